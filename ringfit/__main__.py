@@ -1,0 +1,5 @@
+import sys
+
+from ringfit.cli import main
+
+sys.exit(main())

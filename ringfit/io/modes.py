@@ -1,0 +1,308 @@
+"""Mode tables — ``*.modes.csv`` with an optional ``*.modes.json`` sidecar (DATA.md §2).
+
+A :class:`ModeTable` holds one row per identified mode as NumPy columns.
+Reading validates every cell and names file, row and column on error;
+writing is atomic and round-trips exactly (floats are written with ``repr``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ringfit.errors import InputError
+from ringfit.io.files import atomic_write, check_output_path
+
+KINDS = ("structural", "acoustic")
+TAGS = ("", "extr", "0", "vert", "hort")
+BRANCHES = ("", "backward", "forward")
+STATES = ("free", "loaded", "rolling")
+FRAMES = ("rotating", "fixed")
+#: Columns of DATA.md §2, in the order ringfit writes them.
+COLUMNS = ("n", "a", "tag", "kind", "freq_hz", "freq_std_hz", "damping_pct", "branch")
+#: A sidecar pressure_bar above this looks like Pa.
+MAX_PRESSURE_BAR = 20.0
+
+
+@dataclass
+class ModeTable:
+    """Identified modes, one entry per row (DATA.md §2).
+
+    **Fields** (arrays of shape ``(modes,)``):
+
+    - ``n``: circumferential index, int; ``-1`` where not assigned.
+    - ``a``: cross-sectional index, int.
+    - ``tag``: loaded-tyre label (``""``, ``extr``, ``0``, ``vert``, ``hort``).
+    - ``kind``: ``structural`` or ``acoustic``.
+    - ``freq_hz``: natural frequency [Hz].
+    - ``freq_std_hz``: one standard deviation [Hz]; NaN where unknown.
+    - ``damping_pct``: modal damping ratio [%]; NaN where unknown.
+    - ``branch``: ``""``, ``backward`` or ``forward`` (rotating tyre).
+    - ``extra``: other columns, name -> array of str, kept and written back.
+    - ``condition``: the sidecar's content (``state``, ``speed_kmh``, ...), may be empty.
+    - ``source``: the file it came from, for messages.
+    """
+
+    freq_hz: np.ndarray
+    n: np.ndarray | None = None
+    a: np.ndarray | None = None
+    tag: np.ndarray | None = None
+    kind: np.ndarray | None = None
+    freq_std_hz: np.ndarray | None = None
+    damping_pct: np.ndarray | None = None
+    branch: np.ndarray | None = None
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
+    condition: dict = field(default_factory=dict)
+    source: str = ""
+
+    def __post_init__(self):
+        f = np.atleast_1d(np.asarray(self.freq_hz, dtype=np.float64))
+        m = f.shape[0]
+        self.freq_hz = f
+
+        def col(x, default, dtype):
+            if x is None:
+                return np.full(m, default, dtype=dtype)
+            x = np.atleast_1d(np.asarray(x, dtype=dtype))
+            if x.shape != (m,):
+                raise ValueError(f"column has shape {x.shape}, expected ({m},)")
+            return x
+
+        self.n = col(self.n, -1, np.int64)
+        self.a = col(self.a, 0, np.int64)
+        self.tag = col(self.tag, "", object)
+        self.kind = col(self.kind, "structural", object)
+        self.freq_std_hz = col(self.freq_std_hz, np.nan, np.float64)
+        self.damping_pct = col(self.damping_pct, np.nan, np.float64)
+        self.branch = col(self.branch, "", object)
+        self.extra = {k: col(v, "", object) for k, v in self.extra.items()}
+
+    def __len__(self) -> int:
+        return self.freq_hz.shape[0]
+
+    @property
+    def state(self) -> str:
+        """``free`` (default when there is no sidecar), ``loaded`` or ``rolling``."""
+        return self.condition.get("state", "free")
+
+    def select(self, mask) -> "ModeTable":
+        """Rows where ``mask`` (bool array or index array) holds."""
+        idx = np.asarray(mask)
+        return replace(
+            self,
+            **{c: getattr(self, c)[idx] for c in COLUMNS},
+            extra={k: v[idx] for k, v in self.extra.items()},
+        )
+
+    def structural_with_n(self) -> np.ndarray:
+        """Bool mask of structural rows with an assigned n (what the ring fit uses by default)."""
+        return (self.kind == "structural") & (self.n >= 0)
+
+    def to_rows(self) -> list[dict]:
+        """One dict per row, DATA.md column names, None for empty cells."""
+        rows = []
+        for i in range(len(self)):
+            row = {
+                "n": int(self.n[i]) if self.n[i] >= 0 else None,
+                "a": int(self.a[i]),
+                "tag": self.tag[i],
+                "kind": self.kind[i],
+                "freq_hz": float(self.freq_hz[i]),
+                "freq_std_hz": _none_if_nan(self.freq_std_hz[i]),
+                "damping_pct": _none_if_nan(self.damping_pct[i]),
+                "branch": self.branch[i],
+            }
+            row.update({k: v[i] for k, v in self.extra.items()})
+            rows.append(row)
+        return rows
+
+
+def _none_if_nan(x):
+    return None if not math.isfinite(x) else float(x)
+
+
+def sidecar_path(path: str | os.PathLike) -> Path:
+    """``x.modes.csv`` -> ``x.modes.json`` (also ``x.csv`` -> ``x.json``)."""
+    return Path(path).with_suffix(".json")
+
+
+def read_mode_table(path: str | os.PathLike, *, sidecar: bool = True) -> ModeTable:
+    """Read and validate a mode table and its sidecar, if present (DATA.md §2).
+
+    **Raises** :class:`~ringfit.errors.InputError` naming file, row and
+    column for: unreadable file, missing ``freq_hz`` column, non-numeric,
+    NaN, non-positive or negative values, unknown ``kind``/``tag``/``branch``,
+    a bad sidecar.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise InputError("file not found", source=path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"not a readable text file ({exc.__class__.__name__})", source=path) from None
+    table = parse_mode_table(text, source=str(path))
+    if sidecar:
+        side = sidecar_path(path)
+        if side.exists():
+            table.condition = read_condition(side)
+    return table
+
+
+def parse_mode_table(text: str, *, source: str = "<text>") -> ModeTable:
+    """Parse the CSV text of a mode table (see :func:`read_mode_table`)."""
+    reader = csv.DictReader(io.StringIO(text))
+    header = [h.strip() for h in (reader.fieldnames or [])]
+    if not header:
+        raise InputError("empty file; expected a header row with at least freq_hz", source=source)
+    reader.fieldnames = header
+    if "freq_hz" not in header:
+        raise InputError(f"missing column 'freq_hz' (have: {', '.join(header)})", source=source)
+    if len(set(header)) != len(header):
+        raise InputError(f"duplicate column names in header {header}", source=source)
+    cols: dict[str, list] = {h: [] for h in header}
+    for line_no, row in enumerate(reader, start=2):
+        if None in row:
+            raise InputError(f"row {line_no}: more cells than header columns", source=source)
+        if all((v or "").strip() == "" for v in row.values()):
+            continue
+        for h in header:
+            cols[h].append((row.get(h) or "").strip())
+    m = len(cols["freq_hz"])
+    if m == 0:
+        raise InputError("no data rows", source=source)
+
+    def where(i, c):
+        return f"{source}: row {i + 2}, column '{c}'"
+
+    def floats(c, *, required, positive=False, nonneg=False):
+        out = np.full(m, np.nan)
+        for i, s in enumerate(cols.get(c, [""] * m)):
+            if s == "":
+                if required:
+                    raise InputError(f"{where(i, c)}: empty; expected a number")
+                continue
+            try:
+                x = float(s)
+            except ValueError:
+                raise InputError(f"{where(i, c)}: {s!r} is not a number") from None
+            if not math.isfinite(x):
+                raise InputError(f"{where(i, c)}: {s!r}; expected a finite number")
+            if positive and x <= 0:
+                raise InputError(f"{where(i, c)}: {s}; expected a positive value")
+            if nonneg and x < 0:
+                raise InputError(f"{where(i, c)}: {s}; expected a value >= 0")
+            out[i] = x
+        return out
+
+    def ints(c, default):
+        out = np.full(m, default, dtype=np.int64)
+        for i, s in enumerate(cols.get(c, [""] * m)):
+            if s == "":
+                continue
+            try:
+                x = float(s)
+            except ValueError:
+                raise InputError(f"{where(i, c)}: {s!r} is not an integer") from None
+            if not math.isfinite(x) or x != int(x) or x < 0:
+                raise InputError(f"{where(i, c)}: {s!r}; expected an integer >= 0 or empty")
+            out[i] = int(x)
+        return out
+
+    def choices(c, allowed, default):
+        out = np.empty(m, dtype=object)
+        for i, s in enumerate(cols.get(c, [""] * m)):
+            s = s if s != "" else default
+            if s not in allowed:
+                raise InputError(f"{where(i, c)}: {s!r}; expected one of {list(allowed)}")
+            out[i] = s
+        return out
+
+    table = ModeTable(
+        freq_hz=floats("freq_hz", required=True, positive=True),
+        n=ints("n", -1),
+        a=ints("a", 0),
+        tag=choices("tag", TAGS, ""),
+        kind=choices("kind", KINDS, "structural"),
+        freq_std_hz=floats("freq_std_hz", required=False, nonneg=True),
+        damping_pct=floats("damping_pct", required=False, nonneg=True),
+        branch=choices("branch", BRANCHES, ""),
+        extra={h: np.array(cols[h], dtype=object) for h in header if h not in COLUMNS},
+        source=source,
+    )
+    return table
+
+
+def read_condition(path: str | os.PathLike) -> dict:
+    """Read and validate a ``*.modes.json`` sidecar (DATA.md §2)."""
+    path = Path(path)
+    try:
+        cond = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"not readable JSON ({exc})", source=path) from None
+    if not isinstance(cond, dict):
+        raise InputError("expected a JSON object", source=path)
+    return validate_condition(cond, source=str(path))
+
+
+def validate_condition(cond: dict, *, source: str = "<condition>") -> dict:
+    """Check the sidecar fields that ringfit uses; unknown fields pass through."""
+    if "state" in cond and cond["state"] not in STATES:
+        raise InputError(f"field 'state' = {cond['state']!r}; expected one of {list(STATES)}", source=source)
+    if "frame" in cond and cond["frame"] not in FRAMES:
+        raise InputError(f"field 'frame' = {cond['frame']!r}; expected one of {list(FRAMES)}", source=source)
+    for key in ("load_n", "speed_kmh", "rotation_hz", "pressure_bar"):
+        if key not in cond or cond[key] is None:
+            continue
+        v = cond[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            raise InputError(f"field {key!r} = {v!r}; expected a finite number >= 0", source=source)
+    p = cond.get("pressure_bar")
+    if p is not None and p > MAX_PRESSURE_BAR:
+        raise InputError(f"field 'pressure_bar' = {p:g} looks like Pa, not bar (2.2 bar = 2.2e5 Pa)", source=source)
+    return dict(cond)
+
+
+def format_mode_table(table: ModeTable) -> str:
+    """CSV text of a mode table (floats via ``repr``, so reading it back is exact)."""
+    header = list(COLUMNS) + list(table.extra)
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    for row in table.to_rows():
+        w.writerow(["" if row[h] is None else (repr(row[h]) if isinstance(row[h], float) else row[h]) for h in header])
+    return buf.getvalue()
+
+
+def write_mode_table(
+    table: ModeTable, path: str | os.PathLike, *, overwrite: bool = False, sidecar: bool = True
+) -> Path:
+    """Write ``table`` as CSV (and its ``condition`` as the JSON sidecar when non-empty).
+
+    Refuses to overwrite existing files unless ``overwrite``; writes atomically.
+    """
+    path = check_output_path(path, overwrite=overwrite)
+    side = sidecar_path(path)
+    write_side = sidecar and bool(table.condition)
+    if write_side:
+        check_output_path(side, overwrite=overwrite)
+        validate_condition(table.condition, source=str(side))
+    text = format_mode_table(table)
+    atomic_write(path, lambda tmp: tmp.write_text(text))
+    if write_side:
+        payload = json.dumps(table.condition, indent=1, default=_json_default)
+        atomic_write(side, lambda tmp: tmp.write_text(payload + "\n"))
+    return path
+
+
+def _json_default(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    raise TypeError(f"cannot write {type(x).__name__} to JSON")

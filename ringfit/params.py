@@ -1,0 +1,124 @@
+"""Parameters of the tyre and of Gong's flexible ring, in SI units.
+
+Two frozen PyTrees (``eqx.Module``) carry everything the physics needs:
+
+* :class:`TyreGeometry` — what is known or measured about the tyre (radius,
+  width, inflation pressure, tread thickness).
+* :class:`RingParams` — what is fitted (mass per length, stiffnesses, damping,
+  tread stiffness, and the optional membrane stiffness and centrifugal share).
+
+The symbols and units follow ``PHYSICS.md`` §1. Values are stored in natural
+(physical) units; the fitters work on their logarithms (``ringfit.fit``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import fields, replace
+
+import equinox as eqx
+import jax.numpy as jnp
+
+BAR = 1.0e5  # Pa per bar
+
+#: Parameters a fit can free, by short name -> (RingParams field, unit, TOML key).
+RING_PARAMETERS: dict[str, tuple[str, str]] = {
+    "rho_a": ("kg/m", "rho_a_kg_per_m"),
+    "ei": ("N m^2", "ei_n_m2"),
+    "kw": ("N/m^2", "kw_n_per_m2"),
+    "kv": ("N/m^2", "kv_n_per_m2"),
+    "damping_ratio": ("-", "damping_ratio"),
+    "k_tread": ("N/m^2", "k_tread_n_per_m2"),
+    "ea": ("N", "ea_n"),
+    "chi": ("-", "chi"),
+}
+
+
+class TyreGeometry(eqx.Module):
+    """Geometry and operating condition of the tyre (PHYSICS.md §1).
+
+    **Fields** (scalars, SI):
+
+    - ``radius``: treadband centre radius R [m].
+    - ``width``: treadband width b [m].
+    - ``pressure``: inflation (gauge) pressure p0 [Pa].
+    - ``tread_thickness``: tread / secondary-spring thickness τ [m];
+      the outer radius is R + τ.
+    - ``name``: free text, static.
+    """
+
+    radius: float
+    width: float
+    pressure: float
+    tread_thickness: float = 0.020
+    name: str = eqx.field(static=True, default="")
+
+    @property
+    def hoop_pressure_stiffness(self):
+        """p0·b/R [N/m²], the pressure term of eq. 18."""
+        return self.pressure * self.width / self.radius
+
+    @property
+    def pretension(self):
+        """Hoop pretension T0 = p0·b·R [N] (PHYSICS.md §1)."""
+        return self.pressure * self.width * self.radius
+
+    @property
+    def outer_radius(self):
+        """R + τ [m]."""
+        return self.radius + self.tread_thickness
+
+
+class RingParams(eqx.Module):
+    """Fitted parameters of the flexible ring (PHYSICS.md §1).
+
+    **Fields** (scalars or arrays of one shape, SI):
+
+    - ``rho_a``: mass per unit circumference ρA [kg/m].
+    - ``ei``: bending stiffness EI [N m²].
+    - ``kw``: radial foundation stiffness k_w [N/m²].
+    - ``kv``: tangential foundation stiffness k_v [N/m²].
+    - ``damping_ratio``: modal damping ratio ζ [-] (hysteretic η = 2ζ).
+    - ``k_tread``: radial tread (secondary) spring stiffness [N/m²].
+    - ``ea``: membrane stiffness EA [N]; ``inf`` = inextensible ring.
+    - ``chi``: share of the centrifugal hoop tension carried by the belt [-].
+    """
+
+    rho_a: float
+    ei: float
+    kw: float
+    kv: float
+    damping_ratio: float = 0.025
+    k_tread: float = 19.0e6
+    ea: float = math.inf
+    chi: float = 1.0
+
+    def replace(self, **changes) -> "RingParams":
+        """A copy with some fields changed (``dataclasses.replace``)."""
+        unknown = set(changes) - {f.name for f in fields(self)}
+        if unknown:
+            raise KeyError(
+                f"unknown ring parameter(s) {sorted(unknown)}; known: {sorted(RING_PARAMETERS)}"
+            )
+        return replace(self, **changes)
+
+    def as_dict(self) -> dict[str, float]:
+        """Field name -> float."""
+        return {f.name: float(getattr(self, f.name)) for f in fields(self)}
+
+
+def table9() -> tuple[TyreGeometry, RingParams]:
+    """The source study's Table 9 tyre (PHYSICS.md §1), loaded from the bundled TOML."""
+    from ringfit.io.tyre import read_tyre
+    from ringfit.data import path as data_path
+
+    tyre = read_tyre(data_path("table9.tyre.toml"))
+    return tyre.geometry, tyre.ring
+
+
+def as_float64(x):
+    """``jnp.asarray(x, float64)``; raises if x64 is not enabled (see ringfit/__init__)."""
+    a = jnp.asarray(x, dtype=jnp.float64)
+    if a.dtype != jnp.float64:  # pragma: no cover - guarded by ringfit/__init__
+        raise TypeError("ringfit needs float64: import ringfit before creating JAX arrays")
+    return a

@@ -1,0 +1,134 @@
+"""Natural frequencies of Gong's flexible ring (PHYSICS.md §2–3).
+
+Pure JAX functions of (:class:`~ringfit.params.RingParams`,
+:class:`~ringfit.params.TyreGeometry`, n, ...). ``n`` may be a scalar or an
+array of any shape (ints or floats); results have the same shape (the
+extensible model adds a trailing axis of 2 branches). Frequencies are in Hz,
+rotation speeds Ω in rad/s.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from ringfit.params import RingParams, TyreGeometry
+
+TWO_PI = 2.0 * jnp.pi
+
+
+def modal_stiffness(ring: RingParams, geometry: TyreGeometry, n):
+    """Numerator of eq. 18 [N/m²]: ``EI/R⁴ n²(n²−1)² + (p0b/R) n²(n²−1) + k_w n² + k_v``.
+
+    PHYSICS.md §2.1 (seed eq. 18). Equals ``n² d_n`` with d_n of §2.1.
+    """
+    n2 = jnp.asarray(n, dtype=jnp.float64) ** 2
+    R = geometry.radius
+    return (
+        ring.ei / R**4 * n2 * (n2 - 1.0) ** 2
+        + geometry.hoop_pressure_stiffness * n2 * (n2 - 1.0)
+        + ring.kw * n2
+        + ring.kv
+    )
+
+
+def modal_mass(ring: RingParams, n):
+    """Denominator of eq. 18 [kg/m]: ``ρA (1 + n²)`` (PHYSICS.md §2.1)."""
+    n2 = jnp.asarray(n, dtype=jnp.float64) ** 2
+    return ring.rho_a * (1.0 + n2)
+
+
+def natural_angular_frequencies(ring: RingParams, geometry: TyreGeometry, n):
+    """Static inextensible ring, ω_n [rad/s] (PHYSICS.md §2.1, seed eq. 18)."""
+    return jnp.sqrt(modal_stiffness(ring, geometry, n) / modal_mass(ring, n))
+
+
+def natural_frequencies(ring: RingParams, geometry: TyreGeometry, n):
+    """Static inextensible ring, f_n = ω_n / 2π [Hz] (PHYSICS.md §2.1, seed eq. 18).
+
+    **Arguments:** ``n`` — circumferential index, scalar or array (n = 0 is
+    rigid rotation, n = 1 rigid translation).
+
+    **Returns:** frequencies [Hz], shape of ``n``.
+    """
+    return natural_angular_frequencies(ring, geometry, n) / TWO_PI
+
+
+def extensible_stiffness_matrix(ring: RingParams, geometry: TyreGeometry, n):
+    """K_n of the extensible ring [N/m²], shape ``n.shape + (2, 2)`` (PHYSICS.md §2.2).
+
+    Real basis ``w = W cos nθ``, ``v = V sin nθ``; rows/cols (radial, tangential).
+    """
+    n = jnp.asarray(n, dtype=jnp.float64)
+    R = geometry.radius
+    b4 = ring.ei / R**4
+    m2 = ring.ea / R**2
+    P = geometry.hoop_pressure_stiffness
+    k11 = b4 * n**4 + m2 + ring.kw + P * (n**2 - 1.0)
+    k12 = b4 * n**3 + m2 * n
+    k22 = b4 * n**2 + m2 * n**2 + ring.kv
+    return jnp.stack([jnp.stack([k11, k12], -1), jnp.stack([k12, k22], -1)], -2)
+
+
+def extensible_natural_frequencies(ring: RingParams, geometry: TyreGeometry, n):
+    """Extensible ring, both branches per n [Hz], shape ``n.shape + (2,)`` (PHYSICS.md §2.2).
+
+    Solves ``det(K_n − ρA ω² I) = 0``. Branches are sorted ascending: for
+    EA ≳ 1e5 N index 0 is the flexural (radial-dominant) branch, which tends to
+    eq. 18 as EA → ∞, and index 1 the tangential-dominant (membrane) branch.
+    Needs a finite ``ring.ea``.
+    """
+    K = extensible_stiffness_matrix(ring, geometry, n)
+    lam = jnp.linalg.eigvalsh(K) / ring.rho_a  # ascending ω²
+    return jnp.sqrt(jnp.clip(lam, 0.0)) / TWO_PI
+
+
+def rotating_natural_frequencies(ring: RingParams, geometry: TyreGeometry, n, omega):
+    """Rotating ring seen by a co-rotating observer [Hz], shape ``n.shape + (2,)`` (PHYSICS.md §3.2, seed eq. 25).
+
+    ``ω_n1,2 = 2nΩ/(n²+1) ± √(ω_fn² + n²(n²−1)²Ω²/(n²+1)²)``: index 0 is
+    ω_n1 > 0 (backward wave), index 1 is ω_n2 < 0 (forward wave), convention
+    ``w ∝ exp(i(nθ + ωt))``. Exact for χ = 1, EA → ∞.
+
+    **Arguments:** ``omega`` — wheel speed Ω [rad/s], broadcast with ``n``.
+    """
+    n = jnp.asarray(n, dtype=jnp.float64)
+    omega = jnp.asarray(omega, dtype=jnp.float64)
+    wf = natural_angular_frequencies(ring, geometry, n)
+    n2p1 = n**2 + 1.0
+    shift = 2.0 * n * omega / n2p1
+    root = jnp.sqrt(wf**2 + (n * (n**2 - 1.0) * omega / n2p1) ** 2)
+    return jnp.stack([shift + root, shift - root], -1) / TWO_PI
+
+
+def fixed_frame_frequencies(ring: RingParams, geometry: TyreGeometry, n, omega):
+    """Rotating ring seen by a fixed observer (Doppler) [Hz], shape ``n.shape + (2,)`` (PHYSICS.md §3.3, seed eq. 26).
+
+    ``ω_fixed = ω_nk − nΩ`` applied to both waves of
+    :func:`rotating_natural_frequencies` (signed; index 0 backward, 1 forward).
+    """
+    n = jnp.asarray(n, dtype=jnp.float64)
+    omega = jnp.asarray(omega, dtype=jnp.float64)
+    rot = rotating_natural_frequencies(ring, geometry, n, omega)
+    return rot - (n * omega / TWO_PI)[..., None]
+
+
+def cavity_frequency(n=1, sound_speed: float = 343.0, cavity_length: float = 1.568):
+    """Acoustic cavity resonance ``f_n = n c / L_c`` [Hz] (PHYSICS.md §3.6, seed eq. 22)."""
+    return jnp.asarray(n, dtype=jnp.float64) * sound_speed / cavity_length
+
+
+def critical_speed(ring: RingParams, geometry: TyreGeometry, n_max: int = 60):
+    """Critical speed ``Ω_c = min_n ω_n / n`` over n = 1…n_max (PHYSICS.md §3.4, seed eq. 29).
+
+    **Returns:** ``(omega_c, n_c)`` — Ω_c [rad/s] and the minimising n (int array).
+    The simple resonance condition: χ = 0, no Coriolis (see §3.4).
+    """
+    n = jnp.arange(1, n_max + 1, dtype=jnp.float64)
+    ratio = natural_angular_frequencies(ring, geometry, n) / n
+    i = jnp.argmin(ratio)
+    return ratio[i], (i + 1).astype(jnp.int64)
+
+
+#: jitted versions for repeated calls from NumPy code (the fitters build their own jit regions).
+natural_frequencies_jit = jax.jit(natural_frequencies)
