@@ -1,0 +1,123 @@
+"""The result of a least-squares fit: status, values, uncertainties, residuals.
+
+optimistix returns the optimum and a status but no covariance; every ringfit
+fitter fills a :class:`FitResult` with the covariance computed from the
+Jacobian of the weighted residuals at the optimum (Gauss–Newton / Laplace
+approximation, in the log-parameter space the solver works in).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: A relative standard error above this flags a parameter as poorly determined.
+MAX_RELATIVE_STDERR = 0.5
+
+
+@dataclass
+class FitResult:
+    """What a fit returns.
+
+    - ``status``: ``"converged"``, ``"max_steps_reached"``, ``"nonfinite"`` or
+      another optimistix result name; ``converged`` is ``status == "converged"``.
+    - ``message``: one line saying what happened and, if it failed, what to try.
+    - ``names``: the free parameters, in solver order (``k`` of them).
+    - ``values``: every model parameter after the fit (free and fixed), SI.
+    - ``stderr``: one standard error per free parameter (delta method from the
+      log-space covariance), SI; ``inf`` where the information is singular.
+    - ``covariance_log``: ``(k, k)`` covariance of the log-parameters.
+    - ``correlation``: ``(k, k)`` correlation matrix of the free parameters.
+    - ``residuals``: ``(m,)`` weighted data residuals (model − data)/σ at the optimum.
+    - ``jacobian``: ``(m_total, k)`` Jacobian of all residual rows (data, then
+      prior rows) with respect to the log-parameters.
+    - ``n_data``: number of data rows m (the first rows of ``jacobian``).
+    - ``iterations``: solver steps taken.
+    - ``chi2``: sum of squared weighted data residuals; ``dof`` = m − k.
+    - ``flags``: human-readable warnings (bound hit, large relative error, ...).
+    - ``extra``: fitter-specific arrays (model and measured values, σ, n, ...).
+    """
+
+    status: str
+    message: str
+    names: tuple[str, ...]
+    values: dict[str, float]
+    stderr: dict[str, float]
+    covariance_log: np.ndarray
+    residuals: np.ndarray
+    jacobian: np.ndarray
+    n_data: int
+    iterations: int
+    flags: list[str] = field(default_factory=list)
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def converged(self) -> bool:
+        return self.status == "converged"
+
+    @property
+    def chi2(self) -> float:
+        return float(np.sum(self.residuals**2))
+
+    @property
+    def dof(self) -> int:
+        return int(self.n_data - len(self.names))
+
+    @property
+    def correlation(self) -> np.ndarray:
+        c = self.covariance_log
+        d = np.sqrt(np.abs(np.diag(c)))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return c / np.outer(d, d)
+
+    @property
+    def relative_stderr(self) -> dict[str, float]:
+        return {k: self.stderr[k] / abs(self.values[k]) for k in self.names}
+
+    def interval(self, name: str, level: float = 0.95) -> tuple[float, float]:
+        """Approximate interval from the log-normal Laplace approximation."""
+        from scipy.stats import norm
+
+        i = self.names.index(name)
+        s = math.sqrt(max(self.covariance_log[i, i], 0.0))
+        z = norm.ppf(0.5 + level / 2)
+        v = self.values[name]
+        return v * math.exp(-z * s), v * math.exp(z * s)
+
+    def summary(self) -> str:
+        """A plain-text table of the fit."""
+        lines = [f"status: {self.status} after {self.iterations} iterations — {self.message}"]
+        if self.dof > 0:
+            lines.append(f"chi2 = {self.chi2:.3g} for {self.n_data} data, {len(self.names)} free (dof {self.dof}; "
+                         f"chi2/dof = {self.chi2 / self.dof:.3g})")
+        lines.append(f"{'parameter':<14}{'value':>14}{'std err':>12}{'rel.':>9}")
+        for k in self.names:
+            rel = self.relative_stderr[k]
+            lines.append(f"{k:<14}{self.values[k]:>14.6g}{self.stderr[k]:>12.3g}{rel:>9.1%}")
+        for flag in self.flags:
+            lines.append(f"WARNING: {flag}")
+        return "\n".join(lines)
+
+
+def covariance_from_jacobian(jacobian: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
+    """``(JᵀJ)⁻¹`` via the SVD of J; directions with no information get ``inf`` variance.
+
+    **Arguments:** ``jacobian`` — ``(m, k)`` Jacobian of weighted residuals.
+    **Returns:** ``(k, k)`` covariance.
+    """
+    J = np.asarray(jacobian, dtype=np.float64)
+    _, s, vt = np.linalg.svd(J, full_matrices=False)
+    k = J.shape[1]
+    if s.size == 0:
+        return np.full((k, k), np.inf)
+    keep = s > rcond * s[0]
+    inv = np.where(keep, 1.0 / np.where(keep, s, 1.0) ** 2, np.inf)
+    with np.errstate(invalid="ignore"):
+        cov = (vt.T * inv) @ vt
+    if not keep.all():
+        # an unidentifiable direction: mark every parameter that loads on it
+        null = np.abs(vt[~keep]).max(axis=0) > 1e-8
+        cov[np.ix_(null, null)] = np.inf
+    return cov

@@ -1,0 +1,61 @@
+"""``rotation`` — centrifugal stiffening and Coriolis splitting of a spinning ring (PHYSICS.md §3.2–3.3, §6).
+
+Modal data: rows of a spinning table (``rotation_hz`` or ``speed_kmh`` > 0)
+with a ``branch`` (backward / forward) follow eq. 25 (co-rotating frame) or
+eq. 26 (fixed frame) at Ω' = g·Ω, where Ω is the condition's wheel speed and g
+the parameter ``speed_gain`` (null 0: the static eq. 18, the baseline). g ≈ 1
+means the splitting matches the nominal speed. The formulas act on the
+current ω of each row, so the effect composes with others.
+
+Rolling profiles: the centrifugal share not carried as belt tension,
+``1 − χ`` (null 0 = χ = 1, the baseline), through the (1−χ)ρAΩ² F_n term of
+the per-harmonic operator (PHYSICS.md §4.2): profiles divided by Ω² then stop
+collapsing across speeds.
+"""
+
+import jax.numpy as jnp
+import numpy as np
+
+from ringfit.gap.effects import register
+from ringfit.gap.effects.base import Effect, Parameter
+
+
+def rotating_from_static(omega_static, n, spin, backward, fixed_frame):
+    """Eq. 25 / 26 given the static ω_fn [rad/s] of each row (PHYSICS.md §3.2–3.3).
+
+    ``spin`` Ω [rad/s]; ``backward`` bool; ``fixed_frame`` bool. Returns |ω| [rad/s].
+    """
+    n2p1 = n**2 + 1.0
+    shift = 2.0 * n * spin / n2p1
+    root = jnp.sqrt(omega_static * omega_static + (n * (n**2 - 1.0) * spin / n2p1) ** 2)
+    rot = jnp.where(backward, shift + root, root - shift)
+    doppler = jnp.where(backward, -n * spin, n * spin)
+    return jnp.abs(jnp.where(fixed_frame, rot + doppler, rot))
+
+
+class Rotation(Effect):
+    name = "rotation"
+    summary = "a spinning ring: Coriolis splitting of backward/forward waves and centrifugal tension"
+    parameters = (
+        Parameter("speed_gain", "-", null=0.0, lo=0.0, hi=2.0, start=1.0,
+                  description="wheel speed seen by the modes / nominal wheel speed (eq. 25/26)"),
+    )
+    profile_parameters = (
+        Parameter("chi_deficit", "-", null=0.0, lo=0.0, hi=1.0, start=0.3,
+                  description="1 - chi: centrifugal load not carried as belt tension"),
+    )
+
+    def modal_mask(self, rows):
+        return (np.asarray(rows.spin) > 0) & (np.asarray(rows.branch) != 0) & (np.asarray(rows.is_freq) > 0)
+
+    def modal(self, values, omega, zeta, rows, ring, geometry):
+        spin = values[0] * rows.spin
+        new = rotating_from_static(omega, rows.n, spin, rows.branch > 0, rows.fixed_frame > 0)
+        use = (rows.spin > 0) & (rows.branch != 0)
+        return jnp.where(use, new, omega), zeta
+
+    def profile_model(self, values, model):
+        return model.with_ring_changes(chi=1.0 - values[0])
+
+
+EFFECT = register(Rotation())

@@ -1,0 +1,275 @@
+"""Contact of the rolling ring with a flat road or a drum through radial tread springs (PHYSICS.md §4.3–4.4).
+
+Radial, frictionless, unilateral tread springs between ring and road:
+``δ(φ) = R + τ + w(φ) − s(φ)``, ``p(φ) = k_trd·max(δ, 0)``, ``q_w = −p``; the
+load Fz = R∫p cos φ dφ is imposed and the axle height H is an unknown.
+
+Algorithm (§4.4), jit- and vmap-compatible:
+
+1. Radial receptance ``C_n = G_n[0,0]`` (:func:`ringfit.physics.rolling.receptance`),
+   kernel ``c = IFFT(C)``; on a fixed **candidate window** |φ| ≤ ``window_deg``
+   (K grid points, static) the dense circulant block ``C_KK``.
+2. Active-set (semi-smooth) Newton with a mask over the window: bordered
+   system in (p_A, H), ``A ← {δ > 0}``, until the set repeats (and, for a drum,
+   H has settled); at most ``max_iter`` steps, in a ``lax.while_loop`` on
+   stopped gradients.
+3. One more bordered solve at the **frozen** active set with live parameters.
+   Its derivative is the implicit-function-theorem derivative of the contact
+   solution (exact wherever the active set is locally constant, i.e. almost
+   everywhere), so ``jax.grad`` works with respect to every parameter
+   (ring, geometry, load, speed, drum diameter).
+
+Extra loads (e.g. tread shear of the gap diagnosis) enter as given grid loads
+``extra_load = (q_w, q_v)`` [N/m] whose displacement is added to ``w``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ringfit.params import RingParams, TyreGeometry
+from ringfit.physics.operating import OperatingPoint
+from ringfit.physics.rolling import (
+    DEFAULT_GRID,
+    RingModel,
+    harmonic_numbers,
+    harmonic_response,
+    nyquist_mask,
+    receptance,
+)
+
+#: Initial penetration guess of §4.4: H0 = R + τ − 0.01 m.
+INITIAL_DEFLECTION = 0.01
+
+
+class ContactSolver(eqx.Module):
+    """Static settings of the contact solve (PHYSICS.md §4.4–4.5).
+
+    - ``n_grid``: M grid points over the revolution (harmonics |n| < M/2);
+      default 512 (§4.5: sensor signals within 0.1 % of M = 8192).
+    - ``window_deg``: half-width of the candidate window around φ = 0 [deg];
+      the patch must lie strictly inside (checked: ``RollingSolution.window_ok``).
+    - ``max_iter``: cap on active-set iterations (2–4 are typical).
+    """
+
+    n_grid: int = eqx.field(static=True, default=DEFAULT_GRID)
+    window_deg: float = eqx.field(static=True, default=35.0)
+    max_iter: int = eqx.field(static=True, default=30)
+
+    def grid(self):
+        """φ_j = −π + 2πj/M [rad], shape ``(M,)``."""
+        return -jnp.pi + 2.0 * jnp.pi * jnp.arange(self.n_grid) / self.n_grid
+
+    def window(self) -> tuple[int, int]:
+        """(first index, K) of the candidate window |φ_j| ≤ window_deg (static ints)."""
+        M = self.n_grid
+        half = int(math.floor(math.radians(self.window_deg) / (2.0 * math.pi / M)))
+        return M // 2 - half, 2 * half + 1
+
+
+class RollingSolution(eqx.Module):
+    """Steady rolling state on the grid φ_j (PHYSICS.md §4).
+
+    **Fields** (SI; ``(M,)`` grid arrays, ``(M//2+1,)`` rfft spectra):
+
+    - ``phi``: grid angles [rad]; ``omega``: Ω [rad/s]; ``load``: Fz [N].
+    - ``pressure``: contact pressure p ≥ 0 [N/m] per unit ring length.
+    - ``penetration``: δ [m] (negative outside the patch; −inf where the road is out of reach).
+    - ``w``, ``v``: radial / tangential ring displacement [m].
+    - ``w_spectrum``, ``v_spectrum``: ``rfft(w)``, ``rfft(v)`` (grid spectra, complex).
+    - ``axle_height``: H [m] (above the road, or above the top of the drum).
+    - ``outer_radius``: R + τ [m]; ``fx``: Fx = −R∫p sin φ dφ [N] (rearward +); ``fz``: R∫p cos φ dφ [N].
+    - ``iterations``: active-set iterations; ``converged``: the set repeated;
+      ``window_ok``: the patch lies strictly inside the candidate window.
+    """
+
+    phi: jax.Array
+    omega: jax.Array
+    load: jax.Array
+    pressure: jax.Array
+    penetration: jax.Array
+    w: jax.Array
+    v: jax.Array
+    w_spectrum: jax.Array
+    v_spectrum: jax.Array
+    axle_height: jax.Array
+    outer_radius: jax.Array
+    fx: jax.Array
+    fz: jax.Array
+    iterations: jax.Array
+    converged: jax.Array
+    window_ok: jax.Array
+
+    @property
+    def deflection(self):
+        """Vertical deflection R + τ − H [m]."""
+        return self.outer_radius - self.axle_height
+
+    @property
+    def ok(self):
+        """Converged with the patch inside the window (bool array)."""
+        return self.converged & self.window_ok
+
+
+def tread_pressure(penetration, k_tread):
+    """Unilateral tread-spring law ``p = k_trd·max(δ, 0)`` [N/m] (PHYSICS.md §4.3)."""
+    return k_tread * jnp.maximum(penetration, 0.0)
+
+
+def circulant_block(kernel, first: int, size: int):
+    """Dense ``(size, size)`` block ``c[(i − j) mod M]`` of the circular convolution with ``kernel`` (shape ``(M,)``)."""
+    idx = jnp.arange(first, first + size)
+    return kernel[(idx[:, None] - idx[None, :]) % kernel.shape[0]]
+
+
+def _bordered_solve(mask, h0, ckk, phi_k, w_ext_k, k_tread, outer_radius, load, radius, dphi, road):
+    """Bordered active-set system of §4.4 at fixed ``mask``, road linearised at ``h0``.
+
+    Rows in the set: ``p_j + k (C p)_j + k s'_j H = k (R+τ + w_ext_j − s_j + s'_j H0)``;
+    rows outside: ``p_j = 0``; last row: ``R Δφ Σ cos φ_j p_j = Fz``.
+    Returns ``(p_k, H)``.
+    """
+    s, ds = jax.jvp(lambda h: road.distance(phi_k, h), (h0,), (jnp.ones_like(h0),))
+    m = mask.astype(jnp.float64)
+    K = phi_k.shape[0]
+    A = jnp.eye(K) + k_tread * m[:, None] * ckk
+    col = k_tread * m * ds
+    rhs = k_tread * m * (outer_radius + w_ext_k - jnp.where(mask, s, 0.0) + ds * h0)
+    row = radius * dphi * jnp.cos(phi_k)
+    top = jnp.concatenate([A, col[:, None]], axis=1)
+    bottom = jnp.concatenate([row, jnp.zeros(1)])[None, :]
+    x = jnp.linalg.solve(jnp.concatenate([top, bottom], axis=0), jnp.concatenate([rhs, load[None]]))
+    return x[:K] * m, x[K]
+
+
+def solve_rolling(
+    ring: RingParams,
+    geometry: TyreGeometry,
+    operating: OperatingPoint,
+    *,
+    model: RingModel = RingModel(),
+    solver: ContactSolver = ContactSolver(),
+    extra_load=None,
+) -> RollingSolution:
+    """Steady rolling with tread-spring contact at imposed load (PHYSICS.md §4.3–4.4).
+
+    **Arguments:**
+
+    - ``ring``, ``geometry``: ring parameters (``k_tread`` is the tread spring) and
+      geometry (``tread_thickness`` τ).
+    - ``operating``: Ω [rad/s], Fz [N] and the road (:mod:`ringfit.physics.operating`).
+    - ``model``: ring form and operator terms (:class:`~ringfit.physics.rolling.RingModel`).
+    - ``solver``: grid size, candidate window, iteration cap (static).
+    - ``extra_load``: optional ``(q_w, q_v)`` grid loads [N/m], shape ``(M,)`` each, added to the contact load.
+
+    **Returns:** :class:`RollingSolution`. jit-, vmap- and grad-compatible
+    (gradients by implicit differentiation at the converged active set).
+    """
+    M = solver.n_grid
+    phi = solver.grid()
+    dphi = 2.0 * jnp.pi / M
+    R = geometry.radius
+    outer = geometry.outer_radius
+    omega = jnp.asarray(operating.omega, dtype=jnp.float64)
+    load = jnp.asarray(operating.load, dtype=jnp.float64)
+    road = operating.road
+    k = ring.k_tread
+
+    n = harmonic_numbers(M)
+    G = receptance(ring, geometry, n, omega, model) * nyquist_mask(M)[:, None, None].astype(jnp.complex128)
+    kernel = jnp.fft.irfft(G[:, 0, 0], M)  # c = IFFT(C): w = -c ⊛ p
+    first, K = solver.window()
+    ckk = circulant_block(kernel, first, K)
+    phi_k = phi[first : first + K]
+
+    if extra_load is None:
+        q_ext = s_ext = jnp.zeros(M // 2 + 1, dtype=jnp.complex128)
+    else:
+        q_ext, s_ext = (jnp.fft.rfft(jnp.asarray(q, dtype=jnp.float64)) for q in extra_load)
+    w_ext_spec, v_ext_spec = harmonic_response(G, q_ext, s_ext)
+    w_ext = jnp.fft.irfft(w_ext_spec, M)
+    w_ext_k = w_ext[first : first + K]
+
+    # --- active-set iteration on stopped gradients --------------------------------
+    sg = jax.lax.stop_gradient
+    fixed = (sg(ckk), phi_k, sg(w_ext_k), sg(k), sg(outer), sg(load), sg(R), dphi, sg(road))
+    h_init = sg(outer) - INITIAL_DEFLECTION
+    mask0 = jnp.abs(phi_k) < jnp.arccos(jnp.clip(h_init / sg(outer), -1.0, 1.0))
+
+    def penetration_k(p, h, args):
+        ckk_, phi_k_, w_ext_k_, _, outer_, *_, road_ = args
+        return outer_ + w_ext_k_ - ckk_ @ p - road_.distance(phi_k_, h)
+
+    def body(state):
+        mask, h, _, it, _ = state
+        p, h_new = _bordered_solve(mask, h, *fixed)
+        delta = penetration_k(p, h_new, fixed)
+        new = delta > 0.0
+        new = jnp.where(jnp.any(new), new, mask)
+        done = jnp.all(new == mask) & (jnp.abs(h_new - h) < 1e-12 + 1e-9 * jnp.abs(h))
+        return new, h_new, p, it + 1, done
+
+    def cond(state):
+        return (~state[4]) & (state[3] < solver.max_iter)
+
+    p0 = jnp.zeros(K)
+    mask, h_conv, _, iters, done = jax.lax.while_loop(
+        cond, body, (mask0, h_init, p0, jnp.asarray(0), jnp.asarray(False))
+    )
+
+    # --- differentiable solve at the frozen active set ----------------------------
+    p_k, H = _bordered_solve(mask, sg(h_conv), ckk, phi_k, w_ext_k, k, outer, load, R, dphi, road)
+    pressure = jnp.zeros(M).at[first : first + K].set(p_k)
+    q_spec = jnp.fft.rfft(-pressure) + q_ext
+    W, V = harmonic_response(G, q_spec, s_ext)
+    w = jnp.fft.irfft(W, M)
+    v = jnp.fft.irfft(V, M)
+    s_full = road.distance(phi, H)
+    reach = jnp.isfinite(s_full)
+    penetration = jnp.where(reach, outer + w - jnp.where(reach, s_full, 0.0), -jnp.inf)
+    fx = -R * dphi * jnp.sum(pressure * jnp.sin(phi))
+    fz = R * dphi * jnp.sum(pressure * jnp.cos(phi))
+    window_ok = ~(mask[0] | mask[-1])
+    return RollingSolution(
+        phi=phi, omega=omega, load=load, pressure=pressure, penetration=penetration, w=w, v=v,
+        w_spectrum=W, v_spectrum=V, axle_height=H, outer_radius=outer, fx=fx, fz=fz,
+        iterations=iters, converged=done, window_ok=window_ok,
+    )
+
+
+#: :func:`solve_rolling` under ``eqx.filter_jit`` (one compilation per solver/model structure).
+solve_rolling_jit = eqx.filter_jit(solve_rolling)
+
+
+def patch_edges(solution: RollingSolution):
+    """Leading and trailing contact-patch edges [rad], linearly interpolated zero crossings of δ.
+
+    **Returns:** ``(phi_leading, phi_trailing)`` (φ < 0 leading, φ > 0 trailing, PHYSICS.md §0).
+    """
+    phi, delta = solution.phi, solution.penetration
+    active = solution.pressure > 0.0
+    M = phi.shape[0]
+    i0 = jnp.argmax(active)  # first active point
+    i1 = M - 1 - jnp.argmax(active[::-1])  # last active point
+
+    def cross(a, b):
+        da, db = delta[a], delta[b]
+        return phi[a] + (phi[b] - phi[a]) * (0.0 - da) / (db - da)
+
+    return cross(i0 - 1, i0), cross(i1, i1 + 1)
+
+
+def contact_length(solution: RollingSolution):
+    """Patch length along the outer radius ``(R+τ)(φ_trailing − φ_leading)`` [m]."""
+    lead, trail = patch_edges(solution)
+    return solution.outer_radius * (trail - lead)
+
+
+__all__ = [
+    "ContactSolver", "RollingSolution", "tread_pressure", "circulant_block", "solve_rolling",
+    "solve_rolling_jit", "patch_edges", "contact_length",
+]

@@ -1,0 +1,96 @@
+"""Modes of the loaded, standing tyre: tread springs in the patch as a local foundation (PHYSICS.md §6 ``ground_contact``).
+
+Linearised about the loaded static state, the radial tread springs inside
+the contact patch ``|φ| < a`` act as an extra radial foundation ``k_trd`` on
+that arc only. In the real basis of inextensible shapes (radial amplitude
+``w = Σ A_n cos nφ + B_n sin nφ``, n = 1…N, ``v = w``-consistent so that
+``w + v′ = 0``) the patch couples harmonics of the same parity:
+
+    M = diag(π R ρA (1 + 1/n²))
+    K = diag(π R d_n) + k_trd R ∫_{−a}^{a} Φ_i Φ_j dφ
+
+with d_n of eq. 18 in per-harmonic form (PHYSICS.md §2.1) and
+``∫ cos iφ cos jφ = ½[S(i−j) + S(i+j)]``, ``∫ sin iφ sin jφ = ½[S(i−j) − S(i+j)]``,
+``S(k) = ∫_{−a}^{a} cos kφ dφ = 2 a sinc(k a / π)``. The patch is symmetric
+about φ = 0, so cosine and sine shapes do not couple: cosine-type modes are
+the ``extr`` modes (``vert`` for n = 1; the patch is at their antinode),
+sine-type modes the ``0`` modes (``hort`` for n = 1; a node at the patch).
+The rim is fixed.
+
+All functions are pure JAX; ``half_angle`` may be traced (it is a fitted
+parameter of the gap diagnosis).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from ringfit.params import RingParams, TyreGeometry
+from ringfit.physics.natural import modal_mass, modal_stiffness
+
+#: Harmonics kept in the loaded-mode basis: N = 40 reproduces the PHYSICS.md §7
+#: values to 0.05 Hz (N = 20 is within 0.2 Hz; checked in tests/test_loaded.py).
+DEFAULT_HARMONICS = 40
+
+
+def patch_overlap(half_angle, n_max: int = DEFAULT_HARMONICS):
+    """Overlap integrals of the basis shapes over the patch ``|φ| < a`` [rad].
+
+    **Arguments:** ``half_angle`` — contact half-angle a [rad] (scalar);
+    ``n_max`` — number of harmonics N (static).
+
+    **Returns:** ``(cc, ss)``, each ``(N, N)``: ``∫ cos iφ cos jφ dφ`` and
+    ``∫ sin iφ sin jφ dφ`` over ``[−a, a]``, i, j = 1…N.
+    """
+    n = jnp.arange(1, n_max + 1, dtype=jnp.float64)
+    i, j = n[:, None], n[None, :]
+    a = jnp.asarray(half_angle, dtype=jnp.float64)
+
+    def S(k):
+        return 2.0 * a * jnp.sinc(k * a / jnp.pi)
+
+    return 0.5 * (S(i - j) + S(i + j)), 0.5 * (S(i - j) - S(i + j))
+
+
+def loaded_angular_frequencies(
+    ring: RingParams, geometry: TyreGeometry, half_angle, n_max: int = DEFAULT_HARMONICS, k_tread=None
+):
+    """Natural angular frequencies of the loaded standing tyre [rad/s] (PHYSICS.md §6 ``ground_contact``).
+
+    **Arguments:**
+
+    - ``ring``, ``geometry``: the ring (``k_tread`` taken from ``ring`` unless given).
+    - ``half_angle``: contact half-angle a [rad]; a = 0 gives eq. 18.
+    - ``n_max``: basis size N (static).
+    - ``k_tread``: radial tread stiffness k_trd [N/m²], overrides ``ring.k_tread``.
+
+    **Returns:** ``(cos_type, sin_type)``, each shape ``(N,)``, ascending:
+    the k-th entry is the mode that continues harmonic n = k + 1 of the free
+    ring (``extr``/``vert`` and ``0``/``hort`` respectively).
+    """
+    n = jnp.arange(1, n_max + 1, dtype=jnp.float64)
+    R = geometry.radius
+    kt = ring.k_tread if k_tread is None else k_tread
+    # per-harmonic forms of eq. 18 (natural.py): n² d_n and ρA(1+n²); M_n = πR ρA(1+1/n²), K_n = πR d_n
+    mass = jnp.pi * R * modal_mass(ring, n) / n**2
+    stiff = jnp.pi * R * modal_stiffness(ring, geometry, n) / n**2
+    cc, ss = patch_overlap(half_angle, n_max)
+    scale = 1.0 / jnp.sqrt(mass[:, None] * mass[None, :])
+
+    def eig(overlap):
+        K = jnp.diag(stiff) + kt * R * overlap
+        lam = jnp.linalg.eigvalsh(K * scale)
+        return jnp.sqrt(jnp.clip(lam, 0.0))
+
+    return eig(cc), eig(ss)
+
+
+def loaded_natural_frequencies(
+    ring: RingParams, geometry: TyreGeometry, half_angle, n_max: int = DEFAULT_HARMONICS, k_tread=None
+):
+    """As :func:`loaded_angular_frequencies`, in Hz: ``(cos_type, sin_type)``, each ``(N,)``."""
+    c, s = loaded_angular_frequencies(ring, geometry, half_angle, n_max, k_tread)
+    return c / (2.0 * jnp.pi), s / (2.0 * jnp.pi)
+
+
+__all__ = ["DEFAULT_HARMONICS", "patch_overlap", "loaded_angular_frequencies", "loaded_natural_frequencies"]

@@ -1,0 +1,115 @@
+"""Figures for the free-tyre fit: data vs model, corner plot, identifiability, traces.
+
+Each function returns a matplotlib Figure (Agg backend, imported lazily).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ringfit.report.figures import blank_figure, new_figure
+
+LABELS = {"rho_a": "ρA [kg/m]", "ei": "EI [N m²]", "kw": "k_w [N/m²]", "kv": "k_v [N/m²]",
+          "damping_ratio": "ζ [-]", "k_tread": "k_tread [N/m²]", "ea": "EA [N]"}
+
+
+def modes_figure(n, freq_hz, sigma_hz, lsq_hz=None, predictive=None, credible=None, other=None):
+    """Measured vs fitted natural frequency per mode, with residuals.
+
+    **Arguments:** ``n``, ``freq_hz``, ``sigma_hz``: data ``(m,)``; ``lsq_hz``:
+    least-squares model ``(m,)``; ``predictive``/``credible``: dicts with ``n``,
+    ``lo``, ``median``, ``hi`` ``(p,)`` (95 % posterior predictive / credible
+    band); ``other``: label -> ``(m,)`` frequencies of another model (e.g. Table 9).
+    """
+    fig, (ax, axr) = new_figure(2, 1, figsize=(7.5, 6.5), sharex=True, height_ratios=(2.2, 1))
+    if predictive is not None:
+        ax.fill_between(predictive["n"], predictive["lo"], predictive["hi"], color="C0", alpha=0.18,
+                        label="95 % posterior predictive")
+        ax.plot(predictive["n"], predictive["median"], "-", color="C0", lw=1, label="posterior median")
+    ax.errorbar(n, freq_hz, yerr=sigma_hz, fmt="ko", ms=4, capsize=3, label="measured ± σ")
+    if lsq_hz is not None:
+        ax.plot(n, lsq_hz, "s", mfc="none", color="C3", label="least squares")
+    for i, (label, f) in enumerate((other or {}).items()):
+        ax.plot(n, f, "x", color=f"C{i + 4}", label=label)
+    ax.set_ylabel("natural frequency [Hz]")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    ref = np.interp(n, predictive["n"], predictive["median"]) if predictive is not None else lsq_hz
+    if predictive is not None:
+        band_n = predictive["n"]
+        axr.fill_between(band_n, predictive["lo"] - predictive["median"], predictive["hi"] - predictive["median"],
+                         color="C0", alpha=0.18)
+    axr.errorbar(n, freq_hz - ref, yerr=sigma_hz, fmt="ko", ms=4, capsize=3)
+    if lsq_hz is not None:
+        axr.plot(n, lsq_hz - ref, "s", mfc="none", color="C3")
+    for i, (label, f) in enumerate((other or {}).items()):
+        axr.plot(n, np.asarray(f) - ref, "x", color=f"C{i + 4}")
+    axr.axhline(0, color="0.5", lw=0.8)
+    axr.set_xlabel("circumferential index n")
+    axr.set_ylabel("minus posterior median [Hz]")
+    axr.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def corner_figure(samples, names, truths=None):
+    """Corner plot of posterior draws ``(draws, k)`` (SI units) with the ``corner`` package."""
+    import corner
+
+    fig = blank_figure(figsize=(7.5, 7.5))
+    corner.corner(np.asarray(samples), labels=[LABELS.get(k, k) for k in names], truths=truths, fig=fig,
+                  quantiles=[0.025, 0.5, 0.975], show_titles=True, title_fmt=".3g",
+                  title_kwargs={"fontsize": 8}, label_kwargs={"fontsize": 9})
+    return fig
+
+
+def identifiability_figure(ident, profile_name=None, prior=None):
+    """Fisher eigen-spectrum (log-std per direction) and, if computed, a profile likelihood.
+
+    ``ident``: :class:`ringfit.fit.identifiability.Identifiability`; ``prior``:
+    optional LogNormal-like dict (median, sigma_ln) drawn on the profile panel.
+    """
+    has_profile = profile_name is not None and profile_name in ident.profiles
+    fig, axes = new_figure(1, 2 if has_profile else 1, figsize=(10 if has_profile else 5.5, 3.8))
+    axes = np.atleast_1d(axes)
+    ax = axes[0]
+    k = len(ident.names)
+    s = np.minimum(ident.log_std, 1e3)
+    ax.bar(np.arange(k), s, color=["C3" if x > 0.5 else "C0" for x in s])
+    ax.set_yscale("log")
+    ax.axhline(0.5, color="0.4", ls="--", lw=0.8)
+    ax.set_xticks(np.arange(k))
+    ax.set_xticklabels(["\n".join(f"{v:+.2f} {nm}" for v, nm in zip(vec, ident.names) if abs(v) > 0.3)
+                        for vec in ident.eigenvectors.T], fontsize=7)
+    ax.set_ylabel("σ of log-parameter combination")
+    ax.set_title("Fisher information eigen-directions (data only)", fontsize=9)
+    if has_profile:
+        grid, chi2 = ident.profiles[profile_name]
+        ax2 = axes[1]
+        ax2.semilogx(grid, chi2 - np.min(chi2), "o-", ms=3, label="profile Δχ² (data only)")
+        ax2.axhline(3.84, color="0.4", ls="--", lw=0.8, label="95 % (Δχ² = 3.84)")
+        if prior is not None:
+            pri = ((np.log(grid) - np.log(prior["median"])) / prior["sigma_ln"]) ** 2
+            ax2.semilogx(grid, pri, "-", color="C2", label="prior −2 log p (physical)")
+        ax2.set_ylim(-0.5, max(10.0, min(float(np.max(chi2 - np.min(chi2))), 60.0)))
+        ax2.set_xlabel(LABELS.get(profile_name, profile_name))
+        ax2.set_ylabel("Δχ²")
+        ax2.legend(fontsize=8)
+        ax2.grid(alpha=0.3)
+        ax2.set_title(f"profile likelihood of {profile_name}", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def trace_figure(chain, names, burn=0):
+    """Walker traces of log-parameters ``chain (steps, walkers, k)``; burn-in shaded."""
+    k = chain.shape[2]
+    fig, axes = new_figure(k, 1, figsize=(7.5, 1.4 * k + 0.6), sharex=True)
+    axes = np.atleast_1d(axes)
+    for i, ax in enumerate(axes):
+        ax.plot(chain[:, :, i], color="k", alpha=0.08, lw=0.5)
+        ax.axvspan(0, burn, color="C1", alpha=0.15)
+        ax.set_ylabel(f"log {names[i]}", fontsize=8)
+    axes[-1].set_xlabel("step")
+    fig.tight_layout()
+    return fig
