@@ -90,13 +90,16 @@ def identifiability(result: FitResult, *, profile: tuple[str, ...] = (), fit_aga
             main = int(np.argmax(np.abs(v)))
             flags.append(
                 f"weak direction: the data fix {'/'.join(n for n, x in zip(result.names, v) if abs(x) > 0.3)} "
-                f"(mostly {result.names[main]}) only to a factor {math.exp(min(s, 50)):.3g} at one σ "
+                f"(mostly {result.names[main]}) only to "
+                + (f"a factor {math.exp(s):.3g}" if s < math.log(100) else "worse than a factor 100")
+                + " at one σ "
                 f"(Fisher eigenvalue {lam_i:.3g})"
             )
     for k in result.names:
         rel = result.relative_stderr[k]
         if not rel <= MAX_RELATIVE_STDERR and not any(k in f and "relative" in f for f in flags):
-            flags.append(f"{k} has relative standard error {rel:.0%} > {MAX_RELATIVE_STDERR:.0%}")
+            flags.append(f"{k} has relative standard error {rel:.0%} > {MAX_RELATIVE_STDERR:.0%}"
+                         if rel < 10 else f"{k} has relative standard error over 1000 %")
     out = Identifiability(tuple(result.names), lam, vec, log_std, cond, flags)
     for name in profile:
         if fit_again is None:

@@ -190,9 +190,10 @@ def fit_natural_frequencies(
     mu, sd, mask = prior_arrays(priors, free)
     base = ring_vector(initial)
     free_index = tuple(RING_FIELDS.index(k) for k in free)
-    y0 = np.log(base[list(free_index)])
-    if not np.all(np.isfinite(y0)):
-        raise InputError(f"initial values of {list(free)} must be positive and finite, got {base[list(free_index)]}")
+    start = base[list(free_index)]
+    if not np.all(np.isfinite(start) & (start > 0)):
+        raise InputError(f"initial values of {list(free)} must be positive and finite, got {start}")
+    y0 = np.log(start)
     args = (jnp.asarray(base), geometry, jnp.asarray(data.n), jnp.asarray(data.freq_hz),
             jnp.asarray(data.sigma_hz), jnp.asarray(mu), jnp.asarray(sd), jnp.asarray(mask))
     y, result, steps, jac, res = _solve(jnp.asarray(y0), args, free_index=free_index,
@@ -231,7 +232,7 @@ def _result(free, free_index, base, geometry, data, priors, y, result, steps, ja
                          f"[{math.exp(lo[i]):.3g}, {math.exp(hi[i]):.3g}]: the data do not bound it")
         rel = stderr[k] / values[k]
         if not rel <= MAX_RELATIVE_STDERR:
-            flags.append(f"{k} has relative standard error {rel:.0%} > {MAX_RELATIVE_STDERR:.0%}: "
+            flags.append(f"{k} has relative standard error {_pct(rel)} > {MAX_RELATIVE_STDERR:.0%}: "
                          f"poorly determined by these modes" + (" even with its prior" if k in priors else
                                                                 " (consider prior='physical')"))
     if table.state != "free" or float(table.condition.get("speed_kmh", 0) or 0) > 0:
@@ -255,6 +256,10 @@ def _result(free, free_index, base, geometry, data, priors, y, result, steps, ja
             fisher_data=jac[:m].T @ jac[:m],
         ),
     )
+
+
+def _pct(x: float) -> str:
+    return f"{x:.0%}" if x < 10 else "over 1000 %"
 
 
 def fitted_ring(result: FitResult) -> RingParams:

@@ -95,7 +95,8 @@ class FitResult:
         lines.append(f"{'parameter':<14}{'value':>14}{'std err':>12}{'rel.':>9}")
         for k in self.names:
             rel = self.relative_stderr[k]
-            lines.append(f"{k:<14}{self.values[k]:>14.6g}{self.stderr[k]:>12.3g}{rel:>9.1%}")
+            rel_s = f"{rel:.1%}" if rel < 10 else ">1000%"
+            lines.append(f"{k:<14}{self.values[k]:>14.6g}{self.stderr[k]:>12.3g}{rel_s:>9}")
         for flag in self.flags:
             lines.append(f"WARNING: {flag}")
         return "\n".join(lines)

@@ -1,0 +1,132 @@
+"""Natural-frequency models against PHYSICS.md §7 and the source study's tables."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ringfit  # noqa: F401
+from ringfit.demo import read_table10
+from ringfit.params import table9
+from ringfit.physics import natural as N
+
+GEO, RING = table9()
+TAB10 = read_table10()
+
+
+def test_eq18_reproduces_table10_within_0p05_hz():
+    f = np.asarray(N.natural_frequencies(RING, GEO, TAB10["n"]))
+    np.testing.assert_allclose(f, TAB10["simulated_hz"], atol=0.05)
+
+
+def test_eq18_physics_md_values_n0_to_10():
+    expected = [104.08, 107.02, 119.84, 140.01, 164.69, 192.31, 222.03, 253.41, 286.20, 320.30, 355.66]
+    np.testing.assert_allclose(N.natural_frequencies(RING, GEO, np.arange(11)), expected, atol=0.006)
+
+
+def test_n0_is_rigid_rotation_and_n1_rigid_translation():
+    # ω0² = kv/ρA ; n = 1: d_1 = kw + kv, ω1² = (kw + kv)/(2ρA) — EI and p0 drop out.
+    f0 = np.sqrt(RING.kv / RING.rho_a) / (2 * np.pi)
+    f1 = np.sqrt((RING.kw + RING.kv) / (2 * RING.rho_a)) / (2 * np.pi)
+    assert float(N.natural_frequencies(RING, GEO, 0)) == pytest.approx(f0, rel=1e-12)
+    assert float(N.natural_frequencies(RING.replace(ei=123.0), GEO, 1)) == pytest.approx(f1, rel=1e-12)
+    # translation stiffness πR(kw + kv) = 2.283e6 N/m (PHYSICS.md §7)
+    assert np.pi * GEO.radius * (RING.kw + RING.kv) == pytest.approx(2.283e6, rel=1e-3)
+
+
+def test_extensible_tends_to_inextensible():
+    n = np.arange(1, 10)
+    inext = np.asarray(N.natural_frequencies(RING, GEO, n))
+    prev = np.inf
+    for ea in (1e5, 1e6, 1e8, 1e12):
+        flex = np.asarray(N.extensible_natural_frequencies(RING.replace(ea=ea), GEO, n))[:, 0]
+        gap = np.max(np.abs(flex - inext))
+        assert gap < prev
+        prev = gap
+    assert prev < 1e-6
+    # PHYSICS.md §2.2 sensitivity: within 0.3 Hz at EA = 1e5 N, 0.03 Hz at 1e6 N
+    for ea, tol in ((1e5, 0.32), (1e6, 0.03)):  # "≈0.3 Hz" at 1e5 N
+        flex = np.asarray(N.extensible_natural_frequencies(RING.replace(ea=ea), GEO, n))[:, 0]
+        assert np.max(np.abs(flex - inext)) < tol
+
+
+def test_extensible_tangential_branch_values():
+    f = np.asarray(N.extensible_natural_frequencies(RING.replace(ea=1e6), GEO, np.arange(4)))[:, 1]
+    np.testing.assert_allclose(f, [342.8, 473.7, 737.7, 1037.6], atol=0.06)
+    f = np.asarray(N.extensible_natural_frequencies(RING.replace(ea=1e5), GEO, np.arange(4)))[:, 1]
+    np.testing.assert_allclose(f, [147, 181, 255, 344], atol=0.6)
+
+
+def test_eq25_rotating_frame_values():
+    f = np.asarray(N.rotating_natural_frequencies(RING, GEO, np.array([2, 5, 8]), 43.95))
+    np.testing.assert_allclose(f[:, 0], [125.73, 197.69, 293.02], atol=0.006)
+    np.testing.assert_allclose(f[:, 1], [-114.54, -192.31, -289.57], atol=0.006)
+    # splitting |ω_n1| − |ω_n2| = 4nΩ/(n²+1)
+    n = np.array([2.0, 5.0, 8.0])
+    np.testing.assert_allclose(np.abs(f[:, 0]) - np.abs(f[:, 1]), 4 * n * 43.95 / (n**2 + 1) / (2 * np.pi), rtol=1e-12)
+
+
+def test_eq26_fixed_frame_values():
+    f = np.asarray(N.fixed_frame_frequencies(RING, GEO, np.array([2, 5, 8]), 43.95))
+    np.testing.assert_allclose(f[:, 0], [111.74, 162.71, 237.06], atol=0.01)
+
+
+def test_omega_zero_limits():
+    n = np.arange(0, 11)
+    wf = np.asarray(N.natural_frequencies(RING, GEO, n))
+    rot = np.asarray(N.rotating_natural_frequencies(RING, GEO, n, 0.0))
+    np.testing.assert_allclose(rot[:, 0], wf, rtol=1e-14)
+    np.testing.assert_allclose(rot[:, 1], -wf, rtol=1e-14)
+    np.testing.assert_allclose(np.asarray(N.fixed_frame_frequencies(RING, GEO, n, 0.0))[:, 0], wf, rtol=1e-14)
+
+
+def test_chi1_backward_wave_fixed_frame_stays_positive():
+    # PHYSICS.md §3.3: no standing wave for χ = 1 at any speed
+    omega = np.linspace(0, 600, 61)
+    f = np.asarray(N.fixed_frame_frequencies(RING, GEO, np.arange(2, 30)[:, None], omega[None, :]))[..., 0]
+    assert np.all(f > 0)
+
+
+def test_rotating_eq25_matches_gyroscopic_eigen_solve():
+    """Independent check: 2×2 gyroscopic eigenproblem of §3.1 (χ = 1, EA large) in the complex basis."""
+    omega, R, P = 43.95, GEO.radius, float(GEO.hoop_pressure_stiffness)
+    ea, m = 1e12, RING.rho_a
+    for n in (2, 5, 8):
+        b = RING.ei / R**4
+        K = np.array([[b * n**4 + ea / R**2 + RING.kw + P * (n**2 - 1), 1j * (b * n**3 + ea * n / R**2)],
+                      [-1j * (b * n**3 + ea * n / R**2), b * n**2 + ea * n**2 / R**2 + RING.kv]])
+        # centrifugal (−Ω²) and hoop tension χρAΩ² terms of §3.1 for e^{i(nθ+ωt)}
+        chi = 1.0
+        Kc = K + m * omega**2 * np.array([[-1 + chi * n**2, 1j * chi * n], [-1j * chi * n, -1 + chi]])
+        G = np.array([[0, -2 * m * omega], [2 * m * omega, 0]])  # Coriolis: ρA(−2Ωv̇, +2Ωẇ)
+        # (−ω² M + iω G + K) x = 0 with λ = iω: (λ² M + λ G + K) x = 0 -> companion linearisation
+        M = m * np.eye(2)
+        A = np.block([[np.zeros((2, 2)), np.eye(2)], [-np.linalg.solve(M, Kc), -np.linalg.solve(M, G)]])
+        lam = np.linalg.eigvals(A)  # λ = iω
+        w = np.sort((lam / 1j).real / (2 * np.pi))
+        ref = np.asarray(N.rotating_natural_frequencies(RING, GEO, n, omega))
+        # the two flexural roots (small |ω|) must match eq. 25 to 1e-3 Hz
+        flex = w[np.argsort(np.abs(w))[:2]]
+        np.testing.assert_allclose(np.sort(flex), np.sort(ref), atol=1e-3)
+
+
+def test_critical_speed_and_cavity():
+    wc, nc = N.critical_speed(RING, GEO)
+    assert float(wc) == pytest.approx(223.47, abs=0.01)
+    assert int(nc) == 10
+    assert float(wc) * (GEO.radius + 0.020) * 3.6 == pytest.approx(254, abs=0.5)
+    assert float(N.cavity_frequency()) == pytest.approx(218.75, abs=1e-9)
+
+
+def test_gradient_matches_finite_differences():
+    n = np.arange(1, 10)
+
+    def f(logp):
+        ring = RING.replace(rho_a=jnp.exp(logp[0]), ei=jnp.exp(logp[1]), kw=jnp.exp(logp[2]), kv=jnp.exp(logp[3]))
+        return N.natural_frequencies(ring, GEO, n)
+
+    x = np.log(np.array([RING.rho_a, RING.ei, RING.kw, RING.kv]))
+    J = np.asarray(jax.jacfwd(f)(x))
+    h = 1e-6
+    Jfd = np.stack([(np.asarray(f(x + h * e)) - np.asarray(f(x - h * e))) / (2 * h) for e in np.eye(4)], 1)
+    np.testing.assert_allclose(J, Jfd, rtol=1e-6, atol=1e-9)

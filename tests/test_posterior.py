@@ -1,0 +1,78 @@
+"""emcee posterior: a statistical test with a fixed seed, storage round trip, predictive intervals."""
+
+import numpy as np
+import pytest
+
+from ringfit.fit.least_squares import fit_natural_frequencies
+from ringfit.fit.posterior import batched_log_probability, load_posterior, sample_posterior
+from ringfit.io.modes import ModeTable
+from ringfit.params import table9
+from ringfit.physics.natural import natural_frequencies
+
+GEO, RING = table9()
+N9 = np.arange(1, 10)
+
+
+@pytest.fixture(scope="module")
+def posterior():
+    f = np.asarray(natural_frequencies(RING, GEO, N9))
+    f = f * (1 + 0.005 * np.random.default_rng(3).standard_normal(9))
+    table = ModeTable(freq_hz=f, n=N9, freq_std_hz=0.005 * f)
+    post = sample_posterior(table, GEO, RING.replace(kw=1.2e6, kv=1.2e6), free=("kw", "kv"), prior="none",
+                            walkers=16, min_steps=1500, max_steps=6000, check_every=500, seed=1, progress=False)
+    return table, post
+
+
+def test_posterior_moments_match_laplace_approximation(posterior):
+    """Nearly linear 2-parameter problem: posterior mean/sd ≈ least-squares value/std error."""
+    table, post = posterior
+    lsq = fit_natural_frequencies(table, GEO, RING, free=("kw", "kv"))
+    s = post.samples
+    for i, k in enumerate(("kw", "kv")):
+        assert s[:, i].mean() == pytest.approx(lsq.values[k], abs=0.15 * lsq.stderr[k])
+        assert s[:, i].std() == pytest.approx(lsq.stderr[k], rel=0.15)
+    # the truth lies within 3 posterior standard deviations (fails with probability < 0.3 % per parameter)
+    for i, k in enumerate(("kw", "kv")):
+        assert abs(s[:, i].mean() - getattr(RING, k)) < 3 * s[:, i].std()
+
+
+def test_sampler_diagnostics(posterior):
+    _, post = posterior
+    d = post.diagnostics()
+    assert post.converged and post.steps > 50 * np.max(post.tau)
+    assert 0.2 < d["acceptance_mean"] < 0.9
+    assert np.all(d["rhat"] < 1.05)
+
+
+def test_predictive_interval_contains_data(posterior):
+    table, post = posterior
+    p = post.predictive(N9)
+    inside = (table.freq_hz >= p["lo"]) & (table.freq_hz <= p["hi"])
+    assert inside.sum() >= 8
+    c = post.predictive(N9, noise=False)
+    assert np.all(c["hi"] - c["lo"] < p["hi"] - p["lo"])
+
+
+def test_save_and_load_round_trip(posterior, tmp_path):
+    _, post = posterior
+    path = post.save(tmp_path / "p.h5")
+    back = load_posterior(path)
+    np.testing.assert_array_equal(back.chain, post.chain)
+    assert back.names == post.names and back.burn == post.burn and back.thin == post.thin
+    np.testing.assert_array_equal(back.samples, post.samples)
+    with pytest.raises(Exception, match="refusing to overwrite"):
+        post.save(path)
+
+
+def test_log_probability_batch_and_nan_handling():
+    from ringfit.fit.least_squares import RING_FIELDS, ring_vector
+    import jax.numpy as jnp
+
+    fn = batched_log_probability((RING_FIELDS.index("kw"),))
+    f = np.asarray(natural_frequencies(RING, GEO, N9))
+    args = (jnp.asarray(ring_vector(RING)), GEO, jnp.asarray(N9, float), jnp.asarray(f), jnp.asarray(0.01 * f),
+            jnp.zeros(1), jnp.ones(1), jnp.zeros(1), jnp.log(jnp.array([1e4])), jnp.log(jnp.array([1e8])))
+    y = np.log([[RING.kw], [RING.kw * 1.1], [1e9], [np.nan]])
+    lp = np.asarray(fn(jnp.asarray(y), args))
+    assert lp[0] == pytest.approx(0.0, abs=1e-12) and lp[1] < lp[0]
+    assert lp[2] == -np.inf and lp[3] == -np.inf
