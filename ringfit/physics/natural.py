@@ -83,22 +83,33 @@ def extensible_natural_frequencies(ring: RingParams, geometry: TyreGeometry, n):
     return jnp.sqrt(jnp.clip(lam, 0.0)) / TWO_PI
 
 
-def rotating_natural_frequencies(ring: RingParams, geometry: TyreGeometry, n, omega):
-    """Rotating ring seen by a co-rotating observer [Hz], shape ``n.shape + (2,)`` (PHYSICS.md §3.2, seed eq. 25).
+def rotating_from_static(omega_static, n, omega):
+    """Eq. 25 given the static ω_fn [rad/s]: co-rotating ω_n1, ω_n2 [rad/s], shape ``+ (2,)`` (PHYSICS.md §3.2).
 
-    ``ω_n1,2 = 2nΩ/(n²+1) ± √(ω_fn² + n²(n²−1)²Ω²/(n²+1)²)``: index 0 is
+    ``ω_n1,2 = 2nΩ/(n²+1) ± √(ω_fn² + n²(n²−1)²Ω²/(n²+1)²)``; index 0 is
     ω_n1 > 0 (backward wave), index 1 is ω_n2 < 0 (forward wave), convention
-    ``w ∝ exp(i(nθ + ωt))``. Exact for χ = 1, EA → ∞.
-
-    **Arguments:** ``omega`` — wheel speed Ω [rad/s], broadcast with ``n``.
+    ``w ∝ exp(i(nθ + ωt))``. Taking ω_fn as an argument lets models that change
+    the static frequency (ground contact, cavity, ...) add rotation on top.
     """
     n = jnp.asarray(n, dtype=jnp.float64)
     omega = jnp.asarray(omega, dtype=jnp.float64)
-    wf = natural_angular_frequencies(ring, geometry, n)
     n2p1 = n**2 + 1.0
     shift = 2.0 * n * omega / n2p1
-    root = jnp.sqrt(wf**2 + (n * (n**2 - 1.0) * omega / n2p1) ** 2)
-    return jnp.stack([shift + root, shift - root], -1) / TWO_PI
+    root = jnp.sqrt(omega_static**2 + (n * (n**2 - 1.0) * omega / n2p1) ** 2)
+    return jnp.stack([shift + root, shift - root], -1)
+
+
+def rotating_natural_frequencies(ring: RingParams, geometry: TyreGeometry, n, omega):
+    """Rotating ring seen by a co-rotating observer [Hz], shape ``n.shape + (2,)`` (PHYSICS.md §3.2, seed eq. 25).
+
+    Eq. 25 (:func:`rotating_from_static`) on the static ω_fn of eq. 18: index 0
+    is ω_n1 > 0 (backward wave), index 1 is ω_n2 < 0 (forward wave). Exact for
+    χ = 1, EA → ∞.
+
+    **Arguments:** ``omega`` — wheel speed Ω [rad/s], broadcast with ``n``.
+    """
+    wf = natural_angular_frequencies(ring, geometry, n)
+    return rotating_from_static(wf, n, omega) / TWO_PI
 
 
 def fixed_frame_frequencies(ring: RingParams, geometry: TyreGeometry, n, omega):
