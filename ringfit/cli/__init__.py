@@ -17,6 +17,10 @@ import sys
 #: Modules that contribute subcommands, in help order.
 COMMAND_MODULES = (
     "ringfit.cli.free",
+    "ringfit.cli.rolling",
+    "ringfit.cli.gap",
+    "ringfit.cli.targets",
+    "ringfit.cli.cleat",
 )
 
 

@@ -10,7 +10,7 @@ documented in ``docs/records-continuous.md``.
 Recordings are long (30 min at 25.6 kHz is 46 M samples a channel), so
 :func:`read_continuous` never loads the big channels: members stored without
 compression (what :func:`write_continuous` and :class:`ContinuousWriter`
-write) are memory-mapped, compressed members are decompressed as a stream.
+write) are read in place by offset, compressed members are decompressed as a stream.
 :meth:`ContinuousRecord.chunks` walks the recording in bounded pieces and
 turns the encoder into the unwrapped sensor angle φ (degrees from the centre
 of the contact patch, PHYSICS.md §0) on the way.
@@ -58,7 +58,7 @@ class _Channel:
 
 
 class _ArrayChannel(_Channel):
-    """A channel held by an array (in memory or memory-mapped)."""
+    """A channel held by an in-memory array."""
 
     def __init__(self, array):
         super().__init__(array.shape[-1])
@@ -66,6 +66,28 @@ class _ArrayChannel(_Channel):
 
     def read(self, start, stop):
         return np.asarray(self.array[start:stop], dtype=np.float64)
+
+
+class _FileChannel(_Channel):
+    """A row of an uncompressed npz member, read with plain file reads.
+
+    (Not a memory map: mapped pages would count toward the process's resident
+    memory; file reads keep only the chunk in memory and leave caching to the OS.)
+    """
+
+    def __init__(self, path, dtype, start_byte, length):
+        super().__init__(length)
+        self.fh = open(path, "rb")
+        self.dtype = dtype
+        self.start_byte = start_byte
+
+    def read(self, start, stop):
+        n = max(0, min(stop, self.length) - start)
+        self.fh.seek(self.start_byte + start * self.dtype.itemsize)
+        return np.fromfile(self.fh, dtype=self.dtype, count=n).astype(np.float64)
+
+    def close(self):
+        self.fh.close()
 
 
 class _ZipStreamChannel(_Channel):
@@ -131,8 +153,7 @@ def _open_rows(path: Path, zf: zipfile.ZipFile, name: str, rows: int, length: in
             name_len = int.from_bytes(local[26:28], "little")
             extra_len = int.from_bytes(local[28:30], "little")
         start = info.header_offset + 30 + name_len + extra_len + offset
-        flat = np.memmap(path, dtype=dtype, mode="r", offset=start, shape=(rows * length,))
-        return [_ArrayChannel(flat[r * length : (r + 1) * length]) for r in range(rows)]
+        return [_FileChannel(path, dtype, start + r * length * dtype.itemsize, length) for r in range(rows)]
     return [_ZipStreamChannel(path, info.filename, dtype, offset, r * length, length) for r in range(rows)]
 
 
@@ -141,21 +162,23 @@ def _open_rows(path: Path, zf: zipfile.ZipFile, name: str, rows: int, length: in
 
 @dataclass
 class ContinuousChunk:
-    """A piece of a recording, samples ``start … start + len − 1``.
+    """A piece of a recording, samples ``start … stop − 1`` (n = stop − start).
 
-    - ``acc``: (axes, n) acceleration [m/s²], float64.
+    - ``acc``: (axes, n) acceleration [m/s²], float64; None when the walk
+      skipped it (``chunks(acc=False)``).
     - ``angle_deg``: (n,) unwrapped sensor angle φ [deg] (φ mod 360 from the
       patch centre, PHYSICS.md §0), or None without an encoder.
     - ``hall``: (n,) hall sensor level (any unit), or None.
     """
 
     start: int
-    acc: np.ndarray
+    stop: int
+    acc: np.ndarray | None
     angle_deg: np.ndarray | None
     hall: np.ndarray | None
 
     def __len__(self):
-        return self.acc.shape[-1]
+        return self.stop - self.start
 
 
 @dataclass
@@ -164,7 +187,8 @@ class ContinuousRecord:
 
     **Fields:**
 
-    - ``acc``: (axes, samples) acceleration [m/s²]; an array or memory map.
+    - ``acc``: (axes, samples) acceleration [m/s²]; an array (in memory) or a
+      channel reader (from a file; use :meth:`read` / :meth:`chunks`).
     - ``axes``: tuple of axis names (``radial``, ``tangential``, ``lateral``).
     - ``fs_hz``: sample rate [Hz].
     - ``encoder_angle_deg``: (samples,) absolute encoder angle [deg] or None.
@@ -238,11 +262,15 @@ class ContinuousRecord:
         stop = self.samples if stop is None else min(stop, self.samples)
         return self._channels[key].read(start, stop)
 
-    def chunks(self, chunk: int = DEFAULT_CHUNK, *, start: int = 0, stop: int | None = None) -> Iterator[ContinuousChunk]:
+    def chunks(self, chunk: int = DEFAULT_CHUNK, *, start: int = 0, stop: int | None = None,
+               acc: bool = True) -> Iterator[ContinuousChunk]:
         """Walk the recording in pieces of ``chunk`` samples (bounded memory).
 
         The encoder is decoded into the unwrapped sensor angle on the way; a
         non-finite sample raises :class:`InputError` naming the sample index.
+        ``acc=False`` skips the acceleration channels (e.g. for the hall pass).
+        Each chunk's arrays are fresh: keep a *copy* of any slice held beyond
+        the chunk, or the whole chunk stays alive.
         """
         stop = self.samples if stop is None else min(stop, self.samples)
         tracker = SensorAngleTracker(self) if self.has_encoder else None
@@ -250,18 +278,20 @@ class ContinuousRecord:
             tracker.advance(0, start, chunk)
         for i0 in range(start, stop, chunk):
             i1 = min(i0 + chunk, stop)
-            acc = np.empty((len(self.axes), i1 - i0))
-            for k, a in enumerate(self.axes):
-                acc[k] = self._channels[f"acc:{a}"].read(i0, i1)
-            if not np.isfinite(acc).all():
-                bad = i0 + int(np.argwhere(~np.isfinite(acc))[0, 1])
-                raise InputError(f"key 'acc': non-finite value at sample {bad}", source=self.source)
+            x = None
+            if acc:
+                x = np.empty((len(self.axes), i1 - i0))
+                for k, a in enumerate(self.axes):
+                    x[k] = self._channels[f"acc:{a}"].read(i0, i1)
+                if not np.isfinite(x).all():
+                    bad = i0 + int(np.argwhere(~np.isfinite(x))[0, 1])
+                    raise InputError(f"key 'acc': non-finite value at sample {bad}", source=self.source)
             angle = tracker.angles(i0, i1) if tracker is not None else None
             hall = self._channels["hall"].read(i0, i1) if self.has_hall else None
-            yield ContinuousChunk(i0, acc, angle, hall)
+            yield ContinuousChunk(i0, i1, x, angle, hall)
 
     def close(self) -> None:
-        """Release memory maps and open streams."""
+        """Close the open files and streams."""
         for ch in self._channels.values():
             ch.close()
 
@@ -326,6 +356,10 @@ class SensorAngleTracker:
         edge_at = np.concatenate([[self.last_edge], rising])[k]
         lengths = np.diff(np.concatenate([[self.last_edge], rising]))
         period = np.concatenate([[self.period], lengths])[k]
+        if lengths.size and np.nanmin(lengths) < 3:
+            at = int(rising[int(np.nanargmin(lengths))])
+            raise InputError(f"key 'encoder_pulses': rising edges {int(np.nanmin(lengths))} samples apart at sample "
+                             f"{at}; the pulse rate must stay below fs_hz/3 (aliased pulses)", source=rec.source)
         known = np.isfinite(edge_at) & np.isfinite(period)
         frac = np.zeros_like(idx)
         frac[known] = np.clip((idx[known] - edge_at[known]) / period[known], 0.0, 1.0)
@@ -541,10 +575,12 @@ def write_continuous(record: ContinuousRecord, path: str | os.PathLike, *, overw
 class ContinuousWriter:
     """Stream a long continuous record to ``path`` chunk by chunk (bounded memory).
 
-    Channels go to temporary ``.npy`` memory maps next to ``path``; closing
-    packs them into an uncompressed npz (so that :func:`read_continuous` can
-    memory-map it) and renames it into place. Nothing is left behind if an
-    exception interrupts the writing.
+    Each channel (each axis of ``acc``) is appended to its own temporary raw
+    file next to ``path`` with plain writes — no memory maps, whose dirty
+    pages would count toward the process's resident memory and grow with the
+    recording. Closing streams them, 1 MB at a time, into an uncompressed npz
+    (so that :func:`read_continuous` can read it in place) and renames it into
+    place. Nothing is left behind if an exception interrupts the writing.
 
     **Arguments:** ``axes``, ``fs_hz``, ``samples`` (total per channel);
     ``encoder`` — ``"angle"`` (absolute, degrees), ``"pulses"`` (0/1 levels,
@@ -588,53 +624,78 @@ class ContinuousWriter:
         self.samples = int(samples)
         self.encoder = encoder
         self.tmpdir = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", dir=self.path.parent))
-        fmt = np.lib.format
-        self.acc = fmt.open_memmap(self.tmpdir / "acc.npy", "w+", np.dtype(acc_dtype), (1, len(axes), self.samples))
-        self.enc = None
-        if encoder == "angle":
-            self.enc = fmt.open_memmap(self.tmpdir / "encoder_angle_deg.npy", "w+", np.float64, (self.samples,))
-        elif encoder == "pulses":
-            self.enc = fmt.open_memmap(self.tmpdir / "encoder_pulses.npy", "w+", np.uint8, (self.samples,))
-        self.hall = fmt.open_memmap(self.tmpdir / "hall.npy", "w+", np.float32, (self.samples,)) if hall else None
+        # member name -> (dtype, shape, [temporary raw file per row, in C order])
+        self.members = {"acc": (np.dtype(acc_dtype), (1, len(axes), self.samples), [])}
+        self.files = []
+        try:
+            for k in range(len(axes)):
+                self.members["acc"][2].append(self._open(f"acc_{k}"))
+            if encoder is not None:
+                name = "encoder_angle_deg" if encoder == "angle" else "encoder_pulses"
+                dtype = np.dtype(np.float64 if encoder == "angle" else np.uint8)
+                self.members[name] = (dtype, (self.samples,), [self._open(name)])
+            if hall:
+                self.members["hall"] = (np.dtype(np.float32), (self.samples,), [self._open("hall")])
+        except BaseException:
+            self._cleanup()
+            raise
         self.pos = 0
         self.first_angle = 0.0
+
+    def _open(self, name):
+        fh = open(self.tmpdir / f"{name}.raw", "wb")
+        self.files.append(fh)
+        return fh
 
     def write(self, acc, *, encoder=None, hall=None) -> None:
         """Append a chunk: ``acc`` (axes, n), ``encoder`` (n,), ``hall`` (n,)."""
         acc = np.asarray(acc)
+        if acc.ndim == 1:
+            acc = acc[None, :]
         n = acc.shape[-1]
+        if acc.shape != (len(self.meta.axes), n):
+            raise ValueError(f"acc chunk has shape {acc.shape}; expected ({len(self.meta.axes)}, n)")
         if self.pos + n > self.samples:
             raise ValueError(f"writing past the declared {self.samples} samples")
-        sl = slice(self.pos, self.pos + n)
-        self.acc[0, :, sl] = acc
-        if self.enc is not None:
-            if encoder is None:
-                raise ValueError("this writer expects an encoder chunk")
-            self.enc[sl] = encoder
-            if self.pos == 0 and self.encoder == "angle":
-                self.first_angle = float(encoder[0]) + self.meta.encoder_offset_deg
-        if self.hall is not None:
-            if hall is None:
-                raise ValueError("this writer expects a hall chunk")
-            self.hall[sl] = hall
+        given = {"encoder_angle_deg": encoder, "encoder_pulses": encoder, "hall": hall}
+        for name, (dtype, _, files) in self.members.items():
+            if name == "acc":
+                for k, fh in enumerate(files):
+                    np.ascontiguousarray(acc[k], dtype=dtype).tofile(fh)
+                continue
+            x = given[name]
+            if x is None:
+                raise ValueError(f"this writer expects a{'n encoder' if name != 'hall' else ' hall'} chunk")
+            x = np.asarray(x)
+            if x.shape != (n,):
+                raise ValueError(f"{name} chunk has shape {x.shape}; expected ({n},)")
+            np.ascontiguousarray(x, dtype=dtype).tofile(files[0])
+        if self.pos == 0 and self.encoder == "angle" and n:
+            self.first_angle = float(encoder[0]) + self.meta.encoder_offset_deg
         self.pos += n
 
     def close(self) -> Path:
         """Pack the npz and move it into place."""
         if self.pos != self.samples:
+            self._cleanup()
             raise ValueError(f"wrote {self.pos} of {self.samples} declared samples")
         small = _small_members(self.meta, self.first_angle)
-        arrays = [a for a in (self.acc, self.enc, self.hall) if a is not None]
-        for a in arrays:
-            a.flush()
+        for fh in self.files:
+            fh.close()
+        fmt = np.lib.format
 
         def write(tmp):
             with zipfile.ZipFile(tmp, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
-                for a in arrays:
-                    zf.write(a.filename, Path(a.filename).name)
+                for name, (dtype, shape, files) in self.members.items():
+                    with zf.open(name + ".npy", "w", force_zip64=True) as dst:
+                        fmt.write_array_header_1_0(
+                            dst, {"descr": fmt.dtype_to_descr(dtype), "fortran_order": False, "shape": shape})
+                        for fh in files:
+                            with open(fh.name, "rb") as src:
+                                shutil.copyfileobj(src, dst, 1 << 20)
                 for key, value in small.items():
                     with zf.open(key + ".npy", "w", force_zip64=True) as fh:
-                        np.lib.format.write_array(fh, np.asarray(value), allow_pickle=False)
+                        fmt.write_array(fh, np.asarray(value), allow_pickle=False)
 
         try:
             atomic_write(self.path, write)
@@ -643,11 +704,8 @@ class ContinuousWriter:
         return self.path
 
     def _cleanup(self):
-        for name in ("acc", "enc", "hall"):
-            a = getattr(self, name)
-            if a is not None and hasattr(a, "_mmap") and a._mmap is not None:
-                a._mmap.close()
-            setattr(self, name, None)
+        for fh in self.files:
+            fh.close()
         shutil.rmtree(self.tmpdir, ignore_errors=True)
 
     def __enter__(self):

@@ -241,8 +241,25 @@ def solve_rolling(
     )
 
 
-#: :func:`solve_rolling` under ``eqx.filter_jit`` (one compilation per solver/model structure).
-solve_rolling_jit = eqx.filter_jit(solve_rolling)
+def as_traced(tree):
+    """Python floats in a PyTree (parameters, operating point, models) -> float64 arrays.
+
+    ``eqx.filter_jit`` treats Python floats as static (a recompile per value);
+    passing arrays keeps one compilation per model structure.
+    """
+    return jax.tree.map(
+        lambda x: jnp.asarray(x, dtype=jnp.float64) if isinstance(x, (int, float)) and not isinstance(x, bool) else x,
+        tree,
+    )
+
+
+_solve_rolling_compiled = eqx.filter_jit(solve_rolling)
+
+
+def solve_rolling_jit(ring, geometry, operating, *, model=RingModel(), solver=ContactSolver(), extra_load=None):
+    """:func:`solve_rolling` compiled once per model/solver structure (floats passed as arrays)."""
+    ring, geometry, operating, model = as_traced((ring, geometry, operating, model))
+    return _solve_rolling_compiled(ring, geometry, operating, model=model, solver=solver, extra_load=extra_load)
 
 
 def patch_edges(solution: RollingSolution):
@@ -271,5 +288,5 @@ def contact_length(solution: RollingSolution):
 
 __all__ = [
     "ContactSolver", "RollingSolution", "tread_pressure", "circulant_block", "solve_rolling",
-    "solve_rolling_jit", "patch_edges", "contact_length",
+    "solve_rolling_jit", "as_traced", "patch_edges", "contact_length",
 ]

@@ -31,7 +31,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from ringfit.params import TyreGeometry
-from ringfit.physics.contact import RollingSolution
+from ringfit.physics.contact import RollingSolution, as_traced
 from ringfit.physics.rolling import harmonic_numbers
 
 #: Standard gravity [m/s²].
@@ -184,8 +184,17 @@ def sensor_signals(solution: RollingSolution, geometry: TyreGeometry, sensor: Se
     return channels[0], channels[1]
 
 
+_sensor_signals_compiled = eqx.filter_jit(sensor_signals)
+
+
+def sensor_signals_jit(solution: RollingSolution, geometry: TyreGeometry, sensor: SensorModel = SensorModel()):
+    """:func:`sensor_signals` compiled once per sensor structure (floats passed as arrays)."""
+    geometry, sensor = as_traced((geometry, sensor))
+    return _sensor_signals_compiled(solution, geometry, sensor)
+
+
 __all__ = [
-    "STANDARD_GRAVITY", "belt_slope", "liner_point", "inertial_acceleration", "specific_force", "tilt_axes",
+    "sensor_signals_jit", "STANDARD_GRAVITY", "belt_slope", "liner_point", "inertial_acceleration", "specific_force", "tilt_axes",
     "highpass_response", "iepe_highpass", "remove_revolution_mean", "shift_angle", "SensorModel",
     "sensor_signals",
 ]

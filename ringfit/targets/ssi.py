@@ -157,6 +157,22 @@ def _orth(a: np.ndarray) -> np.ndarray:
     return scipy.linalg.qr(a, mode="economic", check_finite=False)[0]
 
 
+def small_matrix_threads():
+    """Context manager: one BLAS thread for loops of small dense problems (eig of ≤ 200 × 200).
+
+    Multi-threaded BLAS on matrices this small only adds synchronisation; on
+    a loaded machine it made the order sweep 30× slower. Uses
+    ``threadpoolctl`` when installed, else does nothing.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - optional
+        import contextlib
+
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
 def poles_from_svd(
     u: np.ndarray,
     s: np.ndarray,
@@ -184,7 +200,8 @@ def poles_from_svd(
     kmax = int(orders[-1])
     l = int(n_channels)
     if orders[0] < 1 or kmax > s.shape[0]:
-        raise InputError(f"model orders must lie in 1..{s.shape[0]} (the SVD rank); got {orders[0]}..{kmax}")
+        raise InputError(f"model orders must lie in 1..{s.shape[0]} (the rank of the block Hankel matrix; "
+                         f"more block rows raise it); got {orders[0]}..{kmax}")
     if u.shape[0] - l < kmax:
         raise InputError(
             f"model order {kmax} needs at least {kmax // l + 2} block rows for {l} channels; "
@@ -200,7 +217,26 @@ def poles_from_svd(
         from tqdm import tqdm
 
         iterator = tqdm(orders, desc="SSI orders", unit="order", leave=False)
-    for n in iterator:
+    with small_matrix_threads():
+        _sweep(iterator, r, s_mat, c_full, dt, max_damping, out)
+    if not out["order"]:
+        empty = np.zeros(0)
+        return PoleSet(empty.astype(np.int64), empty, empty, empty.astype(complex),
+                       np.zeros((0, l), complex), orders, s)
+    return PoleSet(
+        order=np.concatenate(out["order"]),
+        freq_hz=np.concatenate(out["freq_hz"]),
+        damping=np.concatenate(out["damping"]),
+        lam=np.concatenate(out["lam"]),
+        shape=np.concatenate(out["shape"]),
+        orders=orders,
+        singular_values=s,
+    )
+
+
+def _sweep(orders, r, s_mat, c_full, dt, max_damping, out) -> None:
+    """A_n = R_n⁻¹ S_n for each order, eigen-decomposition, poles and shapes appended to ``out``."""
+    for n in orders:
         a = scipy.linalg.solve_triangular(r[:n, :n], s_mat[:n, :n], check_finite=False)
         mu, psi = np.linalg.eig(a)
         keep = mu.imag > 0
@@ -221,19 +257,6 @@ def poles_from_svd(
         out["damping"].append(zeta[ok])
         out["lam"].append(lam[ok])
         out["shape"].append(phi.T)
-    if not out["order"]:
-        empty = np.zeros(0)
-        return PoleSet(empty.astype(np.int64), empty, empty, empty.astype(complex),
-                       np.zeros((0, l), complex), orders, s)
-    return PoleSet(
-        order=np.concatenate(out["order"]),
-        freq_hz=np.concatenate(out["freq_hz"]),
-        damping=np.concatenate(out["damping"]),
-        lam=np.concatenate(out["lam"]),
-        shape=np.concatenate(out["shape"]),
-        orders=orders,
-        singular_values=s,
-    )
 
 
 def default_block_rows(max_order: int, n_channels: int, n_refs: int) -> int:

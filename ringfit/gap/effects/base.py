@@ -71,6 +71,9 @@ class Effect:
     parameters: tuple[Parameter, ...] = ()
     #: ... unless the effect needs different ones for rolling profiles (``None`` = ``parameters``)
     profile_parameters: tuple[Parameter, ...] | None = None
+    #: baseline parameters the effect legitimately re-balances (e.g. the intercept ζ0 of a
+    #: damping slope); they are left out of the drift guard of :mod:`ringfit.gap.verdict`
+    baseline_partners: tuple[str, ...] = ()
 
     # ---------------------------------------------------------------- helpers
     def params_for(self, domain: str) -> tuple[Parameter, ...]:

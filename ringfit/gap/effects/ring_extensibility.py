@@ -8,6 +8,11 @@ compliance 0 gives eq. 18 bit for bit: with ``c = 1/EA·R²``-scaled compliance,
 ``λ = λ₀ + δ`` with ``c δ² − [c(A′+B′) + n²+1] δ + c(A′B′ − b₃²) = 0``,
 ``A′ = a − λ₀``, ``B′ = B − λ₀`` (the smaller root). Parameter
 ``compliance_per_mn`` = 10⁶ N / EA (null 0 = inextensible, 10 = EA of 1e5 N).
+
+Rolling profiles: the extensible 2×2 operator D_n of PHYSICS.md §4.2 with
+EA = 10⁶/c N (:meth:`ringfit.gap.profile_model.ProfileModel.with_membrane_compliance`;
+c = 0 gives EA = 1e12 N, the inextensible ring to ~1e-8). Signature: belt
+stretch ``s_tan ∝ Ω²Rε′``, small (PHYSICS.md §6).
 """
 
 import jax.numpy as jnp
@@ -24,6 +29,9 @@ class RingExtensibility(Effect):
         Parameter("compliance_per_mn", "1/MN", null=0.0, lo=0.0, hi=50.0, start=2.0,
                   description="1e6 N / EA (10 = EA of 1e5 N)"),
     )
+
+    def profile_model(self, values, model):
+        return model.with_membrane_compliance(values[0] * 1e-6)
 
     def modal_mask(self, rows):
         return (np.asarray(rows.is_freq) > 0) & (np.asarray(rows.n) >= 1)

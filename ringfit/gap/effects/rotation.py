@@ -17,20 +17,19 @@ import jax.numpy as jnp
 import numpy as np
 
 from ringfit.gap.effects import register
+from ringfit.physics import natural
 from ringfit.gap.effects.base import Effect, Parameter
 
 
 def rotating_from_static(omega_static, n, spin, backward, fixed_frame):
-    """Eq. 25 / 26 given the static ω_fn [rad/s] of each row (PHYSICS.md §3.2–3.3).
+    """|ω| [rad/s] of each row from its static ω_fn: eq. 25, plus the Doppler shift of eq. 26 in the fixed frame.
 
-    ``spin`` Ω [rad/s]; ``backward`` bool; ``fixed_frame`` bool. Returns |ω| [rad/s].
+    Uses :func:`ringfit.physics.natural.rotating_from_static` (PHYSICS.md §3.2–3.3);
+    ``spin`` Ω [rad/s]; ``backward`` bool selects ω_n1 (else ω_n2); ``fixed_frame`` bool.
     """
-    n2p1 = n**2 + 1.0
-    shift = 2.0 * n * spin / n2p1
-    root = jnp.sqrt(omega_static * omega_static + (n * (n**2 - 1.0) * spin / n2p1) ** 2)
-    rot = jnp.where(backward, shift + root, root - shift)
-    doppler = jnp.where(backward, -n * spin, n * spin)
-    return jnp.abs(jnp.where(fixed_frame, rot + doppler, rot))
+    waves = natural.rotating_from_static(omega_static, n, spin)
+    rot = jnp.where(backward, waves[..., 0], waves[..., 1])
+    return jnp.abs(jnp.where(fixed_frame, rot - n * spin, rot))
 
 
 class Rotation(Effect):

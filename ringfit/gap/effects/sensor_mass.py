@@ -4,14 +4,32 @@ Modal data: the mode a single sensor sees has its antinode at the sensor,
 so its modal mass grows by m_s (Rayleigh): ``ω' = ω √(M_n/(M_n + m_s))`` with
 ``M_n = πRρA(1 + 1/n²)`` (n ≥ 1; rigid rotation n = 0: ``2πRρA``). About
 −0.06 % for 3 g: a large shrink attributed to it is suspicious. Parameter
-``mass_kg`` (null 0). Rolling profiles: negligible (corner ≈ 17 kHz), not modelled.
+``mass_kg`` (null 0).
+
+Rolling profiles: mass loading of the belt at the sensor, revolution harmonic
+k seen at ω = kΩ through ``Z/(Z + iωm_s)`` with the belt's wave impedance
+``Z = 2√(T0 ρA)`` (≈ 330 N s/m, corner ≈ 17 kHz for 3 g: PHYSICS.md §6) — a
+gentle low-pass of both channels, expected negligible; the bound (50 g) keeps
+it physical. The centrifugal point load m_sΩ²R is a revolution-mean term the
+baseline's mean removal takes out.
 """
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from ringfit.gap.effects import register
 from ringfit.gap.effects.base import Effect, Parameter
+
+
+class MassLoading(eqx.Module):
+    """Gain ``Z/(Z + i kΩ m_s)`` of revolution harmonic k [-], ``Z = 2√(T0 ρA)`` (PHYSICS.md §6 sensor_mass)."""
+
+    mass: float
+
+    def __call__(self, omega, ring, geometry, k):
+        impedance = 2.0 * jnp.sqrt(geometry.pretension * ring.rho_a)
+        return impedance / (impedance + 1j * k * omega * self.mass)
 
 
 class SensorMass(Effect):
@@ -21,6 +39,14 @@ class SensorMass(Effect):
         Parameter("mass_kg", "kg", null=0.0, lo=0.0, hi=0.3, start=0.02,
                   description="sensor + mount mass m_s"),
     )
+
+    profile_parameters = (
+        Parameter("mass_kg", "kg", null=0.0, lo=0.0, hi=0.05, start=0.005,
+                  description="sensor + mount mass m_s"),
+    )
+
+    def profile_model(self, values, model):
+        return model.with_channel_filter(MassLoading(values[0]))
 
     def modal_mask(self, rows):
         return np.asarray(rows.is_freq) > 0

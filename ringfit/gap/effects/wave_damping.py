@@ -34,6 +34,7 @@ class GrowingLoss(AbstractOperatorTerm):
 
 class WaveDamping(Effect):
     name = "wave_damping"
+    baseline_partners = ("damping_ratio",)
     summary = "damping that grows with frequency: waves decay away from the patch, front and rear differ"
     parameters = (
         Parameter("eta_slope", "-", null=0.0, lo=0.0, hi=0.3, start=0.02,

@@ -1,0 +1,138 @@
+"""``ringfit profile`` and ``ringfit cleat``: continuous drum recordings → profiles, angle–time fields, modes.
+
+    ringfit profile RECORD --out NAME.profile.csv [--points 2048]
+    ringfit cleat RECORD --sectors 512 --out FIELD.npz [--animate A.gif] [--ssi MODES.csv]
+
+RECORD is a continuous ``*.records.npz`` (docs/records-continuous.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub) -> None:
+    p = sub.add_parser("profile", help="rolling profile (DATA.md §3) from a continuous recording",
+                       description="Average a continuous recording by sensor angle over revolutions and write "
+                                   "a *.profile.csv (+ .json sidecar); the revolution-to-revolution spread goes "
+                                   "into extra columns.")
+    p.add_argument("record", help="continuous *.records.npz")
+    p.add_argument("--out", required=True, help="output NAME.profile.csv")
+    p.add_argument("--points", type=int, default=2048, help="angle points per revolution (default 2048)")
+    p.add_argument("--quiet-after", type=float, default=None, metavar="S",
+                   help="with a hall channel: leave out samples less than S seconds after each cleat arrival")
+    p.add_argument("--force", action="store_true", help="replace existing outputs")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(run=run_profile)
+
+    c = sub.add_parser("cleat", help="angle–time field of a cleat test, its modes and animation",
+                       description="Rebuild the cleat response on the plane of sensor angle × time since the "
+                                   "cleat's arrival (hall pulses), the no-cleat reading subtracted at the same angle.")
+    c.add_argument("record", help="continuous *.records.npz with encoder and hall")
+    c.add_argument("--out", required=True, help="output FIELD.npz")
+    c.add_argument("--sectors", type=int, default=512, help="sectors around the tyre (default 512)")
+    c.add_argument("--time-step", type=float, default=None, metavar="S", help="time bin [s] (default 1/fs)")
+    c.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="time after each arrival to rebuild [s] (default: the drum period)")
+    c.add_argument("--baseline", default=None, metavar="PROFILE.csv",
+                   help="no-cleat profile to subtract (default: from this record's samples long after each hit)")
+    c.add_argument("--no-baseline", action="store_true", help="subtract nothing")
+    c.add_argument("--animate", default=None, metavar="A.gif", help="write a polar animation (GIF)")
+    c.add_argument("--snapshots", default=None, metavar="S.png", help="write a multi-panel figure of instants")
+    c.add_argument("--coverage-plot", default=None, metavar="C.png", help="write the coverage figure (fig. 23)")
+    c.add_argument("--ssi", default=None, metavar="MODES.csv", help="identify the rolling-tyre modes, write a mode table")
+    c.add_argument("--channels", type=int, default=128, help="sectors used as SSI channels (default 128)")
+    c.add_argument("--f-max", type=float, default=400.0, help="top of the SSI band [Hz] (default 400)")
+    c.add_argument("--skip", type=float, default=None, metavar="S",
+                   help="drop τ < S (cleat contact) before SSI (default: time for 30° of rotation)")
+    c.add_argument("--force", action="store_true", help="replace existing outputs")
+    c.add_argument("--quiet", action="store_true", help="no progress bar")
+    c.set_defaults(run=run_cleat)
+
+
+def run_profile(args: argparse.Namespace) -> int:
+    from ringfit.io.continuous import read_continuous
+    from ringfit.io.files import check_output_path
+    from ringfit.io.profiles import write_profile
+    from ringfit.targets.rolling_profile import rolling_profile
+
+    check_output_path(args.out, overwrite=args.force, inputs=[args.record])
+    with read_continuous(args.record) as rec:
+        arrivals = None
+        if args.quiet_after is not None and rec.has_hall:
+            from ringfit.targets.cleat import detect_cleat_arrivals
+
+            arrivals = detect_cleat_arrivals(rec, progress=not args.quiet).sample
+        prof = rolling_profile(rec, points=args.points, arrivals_samples=arrivals, quiet_after_s=args.quiet_after,
+                               progress=not args.quiet)
+    write_profile(prof.to_profile(), args.out, overwrite=args.force, inputs=[args.record])
+    print(f"{args.out}: {len(prof.angle_deg)} angles, {prof.full_revolutions} revolutions, "
+          f"rotation {prof.rotation_hz:.4f} Hz; median spread "
+          + ", ".join(f"{a} {np_median(prof.spread[i]):.3g} m/s²" for i, a in enumerate(prof.axes)))
+    return 0
+
+
+def np_median(x) -> float:
+    import numpy as np
+
+    return float(np.nanmedian(x))
+
+
+def run_cleat(args: argparse.Namespace) -> int:
+    from ringfit.io.continuous import read_continuous
+    from ringfit.io.files import check_output_path
+    from ringfit.targets.cleat import angle_time_field, coverage_points
+
+    outputs = [args.out] + [p for p in (args.animate, args.snapshots, args.coverage_plot, args.ssi) if p]
+    for p in outputs:
+        check_output_path(p, overwrite=args.force, inputs=[args.record] + ([args.baseline] if args.baseline else []))
+    baseline = "auto"
+    if args.no_baseline:
+        baseline = None
+    elif args.baseline:
+        from ringfit.io.profiles import read_profile
+
+        baseline = read_profile(args.baseline)
+    with read_continuous(args.record) as rec:
+        field = angle_time_field(rec, sectors=args.sectors, time_step_s=args.time_step, duration_s=args.duration,
+                                 baseline=baseline, progress=not args.quiet)
+        cov = field.coverage()
+        print(f"{len(field.arrivals)} cleat arrivals, {cov['passes']} passes used; sensor advances "
+              f"{cov['angle_step_deg']:.2f} deg per pass; {100 * cov['filled_fraction']:.1f} % of "
+              f"{cov['bins']} bins filled (median {cov['median_count']:g} samples per bin); "
+              f"passes for full coverage: {cov['passes_for_full_coverage'] or 'not reached'}")
+        if args.coverage_plot:
+            from ringfit.report.cleat_plots import plot_coverage
+
+            dur = field.tau_s[-1]
+            pts = {k: coverage_points(rec, field.arrivals, k, dur) for k in (10, 50) if k <= len(field.arrivals)}
+            plot_coverage(pts, args.coverage_plot)
+    extra = {}
+    if args.ssi:
+        from ringfit.io.modes import write_mode_table
+        from ringfit.targets.rolling_modes import identify_rolling_modes
+
+        modes = identify_rolling_modes(field, channels=args.channels, f_max=args.f_max, skip_s=args.skip,
+                                       progress=not args.quiet)
+        write_mode_table(modes.table, args.ssi, overwrite=args.force)
+        extra = {"mode_freq_hz": modes.table.freq_hz, "mode_shapes": modes.shapes,
+                 "mode_channel_deg": modes.channel_deg}
+        print(f"{args.ssi}: {len(modes.table)} modes")
+        for i in range(len(modes.table)):
+            t = modes.table
+            print(f"  {t.freq_hz[i]:8.2f} Hz  n={t.n[i]:<2d} {t.branch[i] or t.tag[i]:<9s} "
+                  f"ζ={t.damping_pct[i]:.2f} %")
+    field.save(args.out, overwrite=args.force, extra=extra)
+    print(f"{args.out}: field {field.mean.shape[1]} sectors × {field.mean.shape[2]} time bins "
+          f"of {1e3 * field.time_step_s:.4g} ms; baseline: {field.baseline}")
+    if args.snapshots or args.animate:
+        from ringfit.report.cleat_plots import animate_field, plot_polar_snapshots
+
+        if args.snapshots:
+            t_end = min(field.tau_s[-1], 0.06)
+            plot_polar_snapshots(field, [t_end * f for f in (0.0, 0.05, 0.12, 0.25, 0.5, 1.0)], args.snapshots)
+            print(f"{args.snapshots}: polar snapshots")
+        if args.animate:
+            animate_field(field, args.animate, tau_max_s=min(field.tau_s[-1], 0.1))
+            print(f"{args.animate}: animation")
+    return 0

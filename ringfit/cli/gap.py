@@ -1,0 +1,78 @@
+"""``ringfit diagnose FOLDER --out NAME.diagnosis.json [--report NAME.html] [--effects a,b,…]``.
+
+Diagnoses the sim-to-real gap of a case folder (DATA.md §6) and writes the
+JSON of DATA.md §5; progress goes to stderr while candidates are fitted.
+"""
+
+from __future__ import annotations
+
+import sys
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "diagnose",
+        help="sim-to-real gap diagnosis of a case folder",
+        description="Where the baseline model and the measurements disagree, which unmodelled effect "
+                    "explains it, and how far it shrinks on held-out data (DATA.md §5, §6).",
+    )
+    p.add_argument("folder", help="case folder: tyre.toml, free.modes.csv(+json), test tables, profiles")
+    p.add_argument("--out", required=True, help="output NAME.diagnosis.json")
+    p.add_argument("--report", help="also write a self-contained HTML report")
+    p.add_argument("--effects", help="comma-separated candidate effects (default: all registered)")
+    p.add_argument("--effect-module", action="append", default=[],
+                   help="import a module (or .py file) that registers extra effects; repeatable")
+    p.add_argument("--noise-freq-hz", type=float, help="frequency noise σ [Hz] instead of estimating it")
+    p.add_argument("--noise-profile", type=float, help="profile noise σ [m/s²] instead of estimating it")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    from pathlib import Path
+
+    from ringfit.errors import InputError
+    from ringfit.io.files import check_output_path
+
+    if not str(args.out).endswith(".json"):
+        raise InputError("--out must end in .json (e.g. NAME.diagnosis.json)", source=args.out)
+    folder = Path(args.folder)
+    inputs = list(folder.glob("*")) if folder.is_dir() else []
+    check_output_path(args.out, overwrite=args.force, inputs=inputs)
+    if args.report:
+        check_output_path(args.report, overwrite=args.force, inputs=inputs)
+
+    from ringfit.gap import diagnose
+    from ringfit.gap.effects import load_effect_module
+
+    for mod in args.effect_module:
+        try:
+            load_effect_module(mod)
+        except Exception as exc:  # noqa: BLE001 - report any import failure as bad input
+            raise InputError(f"cannot load effect module: {exc}", source=mod) from None
+    effects = None
+    if args.effects:
+        from ringfit.gap.effects import available
+
+        effects = [e.strip() for e in args.effects.split(",") if e.strip()]
+        unknown = [e for e in effects if e not in available()]
+        if unknown:
+            raise InputError(f"unknown effect(s) {unknown}; known: {', '.join(available())}", source="--effects")
+    noise = {}
+    if args.noise_freq_hz:
+        noise["freq_hz"] = args.noise_freq_hz
+    if args.noise_profile:
+        noise["profile_ms2"] = args.noise_profile
+    print(f"ringfit diagnose: {folder}", file=sys.stderr)
+    diag = diagnose(folder, effects=effects, progress=not args.quiet, noise=noise or None)
+    diag.write(args.out, overwrite=args.force, inputs=inputs)
+    if args.report:
+        from ringfit.report.gap_report import write_gap_report
+
+        write_gap_report(diag, args.report, overwrite=args.force)
+    v = diag.verdict
+    print(f"verdict: {' + '.join(v['effects'])}"
+          + (f" (held-out shrink {v['heldout_shrink_pct']:.0f} %)" if v["effect"] not in ("none", "unexplained") else ""))
+    print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
+    return 0

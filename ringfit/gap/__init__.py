@@ -1,0 +1,11 @@
+"""Sim-to-real gap diagnosis: where model and measurement disagree, which missing effect explains it, how far it shrinks.
+
+Public entry points: :func:`diagnose` (a case folder → :class:`Diagnosis`,
+JSON of DATA.md §5), :func:`read_case` (DATA.md §6), the effect registry
+:mod:`ringfit.gap.effects`.
+"""
+
+from ringfit.gap.case import Case, read_case
+from ringfit.gap.diagnosis import Diagnosis, diagnose, read_diagnosis
+
+__all__ = ["diagnose", "Diagnosis", "read_case", "Case", "read_diagnosis"]

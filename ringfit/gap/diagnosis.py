@@ -1,0 +1,361 @@
+"""Top level of the gap diagnosis: :func:`diagnose` a case folder, write the JSON of DATA.md §5.
+
+Flow for each kind of data in the folder (mode tables, rolling profiles):
+baseline fit → held-out baseline → where (:mod:`~ringfit.gap.localisation`)
+→ screen (:mod:`~ringfit.gap.screening`) → refit each candidate and its
+held-out evidence (:mod:`~ringfit.gap.ranking`) → verdict and greedy chain
+(:mod:`~ringfit.gap.verdict`).
+
+A folder with both profiles and test mode tables is diagnosed per kind; the
+top-level ``baseline``/``where``/``candidates`` are those of the part with
+the larger standardised residual and every part is under ``parts``; the
+verdict lists the effects accepted in any part, then ``unexplained`` if any
+part left a structured residual.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ringfit.gap import effects as effect_library
+from ringfit.gap.localisation import localise
+from ringfit.gap.problem import GapProblem
+from ringfit.gap.ranking import ChainFit, drift, fit_chain, heldout, rms, shrink_interval
+from ringfit.gap.screening import SCREEN_MIN_SCORE, screen
+from ringfit.gap.verdict import RULES, acceptance, is_structured
+
+
+@dataclass
+class PartResult:
+    """Everything computed for one kind of data (kept for the report)."""
+
+    problem: GapProblem
+    baseline: ChainFit
+    reference: ChainFit
+    fits: dict = field(default_factory=dict)  # chain tuple -> ChainFit (with heldout_pred)
+    summary: dict = field(default_factory=dict)  # the JSON of this part
+    chain_fit: ChainFit | None = None
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`diagnose`: ``content`` is the DATA.md §5 dict, ``parts`` the internals."""
+
+    content: dict
+    parts: list[PartResult]
+    folder: Path | None = None
+
+    @property
+    def verdict(self) -> dict:
+        return self.content["verdict"]
+
+    def to_json(self) -> str:
+        return json.dumps(self.content, indent=1, default=_json_default)
+
+    def write(self, path: str | os.PathLike, *, overwrite: bool = False, inputs=()) -> Path:
+        """Write the diagnosis JSON (atomically; refuses to overwrite unless ``overwrite``)."""
+        from ringfit.io.files import atomic_write_text, check_output_path
+
+        path = check_output_path(path, overwrite=overwrite, inputs=inputs)
+        return atomic_write_text(path, self.to_json() + "\n")
+
+
+def _json_default(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"cannot write {type(x).__name__} to JSON")
+
+
+def _r(x, nd=4):
+    x = float(x)
+    return round(x, nd) if math.isfinite(x) else None
+
+
+def read_diagnosis(path: str | os.PathLike) -> dict:
+    """Load a ``*.diagnosis.json`` and check the DATA.md §5 keys; returns the dict."""
+    from ringfit.errors import InputError
+
+    try:
+        d = json.loads(Path(path).read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise InputError(f"not readable JSON ({exc})", source=path) from None
+    for key in ("data", "baseline", "where", "candidates", "verdict"):
+        if key not in d:
+            raise InputError(f"missing key {key!r} (DATA.md §5)", source=path)
+    if "effect" not in d["verdict"] or "effects" not in d["verdict"]:
+        raise InputError("verdict needs 'effect' and 'effects' (DATA.md §5)", source=path)
+    return d
+
+
+# --------------------------------------------------------------------------- one part
+def _candidate_entry(problem: GapProblem, name: str, fit: ChainFit, current: ChainFit, current_ho: np.ndarray,
+                     reference: ChainFit, scores: dict, on_top_of: tuple) -> dict:
+    y = problem.y
+    rb, rc = y - current.pred, y - fit.pred
+    hb, hc = y - current_ho, y - fit.heldout_pred
+    rms_b, rms_c, hrms_b, hrms_c = rms(problem, rb), rms(problem, rc), rms(problem, hb), rms(problem, hc)
+    lo, hi = shrink_interval(problem, hb, hc)
+    m = problem.m
+    dk = fit.k - current.k
+    dchi2 = fit.chi2 - current.chi2
+    params = {}
+    sl = problem.slices()[name]
+    effect = next(e for e in problem.effects if e.name == name)
+    for p, i in zip(problem.effect_params(effect), range(sl.start, sl.stop)):
+        j = int(np.flatnonzero(fit.free == i)[0])
+        v, se = fit.theta[i], fit.se[j]
+        plo, phi = v - 1.959964 * se, v + 1.959964 * se
+        params[p.name] = {"value": _r(v, 6), "lo": _r(max(plo, p.lo), 6), "hi": _r(min(phi, p.hi), 6),
+                          "null": p.null, "unit": p.unit, "excludes_null": bool(abs(v - p.null) > 1.959964 * se)}
+    d = drift(problem, fit, reference)
+    entry = {
+        "effect": name,
+        "rms": _r(rms_c), "heldout_rms": _r(hrms_c),
+        "shrink_pct": _r(100.0 * (1.0 - rms_c / rms_b), 2) if rms_b > 0 else 0.0,
+        "heldout_shrink_pct": _r(100.0 * (1.0 - hrms_c / hrms_b), 2) if hrms_b > 0 else 0.0,
+        "heldout_shrink_interval_pct": [_r(lo, 2), _r(hi, 2)],
+        "evidence": {"delta_bic": _r(dchi2 + dk * math.log(m), 2), "delta_chi2": _r(dchi2, 2),
+                     "screen_score": _r(scores.get(name, {}).get("score", math.nan), 3),
+                     "alignment": _r(scores.get(name, {}).get("alignment", math.nan), 4)},
+        "params": params,
+        "baseline_drift_sigma": {k: _r(v, 2) for k, v in d.items()},
+        "baseline_drift_max_sigma": _r(max((abs(v) for v in d.values()), default=0.0), 2),
+        "baseline_drift_relative": {k: _r(fit.theta[i] / reference.theta[i] - 1.0, 4)
+                                    for i, k in enumerate(problem.base) if not problem.is_linear(i)},
+        "baseline_drift_max_relative": _r(max((abs(fit.theta[i] / reference.theta[i] - 1.0)
+                                               for i, k in enumerate(problem.base)
+                                               if k not in effect.baseline_partners and not problem.is_linear(i)),
+                                              default=0.0), 4),
+        "on_top_of": list(on_top_of),
+        "screened_out": False,
+    }
+    ok, why = acceptance(entry)
+    entry["accepted"] = ok
+    if why:
+        entry["rejected_because"] = why
+    return entry
+
+
+def _screened_entry(problem, name, current, current_ho, scores, on_top_of):
+    y = problem.y
+    r, h = rms(problem, y - current.pred), rms(problem, y - current_ho)
+    min_frac = float(problem.meta.get("screen_min_fraction", 0.0))
+    return {"effect": name, "rms": _r(r), "heldout_rms": _r(h), "shrink_pct": 0.0, "heldout_shrink_pct": 0.0,
+            "heldout_shrink_interval_pct": [0.0, 0.0],
+            "evidence": {"delta_bic": 0.0, "screen_score": _r(scores.get(name, {}).get("score", 0.0), 3),
+                         "alignment": _r(scores.get(name, {}).get("alignment", 0.0), 4)},
+            "params": {}, "on_top_of": list(on_top_of), "screened_out": True, "accepted": False,
+            "rejected_because": [f"screen score < {SCREEN_MIN_SCORE} or alignment^2 < {min_frac:g}: "
+                                 "the residual does not look like this effect"]}
+
+
+def _screened_out(problem: GapProblem, score: dict) -> bool:
+    """The screen's verdict on one candidate (see :mod:`ringfit.gap.screening`)."""
+    min_frac = float(problem.meta.get("screen_min_fraction", 0.0))
+    return score.get("score", 0.0) < SCREEN_MIN_SCORE or score.get("alignment", 0.0) ** 2 < min_frac
+
+
+def _structure(problem: GapProblem, fit: ChainFit):
+    return is_structured((problem.y - fit.pred) / problem.sigma, problem.labels["group"], fit.k)
+
+
+def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
+    """Run baseline, where, screen, candidates and the greedy chain on one problem."""
+    t0 = time.perf_counter()
+    base = fit_chain(problem, ())
+    base_ho = heldout(problem, base)
+    ref_mask = problem.meta.get("reference_mask")
+    reference = fit_chain(problem, (), train=ref_mask) if ref_mask is not None and not np.all(ref_mask) else base
+    part = PartResult(problem, base, reference)
+    part.fits[()] = base
+    structured, red, p = _structure(problem, base)
+    scores = screen(problem, base)
+    y = problem.y
+    noise_rms = float(np.sqrt(np.mean((problem.sigma * problem.scale) ** 2)))
+    hrms_b = rms(problem, y - base_ho)
+    loc = localise(problem, y - base.pred)
+
+    bar = _progress(problem, progress)
+    current, current_ho, chain, rounds = base, base_ho, (), []
+    remaining = [e.name for e in problem.effects]
+    cur_structured = structured
+    rescreen = float(problem.meta.get("screen_min_fraction", 0.0)) > 0
+    while True:
+        entries = []
+        round_scores = scores if not chain else (screen(problem, current, remaining) if rescreen else {})
+        for name in remaining:
+            if bar is not None:
+                bar.set_description(f"{problem.domain}: {'+'.join(chain + (name,))}")
+            if (not chain or rescreen) and _screened_out(problem, round_scores.get(name, {})):
+                entries.append(_screened_entry(problem, name, current, current_ho, round_scores, chain))
+            else:
+                start = current.theta.copy()
+                sl = problem.slices()[name]
+                eff = next(e for e in problem.effects if e.name == name)
+                start[sl] = [q.start for q in problem.effect_params(eff)]
+                fit = fit_chain(problem, chain + (name,), start=start)
+                heldout(problem, fit)
+                part.fits[chain + (name,)] = fit
+                entries.append(_candidate_entry(problem, name, fit, current, current_ho, reference, round_scores,
+                                                chain))
+            if bar is not None:
+                bar.update(1)
+        entries.sort(key=lambda c: -(c["heldout_shrink_pct"] if c["heldout_shrink_pct"] is not None else -1e9))
+        rounds.append(entries)
+        if not cur_structured:
+            break
+        accepted = [c for c in entries if c["accepted"]]
+        if not accepted:
+            chain = chain + ("unexplained",)
+            break
+        best = accepted[0]["effect"]
+        chain = chain + (best,)
+        current = part.fits[chain]
+        current_ho = current.heldout_pred
+        remaining.remove(best)
+        cur_structured, _, _ = _structure(problem, current)
+        if not remaining or not cur_structured:
+            break
+    if bar is not None:
+        bar.close()
+    part.chain_fit = current
+    if not structured:
+        effects_list = ["none"]
+    else:
+        effects_list = list(chain)
+    final_h = rms(problem, y - current_ho)
+    verdict = {"effect": effects_list[0], "effects": effects_list,
+               "heldout_shrink_pct": _r(100.0 * (1.0 - final_h / hrms_b), 2) if effects_list[0] not in
+               ("none", "unexplained") and hrms_b > 0 else 0.0,
+               "rule": RULES}
+    part.summary = {
+        "data": problem.data_files,
+        "baseline": {"model": problem.baseline_model, "rms": _r(rms(problem, y - base.pred)),
+                     "unit": problem.unit, "heldout_rms": _r(hrms_b), "noise_rms": _r(noise_rms),
+                     "ideal_shrink_pct": _r(100.0 * (1.0 - noise_rms / hrms_b), 2) if hrms_b > 0 else 0.0,
+                     "reduced_chi2": _r(red, 3), "noise_p_value": float(p), "structured": bool(structured),
+                     "noise_method": problem.noise_method, "heldout_method": problem.fold_kind,
+                     "parameters": {k: _r(v, 6) for k, v in zip(problem.base, base.theta)},
+                     **({"sources": problem.meta["sources"]} if "sources" in problem.meta else {})},
+        "where": loc["where"],
+        "where_detail": {k: v for k, v in loc.items() if k != "where"},
+        "candidates": rounds[0],
+        "chain": [{"added": c, "candidates": r} for c, r in zip(chain[:len(rounds) - 1], rounds[1:])],
+        "not_applicable": problem.not_applicable,
+        "verdict": verdict,
+        "elapsed_s": round(time.perf_counter() - t0, 2),
+    }
+    return part
+
+
+def _progress(problem, progress):
+    if not progress:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=len(problem.effects), file=sys.stderr, leave=False, unit="candidate")
+
+
+# --------------------------------------------------------------------------- folder
+def build_problems(case, effects, noise=None) -> list[GapProblem]:
+    """The problems of a case: mode tables (always; the free table is data too) and profiles (if any)."""
+    from ringfit.gap.modal import build_modal_problem
+    from ringfit.gap.ranking import fit_baseline
+
+    problems = [build_modal_problem([case.free, *case.tests], case.tyre.geometry, case.tyre.ring, effects,
+                                    noise=noise, fit_reference=fit_baseline)]
+    if case.profiles:
+        from ringfit.gap.profile import build_profile_problem
+
+        ring, sources = _ring_from_free(problems[0], case.tyre)
+        problems.append(build_profile_problem(case, ring, effects, noise=noise, sources=sources))
+    return problems
+
+
+def _ring_from_free(modal_problem: GapProblem, tyre):
+    """The ring for the profile baseline: ρA, EI, k_w, k_v (and ζ when the free table has damping) from
+    the eq. 18 fit to ``free.modes.csv``; the rest (ζ otherwise, k_trd start) from ``tyre.toml``.
+
+    **Returns:** ``(ring, sources)`` with ``sources`` naming where each value came from.
+    """
+    fitted = {k: float(v) for k, v in zip(modal_problem.base, modal_problem.base_values)}
+    sources = {k: "eq. 18 fit to free.modes.csv" for k in fitted}
+    if "damping_ratio" in sources:
+        sources["damping_ratio"] = "median-anchored fit to free.modes.csv damping_pct"
+    for k in ("damping_ratio", "k_tread"):
+        if k not in fitted:
+            sources[k] = ("tyre.toml [ring]" if k in tyre.ring_values else "Table 9 default") + \
+                (" (start of the fit)" if k == "k_tread" else "")
+    return tyre.ring.replace(**fitted), sources
+
+
+def resolve_effects(effects=None):
+    """Effect objects from names (``None`` = every registered effect)."""
+    if effects is None:
+        return tuple(effect_library.get(n) for n in effect_library.available())
+    if isinstance(effects, str):
+        effects = [e.strip() for e in effects.split(",") if e.strip()]
+    return tuple(e if isinstance(e, effect_library.Effect) else effect_library.get(e) for e in effects)
+
+
+def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = None) -> Diagnosis:
+    """Diagnose the sim-to-real gap of a case folder (DATA.md §6) against the baselines of PHYSICS.md §6.
+
+    **Arguments:**
+
+    - ``folder``: the case folder (or a :class:`~ringfit.gap.case.Case`).
+    - ``effects``: candidate names (list or comma-separated string); ``None`` = all registered.
+    - ``progress``: show a tqdm bar on stderr while candidates are fitted.
+    - ``noise``: optional user noise levels, ``{"freq_hz": σ, "damping": σ, "profile_ms2": σ}``;
+      default: estimated from the data (see :mod:`ringfit.gap.modal`, :mod:`ringfit.gap.profile`).
+
+    **Returns:** :class:`Diagnosis` (``.content`` is the DATA.md §5 dict, ``.write(path)``).
+    """
+    from ringfit.gap.case import Case, read_case
+
+    case = folder if isinstance(folder, Case) else read_case(folder)
+    chosen = resolve_effects(effects)
+    t0 = time.perf_counter()
+    problems = build_problems(case, chosen, noise)
+    # the modal part is only a test when the folder holds test tables or nothing else
+    parts = []
+    for prob in problems:
+        if prob.domain == "modes" and case.profiles and not case.tests:
+            continue
+        parts.append(diagnose_problem(prob, progress))
+    content = _combine(parts)
+    content["data"] = case.data_files
+    content["elapsed_s"] = round(time.perf_counter() - t0, 2)
+    return Diagnosis(content, parts, getattr(case, "folder", None))
+
+
+def _combine(parts: list[PartResult]) -> dict:
+    if len(parts) == 1:
+        return dict(parts[0].summary)
+    primary = max(parts, key=lambda p: p.summary["baseline"]["reduced_chi2"] or 0.0)
+    out = dict(primary.summary)
+    effects, unexplained = [], False
+    for p in parts:
+        for e in p.summary["verdict"]["effects"]:
+            if e == "unexplained":
+                unexplained = True
+            elif e != "none" and e not in effects:
+                effects.append(e)
+    if unexplained:
+        effects.append("unexplained")
+    effects = effects or ["none"]
+    v = dict(primary.summary["verdict"])
+    v.update(effect=effects[0], effects=effects)
+    out["verdict"] = v
+    out["parts"] = [p.summary for p in parts]
+    return out

@@ -1,0 +1,102 @@
+"""The common shape of a gap-diagnosis problem, whatever the data (mode tables or rolling profiles).
+
+A :class:`GapProblem` holds the observations ``y`` (one row each), their
+noise level ``sigma``, the held-out folds, labels for localisation, the
+baseline parameters with their reference values (the baseline fit), and a
+jitted predictor of **every** applicable effect at once:
+``predict(theta, data) -> (m,)`` with ``theta = [baseline params, effect 1
+params, effect 2 params, …]`` in natural units. A candidate chain frees the
+baseline and the chain's parameters and keeps every other effect at its null
+(where each effect gives back the baseline exactly), so one compiled
+function serves every candidate and every chain (:mod:`ringfit.gap.ranking`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from ringfit.gap.effects.base import Effect, Parameter
+
+
+@dataclass
+class GapProblem:
+    """Observations, noise, folds and the model of one diagnosis.
+
+    - ``domain``: ``"modes"`` or ``"profiles"``.
+    - ``data_files``: file names the data came from (JSON ``data``).
+    - ``y``, ``sigma``: ``(m,)`` observations and one-σ noise, data units.
+    - ``unit``: unit of the RMS figures (``Hz``-equivalent for modes, m/s² for profiles).
+    - ``scale``: ``(m,)`` factor turning a residual into the unit of the RMS figures.
+    - ``folds``: ``(m,)`` int, held-out group of each row (speed / mode fold); ``fold_kind`` names it.
+    - ``labels``: per-row information used by :mod:`ringfit.gap.localisation`.
+    - ``base``: baseline parameters (log-fitted, positive), ``base_values`` their reference
+      values (baseline fit), ``base_prior_sd`` the σ of a log-normal prior around the
+      reference used in refits (``inf`` = none).
+    - ``effects``: the applicable effects, in the order of ``theta`` after the baseline.
+    - ``predict``: jitted ``(theta (p,), data) -> (m,)``; ``data``: its pytree argument.
+    - ``noise_method``: how ``sigma`` was obtained (one line, goes into the JSON).
+    - ``not_applicable``: effect name -> reason, for effects left out.
+    - ``base_linear``: per baseline parameter, ``True`` for a nuisance fitted linearly
+      (e.g. the profiles' angle offset [rad], which may be negative) instead of as a log;
+      ``base_linear_scale`` its typical size and ``base_linear_bound`` its hard bound ±.
+      ``None`` = every baseline parameter positive and log-fitted.
+    - ``jacobian``: optional jitted ``(theta, data, basis (p, K)) -> (m, K)`` directional
+      derivatives (K fixed); ``None`` = forward-mode Jacobian of ``predict`` (all columns).
+    """
+
+    domain: str
+    data_files: list[str]
+    y: np.ndarray
+    sigma: np.ndarray
+    unit: str
+    scale: np.ndarray
+    folds: np.ndarray
+    fold_kind: str
+    labels: dict
+    base: tuple[str, ...]
+    base_values: np.ndarray
+    base_prior_sd: np.ndarray
+    effects: tuple[Effect, ...]
+    predict: Callable
+    data: Any
+    noise_method: str
+    baseline_model: str
+    not_applicable: dict = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)
+    base_linear: tuple | None = None
+    base_linear_scale: tuple | None = None
+    base_linear_bound: tuple | None = None
+    jacobian: Callable | None = None
+
+    def is_linear(self, i: int) -> bool:
+        """Whether baseline parameter ``i`` is fitted linearly (a nuisance) rather than as a log."""
+        return bool(self.base_linear is not None and self.base_linear[i])
+
+    @property
+    def m(self) -> int:
+        return int(self.y.shape[0])
+
+    def effect_params(self, effect: Effect) -> tuple[Parameter, ...]:
+        return effect.params_for(self.domain)
+
+    def slices(self) -> dict[str, slice]:
+        """Where each effect's parameters sit in ``theta``."""
+        out, i = {}, len(self.base)
+        for e in self.effects:
+            k = len(self.effect_params(e))
+            out[e.name] = slice(i, i + k)
+            i += k
+        return out
+
+    @property
+    def n_theta(self) -> int:
+        return len(self.base) + sum(len(self.effect_params(e)) for e in self.effects)
+
+    def null_theta(self, base_values=None) -> np.ndarray:
+        """theta with the baseline at ``base_values`` (default: reference) and every effect at its null."""
+        parts = [np.asarray(self.base_values if base_values is None else base_values, dtype=np.float64)]
+        parts += [np.array([p.null for p in self.effect_params(e)], dtype=np.float64) for e in self.effects]
+        return np.concatenate(parts)

@@ -1,0 +1,388 @@
+"""Blind-validation case folders (DATA.md §6) with one hidden effect, none, or an effect outside the library.
+
+:func:`make_case` writes ``tyre.toml``, ``free.modes.csv/.json`` and test
+mode tables (a loaded table with ``extr``/``0`` tags, a spinning table with
+backward/forward branches) for a ring drawn around the bundled Table 9 tyre,
+then injects one effect at a random plausible magnitude and adds noise of
+random level and colour. The label is returned, never written into the
+folder. The synthetic truth is computed with code independent of the
+diagnosis where the package has it (eq. 25 from
+:func:`ringfit.physics.natural.rotating_natural_frequencies`, the extensible
+2×2 eigenproblem from :func:`~ringfit.physics.natural.extensible_natural_frequencies`,
+the loaded modes with a different basis size than the diagnosis uses, the
+cavity as a 2×2 eigenproblem in NumPy).
+
+Injected (mode tables): ``ground_contact``, ``rotation``, ``cavity_mode``,
+``wave_damping``, ``ring_extensibility``; ``none``; and the out-of-library
+``tread_pitch`` (a construction non-uniformity that shifts a few neighbouring
+harmonics and splits the loaded/spinning pairs), whose expected verdict is ``unexplained``.
+``sensor_mass`` is not injected: on mode tables it is almost a uniform
+relative shift that a refit of ρA absorbs (PHYSICS.md §6: negligible).
+``cavity_mode`` can be injected but is left out of the benchmark: its mark on
+the structural modes is a near-uniform shift of n = 1 that the baseline's
+k_w + k_v absorbs, so only an acoustic row could show it (not modelled yet).
+``ring_extensibility`` likewise: for a plausible EA (≥ 1e5 N) the flexural
+modes move by < 0.3 Hz (PHYSICS.md §2.2), below the noise; the tangential
+branch that would show it has no label in a DATA.md §2 table.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+#: Effects the generator injects in mode-table cases, with the verdict the diagnosis should give.
+MODAL_INJECTIONS = ("none", "ground_contact", "rotation", "wave_damping", "tread_pitch")
+#: Injectable but not part of the blind benchmark (see the module docstring).
+EXTRA_INJECTIONS = ("cavity_mode", "ring_extensibility")
+EXPECTED = {"none": "none", "tread_pitch": "unexplained"}
+
+
+@dataclass
+class CaseLabel:
+    """What was injected (kept away from the diagnosis)."""
+
+    effect: str
+    expected_verdict: str
+    magnitude: dict
+    noise: dict
+    ring: dict
+    seed: int
+
+
+def _ring(rng):
+    from ringfit.params import table9
+
+    geometry, ring = table9()
+    f = lambda: float(np.exp(rng.normal(0.0, 0.06)))  # noqa: E731
+    ring = ring.replace(rho_a=ring.rho_a * f(), ei=ring.ei * f(), kw=ring.kw * f(), kv=ring.kv * f(),
+                        k_tread=ring.k_tread * f())
+    return geometry, ring
+
+
+def _noise(rng, freq, sigma_rel, colour):
+    """White or coloured (white + a random walk along the rows) relative frequency noise."""
+    white = rng.normal(0.0, 1.0, freq.size)
+    if colour == "white":
+        e = white
+    else:
+        walk = np.cumsum(rng.normal(0.0, 1.0, freq.size))
+        walk = (walk - walk.mean()) / max(walk.std(), 1e-9)
+        e = (white + 0.5 * walk) / math.sqrt(1.25)
+    return freq * (1.0 + sigma_rel * e)
+
+
+def _write_table(folder: Path, name: str, rows: list[dict], condition: dict, with_std: bool, sigma_rel: float):
+    from ringfit.io.modes import ModeTable, write_mode_table
+
+    f = np.array([r["freq_hz"] for r in rows])
+    table = ModeTable(
+        freq_hz=f, n=np.array([r.get("n", -1) for r in rows]), tag=np.array([r.get("tag", "") for r in rows], object),
+        kind=np.array([r.get("kind", "structural") for r in rows], object),
+        branch=np.array([r.get("branch", "") for r in rows], object),
+        damping_pct=np.array([r.get("damping_pct", np.nan) for r in rows]),
+        freq_std_hz=(sigma_rel * f) if with_std else None, condition=condition,
+    )
+    write_mode_table(table, folder / name)
+
+
+def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 0) -> CaseLabel:
+    """Write a blind mode-table case into ``folder`` (created; must be empty or absent).
+
+    **Arguments:** ``effect`` — one of :data:`MODAL_INJECTIONS` (``None`` = drawn at random);
+    ``seed`` — everything random (ring, magnitude, noise level and colour) follows it.
+
+    **Returns:** the hidden :class:`CaseLabel`.
+    """
+    import jax.numpy as jnp
+
+    from ringfit.io.tyre import Tyre, write_tyre
+    from ringfit.physics.loaded import loaded_natural_frequencies
+    from ringfit.physics.natural import (extensible_natural_frequencies, natural_frequencies,
+                                         rotating_natural_frequencies)
+
+    rng = np.random.default_rng(seed)
+    effect = effect or str(rng.choice(MODAL_INJECTIONS))
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    if any(folder.iterdir()):
+        raise FileExistsError(f"{folder} is not empty")
+    geometry, ring = _ring(rng)
+    sigma_rel = float(rng.uniform(0.0005, 0.002))
+    colour = str(rng.choice(["white", "coloured"]))
+    with_std = bool(rng.random() < 0.3)
+    zeta0 = float(rng.uniform(0.015, 0.035))
+    zeta_sd = float(rng.uniform(0.05, 0.12))  # relative damping scatter
+    magnitude: dict = {}
+
+    n_free = np.arange(1, int(rng.integers(8, 11)) + 1)
+    free = np.asarray(natural_frequencies(ring, geometry, jnp.asarray(n_free, float)))
+    n_load = np.arange(1, int(rng.integers(6, 9)) + 1)
+    load_cos = np.asarray(natural_frequencies(ring, geometry, jnp.asarray(n_load, float)))
+    load_sin = load_cos.copy()
+    speed_kmh = float(rng.uniform(40.0, 90.0))
+    omega = speed_kmh / 3.6 / geometry.outer_radius
+    n_rot = np.arange(2, int(rng.integers(6, 9)) + 1)
+    rot_b = np.asarray(natural_frequencies(ring, geometry, jnp.asarray(n_rot, float)))
+    rot_f = rot_b.copy()
+
+    def damping(f):
+        return 100.0 * zeta0 * np.exp(rng.normal(0.0, zeta_sd, f.size))
+
+    damp_free = damping(free)
+    if effect == "ground_contact":
+        a = float(rng.uniform(8.0, 14.0))
+        magnitude["half_angle_deg"] = a
+        c, s = loaded_natural_frequencies(ring, geometry, math.radians(a), n_max=int(rng.integers(24, 60)))
+        load_cos, load_sin = np.asarray(c)[n_load - 1], np.asarray(s)[n_load - 1]
+    elif effect == "rotation":
+        r = np.asarray(rotating_natural_frequencies(ring, geometry, jnp.asarray(n_rot, float), omega))
+        rot_b, rot_f = np.abs(r[:, 0]), np.abs(r[:, 1])
+        magnitude["speed_kmh"] = speed_kmh
+    elif effect == "ring_extensibility":
+        ea = float(np.exp(rng.uniform(np.log(1.0e4), np.log(2.5e4))))
+        magnitude["ea_n"] = ea
+        fl = lambda n: np.asarray(extensible_natural_frequencies(ring.replace(ea=ea), geometry,  # noqa: E731
+                                                                  jnp.asarray(n, float)))[..., 0]
+        free, load_cos, rot_b = fl(n_free), fl(n_load), fl(n_rot)
+        load_sin, rot_f = load_cos.copy(), rot_b.copy()
+    elif effect == "cavity_mode":
+        area = float(rng.uniform(0.008, 0.02))
+        magnitude["cavity_area_m2"] = area
+        f_cav = float(rng.uniform(215.0, 232.0))
+        magnitude["cavity_hz"] = f_cav
+        rho0 = 1.2 * (geometry.pressure + 101325.0) / 101325.0
+        kappa = geometry.width**2 * rho0 * 343.0**2 / area
+
+        def couple(n, f):
+            out = []
+            for ni, fi in zip(n, f):
+                m = ring.rho_a * (ni**2 + 1) / ni**2
+                ks, wa = m * (2 * np.pi * fi) ** 2, 2 * np.pi * f_cav * ni
+                # 2×2: [ks − mω², acoustic coupling] in symmetric form; eigenvalues of the pencil
+                roots = np.roots([m, -(ks + m * wa**2 + kappa), ks * wa**2])
+                x = np.sort(roots.real)
+                out.append(np.sqrt(x[0] if fi < f_cav * ni else x[1]) / (2 * np.pi))
+            return np.array(out)
+
+        free, load_cos, rot_b = couple(n_free, free), couple(n_load, load_cos), couple(n_rot, rot_b)
+        load_sin, rot_f = load_cos.copy(), rot_b.copy()
+    elif effect == "wave_damping":
+        slope = float(rng.uniform(0.02, 0.06))
+        magnitude["eta_slope"] = slope
+        damp_free = 100.0 * (zeta0 + 0.5 * slope * free / 100.0) * np.exp(rng.normal(0.0, zeta_sd, free.size))
+    elif effect == "tread_pitch":
+        amp = float(rng.uniform(0.01, 0.02))
+        magnitude["relative_amplitude"] = amp
+        n0 = float(rng.uniform(3.0, 7.0))
+        magnitude["centre_n"] = n0
+        pattern = lambda n: amp * np.exp(-((n - n0) ** 2) / 4.5)  # noqa: E731 - a bump over a few n
+        free = free * (1 + pattern(n_free))
+        load_cos, load_sin = load_cos * (1 + pattern(n_load)), load_sin * (1 - pattern(n_load))
+        rot_b, rot_f = rot_b * (1 + pattern(n_rot)), rot_f * (1 - pattern(n_rot))
+    elif effect != "none":
+        raise ValueError(f"effect {effect!r} not injectable; choose from {MODAL_INJECTIONS + EXTRA_INJECTIONS}")
+
+    write_tyre(Tyre(geometry, {"rho_a": 2.715, "ei": 0.9426, "kw": 1.294e6, "kv": 1.161e6,
+                               "k_tread": 19e6, "damping_ratio": 0.025}), folder / "tyre.toml")
+    noisy = lambda f: _noise(rng, f, sigma_rel, colour)  # noqa: E731
+    rows = [{"n": int(n), "freq_hz": float(f), "damping_pct": float(d)}
+            for n, f, d in zip(n_free, noisy(free), damp_free)]
+    if effect == "cavity_mode" or rng.random() < 0.5:
+        rows.append({"kind": "acoustic", "freq_hz": float(magnitude.get("cavity_hz", 343 / 1.568) * (1 + 0.01 * rng.random()))})
+    _write_table(folder, "free.modes.csv", rows, {"state": "free", "speed_kmh": 0, "pressure_bar": 2.2,
+                                                   "frame": "fixed"}, with_std, sigma_rel)
+    lrows = []
+    for n, fc, fs in zip(n_load, noisy(load_cos), noisy(load_sin)):
+        lrows.append({"n": int(n), "tag": "vert" if n == 1 else "extr", "freq_hz": float(fc)})
+        lrows.append({"n": int(n), "tag": "hort" if n == 1 else "0", "freq_hz": float(fs)})
+    _write_table(folder, "loaded.modes.csv", lrows, {"state": "loaded", "load_n": 4000.0, "speed_kmh": 0,
+                                                      "pressure_bar": 2.2, "frame": "fixed"}, with_std, sigma_rel)
+    rrows = []
+    for n, fb, ff in zip(n_rot, noisy(rot_b), noisy(rot_f)):
+        rrows.append({"n": int(n), "branch": "backward", "freq_hz": float(fb)})
+        rrows.append({"n": int(n), "branch": "forward", "freq_hz": float(ff)})
+    _write_table(folder, "spinning.modes.csv", rrows, {"state": "free", "speed_kmh": round(speed_kmh, 2),
+                                                        "pressure_bar": 2.2, "frame": "rotating"}, with_std, sigma_rel)
+    return CaseLabel(effect=effect, expected_verdict=EXPECTED.get(effect, effect), magnitude=magnitude,
+                     noise={"relative": sigma_rel, "colour": colour, "freq_std_given": with_std,
+                            "damping_relative": zeta_sd},
+                     ring=ring.as_dict(), seed=seed)
+
+
+def write_label(label: CaseLabel, path: str | os.PathLike) -> None:
+    """Write a label as JSON (keep it outside the case folder)."""
+    Path(path).write_text(json.dumps(label.__dict__, indent=1))
+
+
+# ============================================================================ rolling-profile cases
+#: Effects the generator injects in profile cases (expected verdict = the name, except as in EXPECTED).
+PROFILE_INJECTIONS = ("none", "sensor_tilt", "gravity", "iepe_highpass", "wave_damping", "rotation", "tread_pitch")
+#: Injectable in profiles but not in the blind benchmark: with the baseline sensor (e = 0, γ = 0) and an
+#: inextensible belt the brush tread shear moves the readings by < 0.1 m/s² even at k_x = 40 MN/m²
+#: (PHYSICS.md §6: it needs finite EA or an offset e to show) — below any realistic noise.
+PROFILE_EXTRA_INJECTIONS = ("tread_shear",)
+#: Speeds of a profile case [km/h] (each jittered by up to ±2 km/h).
+PROFILE_SPEEDS = (20.0, 30.0, 40.0, 60.0)
+NOISE_COLOURS = ("white", "pink", "red", "band")
+
+
+def coloured_noise(rng, n_points: int, sigma: float, colour: str) -> np.ndarray:
+    """Periodic noise on ``n_points`` with per-sample σ [m/s²] and a spectrum of the given colour.
+
+    ``white`` flat; ``pink`` ∝ 1/k; ``red`` ∝ 1/k^1.5 (power); ``band``: white plus a
+    resonance bump over a random band of revolution harmonics (a structural mode the
+    averaging did not remove).
+    """
+    spec = np.fft.rfft(rng.normal(0.0, 1.0, n_points))
+    k = np.arange(spec.size, dtype=float)
+    k[0] = 1.0
+    if colour == "pink":
+        spec = spec / np.sqrt(k)
+    elif colour == "red":
+        spec = spec / k**0.75
+    elif colour == "band":
+        centre, width = rng.uniform(15.0, 80.0), rng.uniform(3.0, 12.0)
+        spec = spec * np.sqrt(1.0 + 6.0 * np.exp(-0.5 * ((k - centre) / width) ** 2))
+    spec[0] = 0.0
+    x = np.fft.irfft(spec, n_points)
+    return sigma * x / np.std(x)
+
+
+def _free_rows(rng, ring, geometry, zeta0, sigma_rel):
+    import jax.numpy as jnp
+
+    from ringfit.physics.natural import natural_frequencies
+
+    n_free = np.arange(1, int(rng.integers(8, 11)) + 1)
+    free = np.asarray(natural_frequencies(ring, geometry, jnp.asarray(n_free, float)))
+    free = free * (1.0 + sigma_rel * rng.normal(0.0, 1.0, free.size))
+    damp = 100.0 * zeta0 * np.exp(rng.normal(0.0, 0.05, free.size))
+    return [{"n": int(n), "freq_hz": float(f), "damping_pct": float(d)} for n, f, d in zip(n_free, free, damp)]
+
+
+def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 0) -> CaseLabel:
+    """Write a blind rolling-profile case (DATA.md §6) into ``folder`` (created; must be empty or absent).
+
+    ``tyre.toml`` (bundled Table 9 values, not the truth), ``free.modes.csv`` (eq. 18 of the true
+    ring, noisy, with damping) and one ``*.profile.csv`` + ``.json`` per speed (about 20/30/40/60
+    km/h). Deliberately unlike the diagnosis: the truth is solved on a finer grid (M = 1024 or
+    2048) and written at 360 … 2048 angles; the angle origin is offset by up to ±1.5°; Ω is in the
+    sidecar only sometimes; the road is sometimes the 1.2192 m drum; noise is white, pink, red or
+    band-coloured with a level that varies with speed and channel. ``wave_damping`` is injected as
+    *viscous* material damping (PHYSICS.md §4.2), not the diagnosis's growing hysteretic loss; the
+    out-of-library ``tread_pitch`` modulates the contact pressure with the tread pitch (a ripple of
+    40–70 pitches per revolution): expected verdict ``unexplained``.
+
+    **Returns:** the hidden :class:`CaseLabel` (``noise["grid_rms_ms2"]`` is the noise RMS on the
+    diagnosis's 512-point grid, for the ideal shrink).
+    """
+    from ringfit.gap.effects.tread_shear import BrushShearLoad
+    from ringfit.io.profiles import Profile, resample_profile, write_profile
+    from ringfit.io.tyre import Tyre, write_tyre
+    from ringfit.physics.contact import ContactSolver, solve_rolling_jit
+    from ringfit.physics.operating import KMH, OperatingPoint, road_from_drum_diameter, rolling_radius
+    from ringfit.physics.rolling import Hysteretic, RingModel, Viscous
+    from ringfit.physics.sensor import STANDARD_GRAVITY, SensorModel, sensor_signals_jit, shift_angle
+    from ringfit.synth.profiles import SAMPLE_RATE_HZ, band_limited_resample
+
+    rng = np.random.default_rng(seed)
+    effect = effect or str(rng.choice(PROFILE_INJECTIONS))
+    if effect not in PROFILE_INJECTIONS + PROFILE_EXTRA_INJECTIONS:
+        raise ValueError(f"effect {effect!r} not injectable in profiles; "
+                         f"choose from {PROFILE_INJECTIONS + PROFILE_EXTRA_INJECTIONS}")
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    if any(folder.iterdir()):
+        raise FileExistsError(f"{folder} is not empty")
+    geometry, ring = _ring(rng)
+    zeta0 = float(rng.uniform(0.015, 0.035))
+    ring = ring.replace(damping_ratio=zeta0, k_tread=float(ring.k_tread * np.exp(rng.normal(0.0, 0.15))))
+    load = float(rng.uniform(3500.0, 4500.0))
+    drum = 1.2192 if rng.random() < 0.3 else None
+    road = road_from_drum_diameter(drum)
+    solver = ContactSolver(n_grid=int(rng.choice([1024, 2048])), window_deg=40.0)
+    n_points = int(rng.choice([360, 720, 1000, 1024, 2048]))
+    offset = math.radians(float(rng.uniform(-1.5, 1.5)))
+    write_encoder = bool(rng.random() < 0.7)
+    colour = str(rng.choice(NOISE_COLOURS))
+    sigma40 = float(np.exp(rng.uniform(np.log(0.2), np.log(2.0))))
+    speed_power = float(rng.uniform(0.0, 1.0))
+    tangential_factor = float(rng.uniform(0.5, 1.5))
+    speeds = [s + float(rng.uniform(-2.0, 2.0)) for s in PROFILE_SPEEDS]
+
+    model, sensor, magnitude, pitch = RingModel(), SensorModel(), {}, None
+    shear = None
+    if effect == "sensor_tilt":
+        magnitude.update(tilt_gain=float(rng.uniform(0.5, 1.0)), offset_mm=float(rng.uniform(0.0, 6.0)))
+        sensor = SensorModel(tilt_gain=magnitude["tilt_gain"], offset=magnitude["offset_mm"] * 1e-3)
+    elif effect == "gravity":
+        magnitude["gravity_gain"] = float(rng.uniform(0.95, 1.05))
+        sensor = SensorModel(gravity=magnitude["gravity_gain"] * STANDARD_GRAVITY)
+    elif effect == "iepe_highpass":
+        magnitude["corner_hz"] = float(rng.uniform(0.8, 3.0))
+        magnitude["order"] = int(rng.choice([1, 1, 2]))
+        sensor = SensorModel(corner_hz=magnitude["corner_hz"], highpass_order=magnitude["order"])
+    elif effect == "wave_damping":
+        c_w = float(rng.uniform(400.0, 1200.0))
+        magnitude.update(c_w=c_w, c_v=c_w * ring.kv / ring.kw)
+        model = RingModel(damping=Hysteretic(), terms=(Viscous(c_w=c_w, c_v=magnitude["c_v"]),))
+    elif effect == "tread_shear":
+        magnitude.update(k_x=float(rng.uniform(8e6, 40e6)), mu=float(rng.uniform(0.7, 1.2)))
+        shear = BrushShearLoad(magnitude["k_x"], magnitude["mu"])
+    elif effect == "rotation":
+        magnitude["chi"] = float(rng.uniform(0.1, 0.6))
+        ring = ring.replace(chi=magnitude["chi"])
+    elif effect == "tread_pitch":
+        magnitude.update(pitches=int(rng.integers(40, 71)), depth=float(rng.uniform(0.15, 0.35)),
+                         phase=float(rng.uniform(0, 2 * np.pi)))
+        pitch = magnitude
+
+    write_tyre(Tyre(geometry, {"rho_a": 2.715, "ei": 0.9426, "kw": 1.294e6, "kv": 1.161e6,
+                               "k_tread": 19e6, "damping_ratio": 0.025}), folder / "tyre.toml")
+    _write_table(folder, "free.modes.csv", _free_rows(rng, ring, geometry, zeta0, float(rng.uniform(5e-4, 2e-3))),
+                 {"state": "free", "speed_kmh": 0, "pressure_bar": 2.2, "frame": "fixed"}, False, 0.0)
+    standing = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, load, road), model=model, solver=solver)
+    r_e = float(rolling_radius(geometry.outer_radius, standing.deflection))
+    grid_noise = []
+    for i, speed in enumerate(speeds):
+        omega = speed * KMH / r_e
+        op = OperatingPoint(omega, load, road)
+        sol = solve_rolling_jit(ring, geometry, op, model=model, solver=solver)
+        if shear is not None or pitch is not None:
+            if shear is not None:
+                q_w, q_v = shear(sol, ring, geometry)
+            else:
+                q_w = -pitch["depth"] * sol.pressure * np.cos(pitch["pitches"] * np.asarray(sol.phi) + pitch["phase"])
+                q_v = np.zeros_like(q_w)
+            sol = solve_rolling_jit(ring, geometry, op, model=model, solver=solver,
+                                    extra_load=(np.asarray(q_w), np.asarray(q_v)))
+        channels = np.stack([np.asarray(c) for c in sensor_signals_jit(sol, geometry, sensor)])
+        channels = np.asarray(shift_angle(channels, offset))
+        values = band_limited_resample(channels, n_points)
+        level = sigma40 * (speed / 40.0) ** speed_power
+        noise = np.stack([coloured_noise(rng, n_points, level, colour),
+                          coloured_noise(rng, n_points, level * tangential_factor, colour)])
+        angle = -180.0 + 360.0 * np.arange(n_points) / n_points
+        condition = {"speed_kmh": round(speed, 3), "load_n": round(load, 1), "pressure_bar": 2.2,
+                     "revolutions": int(rng.integers(20, 60)), "sample_rate_hz": SAMPLE_RATE_HZ}
+        if write_encoder:
+            condition["rotation_hz"] = omega / (2.0 * np.pi)
+        if drum is not None:
+            condition["drum_diameter_m"] = drum
+        data = values + noise
+        write_profile(Profile(angle, data[0], data[1], condition=condition), folder / f"run{i + 1}.profile.csv")
+        on_grid = resample_profile(Profile(angle, noise[0], noise[1]), 512)
+        grid_noise.append(np.mean((on_grid - on_grid.mean(-1, keepdims=True)) ** 2))
+    return CaseLabel(
+        effect=effect, expected_verdict=EXPECTED.get(effect, effect), magnitude=magnitude,
+        noise={"colour": colour, "sigma40_ms2": sigma40, "speed_power": speed_power,
+               "tangential_factor": tangential_factor, "grid_rms_ms2": float(np.sqrt(np.mean(grid_noise)))},
+        ring={**ring.as_dict(), "load_n": load, "drum_diameter_m": drum, "grid": solver.n_grid,
+              "n_points": n_points, "angle_offset_deg": math.degrees(offset), "encoder": write_encoder},
+        seed=seed)

@@ -1,0 +1,212 @@
+"""Synthetic roving-sensor impact records from a damped ring modal model.
+
+A free, static tyre struck radially with a hammer at θ = 0 and read by one
+sensor moved around the tread band (DATA.md §4). Each circumferential index
+n gives a DOUBLE pole (the ring is axisymmetric): two modes at
+``f_n (1 ∓ split/2)`` whose symmetry axes sit at a random angle α_n (small
+imperfections), so the hammer excites both and their shapes turn freely
+inside the pair. ``travelling`` mixes the pair into counter-rotating waves
+(0 = standing cos/sin nθ, 1 = pure e^{±inθ}).
+
+Model (PHYSICS.md §2.1 for the frequencies, taken from
+:func:`ringfit.physics.natural.natural_frequencies`): inextensible ring,
+radial ``w = cos n(θ−α)`` with tangential ``v = −sin n(θ−α)/n`` (w + v′ = 0);
+modal mass ``πRρA(1 + 1/n²)``; sensor radial positive toward the wheel centre
+(reads −w). The acceleration FRF is a pole–residue sum
+``H(θ, ω) = −ω² Σ_m [R_m(θ)/(iω − λ_m) + conj(R_m(θ))/(iω − conj λ_m)]``
+with ``R_m(θ) = ψ_m(θ) conj(ψ_m(0)) / (2i ω_d M_m)``; records are computed in
+the frequency domain from the sampled hammer pulse (half sine), so the
+records are exact samples of the periodic response (record lengths are chosen
+long against the decay time).
+
+An optional cavity mode (PHYSICS.md §3.6, seed eq. 22: 343/1.568 Hz,
+ζ ≈ 0.7 %) is seen by the tread sensor as the ring's rigid n = 1 motion it
+drives: an n = 1 pattern far above the ring's own n = 1 frequency.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ringfit.io.records import Records
+
+
+@dataclass
+class SyntheticModes:
+    """The known truth behind synthetic records, one row per physical mode (a pair counts once).
+
+    **Fields** (shape ``(modes,)``): ``n`` (−1 for the cavity), ``kind``
+    (``structural``/``acoustic``), ``freq_hz`` [Hz] (pair centre),
+    ``damping`` [-], ``split`` [-] relative frequency split of the pair,
+    ``orientation_rad`` α_n [rad], ``travelling`` [0..1], ``amplitude`` [-] relative residue scale.
+    """
+
+    n: np.ndarray
+    kind: np.ndarray
+    freq_hz: np.ndarray
+    damping: np.ndarray
+    split: np.ndarray
+    orientation_rad: np.ndarray
+    travelling: np.ndarray
+    amplitude: np.ndarray
+
+    def structural(self) -> np.ndarray:
+        return self.kind == "structural"
+
+
+def ring_modes(
+    ring,
+    geometry,
+    n_values=range(1, 10),
+    *,
+    damping: float | None = None,
+    split: float = 0.002,
+    travelling: float = 0.0,
+    cavity: bool = True,
+    cavity_damping: float = 0.007,
+    cavity_amplitude: float = 0.3,
+    seed: int = 0,
+) -> SyntheticModes:
+    """Modal truth of a free ring: eq. 18 frequencies, one damping ratio, double poles, optional cavity.
+
+    **Arguments:**
+
+    - ``ring``, ``geometry``: :class:`~ringfit.params.RingParams`, :class:`~ringfit.params.TyreGeometry`.
+    - ``n_values``: circumferential indices.
+    - ``damping``: modal damping ratio [-] (default ``ring.damping_ratio``).
+    - ``split``: relative frequency split of each double pole [-].
+    - ``travelling``: 0 standing … 1 counter-rotating waves.
+    - ``cavity``: add the first cavity mode (``cavity_frequency()``, ``cavity_damping``)
+      with residue scale ``cavity_amplitude`` relative to the ring modes.
+    """
+    from ringfit.physics.natural import cavity_frequency, natural_frequencies
+
+    n = np.asarray(list(n_values), dtype=np.int64)
+    rng = np.random.default_rng(seed)
+    f = np.asarray(natural_frequencies(ring, geometry, n.astype(np.float64)), dtype=np.float64)
+    zeta = float(ring.damping_ratio) if damping is None else float(damping)
+    m = n.shape[0]
+    out = SyntheticModes(
+        n=n,
+        kind=np.full(m, "structural", dtype=object),
+        freq_hz=f,
+        damping=np.full(m, zeta),
+        split=np.full(m, float(split)),
+        orientation_rad=rng.uniform(0.1, 0.4, m) * np.pi / np.maximum(n, 1),
+        travelling=np.full(m, float(travelling)),
+        amplitude=np.ones(m),
+    )
+    if cavity:
+        fc = float(cavity_frequency(1))
+        for name, value in (("n", -1), ("kind", "acoustic"), ("freq_hz", fc), ("damping", cavity_damping),
+                            ("split", 0.0), ("orientation_rad", 0.0), ("travelling", 0.0),
+                            ("amplitude", cavity_amplitude)):
+            setattr(out, name, np.append(getattr(out, name), value).astype(getattr(out, name).dtype))
+    return out
+
+
+def _shapes(modes: SyntheticModes, i: int, theta: np.ndarray, axes, rho_a: float, radius: float):
+    """Poles (2,), complex shapes (2, len(theta), axes) of mode i's pair, and modal masses (2,)."""
+    n = int(modes.n[i]) if modes.n[i] >= 0 else 1
+    alpha = modes.orientation_rad[i]
+    beta = modes.travelling[i] * np.pi / 4
+    w_a, w_b = np.cos(n * (theta - alpha)), np.sin(n * (theta - alpha))
+    v_a, v_b = -np.sin(n * (theta - alpha)) / n, np.cos(n * (theta - alpha)) / n
+    comp = {"radial": (-w_a, -w_b), "tangential": (v_a, v_b), "lateral": (0 * w_a, 0 * w_b)}
+    phi_a = np.stack([comp[a][0] for a in axes], -1)
+    phi_b = np.stack([comp[a][1] for a in axes], -1)
+    psi = np.stack([np.cos(beta) * phi_a + 1j * np.sin(beta) * phi_b,
+                    np.cos(beta) * phi_b - 1j * np.sin(beta) * phi_a])
+    f0, zeta, split = modes.freq_hz[i], modes.damping[i], modes.split[i]
+    if modes.kind[i] == "acoustic":  # one standing mode, driven along the impact axis
+        psi = np.stack(_cavity_axes(axes, n, theta), -1)[None].astype(complex)
+        freqs = np.array([f0])
+    else:
+        freqs = f0 * np.array([1 - split / 2, 1 + split / 2])
+    wn = 2 * np.pi * freqs
+    lam = -zeta * wn + 1j * wn * np.sqrt(1 - zeta**2)
+    mass = np.pi * radius * rho_a * (1 + 1 / n**2) / modes.amplitude[i]
+    return lam, psi, np.full(len(freqs), mass)
+
+
+def _cavity_axes(axes, n, theta):
+    # rigid n = 1 motion along the impact axis: radial -cos θ (inward +), tangential -sin θ
+    return [{"radial": -np.cos(n * theta), "tangential": -np.sin(n * theta) / n, "lateral": 0 * theta}[a] for a in axes]
+
+
+def impact_records(
+    modes: SyntheticModes,
+    angles_deg,
+    *,
+    ring=None,
+    geometry=None,
+    axes=("radial", "tangential"),
+    fs_hz: float = 25600.0,
+    duration_s: float = 1.0,
+    impacts_per_angle: int = 1,
+    pre_trigger_s: float = 0.02,
+    trigger_jitter_s: float = 0.005,
+    hammer_duration_s: float = 0.6e-3,
+    hammer_peak_n: float = 300.0,
+    hammer_spread: float = 0.2,
+    sensor_delay_s: float = 0.0,
+    noise: float = 0.01,
+    force_noise: float = 0.005,
+    with_force: bool = True,
+    seed: int = 0,
+) -> Records:
+    """Roving-sensor hammer records of the modal model ``modes`` (DATA.md §4 layout).
+
+    **Arguments:**
+
+    - ``angles_deg``: sensor angles [deg] from the impact point, one group of
+      ``impacts_per_angle`` records each.
+    - ``ring``, ``geometry``: for the modal masses πRρA(1+1/n²) (default Table 9).
+    - ``fs_hz``, ``duration_s``: sampling of every record.
+    - ``pre_trigger_s``, ``trigger_jitter_s``: the impact happens at
+      ``pre_trigger_s + U(0, trigger_jitter_s)`` in each record.
+    - ``hammer_duration_s``, ``hammer_peak_n``, ``hammer_spread``: half-sine
+      pulse, peak force varies by ±spread between impacts.
+    - ``sensor_delay_s``: the acceleration channels lag the force by this [s]
+      (the source's force/acc delay, removed in pre-processing).
+    - ``noise``, ``force_noise``: white noise std relative to the rms of the
+      clean acceleration (over all records) and to the peak force.
+    - ``with_force``: keep the force channel (False: an unmeasured excitation).
+
+    **Returns:** :class:`~ringfit.io.records.Records` with ``acc`` of shape
+    ``(angles·impacts, axes, samples)``.
+    """
+    if ring is None or geometry is None:
+        from ringfit.params import table9
+
+        geometry, ring = table9()
+    rho_a, radius = float(ring.rho_a), float(geometry.radius)
+    rng = np.random.default_rng(seed)
+    angles = np.repeat(np.asarray(angles_deg, dtype=np.float64), int(impacts_per_angle))
+    theta = np.deg2rad(angles)
+    ns = int(round(duration_s * fs_hz))
+    t = np.arange(ns) / fs_hz
+    w = 2 * np.pi * np.fft.rfftfreq(ns, 1 / fs_hz)
+    iw = 1j * w
+    # accelerance per record and axis: (records, axes, freqs)
+    h = np.zeros((angles.size, len(axes), w.size), dtype=complex)
+    for i in range(len(modes.n)):
+        lam, psi, mass = _shapes(modes, i, theta, axes, rho_a, radius)
+        _, psi0, _ = _shapes(modes, i, np.zeros(1), ("radial",), rho_a, radius)
+        for k in range(lam.shape[0]):
+            res = psi[k] * np.conj(psi0[k][0, 0]) / (2j * lam[k].imag * mass[k])  # (records, axes); generalised force of an inward push
+            h += res[..., None] / (iw - lam[k]) + np.conj(res)[..., None] / (iw - np.conj(lam[k]))
+    h *= -(w**2)
+    t0 = pre_trigger_s + rng.uniform(0, trigger_jitter_s, angles.size)
+    peak = hammer_peak_n * (1 + hammer_spread * rng.uniform(-1, 1, angles.size))
+    tau = (t[None, :] - t0[:, None]) / hammer_duration_s
+    force = np.where((tau >= 0) & (tau <= 1), np.sin(np.pi * np.clip(tau, 0, 1)), 0.0) * peak[:, None]
+    spec = np.fft.rfft(force, axis=-1)
+    acc_spec = h * spec[:, None, :] * np.exp(-iw * sensor_delay_s)
+    acc = np.fft.irfft(acc_spec, n=ns, axis=-1)
+    acc += noise * np.sqrt(np.mean(acc**2)) * rng.standard_normal(acc.shape)
+    force = force + force_noise * hammer_peak_n * rng.standard_normal(force.shape)
+    return Records(acc=acc, axes=tuple(axes), sensor_angle_deg=angles, fs_hz=float(fs_hz),
+                   force=force if with_force else None, source="<synthetic>")

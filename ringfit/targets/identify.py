@@ -1,0 +1,185 @@
+"""From records to a mode table: the SSI chain of the source study, end to end.
+
+``records → align (force threshold and delay, or group velocity) → decimate
+→ drop the first 0.0127 s → average repeated impacts per angle → SSI-cov
+→ stabilization → clustering → n, travelling measure, acoustic flag →
+ModeTable`` (DATA.md §2; sidecar state ``free``, frame ``fixed``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from ringfit.errors import InputError
+from ringfit.io.modes import ModeTable
+from ringfit.io.records import Records
+from ringfit.targets.clustering import PhysicalMode, cluster_modes
+from ringfit.targets.decimation import decimate, decimation_factor
+from ringfit.targets.preprocessing import SKIP_AFTER_IMPACT_S, align_on_impact, drop_after_impact, sync_by_group_velocity
+from ringfit.targets.shapes import acoustic_candidates, mode_number, travelling_measure
+from ringfit.targets.ssi import PoleSet, ssi_cov
+from ringfit.targets.stabilization import Stability, stabilization_diagram
+
+
+@dataclass
+class ModeIdentification:
+    """Everything an identification produced, for plots and reports.
+
+    ``table`` (the mode table), ``modes`` (:class:`PhysicalMode` list, same
+    order as the table rows), ``angle_rad``/``axis`` per channel, ``fs_hz``
+    after decimation, and for SSI ``poles`` and ``stability``; for FRF ``frf``.
+    """
+
+    table: ModeTable
+    modes: list
+    angle_rad: np.ndarray
+    axis: np.ndarray
+    fs_hz: float
+    poles: PoleSet | None = None
+    stability: Stability | None = None
+    frf: object | None = None
+    info: dict = field(default_factory=dict)
+
+
+def average_by_angle(acc: np.ndarray, angle_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean of the aligned records taken at the same sensor angle: (records, axes, samples) -> (angles, axes, samples)."""
+    angles, inverse = np.unique(np.round(np.asarray(angle_deg, dtype=np.float64), 9), return_inverse=True)
+    out = np.zeros((angles.size,) + acc.shape[1:])
+    np.add.at(out, inverse, acc)
+    return out / np.bincount(inverse)[:, None, None], angles
+
+
+def prepare_decays(
+    records: Records,
+    *,
+    f_max_hz: float = 400.0,
+    decimate_to: float | None = None,
+    skip_s: float = SKIP_AFTER_IMPACT_S,
+    threshold: float = 0.1,
+    delay_s: float = 0.0,
+    radius_m: float | None = None,
+    average: bool = True,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Aligned, decimated free decays as one ``(channels, samples)`` matrix.
+
+    **Arguments:** ``f_max_hz`` sets the default decimation
+    (:func:`decimation_factor`), ``decimate_to`` [Hz] an explicit target rate;
+    ``radius_m`` is needed when the records carry no force (group-velocity sync).
+
+    **Returns:** ``(y, angle_rad, axis, fs_hz)``.
+    """
+    if records.force is not None:
+        acc, _ = align_on_impact(records, threshold=threshold, delay_s=delay_s)
+    else:
+        if radius_m is None:
+            raise InputError("records without a force channel need the tyre radius for group-velocity sync", source=records.source)
+        acc, _ = sync_by_group_velocity(records, radius_m)
+    angle_deg = records.sensor_angle_deg
+    if average:
+        acc, angle_deg = average_by_angle(acc, angle_deg)
+    q = decimation_factor(records.fs_hz, f_max_hz) if decimate_to is None else max(1, int(round(records.fs_hz / decimate_to)))
+    acc, fs = decimate(acc, records.fs_hz, q)
+    acc = drop_after_impact(acc, fs, skip_s)
+    r, a, s = acc.shape
+    y = acc.reshape(r * a, s)
+    angle = np.repeat(np.deg2rad(angle_deg), a)
+    axis = np.tile(np.array(records.axes, dtype=object), r)
+    return y, angle, axis, fs
+
+
+def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.ndarray, method: str,
+               *, min_confidence: float = 0.5, poles: PoleSet | None = None,
+               spurious_damping_factor: float = 1.5) -> tuple[ModeTable, list]:
+    """A :class:`ModeTable` (DATA.md §2) from physical modes: n from the shapes, acoustic flag, extras.
+
+    With ``poles`` (SSI), modes with the same n within 1 % are first merged
+    as the two halves of a double pole (:func:`~ringfit.targets.clustering.merge_pairs`).
+    Modes that are not ring-like (:func:`~ringfit.targets.shapes.acoustic_candidates`)
+    are acoustic candidates when they are lighter damped than
+    ``spurious_damping_factor`` × the median structural damping (air modes
+    are lighter damped than the rubber, seed §5.1); the others are dropped as
+    mathematical (spurious) modes.
+
+    Extra columns: ``n_confidence``, ``split_hz``, ``travelling``, ``damping_std_pct``.
+
+    **Returns:** ``(table, modes)`` with ``modes`` in table order.
+    """
+    modes = list(modes)
+    n = np.array([mode_number(m.basis, angle_rad, axis)[0] for m in modes], dtype=np.int64)
+    if poles is not None:
+        from ringfit.targets.clustering import merge_pairs
+
+        modes, n = merge_pairs(poles, modes, n)
+    conf, trav = [], []
+    for m in modes:
+        k, c = mode_number(m.basis, angle_rad, axis)
+        conf.append(c)
+        if poles is not None:  # poles of the orders that resolved the pair, else all
+            idx = m.pole_index
+            counts = np.bincount(poles.order[idx])
+            two = idx[counts[poles.order[idx]] >= 2]
+            shapes = poles.shape[two if two.size else idx]
+        else:
+            shapes = m.basis.T
+        trav.append(float(np.mean([travelling_measure(s, angle_rad, axis, k) for s in shapes])))
+    conf = np.array(conf)
+    freq = np.array([m.freq_hz for m in modes])
+    damping = np.array([m.damping for m in modes])
+    acoustic = acoustic_candidates(n, conf, freq, min_confidence)
+    ref = np.nanmedian(damping[~acoustic]) if (~acoustic).any() else np.inf
+    keep = ~acoustic | ~(damping > spurious_damping_factor * ref)
+    idx = np.flatnonzero(keep)
+    modes = [modes[i] for i in idx]
+    fmt = lambda x: f"{x:.6g}"  # noqa: E731
+    table = ModeTable(
+        freq_hz=freq[idx],
+        n=np.where(acoustic[idx], -1, n[idx]),
+        kind=np.where(acoustic[idx], "acoustic", "structural").astype(object),
+        freq_std_hz=np.array([m.freq_std_hz for m in modes]),
+        damping_pct=100 * damping[idx],
+        extra={
+            "n_confidence": np.array([fmt(c) for c in conf[idx]], dtype=object),
+            "split_hz": np.array([fmt(m.split_hz) for m in modes], dtype=object),
+            "travelling": np.array([fmt(trav[i]) for i in idx], dtype=object),
+            "damping_std_pct": np.array([fmt(100 * m.damping_std) for m in modes], dtype=object),
+        },
+        condition={"state": "free", "frame": "fixed", "method": method},
+    )
+    return table, modes
+
+
+def ssi_modes(
+    records: Records,
+    *,
+    orders: Sequence[int] = range(2, 161, 2),
+    block_rows: int | None = 30,
+    f_range: tuple[float, float] = (20.0, 400.0),
+    decimate_to: float | None = None,
+    skip_s: float = SKIP_AFTER_IMPACT_S,
+    threshold: float = 0.1,
+    delay_s: float = 0.0,
+    radius_m: float | None = None,
+    refs: np.ndarray | None = None,
+    pair_aware: bool = True,
+    min_share: float = 0.3,
+    progress: bool = False,
+) -> ModeIdentification:
+    """The source's SSI chain on impact records, with pair-aware stabilization and clustering.
+
+    **Arguments:** ``orders`` model orders; ``block_rows`` p; ``f_range`` [Hz]
+    band of interest (its top sets the decimation); the pre-processing
+    arguments of :func:`prepare_decays`; ``refs`` reference channels.
+
+    **Returns:** :class:`ModeIdentification` (``table`` is the mode table).
+    """
+    y, angle, axis, fs = prepare_decays(records, f_max_hz=f_range[1], decimate_to=decimate_to, skip_s=skip_s,
+                                        threshold=threshold, delay_s=delay_s, radius_m=radius_m)
+    poles = ssi_cov(y, fs, orders=orders, block_rows=block_rows, refs=refs, progress=progress)
+    stab = stabilization_diagram(poles, pair_aware=pair_aware)
+    modes = cluster_modes(poles, stab, f_range=f_range, min_share=min_share)
+    table, modes = mode_table(modes, angle, axis, "ssi-cov", poles=poles)
+    return ModeIdentification(table, modes, angle, axis, fs, poles=poles, stability=stab,
+                              info={"block_rows": block_rows, "channels": y.shape[0], "samples": y.shape[1]})

@@ -1,0 +1,74 @@
+"""Case folders, the DATA.md §5 JSON contract, the CLI, and a fast subset of blind cases that must all be right."""
+
+import json
+import shutil
+
+import pytest
+
+from ringfit.cli import main
+from ringfit.data import path as data_path
+from ringfit.errors import InputError
+from ringfit.gap import diagnose, read_case, read_diagnosis
+from ringfit.synth.cases import make_case
+
+
+def _copy_free(folder):
+    folder.mkdir(exist_ok=True)
+    shutil.copy(data_path("table9.tyre.toml"), folder / "tyre.toml")
+    shutil.copy(data_path("free-ssi.modes.csv"), folder / "free.modes.csv")
+    shutil.copy(data_path("free-ssi.modes.json"), folder / "free.modes.json")
+    return folder
+
+
+def test_incomplete_folders(tmp_path):
+    with pytest.raises(InputError, match="not a folder"):
+        read_case(tmp_path / "nope")
+    (tmp_path / "a").mkdir()
+    with pytest.raises(InputError, match="tyre.toml"):
+        read_case(tmp_path / "a")
+    shutil.copy(data_path("table9.tyre.toml"), tmp_path / "a" / "tyre.toml")
+    with pytest.raises(InputError, match="free.modes.csv"):
+        read_case(tmp_path / "a")
+    f = _copy_free(tmp_path / "b")
+    (f / "loaded.modes.csv").write_text("n,freq_hz\n2,120\n")
+    with pytest.raises(InputError, match="sidecar"):
+        read_case(f)
+
+
+@pytest.mark.slow
+def test_blind_subset_and_json_contract(tmp_path):
+    for seed, effect in [(11, "none"), (12, "ground_contact"), (13, "rotation"), (14, "tread_pitch")]:
+        label = make_case(tmp_path / effect, effect, seed)
+        d = diagnose(tmp_path / effect, progress=False)
+        assert d.verdict["effect"] == label.expected_verdict, (effect, d.verdict)
+        c = d.content
+        for key in ("data", "baseline", "where", "candidates", "verdict"):
+            assert key in c
+        assert {"model", "rms", "unit", "heldout_rms"} <= set(c["baseline"])
+        assert sum(w["share"] for w in c["where"]) <= 1.0 + 1e-9
+        for cand in c["candidates"]:
+            assert {"effect", "rms", "heldout_rms", "shrink_pct", "heldout_shrink_pct", "evidence", "params"} <= set(cand)
+        assert c["verdict"]["effects"][0] == c["verdict"]["effect"]
+        if effect == "ground_contact":
+            p = c["candidates"][0]["params"]["half_angle_deg"]
+            assert p["lo"] <= label.magnitude["half_angle_deg"] <= p["hi"] or \
+                abs(p["value"] - label.magnitude["half_angle_deg"]) < 0.5
+            assert c["where"][0]["region"].startswith("loaded")
+            # held-out shrink within 10 points of the ideal shrink
+            assert abs(c["candidates"][0]["heldout_shrink_pct"] - c["baseline"]["ideal_shrink_pct"]) < 10
+    out = tmp_path / "g.diagnosis.json"
+    d.write(out)
+    back = read_diagnosis(out)
+    assert back["verdict"] == json.loads(d.to_json())["verdict"]
+
+
+@pytest.mark.slow
+def test_cli_diagnose(tmp_path, capsys):
+    folder = _copy_free(tmp_path / "case")
+    out = tmp_path / "x.diagnosis.json"
+    assert main(["diagnose", str(folder), "--out", str(out), "--effects", "cavity_mode,ring_extensibility",
+                 "--quiet"]) == 0
+    assert read_diagnosis(out)["verdict"]["effect"] in ("none", "unexplained", "cavity_mode", "ring_extensibility")
+    assert main(["diagnose", str(folder), "--out", str(out), "--quiet"]) == 2  # exists, no --force
+    assert main(["diagnose", str(tmp_path / "missing"), "--out", str(tmp_path / "y.json"), "--quiet"]) == 2
+    assert main(["diagnose", str(folder), "--out", str(tmp_path / "z.json"), "--effects", "bogus", "--quiet"]) == 2

@@ -1,0 +1,102 @@
+"""Covariance SSI against a state-space system with known poles, and its building blocks."""
+
+import numpy as np
+import pytest
+
+from ringfit.targets.ssi import block_hankel, output_covariances, ssi_cov, ssi_cov_multi_setup, truncated_svd
+from ringfit.targets.stabilization import mac, stabilization_diagram
+
+FS = 200.0
+#: (frequency Hz, damping ratio) of the test system: the independent truth.
+TRUTH = [(11.0, 0.02), (23.0, 0.015), (37.0, 0.03)]
+
+
+def _simulate(n_out=6, n_samples=100_000, seed=0, noise=0.02):
+    """Sum of white-noise-driven second-order sections with exact discrete poles exp(λ dt), seen by n_out sensors."""
+    from scipy.signal import lfilter
+
+    rng = np.random.default_rng(seed)
+    dt = 1 / FS
+    y = np.zeros((n_out, n_samples))
+    for f, z in TRUTH:
+        lam = -z * 2 * np.pi * f + 1j * 2 * np.pi * f * np.sqrt(1 - z**2)
+        mu = np.exp(lam * dt)
+        s = lfilter([1.0], [1.0, -2 * mu.real, abs(mu) ** 2], rng.standard_normal(n_samples + 1))
+        c = rng.standard_normal((n_out, 2))
+        y += c[:, :1] * s[1:] + c[:, 1:] * s[:-1]
+    y += noise * y.std() * rng.standard_normal(y.shape)
+    return y
+
+
+def test_covariances_match_direct_sums():
+    rng = np.random.default_rng(1)
+    y = rng.standard_normal((3, 50))
+    cov = output_covariances(y, 5, refs=[0, 2])
+    n = y.shape[1]
+    for i in range(6):
+        direct = sum(np.outer(y[:, k + i], y[[0, 2], k]) for k in range(n - i)) / (n - i)
+        assert np.allclose(cov[i], direct, rtol=1e-12, atol=1e-14)
+
+
+def test_block_hankel_layout():
+    cov = np.arange(8 * 2 * 1, dtype=float).reshape(8, 2, 1)  # Λ_i = [[2i], [2i+1]]
+    h = block_hankel(cov, 3, 4)
+    assert h.shape == (6, 4)
+    for i in range(3):
+        for j in range(4):
+            assert np.array_equal(h[2 * i:2 * i + 2, j], cov[i + j + 1, :, 0])
+
+
+@pytest.mark.parametrize("method", ["randomized", "svds"])
+def test_truncated_svd_matches_full(method):
+    rng = np.random.default_rng(2)
+    u0, _ = np.linalg.qr(rng.standard_normal((300, 300)))
+    s0 = np.concatenate([np.logspace(3, 0, 40), 1e-3 * rng.random(260)])
+    h = (u0 * s0) @ np.linalg.qr(rng.standard_normal((300, 300)))[0].T
+    u, s = truncated_svd(h, 30, method=method)
+    assert np.allclose(s, s0[:30], rtol=1e-8)
+    assert np.all(mac(u.T, u0[:, :30].T) > 1 - 1e-8)
+
+
+def _recovered(poles, order):
+    i = poles.at_order(order)
+    return poles.freq_hz[i], poles.damping[i]
+
+
+def test_ssi_recovers_known_poles():
+    y = _simulate()
+    poles = ssi_cov(y, FS, orders=range(2, 31, 2), block_rows=10)
+    f, z = _recovered(poles, 6)  # the true order
+    assert f.size == 3
+    for (ft, zt), fi, zi in zip(TRUTH, np.sort(f), z[np.argsort(f)]):
+        assert abs(fi - ft) / ft < 0.003  # ~2σ of the estimator for 500 s of data
+        assert abs(zi - zt) / zt < 0.15
+    stab = stabilization_diagram(poles)
+    for ft, _ in TRUTH:  # each true pole is stable (square) at most orders above the true one
+        near = (np.abs(poles.freq_hz - ft) < 0.01 * ft) & (poles.order >= 8)
+        assert np.mean(stab.label[near] == 2) > 0.7
+
+
+def test_multi_setup_matches_single_setup():
+    """Two setups sharing reference channel 0: the merged Hankel gives the same poles as all channels at once."""
+    y = _simulate(n_out=5, seed=3)
+    setup1 = y[[0, 1, 2]]
+    setup2 = 3.0 * y[[0, 3, 4]]  # another excitation level
+    poles, channel_map = ssi_cov_multi_setup([setup1, setup2], [[0], [0]], FS, orders=[6], block_rows=12)
+    assert channel_map == [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2)]
+    f = np.sort(poles.freq_hz)
+    assert np.allclose(f, [t[0] for t in TRUTH], rtol=0.005)
+    # shapes: merged channels follow the single-setup shapes (MAC ~ 1)
+    single = ssi_cov(y, FS, orders=[6], refs=[0], block_rows=12)
+    for i in range(3):
+        j = np.argmin(np.abs(single.freq_hz - poles.freq_hz[i]))
+        assert mac(poles.shape[i], single.shape[j]) > 0.98
+
+
+def test_bad_inputs():
+    from ringfit.errors import InputError
+
+    with pytest.raises(InputError, match="NaN"):
+        ssi_cov(np.full((2, 100), np.nan), FS)
+    with pytest.raises(InputError, match="block rows"):
+        ssi_cov(np.random.default_rng(0).standard_normal((2, 500)), FS, orders=[40], block_rows=12)
