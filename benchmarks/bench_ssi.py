@@ -1,10 +1,13 @@
 """Covariance SSI: ringfit vs pyOMA2 on the SAME data, decimation, block rows and orders (issue 3, item 11).
 
-Prints, per case, wall time, peak memory (tracemalloc peak of the run, in a
-fresh worker process; numpy reports its buffers to tracemalloc) and whether both find the same modes, then how ringfit's cost grows
-with channels, block rows and orders. Each measurement runs in its own
-subprocess with ONE BLAS thread (OMP/OPENBLAS/MKL_NUM_THREADS=1 set before
-numpy is imported).
+Prints, per case, wall-clock and CPU time (best of ``--repeats`` runs of each
+tool, in its own fresh worker process with ONE BLAS thread: OMP/OPENBLAS/
+MKL_NUM_THREADS=1 set before numpy is imported), the time ratio, peak memory
+(tracemalloc peak of one more run; numpy reports its buffers to tracemalloc),
+whether both find the same modes, ringfit's time per stage, and then how
+ringfit's cost grows with channels, block rows and model orders. The load
+average of the machine is printed before and after: on a shared machine the
+CPU-time ratio is the steadier figure (wall time also counts waiting for a core).
 
 Cases (3.2 kHz after decimation from 25.6 kHz, 30 block rows, orders 2–160
 step 2, synthetic free ring n = 1…20 with double poles + cavity mode):
@@ -13,17 +16,26 @@ step 2, synthetic free ring n = 1…20 with double poles + cavity mode):
 - (b) 32 channels × 20 s, same excitation
 - (c) 32 channels × 4 s of hammer decays (aligned, first 0.0127 s dropped)
 
-Timed scope on both sides: covariances/Hankel, SVD, poles of every order and
-the stabilization labels (pyOMA2: ``SSI.run()`` with method ``cov``; ringfit:
-``ssi_cov`` + ``stabilization_diagram``). "Same modes": for each mode of the
-synthetic truth in 20–700 Hz, both tools have stable poles within 0.5 % at
-≥ 15 % of the orders (ringfit: label ≥ 1, i.e. frequency and pair-aware shape
-stable; pyOMA2: its ``Lab == 1`` poles, frequency 5 %, damping 10 %, MAC
-criteria), and the median frequencies of those poles agree within 0.3 %.
-(The source's 5 % damping criterion, ringfit's squares, is strict for 4 s of
-ambient data: damping estimates scatter more than that between orders.)
+Decimation (and alignment) happen once, outside the timed call, and both
+tools get the same decimated array: neither tool's time includes it.
 
-Usage: ``python benchmarks/bench_ssi.py [--cases a,b,c] [--no-pyoma] [--no-growth]``
+Timed scope on both sides, the same job: covariances and block Hankel
+matrix (30 block rows), SVD, A, C and the eigen-decomposition (poles AND
+mode shapes) of every model order 2, 4, …, 160, and stabilization labels
+from frequency, damping and shape criteria (pyOMA2: ``SSI.run()`` with method
+``cov``: full SVD, ``SSI_fast``, ``SSI_poles``, MPC/MPD hard criteria and
+``SC_apply``; ringfit: ``ssi_cov`` (covariances by blocked FFT, randomized
+rank-160 SVD, one ``dgeev`` per order) + ``stabilization_diagram``).
+Clustering into modes is timed separately (pyOMA2 has no automatic
+clustering in ``SSI.run``). "Same modes": for each mode of the synthetic
+truth in 20–700 Hz, both tools have stable poles within 0.5 % at ≥ 15 % of
+the orders (ringfit: label ≥ 1, i.e. frequency and pair-aware shape stable;
+pyOMA2: its ``Lab == 1`` poles, frequency 5 %, damping 10 %, MAC criteria),
+and the median frequencies of those poles agree within 0.3 %. (The source's
+5 % damping criterion, ringfit's squares, is strict for 4 s of ambient
+data: damping estimates scatter more than that between orders.)
+
+Usage: ``python benchmarks/bench_ssi.py [--cases a,b,c] [--repeats 3] [--no-pyoma] [--no-growth]``
 (pyOMA2 is a benchmark-only extra: ``pip install pyOMA-2``).
 """
 

@@ -82,18 +82,20 @@ def test_gravity_adds_the_1g_field():
     np.testing.assert_allclose(d[:, 1], np.broadcast_to(9.81 * np.sin(phi), (2, M)), atol=1e-9)
 
 
-def test_highpass_gain_and_lead_of_first_harmonic():
-    """PHYSICS.md §5 layer 5: harmonic 1 gets gain 1/√(1+(f_c/f_rot)²) and phase lead atan(f_c/f_rot)."""
+def test_highpass_gain_and_lead():
+    """PHYSICS.md §5 layer 5: revolution harmonic k gets gain 1/√(1+(f_c/kf_rot)²) and lead atan(f_c/kf_rot).
+
+    (k = 1 carries no acceleration for the inextensible ring — rigid translation, §4.6 — so k = 2, 3.)
+    """
     data, _, _ = _data()
     e = lib.get("iepe_highpass")
     fc = 1.0
-    a = np.fft.rfft(_predict((e,), [0.0], data), axis=-1)[..., 1]
-    b = np.fft.rfft(_predict((e,), [fc], data), axis=-1)[..., 1]
-    f_rot = np.asarray(data.omega) / (2 * np.pi)
+    a = np.fft.rfft(_predict((e,), [0.0], data), axis=-1)[..., 2:4]
+    b = np.fft.rfft(_predict((e,), [fc], data), axis=-1)[..., 2:4]
+    f = (np.asarray(data.omega) / (2 * np.pi))[:, None, None] * np.array([2.0, 3.0])
     ratio = b / a
-    np.testing.assert_allclose(np.abs(ratio), np.broadcast_to((1 / np.sqrt(1 + (fc / f_rot) ** 2))[:, None], (2, 2)),
-                               rtol=1e-9)
-    np.testing.assert_allclose(np.angle(ratio), np.broadcast_to(np.arctan(fc / f_rot)[:, None], (2, 2)), atol=1e-9)
+    np.testing.assert_allclose(np.abs(ratio), np.broadcast_to(1 / np.sqrt(1 + (fc / f) ** 2), ratio.shape), rtol=1e-9)
+    np.testing.assert_allclose(np.angle(ratio), np.broadcast_to(np.arctan(fc / f), ratio.shape), atol=1e-9)
 
 
 def test_sensor_mass_is_the_belt_impedance_lowpass():

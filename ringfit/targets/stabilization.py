@@ -93,6 +93,10 @@ def stabilization_diagram(
     **Arguments:** tolerances as in the module docstring; ``pair_aware=False``
     uses the plain MAC only (for comparison).
 
+    The pair MAC is evaluated for the frequency-stable poles only (the others
+    are unstable whatever their shape; their ``pair_mac`` is 0), all orders
+    in one batched eigen-decomposition.
+
     **Returns:** :class:`Stability`.
     """
     m = len(poles)
@@ -102,52 +106,69 @@ def stabilization_diagram(
     plain = np.zeros(m)
     pair = np.zeros(m)
     by_order = [poles.at_order(o) for o in poles.orders]
+    tasks = []  # (poles, their neighbours (c, k), valid (c, k)) per order
     for j in range(1, len(poles.orders)):
         cur, prev = by_order[j], by_order[j - 1]
         if cur.size == 0 or prev.size == 0:
             continue
         rel = np.abs(f[cur][:, None] - f[prev][None, :]) / f[prev][None, :]
         k = prev[np.argmin(rel, axis=1)]
-        freq[cur] = rel.min(axis=1) <= freq_tol
+        fs = rel.min(axis=1) <= freq_tol
+        freq[cur] = fs
         damp[cur] = np.abs(z[cur] - z[k]) <= damping_tol * z[k]
         plain[cur] = mac(phi[cur], phi[k])
-        if not pair_aware:
-            continue
-        hist = np.concatenate(by_order[max(0, j - history):j])
-        pair[cur] = _batched_pair_mac(phi, cur, hist, f, pair_window)
+        if pair_aware and fs.any():
+            hist = np.concatenate(by_order[max(0, j - history):j])
+            tasks.append(_neighbours(cur[fs], hist, f, pair_window))
+    if tasks:
+        pair_idx = np.concatenate([t[0] for t in tasks])
+        pair[pair_idx] = _pair_mac(phi, tasks)
     shape_ok = np.maximum(plain, pair) >= mac_tol if pair_aware else plain >= mac_tol
     label = np.where(freq & damp & shape_ok, 2, np.where(freq & shape_ok, 1, 0))
     source = np.where(freq & damp, 2, np.where(freq, 1, 0))
     return Stability(freq, damp, shape_ok, plain, pair, label, source)
 
 
-def _batched_pair_mac(phi, cur, hist, f, window, rel: float = 0.2, max_dim: int = 2) -> np.ndarray:
-    """Subspace MAC of each pole in ``cur`` against the ≤ 2-D principal subspace of its neighbours in ``hist``.
+def _neighbours(cur, hist, f, window):
+    """Poles of ``hist`` within ``window`` (relative frequency) of each pole of ``cur``: indices (c, k) and mask."""
+    near = np.abs(f[cur][:, None] - f[hist][None, :]) <= window * f[cur][:, None]  # (c, h)
+    k = max(1, int(near.sum(axis=1).max()))
+    order = np.argsort(~near, axis=1, kind="stable")[:, :k]  # neighbours first
+    return cur, hist[order], np.take_along_axis(near, order, axis=1)
+
+
+def _pair_mac(phi, tasks) -> np.ndarray:
+    """Pair MAC of the poles of all ``tasks``, one batched eigen-decomposition per neighbour count k."""
+    cur = np.concatenate([t[0] for t in tasks])
+    ks = np.concatenate([np.full(t[0].size, t[1].shape[1]) for t in tasks])
+    out = np.zeros(cur.size)
+    for k in np.unique(ks):
+        sel = [t for t in tasks if t[1].shape[1] == k]
+        rows = np.flatnonzero(ks == k)
+        out[rows] = _pair_mac_batch(phi, np.concatenate([t[0] for t in sel]), np.concatenate([t[1] for t in sel]),
+                                    np.concatenate([t[2] for t in sel]))
+    return out
+
+
+def _pair_mac_batch(phi, cur, nb, valid, rel: float = 0.2, max_dim: int = 2) -> np.ndarray:
+    """Subspace MAC of each pole ``cur`` against the ≤ 2-D principal subspace of its neighbours ``nb`` (c, k).
 
     Same as :func:`pair_basis` + :func:`subspace_mac` per pole, batched: the
     principal directions come from the eigen-decomposition of the neighbours'
-    Gram matrix ``XᴴX`` (k × k, k = number of neighbours), so the projection
-    of φ is ``Σ_m |v_mᴴ Xᴴφ|² / λ_m`` over the leading eigenpairs with
+    Gram matrix ``XᴴX`` (k × k, zero rows for padding), so the projection of
+    φ is ``Σ_m |v_mᴴ Xᴴφ|² / λ_m`` over the leading eigenpairs with
     ``λ_m ≥ rel² λ_max``.
     """
-    near = np.abs(f[cur][:, None] - f[hist][None, :]) <= window * f[cur][:, None]  # (c, h)
-    counts = near.sum(axis=1)
-    out = np.zeros(cur.size)
-    if counts.max(initial=0) == 0:
-        return out
-    k = int(counts.max())
-    order = np.argsort(~near, axis=1, kind="stable")[:, :k]  # neighbours first
-    valid = np.take_along_axis(near, order, axis=1)  # (c, k)
-    x = phi[hist[order]] * valid[..., None]  # (c, k, ch), zero rows for padding
-    gram = np.einsum("pkc,plc->pkl", np.conj(x), x)
+    k = nb.shape[1]
+    x = phi[nb] * valid[..., None]  # (c, k, ch)
+    xh = np.conj(x)
+    gram = np.matmul(xh, x.transpose(0, 2, 1))  # (c, k, k): x_kᴴ x_l
     lam, vec = np.linalg.eigh(gram)  # ascending
-    proj = np.einsum("pkc,pc->pk", np.conj(x), phi[cur])  # Xᴴφ
-    coef = np.abs(np.einsum("pkm,pk->pm", np.conj(vec), proj)) ** 2  # |v_mᴴ Xᴴφ|²
-    lam_max = lam[:, -1:]
-    use = (lam >= (rel**2) * lam_max) & (lam > 0)
+    proj = np.matmul(xh, phi[cur][:, :, None])  # Xᴴφ: (c, k, 1)
+    coef = np.abs(np.matmul(np.conj(vec.transpose(0, 2, 1)), proj)[:, :, 0]) ** 2  # |v_mᴴ Xᴴφ|²
+    use = (lam >= (rel**2) * lam[:, -1:]) & (lam > 0)
     use &= np.arange(k)[None, :] >= k - max_dim  # at most the max_dim leading ones
     with np.errstate(divide="ignore", invalid="ignore"):
         val = np.where(use, coef / np.where(lam > 0, lam, 1.0), 0.0).sum(axis=1)
     norm = np.sum(np.abs(phi[cur]) ** 2, axis=1)
-    out = np.where(counts > 0, val / norm, 0.0)
-    return out
+    return np.where(valid.any(axis=1), val / norm, 0.0)
