@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from ringfit.targets.ssi import block_hankel, output_covariances, ssi_cov, ssi_cov_multi_setup, truncated_svd
+from ringfit.targets import ssi as ssi_module
+from ringfit.targets.ssi import (BlockHankelOperator, block_hankel, output_covariances, poles_from_svd, ssi_cov,
+                                 ssi_cov_multi_setup, truncated_svd)
 from ringfit.targets.stabilization import mac, stabilization_diagram
 
 FS = 200.0
@@ -36,6 +38,68 @@ def test_covariances_match_direct_sums():
     for i in range(6):
         direct = sum(np.outer(y[:, k + i], y[[0, 2], k]) for k in range(n - i)) / (n - i)
         assert np.allclose(cov[i], direct, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("chunk_bytes", [None, 4096])
+def test_fft_covariances_match_direct_sums(monkeypatch, chunk_bytes):
+    """The blocked-FFT path (long records) against the defining sums, also when the blocks go in several chunks."""
+    if chunk_bytes is not None:
+        monkeypatch.setattr(ssi_module, "_FFT_COV_CHUNK_BYTES", chunk_bytes)
+    rng = np.random.default_rng(5)
+    y = rng.standard_normal((4, 4013)) + 3.0  # odd length, non-zero mean: ~84 blocks, the last ones zero-padded
+    lags = 24  # >= 16 lags and n >= 8 * lags: the FFT path
+    cov = output_covariances(y, lags - 1, refs=[3, 1])
+    n = y.shape[1]
+    for i in range(lags):
+        direct = y[:, i:] @ y[[3, 1], : n - i].T / (n - i)
+        assert np.allclose(cov[i], direct, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("p, q", [(5, 5), (4, 7)])
+def test_block_hankel_operator_products(p, q):
+    rng = np.random.default_rng(6)
+    cov = rng.standard_normal((p + q + 2, 3, 2))
+    dense = block_hankel(cov, p, q)
+    op = BlockHankelOperator(cov, p, q)
+    x, z = rng.standard_normal((q * 2, 4)), rng.standard_normal((p * 3, 5))
+    assert op.shape == dense.shape
+    assert np.allclose(op @ x, dense @ x, rtol=1e-13, atol=1e-13)
+    assert np.allclose(op.T @ z, dense.T @ z, rtol=1e-13, atol=1e-13)
+    assert np.array_equal(op.toarray(), dense)
+
+
+def test_sweep_matches_least_squares_a_per_order():
+    """Poles and shapes of every order against A_n = O↑_n⁺ O↓_n (eq. 11) solved independently per order."""
+    y = _simulate(n_out=4, n_samples=20_000, seed=7)
+    p, orders = 8, [2, 6, 10, 20]
+    u, s, _ = np.linalg.svd(block_hankel(output_covariances(y, 2 * p - 1), p))
+    poles = poles_from_svd(u, s, 4, orders, 1 / FS, max_damping=1.0)
+    for n in orders:
+        obs = u[:, :n] * np.sqrt(s[:n])
+        a = np.linalg.lstsq(obs[:-4], obs[4:], rcond=None)[0]
+        mu, psi = np.linalg.eig(a)
+        lam = np.log(mu) / (1 / FS)
+        zeta = -lam.real / np.abs(lam)
+        keep = (mu.imag > 0) & (zeta > 0) & (zeta < 1.0)
+        i = poles.at_order(n)
+        assert i.size == keep.sum()
+        ref = np.sort_complex(lam[keep])
+        assert np.allclose(np.sort_complex(poles.lam[i]), ref, rtol=1e-9)
+        phi_ref = (obs[:4] @ psi[:, keep]).T
+        for j in i:  # each shape matches the reference shape of the same pole (MAC ~ 1)
+            k = np.argmin(np.abs(lam[keep] - poles.lam[j]))
+            assert mac(poles.shape[j], phi_ref[k]) > 1 - 1e-9
+
+
+def test_many_channels_use_the_fft_hankel_and_agree_with_the_dense_path():
+    """l·r >= FFT_HANKEL_MIN_LR: the operator path gives the poles of the full dense SVD."""
+    y = _simulate(n_out=64, n_samples=6_000, seed=8)
+    assert isinstance(ssi_module.hankel_for_svd(output_covariances(y, 9), 5), BlockHankelOperator)
+    fast = ssi_cov(y, FS, orders=[6, 12], block_rows=5)
+    full = ssi_cov(y, FS, orders=[6, 12], block_rows=5, svd_method="full")
+    i, j = fast.at_order(6), full.at_order(6)
+    assert np.allclose(np.sort(fast.freq_hz[i]), np.sort(full.freq_hz[j]), rtol=1e-9)
+    assert np.allclose(np.sort(fast.freq_hz[i]), [t[0] for t in TRUTH], rtol=0.01)
 
 
 def test_block_hankel_layout():

@@ -8,8 +8,8 @@ The chain, each step one function:
    ``Λ_i = 1/(N−i) Σ_k y(k+i) y_ref(k)ᵀ`` (seed eq. 16 uses 1/(N−1); we divide
    each lag by the number of products it sums). All lags at once: for long
    records by blocked FFT correlation (overlap-save, exact up to round-off,
-   ~2·l·r·N·(1 + L/B)·4 flops instead of 2·l·r·N·L for L lags and blocks of B
-   samples), else by one batched matmul.
+   ≈ 4·l·r·N·(1 + L/B) flops instead of 2·l·r·N·L for L lags and blocks of
+   B ≈ 2L samples), else by one batched matmul.
 2. :func:`block_hankel` — ``H[i, j] = Λ_{i+j+1}``, p block rows, q block
    columns (seed eq. 8), shape ``(p·l, q·r)``; :class:`BlockHankelOperator`
    gives the products ``H X`` and ``Hᵀ Z`` without forming H (block
@@ -79,7 +79,7 @@ FFT_COV_MIN_RATIO = 8
 #: Use :class:`BlockHankelOperator` (FFT products) instead of a dense Hankel matrix from this many l·r on.
 FFT_HANKEL_MIN_LR = 4096
 #: Working-memory cap of the blocked FFT covariances [bytes] (blocks are processed in chunks below it).
-_FFT_COV_CHUNK_BYTES = 32 * 2**20
+_FFT_COV_CHUNK_BYTES = 4 * 2**20
 
 
 def output_covariances(y: np.ndarray, max_lag: int, refs: np.ndarray | None = None) -> np.ndarray:
@@ -102,11 +102,11 @@ def output_covariances(y: np.ndarray, max_lag: int, refs: np.ndarray | None = No
     l, n = y.shape
     if not 0 <= max_lag < n - 1:
         raise InputError(f"max lag {max_lag} needs more than {max_lag + 1} samples; have {n}")
-    yref = y if refs is None else y[np.asarray(refs)]
     lags = max_lag + 1
     if lags >= 16 and n >= FFT_COV_MIN_RATIO * lags:
-        cov = _covariances_fft(y, yref, lags)
+        cov = _covariances_fft(y, refs, lags)
     else:
+        yref = y if refs is None else y[np.asarray(refs)]
         padded = np.concatenate([y, np.zeros((l, lags))], axis=1)
         lagged = np.lib.stride_tricks.sliding_window_view(padded, n, axis=1)[:, :lags]  # (l, lags, n)
         cov = np.matmul(lagged.transpose(1, 0, 2), yref.T)  # (lags, l, r)
@@ -114,7 +114,7 @@ def output_covariances(y: np.ndarray, max_lag: int, refs: np.ndarray | None = No
     return cov
 
 
-def _covariances_fft(y: np.ndarray, yref: np.ndarray, lags: int) -> np.ndarray:
+def _covariances_fft(y: np.ndarray, refs: np.ndarray | None, lags: int) -> np.ndarray:
     """Sums ``Σ_k y(k+i) y_ref(k)ᵀ`` for i < lags by overlap-save FFT correlation, shape ``(lags, l, r)``.
 
     The reference samples are cut into blocks of B; block b of the reference
@@ -123,29 +123,41 @@ def _covariances_fft(y: np.ndarray, yref: np.ndarray, lags: int) -> np.ndarray:
     lag 0 … L−1 products of that block (no wrap-around because the reference
     block is followed by L zeros). The per-frequency sums over blocks are one
     batched complex matmul ``Σ_b Y_b(f) R_b(f)ᴴ`` (l × r per frequency), and one
-    inverse FFT of length M gives all lags.
+    inverse FFT of length M gives all lags. Blocks go in chunks of at most
+    ``_FFT_COV_CHUNK_BYTES`` of spectra.
     """
     from scipy.fft import next_fast_len
 
+    y = np.ascontiguousarray(y)
     l, n = y.shape
-    r = yref.shape[0]
     m = next_fast_len(3 * lags, real=True)  # blocks of B = M − L ≈ 2L samples: ~4·(1 + L/B) flops per product
     b = m - lags
     nb = -(-n // b)
-    ypad = np.zeros((l, nb * b + lags))
-    ypad[:, :n] = y
-    rpad = np.zeros((r, nb * b))
-    rpad[:, :n] = yref
-    acc = np.zeros((m // 2 + 1, l, r), dtype=np.complex128)
-    chunk = max(1, int(_FFT_COV_CHUNK_BYTES // (16 * (m // 2 + 1) * (l + r))))
-    for start in range(0, nb, chunk):
-        stop = min(nb, start + chunk)
-        seg = np.lib.stride_tricks.as_strided(
-            ypad[:, start * b:], shape=(stop - start, l, m), strides=(b * 8, ypad.strides[0], 8), writeable=False)
-        fy = np.fft.rfft(seg, axis=-1)  # (blocks, l, F)
-        fr = np.fft.rfft(rpad[:, start * b:stop * b].reshape(r, stop - start, b), n=m, axis=-1)  # (r, blocks, F)
-        acc += np.matmul(fy.transpose(2, 1, 0), np.conj(fr.transpose(2, 1, 0)))  # (F, l, blocks) @ (F, blocks, r)
-    return np.fft.irfft(acc, n=m, axis=0)[:lags]
+    full = min(nb, max(0, (n - m) // b + 1))  # blocks whose M samples lie inside the record: read in place
+    tail = np.zeros((l, (nb - full) * b + lags))  # the last blocks, zero-padded (a short copy)
+    tail[:, : n - full * b] = y[:, full * b:]
+    ref_rows = slice(None) if refs is None else np.asarray(refs)
+    r = y[ref_rows].shape[0]
+    nf = m // 2 + 1
+    acc = np.zeros((nf, l, r), dtype=np.complex128)
+    chunk = max(32, int(_FFT_COV_CHUNK_BYTES // (2 * 16 * nf * (l + r))))  # >= 32 blocks: efficient GEMMs
+    for src, count in ((y, full), (tail, nb - full)):
+        ref_src = src if refs is None else np.ascontiguousarray(src[ref_rows])
+        for start in range(0, count, chunk):
+            cnt = min(count, start + chunk) - start
+            seg = np.lib.stride_tricks.as_strided(
+                src[:, start * b:], shape=(cnt, l, m), strides=(b * 8, src.strides[0], 8), writeable=False)
+            ref = np.lib.stride_tricks.as_strided(
+                ref_src[:, start * b:], shape=(cnt, r, b), strides=(b * 8, ref_src.strides[0], 8), writeable=False)
+            fy = np.ascontiguousarray(np.fft.rfft(seg, axis=-1).transpose(2, 1, 0))  # (F, l, blocks)
+            fr = np.ascontiguousarray(np.fft.rfft(ref, n=m, axis=-1).transpose(2, 0, 1))  # (F, blocks, r)
+            np.conjugate(fr, out=fr)
+            acc += np.matmul(fy, fr)
+    out = np.empty((lags, l, r))
+    rows = max(1, int(_FFT_COV_CHUNK_BYTES // (8 * m * r)))
+    for i in range(0, l, rows):  # inverse FFT in slabs of channels: only the first L of M lags are kept
+        out[:, i:i + rows] = np.fft.irfft(acc[:, i:i + rows], n=m, axis=0)[:lags]
+    return out
 
 
 def block_hankel(cov: np.ndarray, block_rows: int, block_cols: int | None = None) -> np.ndarray:
@@ -192,7 +204,6 @@ class BlockHankelOperator:
         self._m = next_fast_len(self.p + self.q - 1, real=True)
         self._spec = np.fft.rfft(cov[1:self.p + self.q], n=self._m, axis=0) if _spec is None else _spec  # (F, l, r)
         self.shape = (self.p * self.l, self.q * self.r)
-        self.dtype = np.dtype(np.float64)
 
     @property
     def T(self) -> "BlockHankelOperator":
@@ -377,7 +388,8 @@ def _sweep(orders, g, c_r, dt, max_damping) -> list:
         if not ok.any():
             continue
         j = up[ok]
-        phi = c_r[:, :n] @ vr[:, j] + 1j * (c_r[:, :n] @ vr[:, j + 1])
+        re_im = c_r[:, :n] @ vr[:, np.concatenate([j, j + 1])]  # C R⁻¹ (Re x, Im x) in one product
+        phi = re_im[:, : j.size] + 1j * re_im[:, j.size:]
         phi /= np.linalg.norm(phi, axis=0, keepdims=True)
         out.append((np.full(j.size, n), lam[ok], phi.T))
     return out

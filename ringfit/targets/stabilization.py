@@ -33,6 +33,8 @@ from ringfit.targets.ssi import PoleSet
 #: Source criteria (seed §2.5).
 FREQ_TOL = 0.01
 DAMPING_TOL = 0.05
+#: Working-memory cap of one batch of the pair-MAC computation [bytes].
+_BATCH_BYTES = 2 * 2**20
 
 
 @dataclass
@@ -41,7 +43,8 @@ class Stability:
 
     - ``freq``, ``damping``, ``shape``: the three criteria (bool).
     - ``plain_mac``: MAC with the nearest pole of the previous order.
-    - ``pair_mac``: subspace MAC against the pair (see module docstring).
+    - ``pair_mac``: subspace MAC against the pair (see module docstring);
+      evaluated for frequency-stable poles, 0 for the others.
     - ``label``: 2 = square (frequency, damping and shape stable), 1 =
       circle (frequency and shape stable, damping not), 0 = not stable.
     - ``source_label``: the same without the shape check (the source's symbols).
@@ -94,8 +97,8 @@ def stabilization_diagram(
     uses the plain MAC only (for comparison).
 
     The pair MAC is evaluated for the frequency-stable poles only (the others
-    are unstable whatever their shape; their ``pair_mac`` is 0), all orders
-    in one batched eigen-decomposition.
+    are unstable whatever their shape; their ``pair_mac`` is 0), in batched
+    eigen-decompositions over all orders (one per neighbour count).
 
     **Returns:** :class:`Stability`.
     """
@@ -142,11 +145,13 @@ def _pair_mac(phi, tasks) -> np.ndarray:
     cur = np.concatenate([t[0] for t in tasks])
     ks = np.concatenate([np.full(t[0].size, t[1].shape[1]) for t in tasks])
     out = np.zeros(cur.size)
+    batch = max(16, _BATCH_BYTES // (16 * phi.shape[1] * max(int(ks.max()), 1)))  # bounded working memory
     for k in np.unique(ks):
         sel = [t for t in tasks if t[1].shape[1] == k]
         rows = np.flatnonzero(ks == k)
-        out[rows] = _pair_mac_batch(phi, np.concatenate([t[0] for t in sel]), np.concatenate([t[1] for t in sel]),
-                                    np.concatenate([t[2] for t in sel]))
+        c, nb, valid = (np.concatenate([t[i] for t in sel]) for i in range(3))
+        for a in range(0, rows.size, batch):
+            out[rows[a:a + batch]] = _pair_mac_batch(phi, c[a:a + batch], nb[a:a + batch], valid[a:a + batch])
     return out
 
 
