@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-import ringfit  # noqa: F401  (float64)
+import ringfit  # float64
 from ringfit.fit.rolling import fit_rolling, sample_rolling_posterior
 from ringfit.params import table9
 from ringfit.physics.contact import contact_length, patch_edges
@@ -22,6 +22,7 @@ from ringfit.report.rolling_plots import contact_pressure_figure, deformed_ring_
 from ringfit.synth.profiles import simulate_rolling, synthetic_profile
 
 OUT = Path(os.environ.get("RINGFIT_NOTEBOOK_OUT", "."))
+ringfit.enable_compilation_cache()  # compiled solves and fits go to disk: a second run skips XLA compilation
 geometry, ring = table9()
 DRUM = 1.2192  # m, the source study's test drum
 

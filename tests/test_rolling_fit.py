@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+import ringfit.fit.rolling as rolling_fit
 from ringfit.errors import InputError
 from ringfit.fit.rolling import (
     fit_rolling,
@@ -23,6 +24,11 @@ TRUTH = RING.replace(k_tread=25e6, damping_ratio=0.03)
 SPEEDS = (20.0, 30.0, 40.0, 50.0)
 NOISE = 2.0  # m/s², white, per sample of a 1024-point profile
 DRUM = 1.2192
+
+
+def compilations(jitted):
+    """Executables compiled so far for an ``eqx.filter_jit`` function."""
+    return jitted._cached._cache_size()
 
 
 @pytest.fixture(scope="module")
@@ -46,6 +52,14 @@ def test_recovers_tread_stiffness_from_four_speeds(fit4):
     assert fit4.extra["model"].shape == (4, 2, 512)
 
 
+def test_refit_reuses_the_compiled_fit(profiles, fit4):
+    """Another start and other data of the same structure: no recompilation (floats are traced)."""
+    before = compilations(rolling_fit._solve)
+    res = fit_rolling(profiles[::-1], GEOMETRY, RING.replace(k_tread=15e6, damping_ratio=0.03))
+    assert compilations(rolling_fit._solve) == before
+    assert res.converged and res.values["k_tread"] == pytest.approx(fit4.values["k_tread"], rel=1e-4)
+
+
 @pytest.mark.slow
 def test_recovers_damping_and_angle_offset(profiles):
     offset = math.radians(0.5)
@@ -65,7 +79,9 @@ def test_recovers_damping_and_angle_offset(profiles):
 def test_beats_the_source_sweep_with_twenty_times_fewer_evaluations(profiles):
     """Source §5.3: sweep k_trd, keep the lowest error at 50 km/h. Grid 10–40 MN/m² in 0.1 MN/m² steps."""
     at50 = [p for p in profiles if p.speed_kmh == 50.0]
+    before = compilations(rolling_fit._batched_sse)
     sweep = tread_stiffness_sweep(at50, GEOMETRY, RING.replace(damping_ratio=0.03), np.arange(10e6, 40.001e6, 0.1e6))
+    assert compilations(rolling_fit._batched_sse) <= before + 1  # 301 points in equal chunks: one compilation
     fit = fit_rolling(at50, GEOMETRY, RING.replace(damping_ratio=0.03))
     assert fit.converged
     assert sum_of_squares(fit) <= sweep.best_sse * (1 + 1e-12)
@@ -91,7 +107,9 @@ def test_bad_requests_are_input_errors(profiles):
 
 @pytest.mark.slow
 def test_posterior_brackets_truth(fit4):
+    before = compilations(rolling_fit._batched_log_probability)
     post = sample_rolling_posterior(fit4, walkers=8, steps=120, seed=1)
+    assert compilations(rolling_fit._batched_log_probability) <= before + 1  # all walkers, then halves: one
     lo, med, hi = post.summary()["k_tread"]
     assert lo < med < hi
     assert abs(med - 25e6) < 4 * (hi - lo) / 2 + 1e-3 * 25e6

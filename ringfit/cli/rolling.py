@@ -47,6 +47,9 @@ def _check_grid(grid: int):
 
 
 def run_roll(args) -> int:
+    from ringfit._cache import enable_compilation_cache
+
+    enable_compilation_cache()  # a second run skips XLA compilation
     from ringfit.errors import InputError
     from ringfit.io.files import check_output_path
     from ringfit.io.profiles import sidecar_path
@@ -106,6 +109,9 @@ def run_roll(args) -> int:
 
 
 def run_fit_rolling(args) -> int:
+    from ringfit._cache import enable_compilation_cache
+
+    enable_compilation_cache()  # a second run skips XLA compilation
     from ringfit.cli import CommandFailed
     from ringfit.errors import InputError
     from ringfit.io.files import check_output_path

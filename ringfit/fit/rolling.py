@@ -156,13 +156,50 @@ def _residuals(y, args, spec: _Spec):
     return (ch - measured).ravel()
 
 
+def _residuals_and_jacobian(y, args, spec: _Spec):
+    """Residuals ``(m,)`` and their Jacobian ``(m, k)`` by forward mode: one primal and one vmapped tangent pass."""
+
+    def with_aux(y_):
+        r = _residuals(y_, args, spec)
+        return r, r
+
+    jac, res = jax.jacfwd(with_aux, has_aux=True)(y)
+    return res, jac
+
+
+def _dense_jacobian_residuals(args, spec: _Spec):
+    """``y -> residuals`` whose JVP is the dense product ``J(y) ẏ`` (J from :func:`_residuals_and_jacobian`).
+
+    The solver linearises this once per step: the model is traced once (primal +
+    k tangents) and every further Jacobian product it needs is a small matrix
+    product, which keeps the compiled fit small. Differentiates in ``y`` only.
+    """
+
+    @jax.custom_jvp
+    def fn(y):
+        return _residuals(y, args, spec)
+
+    @fn.defjvp
+    def fn_jvp(primals, tangents):
+        (y,), (dy,) = primals, tangents
+        res, jac = _residuals_and_jacobian(y, args, spec)
+        return res, jac @ dy
+
+    return fn
+
+
 @eqx.filter_jit
 def _solve(y0, args, spec, max_steps, rtol, atol):
-    fn = lambda y, a: _residuals(y, a, spec)  # noqa: E731
+    fn = _dense_jacobian_residuals(args, spec)
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.SVD())
-    sol = optx.least_squares(fn, solver, y0, args=args, max_steps=max_steps, throw=False)
-    res = fn(sol.value, args)
-    jac = jax.jacfwd(fn)(sol.value, args)
+    sol = optx.least_squares(lambda y, _: fn(y), solver, y0, max_steps=max_steps, throw=False)
+    # Residuals and Jacobian at the returned point from the solver's last
+    # linearisation (its state keeps them for the accepted y): no further model trace.
+    f_info = getattr(sol.state, "f_info", None)
+    if f_info is None:  # a solver state without it (other optimistix versions): evaluate once more
+        res, jac = _residuals_and_jacobian(sol.value, args, spec)
+    else:
+        res, jac = f_info.residual, f_info.jac.as_matrix()
     return sol.value, sol.result, sol.stats["num_steps"], res, jac
 
 
@@ -331,12 +368,25 @@ def tread_stiffness_sweep(
         profiles, geometry, ring, solver=solver, sensor=sensor, model=model, rolling_radius_m=rolling_radius_m)
     _, _, _, _, spec, args = _problem(data, geometry, ring, ("k_tread",), model, sensor, solver)
     k_grid = np.asarray(k_grid, dtype=np.float64)
-    sse = np.concatenate([
-        np.asarray(_batched_sse(jnp.log(jnp.asarray(k_grid[i : i + batch]))[:, None], args, spec))
-        for i in range(0, k_grid.size, batch)
-    ])
+    sse = _in_fixed_chunks(lambda ys: _batched_sse(ys, args, spec), np.log(k_grid)[:, None], batch)
     i = int(np.argmin(sse))
     return SweepResult(k_grid, sse, float(k_grid[i]), float(sse[i]), int(k_grid.size))
+
+
+def _in_fixed_chunks(batched_fn, ys, size: int) -> np.ndarray:
+    """``batched_fn`` over the rows of ``ys`` ``(G, k)`` in chunks of exactly ``min(size, G)`` rows.
+
+    The last chunk is padded with copies of its last row (results dropped), so a
+    jitted ``batched_fn`` compiles once per chunk size, not once per remainder.
+    """
+    ys = np.asarray(ys, dtype=np.float64)
+    n = ys.shape[0]
+    size = max(1, min(int(size), n))
+    pad = -n % size
+    if pad:
+        ys = np.concatenate([ys, np.repeat(ys[-1:], pad, axis=0)])
+    out = [np.asarray(batched_fn(jnp.asarray(ys[i : i + size]))) for i in range(0, ys.shape[0], size)]
+    return np.concatenate(out)[:n]
 
 
 @eqx.filter_jit
@@ -431,8 +481,11 @@ def sample_rolling_posterior(
     sigma = jnp.asarray(result.extra["sigma_ms2"])
     lo_j, hi_j = jnp.asarray(lo), jnp.asarray(hi)
 
+    # emcee evaluates all walkers once, then each half of the ensemble per move:
+    # fixed chunks of half the walkers keep that to one compilation.
     def log_prob(ys):
-        out = np.asarray(_batched_log_probability(jnp.asarray(ys), args, spec, sigma, lo_j, hi_j), dtype=np.float64)
+        out = _in_fixed_chunks(lambda y: _batched_log_probability(y, args, spec, sigma, lo_j, hi_j), ys,
+                               (walkers + 1) // 2)
         return np.where(np.isnan(out), -np.inf, out)
 
     rng = np.random.default_rng(seed)

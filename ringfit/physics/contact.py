@@ -262,6 +262,7 @@ def solve_rolling_jit(ring, geometry, operating, *, model=RingModel(), solver=Co
     return _solve_rolling_compiled(ring, geometry, operating, model=model, solver=solver, extra_load=extra_load)
 
 
+@eqx.filter_jit
 def patch_edges(solution: RollingSolution):
     """Leading and trailing contact-patch edges [rad], linearly interpolated zero crossings of δ.
 
@@ -280,6 +281,7 @@ def patch_edges(solution: RollingSolution):
     return cross(i0 - 1, i0), cross(i1, i1 + 1)
 
 
+@eqx.filter_jit
 def contact_length(solution: RollingSolution):
     """Patch length along the outer radius ``(R+τ)(φ_trailing − φ_leading)`` [m]."""
     lead, trail = patch_edges(solution)
