@@ -22,8 +22,8 @@ import numpy as np
 import optimistix as optx
 
 from ringfit.errors import InputError
-from ringfit.fit.priors import LogNormalPrior, log_bounds, prior_arrays, resolve_priors
-from ringfit.fit.result import MAX_RELATIVE_STDERR, FitResult, covariance_from_jacobian
+from ringfit.fit.priors import LogNormalPrior, prior_arrays, resolve_priors
+from ringfit.fit.result import FitResult, covariance_from_jacobian, parameter_flags, solver_status
 from ringfit.io.modes import ModeTable
 from ringfit.params import RING_PARAMETERS, RingParams, TyreGeometry
 from ringfit.physics.natural import natural_frequencies
@@ -202,17 +202,8 @@ def fit_natural_frequencies(
                    int(steps), np.asarray(jac), np.asarray(res), table)
 
 
-def _status(result) -> tuple[str, str]:
-    if bool(result == optx.RESULTS.successful):
-        return "converged", "the solver met its tolerances"
-    for name in ("nonlinear_max_steps_reached", "nonlinear_divergence", "nonfinite"):
-        if bool(result == getattr(optx.RESULTS, name)):
-            return name.removeprefix("nonlinear_"), optx.RESULTS[result]
-    return "failed", optx.RESULTS[result]
-
-
 def _result(free, free_index, base, geometry, data, priors, y, result, steps, jac, res, table) -> FitResult:
-    status, message = _status(result)
+    status, message = solver_status(result)
     m = data.n.size
     values = dict(zip(RING_FIELDS, base.tolist()))
     values.update({k: float(np.exp(v)) for k, v in zip(free, y)})
@@ -224,17 +215,7 @@ def _result(free, free_index, base, geometry, data, priors, y, result, steps, ja
     flags = []
     if status != "converged":
         flags.append(f"solver did not converge ({status}): {message}")
-    lo, hi = log_bounds(free)
-    for i, k in enumerate(free):
-        span = hi[i] - lo[i]
-        if y[i] <= lo[i] + 0.01 * span or y[i] >= hi[i] - 0.01 * span:
-            flags.append(f"{k} = {values[k]:.4g} ran to the edge of its plausible range "
-                         f"[{math.exp(lo[i]):.3g}, {math.exp(hi[i]):.3g}]: the data do not bound it")
-        rel = stderr[k] / values[k]
-        if not rel <= MAX_RELATIVE_STDERR:
-            flags.append(f"{k} has relative standard error {_pct(rel)} > {MAX_RELATIVE_STDERR:.0%}: "
-                         f"poorly determined by these modes" + (" even with its prior" if k in priors else
-                                                                " (consider prior='physical')"))
+    flags += parameter_flags(free, values, stderr, data="these modes", priors=priors)
     if table.state != "free" or float(table.condition.get("speed_kmh", 0) or 0) > 0:
         flags.append(f"table state is {table.state!r} (speed {table.condition.get('speed_kmh', 0)} km/h); "
                      "the eq. 18 model assumes a static, free tyre")
@@ -256,10 +237,6 @@ def _result(free, free_index, base, geometry, data, priors, y, result, steps, ja
             fisher_data=jac[:m].T @ jac[:m],
         ),
     )
-
-
-def _pct(x: float) -> str:
-    return f"{x:.0%}" if x < 10 else "over 1000 %"
 
 
 def fitted_ring(result: FitResult) -> RingParams:

@@ -122,3 +122,47 @@ def covariance_from_jacobian(jacobian: np.ndarray, rcond: float = 1e-12) -> np.n
         null = np.abs(vt[~keep]).max(axis=0) > 1e-8
         cov[np.ix_(null, null)] = np.inf
     return cov
+
+
+def solver_status(result) -> tuple[str, str]:
+    """``(status, message)`` from an ``optimistix.RESULTS`` item (outside jit).
+
+    status is ``"converged"``, ``"max_steps_reached"``, ``"divergence"``,
+    ``"nonfinite"`` or ``"failed"``; message is optimistix's explanation.
+    """
+    import optimistix as optx
+
+    if bool(result == optx.RESULTS.successful):
+        return "converged", "the solver met its tolerances"
+    for name in ("nonlinear_max_steps_reached", "nonlinear_divergence", "nonfinite"):
+        if bool(result == getattr(optx.RESULTS, name)):
+            return name.removeprefix("nonlinear_"), optx.RESULTS[result]
+    return "failed", optx.RESULTS[result]
+
+
+def parameter_flags(names, values: dict, stderr: dict, *, data: str = "these data", priors=()) -> list[str]:
+    """Warnings for fitted positive parameters: at the edge of the plausible range, or poorly determined.
+
+    A parameter is at the edge when its logarithm lies within 1 % of the log-span
+    of :data:`ringfit.fit.priors.BOUNDS` from either bound (or beyond); poorly
+    determined when its relative standard error exceeds :data:`MAX_RELATIVE_STDERR`.
+    ``data`` names what was fitted (for the message); ``priors`` the parameters
+    that carried an informative prior.
+    """
+    from ringfit.fit.priors import BOUNDS
+
+    flags = []
+    for k in names:
+        lo, hi = BOUNDS[k]
+        span = math.log(hi / lo)
+        y = math.log(values[k]) if values[k] > 0 else -math.inf
+        if y <= math.log(lo) + 0.01 * span or y >= math.log(hi) - 0.01 * span:
+            flags.append(f"{k} = {values[k]:.4g} ran to the edge of its plausible range [{lo:.3g}, {hi:.3g}]: "
+                         "the data do not bound it")
+        rel = stderr[k] / values[k]
+        if not rel <= MAX_RELATIVE_STDERR:
+            pct = f"{rel:.0%}" if rel < 10 else "over 1000 %"
+            hint = " even with its prior" if k in priors else " (consider an informative prior)"
+            flags.append(f"{k} has relative standard error {pct} > {MAX_RELATIVE_STDERR:.0%}: "
+                         f"poorly determined by {data}" + hint)
+    return flags

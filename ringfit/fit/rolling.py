@@ -35,10 +35,10 @@ import numpy as np
 import optimistix as optx
 
 from ringfit.errors import InputError
-from ringfit.fit.least_squares import RING_FIELDS, _status, ring_from_log, ring_vector
+from ringfit.fit.least_squares import RING_FIELDS, ring_from_log, ring_vector
 from ringfit.fit.priors import BOUNDS
-from ringfit.fit.result import MAX_RELATIVE_STDERR, FitResult, covariance_from_jacobian
-from ringfit.io.profiles import Profile, resample_profile
+from ringfit.fit.result import FitResult, covariance_from_jacobian, parameter_flags, solver_status
+from ringfit.io.profiles import resample_profile
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced, solve_rolling, solve_rolling_jit
 from ringfit.physics.operating import Drum, FlatRoad, OperatingPoint, rolling_radius
@@ -289,7 +289,7 @@ def evaluations_used(steps: int, k: int) -> int:
 
 
 def _fit_result(free, ring_free, base, y, result, steps, res, jac, data, geometry, spec) -> FitResult:
-    status, message = _status(result)
+    status, message = solver_status(result)
     m = res.size
     k = len(free)
     values = dict(zip(RING_FIELDS, base.tolist()))
@@ -310,13 +310,7 @@ def _fit_result(free, ring_free, base, y, result, steps, res, jac, data, geometr
     flags = []
     if status != "converged":
         flags.append(f"solver did not converge ({status}): {message}")
-    for name in ring_free:
-        lo, hi = BOUNDS[name]
-        if not lo * 1.01 < values[name] < hi / 1.01:
-            flags.append(f"{name} = {values[name]:.4g} at or beyond its plausible range [{lo:.3g}, {hi:.3g}]")
-        rel = stderr[name] / values[name]
-        if not rel <= MAX_RELATIVE_STDERR:
-            flags.append(f"{name} has relative standard error {rel:.0%}: poorly determined by these profiles")
+    flags += parameter_flags(ring_free, values, stderr, data="these profiles")
     M = data.measured.shape[-1]
     return FitResult(
         status=status,

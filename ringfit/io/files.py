@@ -65,3 +65,27 @@ def _umask() -> int:
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
     """Write ``text`` to ``path`` atomically."""
     return atomic_write(path, lambda tmp: tmp.write_text(text))
+
+
+def read_text_file(path: str | os.PathLike) -> str:
+    """Text of ``path`` (UTF-8, BOM tolerated); :class:`InputError` naming the file if missing or unreadable."""
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise InputError("file not found", source=path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"not a readable text file ({exc.__class__.__name__})", source=path) from None
+
+
+def load_npz(path: str | os.PathLike):
+    """``np.load`` of an ``.npz`` without pickles; :class:`InputError` naming the file if missing or unreadable."""
+    import numpy as np
+
+    path = Path(path)
+    if not path.exists():
+        raise InputError("file not found", source=path)
+    try:
+        return np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"not a readable .npz file ({exc.__class__.__name__}: {exc})", source=path) from None

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.io.files import atomic_write, check_output_path
+from ringfit.io.files import atomic_write, check_output_path, read_text_file
 
 KINDS = ("structural", "acoustic")
 TAGS = ("", "extr", "0", "vert", "hort")
@@ -142,12 +142,7 @@ def read_mode_table(path: str | os.PathLike, *, sidecar: bool = True) -> ModeTab
     a bad sidecar.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise InputError("file not found", source=path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"not a readable text file ({exc.__class__.__name__})", source=path) from None
+    text = read_text_file(path)
     table = parse_mode_table(text, source=str(path))
     if sidecar:
         side = sidecar_path(path)

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.io.files import atomic_write, check_output_path
+from ringfit.io.files import atomic_write, check_output_path, read_text_file
 
 #: Columns of DATA.md §3, in the order ringfit writes them.
 COLUMNS = ("angle_deg", "acc_radial_ms2", "acc_tangential_ms2")
@@ -124,12 +124,7 @@ def read_profile(path: str | os.PathLike) -> Profile:
     file, row and column or sidecar field.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise InputError("file not found", source=path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"not a readable text file ({exc.__class__.__name__})", source=path) from None
+    text = read_text_file(path)
     side = sidecar_path(path)
     if not side.exists():
         raise InputError(f"missing sidecar {side.name} (needs {', '.join(REQUIRED_FIELDS)})", source=path)

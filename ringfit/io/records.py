@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.io.files import atomic_write, check_output_path
+from ringfit.io.files import atomic_write, check_output_path, load_npz
 
 #: Allowed sensor axes (DATA.md §4). Sign convention of ``radial``: positive toward the wheel centre.
 AXES = ("radial", "tangential", "lateral")
@@ -145,12 +145,7 @@ def read_records(path: str | os.PathLike) -> Records:
         from ringfit.io.uff import read_uff58
 
         return read_uff58(path)
-    if not path.exists():
-        raise InputError("file not found", source=path)
-    try:
-        data = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"not a readable .npz file ({exc.__class__.__name__}: {exc})", source=path) from None
+    data = load_npz(path)
     with data:
         keys = set(data.files)
         for key in ("acc", "axes", "sensor_angle_deg", "fs_hz"):

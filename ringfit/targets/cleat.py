@@ -36,6 +36,7 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.io.continuous import DEFAULT_CHUNK, ContinuousRecord
+from ringfit.io.files import load_npz
 
 
 # --------------------------------------------------------------------------- arrivals
@@ -267,12 +268,7 @@ class AngleTimeField:
 def load_field(path) -> AngleTimeField:
     """Read a field written by :meth:`AngleTimeField.save`; InputError naming file and key otherwise."""
     path = Path(path)
-    if not path.exists():
-        raise InputError("file not found", source=path)
-    try:
-        z = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"not a readable .npz file ({exc.__class__.__name__})", source=path) from None
+    z = load_npz(path)
     with z:
         if "kind" not in z or str(z["kind"]) != "angle_time_field":
             raise InputError("not an angle-time field (key 'kind' != 'angle_time_field')", source=path)
@@ -440,7 +436,6 @@ def angle_time_field(
     if not (dt > 0 and duration > dt):
         raise InputError(f"time step {dt:g} s and duration {duration:g} s: expected 0 < step < duration")
     n_t = int(math.ceil(duration / dt - 1e-9))
-    n_bins = sectors * n_t
 
     label = "none"
     funcs = [None] * len(axes)

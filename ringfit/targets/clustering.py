@@ -69,7 +69,7 @@ def cluster_modes(
 
     **Returns:** modes sorted by frequency.
     """
-    f, z, phi, order = poles.freq_hz, poles.damping, poles.shape, poles.order
+    f, phi, order = poles.freq_hz, poles.shape, poles.order
     cand = np.flatnonzero((stability.label >= min_label) & (f >= f_range[0]) & (f <= f_range[1]))
     cand = cand[np.argsort(f[cand])]
     parent = np.arange(cand.size)

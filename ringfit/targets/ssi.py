@@ -475,7 +475,7 @@ def multi_setup_hankel(
     p = int(block_rows)
     refs0 = list(ref_index[0])
     r = len(refs0)
-    hs, ref_rows = [], []
+    hs = []
     for j, (y, refs) in enumerate(zip(setups, ref_index)):
         refs = list(refs)
         if len(refs) != r:
