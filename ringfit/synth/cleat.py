@@ -258,7 +258,6 @@ class CleatBench:
         if "table" in self._cache:
             return self._cache["table"]
         if self.steady == "ring":
-
             from ringfit.physics.contact import ContactSolver, solve_rolling
             from ringfit.physics.operating import Drum, OperatingPoint
             from ringfit.physics.sensor import STANDARD_GRAVITY, SensorModel, sensor_signals
