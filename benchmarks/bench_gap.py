@@ -1,17 +1,26 @@
 """Blind validation of the gap diagnosis: generated case folders (profiles and mode tables), labels hidden.
 
-Prints the confusion matrix (expected → verdict), the accuracy (target ≥ 95 %),
-the held-out shrink error against the ideal shrink (target within 10 points)
-for cases whose effect was found, and the time per case. Compiled functions
-are reused across candidates and cases; the first case of each kind includes
-compilation.
+Prints, per case, what was injected and what the diagnosis said; then the
+confusion matrix (expected → verdict), the accuracy (target ≥ 95 %), the
+held-out shrink error against the ideal shrink (target within 10 points) for
+cases whose effect was found, and the time per case. Compiled functions are
+reused across candidates and cases; a first, uncounted diagnosis of a
+four-speed profile folder with every candidate measures the cold start,
+compilation included (the "< 20 s on 2 cores" figure).
 
 Ideal shrink = 1 − (true noise RMS)/(baseline held-out RMS): the fraction of
-the residual that is not noise. For profile cases the true noise RMS on the
-diagnosis grid comes from the hidden label; for mode-table cases (whose
-generator does not keep it) the diagnosis's own noise estimate is used.
+the residual that is not noise. The true noise comes from the hidden label: for
+profile cases its RMS on the diagnosis grid, for mode-table cases the realised
+noise of every frequency and damping row (damping rows in the diagnosis's
+frequency-noise units).
 
-Run: ``python benchmarks/bench_gap.py [n_profile_cases] [n_modal_cases]`` (default 35 + 15).
+The generator varies what a self-fitting benchmark would hold fixed: the truth's
+grid (M = 1024 … 4096 harmonics), the number of recorded angles (360 … 2048),
+noise colour (white, pink, red, band) and level (0.05 … 3 m/s² at 40 km/h),
+angle offset, encoder or not, flat road or drum, the ring (±6 %) and k_trd (±15 %).
+
+Run: ``python benchmarks/bench_gap.py [n_profile_cases] [n_modal_cases] [first_seed_offset]``
+(default 35 + 15, offset 0).
 """
 
 from __future__ import annotations
@@ -30,13 +39,25 @@ from ringfit.gap import diagnose
 from ringfit.synth.cases import MODAL_INJECTIONS, PROFILE_INJECTIONS, make_case, make_profile_case
 
 
-def run(kind: str, n: int, tmp: Path, confusion: Counter, errors: list, times: list) -> None:
+def modal_ideal(d, label) -> float:
+    """Ideal held-out shrink [%] of a mode-table case from the realised noise of every row (hidden label),
+    in the diagnosis's own units (damping rows scaled as the diagnosis scales them)."""
+    part = next(p for p in d.parts if p.problem.domain == "modes")
+    prob = part.problem
+    e = np.array([v for _, v in label.noise["rows"]])
+    if e.size != prob.m:  # row order not reproduced: fall back on the diagnosis's own noise estimate
+        return part.summary["baseline"]["ideal_shrink_pct"]
+    noise_rms = float(np.sqrt(np.mean((e * prob.scale) ** 2)))
+    return 100.0 * (1.0 - noise_rms / part.summary["baseline"]["heldout_rms"])
+
+
+def run(kind: str, n: int, offset: int, tmp: Path, confusion: Counter, errors: list, times: list) -> None:
     injections = PROFILE_INJECTIONS if kind == "profiles" else MODAL_INJECTIONS
     make = make_profile_case if kind == "profiles" else make_case
     for i in range(n):
         effect = injections[i % len(injections)]
         folder = tmp / f"{kind}{i:03d}"
-        label = make(folder, effect, seed=(2000 if kind == "profiles" else 1000) + i)
+        label = make(folder, effect, seed=(2000 if kind == "profiles" else 1000) + offset + i)
         t0 = time.perf_counter()
         d = diagnose(folder, progress=False)
         dt = time.perf_counter() - t0
@@ -45,24 +66,44 @@ def run(kind: str, n: int, tmp: Path, confusion: Counter, errors: list, times: l
         confusion[(label.expected_verdict, got)] += 1
         b = d.content["baseline"]
         note = ""
+        if kind == "profiles":
+            ideal = 100.0 * (1.0 - label.noise["grid_rms_ms2"] / b["heldout_rms"])
+            note = (f"noise {label.noise['colour']:5s} true {label.noise['grid_rms_ms2']:.3g} "
+                    f"est {b['noise_rms']:.3g}; M {label.ring['grid']} pts {label.ring['n_points']} ")
+        else:
+            ideal = modal_ideal(d, label)
         if got == label.expected_verdict and got not in ("none", "unexplained"):
             cand = next(c for c in d.content["candidates"] if c["effect"] == got)
-            if kind == "profiles":
-                ideal = 100.0 * (1.0 - label.noise["grid_rms_ms2"] / b["heldout_rms"])
-            else:
-                ideal = b["ideal_shrink_pct"]
             errors.append((kind, cand["heldout_shrink_pct"] - ideal))
-            note = f"shrink {cand['heldout_shrink_pct']:5.1f} ideal {ideal:5.1f}"
-        print(f"{kind:8s} {i:3d} {label.expected_verdict:>15s} -> {' + '.join(d.verdict['effects']):32s} "
-              f"{dt:5.1f} s {note}", flush=True)
+            note += f"shrink {cand['heldout_shrink_pct']:5.1f} ideal {ideal:5.1f}"
+        else:
+            note += f"ideal {ideal:5.1f}"
+        flag = "" if got == label.expected_verdict else "  <-- MISS"
+        print(f"{kind:8s} {i:3d} {label.expected_verdict:>15s} -> {' + '.join(d.verdict['effects']):30s} "
+              f"{dt:5.1f} s  {note}{flag}", flush=True)
 
 
-def main(n_profiles: int = 35, n_modal: int = 15) -> None:
-    print(f"CPU cores available: {os.cpu_count()}")
+def cold_timing(tmp: Path) -> None:
+    """Wall time of the very first diagnosis in this process: a four-speed profile folder with every
+    candidate, compilation included (the "< 20 s on 2 cores" figure); not counted in the accuracy."""
+    folder = tmp / "cold"
+    make_profile_case(folder, "sensor_tilt", seed=1999)
+    t0 = time.perf_counter()
+    d = diagnose(folder, progress=False)
+    dt = time.perf_counter() - t0
+    n = len(d.content["candidates"])
+    refits = sum(not c.get("screened_out") for c in d.content["candidates"])
+    print(f"cold start: four-speed profile folder, {n} candidates ({refits} refitted after the screen), "
+          f"compilation included: {dt:.1f} s -> {' + '.join(d.verdict['effects'])}", flush=True)
+
+
+def main(n_profiles: int = 35, n_modal: int = 15, offset: int = 0) -> None:
+    print(f"CPU cores available: {os.cpu_count()} (affinity {len(os.sched_getaffinity(0))})")
     confusion, errors, times = Counter(), [], []
     with tempfile.TemporaryDirectory() as tmp:
-        run("profiles", n_profiles, Path(tmp), confusion, errors, times)
-        run("modes", n_modal, Path(tmp), confusion, errors, times)
+        cold_timing(Path(tmp))
+        run("profiles", n_profiles, offset, Path(tmp), confusion, errors, times)
+        run("modes", n_modal, offset, Path(tmp), confusion, errors, times)
     n = n_profiles + n_modal
     labels = sorted({k[0] for k in confusion} | {k[1] for k in confusion})
     print("\nconfusion matrix (rows: expected, columns: verdict)")
@@ -70,7 +111,7 @@ def main(n_profiles: int = 35, n_modal: int = 15) -> None:
     for a in labels:
         print(f"{a[:15]:>15s} " + "".join(f"{confusion[(a, b)]:13d}" for b in labels))
     correct = sum(v for (a, b), v in confusion.items() if a == b)
-    print(f"\naccuracy: {correct}/{n} = {100.0 * correct / n:.1f} % (target >= 95 %)")
+    print(f"\naccuracy: {correct}/{n} = {100.0 * correct / max(n, 1):.1f} % (target >= 95 %)")
     for kind in ("profiles", "modes"):
         e = np.abs([x for k, x in errors if k == kind])
         if e.size:
@@ -78,8 +119,8 @@ def main(n_profiles: int = 35, n_modal: int = 15) -> None:
                   f"{e.max():.1f}, within 10 points: {np.mean(e <= 10) * 100:.0f} % of {e.size} detected effects")
         t = [x for k, x in times if k == kind]
         if t:
-            print(f"{kind}: time per case: first {t[0]:.1f} s (with compilation), median of the rest "
-                  f"{np.median(t[1:]) if len(t) > 1 else float('nan'):.1f} s, max {max(t):.1f} s")
+            print(f"{kind}: time per case (warm): median {np.median(t):.1f} s, max {max(t):.1f} s"
+                  + ("" if kind == "profiles" else f"; first {t[0]:.1f} s with the mode-table compilation"))
 
 
 if __name__ == "__main__":

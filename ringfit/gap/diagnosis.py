@@ -2,9 +2,12 @@
 
 Flow for each kind of data in the folder (mode tables, rolling profiles):
 baseline fit → held-out baseline → where (:mod:`~ringfit.gap.localisation`)
-→ screen (:mod:`~ringfit.gap.screening`) → refit each candidate and its
-held-out evidence (:mod:`~ringfit.gap.ranking`) → verdict and greedy chain
-(:mod:`~ringfit.gap.verdict`).
+→ is the held-out residual above the noise? (:func:`~ringfit.gap.verdict.residual_test`;
+if not: verdict ``none``, candidates listed with their screen figures only,
+no refits) → screen (:mod:`~ringfit.gap.screening`) → refit each candidate
+that passes it and its held-out evidence (:mod:`~ringfit.gap.ranking`) →
+acceptance, verdict and greedy chain (:mod:`~ringfit.gap.verdict`). Every
+rule and threshold is written into the JSON under ``verdict.rule``.
 
 A folder with both profiles and test mode tables is diagnosed per kind; the
 top-level ``baseline``/``where``/``candidates`` are those of the part with
@@ -28,9 +31,9 @@ import numpy as np
 from ringfit.gap import effects as effect_library
 from ringfit.gap.localisation import localise
 from ringfit.gap.problem import GapProblem
-from ringfit.gap.ranking import ChainFit, drift, fit_chain, heldout, rms, shrink_interval
+from ringfit.gap.ranking import ChainFit, drift, fit_chain, heldout, prior_distance, rms, shrink_interval
 from ringfit.gap.screening import SCREEN_MIN_SCORE, screen
-from ringfit.gap.verdict import RULES, acceptance, is_structured
+from ringfit.gap.verdict import RULES, acceptance, residual_test
 
 
 @dataclass
@@ -99,7 +102,7 @@ def read_diagnosis(path: str | os.PathLike) -> dict:
 
 # --------------------------------------------------------------------------- one part
 def _candidate_entry(problem: GapProblem, name: str, fit: ChainFit, current: ChainFit, current_ho: np.ndarray,
-                     reference: ChainFit, scores: dict, on_top_of: tuple) -> dict:
+                     reference: ChainFit, scores: dict, on_top_of: tuple, group: str | None = None) -> dict:
     y = problem.y
     rb, rc = y - current.pred, y - fit.pred
     hb, hc = y - current_ho, y - fit.heldout_pred
@@ -118,12 +121,16 @@ def _candidate_entry(problem: GapProblem, name: str, fit: ChainFit, current: Cha
         params[p.name] = {"value": _r(v, 6), "lo": _r(max(plo, p.lo), 6), "hi": _r(min(phi, p.hi), 6),
                           "null": p.null, "unit": p.unit, "excludes_null": bool(abs(v - p.null) > 1.959964 * se)}
     d = drift(problem, fit, reference)
+    guarded = set(problem.meta.get("prior_guarded", ()))
+    d2, kp = prior_distance(problem, fit.theta, effect.baseline_partners)
+    d2_ref, _ = prior_distance(problem, reference.theta, effect.baseline_partners)
     entry = {
         "effect": name,
         "rms": _r(rms_c), "heldout_rms": _r(hrms_c),
         "shrink_pct": _r(100.0 * (1.0 - rms_c / rms_b), 2) if rms_b > 0 else 0.0,
         "heldout_shrink_pct": _r(100.0 * (1.0 - hrms_c / hrms_b), 2) if hrms_b > 0 else 0.0,
         "heldout_shrink_interval_pct": [_r(lo, 2), _r(hi, 2)],
+        **_group_shrink(problem, group, hb, hc),
         "evidence": {"delta_bic": _r(dchi2 + dk * math.log(m), 2), "delta_chi2": _r(dchi2, 2),
                      "screen_score": _r(scores.get(name, {}).get("score", math.nan), 3),
                      "alignment": _r(scores.get(name, {}).get("alignment", math.nan), 4)},
@@ -134,8 +141,12 @@ def _candidate_entry(problem: GapProblem, name: str, fit: ChainFit, current: Cha
                                     for i, k in enumerate(problem.base) if not problem.is_linear(i)},
         "baseline_drift_max_relative": _r(max((abs(fit.theta[i] / reference.theta[i] - 1.0)
                                                for i, k in enumerate(problem.base)
-                                               if k not in effect.baseline_partners and not problem.is_linear(i)),
-                                              default=0.0), 4),
+                                               if k not in effect.baseline_partners and not problem.is_linear(i)
+                                               and i not in guarded), default=0.0), 4),
+        **({"baseline_prior_distance": {"d2": _r(d2, 2), "d2_baseline_fit": _r(d2_ref, 2), "k": kp,
+                                        "parameters": [problem.base[i] for i in sorted(guarded)
+                                                       if problem.base[i] not in effect.baseline_partners]}}
+           if kp else {}),
         "on_top_of": list(on_top_of),
         "screened_out": False,
     }
@@ -146,17 +157,31 @@ def _candidate_entry(problem: GapProblem, name: str, fit: ChainFit, current: Cha
     return entry
 
 
-def _screened_entry(problem, name, current, current_ho, scores, on_top_of):
+def _group_shrink(problem: GapProblem, group, hb: np.ndarray, hc: np.ndarray) -> dict:
+    """Held-out shrink and its interval on the rows of ``group`` (the residual group that decided the
+    structure test), ``{}`` when the problem has a single group."""
+    groups = np.asarray(problem.labels["group"])
+    if group is None or len(set(groups.tolist())) < 2:
+        return {}
+    sel = groups == group
+    b, c = rms(problem, hb, sel), rms(problem, hc, sel)
+    lo, hi = shrink_interval(problem, hb[sel], hc[sel])
+    return {"group": str(group), "heldout_shrink_in_group_pct": _r(100.0 * (1.0 - c / b), 2) if b > 0 else 0.0,
+            "heldout_shrink_in_group_interval_pct": [_r(lo, 2), _r(hi, 2)]}
+
+
+def _screened_entry(problem, name, current, current_ho, scores, on_top_of, reason=None):
     y = problem.y
     r, h = rms(problem, y - current.pred), rms(problem, y - current_ho)
     min_frac = float(problem.meta.get("screen_min_fraction", 0.0))
+    reason = reason or (f"screen score < {SCREEN_MIN_SCORE} or alignment^2 < {min_frac:g}: "
+                        "the residual does not look like this effect")
     return {"effect": name, "rms": _r(r), "heldout_rms": _r(h), "shrink_pct": 0.0, "heldout_shrink_pct": 0.0,
             "heldout_shrink_interval_pct": [0.0, 0.0],
             "evidence": {"delta_bic": 0.0, "screen_score": _r(scores.get(name, {}).get("score", 0.0), 3),
                          "alignment": _r(scores.get(name, {}).get("alignment", 0.0), 4)},
             "params": {}, "on_top_of": list(on_top_of), "screened_out": True, "accepted": False,
-            "rejected_because": [f"screen score < {SCREEN_MIN_SCORE} or alignment^2 < {min_frac:g}: "
-                                 "the residual does not look like this effect"]}
+            "rejected_because": [reason]}
 
 
 def _screened_out(problem: GapProblem, score: dict) -> bool:
@@ -165,8 +190,10 @@ def _screened_out(problem: GapProblem, score: dict) -> bool:
     return score.get("score", 0.0) < SCREEN_MIN_SCORE or score.get("alignment", 0.0) ** 2 < min_frac
 
 
-def _structure(problem: GapProblem, fit: ChainFit):
-    return is_structured((problem.y - fit.pred) / problem.sigma, problem.labels["group"], fit.k)
+def _structure(problem: GapProblem, heldout_pred: np.ndarray) -> dict:
+    """:func:`~ringfit.gap.verdict.residual_test` of the held-out residual (noise series from ``problem.meta``)."""
+    return residual_test((problem.y - heldout_pred) / problem.sigma, problem.labels["group"],
+                         problem.labels.get("series"), problem.meta.get("series_dof"))
 
 
 def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
@@ -178,7 +205,7 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
     reference = fit_chain(problem, (), train=ref_mask) if ref_mask is not None and not np.all(ref_mask) else base
     part = PartResult(problem, base, reference)
     part.fits[()] = base
-    structured, red, p = _structure(problem, base)
+    test = _structure(problem, base_ho)
     scores = screen(problem, base)
     y = problem.y
     noise_rms = float(np.sqrt(np.mean((problem.sigma * problem.scale) ** 2)))
@@ -188,7 +215,7 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
     bar = _progress(problem, progress)
     current, current_ho, chain, rounds = base, base_ho, (), []
     remaining = [e.name for e in problem.effects]
-    cur_structured = structured
+    cur = test
     rescreen = float(problem.meta.get("screen_min_fraction", 0.0)) > 0
     while True:
         entries = []
@@ -196,7 +223,10 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
         for name in remaining:
             if bar is not None:
                 bar.set_description(f"{problem.domain}: {'+'.join(chain + (name,))}")
-            if (not chain or rescreen) and _screened_out(problem, round_scores.get(name, {})):
+            if not test["excess"]:  # nothing to explain: the screen's figures are all there is to report
+                entries.append(_screened_entry(problem, name, current, current_ho, round_scores, chain,
+                                               "not refitted: the baseline residual is at the noise level"))
+            elif (not chain or rescreen) and _screened_out(problem, round_scores.get(name, {})):
                 entries.append(_screened_entry(problem, name, current, current_ho, round_scores, chain))
             else:
                 start = current.theta.copy()
@@ -207,43 +237,50 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
                 heldout(problem, fit)
                 part.fits[chain + (name,)] = fit
                 entries.append(_candidate_entry(problem, name, fit, current, current_ho, reference, round_scores,
-                                                chain))
+                                                chain, cur["group"]))
             if bar is not None:
                 bar.update(1)
         entries.sort(key=lambda c: -(c["heldout_shrink_pct"] if c["heldout_shrink_pct"] is not None else -1e9))
         rounds.append(entries)
-        if not cur_structured:
+        if not cur["excess"]:
             break
         accepted = [c for c in entries if c["accepted"]]
         if not accepted:
-            chain = chain + ("unexplained",)
+            if cur["structured"]:
+                chain = chain + ("unexplained",)
             break
         best = accepted[0]["effect"]
         chain = chain + (best,)
         current = part.fits[chain]
         current_ho = current.heldout_pred
         remaining.remove(best)
-        cur_structured, _, _ = _structure(problem, current)
-        if not remaining or not cur_structured:
+        cur = _structure(problem, current_ho)
+        if not remaining or not cur["excess"]:
+            if cur["structured"]:
+                chain = chain + ("unexplained",)
             break
     if bar is not None:
         bar.close()
     part.chain_fit = current
-    if not structured:
-        effects_list = ["none"]
-    else:
-        effects_list = list(chain)
+    effects_list = list(chain) or ["none"]
     final_h = rms(problem, y - current_ho)
     verdict = {"effect": effects_list[0], "effects": effects_list,
                "heldout_shrink_pct": _r(100.0 * (1.0 - final_h / hrms_b), 2) if effects_list[0] not in
                ("none", "unexplained") and hrms_b > 0 else 0.0,
-               "rule": RULES}
+               "rule": {**RULES, "screen": (
+                   f"a candidate is refitted only if its linearised score (chi2 it would remove) >= {SCREEN_MIN_SCORE}"
+                   f" and alignment^2 >= {float(problem.meta.get('screen_min_fraction', 0.0)):g} of the residual"),
+                   "noise": problem.noise_method, "heldout": problem.fold_kind}}
     part.summary = {
         "data": problem.data_files,
         "baseline": {"model": problem.baseline_model, "rms": _r(rms(problem, y - base.pred)),
                      "unit": problem.unit, "heldout_rms": _r(hrms_b), "noise_rms": _r(noise_rms),
                      "ideal_shrink_pct": _r(100.0 * (1.0 - noise_rms / hrms_b), 2) if hrms_b > 0 else 0.0,
-                     "reduced_chi2": _r(red, 3), "noise_p_value": float(p), "structured": bool(structured),
+                     "reduced_chi2": _r(test["reduced_chi2"], 3), "noise_p_value": test["p"],
+                     "noise_dof": _r(test["dof"], 1), "worst_group": test["group"],
+                     "excess": test["excess"], "structured": test["structured"],
+                     "reduced_chi2_in_sample": _r(float(np.mean(((y - base.pred) / problem.sigma) ** 2)), 3),
+                     "remaining_reduced_chi2": _r(cur["reduced_chi2"], 3), "remaining_structured": cur["structured"],
                      "noise_method": problem.noise_method, "heldout_method": problem.fold_kind,
                      "parameters": {k: _r(v, 6) for k, v in zip(problem.base, base.theta)},
                      **({"sources": problem.meta["sources"]} if "sources" in problem.meta else {})},
@@ -277,17 +314,26 @@ def build_problems(case, effects, noise=None) -> list[GapProblem]:
     if case.profiles:
         from ringfit.gap.profile import build_profile_problem
 
-        ring, sources = _ring_from_free(problems[0], case.tyre)
-        problems.append(build_profile_problem(case, ring, effects, noise=noise, sources=sources))
+        ring, sources, prior = _ring_from_free(problems[0], case.tyre)
+        problems.append(build_profile_problem(case, ring, effects, noise=noise, sources=sources, ring_prior=prior))
     return problems
 
 
 def _ring_from_free(modal_problem: GapProblem, tyre):
-    """The ring for the profile baseline: ρA, EI, k_w, k_v (and ζ when the free table has damping) from
-    the eq. 18 fit to ``free.modes.csv``; the rest (ζ otherwise, k_trd start) from ``tyre.toml``.
+    """The ring for the profile baseline and its uncertainty, from the eq. 18 fit to ``free.modes.csv``.
 
-    **Returns:** ``(ring, sources)`` with ``sources`` naming where each value came from.
+    ρA, EI, k_w, k_v (and ζ when the free table has damping) come from that fit; the rest (ζ
+    otherwise, the k_trd start) from ``tyre.toml``. The prior of the profile refit is the fit's
+    Laplace posterior of log EI, log k_w, log k_v (, log ζ): the covariance of the free-table
+    reference fit (σ inflated by √(χ²/dof) when > 1). Eq. 18 pins the stiffnesses only relative to
+    the pressure term P(n²−1), which dominates for n ≥ 3, so EI is known to ~10–30 % from a free
+    table while the profiles' bending-length features determine it far better.
+
+    **Returns:** ``(ring, sources, prior)``; ``prior = {"names": (…), "cov": (k, k)}``.
     """
+    from ringfit.gap.profile import RING_BASE
+    from ringfit.gap.ranking import fit_chain
+
     fitted = {k: float(v) for k, v in zip(modal_problem.base, modal_problem.base_values)}
     sources = {k: "eq. 18 fit to free.modes.csv" for k in fitted}
     if "damping_ratio" in sources:
@@ -296,7 +342,16 @@ def _ring_from_free(modal_problem: GapProblem, tyre):
         if k not in fitted:
             sources[k] = ("tyre.toml [ring]" if k in tyre.ring_values else "Table 9 default") + \
                 (" (start of the fit)" if k == "k_tread" else "")
-    return tyre.ring.replace(**fitted), sources
+    ref = fit_chain(modal_problem, (), train=modal_problem.meta.get("reference_mask"))
+    names = tuple(n for n in RING_BASE if n in modal_problem.base)
+    idx = [modal_problem.base.index(n) for n in names]
+    dof = max(int(np.sum(ref.train)) - ref.k, 1)
+    cov = ref.cov_u[np.ix_(idx, idx)] * max(1.0, ref.chi2 / dof)
+    if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
+        from ringfit.gap.profile import RING_PRIOR_SD_FALLBACK
+
+        cov = np.eye(len(names)) * RING_PRIOR_SD_FALLBACK**2
+    return tyre.ring.replace(**fitted), sources, {"names": names, "cov": cov}
 
 
 def resolve_effects(effects=None):

@@ -172,6 +172,33 @@ def modal_predict(theta, data: ModalData, *, effects: tuple, base: tuple, sizes:
     return jnp.where(rows.is_freq > 0, omega / (2.0 * jnp.pi), zeta)
 
 
+@partial(jax.jit, static_argnames=("effects", "base", "sizes"))
+def modal_linearised(theta, data: ModalData, basis, *, effects: tuple, base: tuple, sizes: tuple):
+    """:func:`modal_predict` and its directional derivatives along the columns of ``basis`` ``(p, K)``, one pass.
+
+    **Returns:** ``(pred (m,), J (m, K))``.
+    """
+    f = lambda th: modal_predict(th, data, effects=effects, base=base, sizes=sizes)  # noqa: E731
+    pred, lin = jax.linearize(f, theta)
+    return pred, jax.vmap(lin, in_axes=1, out_axes=1)(basis)
+
+
+#: Rows are padded to a multiple of this (dummy n = 2 rows, dropped from every output), so one
+#: compiled predictor serves mode tables of similar size.
+ROW_BUCKET = 32
+
+
+def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
+    """``rows`` padded with dummy rows (n = 2, frequency, untagged, static) to a multiple of ``bucket``."""
+    m = int(rows.n.shape[0])
+    extra = (-m) % bucket
+    if extra == 0:
+        return rows
+    fill = {"n": 2.0, "is_freq": 1.0, "contact": 0, "spin": 0.0, "branch": 0.0, "fixed_frame": 0.0}
+    return ModalRows(**{k: jnp.concatenate([getattr(rows, k), jnp.full(extra, v, dtype=getattr(rows, k).dtype)])
+                        for k, v in fill.items()}, cavity_hz=rows.cavity_hz)
+
+
 def second_difference_sigma(residual: np.ndarray, sequence: list[str], n: np.ndarray) -> tuple[float, int]:
     """Robust noise σ from second differences along n within each sequence; returns ``(σ, count)``."""
     d2 = []
@@ -218,8 +245,20 @@ def build_modal_problem(tables: list[ModeTable], geometry: TyreGeometry, ring: R
             usable.append(e)
     usable = tuple(usable)
     sizes = tuple(len(e.params_for("modes")) for e in usable)
-    data = ModalData(rows=rows, ring=ring, geometry=geometry)
-    predict = partial(modal_predict, effects=usable, base=base, sizes=sizes)
+    data = ModalData(rows=pad_rows(rows), ring=ring, geometry=geometry)
+    m = len(y)
+    n_theta = len(base) + sum(sizes)
+    static = dict(effects=usable, base=base, sizes=sizes)
+    identity = jnp.eye(n_theta)
+
+    def predict(theta, data):
+        """Prediction of the real rows (padding dropped), NumPy ``(m,)``."""
+        return np.asarray(modal_predict(theta, data, **static))[:m]
+
+    def jacobian(theta, data, basis):
+        """``(pred (m,), J (m, K))``; the basis is ignored in favour of the full identity (p is small)."""
+        pred, J = modal_linearised(theta, data, identity, **static)
+        return np.asarray(pred)[:m], np.asarray(J)[:m] @ np.asarray(basis)
 
     # provisional σ: user's, else 0.5 % of f and 20 % of ζ0 — only to fit the reference baseline
     sigma = np.where(is_freq, 0.005 * y, 0.2 * damping0)
@@ -229,7 +268,8 @@ def build_modal_problem(tables: list[ModeTable], geometry: TyreGeometry, ring: R
         folds=np.zeros(len(y), dtype=int), fold_kind="leave-modes-out", labels=meta, base=base,
         base_values=base_values, base_prior_sd=np.full(len(base), BASE_PRIOR_SD), effects=usable,
         predict=predict, data=data, noise_method="", baseline_model="eq18-free",
-        not_applicable=dropped, meta={"reference_mask": free_rows, "block": 1},
+        not_applicable=dropped, meta={"reference_mask": free_rows, "block": 1, "tangents": n_theta},
+        jacobian=jacobian,
     )
     if fit_reference is not None:
         for _ in range(2):  # σ depends on the residual, the residual on σ (weights): two passes suffice

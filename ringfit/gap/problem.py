@@ -33,8 +33,12 @@ class GapProblem:
     - ``folds``: ``(m,)`` int, held-out group of each row (speed / mode fold); ``fold_kind`` names it.
     - ``labels``: per-row information used by :mod:`ringfit.gap.localisation`.
     - ``base``: baseline parameters (log-fitted, positive), ``base_values`` their reference
-      values (baseline fit), ``base_prior_sd`` the σ of a log-normal prior around the
-      reference used in refits (``inf`` = none).
+      values (baseline fit, the starting point of refits), ``base_prior_sd`` the σ of a
+      log-normal prior used in refits (``inf`` = none), centred on ``base_prior_mean``
+      (natural units; ``None`` = ``base_values``). ``base_prior_cov`` (optional, ``(nb, nb)``
+      in log units, ``inf`` on the diagonal = no prior) replaces ``diag(base_prior_sd²)`` when a
+      prior is correlated — e.g. the ring stiffnesses of the profile baseline, whose prior is
+      the free-table fit's Laplace posterior.
     - ``effects``: the applicable effects, in the order of ``theta`` after the baseline.
     - ``predict``: jitted ``(theta (p,), data) -> (m,)``; ``data``: its pytree argument.
     - ``noise_method``: how ``sigma`` was obtained (one line, goes into the JSON).
@@ -43,8 +47,9 @@ class GapProblem:
       (e.g. the profiles' angle offset [rad], which may be negative) instead of as a log;
       ``base_linear_scale`` its typical size and ``base_linear_bound`` its hard bound ±.
       ``None`` = every baseline parameter positive and log-fitted.
-    - ``jacobian``: optional jitted ``(theta, data, basis (p, K)) -> (m, K)`` directional
-      derivatives (K fixed); ``None`` = forward-mode Jacobian of ``predict`` (all columns).
+    - ``jacobian``: optional jitted ``(theta, data, basis (p, K)) -> (pred (m,), J (m, K))``: the
+      prediction and its directional derivatives along the columns of ``basis`` in one
+      forward-mode pass (K fixed); ``None`` = ``predict`` and its forward-mode Jacobian.
     """
 
     domain: str
@@ -70,6 +75,25 @@ class GapProblem:
     base_linear_scale: tuple | None = None
     base_linear_bound: tuple | None = None
     jacobian: Callable | None = None
+    base_prior_mean: np.ndarray | None = None
+    base_prior_cov: np.ndarray | None = None
+
+    def prior_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The baseline prior as whitened residual rows: ``(index, mean_u, W)`` with rows ``W (u[index] − mean_u)``.
+
+        ``u`` is the solver coordinate of each baseline parameter (log, or value/scale for a
+        linear nuisance); ``index`` the baseline parameters with a prior; ``W`` the inverse
+        Cholesky factor of their prior covariance.
+        """
+        nb = len(self.base)
+        mean = np.asarray(self.base_values if self.base_prior_mean is None else self.base_prior_mean, dtype=np.float64)
+        cov = (np.diag(np.asarray(self.base_prior_sd, dtype=np.float64) ** 2) if self.base_prior_cov is None
+               else np.asarray(self.base_prior_cov, dtype=np.float64))
+        idx = np.array([i for i in range(nb) if np.isfinite(cov[i, i]) and not self.is_linear(i)], dtype=int)
+        if idx.size == 0:
+            return idx, np.zeros(0), np.zeros((0, 0))
+        L = np.linalg.cholesky(cov[np.ix_(idx, idx)])
+        return idx, np.log(mean[idx]), np.linalg.inv(L)
 
     def is_linear(self, i: int) -> bool:
         """Whether baseline parameter ``i`` is fitted linearly (a nuisance) rather than as a log."""

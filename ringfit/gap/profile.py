@@ -5,11 +5,19 @@ damping and radial frictionless tread springs (§4), read through sensor
 layer 2 only (γ = 0, e = 0, no g, no high-pass), each channel's
 per-revolution mean removed. The ring's ρA, EI, k_w, k_v come from the eq. 18
 fit to ``free.modes.csv`` (:mod:`ringfit.gap.modal`), its damping ratio from
-that table's damping column (else ``tyre.toml``); the tread stiffness k_trd is
-fitted to the profiles (starting at ``tyre.toml``'s value or 19e6 N/m²),
-together with one recorded-angle offset for all profiles (a nuisance, fitted
-linearly within ±10°, PHYSICS.md §5 layer 6). The JSON says which source
-each value came from (``baseline.sources``).
+that table's damping column (else ``tyre.toml``). Fitted to the profiles:
+the tread stiffness k_trd (starting at ``tyre.toml``'s value or 19e6 N/m²,
+weak log-normal prior σ = 1), one recorded-angle offset for all profiles (a
+nuisance, linear within ±10°, PHYSICS.md §5 layer 6), and EI, k_w, k_v, ζ
+with the free-table fit's Laplace posterior (correlated, log units) as their
+prior. Why: eq. 18 pins the stiffnesses only relative to the pressure term
+P(n²−1), which dominates the free modes for n ≥ 3, so a free table leaves EI
+uncertain by 10–30 %, while the bending length sets the profile's edge
+features; a baseline that could not move EI within that uncertainty would
+leave a structured residual that no effect explains (and let effects absorb
+it). For χ = 1 the steady shape does not depend on ρA (PHYSICS.md §4.1), so ρA
+stays at the free-table value. The JSON says which source each value came
+from (``baseline.sources``).
 
 **Rows**: every profile (one per speed), both channels, band-limited
 resampled onto the model grid φ_j (M = 512, PHYSICS.md §4.5) with its mean
@@ -19,7 +27,12 @@ to the harmonics each measurement holds. Ω from the sidecar's
 (recomputed after the first baseline fit).
 
 **Noise**: from the far side of the wheel (:mod:`ringfit.gap.profile_noise`),
-per profile and channel, or the user's ``noise={"profile_ms2": σ}``.
+per profile and channel, or the user's ``noise={"profile_ms2": σ}``; a
+model-resolution floor of :data:`MODEL_PRECISION` × the channel's RMS is added
+in quadrature (what the M = 512 grid misses against M = 4096, measured for the
+baseline sensor and the strongest sensor tilt; PHYSICS.md §4.5). The fitted noise spectrum also gives each
+profile and channel its effective degrees of freedom (``meta["series_dof"]``)
+for the χ² test of :mod:`ringfit.gap.verdict`.
 
 **Held-out**: leave-one-speed-out (one fold per profile); with a single
 profile, interleaved 16-sample angle blocks (4 folds).
@@ -27,9 +40,10 @@ profile, interleaved 16-sample angle blocks (4 folds).
 **Candidates**: every effect with a profile hook (sensor_tilt, gravity,
 iepe_highpass, wave_damping, tread_shear, rotation (χ), ring_extensibility
 (EA), sensor_mass); the model of each is composed by
-:class:`ringfit.gap.profile_model.ProfileModel`. One jitted predictor and one
-jitted set of forward-mode tangents (K fixed) serve every candidate, chain
-and case with the same number of profiles.
+:class:`ringfit.gap.profile_model.ProfileModel`. One jitted function —
+prediction and K forward-mode tangents in one pass (:func:`profile_linearised`)
+— serves every prediction and Jacobian of every candidate, chain and case
+with the same number of profiles (flat road or drum alike, :class:`FlatOrDrum`): it is compiled once.
 """
 
 from __future__ import annotations
@@ -46,28 +60,64 @@ from ringfit.errors import InputError
 from ringfit.gap.effects.base import Effect
 from ringfit.gap.problem import GapProblem
 from ringfit.gap.profile_model import ProfileModel, profile_channels
-from ringfit.gap.profile_noise import profile_noise
+from ringfit.gap.profile_noise import noise_dof, profile_noise
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced
+from ringfit.physics.operating import AbstractRoad, Drum, FlatRoad
 
 #: Model grid of the diagnosis (PHYSICS.md §4.5: within 0.1 % of M = 8192 for the sensor signals).
 GRID = 512
-#: Baseline parameters of the profile side: tread stiffness (log) and the angle offset [rad] (linear).
+#: Baseline parameters always fitted to the profiles: tread stiffness (log) and the angle offset [rad] (linear).
 BASE = ("k_tread", "angle_offset")
+#: Ring parameters of the baseline also refitted to the profiles, with the free-table fit's Laplace
+#: posterior as a correlated log-normal prior (``damping_ratio`` only when the free table has damping).
+RING_BASE = ("ei", "kw", "kv", "damping_ratio")
 #: Angle-offset bound and scale [rad].
 OFFSET_BOUND = math.radians(10.0)
 OFFSET_SCALE = math.radians(1.0)
-#: log-normal prior σ of k_trd around its starting value in refits (weak).
+#: log-normal prior σ of k_trd around its starting value (weak: the profiles determine it).
 K_TREAD_PRIOR_SD = 1.0
-#: Forward-mode tangents per Jacobian call (free parameters of the largest chain fit at once).
-TANGENTS = 6
+#: Prior σ (log) of a ring parameter when the free-table fit gives no usable covariance.
+RING_PRIOR_SD_FALLBACK = 0.3
+#: Forward-mode tangents per Jacobian pass (free parameters of a baseline + one two-parameter effect).
+TANGENTS = 8
 #: Bootstrap block [rows] for the shrink interval (contiguous angle samples: coloured noise).
 BLOCK = 16
 #: Screen: a candidate aligned with less than this share of the χ² is not refitted (see screening).
 SCREEN_MIN_FRACTION = 0.02
 CHANNELS = ("radial", "tangential")
-#: Relative model precision added in quadrature to the noise (per profile and channel, × the channel's RMS).
-MODEL_PRECISION = 2e-3
+#: Model-resolution floor (radial, tangential) added in quadrature to the noise, × the channel's RMS per
+#: profile. Measured: the M = 512 model against M = 4096 (band-limited to harmonic 255, Table 9 tyre, 4 kN,
+#: Ω = 18 and 55 rad/s) misses by 1.1e-3 of the channel RMS in the radial channel and by 0.4e-3 in the
+#: tangential one for the baseline sensor, 5.5e-3 with the strongest tilt (γ = 1, e = 6 mm: the doublets
+#: Ω²e(w‴ + w′)/R at the patch edges are a third derivative). The floor bounds these: below it a
+#: residual is discretisation, not physics.
+MODEL_PRECISION = np.array([1.5e-3, 6e-3])
+
+
+class FlatOrDrum(AbstractRoad):
+    """A flat road or a drum per operating point, chosen by a traced flag (PHYSICS.md §4.3).
+
+    Composes :class:`~ringfit.physics.operating.FlatRoad` and
+    :class:`~ringfit.physics.operating.Drum` (``where`` picks one, so the flat
+    road's distances are its own bit for bit): the predictor's pytree is the
+    same for both, and one compilation serves case folders of either kind.
+    ``diameter`` [m] (ignored where ``is_drum`` is false) and ``is_drum`` have
+    the shape of the batch of operating points.
+    """
+
+    diameter: jax.Array
+    is_drum: jax.Array
+
+    def distance(self, phi, height):
+        return jnp.where(self.is_drum, Drum(self.diameter).distance(phi, height), FlatRoad().distance(phi, height))
+
+
+def flat_or_drum(drum_diameter, P: int) -> FlatOrDrum:
+    """:class:`FlatOrDrum` for ``P`` operating points from ``RollingData.drum_diameter`` (``None`` = flat road)."""
+    if drum_diameter is None:
+        return FlatOrDrum(diameter=jnp.ones(P), is_drum=jnp.zeros(P, dtype=bool))
+    return FlatOrDrum(diameter=jnp.asarray(drum_diameter, dtype=jnp.float64), is_drum=jnp.ones(P, dtype=bool))
 
 
 class ProfileData(eqx.Module):
@@ -81,32 +131,49 @@ class ProfileData(eqx.Module):
     band: jax.Array
 
 
-def _compose(theta, effects, sizes):
+def _channels(theta, data: ProfileData, base: tuple, effects: tuple, sizes: tuple, solver: ContactSolver):
+    """``(P·2·M,)`` rows of the composed model (un-jitted core of the predictors)."""
+    ring = data.ring.replace(**{name: theta[i] for i, name in enumerate(base) if name != "angle_offset"})
     model = ProfileModel()
-    i = len(BASE)
+    i = len(base)
     for effect, k in zip(effects, sizes):
         model = effect.profile_model(theta[i : i + k], model)
         i += k
-    return model
-
-
-@partial(jax.jit, static_argnames=("effects", "sizes", "solver"))
-def profile_predict(theta, data: ProfileData, *, effects: tuple, sizes: tuple, solver: ContactSolver):
-    """Predicted rows ``(P·2·M,)`` [m/s²]: profiles × (radial, tangential) × grid angle.
-
-    ``theta`` = [k_trd [N/m²], angle offset [rad], each effect's parameters (``sizes``)], natural units.
-    """
-    ring = data.ring.replace(k_tread=theta[0])
-    model = _compose(theta, effects, sizes)
-    ch = profile_channels(model, ring, data.geometry, data.omega, data.load, data.roads, data.band, theta[1], solver)
+    offset = theta[base.index("angle_offset")]
+    ch = profile_channels(model, ring, data.geometry, data.omega, data.load, data.roads, data.band, offset, solver)
     return ch.reshape(-1)
 
 
-@partial(jax.jit, static_argnames=("effects", "sizes", "solver"))
-def profile_tangents(theta, data: ProfileData, basis, *, effects: tuple, sizes: tuple, solver: ContactSolver):
+@partial(jax.jit, static_argnames=("effects", "sizes", "solver", "base"))
+def profile_predict(theta, data: ProfileData, *, effects: tuple, sizes: tuple, solver: ContactSolver,
+                    base: tuple = BASE):
+    """Predicted rows ``(P·2·M,)`` [m/s²]: profiles × (radial, tangential) × grid angle.
+
+    ``theta`` = [baseline parameters named by ``base`` (natural units: ring fields of
+    :class:`~ringfit.params.RingParams`, ``angle_offset`` [rad]), each effect's parameters (``sizes``)].
+    Default ``base``: k_trd [N/m²] and the angle offset.
+    """
+    return _channels(theta, data, base, effects, sizes, solver)
+
+
+@partial(jax.jit, static_argnames=("effects", "sizes", "solver", "base"))
+def profile_linearised(theta, data: ProfileData, basis, *, effects: tuple, sizes: tuple, solver: ContactSolver,
+                       base: tuple = BASE):
+    """Prediction and directional derivatives in one forward-mode pass.
+
+    **Returns:** ``(pred (m,), J (m, K))`` with ``J[:, k]`` the derivative of :func:`profile_predict`
+    along ``basis[:, k]`` (``basis`` ``(p, K)``). The diagnosis uses this one compiled function
+    for predictions too (a zero basis), so the predictor is compiled once per structure.
+    """
+    f = lambda th: _channels(th, data, base, effects, sizes, solver)  # noqa: E731
+    pred, lin = jax.linearize(f, theta)
+    return pred, jax.vmap(lin, in_axes=1, out_axes=1)(basis)
+
+
+def profile_tangents(theta, data: ProfileData, basis, *, effects: tuple, sizes: tuple, solver: ContactSolver,
+                     base: tuple = BASE):
     """Directional derivatives ``(m, K)`` of :func:`profile_predict` along the columns of ``basis`` ``(p, K)``."""
-    f = lambda th: profile_predict(th, data, effects=effects, sizes=sizes, solver=solver)  # noqa: E731
-    return jax.vmap(lambda t: jax.jvp(f, (theta,), (t,))[1], in_axes=1, out_axes=1)(basis)
+    return profile_linearised(theta, data, basis, effects=effects, sizes=sizes, solver=solver, base=base)[1]
 
 
 def _band(profiles, M: int) -> tuple[np.ndarray, np.ndarray]:
@@ -125,12 +192,15 @@ def _folds(P: int, M: int) -> tuple[np.ndarray, str]:
 
 
 def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], noise: dict | None = None,
-                          sources: dict | None = None, grid: int = GRID) -> GapProblem:
+                          sources: dict | None = None, grid: int = GRID, ring_prior: dict | None = None) -> GapProblem:
     """Assemble the profile problem of a case: rows, baseline fit, noise, folds, the applicable effects.
 
     **Arguments:** ``case`` — a :class:`ringfit.gap.case.Case` with profiles; ``ring`` — the ring
     from the free-table fit (``k_tread`` = starting value); ``effects`` — candidates; ``noise`` —
-    optional ``{"profile_ms2": σ}``; ``sources`` — where each ring value came from (for the JSON).
+    optional ``{"profile_ms2": σ}``; ``sources`` — where each ring value came from (for the JSON);
+    ``ring_prior`` — optional ``{"names": (…), "cov": (k, k)}``: ring fields of :data:`RING_BASE`
+    refitted to the profiles and the covariance of their logs from the free-table fit (the prior
+    of the refit). ``None``: the ring stays as given and only k_trd and the angle offset are fitted.
     """
     from ringfit.fit.rolling import rolling_data
     from ringfit.gap.ranking import fit_chain
@@ -151,11 +221,15 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
     sizes = tuple(len(e.params_for("profiles")) for e in usable)
     band, kmax = _band(profiles, M)
     has_encoder = all(p.rotation_hz is not None for p in profiles)
+    ring_names = tuple(ring_prior["names"]) if ring_prior else ()
+    base = BASE + ring_names
+    nb = len(base)
 
     def prepare(ring_now):
         d = rolling_data(profiles, geometry, ring_now, solver=solver)
         return d, ProfileData(ring=as_traced(ring_now), geometry=as_traced(geometry), omega=jnp.asarray(d.omega),
-                              load=jnp.asarray(d.load), roads=d.roads, band=jnp.asarray(band))
+                              load=jnp.asarray(d.load), roads=flat_or_drum(d.drum_diameter, len(profiles)),
+                              band=jnp.asarray(band))
 
     rdata, data = prepare(ring)
     P = rdata.measured.shape[0]
@@ -169,52 +243,73 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
         "profile": np.repeat(np.arange(P), 2 * M),
     }
     labels["group"] = labels["channel"]
-    predict = partial(profile_predict, effects=usable, sizes=sizes, solver=solver)
-    tangents = partial(profile_tangents, effects=usable, sizes=sizes, solver=solver)
+    labels["series"] = np.repeat(np.arange(2 * P), M)  # one noise series per profile and channel
+    n_theta = nb + sum(sizes)
+    linearised = partial(profile_linearised, effects=usable, sizes=sizes, solver=solver, base=base)
+    zero_basis = jnp.zeros((n_theta, TANGENTS))
+
+    def predict(theta, data):
+        """Prediction only: the one compiled forward-mode function with a zero basis."""
+        return linearised(theta, data, zero_basis)[0]
+
     k0 = float(ring.k_tread)
+    values = np.array([k0, 0.0] + [float(getattr(ring, n)) for n in ring_names])
+    cov = np.diag([K_TREAD_PRIOR_SD**2, np.inf] + [0.0] * len(ring_names))
+    if ring_names:
+        cov[2:, 2:] = np.asarray(ring_prior["cov"], dtype=np.float64)
     problem = GapProblem(
         domain="profiles", data_files=[str(p.source).rsplit("/", 1)[-1] for p in profiles], y=y,
         sigma=np.full(y.shape, max(float(np.std(y)), 1e-9)), unit="m/s^2", scale=np.ones_like(y), folds=folds,
-        fold_kind=fold_kind, labels=labels, base=BASE, base_values=np.array([k0, 0.0]),
-        base_prior_sd=np.array([K_TREAD_PRIOR_SD, np.inf]), effects=usable, predict=predict, data=data,
+        fold_kind=fold_kind, labels=labels, base=base, base_values=values.copy(),
+        base_prior_sd=np.sqrt(np.diag(cov)), effects=usable, predict=predict, data=data,
         noise_method="", baseline_model="gong-rolling", not_applicable=dropped,
         meta={"block": BLOCK, "tangents": TANGENTS, "screen_min_fraction": SCREEN_MIN_FRACTION,
-              "k_max": kmax, "omega": rdata.omega, "omega_source": list(rdata.omega_source)},
-        base_linear=(False, True), base_linear_scale=(1.0, OFFSET_SCALE), base_linear_bound=(1.0, OFFSET_BOUND),
-        jacobian=tangents,
+              "k_max": kmax, "omega": rdata.omega, "omega_source": list(rdata.omega_source),
+              "prior_guarded": (0,) + tuple(range(2, nb))},
+        base_linear=(False, True) + (False,) * len(ring_names),
+        base_linear_scale=(1.0, OFFSET_SCALE) + (1.0,) * len(ring_names),
+        base_linear_bound=(1.0, OFFSET_BOUND) + (1.0,) * len(ring_names),
+        jacobian=linearised, base_prior_mean=values.copy(), base_prior_cov=cov,
     )
     phi = np.radians(phi_deg)
     user = (noise or {}).get("profile_ms2")
     for it in range(2):  # σ weights the fit, the fit's residual gives σ: two passes
         theta = fit_chain(problem, ()).theta
-        problem.base_values = theta[: len(BASE)].copy()
-        if it == 0 and not has_encoder:  # Ω = V/R_e with the fitted tread stiffness's deflection
-            rdata, problem.data = prepare(ring.replace(k_tread=float(theta[0])))
+        problem.base_values = theta[:nb].copy()
+        if it == 0 and not has_encoder:  # Ω = V/R_e with the fitted baseline's deflection
+            fitted = ring.replace(**{n: float(v) for n, v in zip(base, theta) if n != "angle_offset"})
+            rdata, problem.data = prepare(fitted)
             problem.y = y = rdata.measured.reshape(-1)
             problem.meta.update(omega=rdata.omega, omega_source=list(rdata.omega_source))
         resid = (y - np.asarray(predict(jnp.asarray(problem.null_theta()), problem.data))).reshape(P, 2, M)
         if user is not None:
-            sigma = np.full((P, 2), float(user))
-            problem.noise_method = f"user value {float(user):.3g} m/s^2"
+            sigma, slope = np.full((P, 2), float(user)), 0.0
+            problem.noise_method = f"user value {float(user):.3g} m/s^2 (white)"
         else:
             sigma, slope = profile_noise(resid, phi, kmax)
             # model-resolution floor: the M = 512 grid reproduces the sensor signals to ~0.1 % of their
             # peaks (PHYSICS.md §4.5); below that a residual is discretisation, not physics
-            floor = MODEL_PRECISION * np.sqrt(np.mean(rdata.measured**2, axis=-1))
+            floor = MODEL_PRECISION[None, :] * np.sqrt(np.mean(rdata.measured**2, axis=-1))
             sigma = np.sqrt(sigma**2 + floor**2)
             problem.noise_method = (
                 "per profile and channel from the far side of the wheel (|angle| > 90 deg, cos^4 taper): "
                 "power law fitted to the residual spectrum above harmonic 8, extrapolated to harmonic 1, "
-                f"plus {MODEL_PRECISION:g} x channel RMS (model resolution) in quadrature; "
+                f"plus {MODEL_PRECISION[0]:g} (radial) / {MODEL_PRECISION[1]:g} (tangential) x channel RMS "
+                "(model resolution, M = 512 against M = 4096) in quadrature; "
                 "sigma [m/s^2] " + ", ".join(f"{s:g} km/h: {sigma[i, 0]:.3g}/{sigma[i, 1]:.3g}"
                                              for i, s in enumerate(rdata.speed_kmh)))
             problem.meta["noise_slope"] = slope
             problem.noise_method += f"; spectral slope {slope:.2f}"
         problem.sigma = np.repeat(sigma.reshape(-1), M)
+        problem.meta["series_dof"] = {2 * i + c: noise_dof(slope, kmax[i]) for i in range(P) for c in range(2)}
     problem.meta["sources"] = dict(sources or {})
     problem.meta["sources"]["k_tread"] = "fitted to the profiles"
+    for n in ring_names:
+        problem.meta["sources"][n] = (problem.meta["sources"].get(n, "free-table fit")
+                                      + "; refitted to the profiles with that fit's uncertainty as prior")
     problem.meta["sources"]["omega"] = sorted(set(rdata.omega_source))
     return problem
 
 
-__all__ = ["build_profile_problem", "profile_predict", "profile_tangents", "ProfileData", "BASE", "GRID"]
+__all__ = ["build_profile_problem", "profile_predict", "profile_linearised", "profile_tangents", "ProfileData",
+           "BASE", "RING_BASE", "GRID"]

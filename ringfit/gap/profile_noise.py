@@ -20,7 +20,10 @@ Per profile and channel, with the baseline residual r(φ_j) on the model grid:
 5. ``σ² = (2/M) Σ_{k=1}^{k_max} s(k)`` — the noise variance per grid sample.
 
 Coloured noise therefore counts in full, its low-harmonic part by
-extrapolation (stated in the JSON ``noise_method``). A user value (``noise=
+extrapolation (stated in the JSON ``noise_method``). The same power law gives
+the effective degrees of freedom of a noise series, :func:`noise_dof`
+(2·k_max for white noise, far fewer for red), used by the χ² test of
+:mod:`ringfit.gap.verdict`. A user value (``noise=
 {"profile_ms2": σ}``) replaces the estimate.
 """
 
@@ -103,4 +106,15 @@ def profile_noise(residual: np.ndarray, phi: np.ndarray, k_max) -> tuple[np.ndar
     return sigma, b
 
 
-__all__ = ["profile_noise", "band_levels", "far_side_window", "LOWEST_HARMONIC"]
+def noise_dof(slope: float, k_max: int) -> float:
+    """Effective degrees of freedom ν = 2(Σs_k)²/Σs_k² of a periodic noise series with power ``s_k ∝ k^slope``.
+
+    Harmonics k = 1 … ``k_max`` are independent, each a scaled χ²_2 (Satterthwaite): white noise gives
+    ν = 2·k_max (the samples of a band-limited series), red noise (slope −1.5) about 11.
+    """
+    k = np.arange(1, int(k_max) + 1, dtype=np.float64)
+    s = k**slope
+    return float(2.0 * np.sum(s) ** 2 / np.sum(s**2))
+
+
+__all__ = ["profile_noise", "noise_dof", "band_levels", "far_side_window", "LOWEST_HARMONIC"]

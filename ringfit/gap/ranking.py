@@ -6,9 +6,11 @@ One engine for both kinds of data (:class:`~ringfit.gap.problem.GapProblem`):
   over the baseline parameters (log, with a weak log-normal prior around the
   baseline fit) and the chain's effect parameters (natural units scaled by
   their range, bounded, optional Gaussian prior); every other effect stays at
-  its null. The Jacobian comes from the problem's jitted predictor by forward
-  differentiation; one compiled predictor and one compiled Jacobian serve every
-  candidate and chain.
+  its null. The baseline prior may be correlated (the profile baseline's ring
+  stiffnesses carry the free-table fit's covariance): it enters as whitened
+  residual rows. Prediction and Jacobian come from one jitted forward-mode
+  pass of the problem (:func:`predict_and_jacobian`): one compiled function
+  serves every candidate, chain and fold.
 - **Held-out**: K-fold by ``problem.folds`` (leave-one-speed-out for
   profiles, interleaved leave-modes-out for mode tables); each fold refits on
   the other folds (warm start) and predicts the left-out rows.
@@ -33,6 +35,12 @@ from scipy.optimize import least_squares
 from ringfit.gap.problem import GapProblem
 
 Z95 = 1.959964
+#: Least-squares tolerances (relative change of the cost / of the parameters; gradient).
+#: 1e-8 of a χ² of thousands is far below any difference the verdict looks at.
+FTOL, XTOL, GTOL = 1e-8, 1e-8, 1e-8
+#: Trust-region subproblem solver of TRF: ``"lsmr"`` (iterative, products with J only) rather than an SVD
+#: of the (rows × parameters) Jacobian at every step, which dominated the refits of thousands of rows.
+TR_SOLVER = "lsmr"
 _JAC_CACHE: dict = {}
 
 
@@ -45,25 +53,33 @@ def _jacobian_fn(problem: GapProblem):
     return fn
 
 
-def jacobian_columns(problem: GapProblem, theta: np.ndarray, free) -> np.ndarray:
-    """∂pred/∂theta for the ``free`` columns only, ``(m, len(free))`` (natural units of theta).
+def predict_and_jacobian(problem: GapProblem, theta: np.ndarray, free) -> tuple[np.ndarray, np.ndarray]:
+    """Prediction ``(m,)`` and ∂pred/∂theta for the ``free`` columns ``(m, len(free))`` (natural units of theta).
 
-    Uses the problem's directional-derivative function when it has one (a fixed
-    number K of forward-mode tangents, padded with zeros: one compilation for
-    every chain), else the full forward-mode Jacobian.
+    Uses the problem's one-pass forward-mode function when it has one (a fixed
+    number K of tangents, padded with zeros: one compilation for every chain),
+    else ``predict`` and its full forward-mode Jacobian.
     """
     free = np.asarray(free, dtype=int)
+    th = jnp.asarray(theta)
     if problem.jacobian is None:
-        return np.asarray(_jacobian_fn(problem)(jnp.asarray(theta), problem.data))[:, free]
+        pred = np.asarray(problem.predict(th, problem.data))
+        return pred, np.asarray(_jacobian_fn(problem)(th, problem.data))[:, free]
     K = int(problem.meta.get("tangents", 8))
-    out = []
-    for start in range(0, len(free), K):
+    out, pred = [], None
+    for start in range(0, max(len(free), 1), K):
         cols = free[start : start + K]
         basis = np.zeros((theta.size, K))
         basis[cols, np.arange(cols.size)] = 1.0
-        J = np.asarray(problem.jacobian(jnp.asarray(theta), problem.data, jnp.asarray(basis)))
-        out.append(J[:, : cols.size])
-    return np.concatenate(out, axis=1) if out else np.zeros((problem.m, 0))
+        p, J = problem.jacobian(th, problem.data, jnp.asarray(basis))
+        pred = np.asarray(p) if pred is None else pred
+        out.append(np.asarray(J)[:, : cols.size])
+    return pred, np.concatenate(out, axis=1)
+
+
+def jacobian_columns(problem: GapProblem, theta: np.ndarray, free) -> np.ndarray:
+    """∂pred/∂theta for the ``free`` columns only, ``(m, len(free))`` (see :func:`predict_and_jacobian`)."""
+    return predict_and_jacobian(problem, theta, free)[1]
 
 
 @dataclass
@@ -144,17 +160,22 @@ def fit_chain(problem: GapProblem, chain: tuple[str, ...] = (), train=None, star
     w = train / sig
     predict = problem.predict
     data = problem.data
-    # prior rows
-    prior_rows = []  # (position in free, mean_u, sd_u)
+    # prior rows: baseline (possibly correlated, whitened) and each effect's Gaussian prior
+    pidx, pmean, pW = problem.prior_rows()
+    col_of = {int(i): j for j, i in enumerate(free)}
+    base_prior = [(col_of[int(i)]) for i in pidx]
+    eff_prior = []  # (position in free, mean_u, sd_u)
     for j, i in enumerate(free):
-        if i < nb:
-            sd = problem.base_prior_sd[i]
-            if np.isfinite(sd) and not problem.is_linear(i):
-                prior_rows.append((j, ref_log[i], sd))
-        else:
+        if i >= nb:
             _, null, _, _, prior, span = info[i]
             if prior is not None:
-                prior_rows.append((j, (prior[0] - null) / span, prior[1] / span))
+                eff_prior.append((j, (prior[0] - null) / span, prior[1] / span))
+    n_prior = len(base_prior) + len(eff_prior)
+    Jp = np.zeros((n_prior, len(free)))
+    if base_prior:
+        Jp[: len(base_prior), base_prior] = pW
+    for r, (j, _, sd) in enumerate(eff_prior):
+        Jp[len(base_prior) + r, j] = 1.0 / sd
 
     log_cols = [j for j, i in enumerate(free) if i < nb and not problem.is_linear(i)]
 
@@ -174,35 +195,41 @@ def fit_chain(problem: GapProblem, chain: tuple[str, ...] = (), train=None, star
 
     cache = {}
 
-    def evaluate(u):
+    def evaluate(u, need_jac=False):
+        """(theta, pred, J or None) at u; one forward pass gives pred and J where the problem allows."""
         key = u.tobytes()
-        if key not in cache:
+        hit = cache.get(key)
+        if hit is None or (need_jac and hit[2] is None):
             th = to_theta(u)
-            p = np.asarray(predict(jnp.asarray(th), data))
+            if need_jac or problem.jacobian is not None:
+                p, J = predict_and_jacobian(problem, th, free)
+            else:
+                p, J = np.asarray(predict(jnp.asarray(th), data)), None
             cache.clear()
-            cache[key] = (th, p)
-        return cache[key]
+            cache[key] = hit = (th, p, J)
+        return hit
+
+    def prior_resid(u):
+        out = [pW @ (u[base_prior] - pmean)] if base_prior else []
+        out.append(np.asarray([(u[j] - mu) / sd for j, mu, sd in eff_prior], dtype=np.float64))
+        return np.concatenate(out)
 
     def fun(u):
-        th, p = evaluate(u)
+        th, p, _ = evaluate(u)
         r = np.where(train, (p - y) * w, 0.0)
-        pr = [(u[j] - mu) / sd for j, mu, sd in prior_rows]
-        out = np.concatenate([r[train], np.asarray(pr, dtype=np.float64)])
+        out = np.concatenate([r[train], prior_resid(u)])
         return np.where(np.isfinite(out), out, 1e6)
 
     def jac(u):
-        th = to_theta(u)
-        J = jacobian_columns(problem, th, free) * dtheta_du(u, th)[None, :]
+        th, _, J = evaluate(u, need_jac=True)
+        J = J * dtheta_du(u, th)[None, :]
         Jd = (J * w[:, None])[train]
-        Jp = np.zeros((len(prior_rows), len(free)))
-        for r, (j, _, sd) in enumerate(prior_rows):
-            Jp[r, j] = 1.0 / sd
         out = np.vstack([Jd, Jp])
         return np.where(np.isfinite(out), out, 0.0)
 
-    sol = least_squares(fun, u0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
-                        max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10)
-    th, p = evaluate(sol.x)
+    sol = least_squares(fun, u0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac", tr_solver=TR_SOLVER,
+                        max_nfev=max_nfev, xtol=XTOL, ftol=FTOL, gtol=GTOL)
+    th, p, _ = evaluate(sol.x)
     J = jac(sol.x)
     try:
         cov_u = np.linalg.pinv(J.T @ J, rcond=1e-12)
@@ -240,7 +267,8 @@ def rms(problem: GapProblem, resid: np.ndarray, mask=None) -> float:
 def shrink_interval(problem: GapProblem, r_base: np.ndarray, r_cand: np.ndarray, n_boot: int = 400,
                     seed: int = 0) -> tuple[float, float]:
     """95 % block-bootstrap interval of the shrink ``1 − rms_cand/rms_base`` [%] over rows."""
-    rb2, rc2 = (r_base * problem.scale) ** 2, (r_cand * problem.scale) ** 2
+    scale = problem.scale if problem.scale.shape == r_base.shape else 1.0  # a subset of rows: already scaled
+    rb2, rc2 = (r_base * scale) ** 2, (r_cand * scale) ** 2
     m = rb2.size
     block = int(problem.meta.get("block", 1))
     nb = max(1, math.ceil(m / block))
@@ -269,3 +297,20 @@ def drift(problem: GapProblem, fit: ChainFit, reference: ChainFit) -> dict[str, 
 def fit_baseline(problem: GapProblem, mask) -> np.ndarray:
     """Baseline-only fit on the rows in ``mask``; returns the full theta (effects at null)."""
     return fit_chain(problem, (), train=mask).theta
+
+
+def prior_distance(problem: GapProblem, theta: np.ndarray, exclude=()) -> tuple[float, int]:
+    """Squared Mahalanobis distance of the prior-guarded baseline parameters from their prior.
+
+    The guarded parameters are ``problem.meta["prior_guarded"]`` (baseline indices whose prior
+    comes from independent data — for profiles the ring stiffnesses from the free-table fit),
+    less the names in ``exclude`` (an effect's ``baseline_partners``, marginalised out).
+    **Returns:** ``(D², k)``; ``(0, 0)`` when nothing is guarded. Under the prior D² ~ χ²_k.
+    """
+    idx = [i for i in problem.meta.get("prior_guarded", ()) if problem.base[i] not in exclude]
+    if not idx or problem.base_prior_cov is None:
+        return 0.0, 0
+    mean = np.asarray(problem.base_prior_mean if problem.base_prior_mean is not None else problem.base_values)
+    d = np.log(np.asarray(theta)[idx]) - np.log(mean[idx])
+    cov = np.asarray(problem.base_prior_cov)[np.ix_(idx, idx)]
+    return float(d @ np.linalg.solve(cov, d)), len(idx)

@@ -1,31 +1,64 @@
 """The verdict: the best effect, ``none`` or ``unexplained`` — stated rules and thresholds.
 
-**Is there a gap?** The residual of the current model (baseline, then the
-accepted chain) is *structured* when both
+**Is there a gap?** The test is on the *held-out* residual of the current
+model (baseline, then the accepted chain): each row predicted by a refit that
+did not see it (leave-one-speed-out, leave-modes-out), standardised by the
+noise σ. Held-out rather than in-sample, because a baseline with several free
+parameters (profiles: k_trd, EI, k_w, k_v, ζ) absorbs part of an effect
+in-sample; what it cannot carry from one speed to the next is what it misses.
 
-- in at least one group of rows (mode tables: frequency rows, damping rows;
-  profiles: each channel) the reduced χ² (noise-standardised, in-sample) is
-  at least :data:`CHI2_RED_STRUCTURED` (the RMS is ≥ 1.73× the noise level:
-  below that the best possible shrink is < 42 %, and a noise level estimated
-  from the data — coloured noise included — is not trusted to better than that), and
-- the χ² test of that group rejects pure noise at p < :data:`P_NOISE` / groups.
+Per group of rows (mode tables: frequency rows, damping rows; profiles: each
+channel), with χ² = Σz² over the group's rows:
 
-Otherwise the verdict is ``none`` (or the chain stops).
+- ``reduced χ²`` = χ² / (rows) — 1 for pure noise at the estimated level;
+- ``p`` of χ² under pure noise, with the **effective degrees of freedom** of
+  coloured noise (Satterthwaite): a series (one profile and channel) of M rows
+  whose noise has the power spectrum s_k (the fitted power law of
+  :mod:`ringfit.gap.profile_noise`) carries ν = 2(Σs_k)²/Σs_k² degrees of
+  freedom (M for white noise, ~10 for red); a group pools its series as
+  ν = (ΣM)²/Σ(M²/ν) and χ²·ν/ΣM ~ χ²_ν. Mode-table rows count one each.
+
+The most significant group decides. Two levels:
+
+- **excess** (the candidates are refitted): reduced χ² ≥ :data:`CHI2_RED_TRY`
+  and p < :data:`P_NOISE` / groups. Below it the residual is at the noise level:
+  verdict ``none`` (or the chain stops), candidates are listed with their
+  screen figures only.
+- **structured** (a gap remains that must be explained): reduced χ² ≥
+  :data:`CHI2_RED_STRUCTURED` and p < :data:`P_NOISE` / groups — the RMS is ≥ 1.73×
+  the noise level, more than a noise level estimated from the data (coloured
+  noise included) can be wrong by. If nothing is accepted, a structured
+  residual gives ``unexplained``, an excess below it gives ``none``.
+
+An effect claimed between the two levels stands on its own held-out evidence
+(below), which does not depend on the noise level.
 
 **Is an effect accepted?** All of:
 
 1. held-out shrink ≥ :data:`MIN_HELDOUT_SHRINK_PCT` and the lower end of its
    95 % bootstrap interval ≥ :data:`MIN_HELDOUT_SHRINK_LO_PCT`
-   (it removes residual on data that took no part in fitting it);
+   (it removes residual on data that took no part in fitting it) — over all
+   rows, or over the rows of the group whose residual decided the structure
+   test (e.g. the damping rows of a mode table: an effect that acts on the
+   damping alone is diluted by the frequency rows it cannot touch);
 2. ΔBIC ≤ :data:`MAX_DELTA_BIC` (strong evidence in-sample, with the
    parameter-count penalty);
 3. at least one effect parameter's 95 % interval excludes its null value;
-4. no baseline parameter moved by more than :data:`MAX_DRIFT_RELATIVE` (relative)
-   from the reference baseline fit (the effect does not win by letting the
-   baseline drift to implausible values). The drift in standard errors is
-   reported too, but not used: when the baseline fit absorbed part of a
-   real effect, adding the right effect moves it back by many (small)
-   standard errors.
+4. the baseline does not drift to implausible values (the effect must not win
+   by dragging the baseline along):
+
+   - parameters whose prior comes from independent data (profiles: EI, k_w,
+     k_v, ζ from the free-table fit) must stay inside that prior's 99.9 %
+     ellipsoid — squared Mahalanobis distance D² ≤ χ²_k(0.999) — or at least
+     no further out than the baseline-only fit (D² ≤ D²_baseline);
+   - every other positive baseline parameter (mode tables: ρA, EI, k_w, k_v, ζ0;
+     profiles: k_trd) moves by at most :data:`MAX_DRIFT_RELATIVE` (relative)
+     from the reference baseline fit.
+
+   An effect's ``baseline_partners`` (e.g. ζ0 for a damping slope) are exempt.
+   The drift in standard errors is reported too, but not used: when the
+   baseline fit absorbed part of a real effect, adding the right effect moves
+   it back by many (small) standard errors.
 
 Among accepted candidates the best is the largest held-out shrink.
 **Greedy chain**: the best is added, the rest are refitted on top of it, and
@@ -39,43 +72,66 @@ import math
 
 from scipy.stats import chi2 as chi2_dist
 
+#: Reduced χ² (held-out) above which the candidates are refitted. Low on purpose: whether an effect is
+#: real is decided by its held-out evidence, which does not depend on the noise level; this gate only
+#: spares the refits when the residual is plainly noise.
+CHI2_RED_TRY = 1.5
+#: Reduced χ² (held-out) above which a residual is called structured (``unexplained`` if nothing removes it).
 CHI2_RED_STRUCTURED = 3.0
 P_NOISE = 1e-3
 MIN_HELDOUT_SHRINK_PCT = 10.0
 MIN_HELDOUT_SHRINK_LO_PCT = 5.0
 MAX_DELTA_BIC = -10.0
 MAX_DRIFT_RELATIVE = 0.25
+#: Probability content of the prior ellipsoid the guarded baseline parameters must stay in.
+PRIOR_REGION = 0.999
 
 RULES = {
-    "structured": f"in some row group reduced chi2 >= {CHI2_RED_STRUCTURED} and chi2 test p < {P_NOISE}/groups",
+    "structured": (f"held-out residual / noise: in some row group reduced chi2 >= {CHI2_RED_STRUCTURED} and chi2 "
+                   f"test p < {P_NOISE}/groups (effective dof of coloured noise); candidates refitted from reduced "
+                   f"chi2 >= {CHI2_RED_TRY}"),
     "accept": (f"heldout shrink >= {MIN_HELDOUT_SHRINK_PCT}% with bootstrap lower bound >= "
-               f"{MIN_HELDOUT_SHRINK_LO_PCT}%, delta BIC <= {MAX_DELTA_BIC}, a parameter interval excluding its "
-               f"null, baseline drift <= {100 * MAX_DRIFT_RELATIVE:.0f}% relative"),
+               f"{MIN_HELDOUT_SHRINK_LO_PCT}% (all rows, or the rows of the group that decided the structure "
+               f"test), delta BIC <= {MAX_DELTA_BIC}, a parameter interval excluding its "
+               f"null, baseline drift <= {100 * MAX_DRIFT_RELATIVE:.0f}% relative (parameters with an independent "
+               f"prior: Mahalanobis D^2 <= chi2_k({PRIOR_REGION}) or <= that of the baseline fit)"),
     "best": "largest heldout shrink among accepted; greedy chain while the residual stays structured",
 }
 
 
-def is_structured(z, groups, k: int) -> tuple[bool, float, float]:
-    """``(structured, reduced χ², p-value)`` of standardised residuals ``z`` (m,) with k fitted parameters.
+def residual_test(z, groups, series=None, series_dof=None) -> dict:
+    """χ² test of standardised residuals ``z`` (m,) against pure noise, per group; the most significant group.
 
-    Tested per group (``groups`` (m,) labels); the returned χ² figures are of the
-    most significant group. The k parameters are shared out over groups by size.
+    ``groups`` (m,) labels; ``series`` (m,) labels of noise series (default: each row its own)
+    with ``series_dof`` {label: effective dof ν} (default: rows). **Returns** ``{"reduced_chi2",
+    "p", "group", "dof", "excess", "structured"}`` (see the module docstring).
     """
     import numpy as np
 
-    z = np.asarray(z)
+    z = np.asarray(z, dtype=np.float64)
     groups = np.asarray(groups)
     names = list(dict.fromkeys(groups.tolist()))
-    best = (False, 0.0, 1.0)
+    best = None
     for g in names:
         sel = groups == g
-        mg = int(sel.sum())
-        dof = max(mg - k * mg / z.size, 1.0)
+        rows = int(sel.sum())
+        if series is None:
+            dof = float(rows)
+        else:
+            ser = np.asarray(series)[sel]
+            labs, counts = np.unique(ser, return_counts=True)
+            nu = np.array([float((series_dof or {}).get(lab, c)) for lab, c in zip(labs.tolist(), counts)])
+            nu = np.clip(nu, 1.0, counts)
+            dof = float(counts.sum() ** 2 / np.sum(counts.astype(float) ** 2 / nu))
         c2 = float(np.sum(z[sel] ** 2))
-        red, p = c2 / dof, float(chi2_dist.sf(c2, dof))
-        hit = red >= CHI2_RED_STRUCTURED and p < P_NOISE / len(names)
-        if (hit, -p) > (best[0], -best[2]):
-            best = (hit, red, p)
+        red = c2 / max(rows, 1)
+        p = float(chi2_dist.sf(red * dof, dof))
+        out = {"reduced_chi2": red, "p": p, "group": str(g), "dof": dof,
+               "excess": bool(red >= CHI2_RED_TRY and p < P_NOISE / len(names)),
+               "structured": bool(red >= CHI2_RED_STRUCTURED and p < P_NOISE / len(names))}
+        if best is None or (out["structured"], out["excess"], red) > (best["structured"], best["excess"],
+                                                                      best["reduced_chi2"]):
+            best = out
     return best
 
 
@@ -84,10 +140,18 @@ def acceptance(candidate: dict) -> tuple[bool, list[str]]:
     why = []
     hs = candidate.get("heldout_shrink_pct", -math.inf)
     lo = candidate.get("heldout_shrink_interval_pct", [-math.inf, math.inf])[0]
-    if not hs >= MIN_HELDOUT_SHRINK_PCT:
-        why.append(f"heldout shrink {hs:.1f}% < {MIN_HELDOUT_SHRINK_PCT}%")
-    elif not lo >= MIN_HELDOUT_SHRINK_LO_PCT:
-        why.append(f"heldout shrink lower bound {lo:.1f}% < {MIN_HELDOUT_SHRINK_LO_PCT}%")
+    hg = candidate.get("heldout_shrink_in_group_pct", -math.inf)
+    lg = candidate.get("heldout_shrink_in_group_interval_pct", [-math.inf, math.inf])[0]
+
+    def ok(h, low):
+        return h is not None and low is not None and h >= MIN_HELDOUT_SHRINK_PCT and low >= MIN_HELDOUT_SHRINK_LO_PCT
+
+    if not (ok(hs, lo) or ok(hg, lg)):
+        where = f" (in {candidate['group']}: {hg:.1f}%, lower bound {lg:.1f}%)" if "group" in candidate else ""
+        if not hs >= MIN_HELDOUT_SHRINK_PCT:
+            why.append(f"heldout shrink {hs:.1f}% < {MIN_HELDOUT_SHRINK_PCT}%{where}")
+        else:
+            why.append(f"heldout shrink lower bound {lo:.1f}% < {MIN_HELDOUT_SHRINK_LO_PCT}%{where}")
     dbic = candidate.get("evidence", {}).get("delta_bic", math.inf)
     if not dbic <= MAX_DELTA_BIC:
         why.append(f"delta BIC {dbic:.1f} > {MAX_DELTA_BIC}")
@@ -96,4 +160,9 @@ def acceptance(candidate: dict) -> tuple[bool, list[str]]:
     d = candidate.get("baseline_drift_max_relative", 0.0)
     if not d <= MAX_DRIFT_RELATIVE:
         why.append(f"baseline parameters drifted {100 * d:.0f}% > {100 * MAX_DRIFT_RELATIVE:.0f}%")
+    pd = candidate.get("baseline_prior_distance")
+    if pd and pd.get("k"):
+        limit = float(chi2_dist.ppf(PRIOR_REGION, pd["k"]))
+        if not (pd["d2"] <= limit or pd["d2"] <= pd["d2_baseline_fit"]):
+            why.append(f"baseline ring parameters left their free-table prior (D^2 {pd['d2']:.1f} > {limit:.1f})")
     return (not why), why

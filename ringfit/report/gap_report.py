@@ -1,8 +1,18 @@
 """Self-contained HTML report of a gap diagnosis (embedded PNGs): verdict, where, ranked candidates, held-out fit.
 
-Figures: residual per mode (or vs angle) before/after for the top
-candidates, a forest plot of held-out shrink with bootstrap intervals, and
-held-out predicted vs measured. The verdict is one sentence for a tyre engineer.
+Figures, per kind of data in the diagnosis:
+
+- **residual before/after** for the baseline and the top candidates: for
+  rolling profiles vs angle, one panel per channel and speed (the contact
+  patch at 0°); for mode tables per mode (row labels);
+- **forest plot**: every candidate's held-out shrink with its 95 % bootstrap
+  interval (green = accepted), the ideal shrink (the part of the residual
+  that is not noise) as a dashed line;
+- **held-out predicted vs measured**: for profiles, each speed as predicted
+  by the fit to the *other* speeds (baseline and the accepted chain) over the
+  measurement; for mode tables a scatter.
+
+The verdict is one sentence for a tyre engineer (:func:`verdict_sentence`).
 """
 
 from __future__ import annotations
@@ -15,10 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
+#: Candidates drawn in the residual figures (besides the baseline).
+TOP = 2
+
 
 def _png(fig) -> str:
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
     import matplotlib.pyplot as plt
 
     plt.close(fig)
@@ -43,54 +56,167 @@ def verdict_sentence(content: dict) -> str:
             f"residual RMS on data that took no part in the fit{tail}.")
 
 
+def _top_fits(part):
+    """(label, ChainFit) of the baseline's top refitted candidates (accepted first), at most :data:`TOP`."""
+    cands = [c for c in part.summary["candidates"] if not c.get("screened_out")]
+    cands.sort(key=lambda c: (not c.get("accepted"), -(c["heldout_shrink_pct"] or 0.0)))
+    out = []
+    for c in cands[:TOP]:
+        fit = part.fits.get((c["effect"],))
+        if fit is not None:
+            out.append((f"+ {c['effect']}", fit))
+    if part.chain_fit is not None and len(part.chain_fit.chain) > 1:
+        out.append(("+ " + " + ".join(part.chain_fit.chain), part.chain_fit))
+    return out
+
+
+def _profile_grid(prob):
+    """(P, channels, M), angle [deg] and speed labels of a profile problem's rows."""
+    lab = prob.labels
+    P = int(lab["profile"].max()) + 1
+    M = prob.m // (2 * P)
+    angle = lab["angle_deg"][:M]
+    speeds = [float(lab["speed_kmh"][p * 2 * M]) for p in range(P)]
+    return P, M, angle, speeds
+
+
+def _profile_residual_figure(part):
+    import matplotlib.pyplot as plt
+
+    prob = part.problem
+    P, M, angle, speeds = _profile_grid(prob)
+    fits = [("baseline", part.baseline)] + _top_fits(part)
+    fig, axes = plt.subplots(2, P, figsize=(3.0 * P, 4.6), sharex=True, squeeze=False)
+    for p in range(P):
+        for c, ch in enumerate(("radial", "tangential")):
+            ax = axes[c, p]
+            sl = slice((2 * p + c) * M, (2 * p + c + 1) * M)
+            for i, (name, fit) in enumerate(fits):
+                r = (prob.y - fit.pred)[sl]
+                ax.plot(angle, r, lw=0.8 if i else 0.6, color="0.55" if i == 0 else f"C{i}", label=name)
+            ax.axhline(0.0, color="k", lw=0.4)
+            sigma = float(prob.sigma[sl][0])
+            ax.axhspan(-sigma, sigma, color="C2", alpha=0.12, lw=0)
+            ax.set_title(f"{ch}, {speeds[p]:.0f} km/h", fontsize=8)
+            ax.tick_params(labelsize=7)
+            if p == 0:
+                ax.set_ylabel("residual [m/s²]", fontsize=8)
+            if c == 1:
+                ax.set_xlabel("angle from patch centre [deg]", fontsize=8)
+    axes[0, 0].legend(fontsize=6, loc="upper left")
+    fig.suptitle("residual vs angle (measured − model; band = ±1 noise σ)", fontsize=9)
+    return fig
+
+
+def _profile_heldout_figure(part):
+    import matplotlib.pyplot as plt
+
+    prob = part.problem
+    P, M, angle, speeds = _profile_grid(prob)
+    chain = part.chain_fit if part.chain_fit is not None and part.chain_fit is not part.baseline else None
+    fig, axes = plt.subplots(2, P, figsize=(3.0 * P, 4.6), sharex=True, squeeze=False)
+    for p in range(P):
+        for c, ch in enumerate(("radial", "tangential")):
+            ax = axes[c, p]
+            sl = slice((2 * p + c) * M, (2 * p + c + 1) * M)
+            ax.plot(angle, prob.y[sl], color="k", lw=0.6, label="measured")
+            ax.plot(angle, part.baseline.heldout_pred[sl], color="0.55", lw=0.8, label="baseline, held out")
+            if chain is not None and chain.heldout_pred is not None:
+                ax.plot(angle, chain.heldout_pred[sl], color="C2", lw=0.8,
+                        label=" + ".join(chain.chain) + ", held out")
+            ax.set_title(f"{ch}, {speeds[p]:.0f} km/h", fontsize=8)
+            ax.set_xlim(-60, 60)
+            ax.tick_params(labelsize=7)
+            if p == 0:
+                ax.set_ylabel("acceleration [m/s²]", fontsize=8)
+            if c == 1:
+                ax.set_xlabel("angle [deg]", fontsize=8)
+    axes[0, 0].legend(fontsize=6, loc="lower left")
+    fig.suptitle("held-out: each speed predicted by the fit to the other speeds (|angle| ≤ 60°)", fontsize=9)
+    return fig
+
+
+def _modal_residual_figure(part):
+    import matplotlib.pyplot as plt
+
+    prob = part.problem
+    fits = [("baseline", part.baseline)] + _top_fits(part)
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.18 * prob.m), 3.4))
+    x = np.arange(prob.m)
+    for i, (name, fit) in enumerate(fits):
+        ax.plot(x + 0.12 * i, (prob.y - fit.pred) / prob.sigma, "o" if i == 0 else ".",
+                color="0.4" if i == 0 else f"C{i}", ms=4, label=name)
+    ax.axhspan(-1, 1, color="C2", alpha=0.12, lw=0)
+    ax.set_xticks(x, prob.labels["label"], rotation=90, fontsize=5)
+    ax.set_ylabel("residual / noise σ")
+    ax.legend(fontsize=7)
+    ax.set_title("residual per mode (band = ±1 noise σ)", fontsize=9)
+    return fig
+
+
+def _forest_figure(part):
+    import matplotlib.pyplot as plt
+
+    allc = part.summary["candidates"]
+    fig, ax = plt.subplots(figsize=(6, 0.38 * len(allc) + 1.2))
+    for i, c in enumerate(allc):
+        lo, hi = c["heldout_shrink_interval_pct"]
+        ax.plot([lo, hi], [i, i], "-", color="C0", lw=2)
+        ax.plot([c["heldout_shrink_pct"]], [i], "o", color="C2" if c.get("accepted") else "C3")
+    ax.set_yticks(range(len(allc)), [c["effect"] + (" (screened)" if c.get("screened_out") else "") for c in allc],
+                  fontsize=8)
+    ax.invert_yaxis()
+    ax.axvline(0, color="k", lw=0.5)
+    ideal = part.summary["baseline"].get("ideal_shrink_pct")
+    if ideal is not None:
+        ax.axvline(ideal, color="k", ls="--", lw=0.8, label=f"ideal shrink {ideal:.0f} %")
+        ax.legend(fontsize=7, loc="lower right")
+    ax.set_xlabel("held-out RMS shrink [%] (95 % bootstrap interval; green = accepted)")
+    return fig
+
+
+def _modal_heldout_figure(part):
+    import matplotlib.pyplot as plt
+
+    prob = part.problem
+    y = prob.y
+    fit = part.chain_fit if part.chain_fit is not None else part.baseline
+    fig, ax = plt.subplots(figsize=(4.5, 4.5))
+    ax.plot(y, part.baseline.heldout_pred, "k.", label="baseline")
+    if fit.heldout_pred is not None and fit is not part.baseline:
+        ax.plot(y, fit.heldout_pred, ".", color="C2", label=" + ".join(fit.chain))
+    lim = [np.nanmin(y), np.nanmax(y)]
+    ax.plot(lim, lim, "k-", lw=0.5)
+    ax.set_xlabel("measured")
+    ax.set_ylabel("held-out predicted")
+    ax.legend(fontsize=7)
+    return fig
+
+
 def figures(diag) -> list[tuple[str, str]]:
+    """``(title, data URI)`` of every figure of the report."""
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     out = []
     for part in diag.parts:
-        prob = part.problem
-        y = prob.y
-        cands = [c for c in part.summary["candidates"] if not c.get("screened_out")][:3]
-        # residual before/after
-        fig, ax = plt.subplots(figsize=(8, 3.2))
-        x = np.arange(prob.m)
-        ax.plot(x, (y - part.baseline.pred) / prob.sigma, "k.", label="baseline")
-        for c in cands:
-            fit = part.fits.get((c["effect"],))
-            if fit is not None:
-                ax.plot(x, (y - fit.pred) / prob.sigma, ".", label=f"+ {c['effect']}")
-        ax.set_xlabel("observation (rows: " + ("modes, by table" if prob.domain == "modes" else "angle, by speed") + ")")
-        ax.set_ylabel("residual / noise σ")
-        ax.legend(fontsize=7)
-        out.append((f"{prob.domain}: residual before/after", _png(fig)))
-        # forest plot
-        allc = part.summary["candidates"]
-        fig, ax = plt.subplots(figsize=(6, 0.4 * len(allc) + 1))
-        for i, c in enumerate(allc):
-            lo, hi = c["heldout_shrink_interval_pct"]
-            ax.plot([lo, hi], [i, i], "-", color="C0")
-            ax.plot([c["heldout_shrink_pct"]], [i], "o", color="C2" if c.get("accepted") else "C3")
-        ax.set_yticks(range(len(allc)), [c["effect"] for c in allc])
-        ax.invert_yaxis()
-        ax.axvline(0, color="k", lw=0.5)
-        ax.set_xlabel("held-out shrink [%] (95 % bootstrap interval; green = accepted)")
-        out.append((f"{prob.domain}: ranked candidates", _png(fig)))
-        # held-out predicted vs measured
-        fit = part.chain_fit if part.chain_fit is not None else part.baseline
-        fig, ax = plt.subplots(figsize=(4.5, 4.5))
-        ax.plot(y, part.baseline.heldout_pred, "k.", label="baseline")
-        if fit.heldout_pred is not None and fit is not part.baseline:
-            ax.plot(y, fit.heldout_pred, ".", color="C2", label=" + ".join(fit.chain))
-        lim = [np.nanmin(y), np.nanmax(y)]
-        ax.plot(lim, lim, "k-", lw=0.5)
-        ax.set_xlabel("measured")
-        ax.set_ylabel("held-out predicted")
-        ax.legend(fontsize=7)
-        out.append((f"{prob.domain}: held-out predicted vs measured", _png(fig)))
+        dom = part.problem.domain
+        if dom == "profiles":
+            out.append(("profiles: residual vs angle before/after, per channel and speed",
+                        _png(_profile_residual_figure(part))))
+        else:
+            out.append(("mode tables: residual per mode before/after", _png(_modal_residual_figure(part))))
+        out.append((f"{dom}: ranked candidates (forest plot)", _png(_forest_figure(part))))
+        if dom == "profiles":
+            out.append(("profiles: held-out predicted vs measured", _png(_profile_heldout_figure(part))))
+        else:
+            out.append(("mode tables: held-out predicted vs measured", _png(_modal_heldout_figure(part))))
     return out
+
+
+def _params_text(candidate: dict) -> str:
+    return ", ".join(f"{k} {v.get('value')} [{v.get('lo')}, {v.get('hi')}]"
+                     for k, v in candidate.get("params", {}).items())
 
 
 def write_gap_report(diag, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
@@ -102,18 +228,26 @@ def write_gap_report(diag, path: str | os.PathLike, *, overwrite: bool = False) 
     rows = "".join(
         f"<tr><td>{html.escape(x['effect'])}</td><td>{x['heldout_shrink_pct']}</td>"
         f"<td>{x['heldout_shrink_interval_pct']}</td><td>{x['evidence'].get('delta_bic')}</td>"
+        f"<td>{html.escape(_params_text(x))}</td>"
         f"<td>{'yes' if x.get('accepted') else html.escape('; '.join(x.get('rejected_because', [])))}</td></tr>"
         for x in c["candidates"])
     where = "".join(f"<li>{html.escape(w['region'])}: {100 * w['share']:.0f} %</li>" for w in c["where"])
     figs = "".join(f"<h3>{html.escape(t)}</h3><img src='{src}'/>" for t, src in figures(diag))
+    b = c["baseline"]
+    rules = c["verdict"].get("rule", {})
+    rule_items = "".join(f"<li><b>{html.escape(k)}</b>: {html.escape(str(v))}</li>" for k, v in rules.items())
     doc = f"""<!doctype html><html><head><meta charset="utf-8"><title>ringfit gap diagnosis</title>
-<style>body{{font-family:sans-serif;max-width:60em;margin:auto}}td,th{{border:1px solid #ccc;padding:2px 6px}}</style>
+<style>body{{font-family:sans-serif;max-width:70em;margin:auto}}
+td,th{{border:1px solid #ccc;padding:2px 6px;font-size:90%}} img{{max-width:100%}}</style>
 </head><body><h1>Sim-to-real gap diagnosis</h1>
-<p><b>Verdict:</b> {html.escape(verdict_sentence(c))}</p>
-<p>Data: {html.escape(', '.join(c['data']))}. Baseline {html.escape(c['baseline']['model'])}: RMS {c['baseline']['rms']}
-{html.escape(c['baseline']['unit'])}, held-out {c['baseline']['heldout_rms']}; noise {html.escape(c['baseline'].get('noise_method', ''))}.</p>
+<p><b>Verdict:</b> {html.escape(verdict_sentence(c))} <small>({html.escape(' + '.join(c['verdict']['effects']))})</small></p>
+<p>Data: {html.escape(', '.join(c['data']))}. Baseline {html.escape(b['model'])}: RMS {b['rms']}
+{html.escape(b['unit'])}, held-out {b['heldout_rms']} ({html.escape(str(b.get('heldout_method', '')))}); noise RMS
+{b.get('noise_rms')} — {html.escape(b.get('noise_method', ''))}. Held-out reduced χ² {b.get('reduced_chi2')}
+(effective dof {b.get('noise_dof')}); ideal shrink {b.get('ideal_shrink_pct')} %.</p>
 <h2>Where</h2><ul>{where}</ul>
-<h2>Which</h2><table><tr><th>effect</th><th>held-out shrink %</th><th>95 % interval</th><th>ΔBIC</th><th>accepted</th></tr>{rows}</table>
-<p>Rules: {html.escape(str(c['verdict'].get('rule', '')))}</p>
+<h2>Which</h2><table><tr><th>effect</th><th>held-out shrink %</th><th>95 % interval</th><th>ΔBIC</th>
+<th>parameters [95 % interval]</th><th>accepted</th></tr>{rows}</table>
+<h2>Rules</h2><ul>{rule_items}</ul>
 {figs}</body></html>"""
     return atomic_write_text(path, doc)

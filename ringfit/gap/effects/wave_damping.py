@@ -1,13 +1,30 @@
 """``wave_damping`` — loss that grows with frequency, so deformation waves decay away from the patch (PHYSICS.md §4.2, §6).
 
-Loss factor ``η(ω) = η0 + η1 ω/ω_ref`` with ω_ref = 2π·100 Hz; η0 = 2ζ is the
-baseline's hysteretic loss, η1 (``eta_slope``, null 0) is the effect.
+PHYSICS.md §6 names two forms; the effect carries both, each with its own
+parameter (null 0 = the baseline's constant hysteretic loss η0 = 2ζ):
 
-- Modal data: ``ζ = ζ0 + η1 ω/(2 ω_ref)`` on damping rows — ζ rising with n.
-- Rolling profiles: the material sees harmonic n at ω = |n|Ω, so the extra
-  hysteretic term ``i η1 (|n|Ω/ω_ref) s_n K_n^c`` is added to D_n through
-  :class:`ringfit.physics.rolling.RingModel` ``terms`` — leading/trailing
-  asymmetry growing with speed.
+1. **Growing hysteretic loss** ``η(ω) = η0 + η1·ω/ω_ref``, ω_ref = 2π·100 Hz
+   (``eta_slope`` = η1). The material sees harmonic n at ω = |n|Ω, so the
+   extra term ``i η1 (|n|Ω/ω_ref) s_n K_n^c`` is added to D_n (:class:`GrowingLoss`).
+2. **Viscous material damping** (PHYSICS.md §4.2 "alternative damping"):
+   ``i nΩ c_w`` on D_n[0,0] and ``i nΩ c_v`` on D_n[1,1], added on top of the
+   baseline's hysteretic loss through :class:`ringfit.physics.rolling.Viscous`
+   with one coefficient ``c = c_w = c_v`` [N s/m²] (``viscous_c``; isotropic
+   material viscosity per unit length — the data cannot separate c_v from c_w:
+   for the inextensible ring they enter only as ``c_w + c_v/n²``).
+
+Either form makes the loss grow with the harmonic's frequency nΩ, so the
+bulges at |φ| ≈ 15–60° lose their front/rear symmetry more at higher speed;
+the growing hysteretic form grows like n·K_n (strongest at high n, near the
+patch edges), the viscous one like n (the long waves). The refit frees both and
+the JSON reports both; at least one interval must exclude 0 for acceptance.
+
+- **Modal data**: only the hysteretic form, whose modal signature is the one
+  PHYSICS.md §6 names — ``ζ = ζ0 + η1 ω/(2 ω_ref)`` on damping rows, ζ rising
+  with n. (Viscous c_w = c_v gives ``ζ = c/(2ρAω)``, falling with n — not a
+  wave-damping signature on a free tyre, and collinear with ζ0 over the few
+  measured modes.)
+- **Rolling profiles**: both forms (parameters ``eta_slope``, ``viscous_c``).
 """
 
 import jax.numpy as jnp
@@ -15,7 +32,7 @@ import numpy as np
 
 from ringfit.gap.effects import register
 from ringfit.gap.effects.base import Effect, Parameter
-from ringfit.physics.rolling import AbstractOperatorTerm, elastic_stiffness
+from ringfit.physics.rolling import AbstractOperatorTerm, Viscous, elastic_stiffness
 
 REFERENCE_FREQUENCY_HZ = 100.0
 
@@ -32,14 +49,18 @@ class GrowingLoss(AbstractOperatorTerm):
         return 1j * (eta * jnp.sign(n))[..., None, None] * elastic_stiffness(ring, geometry, n)
 
 
+ETA_SLOPE = Parameter("eta_slope", "-", null=0.0, lo=0.0, hi=0.3, start=0.02,
+                      description="growth of the hysteretic loss factor per 100 Hz")
+VISCOUS_C = Parameter("viscous_c", "N s/m^2", null=0.0, lo=0.0, hi=5000.0, start=300.0,
+                      description="viscous material damping c = c_w = c_v per unit length")
+
+
 class WaveDamping(Effect):
     name = "wave_damping"
     baseline_partners = ("damping_ratio",)
     summary = "damping that grows with frequency: waves decay away from the patch, front and rear differ"
-    parameters = (
-        Parameter("eta_slope", "-", null=0.0, lo=0.0, hi=0.3, start=0.02,
-                  description="growth of the loss factor per 100 Hz"),
-    )
+    parameters = (ETA_SLOPE,)
+    profile_parameters = (ETA_SLOPE, VISCOUS_C)
 
     def modal_mask(self, rows):
         return np.asarray(rows.is_freq) == 0
@@ -49,7 +70,8 @@ class WaveDamping(Effect):
         return omega, zeta + 0.5 * values[0] * omega / ref
 
     def profile_model(self, values, model):
-        return model.with_operator_term(GrowingLoss(values[0]))
+        model = model.with_operator_term(GrowingLoss(values[0]))
+        return model.with_operator_term(Viscous(c_w=values[1], c_v=values[1]))
 
 
 EFFECT = register(WaveDamping())
