@@ -266,7 +266,6 @@ class CleatBench:
             sol = solve_rolling(self.ring, self.geometry, op, solver=ContactSolver(n_grid=2048))
             sensor = SensorModel(gravity=STANDARD_GRAVITY if self.gravity else 0.0, tilt_gain=1.0, remove_mean=False)
             rad, tan = (np.asarray(x) for x in sensor_signals(sol, self.geometry, sensor))
-            del jnp
         else:
             rad, tan = self._analytic_steady(2048)
         # band-limited refinement (zero-padded spectrum) so that linear interpolation is accurate
