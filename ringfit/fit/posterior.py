@@ -233,6 +233,48 @@ def load_posterior(path) -> Posterior:
                      lsq=meta.get("lsq", {}), **arrays)
 
 
+def run_ensemble(log_prob_fn, p0, *, min_steps: int, max_steps: int, check_every: int = 1000, seed: int = 0,
+                 progress: bool = False):
+    """Run ``emcee.EnsembleSampler(vectorize=True)`` until the chain exceeds :data:`TAU_FACTOR` τ.
+
+    **Arguments:** ``log_prob_fn`` — ``(walkers, k) -> (walkers,)`` NumPy float64,
+    −inf outside the support; ``p0`` — ``(walkers, k)`` start; the chain grows in
+    blocks of ``check_every`` after ``min_steps`` until it is longer than
+    :data:`TAU_FACTOR` × max τ or reaches ``max_steps``; ``progress`` — tqdm bar on stderr.
+
+    **Returns:** ``(sampler, tau)`` with ``tau`` ``(k,)`` the integrated autocorrelation times.
+    """
+    import emcee
+
+    walkers, k = np.shape(p0)
+    sampler = emcee.EnsembleSampler(walkers, k, log_prob_fn, vectorize=True)
+    sampler.random_state = np.random.RandomState(seed).get_state()
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=min_steps, desc="sampling", unit="step", leave=False)
+    state = p0
+    tau = np.full(k, np.inf)
+    while sampler.iteration < max_steps:
+        block = check_every if sampler.iteration >= min_steps else min_steps - sampler.iteration
+        block = min(block, max_steps - sampler.iteration)
+        for state in sampler.sample(state, iterations=block):
+            if bar is not None:
+                bar.update(1)
+        tau = sampler.get_autocorr_time(tol=0)
+        if bar is not None:
+            bar.set_postfix_str(f"τ≈{np.max(tau):.0f}, need {TAU_FACTOR * np.max(tau):.0f} steps")
+        if np.all(np.isfinite(tau)) and sampler.iteration > TAU_FACTOR * np.max(tau):
+            break
+        if bar is not None:
+            bar.total = min(max_steps, max(sampler.iteration + check_every, int(TAU_FACTOR * np.max(tau))))
+            bar.refresh()
+    if bar is not None:
+        bar.close()
+    return sampler, np.asarray(tau)
+
+
 def sample_posterior(
     table,
     geometry: TyreGeometry,
@@ -259,8 +301,6 @@ def sample_posterior(
     **Returns:** :class:`Posterior`. Warns (``RuntimeWarning``) when the chain
     did not reach :data:`TAU_FACTOR` autocorrelation times by ``max_steps``.
     """
-    import emcee
-
     free = check_free(free)
     lsq = fit_natural_frequencies(table, geometry, initial, free=free, prior=prior, modes=modes,
                                   default_relative_std=default_relative_std)
@@ -282,31 +322,8 @@ def sample_posterior(
     step = np.sqrt(np.clip(np.diag(lsq.covariance_log), 1e-8, 0.01))
     p0 = y_opt + 0.1 * step * rng.standard_normal((walkers, len(free)))
     p0 = np.clip(p0, lo + 1e-6, hi - 1e-6)
-    sampler = emcee.EnsembleSampler(walkers, len(free), log_prob_fn, vectorize=True)
-    sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=min_steps, desc="sampling", unit="step", leave=False)
-    state = p0
-    tau = np.full(len(free), np.inf)
-    while sampler.iteration < max_steps:
-        block = check_every if sampler.iteration >= min_steps else min_steps - sampler.iteration
-        block = min(block, max_steps - sampler.iteration)
-        for state in sampler.sample(state, iterations=block):
-            if bar is not None:
-                bar.update(1)
-        tau = sampler.get_autocorr_time(tol=0)
-        if bar is not None:
-            bar.set_postfix_str(f"τ≈{np.max(tau):.0f}, need {TAU_FACTOR * np.max(tau):.0f} steps")
-        if np.all(np.isfinite(tau)) and sampler.iteration > TAU_FACTOR * np.max(tau):
-            break
-        if bar is not None:
-            bar.total = min(max_steps, max(sampler.iteration + check_every, int(TAU_FACTOR * np.max(tau))))
-            bar.refresh()
-    if bar is not None:
-        bar.close()
+    sampler, tau = run_ensemble(log_prob_fn, p0, min_steps=min_steps, max_steps=max_steps,
+                                check_every=check_every, seed=int(rng.integers(2**31)), progress=progress)
     chain = sampler.get_chain()
     tmax = float(np.max(tau)) if np.all(np.isfinite(tau)) else chain.shape[0] / 10
     burn = int(min(2 * tmax, chain.shape[0] // 2))
@@ -334,5 +351,5 @@ def sample_posterior(
     return post
 
 
-__all__ = ["Posterior", "sample_posterior", "load_posterior", "log_probability", "batched_log_probability",
+__all__ = ["Posterior", "sample_posterior", "run_ensemble", "load_posterior", "log_probability", "batched_log_probability",
            "TAU_FACTOR"]

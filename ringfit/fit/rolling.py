@@ -458,9 +458,10 @@ def sample_rolling_posterior(
     (``result.extra["sigma_ms2"]``); prior: flat in ``log θ`` within
     :data:`ringfit.fit.priors.BOUNDS` (flat within ±10° for the angle offset).
     ``emcee.EnsembleSampler(vectorize=True)`` calls one jitted, vmapped
-    log-probability; walkers start in a small ball (¼ of the standard error) at the optimum.
+    log-probability (:func:`ringfit.fit.posterior.run_ensemble`, here for exactly
+    ``steps`` steps); walkers start in a small ball (¼ of the standard error) at the optimum.
     """
-    import emcee
+    from ringfit.fit.posterior import run_ensemble
 
     spec = result.extra["spec"]
     data = result.extra["data"]
@@ -484,10 +485,7 @@ def sample_rolling_posterior(
 
     rng = np.random.default_rng(seed)
     p0 = y_opt + 0.25 * sd * rng.standard_normal((walkers, len(free)))
-    sampler = emcee.EnsembleSampler(walkers, len(free), log_prob, vectorize=True)
-    sampler.random_state = np.random.RandomState(seed).get_state()
-    sampler.run_mcmc(p0, steps, progress=progress)
-    tau = sampler.get_autocorr_time(quiet=True, tol=0)
+    sampler, tau = run_ensemble(log_prob, p0, min_steps=steps, max_steps=steps, seed=seed, progress=progress)
     burn = int(burn if burn is not None else min(steps // 2, max(int(3 * np.nanmax(tau)), steps // 5)))
     return RollingPosterior(tuple(free), sampler.get_chain(), sampler.get_log_prob(),
                             sampler.acceptance_fraction, np.asarray(tau), burn, float(sigma))
