@@ -17,25 +17,16 @@ The verdict is one sentence for a tyre engineer (:func:`verdict_sentence`).
 
 from __future__ import annotations
 
-import base64
-import html
-import io
 import os
 from pathlib import Path
 
 import numpy as np
 
+from ringfit.report.figures import new_figure, png_data_uri
+from ringfit.report.html import esc, html_document, table_html
+
 #: Candidates drawn in the residual figures (besides the baseline).
 TOP = 2
-
-
-def _png(fig) -> str:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
 
 
 def verdict_sentence(content: dict) -> str:
@@ -80,68 +71,62 @@ def _profile_grid(prob):
     return P, M, angle, speeds
 
 
-def _profile_residual_figure(part):
-    import matplotlib.pyplot as plt
-
-    prob = part.problem
+def _profile_panels(prob, ylabel: str, xlabel: str, draw):
+    """A 2 × speeds grid (radial, tangential per speed); ``draw(ax, sl)`` fills the panel of row slice ``sl``."""
     P, M, angle, speeds = _profile_grid(prob)
-    fits = [("baseline", part.baseline)] + _top_fits(part)
-    fig, axes = plt.subplots(2, P, figsize=(3.0 * P, 4.6), sharex=True, squeeze=False)
+    fig, axes = new_figure(2, P, figsize=(3.0 * P, 4.6), sharex=True, squeeze=False)
     for p in range(P):
         for c, ch in enumerate(("radial", "tangential")):
             ax = axes[c, p]
-            sl = slice((2 * p + c) * M, (2 * p + c + 1) * M)
-            for i, (name, fit) in enumerate(fits):
-                r = (prob.y - fit.pred)[sl]
-                ax.plot(angle, r, lw=0.8 if i else 0.6, color="0.55" if i == 0 else f"C{i}", label=name)
-            ax.axhline(0.0, color="k", lw=0.4)
-            sigma = float(prob.sigma[sl][0])
-            ax.axhspan(-sigma, sigma, color="C2", alpha=0.12, lw=0)
+            draw(ax, angle, slice((2 * p + c) * M, (2 * p + c + 1) * M))
             ax.set_title(f"{ch}, {speeds[p]:.0f} km/h", fontsize=8)
             ax.tick_params(labelsize=7)
             if p == 0:
-                ax.set_ylabel("residual [m/s²]", fontsize=8)
+                ax.set_ylabel(ylabel, fontsize=8)
             if c == 1:
-                ax.set_xlabel("angle from patch centre [deg]", fontsize=8)
+                ax.set_xlabel(xlabel, fontsize=8)
+    return fig, axes
+
+
+def _profile_residual_figure(part):
+    prob = part.problem
+    fits = [("baseline", part.baseline)] + _top_fits(part)
+
+    def draw(ax, angle, sl):
+        for i, (name, fit) in enumerate(fits):
+            ax.plot(angle, (prob.y - fit.pred)[sl], lw=0.8 if i else 0.6, color="0.55" if i == 0 else f"C{i}",
+                    label=name)
+        ax.axhline(0.0, color="k", lw=0.4)
+        sigma = float(prob.sigma[sl][0])
+        ax.axhspan(-sigma, sigma, color="C2", alpha=0.12, lw=0)
+
+    fig, axes = _profile_panels(prob, "residual [m/s²]", "angle from patch centre [deg]", draw)
     axes[0, 0].legend(fontsize=6, loc="upper left")
     fig.suptitle("residual vs angle (measured − model; band = ±1 noise σ)", fontsize=9)
     return fig
 
 
 def _profile_heldout_figure(part):
-    import matplotlib.pyplot as plt
-
     prob = part.problem
-    P, M, angle, speeds = _profile_grid(prob)
     chain = part.chain_fit if part.chain_fit is not None and part.chain_fit is not part.baseline else None
-    fig, axes = plt.subplots(2, P, figsize=(3.0 * P, 4.6), sharex=True, squeeze=False)
-    for p in range(P):
-        for c, ch in enumerate(("radial", "tangential")):
-            ax = axes[c, p]
-            sl = slice((2 * p + c) * M, (2 * p + c + 1) * M)
-            ax.plot(angle, prob.y[sl], color="k", lw=0.6, label="measured")
-            ax.plot(angle, part.baseline.heldout_pred[sl], color="0.55", lw=0.8, label="baseline, held out")
-            if chain is not None and chain.heldout_pred is not None:
-                ax.plot(angle, chain.heldout_pred[sl], color="C2", lw=0.8,
-                        label=" + ".join(chain.chain) + ", held out")
-            ax.set_title(f"{ch}, {speeds[p]:.0f} km/h", fontsize=8)
-            ax.set_xlim(-60, 60)
-            ax.tick_params(labelsize=7)
-            if p == 0:
-                ax.set_ylabel("acceleration [m/s²]", fontsize=8)
-            if c == 1:
-                ax.set_xlabel("angle [deg]", fontsize=8)
+
+    def draw(ax, angle, sl):
+        ax.plot(angle, prob.y[sl], color="k", lw=0.6, label="measured")
+        ax.plot(angle, part.baseline.heldout_pred[sl], color="0.55", lw=0.8, label="baseline, held out")
+        if chain is not None and chain.heldout_pred is not None:
+            ax.plot(angle, chain.heldout_pred[sl], color="C2", lw=0.8, label=" + ".join(chain.chain) + ", held out")
+        ax.set_xlim(-60, 60)
+
+    fig, axes = _profile_panels(prob, "acceleration [m/s²]", "angle [deg]", draw)
     axes[0, 0].legend(fontsize=6, loc="lower left")
     fig.suptitle("held-out: each speed predicted by the fit to the other speeds (|angle| ≤ 60°)", fontsize=9)
     return fig
 
 
 def _modal_residual_figure(part):
-    import matplotlib.pyplot as plt
-
     prob = part.problem
     fits = [("baseline", part.baseline)] + _top_fits(part)
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.18 * prob.m), 3.4))
+    fig, ax = new_figure(figsize=(max(6.0, 0.18 * prob.m), 3.4))
     x = np.arange(prob.m)
     for i, (name, fit) in enumerate(fits):
         ax.plot(x + 0.12 * i, (prob.y - fit.pred) / prob.sigma, "o" if i == 0 else ".",
@@ -155,10 +140,8 @@ def _modal_residual_figure(part):
 
 
 def _forest_figure(part):
-    import matplotlib.pyplot as plt
-
     allc = part.summary["candidates"]
-    fig, ax = plt.subplots(figsize=(6, 0.38 * len(allc) + 1.2))
+    fig, ax = new_figure(figsize=(6, 0.38 * len(allc) + 1.2))
     for i, c in enumerate(allc):
         lo, hi = c["heldout_shrink_interval_pct"]
         ax.plot([lo, hi], [i, i], "-", color="C0", lw=2)
@@ -176,12 +159,10 @@ def _forest_figure(part):
 
 
 def _modal_heldout_figure(part):
-    import matplotlib.pyplot as plt
-
     prob = part.problem
     y = prob.y
     fit = part.chain_fit if part.chain_fit is not None else part.baseline
-    fig, ax = plt.subplots(figsize=(4.5, 4.5))
+    fig, ax = new_figure(figsize=(4.5, 4.5))
     ax.plot(y, part.baseline.heldout_pred, "k.", label="baseline")
     if fit.heldout_pred is not None and fit is not part.baseline:
         ax.plot(y, fit.heldout_pred, ".", color="C2", label=" + ".join(fit.chain))
@@ -195,22 +176,19 @@ def _modal_heldout_figure(part):
 
 def figures(diag) -> list[tuple[str, str]]:
     """``(title, data URI)`` of every figure of the report."""
-    import matplotlib
-
-    matplotlib.use("Agg")
     out = []
     for part in diag.parts:
         dom = part.problem.domain
         if dom == "profiles":
             out.append(("profiles: residual vs angle before/after, per channel and speed",
-                        _png(_profile_residual_figure(part))))
+                        png_data_uri(_profile_residual_figure(part))))
         else:
-            out.append(("mode tables: residual per mode before/after", _png(_modal_residual_figure(part))))
-        out.append((f"{dom}: ranked candidates (forest plot)", _png(_forest_figure(part))))
+            out.append(("mode tables: residual per mode before/after", png_data_uri(_modal_residual_figure(part))))
+        out.append((f"{dom}: ranked candidates (forest plot)", png_data_uri(_forest_figure(part))))
         if dom == "profiles":
-            out.append(("profiles: held-out predicted vs measured", _png(_profile_heldout_figure(part))))
+            out.append(("profiles: held-out predicted vs measured", png_data_uri(_profile_heldout_figure(part))))
         else:
-            out.append(("mode tables: held-out predicted vs measured", _png(_modal_heldout_figure(part))))
+            out.append(("mode tables: held-out predicted vs measured", png_data_uri(_modal_heldout_figure(part))))
     return out
 
 
@@ -225,29 +203,23 @@ def write_gap_report(diag, path: str | os.PathLike, *, overwrite: bool = False) 
 
     path = check_output_path(path, overwrite=overwrite)
     c = diag.content
-    rows = "".join(
-        f"<tr><td>{html.escape(x['effect'])}</td><td>{x['heldout_shrink_pct']}</td>"
-        f"<td>{x['heldout_shrink_interval_pct']}</td><td>{x['evidence'].get('delta_bic')}</td>"
-        f"<td>{html.escape(_params_text(x))}</td>"
-        f"<td>{'yes' if x.get('accepted') else html.escape('; '.join(x.get('rejected_because', [])))}</td></tr>"
-        for x in c["candidates"])
-    where = "".join(f"<li>{html.escape(w['region'])}: {100 * w['share']:.0f} %</li>" for w in c["where"])
-    figs = "".join(f"<h3>{html.escape(t)}</h3><img src='{src}'/>" for t, src in figures(diag))
+    rows = [[esc(x["effect"]), esc(x["heldout_shrink_pct"]), esc(x["heldout_shrink_interval_pct"]),
+             esc(x["evidence"].get("delta_bic")), esc(_params_text(x)),
+             "yes" if x.get("accepted") else esc("; ".join(x.get("rejected_because", [])))]
+            for x in c["candidates"]]
+    where = "".join(f"<li>{esc(w['region'])}: {100 * w['share']:.0f} %</li>" for w in c["where"])
     b = c["baseline"]
     rules = c["verdict"].get("rule", {})
-    rule_items = "".join(f"<li><b>{html.escape(k)}</b>: {html.escape(str(v))}</li>" for k, v in rules.items())
-    doc = f"""<!doctype html><html><head><meta charset="utf-8"><title>ringfit gap diagnosis</title>
-<style>body{{font-family:sans-serif;max-width:70em;margin:auto}}
-td,th{{border:1px solid #ccc;padding:2px 6px;font-size:90%}} img{{max-width:100%}}</style>
-</head><body><h1>Sim-to-real gap diagnosis</h1>
-<p><b>Verdict:</b> {html.escape(verdict_sentence(c))} <small>({html.escape(' + '.join(c['verdict']['effects']))})</small></p>
-<p>Data: {html.escape(', '.join(c['data']))}. Baseline {html.escape(b['model'])}: RMS {b['rms']}
-{html.escape(b['unit'])}, held-out {b['heldout_rms']} ({html.escape(str(b.get('heldout_method', '')))}); noise RMS
-{b.get('noise_rms')} — {html.escape(b.get('noise_method', ''))}. Held-out reduced χ² {b.get('reduced_chi2')}
-(effective dof {b.get('noise_dof')}); ideal shrink {b.get('ideal_shrink_pct')} %.</p>
-<h2>Where</h2><ul>{where}</ul>
-<h2>Which</h2><table><tr><th>effect</th><th>held-out shrink %</th><th>95 % interval</th><th>ΔBIC</th>
-<th>parameters [95 % interval]</th><th>accepted</th></tr>{rows}</table>
-<h2>Rules</h2><ul>{rule_items}</ul>
-{figs}</body></html>"""
-    return atomic_write_text(path, doc)
+    rule_items = "".join(f"<li><b>{esc(k)}</b>: {esc(v)}</li>" for k, v in rules.items())
+    summary = (
+        f"<p><b>Verdict:</b> {esc(verdict_sentence(c))} <small>({esc(' + '.join(c['verdict']['effects']))})</small></p>"
+        f"<p>Data: {esc(', '.join(c['data']))}. Baseline {esc(b['model'])}: RMS {b['rms']} {esc(b['unit'])}, "
+        f"held-out {b['heldout_rms']} ({esc(b.get('heldout_method', ''))}); noise RMS {b.get('noise_rms')} — "
+        f"{esc(b.get('noise_method', ''))}. Held-out reduced χ² {b.get('reduced_chi2')} (effective dof "
+        f"{b.get('noise_dof')}); ideal shrink {b.get('ideal_shrink_pct')} %.</p>")
+    sections = [("Verdict", summary), ("Where", f"<ul>{where}</ul>"),
+                ("Which", table_html(["effect", "held-out shrink %", "95 % interval", "ΔBIC",
+                                      "parameters [95 % interval]", "accepted"], rows)),
+                ("Rules", f"<ul>{rule_items}</ul>")]
+    sections += [(title, f'<figure><img src="{src}" alt="{esc(title)}"></figure>') for title, src in figures(diag)]
+    return atomic_write_text(path, html_document("Sim-to-real gap diagnosis", sections))
