@@ -102,7 +102,7 @@ def run_fit(args) -> int:
     enable_compilation_cache()
     from ringfit.cli import CommandFailed
     from ringfit.fit.identifiability import identifiability
-    from ringfit.fit.least_squares import fit_natural_frequencies
+    from ringfit.fit.least_squares import fit_natural_frequencies, fitted_ring
     from ringfit.io.files import check_output_path
     from ringfit.io.tyre import write_tyre
 
@@ -116,16 +116,10 @@ def run_fit(args) -> int:
         raise CommandFailed(f"fit did not converge ({result.status}); nothing written. "
                             + ("Try --prior physical or fix EI." if args.prior == "none" else
                                "Try --max-steps or fewer free parameters."))
-    write_tyre(tyre.with_ring(_ring(result), names=list(tyre.ring_values) + list(free)), args.out,
+    write_tyre(tyre.with_ring(fitted_ring(result), names=list(tyre.ring_values) + list(free)), args.out,
                overwrite=args.force)
     print(f"wrote {args.out}")
     return 0
-
-
-def _ring(result):
-    from ringfit.fit.least_squares import fitted_ring
-
-    return fitted_ring(result)
 
 
 def run_sample(args) -> int:
