@@ -1,14 +1,28 @@
 """Covariance SSI: ringfit vs pyOMA2 on the SAME data, decimation, block rows and orders (issue 3, item 11).
 
 Prints, per case, wall-clock and CPU time (best of ``--repeats`` runs of each
-tool after one untimed warm-up run, in its own fresh worker process with ONE
-BLAS thread: OMP/OPENBLAS/MKL_NUM_THREADS=1 set before numpy is imported;
-a second round of ringfit after pyOMA2, and of pyOMA2 where it takes < 20 s), the time ratio, peak memory
-(tracemalloc peak of one more run; numpy reports its buffers to tracemalloc),
-whether both find the same modes, ringfit's time per stage, and then how
-ringfit's cost grows with channels, block rows and model orders. The load
-average of the machine is printed before and after: on a shared machine the
-CPU-time ratio is the steadier figure (wall time also counts waiting for a core).
+tool after one untimed warm-up run, each configuration in its own fresh
+worker process with OMP/OPENBLAS/MKL_NUM_THREADS set before numpy is
+imported; a second round of every configuration after the first, pyOMA2's
+where it takes < 20 s), the time ratios, peak memory (tracemalloc peak of one
+more run; numpy reports its buffers to tracemalloc), whether both find the
+same modes, ringfit's wall time per stage, and then how ringfit's cost grows
+with channels, block rows and model orders.
+
+Four configurations, three ratios:
+
+- ringfit ``x1``: one core — ``workers=1`` and one BLAS thread;
+- ringfit ``default``: its default threads (one per usable CPU, ≤ 8: the
+  order sweep's LAPACK calls and the SVD's block products run in parallel),
+  one BLAS thread each;
+- pyOMA2 ``x1``: one BLAS thread (the setting the issue measured pyOMA2 in);
+- pyOMA2 ``all``: as many BLAS threads as cores (its only parallelism).
+
+"one core" = pyOMA2 x1 / ringfit x1 (same resources); "issue's setting" =
+pyOMA2 x1 / ringfit default; "whole machine" = pyOMA2 all / ringfit default
+(each tool with every core it can use). The load average is printed before
+and after each case: this is a shared virtual machine and wall times move by
+±20 % between runs.
 
 Cases (3.2 kHz after decimation from 25.6 kHz, 30 block rows, orders 2–160
 step 2, synthetic free ring n = 1…20 with double poles + cavity mode):
@@ -26,7 +40,8 @@ mode shapes) of every model order 2, 4, …, 160, and stabilization labels
 from frequency, damping and shape criteria (pyOMA2: ``SSI.run()`` with method
 ``cov``: full SVD, ``SSI_fast``, ``SSI_poles``, MPC/MPD hard criteria and
 ``SC_apply``; ringfit: ``ssi_cov`` (covariances by blocked FFT, randomized
-rank-160 SVD, one ``dgeev`` per order) + ``stabilization_diagram``).
+rank-160 SVD, per order one Hessenberg–Schur reduction carrying only the
+output rows, :mod:`ringfit.targets.eigen`) + ``stabilization_diagram``).
 Clustering into modes is timed separately (pyOMA2 has no automatic
 clustering in ``SSI.run``). "Same modes": for each mode of the synthetic
 truth in 20–700 Hz, both tools have stable poles within 0.5 % at ≥ 15 % of
@@ -44,8 +59,9 @@ from __future__ import annotations
 
 import os
 
+_BLAS_THREADS = os.environ.get("BENCH_SSI_BLAS_THREADS", "1")  # set per worker by the parent
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_v] = "1"
+    os.environ[_v] = _BLAS_THREADS
 
 import argparse  # noqa: E402
 import json  # noqa: E402
@@ -93,7 +109,7 @@ def make_case(case: str, path: Path) -> None:
 
 
 def worker(tool: str, data: Path, out: Path, block_rows: int, ordmax: int, channels: int, repeats: int,
-           stages: bool) -> None:
+           stages: bool, workers: int | None) -> None:
     os.environ["TQDM_DISABLE"] = "1"
     import logging
     import tracemalloc
@@ -113,7 +129,7 @@ def worker(tool: str, data: Path, out: Path, block_rows: int, ordmax: int, chann
 
     def run():
         if tool == "ringfit":
-            poles = ssi.ssi_cov(y, fs, orders=orders, block_rows=block_rows)
+            poles = ssi.ssi_cov(y, fs, orders=orders, block_rows=block_rows, workers=workers)
             return poles, stabilization_diagram(poles)
         setup = SingleSetup(y.T, fs=fs)
         alg = SSI(name="ssicov", method="cov", br=block_rows, ordmax=ordmax, step=STEP)
@@ -134,21 +150,22 @@ def worker(tool: str, data: Path, out: Path, block_rows: int, ordmax: int, chann
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     stage_s = {}
-    if tool == "ringfit" and stages:  # the same pipeline, step by step (CPU seconds, best of `repeats`)
+    if tool == "ringfit" and stages:  # the same pipeline, step by step (wall seconds, best of `repeats`)
+        w = ssi.default_workers() if workers is None else workers
         for _ in range(repeats):
             t = {}
-            c = time.process_time()
+            c = time.perf_counter()
             cov = ssi.output_covariances(y, 2 * block_rows - 1)
-            t["covariances"] = time.process_time() - c
-            c = time.process_time()
-            u, sv = ssi.truncated_svd(ssi.hankel_for_svd(cov, block_rows), ordmax)
-            t["Hankel + SVD"] = time.process_time() - c
-            c = time.process_time()
-            poles = ssi.poles_from_svd(u, sv, y.shape[0], orders, 1 / fs)
-            t["poles + shapes"] = time.process_time() - c
-            c = time.process_time()
+            t["covariances"] = time.perf_counter() - c
+            c = time.perf_counter()
+            u, sv = ssi.truncated_svd(ssi.hankel_for_svd(cov, block_rows), ordmax, workers=w)
+            t["Hankel + SVD"] = time.perf_counter() - c
+            c = time.perf_counter()
+            poles = ssi.poles_from_svd(u, sv, y.shape[0], orders, 1 / fs, workers=w)
+            t["poles + shapes"] = time.perf_counter() - c
+            c = time.perf_counter()
             stabilization_diagram(poles)
-            t["stabilization"] = time.process_time() - c
+            t["stabilization"] = time.perf_counter() - c
             stage_s = {k: min(v, stage_s.get(k, np.inf)) for k, v in t.items()}
     if tool == "ringfit":
         poles = first
@@ -169,13 +186,17 @@ def worker(tool: str, data: Path, out: Path, block_rows: int, ordmax: int, chann
                "stable_o": stable_o.tolist()}, open(out, "w"))
 
 
-def run_worker(tool, data, block_rows=BLOCK_ROWS, ordmax=ORDMAX, channels=10**6, repeats=3, stages=False):
+def run_worker(tool, data, block_rows=BLOCK_ROWS, ordmax=ORDMAX, channels=10**6, repeats=3, stages=False,
+               workers=None, blas_threads=1):
+    """One tool in a fresh process. ``workers``: ringfit's threads (None = its default); ``blas_threads``: BLAS pool."""
     with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as fh:
         out = Path(fh.name)
     cmd = [sys.executable, __file__, "--worker", tool, "--data", str(data), "--out", str(out),
            "--block-rows", str(block_rows), "--ordmax", str(ordmax), "--channels", str(channels),
-           "--repeats", str(repeats)] + (["--stages"] if stages else [])
-    subprocess.run(cmd, check=True, env=dict(os.environ), cwd=ROOT)
+           "--repeats", str(repeats), "--workers", str(0 if workers is None else workers)]
+    cmd += ["--stages"] if stages else []
+    env = dict(os.environ, BENCH_SSI_BLAS_THREADS=str(blas_threads))
+    subprocess.run(cmd, check=True, env=env, cwd=ROOT)
     r = json.loads(out.read_text())
     out.unlink()
     return r
@@ -203,14 +224,19 @@ def main():
     ap.add_argument("--ordmax", type=int, default=ORDMAX)
     ap.add_argument("--channels", type=int, default=10**6)
     ap.add_argument("--stages", action="store_true")
+    ap.add_argument("--workers", type=int, default=0)
     args = ap.parse_args()
     if args.worker:
         return worker(args.worker, Path(args.data), Path(args.out), args.block_rows, args.ordmax, args.channels,
-                      args.repeats, args.stages)
+                      args.repeats, args.stages, args.workers or None)
     tmp = Path(tempfile.mkdtemp(prefix="bench_ssi_"))
     n_orders = ORDMAX // STEP
-    print(f"one BLAS thread; {FS:.0f} Hz after decimation; {BLOCK_ROWS} block rows; orders {STEP}-{ORDMAX} step {STEP}; "
-          f"best of {args.repeats} runs per tool")
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    print(f"{FS:.0f} Hz after decimation; {BLOCK_ROWS} block rows; orders {STEP}-{ORDMAX} step {STEP}; "
+          f"best of {args.repeats} runs per tool; {cores} cores")
+    print("configurations: ringfit x1 = one core (workers=1, one BLAS thread); ringfit default = its default "
+          f"threads ({min(8, cores)} workers, one BLAS thread each); pyOMA2 x1 = one BLAS thread (the issue's "
+          f"setting); pyOMA2 all = {cores} BLAS threads")
     print(load())
     summary = []
     for case in args.cases.split(","):
@@ -220,52 +246,67 @@ def main():
         truth = d["truth"]
         print(f"\n== case ({case}): {d['y'].shape[0]} channels x {d['y'].shape[1] / d['fs']:.1f} s "
               f"({d['y'].shape[1]} samples), {truth.size} true modes in {BAND[0]:.0f}-{BAND[1]:.0f} Hz")
-        rf = run_worker("ringfit", data, repeats=max(args.repeats, 5), stages=True)
-        print(f"ringfit : wall {rf['wall_s']:7.3f} s  cpu {rf['cpu_s']:7.3f} s  peak +{rf['peak_mb']:7.1f} MB  "
-              f"(+ clustering {rf['cluster_s']:.2f} s, {len(rf['modes'])} modes)")
-        print("  stages (cpu s): " + ", ".join(f"{k} {v:.3f}" for k, v in rf["stages"].items()))
-        rf_hits = {f0: found(rf["stable_f"], rf["stable_o"], f0, n_orders) for f0 in truth}
+        reps = max(args.repeats, 5)
+        rf = {"x1": run_worker("ringfit", data, repeats=reps, stages=True, workers=1),
+              "default": run_worker("ringfit", data, repeats=reps, stages=True)}
+        for key, r in rf.items():
+            print(f"ringfit {key:<7}: wall {r['wall_s']:7.3f} s  cpu {r['cpu_s']:7.3f} s  peak +{r['peak_mb']:7.1f} MB  "
+                  f"(+ clustering {r['cluster_s']:.2f} s, {len(r['modes'])} modes)")
+            print("  stages (wall s): " + ", ".join(f"{k} {v:.3f}" for k, v in r["stages"].items()))
+        rf_hits = {f0: found(rf["x1"]["stable_f"], rf["x1"]["stable_o"], f0, n_orders) for f0 in truth}
         print(f"ringfit finds {sum(v is not None for v in rf_hits.values())}/{truth.size} true modes "
               f"(stable poles within 0.5 % at >= 15 % of orders)")
         if args.no_pyoma:
             continue
-        py = run_worker("pyoma2", data, repeats=args.repeats)
-        # a second round, interleaved (ringfit always, pyOMA2 where it is quick): best of both rounds per tool
-        rounds = [(rf, run_worker("ringfit", data, repeats=max(args.repeats, 5)))]
-        if py["wall_s"] < 20.0:
-            rounds.append((py, run_worker("pyoma2", data, repeats=args.repeats)))
-        for a, b in rounds:
-            a["wall_s"], a["cpu_s"] = min(a["wall_s"], b["wall_s"]), min(a["cpu_s"], b["cpu_s"])
-        print(f"ringfit : best of two rounds: wall {rf['wall_s']:7.3f} s  cpu {rf['cpu_s']:7.3f} s")
-        py_hits = {f0: found(py["stable_f"], py["stable_o"], f0, n_orders) for f0 in truth}
+        py = {"x1": run_worker("pyoma2", data, repeats=args.repeats),
+              "all": run_worker("pyoma2", data, repeats=args.repeats, blas_threads=cores)}
+        # a second round, interleaved (ringfit always, pyOMA2 where it is quick): best of both rounds per run
+        for key, w in (("x1", 1), ("default", None)):
+            again = run_worker("ringfit", data, repeats=reps, workers=w)
+            rf[key]["wall_s"], rf[key]["cpu_s"] = min(rf[key]["wall_s"], again["wall_s"]), min(rf[key]["cpu_s"], again["cpu_s"])
+        for key, bt in (("x1", 1), ("all", cores)):
+            if py[key]["wall_s"] < 20.0:
+                again = run_worker("pyoma2", data, repeats=args.repeats, blas_threads=bt)
+                py[key]["wall_s"], py[key]["cpu_s"] = (min(py[key]["wall_s"], again["wall_s"]),
+                                                       min(py[key]["cpu_s"], again["cpu_s"]))
+        for key, r in rf.items():
+            print(f"ringfit {key:<7}: best of two rounds: wall {r['wall_s']:7.3f} s  cpu {r['cpu_s']:7.3f} s")
+        for key, r in py.items():
+            print(f"pyOMA2  {key:<7}: wall {r['wall_s']:7.3f} s  cpu {r['cpu_s']:7.3f} s  peak +{r['peak_mb']:7.1f} MB")
+        py_hits = {f0: found(py["x1"]["stable_f"], py["x1"]["stable_o"], f0, n_orders) for f0 in truth}
         both = [f0 for f0 in truth if rf_hits[f0] is not None and py_hits[f0] is not None]
         agree = [f0 for f0 in both if abs(rf_hits[f0] - py_hits[f0]) <= 0.003 * f0]
-        print(f"pyOMA2  : wall {py['wall_s']:7.3f} s  cpu {py['cpu_s']:7.3f} s  peak +{py['peak_mb']:7.1f} MB")
         print(f"pyOMA2 finds {sum(v is not None for v in py_hits.values())}/{truth.size}; found by both: {len(both)}, "
               f"agreeing within 0.3 %: {len(agree)}")
         missing = [f"{f0:.1f}" for f0 in truth if (rf_hits[f0] is None) != (py_hits[f0] is None)]
         if missing:
             print("  found by only one tool: " + ", ".join(missing) + " Hz")
-        ratio_w, ratio_c = py["wall_s"] / rf["wall_s"], py["cpu_s"] / rf["cpu_s"]
-        ratio_m = py["peak_mb"] / max(rf["peak_mb"], 1e-3)
-        print(f"time ratio pyOMA2 / ringfit: wall {ratio_w:.1f}x, cpu {ratio_c:.1f}x; memory ratio {ratio_m:.1f}x")
-        summary.append((case, ratio_w, ratio_c, ratio_m, len(agree), truth.size))
+        ratios = {"one core (pyOMA2 x1 / ringfit x1)": (py["x1"], rf["x1"]),
+                  "issue's setting (pyOMA2 x1 / ringfit default)": (py["x1"], rf["default"]),
+                  "whole machine (pyOMA2 all / ringfit default)": (py["all"], rf["default"])}
+        for label, (a_, b_) in ratios.items():
+            print(f"time ratio, {label}: wall {a_['wall_s'] / b_['wall_s']:.1f}x, cpu {a_['cpu_s'] / b_['cpu_s']:.1f}x")
+        ratio_m = py["x1"]["peak_mb"] / max(rf["default"]["peak_mb"], 1e-3)
+        print(f"memory ratio (tracemalloc peak, pyOMA2 x1 / ringfit default): {ratio_m:.1f}x")
+        summary.append((case, [a_["wall_s"] / b_["wall_s"] for a_, b_ in ratios.values()], ratio_m, len(agree),
+                        truth.size))
         print(load())
     if summary:
-        print("\n== summary (pyOMA2 / ringfit)")
-        for case, rw, rc, rm, n_agree, n_truth in summary:
-            print(f"case ({case}): wall {rw:5.1f}x  cpu {rc:5.1f}x  memory {rm:5.1f}x  same modes {n_agree}/{n_truth}")
+        print("\n== summary: wall-time ratios pyOMA2 / ringfit (one core | issue's setting | whole machine)")
+        for case, rw, rm, n_agree, n_truth in summary:
+            print(f"case ({case}): {rw[0]:5.1f}x | {rw[1]:5.1f}x | {rw[2]:5.1f}x   memory {rm:5.1f}x  "
+                  f"same modes {n_agree}/{n_truth}")
     if args.no_growth:
         return
     data = tmp / "a.npz"
     if not data.exists():
         make_case("a", data)
-    print("\n== ringfit cost growth on case (a) data (4 s; cpu s, best of 3)")
+    print("\n== ringfit cost growth on case (a) data (4 s; default workers; wall s, best of 3)")
     base = run_worker("ringfit", data, repeats=3, stages=True)
 
     def row(label, r):
         st = ", ".join(f"{k} {v:.3f}" for k, v in r["stages"].items())
-        return f"{label}: {r['cpu_s']:6.3f} s  +{r['peak_mb']:6.1f} MB   ({st})"
+        return f"{label}: {r['wall_s']:6.3f} s  +{r['peak_mb']:6.1f} MB   ({st})"
 
     for ch in (32, 64, 128):
         r = base if ch == 128 else run_worker("ringfit", data, channels=ch, repeats=3, stages=True)

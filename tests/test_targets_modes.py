@@ -170,7 +170,7 @@ def test_cli_ssi_chain_feeds_the_fit(tmp_path, truth):
     write_records(rec, tmp_path / "t.records.npz")
     out = tmp_path / "t.modes.csv"
     assert main(["ssi", str(tmp_path / "t.records.npz"), "--out", str(out), "--orders", "2:160:2",
-                 "--block-rows", "30", "--plot", str(tmp_path / "stab.png"), "--no-progress"]) == 0
+                 "--block-rows", "30", "--workers", "2", "--plot", str(tmp_path / "stab.png"), "--no-progress"]) == 0
     assert (tmp_path / "stab.png").stat().st_size > 0
     table = read_mode_table(out)
     assert table.condition == {"state": "free", "frame": "fixed", "method": "ssi-cov"}

@@ -20,6 +20,16 @@ def _orders(text: str) -> range:
     return range(start, stop + 1, step)
 
 
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1; got {text!r}")
+    return value
+
+
 def _band(text: str) -> tuple[float, float]:
     try:
         lo, hi = (float(x) for x in text.split(":"))
@@ -54,6 +64,8 @@ def register(sub) -> None:
     p.add_argument("--block-rows", type=int, default=30, metavar="N", help="block rows p of the Hankel matrix (default 30)")
     p.add_argument("--skip", type=float, default=0.0127, help="seconds dropped after the impact (default 0.0127)")
     p.add_argument("--radius", type=float, default=None, help="tyre radius [m], for records without force")
+    p.add_argument("--workers", type=_positive_int, default=None, metavar="N",
+                   help="threads for the SVD and the order sweep (default: the CPUs this process may use, at most 8)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=run_ssi)
 
@@ -103,7 +115,7 @@ def run_ssi(args) -> int:
     records = read_records(args.records)
     result = ssi_modes(records, orders=args.orders, block_rows=args.block_rows, f_range=args.band,
                        skip_s=args.skip, threshold=args.threshold, delay_s=args.delay, radius_m=args.radius,
-                       progress=not args.no_progress and sys.stderr is not None)
+                       progress=not args.no_progress and sys.stderr is not None, workers=args.workers)
 
     def plot(res):
         from ringfit.report.targets_plots import plot_stabilization

@@ -166,18 +166,21 @@ def ssi_modes(
     pair_aware: bool = True,
     min_share: float = 0.3,
     progress: bool = False,
+    workers: int | None = None,
 ) -> ModeIdentification:
     """The source's SSI chain on impact records, with pair-aware stabilization and clustering.
 
     **Arguments:** ``orders`` model orders; ``block_rows`` p; ``f_range`` [Hz]
     band of interest (its top sets the decimation); the pre-processing
-    arguments of :func:`prepare_decays`; ``refs`` reference channels.
+    arguments of :func:`prepare_decays`; ``refs`` reference channels;
+    ``workers`` threads for the SVD products and the order sweep (default:
+    the usable CPUs, see :func:`ringfit.targets.ssi.default_workers`).
 
     **Returns:** :class:`ModeIdentification` (``table`` is the mode table).
     """
     y, angle, axis, fs = prepare_decays(records, f_max_hz=f_range[1], decimate_to=decimate_to, skip_s=skip_s,
                                         threshold=threshold, delay_s=delay_s, radius_m=radius_m)
-    poles = ssi_cov(y, fs, orders=orders, block_rows=block_rows, refs=refs, progress=progress)
+    poles = ssi_cov(y, fs, orders=orders, block_rows=block_rows, refs=refs, progress=progress, workers=workers)
     stab = stabilization_diagram(poles, pair_aware=pair_aware)
     modes = cluster_modes(poles, stab, f_range=f_range, min_share=min_share)
     table, modes = mode_table(modes, angle, axis, "ssi-cov", poles=poles)

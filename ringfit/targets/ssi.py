@@ -77,9 +77,11 @@ class PoleSet:
 #: Use blocked FFT correlation for the covariances when the record has at least this many lags' worth of samples.
 FFT_COV_MIN_RATIO = 8
 #: Use :class:`BlockHankelOperator` (FFT products) instead of a dense Hankel matrix from this many l·r on.
-FFT_HANKEL_MIN_LR = 4096
+FFT_HANKEL_MIN_LR = 1024
 #: Working-memory cap of the blocked FFT covariances [bytes] (blocks are processed in chunks below it).
 _FFT_COV_CHUNK_BYTES = 4 * 2**20
+#: Size of the spectra of one column chunk in :class:`BlockHankelOperator` products [bytes].
+_HANKEL_CHUNK_BYTES = 2**20
 
 
 def output_covariances(y: np.ndarray, max_lag: int, refs: np.ndarray | None = None) -> np.ndarray:
@@ -212,12 +214,22 @@ class BlockHankelOperator:
         return BlockHankelOperator(cov_t, self.q, self.p, _spec=self._spec.transpose(0, 2, 1))
 
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
-        """``H @ x`` for x of shape ``(q·r, k)``; returns ``(p·l, k)``."""
+        """``H @ x`` for x of shape ``(q·r, k)``; returns ``(p·l, k)``.
+
+        Columns go in chunks whose spectra stay under ``_HANKEL_CHUNK_BYTES``:
+        cache-sized temporaries, about half the time of one pass over 200
+        columns at 32 channels.
+        """
         x = np.asarray(x, dtype=np.float64)
         k = x.shape[1]
-        xf = np.fft.rfft(x.reshape(self.q, self.r, k)[::-1], n=self._m, axis=0)  # reversed blocks: a convolution
-        out = np.fft.irfft(np.matmul(self._spec, xf), n=self._m, axis=0)[self.q - 1:self.q - 1 + self.p]
-        return out.reshape(self.p * self.l, k)
+        out = np.empty((self.p * self.l, k))
+        step = max(8, _HANKEL_CHUNK_BYTES // (16 * self._spec.shape[0] * max(self.l, self.r)))
+        for a in range(0, k, step):
+            b = min(k, a + step)
+            xf = np.fft.rfft(x[:, a:b].reshape(self.q, self.r, b - a)[::-1], n=self._m, axis=0)  # reversed: convolution
+            conv = np.fft.irfft(np.matmul(self._spec, xf), n=self._m, axis=0)[self.q - 1:self.q - 1 + self.p]
+            out[:, a:b] = conv.reshape(self.p * self.l, b - a)
+        return out
 
     def toarray(self) -> np.ndarray:
         """The dense matrix (:func:`block_hankel`)."""
@@ -232,6 +244,7 @@ def truncated_svd(
     n_iter: int = 2,
     oversample: int | None = None,
     seed: int = 0,
+    workers: int = 1,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Leading ``rank`` left singular vectors and values of ``h``.
 
@@ -244,6 +257,8 @@ def truncated_svd(
       SVD of the small projected matrix), ``"svds"`` (ARPACK via
       ``scipy.sparse.linalg.svds``) or ``"full"`` (LAPACK ``gesdd``).
     - ``oversample``: extra random vectors (default ``max(20, rank // 4)``).
+    - ``workers``: threads for the randomized method's products ``H X``,
+      ``Hᵀ Z`` (column blocks, one BLAS thread each); 1 = BLAS's own threading.
 
     Accuracy: singular triplets above the noise floor of H come out to
     round-off (~1e-13 relative on the benchmark data); those inside a flat
@@ -269,13 +284,49 @@ def truncated_svd(
         raise ValueError(f"unknown SVD method {method!r}; expected randomized, svds or full")
     k = min(rank + (max(20, rank // 4) if oversample is None else int(oversample)), min(m, n))
     rng = np.random.default_rng(seed)
-    ht = h.T
-    basis = h @ rng.standard_normal((n, k))
-    for _ in range(int(n_iter)):  # power iterations, LU-normalised (same subspace as QR, ~4x cheaper)
-        basis = h @ _lu_normalise(ht @ _lu_normalise(basis))
-    qmat = scipy.linalg.qr(basis, mode="economic", check_finite=False, overwrite_a=True)[0]
-    ub, s, _ = scipy.linalg.svd((ht @ qmat).T, full_matrices=False, check_finite=False, overwrite_a=True)
+    with _ColumnBlocks(workers) as apply:
+        basis = apply(h, rng.standard_normal((n, k)))
+        for _ in range(int(n_iter)):  # power iterations, LU-normalised (same subspace as QR, ~4x cheaper)
+            basis = apply(h, _lu_normalise(apply(h.T, _lu_normalise(basis))))
+        qmat = scipy.linalg.qr(basis, mode="economic", check_finite=False, overwrite_a=True)[0]
+        # SVD of the k × n projection B = QᵀH through the R factor of Bᵀ = Q₂R (B = RᵀQ₂ᵀ: same U and s, and
+        # the k × k SVD of Rᵀ is half the work of gesdd on B, which would also form the unused right vectors)
+        r_b = scipy.linalg.qr(apply(h.T, qmat), mode="r", check_finite=False, overwrite_a=True)[0][:k]
+    ub, s, _ = scipy.linalg.svd(r_b.T, check_finite=False, overwrite_a=True)
     return (qmat @ ub[:, :rank]), s[:rank]
+
+
+class _ColumnBlocks:
+    """Context manager giving ``apply(op, x) = op @ x``, computed in ``workers`` threads over column blocks of x.
+
+    Inside, BLAS runs one thread per worker (no oversubscription); with one
+    worker it is the plain product and BLAS keeps its own threading.
+    """
+
+    def __init__(self, workers: int):
+        self.workers = max(1, int(workers))
+        self._pool = self._limits = None
+
+    def __enter__(self):
+        if self.workers > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._limits = small_matrix_threads()
+            self._limits.__enter__()
+            self._pool = ThreadPoolExecutor(max_workers=self.workers)
+        return self.apply
+
+    def __exit__(self, *exc):
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._limits.__exit__(*exc)
+
+    def apply(self, op, x: np.ndarray) -> np.ndarray:
+        if self._pool is None or x.shape[1] < 32 * self.workers:
+            return op @ x
+        edges = np.linspace(0, x.shape[1], self.workers + 1).astype(int)
+        parts = self._pool.map(lambda i: op @ x[:, edges[i]:edges[i + 1]], range(self.workers))
+        return np.concatenate(list(parts), axis=1)
 
 
 def _lu_normalise(a: np.ndarray) -> np.ndarray:
@@ -308,14 +359,18 @@ def poles_from_svd(
     *,
     max_damping: float = 0.3,
     progress: bool = False,
+    workers: int | None = None,
 ) -> PoleSet:
     """Poles and shapes of every model order from one SVD (seed eq. 10–15).
 
     One QR ``O↑ = Q R`` of the largest shifted observability matrix and one
     triangular solve give ``G = QᵀO↓R⁻¹`` and ``C R⁻¹``; order n is the
     eigen-decomposition of the leading block ``G_n`` (similar to
-    ``A_n = R_n⁻¹(QᵀO↓)_n``, see the module docstring), one LAPACK ``dgeev``
-    per order and no other per-order matrix work.
+    ``A_n = R_n⁻¹(QᵀO↓)_n``, see the module docstring): per order one
+    Hessenberg–Schur reduction with the rotations applied to the l rows of
+    ``C R⁻¹`` instead of an n × n basis, and eigenvectors of the kept poles
+    only (:func:`ringfit.targets.eigen.eig_shapes`; same poles and shapes as
+    ``dgeev``), the orders spread over ``workers`` threads.
 
     **Arguments:**
 
@@ -325,6 +380,8 @@ def poles_from_svd(
     - ``dt``: sample interval [s].
     - ``max_damping``: poles with ζ outside (0, max_damping) are dropped.
     - ``progress``: show a tqdm bar over the orders (stderr).
+    - ``workers``: threads for the order sweep (default :func:`default_workers`;
+      1 = serial). Results do not depend on it.
 
     **Returns:** :class:`PoleSet`.
     """
@@ -344,14 +401,19 @@ def poles_from_svd(
     # G = (QᵀO↓) R⁻¹ and C R⁻¹ in one triangular solve: Xᵀ = R⁻ᵀ [QᵀO↓; C]ᵀ
     rhs = np.concatenate([q.T @ obs[l:], obs[:l]], axis=0)
     sol = scipy.linalg.solve_triangular(r, rhs.T, trans="T", check_finite=False).T
-    g, c_r = np.asfortranarray(sol[:kmax]), sol[kmax:]
-    iterator = orders
+    g, c_r = np.asfortranarray(sol[:kmax]), np.asfortranarray(sol[kmax:])
+    workers = default_workers() if workers is None else max(1, int(workers))
+    bar = None
     if progress:
         from tqdm import tqdm
 
-        iterator = tqdm(orders, desc="SSI orders", unit="order", leave=False)
-    with small_matrix_threads():
-        out = _sweep(iterator, g, c_r, dt, max_damping)
+        bar = tqdm(total=orders.size, desc="SSI orders", unit="order", leave=False)
+    try:
+        with small_matrix_threads():
+            out = _sweep([int(o) for o in orders], g, c_r, dt, max_damping, workers, bar)
+    finally:
+        if bar is not None:
+            bar.close()
     if not out:
         empty = np.zeros(0)
         return PoleSet(empty.astype(np.int64), empty, empty, empty.astype(complex),
@@ -369,30 +431,58 @@ def poles_from_svd(
     )
 
 
-def _sweep(orders, g, c_r, dt, max_damping) -> list:
-    """Eigen-decomposition of each leading block ``G_n``; ``(order, λ_c, φ)`` of the kept poles per order."""
-    from scipy.linalg.lapack import dgeev
+def _sweep(orders, g, c_r, dt, max_damping, workers: int, bar=None) -> list:
+    """Eigenvalues of each leading block ``G_n`` and shapes of its kept poles; ``(order, λ_c, φ)`` per order.
 
-    out = []
-    for n in orders:
-        wr, wi, _, vr, info = dgeev(g[:n, :n], compute_vl=0, compute_vr=1)
-        if info != 0:
-            raise InputError(f"eigen-decomposition of model order {n} did not converge (LAPACK info {info})")
-        up = np.flatnonzero(wi > 0)  # first of each complex pair: vectors vr[:, j] ± i vr[:, j+1]
-        if up.size == 0:
-            continue
-        mu = wr[up] + 1j * wi[up]
-        lam = np.log(mu) / dt
+    Orders run in ``workers`` threads (largest first, for balance): the LAPACK
+    calls of :func:`ringfit.targets.eigen.eig_shapes` release the GIL.
+    """
+    from ringfit.targets.eigen import eig_shapes
+
+    def keep(wr, wi):
+        up = np.flatnonzero(wi > 0)  # first of each complex pair
+        lam = np.log(wr[up] + 1j * wi[up]) / dt
         zeta = -lam.real / np.abs(lam)
-        ok = (zeta > 0) & (zeta < max_damping)
-        if not ok.any():
-            continue
-        j = up[ok]
-        re_im = c_r[:, :n] @ vr[:, np.concatenate([j, j + 1])]  # C R⁻¹ (Re x, Im x) in one product
-        phi = re_im[:, : j.size] + 1j * re_im[:, j.size:]
-        phi /= np.linalg.norm(phi, axis=0, keepdims=True)
-        out.append((np.full(j.size, n), lam[ok], phi.T))
-    return out
+        return up[(zeta > 0) & (zeta < max_damping)]
+
+    def one(n):
+        try:
+            wr, wi, j, phi = eig_shapes(g[:n, :n], c_r[:, :n], keep)
+        except np.linalg.LinAlgError as exc:
+            raise InputError(f"eigen-decomposition of model order {n} did not converge ({exc})") from None
+        if j.size == 0:
+            return None
+        lam = np.log(wr[j] + 1j * wi[j]) / dt
+        phi = phi / np.linalg.norm(phi, axis=0, keepdims=True)
+        return np.full(j.size, n), lam, phi.T
+
+    results = {}
+    if workers <= 1:
+        for n in orders:
+            results[n] = one(n)
+            if bar is not None:
+                bar.update()
+    else:
+        from concurrent.futures import ThreadPoolExecutor, as_completed
+
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(one, n): n for n in sorted(orders, reverse=True)}
+            for fut in as_completed(futures):
+                results[futures[fut]] = fut.result()
+                if bar is not None:
+                    bar.update()
+    return [results[n] for n in orders if results[n] is not None]
+
+
+def default_workers() -> int:
+    """Default ``workers`` of :func:`ssi_cov`: the CPUs this process may use (affinity mask), at most 8."""
+    import os
+
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        cpus = os.cpu_count() or 1
+    return max(1, min(8, cpus))
 
 
 def default_block_rows(max_order: int, n_channels: int, n_refs: int) -> int:
@@ -412,6 +502,7 @@ def ssi_cov(
     svd_method: str = "randomized",
     max_damping: float = 0.3,
     progress: bool = False,
+    workers: int | None = None,
 ) -> PoleSet:
     """Covariance-driven SSI (SSI-cov/ref) over a sweep of model orders (seed §2.4).
 
@@ -423,6 +514,9 @@ def ssi_cov(
     - ``block_rows``: p (= q block columns); default :func:`default_block_rows`.
     - ``refs``: reference channel indices (SSI-cov/ref); default all channels.
     - ``svd_method``: see :func:`truncated_svd`.
+    - ``workers``: threads for the SVD's products and the order sweep
+      (default :func:`default_workers`; 1 = serial). Results do not depend on it
+      beyond round-off in the SVD.
 
     **Returns:** :class:`PoleSet`.
     """
@@ -437,17 +531,20 @@ def ssi_cov(
     p = default_block_rows(max(orders), l, r) if block_rows is None else int(block_rows)
     cov = output_covariances(y, 2 * p - 1, refs)
     h = hankel_for_svd(cov, p)
-    u, s = truncated_svd(h, max(orders), method=svd_method)
-    return poles_from_svd(u, s, l, orders, 1.0 / fs_hz, max_damping=max_damping, progress=progress)
+    workers = default_workers() if workers is None else max(1, int(workers))
+    u, s = truncated_svd(h, max(orders), method=svd_method, workers=workers)
+    return poles_from_svd(u, s, l, orders, 1.0 / fs_hz, max_damping=max_damping, progress=progress, workers=workers)
 
 
 def hankel_for_svd(cov: np.ndarray, block_rows: int):
     """The block Hankel matrix in the cheaper form for :func:`truncated_svd`.
 
     :class:`BlockHankelOperator` (FFT products, H never formed) when
-    l·r ≥ ``FFT_HANKEL_MIN_LR``, where it is ~2× cheaper per product and
+    l·r ≥ ``FFT_HANKEL_MIN_LR`` (one BLAS thread, 200 columns, p = 30: equal
+    cost at 32 × 32 channels, 2.7× cheaper at 64 × 64, 3.6× at 128 × 128) and
     p·q·l·r numbers of memory are saved; the dense :func:`block_hankel` for
-    fewer channels, where one real GEMM beats many small complex ones.
+    fewer channels, where one real GEMM beats many small complex ones
+    (16 × 16: dense 1.7× cheaper).
     """
     _, l, r = cov.shape
     if l * r >= FFT_HANKEL_MIN_LR:
@@ -508,8 +605,11 @@ def ssi_cov_multi_setup(
     svd_method: str = "randomized",
     max_damping: float = 0.3,
     progress: bool = False,
+    workers: int | None = None,
 ) -> tuple[PoleSet, list[tuple[int, int]]]:
     """SSI-cov/ref over several setups sharing references (see :func:`multi_setup_hankel`).
+
+    Other arguments as in :func:`ssi_cov`.
 
     **Returns:** ``(poles, channel_map)``; the shapes of ``poles`` follow ``channel_map``.
     """
@@ -518,6 +618,8 @@ def ssi_cov_multi_setup(
     l_total = r + sum(np.asarray(y).shape[0] - len(ri) for y, ri in zip(setups, ref_index))
     p = default_block_rows(max(orders), l_total, r) if block_rows is None else int(block_rows)
     h, channel_map = multi_setup_hankel(setups, ref_index, p)
-    u, s = truncated_svd(h, max(orders), method=svd_method)
-    poles = poles_from_svd(u, s, l_total, orders, 1.0 / fs_hz, max_damping=max_damping, progress=progress)
+    workers = default_workers() if workers is None else max(1, int(workers))
+    u, s = truncated_svd(h, max(orders), method=svd_method, workers=workers)
+    poles = poles_from_svd(u, s, l_total, orders, 1.0 / fs_hz, max_damping=max_damping, progress=progress,
+                           workers=workers)
     return poles, channel_map

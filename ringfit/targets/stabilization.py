@@ -44,7 +44,8 @@ class Stability:
     - ``freq``, ``damping``, ``shape``: the three criteria (bool).
     - ``plain_mac``: MAC with the nearest pole of the previous order.
     - ``pair_mac``: subspace MAC against the pair (see module docstring);
-      evaluated for frequency-stable poles, 0 for the others.
+      evaluated only where it can decide the label — frequency-stable poles
+      whose plain MAC is below the threshold — NaN elsewhere.
     - ``label``: 2 = square (frequency, damping and shape stable), 1 =
       circle (frequency and shape stable, damping not), 0 = not stable.
     - ``source_label``: the same without the shape check (the source's symbols).
@@ -96,9 +97,12 @@ def stabilization_diagram(
     **Arguments:** tolerances as in the module docstring; ``pair_aware=False``
     uses the plain MAC only (for comparison).
 
-    The pair MAC is evaluated for the frequency-stable poles only (the others
-    are unstable whatever their shape; their ``pair_mac`` is 0), in batched
-    eigen-decompositions over all orders (one per neighbour count).
+    The pair MAC is evaluated only where it can change the label: for
+    frequency-stable poles (the others are unstable whatever their shape)
+    whose plain MAC is below ``mac_tol`` (the others are shape stable
+    already); ``pair_mac`` is NaN elsewhere. On free decays that is ~10 % of
+    the frequency-stable poles. Batched eigen-decompositions over all orders
+    (one per neighbour count).
 
     **Returns:** :class:`Stability`.
     """
@@ -107,7 +111,7 @@ def stabilization_diagram(
     freq = np.zeros(m, bool)
     damp = np.zeros(m, bool)
     plain = np.zeros(m)
-    pair = np.zeros(m)
+    pair = np.full(m, np.nan)
     by_order = [poles.at_order(o) for o in poles.orders]
     tasks = []  # (poles, their neighbours (c, k), valid (c, k)) per order
     for j in range(1, len(poles.orders)):
@@ -120,13 +124,14 @@ def stabilization_diagram(
         freq[cur] = fs
         damp[cur] = np.abs(z[cur] - z[k]) <= damping_tol * z[k]
         plain[cur] = mac(phi[cur], phi[k])
-        if pair_aware and fs.any():
+        need = fs & (plain[cur] < mac_tol)
+        if pair_aware and need.any():
             hist = np.concatenate(by_order[max(0, j - history):j])
-            tasks.append(_neighbours(cur[fs], hist, f, pair_window))
+            tasks.append(_neighbours(cur[need], hist, f, pair_window))
     if tasks:
         pair_idx = np.concatenate([t[0] for t in tasks])
         pair[pair_idx] = _pair_mac(phi, tasks)
-    shape_ok = np.maximum(plain, pair) >= mac_tol if pair_aware else plain >= mac_tol
+    shape_ok = (plain >= mac_tol) | (pair >= mac_tol) if pair_aware else plain >= mac_tol
     label = np.where(freq & damp & shape_ok, 2, np.where(freq & shape_ok, 1, 0))
     source = np.where(freq & damp, 2, np.where(freq, 1, 0))
     return Stability(freq, damp, shape_ok, plain, pair, label, source)
