@@ -19,8 +19,9 @@ Four configurations, three ratios:
 - pyOMA2 ``all``: as many BLAS threads as cores (its only parallelism).
 
 "one core" = pyOMA2 x1 / ringfit x1 (same resources); "issue's setting" =
-pyOMA2 x1 / ringfit default; "whole machine" = pyOMA2 all / ringfit default
-(each tool with every core it can use). The load average is printed before
+pyOMA2 x1 / ringfit default; "whole machine" = the faster of pyOMA2 x1 and
+all / ringfit default (each tool as fast as it runs on this machine; more
+BLAS threads slow pyOMA2 down on the small cases). The load average is printed before
 and after each case: this is a shared virtual machine and wall times move by
 ±20 % between runs.
 
@@ -265,8 +266,8 @@ def main():
             again = run_worker("ringfit", data, repeats=reps, workers=w)
             rf[key]["wall_s"], rf[key]["cpu_s"] = min(rf[key]["wall_s"], again["wall_s"]), min(rf[key]["cpu_s"], again["cpu_s"])
         for key, bt in (("x1", 1), ("all", cores)):
-            if py[key]["wall_s"] < 20.0:
-                again = run_worker("pyoma2", data, repeats=args.repeats, blas_threads=bt)
+            if py[key]["wall_s"] < 20.0:  # quick: as many timed runs as ringfit gets
+                again = run_worker("pyoma2", data, repeats=reps, blas_threads=bt)
                 py[key]["wall_s"], py[key]["cpu_s"] = (min(py[key]["wall_s"], again["wall_s"]),
                                                        min(py[key]["cpu_s"], again["cpu_s"]))
         for key, r in rf.items():
@@ -283,7 +284,8 @@ def main():
             print("  found by only one tool: " + ", ".join(missing) + " Hz")
         ratios = {"one core (pyOMA2 x1 / ringfit x1)": (py["x1"], rf["x1"]),
                   "issue's setting (pyOMA2 x1 / ringfit default)": (py["x1"], rf["default"]),
-                  "whole machine (pyOMA2 all / ringfit default)": (py["all"], rf["default"])}
+                  "whole machine (pyOMA2 at its best / ringfit default)":
+                      (min(py.values(), key=lambda r: r["wall_s"]), rf["default"])}
         for label, (a_, b_) in ratios.items():
             print(f"time ratio, {label}: wall {a_['wall_s'] / b_['wall_s']:.1f}x, cpu {a_['cpu_s'] / b_['cpu_s']:.1f}x")
         ratio_m = py["x1"]["peak_mb"] / max(rf["default"]["peak_mb"], 1e-3)
