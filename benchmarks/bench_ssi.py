@@ -279,6 +279,9 @@ def main():
         agree = [f0 for f0 in both if abs(rf_hits[f0] - py_hits[f0]) <= 0.003 * f0]
         print(f"pyOMA2 finds {sum(v is not None for v in py_hits.values())}/{truth.size}; found by both: {len(both)}, "
               f"agreeing within 0.3 %: {len(agree)}")
+        for f0 in (f0 for f0 in both if f0 not in agree):
+            print(f"  apart by > 0.3 %: truth {f0:.2f} Hz, ringfit {rf_hits[f0]:.2f} ({100 * (rf_hits[f0] / f0 - 1):+.2f} %), "
+                  f"pyOMA2 {py_hits[f0]:.2f} ({100 * (py_hits[f0] / f0 - 1):+.2f} %)")
         missing = [f"{f0:.1f}" for f0 in truth if (rf_hits[f0] is None) != (py_hits[f0] is None)]
         if missing:
             print("  found by only one tool: " + ", ".join(missing) + " Hz")

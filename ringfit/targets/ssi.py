@@ -80,8 +80,8 @@ FFT_COV_MIN_RATIO = 8
 FFT_HANKEL_MIN_LR = 1024
 #: Working-memory cap of the blocked FFT covariances [bytes] (blocks are processed in chunks below it).
 _FFT_COV_CHUNK_BYTES = 4 * 2**20
-#: Size of the spectra of one column chunk in :class:`BlockHankelOperator` products [bytes].
-_HANKEL_CHUNK_BYTES = 2**20
+#: Columns per chunk in :class:`BlockHankelOperator` products (measured best at 32 and 128 channels alike).
+_HANKEL_CHUNK_COLS = 32
 
 
 def output_covariances(y: np.ndarray, max_lag: int, refs: np.ndarray | None = None) -> np.ndarray:
@@ -216,14 +216,14 @@ class BlockHankelOperator:
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
         """``H @ x`` for x of shape ``(q·r, k)``; returns ``(p·l, k)``.
 
-        Columns go in chunks whose spectra stay under ``_HANKEL_CHUNK_BYTES``:
-        cache-sized temporaries, about half the time of one pass over 200
-        columns at 32 channels.
+        Columns go in chunks of ``_HANKEL_CHUNK_COLS``: cache-sized
+        temporaries; one BLAS thread, 200 columns, p = 30: 4.3 ms instead of
+        7.5 ms at 32 channels, 28 ms instead of 36 ms (16-column chunks) at 128.
         """
         x = np.asarray(x, dtype=np.float64)
         k = x.shape[1]
         out = np.empty((self.p * self.l, k))
-        step = max(8, _HANKEL_CHUNK_BYTES // (16 * self._spec.shape[0] * max(self.l, self.r)))
+        step = _HANKEL_CHUNK_COLS
         for a in range(0, k, step):
             b = min(k, a + step)
             xf = np.fft.rfft(x[:, a:b].reshape(self.q, self.r, b - a)[::-1], n=self._m, axis=0)  # reversed: convolution
