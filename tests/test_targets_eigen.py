@@ -113,9 +113,9 @@ def test_a_qr_iteration_that_does_not_converge_falls_back_to_dgeev(monkeypatch):
     """dlahqr reporting non-convergence (info > 0) sends that matrix through dgeev: same eigenvalues and shapes."""
     real = eigen._lapack
 
-    def failing(name, nargs):
+    def failing(name):
         if name != "dlahqr":
-            return real(name, nargs)
+            return real(name)
 
         def dlahqr(*args):
             args[-1]._obj.value = 1  # INFO: eigenvalue 1 did not converge

@@ -39,8 +39,8 @@ _c_int = ctypes.c_int
 
 
 @functools.lru_cache(maxsize=None)
-def _lapack(name: str, nargs: int):
-    """The LAPACK routine ``name`` from ``scipy.linalg.cython_lapack`` as a ctypes function (all pointer arguments)."""
+def _lapack(name: str):
+    """The LAPACK routine ``name`` (one of ``_ROUTINES``) from ``scipy.linalg.cython_lapack`` as a ctypes function."""
     import scipy.linalg.cython_lapack as cython_lapack
 
     capsule = cython_lapack.__pyx_capi__[name]
@@ -49,20 +49,21 @@ def _lapack(name: str, nargs: int):
     get_pointer = ctypes.pythonapi.PyCapsule_GetPointer
     get_pointer.restype, get_pointer.argtypes = ctypes.c_void_p, [ctypes.py_object, ctypes.c_char_p]
     address = get_pointer(capsule, get_name(capsule))
-    return ctypes.CFUNCTYPE(None, *([ctypes.c_void_p] * nargs))(address)
+    return ctypes.CFUNCTYPE(None, *([ctypes.c_void_p] * _ROUTINES[name]))(address)  # all arguments are pointers
 
 
 @functools.lru_cache(maxsize=1)
 def direct_lapack_available() -> bool:
     """Whether the GIL-free path loads on this scipy (else :func:`eig_shapes` uses ``dgeev``)."""
     try:
-        for name, nargs in _ROUTINES.items():
-            _lapack(name, nargs)
+        for name in _ROUTINES:
+            _lapack(name)
     except Exception:  # pragma: no cover - depends on the scipy build
         return False
     return True
 
 
+#: The routines used, with their number of arguments.
 _ROUTINES = {"dgehrd": 9, "dormhr": 14, "dlahqr": 14, "dlaqr0": 16, "dtrevc": 14}
 #: Largest n for the double-shift QR ``dlahqr``; above it the multishift ``dlaqr0`` (aggressive early deflation).
 DLAHQR_MAX_N = 200
@@ -80,13 +81,13 @@ def _workspace(n: int, l: int) -> int:
     info = _c_int(0)
     p, q = dummy.ctypes.data, query.ctypes.data
     sizes = []
-    _lapack("dgehrd", 9)(_ref(n), _ref(1), _ref(n), p, _ref(n), p, q, _ref(-1), ctypes.byref(info))
+    _lapack("dgehrd")(_ref(n), _ref(1), _ref(n), p, _ref(n), p, q, _ref(-1), ctypes.byref(info))
     sizes.append(query[0])
-    _lapack("dormhr", 14)(b"R", b"N", _ref(l), _ref(n), _ref(1), _ref(n), p, _ref(n), p, p, _ref(max(l, 1)), q,
-                          _ref(-1), ctypes.byref(info))
+    _lapack("dormhr")(b"R", b"N", _ref(l), _ref(n), _ref(1), _ref(n), p, _ref(n), p, p, _ref(max(l, 1)), q,
+                      _ref(-1), ctypes.byref(info))
     sizes.append(query[0])
-    _lapack("dlaqr0", 16)(_ref(1), _ref(1), _ref(n), _ref(1), _ref(n), p, _ref(n), p, p, _ref(1), _ref(l), p,
-                          _ref(max(l, 1)), q, _ref(-1), ctypes.byref(info))
+    _lapack("dlaqr0")(_ref(1), _ref(1), _ref(n), _ref(1), _ref(n), p, _ref(n), p, p, _ref(1), _ref(l), p,
+                      _ref(max(l, 1)), q, _ref(-1), ctypes.byref(info))
     sizes.append(query[0])
     return int(max(max(sizes), 4 * n, 1))
 
@@ -121,20 +122,20 @@ def eig_shapes(
     info = _c_int(0)
     a = np.array(g, dtype=np.float64, order="F")
     tau = np.empty(n - 1)
-    _lapack("dgehrd", 9)(_ref(n), _ref(1), _ref(n), a.ctypes.data, _ref(n), tau.ctypes.data, work.ctypes.data,
-                         _ref(lwork), ctypes.byref(info))
+    _lapack("dgehrd")(_ref(n), _ref(1), _ref(n), a.ctypes.data, _ref(n), tau.ctypes.data, work.ctypes.data,
+                      _ref(lwork), ctypes.byref(info))
     cz = np.array(c, dtype=np.float64, order="F")
-    _lapack("dormhr", 14)(b"R", b"N", _ref(l), _ref(n), _ref(1), _ref(n), a.ctypes.data, _ref(n), tau.ctypes.data,
-                          cz.ctypes.data, _ref(l), work.ctypes.data, _ref(lwork), ctypes.byref(info))
+    _lapack("dormhr")(b"R", b"N", _ref(l), _ref(n), _ref(1), _ref(n), a.ctypes.data, _ref(n), tau.ctypes.data,
+                      cz.ctypes.data, _ref(l), work.ctypes.data, _ref(lwork), ctypes.byref(info))
     t = np.asfortranarray(np.triu(a, -1))  # H: the reflectors below the subdiagonal removed
     wr, wi = np.empty(n), np.empty(n)
     if n <= DLAHQR_MAX_N:
-        _lapack("dlahqr", 14)(_ref(1), _ref(1), _ref(n), _ref(1), _ref(n), t.ctypes.data, _ref(n), wr.ctypes.data,
-                              wi.ctypes.data, _ref(1), _ref(l), cz.ctypes.data, _ref(l), ctypes.byref(info))
+        _lapack("dlahqr")(_ref(1), _ref(1), _ref(n), _ref(1), _ref(n), t.ctypes.data, _ref(n), wr.ctypes.data,
+                          wi.ctypes.data, _ref(1), _ref(l), cz.ctypes.data, _ref(l), ctypes.byref(info))
     else:
-        _lapack("dlaqr0", 16)(_ref(1), _ref(1), _ref(n), _ref(1), _ref(n), t.ctypes.data, _ref(n), wr.ctypes.data,
-                              wi.ctypes.data, _ref(1), _ref(l), cz.ctypes.data, _ref(l), work.ctypes.data,
-                              _ref(lwork), ctypes.byref(info))
+        _lapack("dlaqr0")(_ref(1), _ref(1), _ref(n), _ref(1), _ref(n), t.ctypes.data, _ref(n), wr.ctypes.data,
+                          wi.ctypes.data, _ref(1), _ref(l), cz.ctypes.data, _ref(l), work.ctypes.data,
+                          _ref(lwork), ctypes.byref(info))
     if info.value != 0:  # rare: QR iteration did not converge; dgeev (balancing, dlahqr fallback) may
         return _eig_shapes_dgeev(g, c, choose)
     j = np.sort(np.asarray(choose(wr, wi), dtype=np.int64))
@@ -145,8 +146,8 @@ def eig_shapes(
     mm = 2 * j.size
     y = np.empty((n, mm), order="F")
     m = _c_int(0)
-    _lapack("dtrevc", 14)(b"R", b"S", select.ctypes.data, _ref(n), t.ctypes.data, _ref(n), y.ctypes.data, _ref(n),
-                          y.ctypes.data, _ref(n), _ref(mm), ctypes.byref(m), work.ctypes.data, ctypes.byref(info))
+    _lapack("dtrevc")(b"R", b"S", select.ctypes.data, _ref(n), t.ctypes.data, _ref(n), y.ctypes.data, _ref(n),
+                      y.ctypes.data, _ref(n), _ref(mm), ctypes.byref(m), work.ctypes.data, ctypes.byref(info))
     if info.value != 0 or m.value != mm:  # pragma: no cover - dtrevc has no failure mode for valid input
         return _eig_shapes_dgeev(g, c, choose)
     re_im = cz @ y  # columns (Re, Im) per chosen eigenvalue, in increasing j

@@ -159,7 +159,7 @@ def identify_rolling_modes(
     """
     from ringfit.io.modes import ModeTable
     from ringfit.targets.decimation import decimate, decimation_factor
-    from ringfit.targets.ssi import block_hankel, poles_from_svd, ssi_cov, truncated_svd
+    from ringfit.targets.ssi import block_hankel, poles_from_hankel, ssi_cov
     from ringfit.targets.stabilization import stabilization_diagram
 
     if method not in ("decay", "cov"):
@@ -187,8 +187,7 @@ def identify_rolling_modes(
         if qcols < max(orders):
             raise InputError(f"{n} samples are too few for model order {max(orders)} with {p} block rows")
         h = block_hankel(y.T[:, :, None], p, qcols)
-        u, s = truncated_svd(h, max(orders))
-        poles = poles_from_svd(u, s, l, orders, 1.0 / fs_d, progress=progress)
+        poles = poles_from_hankel(h, l, orders, 1.0 / fs_d, progress=progress)
     stability = stabilization_diagram(poles)
     m, ratio, phase = winding(poles.shape, ch_deg) if len(poles) else (np.zeros(0, int),) * 3
 

@@ -33,7 +33,9 @@ merges several setups (records) that share reference channels.
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import os
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -285,7 +287,7 @@ def truncated_svd(
         raise ValueError(f"unknown SVD method {method!r}; expected randomized, svds or full")
     k = min(rank + (max(20, rank // 4) if oversample is None else int(oversample)), min(m, n))
     rng = np.random.default_rng(seed)
-    with _ColumnBlocks(workers) as apply:
+    with _column_blocks(max(1, int(workers))) as apply:
         basis = apply(h, rng.standard_normal((n, k)))
         for _ in range(int(n_iter)):  # power iterations, LU-normalised (same subspace as QR, ~4x cheaper)
             basis = apply(h, _lu_normalise(apply(h.T, _lu_normalise(basis))))
@@ -297,37 +299,27 @@ def truncated_svd(
     return (qmat @ ub[:, :rank]), s[:rank]
 
 
-class _ColumnBlocks:
-    """Context manager giving ``apply(op, x) = op @ x``, computed in ``workers`` threads over column blocks of x.
+@contextlib.contextmanager
+def _column_blocks(workers: int):
+    """Context giving ``apply(op, x) = op @ x``, computed in ``workers`` threads over column blocks of x.
 
-    Inside, BLAS runs one thread per worker (no oversubscription); with one
-    worker it is the plain product and BLAS keeps its own threading.
+    With more than one worker BLAS runs one thread per worker (:func:`_own_threads`);
+    with one it is the plain product and BLAS keeps its own threading.
     """
+    if workers <= 1:
+        yield lambda op, x: op @ x
+        return
+    from concurrent.futures import ThreadPoolExecutor
 
-    def __init__(self, workers: int):
-        self.workers = max(1, int(workers))
-        self._pool = self._limits = None
+    with _own_threads(workers), ThreadPoolExecutor(max_workers=workers) as pool:
+        def apply(op, x):
+            if x.shape[1] < 32 * workers:
+                return op @ x
+            edges = np.linspace(0, x.shape[1], workers + 1).astype(int)
+            parts = pool.map(lambda i: op @ x[:, edges[i]:edges[i + 1]], range(workers))
+            return np.concatenate(list(parts), axis=1)
 
-    def __enter__(self):
-        if self.workers > 1:
-            from concurrent.futures import ThreadPoolExecutor
-
-            self._limits = small_matrix_threads()
-            self._limits.__enter__()
-            self._pool = ThreadPoolExecutor(max_workers=self.workers)
-        return self.apply
-
-    def __exit__(self, *exc):
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._limits.__exit__(*exc)
-
-    def apply(self, op, x: np.ndarray) -> np.ndarray:
-        if self._pool is None or x.shape[1] < 32 * self.workers:
-            return op @ x
-        edges = np.linspace(0, x.shape[1], self.workers + 1).astype(int)
-        parts = self._pool.map(lambda i: op @ x[:, edges[i]:edges[i + 1]], range(self.workers))
-        return np.concatenate(list(parts), axis=1)
+        yield apply
 
 
 def _lu_normalise(a: np.ndarray) -> np.ndarray:
@@ -405,7 +397,7 @@ def poles_from_svd(
     rhs = np.concatenate([q.T @ obs[l:], obs[:l]], axis=0)
     sol = scipy.linalg.solve_triangular(r, rhs.T, trans="T", check_finite=False).T
     g, c_r = np.asfortranarray(sol[:kmax]), np.asfortranarray(sol[kmax:])
-    workers = default_workers() if workers is None else max(1, int(workers))
+    workers = _workers(workers)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -442,9 +434,12 @@ def _sweep(orders, g, c_r, dt, max_damping, workers: int, bar=None) -> list:
     """
     from ringfit.targets.eigen import eig_shapes
 
+    def continuous(wr, wi):  # λ_c = ln(μ)/Δt (eq. 13)
+        return np.log(wr + 1j * wi) / dt
+
     def keep(wr, wi):
         up = np.flatnonzero(wi > 0)  # first of each complex pair
-        lam = np.log(wr[up] + 1j * wi[up]) / dt
+        lam = continuous(wr[up], wi[up])
         zeta = -lam.real / np.abs(lam)
         return up[(zeta > 0) & (zeta < max_damping)]
 
@@ -455,7 +450,7 @@ def _sweep(orders, g, c_r, dt, max_damping, workers: int, bar=None) -> list:
             raise InputError(f"eigen-decomposition of model order {n} did not converge ({exc})") from None
         if j.size == 0:
             return None
-        lam = np.log(wr[j] + 1j * wi[j]) / dt
+        lam = continuous(wr[j], wi[j])
         phi = phi / np.linalg.norm(phi, axis=0, keepdims=True)
         return np.full(j.size, n), lam, phi.T
 
@@ -479,8 +474,6 @@ def _sweep(orders, g, c_r, dt, max_damping, workers: int, bar=None) -> list:
 
 def default_workers() -> int:
     """Default ``workers`` of :func:`ssi_cov`: the CPUs this process may use (affinity mask), at most 8."""
-    import os
-
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:  # pragma: no cover - not on Linux
@@ -532,13 +525,41 @@ def ssi_cov(
     l = y.shape[0]
     r = l if refs is None else len(refs)
     p = default_block_rows(max(orders), l, r) if block_rows is None else int(block_rows)
-    workers = default_workers() if workers is None else max(1, int(workers))
+    workers = _workers(workers)
     with _own_threads(workers):
-        cov = output_covariances(y, 2 * p - 1, refs)
-        h = hankel_for_svd(cov, p)
+        h = hankel_for_svd(output_covariances(y, 2 * p - 1, refs), p)
+        return poles_from_hankel(h, l, orders, 1.0 / fs_hz, svd_method=svd_method, max_damping=max_damping,
+                                 progress=progress, workers=workers)
+
+
+def poles_from_hankel(
+    h,
+    n_channels: int,
+    orders: Sequence[int],
+    dt: float,
+    *,
+    svd_method: str = "randomized",
+    max_damping: float = 0.3,
+    progress: bool = False,
+    workers: int | None = None,
+) -> PoleSet:
+    """Steps 3–4 for any block Hankel matrix (or :class:`BlockHankelOperator`) with n_channels rows per block.
+
+    :func:`truncated_svd` of rank ``max(orders)`` and :func:`poles_from_svd`,
+    with one BLAS thread throughout when ``workers`` > 1 (:func:`_own_threads`).
+    Used by :func:`ssi_cov`, :func:`ssi_cov_multi_setup` and the data-driven
+    SSI of :mod:`ringfit.targets.rolling_modes`.
+    """
+    workers = _workers(workers)
+    with _own_threads(workers):
         u, s = truncated_svd(h, max(orders), method=svd_method, workers=workers)
-        return poles_from_svd(u, s, l, orders, 1.0 / fs_hz, max_damping=max_damping, progress=progress,
+        return poles_from_svd(u, s, n_channels, orders, dt, max_damping=max_damping, progress=progress,
                               workers=workers)
+
+
+def _workers(workers: int | None) -> int:
+    """``workers`` argument → thread count (None: :func:`default_workers`)."""
+    return default_workers() if workers is None else max(1, int(workers))
 
 
 def _own_threads(workers: int):
@@ -549,11 +570,7 @@ def _own_threads(workers: int):
     (measured: 32 channels × 4 s, 2 cores, 0.18 → 0.23 s). With one worker
     BLAS keeps its own threading.
     """
-    if workers > 1:
-        return small_matrix_threads()
-    import contextlib
-
-    return contextlib.nullcontext()
+    return small_matrix_threads() if workers > 1 else contextlib.nullcontext()
 
 
 def hankel_for_svd(cov: np.ndarray, block_rows: int):
@@ -637,10 +654,9 @@ def ssi_cov_multi_setup(
     r = len(ref_index[0])
     l_total = r + sum(np.asarray(y).shape[0] - len(ri) for y, ri in zip(setups, ref_index))
     p = default_block_rows(max(orders), l_total, r) if block_rows is None else int(block_rows)
-    workers = default_workers() if workers is None else max(1, int(workers))
+    workers = _workers(workers)
     with _own_threads(workers):
         h, channel_map = multi_setup_hankel(setups, ref_index, p)
-        u, s = truncated_svd(h, max(orders), method=svd_method, workers=workers)
-        poles = poles_from_svd(u, s, l_total, orders, 1.0 / fs_hz, max_damping=max_damping, progress=progress,
-                               workers=workers)
+        poles = poles_from_hankel(h, l_total, orders, 1.0 / fs_hz, svd_method=svd_method, max_damping=max_damping,
+                                  progress=progress, workers=workers)
     return poles, channel_map
