@@ -23,7 +23,7 @@ import optimistix as optx
 
 from ringfit.errors import InputError
 from ringfit.fit.priors import LogNormalPrior, prior_arrays, resolve_priors
-from ringfit.fit.result import FitResult, covariance_from_jacobian, parameter_flags, solver_status
+from ringfit.fit.result import FitResult, covariance_from_jacobian, parameter_flags, solver_flags, solver_status
 from ringfit.io.modes import ModeTable
 from ringfit.params import RING_PARAMETERS, RingParams, TyreGeometry
 from ringfit.physics.natural import natural_frequencies
@@ -212,10 +212,7 @@ def _result(free, free_index, base, geometry, data, priors, y, result, steps, ja
               for i, k in enumerate(free)}
     ring = RingParams(**values)
     model = np.asarray(natural_frequencies(ring, geometry, data.n))
-    flags = []
-    if status != "converged":
-        flags.append(f"solver did not converge ({status}): {message}")
-    flags += parameter_flags(free, values, stderr, data="these modes", priors=priors)
+    flags = solver_flags(status, message) + parameter_flags(free, values, stderr, data="these modes", priors=priors)
     if table.state != "free" or float(table.condition.get("speed_kmh", 0) or 0) > 0:
         flags.append(f"table state is {table.state!r} (speed {table.condition.get('speed_kmh', 0)} km/h); "
                      "the eq. 18 model assumes a static, free tyre")

@@ -140,6 +140,11 @@ def solver_status(result) -> tuple[str, str]:
     return "failed", optx.RESULTS[result]
 
 
+def solver_flags(status: str, message: str) -> list[str]:
+    """The report line for a solver that did not converge (none when it did)."""
+    return [] if status == "converged" else [f"solver did not converge ({status}): {message}"]
+
+
 def parameter_flags(names, values: dict, stderr: dict, *, data: str = "these data", priors=()) -> list[str]:
     """Warnings for fitted positive parameters: at the edge of the plausible range, or poorly determined.
 

@@ -37,7 +37,7 @@ import optimistix as optx
 from ringfit.errors import InputError
 from ringfit.fit.least_squares import RING_FIELDS, ring_from_log, ring_vector
 from ringfit.fit.priors import BOUNDS
-from ringfit.fit.result import FitResult, covariance_from_jacobian, parameter_flags, solver_status
+from ringfit.fit.result import FitResult, covariance_from_jacobian, parameter_flags, solver_flags, solver_status
 from ringfit.io.profiles import resample_profile
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced, solve_rolling, solve_rolling_jit
@@ -307,10 +307,7 @@ def _fit_result(free, ring_free, base, y, result, steps, res, jac, data, geometr
         stderr[name] = sd if name == ANGLE_OFFSET else values[name] * sd
     ring = RingParams(**{f: values[f] for f in RING_FIELDS})
     model = res.reshape(data.measured.shape) + data.measured
-    flags = []
-    if status != "converged":
-        flags.append(f"solver did not converge ({status}): {message}")
-    flags += parameter_flags(ring_free, values, stderr, data="these profiles")
+    flags = solver_flags(status, message) + parameter_flags(ring_free, values, stderr, data="these profiles")
     M = data.measured.shape[-1]
     return FitResult(
         status=status,
