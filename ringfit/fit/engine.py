@@ -241,20 +241,65 @@ def _dense(model, data, theta0, free, prior_w, prior_mean):
     return fn
 
 
-@functools.partial(jax.jit, static_argnames=("model", "treedef", "max_steps", "rtol", "atol"))
-def _solve(leaves, z0, theta0, free_arrays, prior_w, prior_mean, *, model, treedef, max_steps, rtol, atol):
+#: Consecutive rejected steps after which a solve that has accepted at least two steps is at a minimum
+#: to rounding: the trust region shrank by 4^STALL_STEPS without any decrease of the cost.
+STALL_STEPS = 4
+
+
+#: Diagonal of JᵀJ at the start in the solver's scaled variables (see :func:`_solve`).
+JTJ_DIAGONAL = 1e3
+#: Static cap on solver steps; the step limit of a call is traced (``least_squares(max_steps=…)``),
+#: so every limit shares one compiled solve.
+STEP_CAP = 100_000
+
+
+class _LevenbergMarquardt(optx.LevenbergMarquardt):
+    """optimistix Levenberg–Marquardt with a traced step limit and a stop when it stalls at a minimum.
+
+    - The step limit is ``args`` (a traced integer): reaching it without convergence
+      reports ``nonlinear_max_steps_reached``, as optimistix's own ``max_steps`` does.
+      A limit of 1 evaluates the residuals, Jacobian and aux at the start and stops
+      (:func:`evaluate`).
+    - Near the optimum of a model that is smooth only to rounding (the contact solve's
+      active set, float64 sums over thousands of rows) every further Gauss–Newton step
+      raises the cost by ~1e-12 relative; the trust region then shrinks until the step is
+      below the Cauchy tolerances, which can take twenty wasted linearisations. After at
+      least two accepted steps, :data:`STALL_STEPS` rejections in a row end the solve at
+      the last accepted point (reported as converged).
+    """
+
+    def terminate(self, fn, y, args, options, state, tags):
+        done, result = super().terminate(fn, y, args, options, state, tags)
+        stalled = (state.num_accepted_steps >= 2) & (state.num_steps_since_acceptance >= STALL_STEPS)
+        limit = (state.num_steps >= args) & ~(done | stalled)
+        result = optx.RESULTS.where(limit & (args > 1), optx.RESULTS.nonlinear_max_steps_reached, result)
+        return done | stalled | limit, result
+
+
+@functools.partial(jax.jit, static_argnames=("model", "treedef", "rtol", "atol"))
+def _solve(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, *, model, treedef, rtol, atol):
     """The whole fit in one compiled region; ``data`` arrives as flat leaves (fast dispatch)."""
     data = jax.tree.unflatten(treedef, leaves)
     free = _Free(*free_arrays)
     fn = _dense(model, data, theta0, free, prior_w, prior_mean)
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.SVD())
-    sol = optx.least_squares(lambda z, _: fn(z), solver, z0, has_aux=True, max_steps=max_steps, throw=False)
-    z = sol.value
+    # the solver works on s = d·z with d ∝ the Jacobian column norms at the start (Marquardt's scaling,
+    # scipy's x_scale="jac"): the damping then acts alike on every direction; the diagonal of JᵀJ in s
+    # is JTJ_DIAGONAL, so optimistix's initial damping λ = 1 starts near Gauss–Newton (λ/diag = 1e-3)
+    # (a one-step evaluation needs no scaling: skip that linearisation)
+    def column_norms(z):
+        return jnp.sqrt(jnp.sum(jax.jacfwd(lambda x: fn(x)[0])(z) ** 2, axis=0))
+
+    norms = jax.lax.cond(max_steps > 1, column_norms, jnp.ones_like, z0)
+    d = jnp.where(norms > 0, norms, 1.0) / jnp.sqrt(JTJ_DIAGONAL)
+    solver = _LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.SVD())
+    sol = optx.least_squares(lambda s, _: fn(s / d), solver, z0 * d, args=max_steps, has_aux=True,
+                             max_steps=STEP_CAP, throw=False)
+    z = sol.value / d
     # residuals, Jacobian and aux at the returned point from the solver's last accepted
     # linearisation: no further trace of the model
     info = sol.state.f_info
-    res, jac_z, aux = info.residual, info.jac.as_matrix(), sol.state.aux
-    jac_u = jac_z / free.du_dz(z)[None, :]
+    res, jac_s, aux = info.residual, info.jac.as_matrix(), sol.state.aux
+    jac_u = jac_s * d[None, :] / free.du_dz(z)[None, :]
     return free.u_of(z), sol.result._value, sol.stats["num_steps"], res, jac_u, aux
 
 
@@ -318,8 +363,10 @@ def least_squares(
     free_arrays = (np.array(index + [len(names)] * pad, dtype=np.int32), np.array([c.kind == LOG for c in slots]),
                    np.array([c.center for c in slots]), np.array([c.scale for c in slots]), bounded, mid, half)
     leaves, treedef = jax.tree.flatten(data)
-    out = _solve(leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean, model=model, treedef=treedef,
-                 max_steps=int(max_steps), rtol=float(rtol), atol=float(atol))
+    if not 1 <= int(max_steps) <= STEP_CAP:
+        raise InputError(f"max_steps = {max_steps}: expected 1 … {STEP_CAP}")
+    out = _solve(leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean, np.int64(max_steps), model=model,
+                 treedef=treedef, rtol=float(rtol), atol=float(atol))
     u_free, result, steps, res, jac, aux = out
     u_free, res, jac = np.asarray(u_free)[: len(free)], np.asarray(res), np.asarray(jac)[:, : len(free)]
     m = res.size - K
@@ -398,4 +445,17 @@ def sum_of_squares_batch(problem: Problem, thetas, chunk: int = 64) -> np.ndarra
     return np.concatenate(out)[:n]
 
 
-__all__ = ["least_squares", "sum_of_squares_batch", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]
+def evaluate(problem: Problem, theta, free: tuple[str, ...], **kwargs) -> FitResult:
+    """Residuals, Jacobian (w.r.t. the free parameters' solver coordinates) and aux at ``theta`` — no fit.
+
+    One step of :func:`least_squares`' compiled solve (the same executable: no extra
+    compilation); ``kwargs`` as there (``pad_to``, ``n_data``, ``rtol``, ``atol`` must
+    match the fits it should share a compilation with). ``status`` is ``"evaluated"``.
+    """
+    result = least_squares(problem, theta, free, max_steps=1, **kwargs)
+    result.status, result.message = "evaluated", "residuals and Jacobian at the given parameters (no fit)"
+    result.flags = []
+    return result
+
+
+__all__ = ["least_squares", "evaluate", "sum_of_squares_batch", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]

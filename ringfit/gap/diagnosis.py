@@ -31,7 +31,8 @@ import numpy as np
 from ringfit.gap import effects as effect_library
 from ringfit.gap.localisation import localise
 from ringfit.gap.problem import GapProblem
-from ringfit.gap.ranking import ChainFit, drift, fit_chain, heldout, prior_distance, rms, shrink_interval
+from ringfit.fit.result import FitResult
+from ringfit.gap.ranking import drift, fit_chain, heldout, prior_distance, rms, shrink_interval, theta_names
 from ringfit.gap.screening import SCREEN_MIN_SCORE, screen
 from ringfit.gap.verdict import RULES, acceptance, residual_test
 
@@ -41,11 +42,11 @@ class PartResult:
     """Everything computed for one kind of data (kept for the report)."""
 
     problem: GapProblem
-    baseline: ChainFit
-    reference: ChainFit
-    fits: dict = field(default_factory=dict)  # chain tuple -> ChainFit (with heldout_pred)
+    baseline: FitResult
+    reference: FitResult
+    fits: dict = field(default_factory=dict)  # chain tuple -> FitResult (extra: pred, heldout_pred)
     summary: dict = field(default_factory=dict)  # the JSON of this part
-    chain_fit: ChainFit | None = None
+    chain_fit: FitResult | None = None
 
 
 @dataclass
@@ -101,22 +102,22 @@ def read_diagnosis(path: str | os.PathLike) -> dict:
 
 
 # --------------------------------------------------------------------------- one part
-def _candidate_entry(problem: GapProblem, name: str, fit: ChainFit, current: ChainFit, current_ho: np.ndarray,
-                     reference: ChainFit, scores: dict, on_top_of: tuple, group: str | None = None) -> dict:
+def _candidate_entry(problem: GapProblem, name: str, fit: FitResult, current: FitResult, current_ho: np.ndarray,
+                     reference: FitResult, scores: dict, on_top_of: tuple, group: str | None = None) -> dict:
     y = problem.y
-    rb, rc = y - current.pred, y - fit.pred
-    hb, hc = y - current_ho, y - fit.heldout_pred
+    rb, rc = y - current.extra["pred"], y - fit.extra["pred"]
+    hb, hc = y - current_ho, y - fit.extra["heldout_pred"]
     rms_b, rms_c, hrms_b, hrms_c = rms(problem, rb), rms(problem, rc), rms(problem, hb), rms(problem, hc)
     lo, hi = shrink_interval(problem, hb, hc)
     m = problem.m
-    dk = fit.k - current.k
+    dk = len(fit.names) - len(current.names)
     dchi2 = fit.chi2 - current.chi2
     params = {}
     sl = problem.slices()[name]
     effect = next(e for e in problem.effects if e.name == name)
+    names = theta_names(problem)
     for p, i in zip(problem.effect_params(effect), range(sl.start, sl.stop)):
-        j = int(np.flatnonzero(fit.free == i)[0])
-        v, se = fit.theta[i], fit.se[j]
+        v, se = fit.theta[i], fit.stderr[names[i]]
         plo, phi = v - 1.959964 * se, v + 1.959964 * se
         params[p.name] = {"value": _r(v, 6), "lo": _r(max(plo, p.lo), 6), "hi": _r(min(phi, p.hi), 6),
                           "null": p.null, "unit": p.unit, "excludes_null": bool(abs(v - p.null) > 1.959964 * se)}
@@ -172,7 +173,7 @@ def _group_shrink(problem: GapProblem, group, hb: np.ndarray, hc: np.ndarray) ->
 
 def _screened_entry(problem, name, current, current_ho, scores, on_top_of, reason=None):
     y = problem.y
-    r, h = rms(problem, y - current.pred), rms(problem, y - current_ho)
+    r, h = rms(problem, y - current.extra["pred"]), rms(problem, y - current_ho)
     min_frac = float(problem.meta.get("screen_min_fraction", 0.0))
     reason = reason or (f"screen score < {SCREEN_MIN_SCORE} or alignment^2 < {min_frac:g}: "
                         "the residual does not look like this effect")
@@ -210,7 +211,7 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
     y = problem.y
     noise_rms = float(np.sqrt(np.mean((problem.sigma * problem.scale) ** 2)))
     hrms_b = rms(problem, y - base_ho)
-    loc = localise(problem, y - base.pred)
+    loc = localise(problem, y - base.extra["pred"])
 
     bar = _progress(problem, progress)
     current, current_ho, chain, rounds = base, base_ho, (), []
@@ -252,7 +253,7 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
         best = accepted[0]["effect"]
         chain = chain + (best,)
         current = part.fits[chain]
-        current_ho = current.heldout_pred
+        current_ho = current.extra["heldout_pred"]
         remaining.remove(best)
         cur = _structure(problem, current_ho)
         if not remaining or not cur["excess"]:
@@ -273,13 +274,13 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
                    "noise": problem.noise_method, "heldout": problem.fold_kind}}
     part.summary = {
         "data": problem.data_files,
-        "baseline": {"model": problem.baseline_model, "rms": _r(rms(problem, y - base.pred)),
+        "baseline": {"model": problem.baseline_model, "rms": _r(rms(problem, y - base.extra["pred"])),
                      "unit": problem.unit, "heldout_rms": _r(hrms_b), "noise_rms": _r(noise_rms),
                      "ideal_shrink_pct": _r(100.0 * (1.0 - noise_rms / hrms_b), 2) if hrms_b > 0 else 0.0,
                      "reduced_chi2": _r(test["reduced_chi2"], 3), "noise_p_value": test["p"],
                      "noise_dof": _r(test["dof"], 1), "worst_group": test["group"],
                      "excess": test["excess"], "structured": test["structured"],
-                     "reduced_chi2_in_sample": _r(float(np.mean(((y - base.pred) / problem.sigma) ** 2)), 3),
+                     "reduced_chi2_in_sample": _r(float(np.mean(((y - base.extra["pred"]) / problem.sigma) ** 2)), 3),
                      "remaining_reduced_chi2": _r(cur["reduced_chi2"], 3), "remaining_structured": cur["structured"],
                      "noise_method": problem.noise_method, "heldout_method": problem.fold_kind,
                      "parameters": {k: _r(v, 6) for k, v in zip(problem.base, base.theta)},
@@ -345,8 +346,7 @@ def _ring_from_free(modal_problem: GapProblem, tyre):
     ref = fit_chain(modal_problem, (), train=modal_problem.meta.get("reference_mask"))
     names = tuple(n for n in RING_BASE if n in modal_problem.base)
     idx = [modal_problem.base.index(n) for n in names]
-    dof = max(int(np.sum(ref.train)) - ref.k, 1)
-    cov = ref.cov_u[np.ix_(idx, idx)] * max(1.0, ref.chi2 / dof)
+    cov = ref.covariance_log[np.ix_(idx, idx)]  # inflated by max(1, χ²/dof) in the fit
     if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
         from ringfit.gap.profile import RING_PRIOR_SD_FALLBACK
 

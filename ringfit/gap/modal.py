@@ -31,6 +31,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.gap.effects.base import Effect
 from ringfit.gap.problem import GapProblem
+from ringfit.gap.ranking import predict
 from ringfit.io.modes import ModeTable
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.natural import cavity_frequency, natural_angular_frequencies
@@ -154,13 +155,22 @@ def build_rows(tables: list[ModeTable], geometry: TyreGeometry):
     return rows, np.asarray(y), np.asarray(user_sigma), meta
 
 
-@partial(jax.jit, static_argnames=("effects", "base", "sizes"))
-def modal_predict(theta, data: ModalData, *, effects: tuple, base: tuple, sizes: tuple):
-    """Prediction of every row: frequency [Hz] or damping ratio [-], shape ``(m,)``.
+class ModalPredictor(eqx.Module):
+    """Prediction of every (padded) row of a mode-table problem: frequency [Hz] or damping ratio [-].
 
-    ``theta`` = baseline parameters (``base`` names) then each effect's
-    parameters (``sizes`` of them each), natural units.
+    ``theta`` = baseline parameters (``base`` names) then each effect's parameters
+    (``sizes`` of them each), natural units.
     """
+
+    effects: tuple = eqx.field(static=True)
+    base: tuple = eqx.field(static=True)
+    sizes: tuple = eqx.field(static=True)
+
+    def __call__(self, theta, data):
+        return _modal(theta, data, self.effects, self.base, self.sizes)
+
+
+def _modal(theta, data: ModalData, effects: tuple, base: tuple, sizes: tuple):
     ring = data.ring.replace(**{k: theta[i] for i, k in enumerate(base)})
     rows = data.rows
     omega = natural_angular_frequencies(ring, data.geometry, rows.n)
@@ -172,17 +182,8 @@ def modal_predict(theta, data: ModalData, *, effects: tuple, base: tuple, sizes:
     return jnp.where(rows.is_freq > 0, omega / (2.0 * jnp.pi), zeta)
 
 
-@partial(jax.jit, static_argnames=("effects", "base", "sizes"))
-def modal_linearised(theta, data: ModalData, basis, *, effects: tuple, base: tuple, sizes: tuple):
-    """:func:`modal_predict` and its directional derivatives along the columns of ``basis`` ``(p, K)``, one pass.
-
-    **Returns:** ``(pred (m,), J (m, K))``.
-    """
-    f = lambda th: modal_predict(th, data, effects=effects, base=base, sizes=sizes)  # noqa: E731
-    pred, lin = jax.linearize(f, theta)
-    return pred, jax.vmap(lin, in_axes=1, out_axes=1)(basis)
-
-
+#: Effect parameters a chain frees at most besides the baseline (the refit's padded free-set size).
+MAX_CHAIN_PARAMETERS = 4
 #: Rows are padded to a multiple of this (dummy n = 2 rows, dropped from every output), so one
 #: compiled predictor serves mode tables of similar size.
 ROW_BUCKET = 32
@@ -249,16 +250,6 @@ def build_modal_problem(tables: list[ModeTable], geometry: TyreGeometry, ring: R
     m = len(y)
     n_theta = len(base) + sum(sizes)
     static = dict(effects=usable, base=base, sizes=sizes)
-    identity = jnp.eye(n_theta)
-
-    def predict(theta, data):
-        """Prediction of the real rows (padding dropped), NumPy ``(m,)``."""
-        return np.asarray(modal_predict(theta, data, **static))[:m]
-
-    def jacobian(theta, data, basis):
-        """``(pred (m,), J (m, K))``; the basis is ignored in favour of the full identity (p is small)."""
-        pred, J = modal_linearised(theta, data, identity, **static)
-        return np.asarray(pred)[:m], np.asarray(J)[:m] @ np.asarray(basis)
 
     # provisional σ: user's, else 0.5 % of f and 20 % of ζ0 — only to fit the reference baseline
     sigma = np.where(is_freq, 0.005 * y, 0.2 * damping0)
@@ -267,15 +258,17 @@ def build_modal_problem(tables: list[ModeTable], geometry: TyreGeometry, ring: R
         domain="modes", data_files=[], y=y, sigma=sigma, unit="Hz", scale=np.ones_like(y),
         folds=np.zeros(len(y), dtype=int), fold_kind="leave-modes-out", labels=meta, base=base,
         base_values=base_values, base_prior_sd=np.full(len(base), BASE_PRIOR_SD), effects=usable,
-        predict=predict, data=data, noise_method="", baseline_model="eq18-free",
-        not_applicable=dropped, meta={"reference_mask": free_rows, "block": 1, "tangents": n_theta},
-        jacobian=jacobian,
+        data=data, noise_method="", baseline_model="eq18-free",
+        not_applicable=dropped, meta={"reference_mask": free_rows, "block": 1,
+                                      "tangents": min(n_theta, len(base) + MAX_CHAIN_PARAMETERS),
+                                      "padded_rows": int(data.rows.n.shape[0])},
+        predictor=ModalPredictor(**static),
     )
     if fit_reference is not None:
         for _ in range(2):  # σ depends on the residual, the residual on σ (weights): two passes suffice
             theta = fit_reference(problem, free_rows)
             problem.base_values = theta[: len(base)]
-            resid = y - np.asarray(predict(jnp.asarray(problem.null_theta()), data))
+            resid = y - predict(problem, problem.null_theta())
             problem.sigma, problem.noise_method = _noise(resid, y, is_freq, user_sigma, meta, n, noise, damping0)
     # relative scale for the RMS figures: Hz rows as they are; damping rows in σ units × median Hz σ
     fs = float(np.median(problem.sigma[is_freq]))

@@ -3,18 +3,18 @@
 A :class:`GapProblem` holds the observations ``y`` (one row each), their
 noise level ``sigma``, the held-out folds, labels for localisation, the
 baseline parameters with their reference values (the baseline fit), and a
-jitted predictor of **every** applicable effect at once:
-``predict(theta, data) -> (m,)`` with ``theta = [baseline params, effect 1
+predictor of **every** applicable effect at once:
+``predictor(theta, data) -> (m,)`` with ``theta = [baseline params, effect 1
 params, effect 2 params, …]`` in natural units. A candidate chain frees the
 baseline and the chain's parameters and keeps every other effect at its null
-(where each effect gives back the baseline exactly), so one compiled
-function serves every candidate and every chain (:mod:`ringfit.gap.ranking`).
+(where each effect gives back the baseline exactly), so one compiled refit of
+the engine serves every candidate, chain and prediction (:mod:`ringfit.gap.ranking`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -40,16 +40,16 @@ class GapProblem:
       prior is correlated — e.g. the ring stiffnesses of the profile baseline, whose prior is
       the free-table fit's Laplace posterior.
     - ``effects``: the applicable effects, in the order of ``theta`` after the baseline.
-    - ``predict``: jitted ``(theta (p,), data) -> (m,)``; ``data``: its pytree argument.
+    - ``data``: the predictor's pytree argument.
     - ``noise_method``: how ``sigma`` was obtained (one line, goes into the JSON).
     - ``not_applicable``: effect name -> reason, for effects left out.
     - ``base_linear``: per baseline parameter, ``True`` for a nuisance fitted linearly
       (e.g. the profiles' angle offset [rad], which may be negative) instead of as a log;
       ``base_linear_scale`` its typical size and ``base_linear_bound`` its hard bound ±.
       ``None`` = every baseline parameter positive and log-fitted.
-    - ``jacobian``: optional jitted ``(theta, data, basis (p, K)) -> (pred (m,), J (m, K))``: the
-      prediction and its directional derivatives along the columns of ``basis`` in one
-      forward-mode pass (K fixed); ``None`` = ``predict`` and its forward-mode Jacobian.
+    - ``predictor``: the un-jitted prediction ``predictor(theta, data) -> (m_padded,)`` (an
+      ``eqx.Module`` with static configuration; rows past ``m`` are padding) — what every refit
+      differentiates inside the engine's one compiled solve.
     """
 
     domain: str
@@ -65,7 +65,6 @@ class GapProblem:
     base_values: np.ndarray
     base_prior_sd: np.ndarray
     effects: tuple[Effect, ...]
-    predict: Callable
     data: Any
     noise_method: str
     baseline_model: str
@@ -74,9 +73,9 @@ class GapProblem:
     base_linear: tuple | None = None
     base_linear_scale: tuple | None = None
     base_linear_bound: tuple | None = None
-    jacobian: Callable | None = None
     base_prior_mean: np.ndarray | None = None
     base_prior_cov: np.ndarray | None = None
+    predictor: Any = None
 
     def prior_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The baseline prior as whitened residual rows: ``(index, mean_u, W)`` with rows ``W (u[index] − mean_u)``.

@@ -41,8 +41,8 @@ profile, interleaved 16-sample angle blocks (4 folds).
 iepe_highpass, wave_damping, tread_shear, rotation (χ), ring_extensibility
 (EA), sensor_mass); the model of each is composed by
 :class:`ringfit.physics.profile.ProfileModel`. One jitted function —
-prediction and K forward-mode tangents in one pass (:func:`profile_linearised`)
-— serves every prediction and Jacobian of every candidate, chain and case
+the engine's refit (prediction and K forward-mode tangents per step), stopped after one
+linearisation for plain predictions and Jacobians — serves every candidate, chain and case
 with the same number of profiles (flat road or drum alike, :class:`ringfit.physics.profile.FlatOrDrum`): it is compiled once.
 """
 
@@ -118,6 +118,18 @@ def _channels(theta, data: ProfileData, base: tuple, effects: tuple, sizes: tupl
     return ch.reshape(-1)
 
 
+class ProfilePredictor(eqx.Module):
+    """Prediction of every row of a profile problem: :func:`_channels`, un-jitted (static configuration)."""
+
+    effects: tuple = eqx.field(static=True)
+    sizes: tuple = eqx.field(static=True)
+    solver: ContactSolver = eqx.field(static=True)
+    base: tuple = eqx.field(static=True)
+
+    def __call__(self, theta, data):
+        return _channels(theta, data, self.base, self.effects, self.sizes, self.solver)
+
+
 @partial(jax.jit, static_argnames=("effects", "sizes", "solver", "base"))
 def profile_predict(theta, data: ProfileData, *, effects: tuple, sizes: tuple, solver: ContactSolver,
                     base: tuple = BASE):
@@ -128,26 +140,6 @@ def profile_predict(theta, data: ProfileData, *, effects: tuple, sizes: tuple, s
     Default ``base``: k_trd [N/m²] and the angle offset.
     """
     return _channels(theta, data, base, effects, sizes, solver)
-
-
-@partial(jax.jit, static_argnames=("effects", "sizes", "solver", "base"))
-def profile_linearised(theta, data: ProfileData, basis, *, effects: tuple, sizes: tuple, solver: ContactSolver,
-                       base: tuple = BASE):
-    """Prediction and directional derivatives in one forward-mode pass.
-
-    **Returns:** ``(pred (m,), J (m, K))`` with ``J[:, k]`` the derivative of :func:`profile_predict`
-    along ``basis[:, k]`` (``basis`` ``(p, K)``). The diagnosis uses this one compiled function
-    for predictions too (a zero basis), so the predictor is compiled once per structure.
-    """
-    f = lambda th: _channels(th, data, base, effects, sizes, solver)  # noqa: E731
-    pred, lin = jax.linearize(f, theta)
-    return pred, jax.vmap(lin, in_axes=1, out_axes=1)(basis)
-
-
-def profile_tangents(theta, data: ProfileData, basis, *, effects: tuple, sizes: tuple, solver: ContactSolver,
-                     base: tuple = BASE):
-    """Directional derivatives ``(m, K)`` of :func:`profile_predict` along the columns of ``basis`` ``(p, K)``."""
-    return profile_linearised(theta, data, basis, effects=effects, sizes=sizes, solver=solver, base=base)[1]
 
 
 def _band(profiles, M: int) -> tuple[np.ndarray, np.ndarray]:
@@ -178,7 +170,7 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
     """
     from ringfit.fit.rolling import rolling_data
     from ringfit.io.profiles import grid_angles_deg
-    from ringfit.gap.ranking import fit_chain
+    from ringfit.gap.ranking import fit_chain, predict
 
     profiles = list(case.profiles)
     if not profiles:
@@ -219,13 +211,6 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
     }
     labels["group"] = labels["channel"]
     labels["series"] = np.repeat(np.arange(2 * P), M)  # one noise series per profile and channel
-    n_theta = nb + sum(sizes)
-    linearised = partial(profile_linearised, effects=usable, sizes=sizes, solver=solver, base=base)
-    zero_basis = jnp.zeros((n_theta, TANGENTS))
-
-    def predict(theta, data):
-        """Prediction only: the one compiled forward-mode function with a zero basis."""
-        return linearised(theta, data, zero_basis)[0]
 
     k0 = float(ring.k_tread)
     values = np.array([k0, 0.0] + [float(getattr(ring, n)) for n in ring_names])
@@ -236,7 +221,7 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
         domain="profiles", data_files=[str(p.source).rsplit("/", 1)[-1] for p in profiles], y=y,
         sigma=np.full(y.shape, max(float(np.std(y)), 1e-9)), unit="m/s^2", scale=np.ones_like(y), folds=folds,
         fold_kind=fold_kind, labels=labels, base=base, base_values=values.copy(),
-        base_prior_sd=np.sqrt(np.diag(cov)), effects=usable, predict=predict, data=data,
+        base_prior_sd=np.sqrt(np.diag(cov)), effects=usable, data=data,
         noise_method="", baseline_model="gong-rolling", not_applicable=dropped,
         meta={"block": BLOCK, "tangents": TANGENTS, "screen_min_fraction": SCREEN_MIN_FRACTION,
               "k_max": kmax, "omega": rdata.omega, "omega_source": list(rdata.omega_source),
@@ -244,7 +229,8 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
         base_linear=(False, True) + (False,) * len(ring_names),
         base_linear_scale=(1.0, OFFSET_SCALE) + (1.0,) * len(ring_names),
         base_linear_bound=(1.0, OFFSET_BOUND) + (1.0,) * len(ring_names),
-        jacobian=linearised, base_prior_mean=values.copy(), base_prior_cov=cov,
+        base_prior_mean=values.copy(), base_prior_cov=cov,
+        predictor=ProfilePredictor(usable, sizes, solver, base),
     )
     phi = np.radians(phi_deg)
     user = (noise or {}).get("profile_ms2")
@@ -256,7 +242,7 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
             rdata, problem.data = prepare(fitted)
             problem.y = y = rdata.measured.reshape(-1)
             problem.meta.update(omega=rdata.omega, omega_source=list(rdata.omega_source))
-        resid = (y - np.asarray(predict(jnp.asarray(problem.null_theta()), problem.data))).reshape(P, 2, M)
+        resid = (y - predict(problem, problem.null_theta())).reshape(P, 2, M)
         if user is not None:
             sigma, slope = np.full((P, 2), float(user)), 0.0
             problem.noise_method = f"user value {float(user):.3g} m/s^2 (white)"
@@ -286,5 +272,5 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
     return problem
 
 
-__all__ = ["build_profile_problem", "profile_predict", "profile_linearised", "profile_tangents", "ProfileData",
+__all__ = ["build_profile_problem", "profile_predict", "ProfilePredictor", "ProfileData",
            "BASE", "RING_BASE", "GRID"]

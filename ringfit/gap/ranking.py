@@ -1,258 +1,191 @@
 """Refit baseline + effect(s) and rank candidates by held-out evidence.
 
-One engine for both kinds of data (:class:`~ringfit.gap.problem.GapProblem`):
+One engine for every refit (:func:`ringfit.fit.engine.least_squares`, the
+engine of ``ringfit fit``), whatever the data (:class:`~ringfit.gap.problem.GapProblem`):
 
-- **Refit**: bounded least squares (``scipy.optimize.least_squares``, TRF)
-  over the baseline parameters (log, with a weak log-normal prior around the
-  baseline fit) and the chain's effect parameters (natural units scaled by
-  their range, bounded, optional Gaussian prior); every other effect stays at
-  its null. The baseline prior may be correlated (the profile baseline's ring
-  stiffnesses carry the free-table fit's covariance): it enters as whitened
-  residual rows. Prediction and Jacobian come from one jitted forward-mode
-  pass of the problem (:func:`predict_and_jacobian`): one compiled function
-  serves every candidate, chain and fold.
-- **Held-out**: K-fold by ``problem.folds`` (leave-one-speed-out for
-  profiles, interleaved leave-modes-out for mode tables); each fold refits on
-  the other folds (warm start) and predicts the left-out rows.
+- **Refit**: the baseline parameters (log, bounded to e^±3 around the baseline
+  fit, with the problem's baseline prior — possibly correlated, e.g. the profile
+  baseline's ring stiffnesses carry the free-table fit's covariance) and the
+  chain's effect parameters (natural units scaled by their range, bounded,
+  optional Gaussian prior); every other effect stays at its null. Residuals are
+  ``(prediction − y)/σ`` on the train rows (zero weight elsewhere). The free set
+  is padded to a fixed size, so one compiled solve serves every candidate, chain
+  and fold of a problem.
+- **Held-out**: K-fold by ``problem.folds`` (leave-one-speed-out for profiles,
+  interleaved leave-modes-out for mode tables); each fold refits on the other
+  folds (warm start) and predicts the left-out rows.
 - **Evidence**: ΔBIC = Δχ² + Δk·ln m (negative favours the effect).
-- **Drift**: how far the baseline parameters moved when the effect was
-  added, in standard errors of the reference baseline fit.
-- **Intervals**: effect parameters ±1.96 σ (Laplace, σ inflated by
-  √(χ²/dof) when > 1); held-out shrink by a block bootstrap of the held-out
-  residuals.
+- **Drift**: how far the baseline parameters moved when the effect was added, in
+  standard errors of the reference baseline fit.
+- **Intervals**: effect parameters ±1.96 σ (Laplace, σ inflated by √(χ²/dof) when
+  > 1); held-out shrink by a block bootstrap of the held-out residuals.
+
+Every fit is a :class:`~ringfit.fit.result.FitResult`; ``extra`` holds ``chain``,
+``pred`` (prediction of every row), ``train`` (rows fitted) and, once computed,
+``heldout_pred``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
-import jax
-import jax.numpy as jnp
+import equinox as eqx
 import numpy as np
-from scipy.optimize import least_squares
 
+from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, evaluate,
+                                least_squares)
+from ringfit.fit.result import FitResult
 from ringfit.gap.problem import GapProblem
 
 Z95 = 1.959964
-#: Least-squares tolerances (relative change of the cost / of the parameters; gradient).
-#: 1e-8 of a χ² of thousands is far below any difference the verdict looks at.
-FTOL, XTOL, GTOL = 1e-8, 1e-8, 1e-8
-#: Trust-region subproblem solver of TRF: ``"lsmr"`` (iterative, products with J only) rather than an SVD
-#: of the (rows × parameters) Jacobian at every step, which dominated the refits of thousands of rows.
-TR_SOLVER = "lsmr"
-_JAC_CACHE: dict = {}
+#: Solver tolerances (optimistix Cauchy termination on the solver coordinates and the residuals).
+RTOL, ATOL = 1e-8, 1e-8
+#: Baseline parameters move at most a factor e^3 from the baseline fit in a refit.
+BASE_LOG_RANGE = 3.0
 
 
-def _jacobian_fn(problem: GapProblem):
-    key = problem.predict
-    fn = _JAC_CACHE.get(key)
-    if fn is None:
-        fn = jax.jit(jax.jacfwd(problem.predict))
-        _JAC_CACHE[key] = fn
-    return fn
+class GapResiduals(AbstractResiduals):
+    """``(prediction(θ) − y)·w`` for a gap problem's predictor; aux: the prediction of every row."""
+
+    predictor: object = eqx.field(static=True)
+
+    def __call__(self, theta, data):
+        pdata, y, w = data
+        pred = self.predictor(theta, pdata)
+        return (pred - y) * w, pred
+
+
+def _engine_problem(problem: GapProblem, train) -> Problem:
+    """The engine's problem of a gap refit: residuals ``(prediction − y)/σ`` on the ``train`` rows."""
+    m = problem.m
+    w = np.where(train, 1.0 / problem.sigma, 0.0)
+    y = problem.y
+    pad = int(problem.meta.get("padded_rows", m)) - m  # rows the predictor pads (weight 0)
+    if pad:
+        y, w = np.concatenate([y, np.zeros(pad)]), np.concatenate([w, np.zeros(pad)])
+    return Problem(GapResiduals(problem.predictor), (problem.data, y, w), coordinates(problem),
+                   prior=gap_prior(problem), sigma="inflate", data_label="the gap data")
+
+
+def _pad(problem: GapProblem) -> int:
+    return int(problem.meta.get("tangents", problem.n_theta))
+
+
+def predict(problem: GapProblem, theta) -> np.ndarray:
+    """Prediction ``(m,)`` of every row at ``theta`` (natural units) — one step of the compiled refit, no fit."""
+    out = evaluate(_engine_problem(problem, np.ones(problem.m, dtype=bool)), np.asarray(theta, dtype=np.float64),
+                   _free_names(problem, ()), pad_to=_pad(problem), rtol=RTOL, atol=ATOL)
+    return np.asarray(out.extra["aux"])[: problem.m]
 
 
 def predict_and_jacobian(problem: GapProblem, theta: np.ndarray, free) -> tuple[np.ndarray, np.ndarray]:
     """Prediction ``(m,)`` and ∂pred/∂theta for the ``free`` columns ``(m, len(free))`` (natural units of theta).
 
-    Uses the problem's one-pass forward-mode function when it has one (a fixed
-    number K of tangents, padded with zeros: one compilation for every chain),
-    else ``predict`` and its full forward-mode Jacobian.
+    Evaluated by the refit's own compiled solve stopped after its first linearisation
+    (:func:`ringfit.fit.engine.evaluate`), in chunks of the padded free-set size. Used by the screen.
     """
     free = np.asarray(free, dtype=int)
-    th = jnp.asarray(theta)
-    if problem.jacobian is None:
-        pred = np.asarray(problem.predict(th, problem.data))
-        return pred, np.asarray(_jacobian_fn(problem)(th, problem.data))[:, free]
-    K = int(problem.meta.get("tangents", 8))
-    out, pred = [], None
+    names = theta_names(problem)
+    coords = coordinates(problem)
+    theta = np.asarray(theta, dtype=np.float64)
+    eng = _engine_problem(problem, np.ones(problem.m, dtype=bool))
+    m, K = problem.m, _pad(problem)
+    w = 1.0 / problem.sigma
+    pred, cols = None, []
     for start in range(0, max(len(free), 1), K):
-        cols = free[start : start + K]
-        basis = np.zeros((theta.size, K))
-        basis[cols, np.arange(cols.size)] = 1.0
-        p, J = problem.jacobian(th, problem.data, jnp.asarray(basis))
-        pred = np.asarray(p) if pred is None else pred
-        out.append(np.asarray(J)[:, : cols.size])
-    return pred, np.concatenate(out, axis=1)
+        chunk = free[start : start + K]
+        out = evaluate(eng, theta, tuple(names[i] for i in chunk), pad_to=K, rtol=RTOL, atol=ATOL)
+        pred = np.asarray(out.extra["aux"])[:m] if pred is None else pred
+        dtheta_du = np.array([theta[i] if coords[i].kind == LOG else coords[i].scale for i in chunk])
+        cols.append(out.jacobian[:m] / w[:, None] / dtheta_du[None, :])
+    return pred, np.concatenate(cols, axis=1)
 
 
-def jacobian_columns(problem: GapProblem, theta: np.ndarray, free) -> np.ndarray:
-    """∂pred/∂theta for the ``free`` columns only, ``(m, len(free))`` (see :func:`predict_and_jacobian`)."""
-    return predict_and_jacobian(problem, theta, free)[1]
+def theta_names(problem: GapProblem) -> tuple[str, ...]:
+    """Names of the entries of theta: the baseline's, then ``effect.parameter`` for each effect."""
+    return tuple(problem.base) + tuple(f"{e.name}.{p.name}" for e in problem.effects for p in problem.effect_params(e))
 
 
-@dataclass
-class ChainFit:
-    """A refit of the baseline plus a chain of effects.
-
-    - ``theta``: full parameter vector (natural units); ``free``: indices fitted.
-    - ``pred``: ``(m,)`` prediction on every row; ``train``: bool ``(m,)`` rows fitted.
-    - ``cov_u``: covariance of the free parameters in solver units (log for the
-      baseline, range-scaled for effects); ``se``: natural-unit standard errors (free).
-    - ``chi2``: Σ((pred − y)/σ)² on the train rows; ``k``: number of free parameters.
-    """
-
-    chain: tuple[str, ...]
-    theta: np.ndarray
-    free: np.ndarray
-    pred: np.ndarray
-    train: np.ndarray
-    cov_u: np.ndarray
-    se: np.ndarray
-    chi2: float
-    k: int
-    success: bool
-    nfev: int
-    heldout_pred: np.ndarray | None = None
-    extra: dict = field(default_factory=dict)
+def coordinates(problem: GapProblem) -> tuple[Coordinate, ...]:
+    """How each entry of theta is solved for (see the module docstring)."""
+    out = []
+    for i, name in enumerate(problem.base):
+        if problem.is_linear(i):
+            bound = problem.base_linear_bound[i]
+            out.append(Coordinate(name, LINEAR, scale=problem.base_linear_scale[i], lo=-bound, hi=bound))
+        else:
+            ref = float(problem.base_values[i])
+            out.append(Coordinate(name, LOG, lo=ref * math.exp(-BASE_LOG_RANGE), hi=ref * math.exp(BASE_LOG_RANGE)))
+    for e in problem.effects:
+        for p in problem.effect_params(e):
+            out.append(Coordinate(f"{e.name}.{p.name}", LINEAR, center=p.null, scale=p.span, lo=p.lo, hi=p.hi))
+    return tuple(out)
 
 
-def _free_indices(problem: GapProblem, chain) -> np.ndarray:
+def gap_prior(problem: GapProblem) -> GaussianPrior | None:
+    """The baseline prior (log units, possibly correlated) and every effect parameter's Gaussian prior."""
+    names = theta_names(problem)
+    idx, mean, W = problem.prior_rows()
+    prior = None
+    if idx.size:
+        cov = np.linalg.inv(W.T @ W)
+        prior = GaussianPrior(tuple(names[i] for i in idx), mean, cov)
+    effects = {}
+    for e in problem.effects:
+        for p in problem.effect_params(e):
+            if p.prior is not None:
+                effects[f"{e.name}.{p.name}"] = ((p.prior[0] - p.null) / p.span, p.prior[1] / p.span)
+    if effects:
+        eff = GaussianPrior.independent(effects)
+        prior = eff if prior is None else prior.combine(eff)
+    return prior
+
+
+def _free_names(problem: GapProblem, chain) -> tuple[str, ...]:
+    names = theta_names(problem)
     sl = problem.slices()
     idx = list(range(len(problem.base)))
     for name in chain:
         idx.extend(range(sl[name].start, sl[name].stop))
-    return np.asarray(idx, dtype=int)
-
-
-def _param_table(problem: GapProblem):
-    """Per theta entry: (kind, null, lo, hi, prior) with kind 'log' for baseline, 'lin' for effects."""
-    out = [("log", None, None, None, None)] * len(problem.base)
-    for e in problem.effects:
-        for p in problem.effect_params(e):
-            out.append(("lin", p.null, p.lo, p.hi, p.prior, p.span))
-    return out
+    return tuple(names[i] for i in idx)
 
 
 def fit_chain(problem: GapProblem, chain: tuple[str, ...] = (), train=None, start=None,
-              max_nfev: int = 60) -> ChainFit:
-    """Least-squares refit of the baseline + ``chain`` on the ``train`` rows (default all)."""
+              max_steps: int = 60) -> FitResult:
+    """Refit the baseline + ``chain`` on the ``train`` rows (default all) with the engine.
+
+    **Returns:** :class:`~ringfit.fit.result.FitResult` (standard errors inflated by √(χ²/dof)
+    when > 1); ``extra``: ``chain``, ``pred`` ``(m,)``, ``train`` ``(m,)`` bool.
+    """
     m = problem.m
     train = np.ones(m, dtype=bool) if train is None else np.asarray(train, dtype=bool)
-    free = _free_indices(problem, chain)
     theta0 = problem.null_theta() if start is None else np.array(start, dtype=np.float64)
-    info = _param_table(problem)
-    nb = len(problem.base)
-    ref_log = np.log(np.where([problem.is_linear(i) for i in range(nb)], 1.0, problem.base_values))
-    # starting point: effects of the chain at their interior start unless given
-    if start is None:
+    if start is None:  # effects of the chain at their interior start
         for name in chain:
             sl = problem.slices()[name]
             e = next(e for e in problem.effects if e.name == name)
             theta0[sl] = [p.start for p in problem.effect_params(e)]
-    u0, lo, hi, spans = [], [], [], []
-    for i in free:
-        if i < nb and problem.is_linear(i):
-            sc, bound = problem.base_linear_scale[i], problem.base_linear_bound[i]
-            u0.append(theta0[i] / sc), lo.append(-bound / sc), hi.append(bound / sc)
-            spans.append(sc)
-        elif i < nb:
-            u0.append(math.log(theta0[i])), lo.append(ref_log[i] - 3.0), hi.append(ref_log[i] + 3.0)
-            spans.append(None)
-        else:
-            _, null, plo, phi, _, span = info[i]
-            u0.append((theta0[i] - null) / span), lo.append((plo - null) / span), hi.append((phi - null) / span)
-            spans.append(span)
-    u0 = np.clip(np.asarray(u0), np.asarray(lo) + 1e-12, np.asarray(hi) - 1e-12)
-    lo, hi = np.asarray(lo), np.asarray(hi)
-    y, sig = problem.y, problem.sigma
-    w = train / sig
-    predict = problem.predict
-    data = problem.data
-    # prior rows: baseline (possibly correlated, whitened) and each effect's Gaussian prior
-    pidx, pmean, pW = problem.prior_rows()
-    col_of = {int(i): j for j, i in enumerate(free)}
-    base_prior = [(col_of[int(i)]) for i in pidx]
-    eff_prior = []  # (position in free, mean_u, sd_u)
-    for j, i in enumerate(free):
-        if i >= nb:
-            _, null, _, _, prior, span = info[i]
-            if prior is not None:
-                eff_prior.append((j, (prior[0] - null) / span, prior[1] / span))
-    n_prior = len(base_prior) + len(eff_prior)
-    Jp = np.zeros((n_prior, len(free)))
-    if base_prior:
-        Jp[: len(base_prior), base_prior] = pW
-    for r, (j, _, sd) in enumerate(eff_prior):
-        Jp[len(base_prior) + r, j] = 1.0 / sd
-
-    log_cols = [j for j, i in enumerate(free) if i < nb and not problem.is_linear(i)]
-
-    def to_theta(u):
-        th = theta0.copy()
-        for j, i in enumerate(free):
-            if j in log_cols:
-                th[i] = math.exp(u[j])
-            elif i < nb:
-                th[i] = u[j] * spans[j]
-            else:
-                th[i] = info[i][1] + u[j] * spans[j]
-        return th
-
-    def dtheta_du(u, th):
-        return np.array([th[i] if j in log_cols else spans[j] for j, i in enumerate(free)])
-
-    cache = {}
-
-    def evaluate(u, need_jac=False):
-        """(theta, pred, J or None) at u; one forward pass gives pred and J where the problem allows."""
-        key = u.tobytes()
-        hit = cache.get(key)
-        if hit is None or (need_jac and hit[2] is None):
-            th = to_theta(u)
-            if need_jac or problem.jacobian is not None:
-                p, J = predict_and_jacobian(problem, th, free)
-            else:
-                p, J = np.asarray(predict(jnp.asarray(th), data)), None
-            cache.clear()
-            cache[key] = hit = (th, p, J)
-        return hit
-
-    def prior_resid(u):
-        out = [pW @ (u[base_prior] - pmean)] if base_prior else []
-        out.append(np.asarray([(u[j] - mu) / sd for j, mu, sd in eff_prior], dtype=np.float64))
-        return np.concatenate(out)
-
-    def fun(u):
-        th, p, _ = evaluate(u)
-        r = np.where(train, (p - y) * w, 0.0)
-        out = np.concatenate([r[train], prior_resid(u)])
-        return np.where(np.isfinite(out), out, 1e6)
-
-    def jac(u):
-        th, _, J = evaluate(u, need_jac=True)
-        J = J * dtheta_du(u, th)[None, :]
-        Jd = (J * w[:, None])[train]
-        out = np.vstack([Jd, Jp])
-        return np.where(np.isfinite(out), out, 0.0)
-
-    sol = least_squares(fun, u0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac", tr_solver=TR_SOLVER,
-                        max_nfev=max_nfev, xtol=XTOL, ftol=FTOL, gtol=GTOL)
-    th, p, _ = evaluate(sol.x)
-    J = jac(sol.x)
-    try:
-        cov_u = np.linalg.pinv(J.T @ J, rcond=1e-12)
-    except np.linalg.LinAlgError:  # pragma: no cover
-        cov_u = np.full((len(free), len(free)), np.inf)
-    chi2 = float(np.sum(((p - y) / sig)[train] ** 2))
-    dof = max(int(train.sum()) - len(free), 1)
-    infl = math.sqrt(max(1.0, chi2 / dof))
-    se = np.array([
-        (th[i] if j in log_cols else spans[j]) * math.sqrt(max(cov_u[j, j], 0.0)) * infl for j, i in enumerate(free)
-    ])
-    return ChainFit(tuple(chain), th, free, p, train, cov_u, se, chi2, len(free), bool(sol.success),
-                    int(sol.nfev))
+    engine_problem = _engine_problem(problem, train)
+    for i, c in enumerate(engine_problem.coords):  # a warm start just outside a bound (rounding) comes back inside
+        if c.kind == LINEAR:
+            theta0[i] = np.clip(theta0[i], c.lo, c.hi)
+    free = _free_names(problem, chain)
+    fit = least_squares(engine_problem, theta0, free, max_steps=max_steps, rtol=RTOL, atol=ATOL,
+                        n_data=int(train.sum()), pad_to=_pad(problem))
+    fit.extra.update(chain=tuple(chain), pred=np.asarray(fit.extra.pop("aux"))[:m], train=train)
+    fit.residuals = fit.residuals[:m]
+    return fit
 
 
-def heldout(problem: GapProblem, fit: ChainFit, max_nfev: int = 40) -> np.ndarray:
+def heldout(problem: GapProblem, fit: FitResult, max_steps: int = 60) -> np.ndarray:
     """Held-out predictions ``(m,)``: each fold predicted by a refit on the others (warm start from ``fit``)."""
     out = np.full(problem.m, np.nan)
     for f in np.unique(problem.folds):
         test = problem.folds == f
-        sub = fit_chain(problem, fit.chain, train=fit.train & ~test, start=fit.theta, max_nfev=max_nfev)
-        out[test] = sub.pred[test]
-    fit.heldout_pred = out
+        sub = fit_chain(problem, fit.extra["chain"], train=fit.extra["train"] & ~test, start=fit.theta,
+                        max_steps=max_steps)
+        out[test] = sub.extra["pred"][test]
+    fit.extra["heldout_pred"] = out
     return out
 
 
@@ -280,12 +213,12 @@ def shrink_interval(problem: GapProblem, r_base: np.ndarray, r_cand: np.ndarray,
     return float(np.percentile(s, 2.5)), float(np.percentile(s, 97.5))
 
 
-def drift(problem: GapProblem, fit: ChainFit, reference: ChainFit) -> dict[str, float]:
+def drift(problem: GapProblem, fit: FitResult, reference: FitResult) -> dict[str, float]:
     """Baseline-parameter drift of ``fit`` from ``reference``, in the reference's standard errors."""
     out = {}
     nb = len(problem.base)
     for j in range(nb):
-        se_u = math.sqrt(max(reference.cov_u[j, j], 1e-300))
+        se_u = math.sqrt(max(reference.covariance_log[j, j], 1e-300))
         if problem.is_linear(j):
             d = (fit.theta[j] - reference.theta[j]) / problem.base_linear_scale[j] / se_u
         else:

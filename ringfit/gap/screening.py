@@ -22,30 +22,30 @@ The screen is run at the baseline and again on top of each accepted chain.
 
 from __future__ import annotations
 
-import jax.numpy as jnp
 import numpy as np
 
 from ringfit.gap.problem import GapProblem
-from ringfit.gap.ranking import ChainFit, jacobian_columns
+from ringfit.fit.result import FitResult
+from ringfit.gap.ranking import predict, predict_and_jacobian
 
 SCREEN_MIN_SCORE = 1.0
 STEP = 0.05
 
 
-def screen(problem: GapProblem, baseline: ChainFit, names=None) -> dict[str, dict]:
+def screen(problem: GapProblem, baseline: FitResult, names=None) -> dict[str, dict]:
     """Score and alignment of the applicable effects (``names``; default all) at ``baseline``.
 
-    ``baseline`` is a :class:`ChainFit` (the baseline, or the baseline plus an
+    ``baseline`` is a :class:`~ringfit.fit.result.FitResult` of :func:`ringfit.gap.ranking.fit_chain` (the baseline, or the baseline plus an
     accepted chain, whose own free parameters are projected out too).
     """
     th0 = baseline.theta
-    p0 = baseline.pred
+    p0 = baseline.extra["pred"]
     sig = problem.sigma
     r = (problem.y - p0) / sig
     nb = len(problem.base)
-    free = np.asarray(baseline.free, dtype=int)
+    free = np.asarray(baseline.free_index, dtype=int)
     unit = np.array([1.0 if (i >= nb or problem.is_linear(i)) else th0[i] for i in free])
-    Jb = jacobian_columns(problem, th0, free) * unit[None, :] / sig[:, None]
+    Jb = predict_and_jacobian(problem, th0, free)[1] * unit[None, :] / sig[:, None]
     Q, _ = np.linalg.qr(Jb)
     out = {}
     sl = problem.slices()
@@ -59,7 +59,7 @@ def screen(problem: GapProblem, baseline: ChainFit, names=None) -> dict[str, dic
                 h = -h
             th = th0.copy()
             th[j] = p.null + h
-            pj = np.asarray(problem.predict(jnp.asarray(th), problem.data))
+            pj = predict(problem, th)
             cols.append((pj - p0) / sig / h)
         S = np.stack(cols, 1)
         S = S - Q @ (Q.T @ S)

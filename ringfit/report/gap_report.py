@@ -48,7 +48,7 @@ def verdict_sentence(content: dict) -> str:
 
 
 def _top_fits(part):
-    """(label, ChainFit) of the baseline's top refitted candidates (accepted first), at most :data:`TOP`."""
+    """(label, FitResult) of the baseline's top refitted candidates (accepted first), at most :data:`TOP`."""
     cands = [c for c in part.summary["candidates"] if not c.get("screened_out")]
     cands.sort(key=lambda c: (not c.get("accepted"), -(c["heldout_shrink_pct"] or 0.0)))
     out = []
@@ -56,8 +56,8 @@ def _top_fits(part):
         fit = part.fits.get((c["effect"],))
         if fit is not None:
             out.append((f"+ {c['effect']}", fit))
-    if part.chain_fit is not None and len(part.chain_fit.chain) > 1:
-        out.append(("+ " + " + ".join(part.chain_fit.chain), part.chain_fit))
+    if part.chain_fit is not None and len(part.chain_fit.extra["chain"]) > 1:
+        out.append(("+ " + " + ".join(part.chain_fit.extra["chain"]), part.chain_fit))
     return out
 
 
@@ -94,7 +94,7 @@ def _profile_residual_figure(part):
 
     def draw(ax, angle, sl):
         for i, (name, fit) in enumerate(fits):
-            ax.plot(angle, (prob.y - fit.pred)[sl], lw=0.8 if i else 0.6, color="0.55" if i == 0 else f"C{i}",
+            ax.plot(angle, (prob.y - fit.extra["pred"])[sl], lw=0.8 if i else 0.6, color="0.55" if i == 0 else f"C{i}",
                     label=name)
         ax.axhline(0.0, color="k", lw=0.4)
         sigma = float(prob.sigma[sl][0])
@@ -112,9 +112,10 @@ def _profile_heldout_figure(part):
 
     def draw(ax, angle, sl):
         ax.plot(angle, prob.y[sl], color="k", lw=0.6, label="measured")
-        ax.plot(angle, part.baseline.heldout_pred[sl], color="0.55", lw=0.8, label="baseline, held out")
-        if chain is not None and chain.heldout_pred is not None:
-            ax.plot(angle, chain.heldout_pred[sl], color="C2", lw=0.8, label=" + ".join(chain.chain) + ", held out")
+        ax.plot(angle, part.baseline.extra["heldout_pred"][sl], color="0.55", lw=0.8, label="baseline, held out")
+        if chain is not None and chain.extra.get("heldout_pred") is not None:
+            ax.plot(angle, chain.extra["heldout_pred"][sl], color="C2", lw=0.8,
+                    label=" + ".join(chain.extra["chain"]) + ", held out")
         ax.set_xlim(-60, 60)
 
     fig, axes = _profile_panels(prob, "acceleration [m/s²]", "angle [deg]", draw)
@@ -129,7 +130,7 @@ def _modal_residual_figure(part):
     fig, ax = new_figure(figsize=(max(6.0, 0.18 * prob.m), 3.4))
     x = np.arange(prob.m)
     for i, (name, fit) in enumerate(fits):
-        ax.plot(x + 0.12 * i, (prob.y - fit.pred) / prob.sigma, "o" if i == 0 else ".",
+        ax.plot(x + 0.12 * i, (prob.y - fit.extra["pred"]) / prob.sigma, "o" if i == 0 else ".",
                 color="0.4" if i == 0 else f"C{i}", ms=4, label=name)
     ax.axhspan(-1, 1, color="C2", alpha=0.12, lw=0)
     ax.set_xticks(x, prob.labels["label"], rotation=90, fontsize=5)
@@ -163,9 +164,9 @@ def _modal_heldout_figure(part):
     y = prob.y
     fit = part.chain_fit if part.chain_fit is not None else part.baseline
     fig, ax = new_figure(figsize=(4.5, 4.5))
-    ax.plot(y, part.baseline.heldout_pred, "k.", label="baseline")
-    if fit.heldout_pred is not None and fit is not part.baseline:
-        ax.plot(y, fit.heldout_pred, ".", color="C2", label=" + ".join(fit.chain))
+    ax.plot(y, part.baseline.extra["heldout_pred"], "k.", label="baseline")
+    if fit.extra.get("heldout_pred") is not None and fit is not part.baseline:
+        ax.plot(y, fit.extra["heldout_pred"], ".", color="C2", label=" + ".join(fit.extra["chain"]))
     lim = [np.nanmin(y), np.nanmax(y)]
     ax.plot(lim, lim, "k-", lw=0.5)
     ax.set_xlabel("measured")
