@@ -122,3 +122,8 @@ def plot_frf(result, *, f_range=(0.0, 400.0), ax=None):
     ax.set_xlim(*f_range)
     fig.tight_layout()
     return fig
+
+
+def plot_ssi_summary(result, *, f_range=(0.0, 400.0)):
+    """The figure `ringfit ssi --plot` writes (placeholder: the stabilization diagram)."""
+    return plot_stabilization(result, f_range=f_range)
