@@ -151,11 +151,26 @@ def _finish(args, result, plot) -> int:
     return 0
 
 
-def _check_skip(args, records) -> None:
+def _check_records(args, records) -> None:
+    """What the options ask of the records: a band below their Nyquist, a skip shorter than them."""
     from ringfit.errors import InputError
+    from ringfit.io.records import MeasuredFRF
+    from ringfit.targets.identify import MIN_DECAY_SAMPLES
 
+    if isinstance(records, MeasuredFRF):
+        f = records.freq_hz
+        if args.band[0] < f[0] or args.band[1] > f[-1]:
+            raise InputError(f"--band {args.band[0]:g}:{args.band[1]:g} reaches beyond the measured lines "
+                             f"{f[0]:g}–{f[-1]:g} Hz of {records.source}")
+        return
+    if records.n_samples < MIN_DECAY_SAMPLES:
+        raise InputError(f"records of {records.n_samples} samples; expected at least {MIN_DECAY_SAMPLES}",
+                         source=records.source)
+    if args.band[1] >= records.fs_hz / 2:
+        raise InputError(f"--band {args.band[0]:g}:{args.band[1]:g}: the top is not below the records' Nyquist "
+                         f"frequency {records.fs_hz / 2:g} Hz ({records.source})")
     length = records.n_samples / records.fs_hz
-    if args.skip >= length:
+    if getattr(args, "skip", 0.0) >= length:
         raise InputError(f"--skip {args.skip:g} s is not shorter than the records ({length:.4g} s)")
 
 
@@ -166,7 +181,7 @@ def run_ssi(args) -> int:
 
     _check_outputs(args)
     records = _read(args, frf_ok=False)
-    _check_skip(args, records)
+    _check_records(args, records)
     result = ssi_modes(records, orders=args.orders, block_rows=args.block_rows, f_range=args.band,
                        skip_s=args.skip, threshold=args.threshold, delay_s=args.delay, radius_m=args.radius,
                        progress=not args.quiet and sys.stderr is not None, workers=args.workers)
@@ -184,6 +199,7 @@ def run_frf(args) -> int:
 
     _check_outputs(args)
     records = _read(args, frf_ok=True)
+    _check_records(args, records)
     result = frf_modes(records, f_range=args.band, delay_s=args.delay, threshold=args.threshold,
                        min_coherence=args.min_coherence, indicator=args.indicator)
 
