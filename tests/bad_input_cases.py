@@ -69,6 +69,27 @@ def _profile_csv(points=64, noise=0.0, seed=0):
     return "\n".join(lines) + "\n"
 
 
+def _drum_record(fs=2000.0, seconds=3.0, rotation_hz=10.0, drum_period_s=0.3137):
+    """A small continuous drum recording (NumPy only): encoder, hall pulses, a steady pattern and ringing after each hit."""
+    from ringfit.io.continuous import ContinuousRecord
+
+    t = np.arange(int(fs * seconds)) / fs
+    phi = 360.0 * rotation_hz * t - 90.0
+    p = np.deg2rad(phi)
+    hits = np.arange(0.05, seconds, drum_period_s)
+    tau = t[None, :] - hits[:, None]
+    ring = np.where(tau >= 0, np.exp(-30 * np.clip(tau, 0, None)) * np.sin(2 * np.pi * 120 * np.clip(tau, 0, None)),
+                    0.0).sum(axis=0)
+    rng = np.random.default_rng(1)
+    acc = np.stack([400 * np.exp(-0.5 * (np.angle(np.exp(1j * p)) / 0.2) ** 2) + 50 * ring,
+                    40 * np.sin(p) + 20 * ring]) + rng.standard_normal((2, t.size))
+    hall = ((tau >= -0.002) & (tau < 0.003)).any(axis=0).astype(float)
+    return ContinuousRecord(acc=acc, axes=("radial", "tangential"), fs_hz=fs, encoder_angle_deg=phi % 360.0,
+                            hall=hall, hall_delay_s=0.002,
+                            condition={"speed_kmh": 40.0, "load_n": 4000.0, "pressure_bar": 2.2,
+                                       "drum_diameter_m": 1.2192, "rotation_hz": rotation_hz})
+
+
 PROFILE_SIDECAR = {"speed_kmh": 30.0, "load_n": 4000.0, "pressure_bar": 2.2, "revolutions": 26,
                    "sample_rate_hz": 25600.0, "rotation_hz": 7.66}
 
@@ -77,7 +98,6 @@ def build_fixtures(folder: str | os.PathLike) -> Path:
     """Write the valid inputs every case starts from into ``folder``; returns it."""
     from ringfit.data import path as data_path
     from ringfit.io.continuous import ContinuousRecord, write_continuous
-    from ringfit.synth.cleat import CleatBench
 
     d = Path(folder)
     d.mkdir(parents=True, exist_ok=True)
@@ -89,8 +109,7 @@ def build_fixtures(folder: str | os.PathLike) -> Path:
     (d / "run1.profile.json").write_text(json.dumps(PROFILE_SIDECAR))
     (d / "noise.profile.csv").write_text(_profile_csv(noise=50.0))
     (d / "noise.profile.json").write_text(json.dumps(PROFILE_SIDECAR))
-    bench = CleatBench(steady="analytic", fs_hz=2000.0, noise_ms2=1.0)
-    rec = bench.record(2.0)
+    rec = _drum_record()
     write_continuous(rec, d / "cont.records.npz")
     frozen = ContinuousRecord(acc=rec.acc, axes=rec.axes, fs_hz=rec.fs_hz,
                               encoder_angle_deg=np.full(rec.samples, 12.5), hall=rec.hall,
@@ -364,6 +383,38 @@ add("diagnose-case-sidecar-deep", DIAG, setup=_json("case/free.modes.json", DEEP
 add("diagnose-case-tyre-ring-int", DIAG, setup=lambda d: (d / "case/tyre.toml").write_text(
     "ring = 5\n[tyre]\nradius_m = 0.296\nwidth_m = 0.152\npressure_bar = 2.2\n"), names=("tyre.toml",))
 add("diagnose-not-a-folder", ["diagnose", "{d}/nope", "--out", "{d}/out.diagnosis.json"], names=("nope",))
+
+# UFF files from other software (tests/data/uff, MIT): truncated, a microphone, FRFs given to SSI, no angle
+UFF_DATA = Path(__file__).parent / "data" / "uff"
+
+
+def _copy_uff(name, as_name=None, cut=None):
+    def setup(d: Path):
+        data = (UFF_DATA / name).read_bytes()
+        (d / (as_name or name)).write_bytes(data if cut is None else data[: int(len(data) * cut)])
+    return setup
+
+
+for cmd in ("ssi", "frf"):
+    add(f"{cmd}-uff-truncated-microphone", [cmd, "{d}/mic.uff", "--out", "{d}/out.modes.csv"],
+        setup=_copy_uff("dataset_milestone_in_header.uff", "mic.uff"), names=("mic.uff",), item=5)
+    add(f"{cmd}-uff-cut-in-half", [cmd, "{d}/half.uff", "--out", "{d}/out.modes.csv"],
+        setup=_copy_uff("binary8byte.uff", "half.uff", cut=0.5), names=("half.uff",), item=5)
+    add(f"{cmd}-uff-direction-0", [cmd, "{d}/b.uff", "--out", "{d}/out.modes.csv"],
+        setup=_copy_uff("binary8byte.uff", "b.uff"), names=("b.uff",), item=5)
+    add(f"{cmd}-uff-no-angle", [cmd, "{d}/b.uff", "--out", "{d}/out.modes.csv", "--axes", "0=radial"],
+        setup=_copy_uff("binary8byte.uff", "b.uff"), names=("b.uff",), item=5)
+    add(f"{cmd}-uff-band-above-nyquist", [cmd, "{d}/b.uff", "--out", "{d}/out.modes.csv", "--axes", "0=radial",
+                                          "--angles", "1=0"], setup=_copy_uff("binary8byte.uff", "b.uff"),
+        names=("--band",), item=5)
+add("ssi-uff-frfs", ["ssi", "{d}/h.uff", "--out", "{d}/out.modes.csv", "--axes", "0=radial", "--angles", "0=0"],
+    setup=_copy_uff("non_ascii_header.uff", "h.uff"), names=("h.uff",), item=5)
+add("frf-uff-frfs-band-beyond-lines", ["frf", "{d}/h.uff", "--out", "{d}/out.modes.csv", "--axes", "0=radial",
+                                       "--angles", "0=0"], setup=_copy_uff("non_ascii_header.uff", "h.uff"),
+    names=("--band",), item=5)
+add("ssi-angles-for-npz", SSI + ["--angles", "1=0"], names=("--angles",))
+add("ssi-angles-garbage", SSI + ["--angles", "one=zero"], names=("--angles",))
+add("ssi-axes-garbage", SSI + ["--axes", "0=vertical"], names=("--axes",))
 
 # --- 3. no silent acceptance --------------------------------------------------------------------------------
 add("tyre-unknown-ring-key", FIT, setup=_tyre(ring="rho_a_kg_per_m = 2.715\nei_nm2 = 0.9\n"), names=("ei_n_m2",), item=3)

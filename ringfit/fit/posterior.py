@@ -211,7 +211,7 @@ class Posterior:
 
 
 def load_posterior(path) -> Posterior:
-    """Read a posterior written by :meth:`Posterior.save`."""
+    """Read a posterior written by :meth:`Posterior.save`; InputError naming the file for anything else."""
     import h5py
 
     from ringfit.errors import InputError
@@ -224,13 +224,22 @@ def load_posterior(path) -> Posterior:
             if h5.attrs.get("format") != FORMAT:
                 raise InputError(f"not a ringfit posterior (format {h5.attrs.get('format')!r})", source=path)
             meta = json.loads(h5.attrs["meta"])
-            arrays = {k: h5[k][()] for k in ("chain", "log_prob", "acceptance", "tau")}
-    except OSError as exc:
-        raise InputError(f"not a readable HDF5 file ({exc})", source=path) from None
-    data = {k: (np.asarray(v) if isinstance(v, list) else v) for k, v in meta["data"].items()}
-    return Posterior(names=tuple(meta["names"]), values0=meta["values0"], burn=meta["burn"], thin=meta["thin"],
-                     data=data, geometry=meta["geometry"], priors=meta["priors"], source=meta["source"],
-                     lsq=meta.get("lsq", {}), **arrays)
+            arrays = {k: np.asarray(h5[k][()], dtype=np.float64) for k in ("chain", "log_prob", "acceptance", "tau")}
+        data = {k: (np.asarray(v) if isinstance(v, list) else v) for k, v in meta["data"].items()}
+        post = Posterior(names=tuple(str(n) for n in meta["names"]), values0=dict(meta["values0"]),
+                         burn=int(meta["burn"]), thin=int(meta["thin"]), data=data, geometry=dict(meta["geometry"]),
+                         priors=dict(meta["priors"]), source=str(meta["source"]), lsq=dict(meta.get("lsq", {})),
+                         **arrays)
+        steps, walkers, k = post.chain.shape
+        if (k != len(post.names) or post.log_prob.shape != (steps, walkers) or post.acceptance.shape != (walkers,)
+                or post.tau.shape != (k,) or not 0 <= post.burn < steps or post.thin < 1):
+            raise ValueError("inconsistent shapes")
+    except InputError:
+        raise
+    except (OSError, KeyError, TypeError, ValueError, AttributeError, RecursionError, OverflowError) as exc:
+        text = str(exc).splitlines()[0][:120] if str(exc) else ""
+        raise InputError(f"not a readable ringfit posterior ({exc.__class__.__name__}: {text})", source=path) from None
+    return post
 
 
 def run_ensemble(log_prob_fn, p0, *, min_steps: int, max_steps: int, check_every: int = 1000, seed: int = 0,

@@ -175,8 +175,8 @@ class MeasuredFRF:
         if h.ndim != 3 or f.ndim != 1 or h.shape[2] != f.size:
             raise InputError(f"FRFs of shape {h.shape} on {f.shape} frequencies; expected (records, axes, F) on (F,)",
                              source=src)
-        if f.size < 8:
-            raise InputError(f"{f.size} frequency lines; expected at least 8", source=src)
+        if f.size < 2:
+            raise InputError(f"{f.size} frequency line(s); expected at least 2", source=src)
         if not (np.isfinite(f).all() and f[0] >= 0 and (np.diff(f) > 0).all()):
             raise InputError("frequency axis is not finite, >= 0 and increasing", source=src)
         h = h.astype(np.complex128)

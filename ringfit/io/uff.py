@@ -320,8 +320,9 @@ def _ordinate(i, s, path) -> tuple[str, float]:
     where = f"dataset {i} (node {s.get('rsp_node')}, direction {s.get('rsp_dir')})"
     kind = {ACCELERATION: "acc", FORCE: "force", 9: "force"}.get(spec)
     if spec in (PRESSURE, SOUND_PRESSURE) or (unit and unit[0] == "pressure"):
-        raise InputError(f"{where}: ordinate is {_SPECIFIC.get(spec, 'a pressure')} [{label.strip() or '?'}], "
-                         "not acceleration (a microphone?); ringfit reads accelerometer records", source=path)
+        what = _SPECIFIC[spec] if spec in (PRESSURE, SOUND_PRESSURE) else "a pressure"
+        raise InputError(f"{where}: ordinate is {what} [{label.strip() or '?'}], not acceleration "
+                         "(a microphone?); ringfit reads accelerometer records", source=path)
     if spec in (DISPLACEMENT, VELOCITY) or (unit and unit[0] in ("disp", "vel") and kind is None):
         raise InputError(f"{where}: ordinate is {_SPECIFIC.get(spec) if spec in (8, 11) else unit[0]} "
                          f"[{label.strip()}], not acceleration", source=path)
