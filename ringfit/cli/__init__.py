@@ -24,6 +24,7 @@ COMMAND_MODULES = (
     "ringfit.cli.gap",
     "ringfit.cli.targets",
     "ringfit.cli.cleat",
+    "ringfit.cli.example",
 )
 
 
@@ -52,7 +53,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a one-line usage error (status 2)
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
     from ringfit.errors import InputError
 
     try:
@@ -78,7 +82,7 @@ def _print_warnings(caught) -> None:
     """Each library warning as one ``WARNING:`` line on stderr (repeats and library-internal noise dropped)."""
     seen = set()
     for w in caught:
-        if issubclass(w.category, (DeprecationWarning, PendingDeprecationWarning, ImportWarning)):
+        if issubclass(w.category, (DeprecationWarning, PendingDeprecationWarning, ImportWarning, ResourceWarning)):
             continue
         text = " ".join(str(w.message).split())
         if text and text not in seen:

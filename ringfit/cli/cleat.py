@@ -134,13 +134,16 @@ def run_cleat(args: argparse.Namespace) -> int:
     print(f"{args.out}: field {field.mean.shape[1]} sectors × {field.mean.shape[2]} time bins "
           f"of {1e3 * field.time_step_s:.4g} ms; baseline: {field.baseline}")
     if args.snapshots or args.animate:
-        from ringfit.report.cleat_plots import animate_field, plot_polar_snapshots
+        from ringfit.report.cleat_plots import animate_field, field_scale, plot_polar_snapshots
 
+        window = min(field.tau_s[-1], 0.1)
+        scale = field_scale(field, "radial", window)  # one scale for snapshots and animation
         if args.snapshots:
             t_end = min(field.tau_s[-1], 0.06)
-            plot_polar_snapshots(field, [t_end * f for f in (0.0, 0.05, 0.12, 0.25, 0.5, 1.0)], args.snapshots)
-            print(f"{args.snapshots}: polar snapshots")
+            plot_polar_snapshots(field, [t_end * f for f in (0.0, 0.05, 0.12, 0.25, 0.5, 1.0)], args.snapshots,
+                                 scale=scale)
+            print(f"{args.snapshots}: polar snapshots ({scale:.3g} m/s² per unit radius)")
         if args.animate:
-            animate_field(field, args.animate, tau_max_s=min(field.tau_s[-1], 0.1))
-            print(f"{args.animate}: animation")
+            animate_field(field, args.animate, tau_max_s=window, scale=scale)
+            print(f"{args.animate}: animation ({scale:.3g} m/s² per unit radius)")
     return 0

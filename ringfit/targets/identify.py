@@ -243,9 +243,13 @@ def ssi_modes(
     modes = cluster_modes(poles, stab, f_range=f_range, min_share=min_share)
     table, modes = mode_table(modes, angle, axis, "ssi-cov", poles=poles)
     note_quality(table, d.notes, d.credible)
+    from ringfit.targets.quality import psd_singular_values
+
     return ModeIdentification(table, modes, angle, axis, fs, poles=poles, stability=stab,
                               info={"block_rows": block_rows, "channels": y.shape[0], "samples": y.shape[1],
-                                    "notes": list(d.notes), "credible": d.credible})
+                                    "notes": list(d.notes), "credible": d.credible,
+                                    "psd_singular_values": psd_singular_values(y, fs),
+                                    "source": records.source})
 
 
 def note_quality(table: ModeTable, notes: list[str], credible: bool, limits: list[str] = ()) -> None:

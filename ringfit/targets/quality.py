@@ -170,3 +170,29 @@ def screen_channels(y: np.ndarray, labels: list[str] | None = None) -> ChannelSc
 def channel_labels(angle_deg: np.ndarray, axes) -> list[str]:
     """``"<angle>° <axis>"`` for each channel of (angles, axes) in channel order."""
     return [f"{a:g}° {ax}" for a in np.asarray(angle_deg) for ax in axes]
+
+
+def psd_singular_values(y: np.ndarray, fs_hz: float, *, segment: int | None = None, k: int = 3,
+                        nfft: int = 2048) -> tuple[np.ndarray, np.ndarray]:
+    """Singular values of the channels' cross-power spectral matrix (Welch, Hann, 75 % overlap): a CMIF-like
+    background for the stabilization diagram, one curve per independent motion at each frequency.
+
+    **Arguments:** ``y`` (channels, samples) [m/s²]; ``segment`` samples per Welch segment (default half
+    the record); ``k`` how many singular values to keep; ``nfft`` FFT length (segments zero-padded).
+
+    **Returns:** ``(freq_hz (F,), sv (F, k))`` in (m/s²)²/Hz, largest first.
+    """
+    y = np.asarray(y, dtype=np.float64)
+    c, s = y.shape
+    nper = int(segment or max(16, s // 2))
+    nper = min(nper, s)
+    step = max(1, nper // 4)
+    win = np.hanning(nper)
+    n = max(nfft, nper)
+    starts = list(range(0, s - nper + 1, step)) or [0]
+    spec = np.stack([np.fft.rfft(y[:, i:i + nper] * win, n, axis=1) for i in starts], axis=-1)  # (c, F, segs)
+    sv = np.linalg.svd(np.moveaxis(spec, 1, 0), compute_uv=False) ** 2  # (F, min(c, segs))
+    sv /= len(starts) * fs_hz * np.sum(win**2)
+    out = np.zeros((sv.shape[0], k))
+    out[:, : min(k, sv.shape[1])] = sv[:, :k]
+    return np.fft.rfftfreq(n, 1.0 / fs_hz), out
