@@ -452,6 +452,7 @@ for v in ("-1", "nan", "0"):
     add(f"diagnose-noise-profile-{v}", DIAG + ["--noise-profile", v], names=("--noise-profile",), item=3)
 add("fit-max-steps-0", FIT + ["--max-steps", "0"], names=("--max-steps",), item=3)
 add("fit-max-steps-negative", FIT + ["--max-steps", "-5"], names=("--max-steps",), item=3)
+add("fit-max-iterations-0", FIT + ["--max-iterations", "0"], names=("--max-iterations",), item=3)
 add("sample-max-steps-0", SAMPLE + ["--max-steps", "0"], names=("--max-steps",), item=3)
 add("fit-4-params-2-modes", FIT, setup=_modes(FREE_ROWS[:2]), names=("free.modes.csv", "--free", "modes"), item=3)
 add("fit-4-params-1-mode", FIT, setup=_modes(FREE_ROWS[:1]), names=("free.modes.csv", "--free", "modes"), item=3)

@@ -137,6 +137,16 @@ def _member_layout(path: Path, zf: zipfile.ZipFile, name: str):
     return info, np.dtype(dtype), tuple(shape), fortran, offset
 
 
+def _stored_data_start(path: Path, info: zipfile.ZipInfo) -> int:
+    """Byte offset in the file where a stored (uncompressed) member's data begin (after its local header)."""
+    with open(path, "rb") as f:
+        f.seek(info.header_offset)
+        local = f.read(30)
+    if local[:4] != b"PK\x03\x04":
+        raise InputError(f"member {info.filename!r}: bad zip local header (corrupted file)", source=path)
+    return info.header_offset + 30 + int.from_bytes(local[26:28], "little") + int.from_bytes(local[28:30], "little")
+
+
 def _open_rows(path: Path, zf: zipfile.ZipFile, name: str, rows: int, length: int) -> list[_Channel]:
     """Channels for each row of a C-ordered member of shape (..., length) with ``rows`` rows."""
     info, dtype, shape, fortran, offset = _member_layout(path, zf, name)
@@ -145,14 +155,7 @@ def _open_rows(path: Path, zf: zipfile.ZipFile, name: str, rows: int, length: in
     if dtype.hasobject or dtype.kind not in "fiub":
         raise InputError(f"key '{name}' has dtype {dtype}; expected numbers", source=path)
     if info.compress_type == zipfile.ZIP_STORED:
-        with open(path, "rb") as f:
-            f.seek(info.header_offset)
-            local = f.read(30)
-            if local[:4] != b"PK\x03\x04":
-                raise InputError(f"key '{name}': bad zip local header", source=path)
-            name_len = int.from_bytes(local[26:28], "little")
-            extra_len = int.from_bytes(local[28:30], "little")
-        start = info.header_offset + 30 + name_len + extra_len + offset
+        start = _stored_data_start(path, info) + offset
         return [_FileChannel(path, dtype, start + r * length * dtype.itemsize, length) for r in range(rows)]
     return [_ZipStreamChannel(path, info.filename, dtype, offset, r * length, length) for r in range(rows)]
 
@@ -438,12 +441,7 @@ def verify_members(path: Path, zf: zipfile.ZipFile) -> None:
     for info in zf.infolist():
         if info.compress_type == zipfile.ZIP_STORED:
             with open(path, "rb") as f:
-                f.seek(info.header_offset)
-                local = f.read(30)
-                if local[:4] != b"PK\x03\x04":
-                    raise InputError(f"member {info.filename!r}: bad zip local header (corrupted file)", source=path)
-                f.seek(info.header_offset + 30 + int.from_bytes(local[26:28], "little")
-                       + int.from_bytes(local[28:30], "little"))
+                f.seek(_stored_data_start(path, info))
                 crc, left = 0, info.file_size
                 while left > 0:
                     block = f.read(min(left, 1 << 24))

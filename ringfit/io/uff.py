@@ -204,6 +204,33 @@ def read_uff(path: str | os.PathLike, *, angles: dict | None = None, axes: dict 
 class _Context:
     def __init__(self, path, axis_of, angles, coords, own):
         self.path, self.axis_of, self.angles, self.coords, self.own = path, axis_of, angles, coords, own
+        self.order: list[tuple] = []  # record keys (response node, reference node, take) in file order
+        self.angle_of: dict[tuple, float] = {}
+        self.seen: dict[tuple, int] = {}
+
+    def place(self, table: dict, i, s, axis: str, values) -> None:
+        """Put dataset i's ``values`` into ``table[record][axis]``; a repeated node/reference/axis starts a new take."""
+        node, ref = int(s.get("rsp_node", 0)), int(s.get("ref_node", 0))
+        take = self.seen.get((node, ref, axis), 0)
+        self.seen[(node, ref, axis)] = take + 1
+        key = (node, ref, take)
+        if key not in table:
+            table[key] = {}
+            self.order.append(key)
+            self.angle_of[key] = self.angle(i, s)
+        table[key][axis] = values
+
+    def complete(self, table: dict, what: str) -> tuple[list, dict, list]:
+        """(record keys, their angles, axes used) once every record has every axis that any record has."""
+        if not table:
+            raise InputError(f"no {what} found", source=self.path)
+        used = [a for a in AXES if any(a in table[k] for k in self.order)]
+        for k in self.order:
+            missing = [a for a in used if a not in table[k]]
+            if missing:
+                raise InputError(f"node {k[0]} (reference {k[1]}, take {k[2] + 1}): no dataset for axis "
+                                 f"{missing[0]!r} while other records have it", source=self.path)
+        return self.order, self.angle_of, used
 
     def axis(self, i, s) -> tuple[str, float]:
         """(axis name, sign) of dataset i's response direction."""
@@ -341,10 +368,7 @@ def _ordinate(i, s, path) -> tuple[str, float]:
 def _time_records(ctx: _Context, sets) -> Records:
     path = ctx.path
     fs = length = None
-    acc: dict[tuple, dict[str, np.ndarray]] = {}  # (rsp node, ref node, repeat) -> axis -> samples
-    order: list[tuple] = []
-    angle_of: dict[tuple, float] = {}
-    seen: dict[tuple, int] = {}
+    acc: dict[tuple, dict[str, np.ndarray]] = {}  # (rsp node, ref node, take) -> axis -> samples
     forces: list[np.ndarray] = []
     for i, s in sets:
         inc = float(s.get("abscissa_inc", 0.0))
@@ -370,23 +394,8 @@ def _time_records(ctx: _Context, sets) -> Records:
             forces.append(data)
             continue
         name, sign = ctx.axis(i, s)
-        node, ref = int(s.get("rsp_node", 0)), int(s.get("ref_node", 0))
-        rep = seen.get((node, ref, name), 0)
-        seen[(node, ref, name)] = rep + 1
-        key = (node, ref, rep)
-        if key not in acc:
-            acc[key] = {}
-            order.append(key)
-            angle_of[key] = ctx.angle(i, s)
-        acc[key][name] = sign * data
-    if not acc:
-        raise InputError("no acceleration datasets (dataset 58, function type 1) found", source=path)
-    used = [a for a in AXES if any(a in acc[k] for k in order)]
-    for k in order:
-        missing = [a for a in used if a not in acc[k]]
-        if missing:
-            raise InputError(f"node {k[0]} (reference {k[1]}, take {k[2] + 1}): no dataset for axis {missing[0]!r} "
-                             f"while other records have it", source=path)
+        ctx.place(acc, i, s, name, sign * data)
+    order, angle_of, used = ctx.complete(acc, "acceleration datasets (dataset 58, function type 1)")
     if forces and len(forces) != len(order):
         raise InputError(f"{len(forces)} force datasets for {len(order)} records; expected one force per record "
                          "(paired in file order) or none", source=path)
@@ -405,9 +414,6 @@ def _frf_records(ctx: _Context, sets) -> MeasuredFRF:
     freq = None
     frf: dict[tuple, dict[str, np.ndarray]] = {}
     coh: dict[tuple, dict[str, np.ndarray]] = {}
-    order: list[tuple] = []
-    angle_of: dict[tuple, float] = {}
-    seen: dict[tuple, int] = {}
     for i, s in sets:
         inc, f0, n = float(s.get("abscissa_inc", 0.0)), float(s.get("abscissa_min", 0.0)), int(s["num_pts"])
         if int(s.get("abscissa_spacing", 1)) != 1 or not (math.isfinite(inc) and inc > 0 and math.isfinite(f0)):
@@ -431,22 +437,8 @@ def _frf_records(ctx: _Context, sets) -> MeasuredFRF:
             h = 1j * w * h
         elif kind == "disp":  # receptance -> accelerance: A = -ω² X
             h = -(w**2) * h
-        rep = seen.get((node, ref, name), 0)
-        seen[(node, ref, name)] = rep + 1
-        key = (node, ref, rep)
-        if key not in frf:
-            frf[key] = {}
-            order.append(key)
-            angle_of[key] = ctx.angle(i, s)
-        frf[key][name] = h
-    if not frf:
-        raise InputError("no FRF datasets (dataset 58, function type 4) found", source=path)
-    used = [a for a in AXES if any(a in frf[k] for k in order)]
-    for k in order:
-        missing = [a for a in used if a not in frf[k]]
-        if missing:
-            raise InputError(f"node {k[0]} (reference {k[1]}): no FRF for axis {missing[0]!r} while other "
-                             "records have it", source=path)
+        ctx.place(frf, i, s, name, h)
+    order, angle_of, used = ctx.complete(frf, "FRF datasets (dataset 58, function type 4)")
     coherence = None
     if coh:
         try:
