@@ -290,18 +290,23 @@ def test_continuous_bytes(cut, flips):
 @st.composite
 def posterior_parts(draw):
     k, steps, walkers = 2, 6, 4
-    meta = {"names": ["ei", "kw"], "values0": {"ei": 1.0}, "burn": 1, "thin": 1,
-            "data": {"n": [1, 2], "freq_hz": [100.0, 110.0], "sigma_hz": [1.0, 1.0]},
-            "geometry": {"radius": 0.3}, "priors": {}, "source": "x"}
-    for key in draw(st.lists(st.sampled_from(sorted(meta)), max_size=3)):
-        meta[key] = draw(_json_values())
+    v1 = draw(st.booleans())  # both formats ringfit reads: /1 (problem keys at the top) and /2 (under "meta")
+    problem = {"data": {"n": [1, 2], "freq_hz": [100.0, 110.0], "sigma_hz": [1.0, 1.0]},
+               "geometry": {"radius": 0.3}, "priors": {}, "source": "x"}
+    head = {"names": ["ei", "kw"], "values0": {"ei": 1.0}, "burn": 1, "thin": 1}
+    if v1:
+        head.update(problem)
+    else:
+        head.update(kinds=["log", "log"], centers=[0.0, 0.0], scales=[1.0, 1.0], meta=problem)
+    for key in draw(st.lists(st.sampled_from(sorted(head)), max_size=3)):
+        head[key] = draw(_json_values())
     if draw(st.booleans()):
-        del meta[draw(st.sampled_from(sorted(meta)))]
+        del head[draw(st.sampled_from(sorted(head)))]
     arrays = {"chain": np.zeros((steps, walkers, k)), "log_prob": np.zeros((steps, walkers)),
               "acceptance": np.zeros(walkers), "tau": np.ones(k)}
     for key in draw(st.lists(st.sampled_from(sorted(arrays)), max_size=2)):
         arrays[key] = np.zeros(draw(st.lists(st.integers(0, 3), max_size=3)))
-    return meta, arrays
+    return ("ringfit-posterior/1" if v1 else "ringfit-posterior/2"), head, arrays
 
 
 @settings(max_examples=25, deadline=None, derandomize=True)
@@ -309,12 +314,12 @@ def posterior_parts(draw):
 def test_posterior_reader(parts, as_text):
     import h5py
 
-    from ringfit.fit.posterior import FORMAT, load_posterior
+    from ringfit.fit.posterior import load_posterior
 
-    meta, arrays = parts
+    fmt, meta, arrays = parts
     p = _tmp(b"", "p.h5")
     with h5py.File(p, "w") as h5:
-        h5.attrs["format"] = FORMAT
+        h5.attrs["format"] = fmt
         h5.attrs["meta"] = "{not json" if as_text else json.dumps(meta, default=str)
         for key, value in arrays.items():
             h5.create_dataset(key, data=value)
