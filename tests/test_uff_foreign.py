@@ -228,7 +228,6 @@ def test_truncated_file_refused(tmp_path, binary, keep):
 
 def test_mixed_function_types_and_unpaired_forces_refused(tmp_path):
     sets, _, _ = _time_sets(repeats=1, with_force=False)
-    f = np.arange(64) * 1.0
     frf = _dataset(1, 3, np.ones(64, complex), func_type=4, inc=1.0, ordinate=12, units="m/s^2/N", denom=13)
     path = _write(tmp_path / "mixed.uff", [_geometry(15)] + sets + [frf])
     with pytest.raises(InputError, match="mixes time responses"):
@@ -237,7 +236,6 @@ def test_mixed_function_types_and_unpaired_forces_refused(tmp_path):
     path = _write(tmp_path / "extra_force.uff", [_geometry(15)] + sets + [sets[2]])
     with pytest.raises(InputError, match="force datasets for 6 records"):
         read_records(path)
-    del f
 
 
 def test_ssi_cli_on_a_foreign_uff_with_angles_map(tmp_path, capsys):

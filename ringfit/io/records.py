@@ -37,8 +37,8 @@ def read_measurement(path: str | os.PathLike, *, angles: dict | None = None,
 
     **Arguments:** ``angles`` — node number -> sensor angle [deg] and ``axes`` —
     UFF direction code -> axis name, for UFF files that do not say it
-    themselves (see :func:`ringfit.io.uff.read_uff`); an npz ignores neither
-    silently: giving them for an npz is an error.
+    themselves (see :func:`ringfit.io.uff.read_uff`); an npz names both
+    itself, so giving them for an npz is an error rather than silently ignored.
 
     **Returns:** :class:`Records` (time data) or :class:`MeasuredFRF` (UFF function type 4).
     """
