@@ -2,17 +2,27 @@
 
 Importing ``ringfit`` enables JAX's 64-bit mode (``jax_enable_x64``) for the
 whole process: ring stiffnesses span 1e-1 … 1e7 and float32 silently ruins
-fits. Public names are re-exported here one by one and imported lazily, so
-``import ringfit`` stays cheap.
+fits. It does so without importing JAX (``JAX_ENABLE_X64=1`` in the
+environment, read when JAX is first imported; or ``jax.config`` when JAX is
+already loaded), so ``import ringfit`` and ``ringfit --help`` stay fast.
+Public names are re-exported here one by one and imported lazily.
 """
 
 from __future__ import annotations
 
 import importlib
+import os
+import sys
 
-import jax
 
-jax.config.update("jax_enable_x64", True)
+def _enable_x64() -> None:
+    if "jax" in sys.modules:
+        sys.modules["jax"].config.update("jax_enable_x64", True)
+    else:
+        os.environ["JAX_ENABLE_X64"] = "1"
+
+
+_enable_x64()
 
 __version__ = "0.1.0"
 

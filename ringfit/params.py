@@ -108,12 +108,21 @@ class RingParams(eqx.Module):
 
 
 def table9() -> tuple[TyreGeometry, RingParams]:
-    """The source study's Table 9 tyre (PHYSICS.md §1), loaded from the bundled TOML."""
-    from ringfit.io.tyre import read_tyre
+    """The source study's Table 9 tyre (docs/physics.md §1), from the bundled ``table9.tyre.toml``.
+
+    Read with ``tomllib`` directly (the bundled file is known good), so that
+    this module imports nothing above it (``ringfit.io.tyre`` reads user files).
+    """
+    import tomllib
+
     from ringfit.data import path as data_path
 
-    tyre = read_tyre(data_path("table9.tyre.toml"))
-    return tyre.geometry, tyre.ring
+    doc = tomllib.loads(data_path("table9.tyre.toml").read_text(encoding="utf-8"))
+    t, r = doc["tyre"], doc["ring"]
+    field_of = {toml_key: short for short, (_, toml_key) in RING_PARAMETERS.items()}
+    geometry = TyreGeometry(radius=float(t["radius_m"]), width=float(t["width_m"]),
+                            pressure=float(t["pressure_bar"]) * BAR, name=str(t.get("name", "")))
+    return geometry, RingParams(**{field_of[k]: float(v) for k, v in r.items()})
 
 
 def as_float64(x):

@@ -5,7 +5,9 @@ Each command family lives in its own module here and adds its subcommands in
 ``ringfit --help`` and a cold ``ringfit fit`` stay fast.
 
 Exit codes: 0 success, 1 the job ran but did not succeed (e.g. a fit that did
-not converge), 2 bad input (one line on stderr naming file/row/field).
+not converge), 2 bad input (one line on stderr naming file/row/field/option;
+argparse's own errors are one line too). Warnings raised by the library go to
+stderr as one ``WARNING:`` line each. ``ringfit --help`` imports no JAX.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
 
 #: Modules that contribute subcommands, in help order.
 COMMAND_MODULES = (
@@ -21,6 +24,7 @@ COMMAND_MODULES = (
     "ringfit.cli.gap",
     "ringfit.cli.targets",
     "ringfit.cli.cleat",
+    "ringfit.cli.example",
 )
 
 
@@ -28,13 +32,20 @@ class CommandFailed(Exception):
     """The command ran but its job did not succeed (exit status 1)."""
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose errors are one line (what, which option, where to look), exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="ringfit",
         description="Tyre structural dynamics from one embedded accelerometer.",
     )
     parser.add_argument("--version", action="version", version="ringfit 0.1.0")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=OneLineParser)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
     return parser
@@ -42,11 +53,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a one-line usage error (status 2)
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
     from ringfit.errors import InputError
 
     try:
-        status = args.run(args)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                status = args.run(args)
+            finally:
+                _print_warnings(caught)
     except InputError as exc:
         print(f"ringfit {args.command}: error: {exc}", file=sys.stderr)
         return 2
@@ -57,6 +76,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"ringfit {args.command}: interrupted", file=sys.stderr)
         return 130
     return int(status or 0)
+
+
+def _print_warnings(caught) -> None:
+    """Each library warning as one ``WARNING:`` line on stderr (repeats and library-internal noise dropped)."""
+    seen = set()
+    for w in caught:
+        if issubclass(w.category, (DeprecationWarning, PendingDeprecationWarning, ImportWarning, ResourceWarning)):
+            continue
+        text = " ".join(str(w.message).split())
+        if text and text not in seen:
+            seen.add(text)
+            print(f"WARNING: {text}", file=sys.stderr)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 
+from ringfit.cli._args import force_flag, integer, number, quiet_flag
+
 
 def register(sub) -> None:
     p = sub.add_parser("profile", help="rolling profile (DATA.md §3) from a continuous recording",
@@ -18,11 +20,12 @@ def register(sub) -> None:
                                    "into extra columns.")
     p.add_argument("record", help="continuous *.records.npz")
     p.add_argument("--out", required=True, help="output NAME.profile.csv")
-    p.add_argument("--points", type=int, default=2048, help="angle points per revolution (default 2048)")
-    p.add_argument("--quiet-after", type=float, default=None, metavar="S",
-                   help="with a hall channel: leave out samples less than S seconds after each cleat arrival")
-    p.add_argument("--force", action="store_true", help="replace existing outputs")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--points", type=integer("a whole number of angles in 16..1048576", lo=16, hi=1 << 20),
+                   default=2048, help="angle points per revolution (default 2048)")
+    p.add_argument("--quiet-after", type=number("a finite number of seconds >= 0", lo=0.0, hi=1e4), default=None,
+                   metavar="S", help="with a hall channel: leave out samples less than S seconds after each cleat arrival")
+    force_flag(p)
+    quiet_flag(p)
     p.set_defaults(run=run_profile)
 
     c = sub.add_parser("cleat", help="angle–time field of a cleat test, its modes and animation",
@@ -30,10 +33,12 @@ def register(sub) -> None:
                                    "cleat's arrival (hall pulses), the no-cleat reading subtracted at the same angle.")
     c.add_argument("record", help="continuous *.records.npz with encoder and hall")
     c.add_argument("--out", required=True, help="output FIELD.npz")
-    c.add_argument("--sectors", type=int, default=512, help="sectors around the tyre (default 512)")
-    c.add_argument("--time-step", type=float, default=None, metavar="S", help="time bin [s] (default 1/fs)")
-    c.add_argument("--duration", type=float, default=None, metavar="S",
-                   help="time after each arrival to rebuild [s] (default: the drum period)")
+    c.add_argument("--sectors", type=integer("a whole number of sectors in 4..65536", lo=4, hi=1 << 16), default=512,
+                   help="sectors around the tyre (default 512)")
+    c.add_argument("--time-step", type=number("a time step in seconds > 0", lo=0.0, hi=1e3, lo_open=True),
+                   default=None, metavar="S", help="time bin [s] (default 1/fs)")
+    c.add_argument("--duration", type=number("a duration in seconds > 0", lo=0.0, hi=1e4, lo_open=True), default=None,
+                   metavar="S", help="time after each arrival to rebuild [s] (default: the drum period)")
     c.add_argument("--baseline", default=None, metavar="PROFILE.csv",
                    help="no-cleat profile to subtract (default: from this record's samples long after each hit)")
     c.add_argument("--no-baseline", action="store_true", help="subtract nothing")
@@ -41,22 +46,24 @@ def register(sub) -> None:
     c.add_argument("--snapshots", default=None, metavar="S.png", help="write a multi-panel figure of instants")
     c.add_argument("--coverage-plot", default=None, metavar="C.png", help="write the coverage figure (fig. 23)")
     c.add_argument("--ssi", default=None, metavar="MODES.csv", help="identify the rolling-tyre modes, write a mode table")
-    c.add_argument("--channels", type=int, default=128, help="sectors used as SSI channels (default 128)")
-    c.add_argument("--f-max", type=float, default=400.0, help="top of the SSI band [Hz] (default 400)")
-    c.add_argument("--skip", type=float, default=None, metavar="S",
+    c.add_argument("--channels", type=integer("a whole number of channels in 2..4096", lo=2, hi=4096), default=128,
+                   help="sectors used as SSI channels (default 128)")
+    c.add_argument("--f-max", type=number("a frequency in Hz > 0", lo=0.0, hi=1e6, lo_open=True), default=400.0,
+                   help="top of the SSI band [Hz] (default 400)")
+    c.add_argument("--skip", type=number("a finite number of seconds >= 0", lo=0.0, hi=1e3), default=None, metavar="S",
                    help="drop τ < S (cleat contact) before SSI (default: time for 30° of rotation)")
-    c.add_argument("--force", action="store_true", help="replace existing outputs")
-    c.add_argument("--quiet", action="store_true", help="no progress bar")
+    force_flag(c)
+    quiet_flag(c)
     c.set_defaults(run=run_cleat)
 
 
 def run_profile(args: argparse.Namespace) -> int:
     from ringfit.io.continuous import read_continuous
-    from ringfit.io.files import check_output_path
-    from ringfit.io.profiles import write_profile
+    from ringfit.io.files import check_output_paths
+    from ringfit.io.profiles import sidecar_path, write_profile
     from ringfit.targets.rolling_profile import rolling_profile
 
-    check_output_path(args.out, overwrite=args.force, inputs=[args.record])
+    check_output_paths([args.out, sidecar_path(args.out)], overwrite=args.force, inputs=[args.record])
     with read_continuous(args.record) as rec:
         arrivals = None
         if args.quiet_after is not None and rec.has_hall:
@@ -80,12 +87,13 @@ def np_median(x) -> float:
 
 def run_cleat(args: argparse.Namespace) -> int:
     from ringfit.io.continuous import read_continuous
-    from ringfit.io.files import check_output_path
+    from ringfit.io.files import check_output_paths
+    from ringfit.io.modes import sidecar_path
     from ringfit.targets.cleat import angle_time_field, coverage_points
 
-    outputs = [args.out] + [p for p in (args.animate, args.snapshots, args.coverage_plot, args.ssi) if p]
-    for p in outputs:
-        check_output_path(p, overwrite=args.force, inputs=[args.record] + ([args.baseline] if args.baseline else []))
+    outputs = [args.out, args.animate, args.snapshots, args.coverage_plot, args.ssi,
+               sidecar_path(args.ssi) if args.ssi else None]
+    check_output_paths(outputs, overwrite=args.force, inputs=[args.record] + ([args.baseline] if args.baseline else []))
     baseline = "auto"
     if args.no_baseline:
         baseline = None
@@ -126,13 +134,16 @@ def run_cleat(args: argparse.Namespace) -> int:
     print(f"{args.out}: field {field.mean.shape[1]} sectors × {field.mean.shape[2]} time bins "
           f"of {1e3 * field.time_step_s:.4g} ms; baseline: {field.baseline}")
     if args.snapshots or args.animate:
-        from ringfit.report.cleat_plots import animate_field, plot_polar_snapshots
+        from ringfit.report.cleat_plots import animate_field, field_scale, plot_polar_snapshots
 
+        window = min(field.tau_s[-1], 0.1)
+        scale = field_scale(field, "radial", window)  # one scale for snapshots and animation
         if args.snapshots:
             t_end = min(field.tau_s[-1], 0.06)
-            plot_polar_snapshots(field, [t_end * f for f in (0.0, 0.05, 0.12, 0.25, 0.5, 1.0)], args.snapshots)
-            print(f"{args.snapshots}: polar snapshots")
+            plot_polar_snapshots(field, [t_end * f for f in (0.0, 0.05, 0.12, 0.25, 0.5, 1.0)], args.snapshots,
+                                 scale=scale)
+            print(f"{args.snapshots}: polar snapshots ({scale:.3g} m/s² per unit radius)")
         if args.animate:
-            animate_field(field, args.animate, tau_max_s=min(field.tau_s[-1], 0.1))
-            print(f"{args.animate}: animation")
+            animate_field(field, args.animate, tau_max_s=window, scale=scale)
+            print(f"{args.animate}: animation ({scale:.3g} m/s² per unit radius)")
     return 0

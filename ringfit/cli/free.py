@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from ringfit.cli._args import force_flag, integer, number, quiet_flag
+
 DEFAULT_FREE = "rho_a,ei,kw,kv"
 
 
@@ -16,7 +18,9 @@ def register(sub) -> None:
                                    "and identifiability findings. Exit 1 if the fit does not converge.")
     _common(p)
     p.add_argument("--out", required=True, type=Path, help="output tyre TOML with fitted [ring] values")
-    p.add_argument("--max-steps", type=int, default=256, help="solver step limit (default 256)")
+    p.add_argument("--max-iterations", type=integer("a whole number of solver iterations >= 1", lo=1), default=256,
+                   metavar="N", help="Levenberg–Marquardt iteration limit (default 256)")
+    p.add_argument("--max-steps", dest="fit_max_steps", default=None, help=argparse.SUPPRESS)
     p.set_defaults(run=run_fit)
 
     p = sub.add_parser("sample", help="emcee posterior of the ring parameters",
@@ -24,11 +28,14 @@ def register(sub) -> None:
                                    "times (or --max-steps), and save the draws to HDF5 for `ringfit report`.")
     _common(p)
     p.add_argument("--out", required=True, type=Path, help="output posterior file (HDF5, e.g. POSTERIOR.h5)")
-    p.add_argument("--walkers", type=int, default=32)
-    p.add_argument("--min-steps", type=int, default=2000)
-    p.add_argument("--max-steps", type=int, default=20000)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--walkers", type=integer("a whole number of walkers >= 2", lo=2), default=32,
+                   help="emcee walkers; at least twice the number of free parameters (default 32)")
+    p.add_argument("--min-steps", type=integer("a whole number of steps >= 100", lo=100), default=2000,
+                   help="chain steps run before the first convergence check (default 2000)")
+    p.add_argument("--max-steps", type=integer("a whole number of steps >= 100", lo=100), default=20000,
+                   help="chain steps at most, converged or not (default 20000)")
+    p.add_argument("--seed", type=integer("a whole number >= 0", lo=0), default=0, help="random seed (default 0)")
+    quiet_flag(p)
     p.set_defaults(run=run_sample)
 
     p = sub.add_parser("report", help="self-contained HTML uncertainty report from a saved posterior",
@@ -36,7 +43,7 @@ def register(sub) -> None:
                                    "corner plot, identifiability, sampler diagnostics) from a posterior file.")
     p.add_argument("posterior", type=Path, help="posterior file written by `ringfit sample`")
     p.add_argument("--out", required=True, type=Path, help="output .html")
-    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    force_flag(p)
     p.set_defaults(run=run_report)
 
     p = sub.add_parser("demo", help="fit + posterior + report on the bundled source-study data",
@@ -45,22 +52,24 @@ def register(sub) -> None:
                                    "HTML report, and prints the Table 10 comparison.")
     p.add_argument("--out", type=Path, default=Path("ringfit-demo"), help="output folder (default ./ringfit-demo)")
     p.add_argument("--force", action="store_true", help="replace the outputs of an earlier demo in that folder")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=integer("a whole number >= 0", lo=0), default=0, help="random seed (default 0)")
+    quiet_flag(p)
     p.set_defaults(run=run_demo)
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("modes", type=Path, help="mode table *.modes.csv (DATA.md §2)")
-    p.add_argument("--tyre", required=True, type=Path, help="tyre TOML (DATA.md §1); [ring] gives starting values")
+    p.add_argument("modes", type=Path, help="mode table *.modes.csv (docs/formats.md §2)")
+    p.add_argument("--tyre", required=True, type=Path, help="tyre TOML (docs/formats.md §1); [ring] gives starting values")
     p.add_argument("--free", default=DEFAULT_FREE,
                    help=f"comma-separated parameters to fit (default {DEFAULT_FREE}); others stay at the tyre file's values")
     p.add_argument("--prior", default="physical", choices=("physical", "none"),
                    help="'physical': belt-plate log-normal prior on EI (see docs); 'none': data only (default physical)")
     p.add_argument("--modes-used", default=None, metavar="N-LIST",
                    help="which n take part, e.g. '1-6' or '1,3,7' (default: every structural mode with n)")
-    p.add_argument("--default-std", type=float, default=None, metavar="REL",
+    p.add_argument("--default-std", type=number("a fraction between 0 and 1 (e.g. 0.01)", lo=0, hi=1, lo_open=True,
+                                                hi_open=True), default=None, metavar="REL",
                    help="σ/f where the table has no freq_std_hz (default 0.01)")
-    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    force_flag(p)
 
 
 def parse_n_list(text: str | None):
@@ -84,16 +93,34 @@ def parse_n_list(text: str | None):
 
 
 def _inputs(args):
-    from ringfit.errors import InputError
     from ringfit.fit.least_squares import DEFAULT_RELATIVE_STD, check_free
     from ringfit.io.modes import read_mode_table
     from ringfit.io.tyre import read_tyre
 
     free = check_free([s.strip() for s in args.free.split(",") if s.strip()])
     rel = DEFAULT_RELATIVE_STD if args.default_std is None else args.default_std
-    if not 0 < rel < 1:
-        raise InputError(f"--default-std {rel}: expected a fraction between 0 and 1 (e.g. 0.01)")
-    return read_mode_table(args.modes), read_tyre(args.tyre), free, parse_n_list(args.modes_used), rel
+    table, tyre, modes = read_mode_table(args.modes), read_tyre(args.tyre), parse_n_list(args.modes_used)
+    check_well_posed(table, free, args.prior, modes, rel)
+    return table, tyre, free, modes, rel
+
+
+def check_well_posed(table, free, prior, modes, rel) -> None:
+    """Refuse a fit with fewer data (modes used + parameters with a prior) than free parameters.
+
+    Such a fit has no unique answer: the solver would wander along the
+    unidentified directions and report infinite standard errors.
+    """
+    from ringfit.errors import InputError
+    from ringfit.fit.least_squares import frequency_data
+    from ringfit.fit.priors import resolve_priors
+
+    used = frequency_data(table, modes, rel).n.size
+    priors = [k for k in resolve_priors(prior, free) if k in free]
+    if used + len(priors) < len(free):
+        with_prior = f" and a prior on {', '.join(priors)}" if priors else ""
+        raise InputError(
+            f"{used} mode(s) with an assigned n{with_prior} cannot determine {len(free)} free parameters "
+            f"({', '.join(free)}); give more modes or fewer parameters (--free)", source=table.source or None)
 
 
 def run_fit(args) -> int:
@@ -106,16 +133,21 @@ def run_fit(args) -> int:
     from ringfit.io.files import check_output_path
     from ringfit.io.tyre import write_tyre
 
+    from ringfit.errors import InputError
+
+    if args.fit_max_steps is not None:
+        raise InputError("--max-steps is the sampler's chain length (`ringfit sample`); the fit's iteration limit "
+                         "is --max-iterations")
     check_output_path(args.out, overwrite=args.force, inputs=[args.modes, args.tyre])
     table, tyre, free, modes, rel = _inputs(args)
     result = fit_natural_frequencies(table, tyre.geometry, tyre.ring, free=free, prior=args.prior, modes=modes,
-                                     default_relative_std=rel, max_steps=args.max_steps)
+                                     default_relative_std=rel, max_steps=args.max_iterations)
     print(result.summary())
     print(identifiability(result).summary(known=result.flags))
     if not result.converged:
         raise CommandFailed(f"fit did not converge ({result.status}); nothing written. "
                             + ("Try --prior physical or fix EI." if args.prior == "none" else
-                               "Try --max-steps or fewer free parameters."))
+                               "Try --max-iterations or fewer free parameters."))
     write_tyre(tyre.with_ring(fitted_ring(result), names=list(tyre.ring_values) + list(free)), args.out,
                overwrite=args.force)
     print(f"wrote {args.out}")
@@ -131,13 +163,20 @@ def run_sample(args) -> int:
     from ringfit.fit.posterior import sample_posterior
     from ringfit.io.files import check_output_path
 
+    from ringfit.errors import InputError
+
     check_output_path(args.out, overwrite=args.force, inputs=[args.modes, args.tyre])
+    if args.max_steps < args.min_steps:
+        raise InputError(f"--max-steps {args.max_steps} is below --min-steps {args.min_steps}")
     table, tyre, free, modes, rel = _inputs(args)
+    if args.walkers < 2 * len(free):
+        raise InputError(f"--walkers {args.walkers}: expected at least twice the {len(free)} free parameters "
+                         f"({2 * len(free)})")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
         post = sample_posterior(table, tyre.geometry, tyre.ring, free=free, prior=args.prior, modes=modes,
                                 default_relative_std=rel, walkers=args.walkers, min_steps=args.min_steps,
-                                max_steps=args.max_steps, seed=args.seed, progress=not args.no_progress)
+                                max_steps=args.max_steps, seed=args.seed, progress=not args.quiet)
     for w in caught:
         print(f"WARNING: {w.message}", file=sys.stderr)
     _print_posterior(post)
@@ -169,6 +208,9 @@ def run_demo(args) -> int:
 
     enable_compilation_cache()
     from ringfit.demo import run_demo as demo
+    from ringfit.errors import InputError
 
-    demo(args.out, overwrite=args.force, seed=args.seed)
+    if args.out.exists() and not args.out.is_dir():
+        raise InputError("exists and is not a folder; --out names the folder the demo writes into", source=args.out)
+    demo(args.out, overwrite=args.force, seed=args.seed, progress=not args.quiet)
     return 0

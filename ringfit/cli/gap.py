@@ -1,12 +1,12 @@
 """``ringfit diagnose FOLDER --out NAME.diagnosis.json [--report NAME.html] [--effects a,b,…]``.
 
-Diagnoses the sim-to-real gap of a case folder (DATA.md §6) and writes the
-JSON of DATA.md §5; progress goes to stderr while candidates are fitted.
+Diagnoses the sim-to-real gap of a case folder (docs/formats.md §6) and writes the
+JSON of docs/formats.md §5; progress goes to stderr while candidates are fitted.
 """
 
 from __future__ import annotations
 
-import sys
+from ringfit.cli._args import force_flag, number, quiet_flag
 
 
 def register(subparsers) -> None:
@@ -14,7 +14,7 @@ def register(subparsers) -> None:
         "diagnose",
         help="sim-to-real gap diagnosis of a case folder",
         description="Where the baseline model and the measurements disagree, which unmodelled effect "
-                    "explains it, and how far it shrinks on held-out data (DATA.md §5, §6).",
+                    "explains it, and how far it shrinks on held-out data (docs/formats.md §5, §6).",
     )
     p.add_argument("folder", help="case folder: tyre.toml, free.modes.csv(+json), test tables, profiles")
     p.add_argument("--out", required=True, help="output NAME.diagnosis.json")
@@ -22,10 +22,12 @@ def register(subparsers) -> None:
     p.add_argument("--effects", help="comma-separated candidate effects (default: all registered)")
     p.add_argument("--effect-module", action="append", default=[],
                    help="import a module (or .py file) that registers extra effects; repeatable")
-    p.add_argument("--noise-freq-hz", type=float, help="frequency noise σ [Hz] instead of estimating it")
-    p.add_argument("--noise-profile", type=float, help="profile noise σ [m/s²] instead of estimating it")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.add_argument("--noise-freq-hz", type=number("a noise level in Hz > 0", lo=0.0, hi=1e4, lo_open=True),
+                   help="frequency noise σ [Hz] instead of estimating it")
+    p.add_argument("--noise-profile", type=number("a noise level in m/s² > 0", lo=0.0, hi=1e8, lo_open=True),
+                   help="profile noise σ [m/s²] instead of estimating it")
+    quiet_flag(p)
+    force_flag(p)
     p.set_defaults(run=run)
 
 
@@ -33,15 +35,16 @@ def run(args) -> int:
     from pathlib import Path
 
     from ringfit.errors import InputError
-    from ringfit.io.files import check_output_path
+    from ringfit.io.files import check_output_paths
 
     if not str(args.out).endswith(".json"):
         raise InputError("--out must end in .json (e.g. NAME.diagnosis.json)", source=args.out)
     folder = Path(args.folder)
-    inputs = list(folder.glob("*")) if folder.is_dir() else []
-    check_output_path(args.out, overwrite=args.force, inputs=inputs)
-    if args.report:
-        check_output_path(args.report, overwrite=args.force, inputs=inputs)
+    if not folder.is_dir():
+        raise InputError("not a folder; a case is a folder with tyre.toml and free.modes.csv (docs/formats.md §6)",
+                         source=folder)
+    inputs = list(folder.glob("*"))
+    check_output_paths([args.out, args.report], overwrite=args.force, inputs=inputs)
 
     from ringfit.gap import diagnose
     from ringfit.gap.effects import load_effect_module
@@ -60,11 +63,11 @@ def run(args) -> int:
         if unknown:
             raise InputError(f"unknown effect(s) {unknown}; known: {', '.join(available())}", source="--effects")
     noise = {}
-    if args.noise_freq_hz:
+    if args.noise_freq_hz is not None:
         noise["freq_hz"] = args.noise_freq_hz
-    if args.noise_profile:
+    if args.noise_profile is not None:
         noise["profile_ms2"] = args.noise_profile
-    print(f"ringfit diagnose: {folder}", file=sys.stderr)
+    print(f"ringfit diagnose: {folder}")
     diag = diagnose(folder, effects=effects, progress=not args.quiet, noise=noise or None)
     diag.write(args.out, overwrite=args.force, inputs=inputs)
     if args.report:

@@ -4,23 +4,57 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ringfit.cli._args import force_flag, integer, number
+
+#: Largest model grid and written profile accepted (a profile of 2^20 angles is 16 MB of CSV already).
+MAX_GRID = 1 << 14
+MAX_POINTS = 1 << 20
+
+
+#: A rolling fit whose model explains less than this share of the profiles' variance is refused (exit 1).
+MIN_EXPLAINED = 0.2
+
+
+def explained_share(measured, model) -> float:
+    """1 − Σ(model − measured)² / Σ(measured − its mean)², each profile and channel about its own mean."""
+    import numpy as np
+
+    measured, model = np.asarray(measured), np.asarray(model)
+    total = np.sum((measured - measured.mean(axis=-1, keepdims=True)) ** 2)
+    return float(1.0 - np.sum((model - measured) ** 2) / total) if total > 0 else 0.0
+
+
+def _grid(text: str) -> int:
+    import argparse
+
+    value = integer(f"an even number in 64..{MAX_GRID}", lo=64, hi=MAX_GRID)(text)
+    if value % 2:
+        raise argparse.ArgumentTypeError(f"expected an even number in 64..{MAX_GRID}; got {text!r}")
+    return value
+
 
 def register(sub) -> None:
     p = sub.add_parser("roll", help="simulate the steady rolling tyre and write the sensor profile",
                        description="Solve the steady rolling ring with tread-spring contact (flat road or drum, "
-                                   "load imposed) and write what the co-rotating sensor reads (DATA.md §3, baseline "
+                                   "load imposed) and write what the co-rotating sensor reads (docs/formats.md §3, baseline "
                                    "sensor: radial/tangential, revolution mean removed). The sidecar carries "
                                    "rotation_hz = Ω/2π with Ω = V/R_e, R_e = R_out − δ/3 unless --rotation-hz is given.")
-    p.add_argument("--tyre", required=True, type=Path, help="tyre TOML (DATA.md §1) with fitted [ring] values")
-    p.add_argument("--speed", required=True, type=float, help="speed [km/h]")
-    p.add_argument("--load", type=float, default=4000.0, help="vertical load Fz [N] (default 4000)")
-    p.add_argument("--drum", type=float, default=None, metavar="DIAMETER_M", help="drum diameter [m]; omit for a flat road")
-    p.add_argument("--rotation-hz", type=float, default=None, help="wheel rotation rate [Hz] (overrides V/R_e)")
-    p.add_argument("--points", type=int, default=1024, help="angles in the written profile (default 1024)")
-    p.add_argument("--grid", type=int, default=512, help="model grid M (default 512, PHYSICS.md §4.5)")
+    p.add_argument("--tyre", required=True, type=Path,
+                   help="tyre TOML (docs/formats.md §1) with fitted [ring] values")
+    p.add_argument("--speed", required=True, type=number("a speed in km/h in [0, 1000]", lo=0.0, hi=1000.0),
+                   help="speed [km/h]")
+    p.add_argument("--load", type=number("a load in N in (0, 1e6]", lo=0.0, hi=1e6, lo_open=True), default=4000.0,
+                   help="vertical load Fz [N] (default 4000)")
+    p.add_argument("--drum", type=number("a drum diameter in metres in (0, 100]", lo=0.0, hi=100.0, lo_open=True),
+                   default=None, metavar="DIAMETER_M", help="drum diameter [m]; omit for a flat road")
+    p.add_argument("--rotation-hz", type=number("a rotation rate in Hz in (0, 1000]", lo=0.0, hi=1000.0, lo_open=True),
+                   default=None, help="wheel rotation rate [Hz] (overrides V/R_e)")
+    p.add_argument("--points", type=integer(f"a whole number of angles in 16..{MAX_POINTS}", lo=16, hi=MAX_POINTS),
+                   default=1024, help="angles in the written profile (default 1024)")
+    p.add_argument("--grid", type=_grid, default=512, help="model grid M, even (default 512, docs/physics.md §4.5)")
     p.add_argument("--out", required=True, type=Path, help="output SIM.profile.csv (sidecar .json next to it)")
     p.add_argument("--plot", type=Path, default=None, help="optional PNG: deformed ring, pressure, channels")
-    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    force_flag(p)
     p.set_defaults(run=run_roll)
 
     p = sub.add_parser("fit-rolling", help="fit the tread stiffness to rolling profiles",
@@ -33,17 +67,10 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, type=Path, help="output tyre TOML with the fitted [ring] values")
     p.add_argument("--free", default="k_tread",
                    help="comma-separated parameters: k_tread, damping_ratio, angle_offset, ... (default k_tread)")
-    p.add_argument("--grid", type=int, default=512, help="model grid M (default 512)")
+    p.add_argument("--grid", type=_grid, default=512, help="model grid M, even (default 512)")
     p.add_argument("--plot", type=Path, default=None, help="optional PNG: measured vs model per channel and speed")
-    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    force_flag(p)
     p.set_defaults(run=run_fit_rolling)
-
-
-def _check_grid(grid: int):
-    from ringfit.errors import InputError
-
-    if grid < 64 or grid % 2:
-        raise InputError(f"--grid {grid}: expected an even number >= 64")
 
 
 def run_roll(args) -> int:
@@ -51,22 +78,10 @@ def run_roll(args) -> int:
 
     enable_compilation_cache()  # a second run skips XLA compilation
     from ringfit.errors import InputError
-    from ringfit.io.files import check_output_path
+    from ringfit.io.files import check_output_paths
     from ringfit.io.profiles import sidecar_path
 
-    _check_grid(args.grid)
-    if not args.speed >= 0:
-        raise InputError(f"--speed {args.speed}: expected a speed >= 0 km/h")
-    if not args.load > 0:
-        raise InputError(f"--load {args.load}: expected a positive load in N")
-    if args.drum is not None and not args.drum > 0:
-        raise InputError(f"--drum {args.drum}: expected a positive diameter in metres")
-    if args.points < 16:
-        raise InputError(f"--points {args.points}: expected at least 16")
-    check_output_path(args.out, overwrite=args.force, inputs=[args.tyre])
-    check_output_path(sidecar_path(args.out), overwrite=args.force, inputs=[args.tyre])
-    if args.plot is not None:
-        check_output_path(args.plot, overwrite=args.force, inputs=[args.tyre, args.out])
+    check_output_paths([args.out, sidecar_path(args.out), args.plot], overwrite=args.force, inputs=[args.tyre])
 
     import numpy as np
 
@@ -99,7 +114,10 @@ def run_roll(args) -> int:
     if args.plot is not None:
         from ringfit.report.rolling_plots import rolling_solution_figure
 
-        rolling_solution_figure(sol, tyre.geometry, grid.channels, speed_kmh=args.speed).savefig(args.plot)
+        from ringfit.io.files import atomic_write
+
+        fig = rolling_solution_figure(sol, tyre.geometry, grid.channels, speed_kmh=args.speed)
+        atomic_write(args.plot, lambda tmp: fig.savefig(tmp, format="png"))
         print(f"wrote {args.plot}")
     return 0
 
@@ -110,14 +128,10 @@ def run_fit_rolling(args) -> int:
     enable_compilation_cache()  # a second run skips XLA compilation
     from ringfit.cli import CommandFailed
     from ringfit.errors import InputError
-    from ringfit.io.files import check_output_path
+    from ringfit.io.files import check_output_paths
 
-    _check_grid(args.grid)
     free = tuple(x.strip() for x in args.free.split(",") if x.strip())
-    inputs = [args.tyre, *args.profiles]
-    check_output_path(args.out, overwrite=args.force, inputs=inputs)
-    if args.plot is not None:
-        check_output_path(args.plot, overwrite=args.force, inputs=inputs + [args.out])
+    check_output_paths([args.out, args.plot], overwrite=args.force, inputs=[args.tyre, *args.profiles])
 
     import math
 
@@ -147,11 +161,19 @@ def run_fit_rolling(args) -> int:
     if args.plot is not None:
         from ringfit.report.rolling_plots import profiles_figure
 
-        profiles_figure(result.extra["angle_deg"], result.extra["model"], result.extra["speed_kmh"],
-                        result.extra["measured"], title="rolling profiles: measured vs fitted model").savefig(args.plot)
+        from ringfit.io.files import atomic_write
+
+        fig = profiles_figure(result.extra["angle_deg"], result.extra["model"], result.extra["speed_kmh"],
+                              result.extra["measured"], title="rolling profiles: measured vs fitted model")
+        atomic_write(args.plot, lambda tmp: fig.savefig(tmp, format="png"))
         print(f"wrote {args.plot}")
     if not result.converged:
         raise CommandFailed(f"fit did not converge ({result.status}): {result.message}; nothing written")
+    explained = explained_share(result.extra["measured"], result.extra["model"])
+    print(f"the model explains {100 * explained:.1f} % of the profiles' variance")
+    if explained < MIN_EXPLAINED:
+        raise CommandFailed(f"the fitted model explains only {100 * explained:.1f} % of the profiles' variance "
+                            f"(< {100 * MIN_EXPLAINED:g} %): pure noise, or not a rolling profile; nothing written")
     ring_names = [k for k in result.names if k != ANGLE_OFFSET]
     write_tyre(tyre.with_ring(fitted_ring(result), ring_names), args.out, overwrite=args.force)
     print(f"wrote {args.out}")

@@ -1,10 +1,11 @@
-"""``ringfit ssi | frf`` — mode tables from impact records (DATA.md §4 → §2)."""
+"""``ringfit ssi | frf`` — mode tables from impact records or measured FRFs (docs/formats.md §4 → §2)."""
 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
+
+from ringfit.cli._args import force_flag, integer, number, quiet_flag
 
 
 def _orders(text: str) -> range:
@@ -13,81 +14,122 @@ def _orders(text: str) -> range:
         if len(parts) == 2:
             parts.append(2)
         start, stop, step = parts
-        if not (1 <= start <= stop and step >= 1):
+        if not (1 <= start <= stop <= 2000 and step >= 1):
             raise ValueError
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}; expected START:STOP[:STEP], e.g. 2:160:2") from None
+        raise argparse.ArgumentTypeError(f"{text!r}; expected START:STOP[:STEP] with 1 <= START <= STOP <= 2000, "
+                                         "e.g. 2:160:2") from None
     return range(start, stop + 1, step)
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1; got {text!r}")
-    return value
 
 
 def _band(text: str) -> tuple[float, float]:
     try:
         lo, hi = (float(x) for x in text.split(":"))
-        if not 0 <= lo < hi:
+        if not (0 <= lo < hi < float("inf")):
             raise ValueError
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}; expected LOW:HIGH in Hz, e.g. 20:400") from None
+        raise argparse.ArgumentTypeError(f"{text!r}; expected LOW:HIGH in Hz with 0 <= LOW < HIGH, e.g. 20:400") from None
     return lo, hi
 
 
+def _node_map(kind: str):
+    """``NODE=VALUE,...`` -> dict; VALUE a number (angles) or an axis name (axes)."""
+
+    def convert(text: str) -> dict:
+        import math
+
+        out = {}
+        try:
+            for part in text.split(","):
+                if not part.strip():
+                    continue
+                key, value = (x.strip() for x in part.split("="))
+                key = int(key)
+                if kind == "angles":
+                    value = float(value)
+                    if not math.isfinite(value):
+                        raise ValueError
+                elif value not in ("radial", "tangential", "lateral"):
+                    raise ValueError
+                out[key] = value
+        except ValueError:
+            example = "1=0,2=15,3=30 (node=degrees)" if kind == "angles" else "0=radial or 1=tangential,3=radial"
+            raise argparse.ArgumentTypeError(f"{text!r}; expected e.g. {example}") from None
+        if not out:
+            raise argparse.ArgumentTypeError(f"{text!r} is empty")
+        return out
+
+    return convert
+
+
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("records", type=Path, help="records *.records.npz or UFF type 58 (.uff/.unv), DATA.md §4")
+    p.add_argument("records", type=Path,
+                   help="records *.records.npz or UFF58 (.uff/.unv) time records (docs/formats.md §4)")
     p.add_argument("--out", required=True, type=Path, help="output mode table *.modes.csv (+ .modes.json sidecar)")
     p.add_argument("--band", type=_band, default=(20.0, 400.0), metavar="LOW:HIGH",
-                   help="frequency range of interest in Hz; its top sets the decimation (default 20:400)")
-    p.add_argument("--delay", type=float, default=0.0, help="delay of the acceleration behind the force channel [s]")
-    p.add_argument("--threshold", type=float, default=0.1, help="impact = first |force| >= THRESHOLD x peak (default 0.1)")
+                   help="frequency range of interest in Hz, below the records' Nyquist frequency; its top sets the "
+                        "decimation (default 20:400)")
+    p.add_argument("--delay", type=number("a finite delay in seconds, |delay| <= 1", lo=-1.0, hi=1.0), default=0.0,
+                   help="delay of the acceleration behind the force channel [s] (default 0)")
+    p.add_argument("--threshold", type=number("a fraction of the peak force in (0, 1]", lo=0.0, hi=1.0, lo_open=True),
+                   default=0.1, help="impact = first |force| >= THRESHOLD x peak (default 0.1)")
+    p.add_argument("--angles", type=_node_map("angles"), default=None, metavar="NODE=DEG,...",
+                   help="UFF only: sensor angle [deg] of each response node, for files without node coordinates")
+    p.add_argument("--axes", type=_node_map("axes"), default=None, metavar="DIR=AXIS,...",
+                   help="UFF only: axis of each response direction code, e.g. 0=radial for scalar channels "
+                        "(default 1=tangential,2=lateral,3=radial)")
     p.add_argument("--plot", type=Path, default=None, help="also write a PNG figure")
-    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    force_flag(p)
 
 
 def register(sub) -> None:
     p = sub.add_parser("ssi", help="covariance-driven SSI of impact records -> mode table",
-                       description="Align the records on the hammer impact (or by group velocity without force), "
-                                   "decimate, drop the first 0.0127 s, run SSI-cov over the model orders, label the "
+                       description="Remove channel offsets, align the records on the hammer impact (or by group "
+                                   "velocity without force), decimate, drop the first 0.0127 s, leave out dead or "
+                                   "junk channels (said so), run SSI-cov over the model orders, label the "
                                    "stabilization diagram (frequency 1 %%, damping 5 %%, pair-aware shape check), "
                                    "cluster stable poles into modes (one per double pole), assign n from the shapes "
                                    "and write the mode table.")
     _common(p)
     p.add_argument("--orders", type=_orders, default=range(2, 161, 2), metavar="START:STOP[:STEP]",
                    help="model orders (state dimensions), default 2:160:2")
-    p.add_argument("--block-rows", type=int, default=30, metavar="N", help="block rows p of the Hankel matrix (default 30)")
-    p.add_argument("--skip", type=float, default=0.0127, help="seconds dropped after the impact (default 0.0127)")
-    p.add_argument("--radius", type=float, default=None, help="tyre radius [m], for records without force")
-    p.add_argument("--workers", type=_positive_int, default=None, metavar="N",
+    p.add_argument("--block-rows", type=integer("a whole number of block rows >= 2", lo=2, hi=10_000), default=30,
+                   metavar="N", help="block rows p of the Hankel matrix (default 30)")
+    p.add_argument("--skip", type=number("a finite number of seconds >= 0", lo=0.0, hi=1e3), default=0.0127,
+                   help="seconds dropped after the impact (default 0.0127)")
+    p.add_argument("--radius", type=number("a tyre radius in metres, 0 < R <= 5", lo=0.0, hi=5.0, lo_open=True),
+                   default=None, help="tyre radius [m], for records without force")
+    p.add_argument("--workers", type=integer("a whole number >= 1", lo=1, hi=4096), default=None, metavar="N",
                    help="threads for the SVD and the order sweep (default: the CPUs this process may use, at most 8)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    quiet_flag(p)
     p.set_defaults(run=run_ssi)
 
-    p = sub.add_parser("frf", help="H1 / coherence peak picking of impact records -> mode table",
-                       description="H1 and coherence over repeated impacts per sensor angle (poor impacts rejected), "
-                                   "peak picking per circumferential harmonic, half-power damping, quadrature shapes, "
-                                   "n from the shapes; writes the mode table.")
+    p = sub.add_parser("frf", help="H1 / coherence peak picking of impact records or measured FRFs -> mode table",
+                       description="H1 and coherence over repeated impacts per sensor angle (channel offsets removed, "
+                                   "records with dead or junk channels and poor impacts rejected), or FRFs measured "
+                                   "by other software (UFF58 function type 4); peak picking per circumferential "
+                                   "harmonic, half-power damping, quadrature shapes, n from the shapes; writes the "
+                                   "mode table.")
     _common(p)
     p.add_argument("--indicator", choices=("harmonic", "sum"), default="harmonic",
                    help="peak-picking curve: per circumferential harmonic (default) or the summed FRF power (source)")
-    p.add_argument("--min-coherence", type=float, default=0.9, help="impact rejection target (default 0.9)")
+    p.add_argument("--min-coherence", type=number("a coherence in [0, 1]", lo=0.0, hi=1.0), default=0.9,
+                   help="impact rejection target (default 0.9)")
     p.set_defaults(run=run_frf)
 
 
 def _check_outputs(args) -> None:
-    from ringfit.io.files import check_output_path
+    from ringfit.io.files import check_output_paths
     from ringfit.io.modes import sidecar_path
 
-    check_output_path(args.out, overwrite=args.force, inputs=[args.records])
-    check_output_path(sidecar_path(args.out), overwrite=args.force, inputs=[args.records])
-    if args.plot is not None:
-        check_output_path(args.plot, overwrite=args.force, inputs=[args.records])
+    check_output_paths([args.out, sidecar_path(args.out), args.plot], overwrite=args.force, inputs=[args.records])
+
+
+def _read(args, *, frf_ok: bool):
+    from ringfit.io.records import read_measurement, read_records
+
+    read = read_measurement if frf_ok else read_records
+    return read(args.records, angles=args.angles, axes=args.axes)
 
 
 def _finish(args, result, plot) -> int:
@@ -100,37 +142,64 @@ def _finish(args, result, plot) -> int:
         fig = plot(result)
         atomic_write(args.plot, lambda tmp: fig.savefig(tmp, format="png", dpi=120))
     t = result.table
-    print(f"{len(t)} modes -> {args.out}")
+    print(f"{len(t)} modes -> {args.out}" + ("" if t.condition.get("credible", True) else "  (NOT CREDIBLE: noise)"))
     for i in range(len(t)):
         n = "-" if t.n[i] < 0 else str(t.n[i])
         print(f"  n={n:>2}  {t.kind[i]:<10}  {t.freq_hz[i]:8.2f} Hz ± {t.freq_std_hz[i]:.2f}  ζ = {t.damping_pct[i]:.2f} %")
+    for note in t.condition.get("limits", []):
+        print(f"note: {note}")
     return 0
 
 
+def _check_records(args, records) -> None:
+    """What the options ask of the records: a band below their Nyquist, a skip shorter than them."""
+    from ringfit.errors import InputError
+    from ringfit.io.records import MeasuredFRF
+    from ringfit.targets.identify import MIN_DECAY_SAMPLES
+
+    if isinstance(records, MeasuredFRF):
+        f = records.freq_hz
+        if args.band[0] < f[0] or args.band[1] > f[-1]:
+            raise InputError(f"--band {args.band[0]:g}:{args.band[1]:g} reaches beyond the measured lines "
+                             f"{f[0]:g}–{f[-1]:g} Hz of {records.source}")
+        return
+    if records.n_samples < MIN_DECAY_SAMPLES:
+        raise InputError(f"records of {records.n_samples} samples; expected at least {MIN_DECAY_SAMPLES}",
+                         source=records.source)
+    if args.band[1] >= records.fs_hz / 2:
+        raise InputError(f"--band {args.band[0]:g}:{args.band[1]:g}: the top is not below the records' Nyquist "
+                         f"frequency {records.fs_hz / 2:g} Hz ({records.source})")
+    length = records.n_samples / records.fs_hz
+    if getattr(args, "skip", 0.0) >= length:
+        raise InputError(f"--skip {args.skip:g} s is not shorter than the records ({length:.4g} s)")
+
+
 def run_ssi(args) -> int:
-    from ringfit.io.records import read_records
+    import sys
+
     from ringfit.targets.identify import ssi_modes
 
     _check_outputs(args)
-    records = read_records(args.records)
+    records = _read(args, frf_ok=False)
+    _check_records(args, records)
     result = ssi_modes(records, orders=args.orders, block_rows=args.block_rows, f_range=args.band,
                        skip_s=args.skip, threshold=args.threshold, delay_s=args.delay, radius_m=args.radius,
-                       progress=not args.no_progress and sys.stderr is not None, workers=args.workers)
+                       progress=not args.quiet and sys.stderr is not None, workers=args.workers)
 
     def plot(res):
-        from ringfit.report.targets_plots import plot_stabilization
+        from ringfit.report.targets_plots import plot_ssi_summary
 
-        return plot_stabilization(res, f_range=args.band)
+        return plot_ssi_summary(res, f_range=args.band)
 
     return _finish(args, result, plot)
 
 
 def run_frf(args) -> int:
-    from ringfit.io.records import read_records
     from ringfit.targets.frf import frf_modes
 
     _check_outputs(args)
-    records = read_records(args.records)
+    records = _read(args, frf_ok=True)
+    _check_records(args, records)
     result = frf_modes(records, f_range=args.band, delay_s=args.delay, threshold=args.threshold,
                        min_coherence=args.min_coherence, indicator=args.indicator)
 

@@ -177,7 +177,11 @@ def _json_default(x):
 
 
 def load_posterior(path) -> Posterior:
-    """Read a posterior written by :meth:`Posterior.save` (formats ``ringfit-posterior/1`` and ``/2``)."""
+    """Read a posterior written by :meth:`Posterior.save` (formats ``ringfit-posterior/1`` and ``/2``).
+
+    Anything else — not HDF5, another format, missing or malformed metadata,
+    arrays of inconsistent shapes — is an :class:`InputError` naming the file.
+    """
     import h5py
 
     from ringfit.errors import InputError
@@ -191,22 +195,31 @@ def load_posterior(path) -> Posterior:
             if fmt not in FORMATS_READ:
                 raise InputError(f"not a ringfit posterior (format {fmt!r})", source=path)
             head = json.loads(h5.attrs["meta"])
-            arrays = {k: h5[k][()] for k in ("chain", "log_prob", "acceptance", "tau")}
+            arrays = {k: np.asarray(h5[k][()], dtype=np.float64) for k in ("chain", "log_prob", "acceptance", "tau")}
+        if fmt == "ringfit-posterior/1":  # every free parameter a logarithm; problem details at the top level
+            meta = {k: head[k] for k in ("data", "geometry", "priors", "source", "lsq") if k in head}
+            head = dict(head, kinds=["log"] * len(head["names"]), centers=[], scales=[], meta=meta)
+        meta = dict(head["meta"])
+        if "data" in meta:
+            meta["data"] = {k: (np.asarray(v) if isinstance(v, list) else v) for k, v in meta["data"].items()}
+        k = len(head["names"])
+        post = Posterior(names=tuple(str(n) for n in head["names"]), kinds=tuple(head["kinds"]),
+                         values0=dict(head["values0"]), burn=int(head["burn"]), thin=int(head["thin"]),
+                         centers=tuple(head["centers"]) or (0.0,) * k, scales=tuple(head["scales"]) or (1.0,) * k,
+                         meta=meta, **arrays)
+        steps, walkers, kk = post.chain.shape
+        if (kk != k or len(post.kinds) != k or len(post.centers) != k or len(post.scales) != k
+                or post.log_prob.shape != (steps, walkers) or post.acceptance.shape != (walkers,)
+                or post.tau.shape != (k,) or not 0 <= post.burn < steps or post.thin < 1):
+            raise ValueError("arrays and metadata of inconsistent shapes")
+    except InputError:
+        raise
     except OSError as exc:
-        raise InputError(f"not a readable HDF5 file ({exc})", source=path) from None
-    except (KeyError, ValueError, TypeError) as exc:
-        raise InputError(f"damaged posterior file ({exc})", source=path) from None
-    if fmt == "ringfit-posterior/1":  # every free parameter a logarithm; problem details at the top level
-        meta = {k: head[k] for k in ("data", "geometry", "priors", "source", "lsq") if k in head}
-        head = dict(head, kinds=["log"] * len(head["names"]), centers=[], scales=[], meta=meta)
-    meta = head["meta"]
-    if "data" in meta:
-        meta["data"] = {k: (np.asarray(v) if isinstance(v, list) else v) for k, v in meta["data"].items()}
-    k = len(head["names"])
-    return Posterior(names=tuple(head["names"]), kinds=tuple(head["kinds"]), values0=head["values0"],
-                     burn=int(head["burn"]), thin=int(head["thin"]),
-                     centers=tuple(head["centers"]) or (0.0,) * k, scales=tuple(head["scales"]) or (1.0,) * k,
-                     meta=meta, **arrays)
+        raise InputError(f"not a readable HDF5 file ({str(exc).splitlines()[0][:120]})", source=path) from None
+    except (KeyError, TypeError, ValueError, AttributeError, RecursionError, OverflowError) as exc:
+        text = str(exc).splitlines()[0][:120] if str(exc) else ""
+        raise InputError(f"damaged posterior file ({exc.__class__.__name__}: {text})", source=path) from None
+    return post
 
 
 #: Steps between updates of the progress bar's target (τ re-estimated, cheap).

@@ -15,29 +15,74 @@ from pathlib import Path
 from ringfit.errors import InputError
 
 
+def sidecar_of(path: str | os.PathLike) -> Path:
+    """The JSON sidecar a reader looks for next to ``path``: ``x.modes.csv`` -> ``x.modes.json`` (docs/formats.md §2, §3)."""
+    return Path(path).with_suffix(".json")
+
+
+def protected_inputs(inputs: Iterable[str | os.PathLike]) -> list[Path]:
+    """``inputs`` plus the sidecar of each one that has a sidecar on disk: every file a command reads."""
+    out = []
+    for item in inputs:
+        item = Path(item)
+        out.append(item)
+        if item.suffix.lower() != ".json":
+            side = sidecar_of(item)
+            if side != item and side.exists():
+                out.append(side)
+    return out
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists() and os.path.samefile(a, b):
+            return True
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
 def check_output_path(
     path: str | os.PathLike, *, overwrite: bool = False, inputs: Iterable[str | os.PathLike] = ()
 ) -> Path:
     """Validate an output path before any work is written.
 
-    Raises :class:`InputError` if ``path`` is one of ``inputs`` (never
-    overwrite an input), exists and ``overwrite`` is false, or its folder
-    does not exist.
+    Raises :class:`InputError` (one line naming ``path``) if ``path`` is one of
+    ``inputs`` or the JSON sidecar of one of them (a file a command reads is
+    never written), is a directory, exists (a dangling symbolic link counts)
+    and ``overwrite`` is false, or its folder does not exist.
     """
     path = Path(path)
-    for item in inputs:
-        try:
-            if Path(item).exists() and path.exists() and os.path.samefile(item, path):
+    try:
+        for item in protected_inputs(inputs):
+            if _same_file(item, path):
                 raise InputError("is an input file; refusing to overwrite it", source=path)
-        except OSError:
-            pass
-        if Path(item).resolve() == path.resolve():
-            raise InputError("is an input file; refusing to overwrite it", source=path)
-    if path.exists() and not overwrite:
-        raise InputError("exists; refusing to overwrite it (pass --force to replace it)", source=path)
-    if not path.parent.exists():
-        raise InputError(f"folder {path.parent} does not exist", source=path)
+        if path.is_dir():
+            raise InputError("is a directory; expected a file name", source=path)
+        if os.path.lexists(path) and not overwrite:
+            what = "is a dangling symbolic link" if path.is_symlink() and not path.exists() else "exists"
+            raise InputError(f"{what}; refusing to overwrite it (pass --force to replace it)", source=path)
+        if not path.parent.is_dir():
+            raise InputError(f"folder {path.parent} does not exist", source=path)
+    except OSError as exc:  # a name too long, a loop of links, no permission to look
+        raise InputError(f"cannot be used as an output ({exc.strerror or exc.__class__.__name__})", source=path) from None
     return path
+
+
+def check_output_paths(
+    paths: Iterable[str | os.PathLike | None], *, overwrite: bool = False, inputs: Iterable[str | os.PathLike] = ()
+) -> list[Path]:
+    """:func:`check_output_path` for each of ``paths`` (``None`` skipped), and no two outputs the same file."""
+    inputs = list(inputs)
+    seen: list[Path] = []
+    for p in paths:
+        if p is None:
+            continue
+        p = check_output_path(p, overwrite=overwrite, inputs=inputs)
+        if any(_same_file(p, q) for q in seen):
+            raise InputError("is named for two outputs; give each output its own file", source=p)
+        seen.append(p)
+    return seen
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[Path], None]) -> Path:
@@ -78,14 +123,44 @@ def read_text_file(path: str | os.PathLike) -> str:
         raise InputError(f"not a readable text file ({exc.__class__.__name__})", source=path) from None
 
 
-def load_npz(path: str | os.PathLike):
-    """``np.load`` of an ``.npz`` without pickles; :class:`InputError` naming the file if missing or unreadable."""
+def load_npz(path: str | os.PathLike) -> dict:
+    """Every array of an ``.npz`` as a dict, read without pickles.
+
+    **Raises** :class:`InputError` naming the file when it is missing, empty,
+    truncated, corrupted (zip CRC), holds object arrays (which would need
+    unpickling) or anything else NumPy cannot read.
+    """
+    import zipfile
+
     import numpy as np
 
     path = Path(path)
     if not path.exists():
         raise InputError("file not found", source=path)
+    if path.is_dir():
+        raise InputError("is a directory; expected an .npz file", source=path)
     try:
-        return np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+    except OSError as exc:
+        raise InputError(f"not readable ({exc.strerror or exc.__class__.__name__})", source=path) from None
+    if magic[:2] != b"PK":
+        why = "empty file" if not magic else "no zip signature"
+        raise InputError(f"not a readable .npz file ({why}); truncated, or not an .npz?", source=path)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if not isinstance(data, np.lib.npyio.NpzFile):
+                raise InputError("is a single .npy array; expected an .npz archive of named arrays", source=path)
+            return {key: data[key] for key in data.files}
+    except InputError:
+        raise
+    except ValueError as exc:
+        if "allow_pickle" in str(exc):
+            raise InputError("holds object arrays, which ringfit does not unpickle; expected numeric and "
+                             "string arrays", source=path) from None
         raise InputError(f"not a readable .npz file ({exc.__class__.__name__}: {exc})", source=path) from None
+    except (OSError, EOFError, zipfile.BadZipFile, zipfile.LargeZipFile, KeyError, NotImplementedError,
+            RuntimeError, MemoryError, UnicodeDecodeError) as exc:
+        text = str(exc).splitlines()[0] if str(exc) else ""
+        why = "empty file" if path.stat().st_size == 0 else f"{exc.__class__.__name__}: {text}"
+        raise InputError(f"not a readable .npz file ({why}); truncated or corrupted?", source=path) from None

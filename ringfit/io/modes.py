@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
+from ringfit.io.checks import check_condition_field, read_json_object, short_repr
 from ringfit.io.files import atomic_write, check_output_path, read_text_file
 
 KINDS = ("structural", "acoustic")
@@ -29,6 +30,12 @@ FRAMES = ("rotating", "fixed")
 COLUMNS = ("n", "a", "tag", "kind", "freq_hz", "freq_std_hz", "damping_pct", "branch")
 #: A sidecar pressure_bar above this looks like Pa.
 MAX_PRESSURE_BAR = 20.0
+#: Largest plausible natural frequency [Hz] in a mode table (a tyre's modes lie below a few kHz).
+MAX_FREQ_HZ = 1.0e5
+#: Largest circumferential / cross-sectional index accepted.
+MAX_INDEX = 1000
+#: Largest modal damping accepted [%] (100 % is critical damping: no longer a mode).
+MAX_DAMPING_PCT = 100.0
 
 
 @dataclass
@@ -153,6 +160,13 @@ def read_mode_table(path: str | os.PathLike, *, sidecar: bool = True) -> ModeTab
 
 def parse_mode_table(text: str, *, source: str = "<text>") -> ModeTable:
     """Parse the CSV text of a mode table (see :func:`read_mode_table`)."""
+    try:
+        return _parse_mode_table(text, source)
+    except csv.Error as exc:  # a cell over the field size limit, a NUL byte
+        raise InputError(f"not a readable CSV file ({exc})", source=source) from None
+
+
+def _parse_mode_table(text: str, source: str) -> ModeTable:
     reader = csv.DictReader(io.StringIO(text))
     header = [h.strip() for h in (reader.fieldnames or [])]
     if not header:
@@ -177,7 +191,7 @@ def parse_mode_table(text: str, *, source: str = "<text>") -> ModeTable:
     def where(i, c):
         return f"{source}: row {i + 2}, column '{c}'"
 
-    def floats(c, *, required, positive=False, nonneg=False):
+    def floats(c, *, required, positive=False, nonneg=False, hi=MAX_FREQ_HZ, unit="Hz"):
         out = np.full(m, np.nan)
         for i, s in enumerate(cols.get(c, [""] * m)):
             if s == "":
@@ -187,13 +201,16 @@ def parse_mode_table(text: str, *, source: str = "<text>") -> ModeTable:
             try:
                 x = float(s)
             except ValueError:
-                raise InputError(f"{where(i, c)}: {s!r} is not a number") from None
+                raise InputError(f"{where(i, c)}: {short_repr(s)} is not a number") from None
             if not math.isfinite(x):
-                raise InputError(f"{where(i, c)}: {s!r}; expected a finite number")
+                raise InputError(f"{where(i, c)}: {short_repr(s)}; expected a finite number")
             if positive and x <= 0:
                 raise InputError(f"{where(i, c)}: {s}; expected a positive value")
             if nonneg and x < 0:
                 raise InputError(f"{where(i, c)}: {s}; expected a value >= 0")
+            if x > hi:
+                raise InputError(f"{where(i, c)}: {x:g}; outside the plausible range "
+                                 f"[0, {hi:g}] {unit} (docs/formats.md §2)")
             out[i] = x
         return out
 
@@ -204,10 +221,10 @@ def parse_mode_table(text: str, *, source: str = "<text>") -> ModeTable:
                 continue
             try:
                 x = float(s)
-            except ValueError:
-                raise InputError(f"{where(i, c)}: {s!r} is not an integer") from None
-            if not math.isfinite(x) or x != int(x) or x < 0:
-                raise InputError(f"{where(i, c)}: {s!r}; expected an integer >= 0 or empty")
+            except (ValueError, OverflowError):
+                raise InputError(f"{where(i, c)}: {short_repr(s)} is not an integer") from None
+            if not math.isfinite(x) or x != int(x) or not 0 <= x <= MAX_INDEX:
+                raise InputError(f"{where(i, c)}: {short_repr(s)}; expected an integer 0..{MAX_INDEX} or empty")
             out[i] = int(x)
         return out
 
@@ -216,7 +233,7 @@ def parse_mode_table(text: str, *, source: str = "<text>") -> ModeTable:
         for i, s in enumerate(cols.get(c, [""] * m)):
             s = s if s != "" else default
             if s not in allowed:
-                raise InputError(f"{where(i, c)}: {s!r}; expected one of {list(allowed)}")
+                raise InputError(f"{where(i, c)}: {short_repr(s)}; expected one of {list(allowed)}")
             out[i] = s
         return out
 
@@ -227,7 +244,7 @@ def parse_mode_table(text: str, *, source: str = "<text>") -> ModeTable:
         tag=choices("tag", TAGS, ""),
         kind=choices("kind", KINDS, "structural"),
         freq_std_hz=floats("freq_std_hz", required=False, nonneg=True),
-        damping_pct=floats("damping_pct", required=False, nonneg=True),
+        damping_pct=floats("damping_pct", required=False, nonneg=True, hi=MAX_DAMPING_PCT, unit="%"),
         branch=choices("branch", BRANCHES, ""),
         extra={h: np.array(cols[h], dtype=object) for h in header if h not in COLUMNS},
         source=source,
@@ -238,30 +255,21 @@ def parse_mode_table(text: str, *, source: str = "<text>") -> ModeTable:
 def read_condition(path: str | os.PathLike) -> dict:
     """Read and validate a ``*.modes.json`` sidecar (DATA.md §2)."""
     path = Path(path)
-    try:
-        cond = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"not readable JSON ({exc})", source=path) from None
-    if not isinstance(cond, dict):
-        raise InputError("expected a JSON object", source=path)
-    return validate_condition(cond, source=str(path))
+    return validate_condition(read_json_object(path), source=str(path))
 
 
 def validate_condition(cond: dict, *, source: str = "<condition>") -> dict:
     """Check the sidecar fields that ringfit uses; unknown fields pass through."""
+    if not isinstance(cond, dict):
+        raise InputError("expected a JSON object", source=source)
     if "state" in cond and cond["state"] not in STATES:
-        raise InputError(f"field 'state' = {cond['state']!r}; expected one of {list(STATES)}", source=source)
+        raise InputError(f"field 'state' = {short_repr(cond['state'])}; expected one of {list(STATES)}", source=source)
     if "frame" in cond and cond["frame"] not in FRAMES:
-        raise InputError(f"field 'frame' = {cond['frame']!r}; expected one of {list(FRAMES)}", source=source)
+        raise InputError(f"field 'frame' = {short_repr(cond['frame'])}; expected one of {list(FRAMES)}", source=source)
     for key in ("load_n", "speed_kmh", "rotation_hz", "pressure_bar"):
         if key not in cond or cond[key] is None:
             continue
-        v = cond[key]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-            raise InputError(f"field {key!r} = {v!r}; expected a finite number >= 0", source=source)
-    p = cond.get("pressure_bar")
-    if p is not None and p > MAX_PRESSURE_BAR:
-        raise InputError(f"field 'pressure_bar' = {p:g} looks like Pa, not bar (2.2 bar = 2.2e5 Pa)", source=source)
+        check_condition_field(cond, key, source=source)
     return dict(cond)
 
 

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
+from ringfit.io.checks import check_condition_field, number_in_range, read_json_object, short_repr
 from ringfit.io.files import atomic_write, check_output_path, read_text_file
 
 #: Columns of DATA.md §3, in the order ringfit writes them.
@@ -44,6 +45,8 @@ MIN_POINTS = 16
 MAX_GAP_RATIO = 1.5
 #: A sidecar pressure_bar above this looks like Pa.
 MAX_PRESSURE_BAR = 20.0
+#: Largest plausible reading [m/s²] in a profile (10⁷ g: beyond any accelerometer).
+MAX_ACC_MS2 = 1.0e8
 
 
 @dataclass
@@ -136,6 +139,13 @@ def read_profile(path: str | os.PathLike) -> Profile:
 
 def parse_profile(text: str, *, source: str = "<text>") -> Profile:
     """Parse and validate the CSV text of a profile (see :func:`read_profile`); no sidecar."""
+    try:
+        return _parse_profile(text, source)
+    except csv.Error as exc:  # a cell over the field size limit, a NUL byte
+        raise InputError(f"not a readable CSV file ({exc})", source=source) from None
+
+
+def _parse_profile(text: str, source: str) -> Profile:
     reader = csv.DictReader(io.StringIO(text))
     header = [h.strip() for h in (reader.fieldnames or [])]
     if not header:
@@ -167,9 +177,14 @@ def parse_profile(text: str, *, source: str = "<text>") -> Profile:
             try:
                 out[i] = float(s)
             except ValueError:
-                raise InputError(f"row {lines[i]}, column '{c}': {s!r} is not a number", source=source) from None
+                raise InputError(f"row {lines[i]}, column '{c}': {short_repr(s)} is not a number",
+                                 source=source) from None
             if not math.isfinite(out[i]):
-                raise InputError(f"row {lines[i]}, column '{c}': {s!r}; expected a finite number", source=source)
+                raise InputError(f"row {lines[i]}, column '{c}': {short_repr(s)}; expected a finite number",
+                                 source=source)
+            if c != "angle_deg" and abs(out[i]) > MAX_ACC_MS2:
+                raise InputError(f"row {lines[i]}, column '{c}': {out[i]:g}; outside the plausible range "
+                                 f"±{MAX_ACC_MS2:g} m/s² (docs/formats.md §3)", source=source)
         values[c] = out
     check_angles(values["angle_deg"], lines, source)
     extra = {h: np.array(cols[h], dtype=object) for h in header if h not in COLUMNS}
@@ -207,11 +222,7 @@ def check_angles(angle_deg: np.ndarray, lines=None, source: str = "<profile>") -
 def read_condition(path: str | os.PathLike) -> dict:
     """Read and validate a profile sidecar (DATA.md §3)."""
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"not a readable JSON file ({exc.__class__.__name__}: {exc})", source=path) from None
-    return validate_condition(doc, source=str(path))
+    return validate_condition(read_json_object(path), source=str(path))
 
 
 def validate_condition(doc, *, source: str = "<sidecar>") -> dict:
@@ -229,21 +240,9 @@ def validate_condition(doc, *, source: str = "<sidecar>") -> dict:
     for key in REQUIRED_FIELDS + OPTIONAL_FIELDS:
         if key not in doc:
             continue
-        value = doc[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise InputError(f"field {key!r} = {value!r}: expected a finite number", source=source)
-        if key == "speed_kmh":
-            ok = value >= 0
-        elif key == "revolutions":
-            ok = value >= 1 and float(value).is_integer()
-        else:
-            ok = value > 0
-        if not ok:
-            what = "a whole number >= 1" if key == "revolutions" else (
-                "a number >= 0" if key == "speed_kmh" else "a positive number")
-            raise InputError(f"field {key!r} = {value!r}: expected {what}", source=source)
-    if doc["pressure_bar"] > MAX_PRESSURE_BAR:
-        raise InputError(f"field 'pressure_bar' = {doc['pressure_bar']:g} looks like Pa or kPa, not bar", source=source)
+        check_condition_field(doc, key, source=source)
+        if key not in ("speed_kmh", "revolutions"):  # the others must be > 0
+            number_in_range(doc[key], key, 0.0, None, lo_open=True, source=source)
     return doc
 
 

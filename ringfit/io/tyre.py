@@ -1,12 +1,16 @@
 """Tyre description files — ``*.toml`` (DATA.md §1).
 
 ``[tyre]`` holds geometry and pressure (required); ``[ring]`` holds ring
-parameters, fitted or starting guesses (optional, any subset). Unknown keys
-are kept in :attr:`Tyre.extra` and written back, so a file round-trips.
+parameters, fitted or starting guesses (optional, any subset); ``[meta]``
+(optional) is free-form and kept in :attr:`Tyre.extra`, so a file
+round-trips. Any other key or table is refused with the nearest valid name
+(a typo such as ``ei_nm2`` would otherwise be silently ignored), and every
+value must lie in the plausible range of :data:`RANGES` (docs/formats.md §1).
 """
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 import tomllib
@@ -20,6 +24,28 @@ from ringfit.params import BAR, RING_PARAMETERS, RingParams, TyreGeometry
 _TYRE_KEYS = {"radius_m": "radius", "width_m": "width", "tread_thickness_m": "tread_thickness"}
 #: A [tyre] pressure_bar above this is almost surely a value in Pa or kPa.
 MAX_PRESSURE_BAR = 20.0
+#: Keys of the [tyre] table.
+TYRE_KEYS = ("name", "radius_m", "width_m", "pressure_bar", "tread_thickness_m")
+#: Top-level tables of a tyre file; ``meta`` is free-form (notes, provenance).
+TABLES = ("tyre", "ring", "meta")
+
+#: Plausible range (lo, hi], SI, of every number in a tyre file. Far wider than a
+#: passenger-car tyre (the fit's own bounds are in ringfit/fit/priors.py): a value
+#: outside is a unit slip or a typo, and would only send a solver astray.
+RANGES: dict[str, tuple[float, float]] = {
+    "radius_m": (0.05, 5.0),
+    "width_m": (0.005, 2.0),
+    "pressure_bar": (0.0, MAX_PRESSURE_BAR),
+    "tread_thickness_m": (0.0, 0.2),
+    "rho_a_kg_per_m": (1e-3, 1e3),
+    "ei_n_m2": (1e-6, 1e6),
+    "kw_n_per_m2": (1.0, 1e11),
+    "kv_n_per_m2": (1.0, 1e11),
+    "damping_ratio": (0.0, 1.0),
+    "k_tread_n_per_m2": (1.0, 1e12),
+    "ea_n": (1.0, 1e13),
+    "chi": (-1.0, 2.0),
+}
 
 #: Defaults used when [ring] lacks a value that a model needs (Table 9 of the seed).
 RING_DEFAULTS = dict(rho_a=2.715, ei=0.9426, kw=1.294e6, kv=1.161e6, damping_ratio=0.025, k_tread=19.0e6)
@@ -55,24 +81,43 @@ class Tyre:
         return Tyre(self.geometry, values, dict(self.extra), self.source)
 
 
-def _number(table: dict, key: str, where: str, *, positive=True) -> float:
+def _number(table: dict, key: str, where: str) -> float:
+    """``table[key]`` as a float inside :data:`RANGES` [key]; InputError naming ``[where] key`` otherwise."""
     value = table[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"[{where}] {key} = {value!r}: expected a number")
-    value = float(value)
-    if not math.isfinite(value):
-        raise InputError(f"[{where}] {key} = {value}: expected a finite number")
-    if positive and value <= 0:
-        raise InputError(f"[{where}] {key} = {value}: expected a positive number")
-    return value
+        raise InputError(f"[{where}] {key} = {_show(value)}: expected a number")
+    try:
+        x = float(value)
+    except OverflowError:
+        x = math.inf
+    if not math.isfinite(x):
+        raise InputError(f"[{where}] {key} = {_show(value)}: expected a finite number")
+    lo, hi = RANGES[key]
+    if not lo < x <= hi:
+        raise InputError(f"[{where}] {key} = {x:g}: outside the plausible range ({lo:g}, {hi:g}] "
+                         "(docs/formats.md §1; a unit slip?)")
+    return x
+
+
+def _show(value) -> str:
+    """A short repr for messages (a 400-digit number or a long string is cut)."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _unknown(key: str, known, where: str) -> InputError:
+    close = difflib.get_close_matches(key, list(known), n=1, cutoff=0.6)
+    hint = f"did you mean {close[0]!r}? " if close else ""
+    return InputError(f"unknown {where} {_show(key)}: {hint}expected one of {', '.join(known)}")
 
 
 def read_tyre(path: str | os.PathLike) -> Tyre:
     """Read and validate a tyre TOML file (DATA.md §1).
 
     Raises :class:`~ringfit.errors.InputError` with one line naming the file
-    and field for anything missing, non-numeric, non-positive or implausible
-    (a ``pressure_bar`` that looks like Pa).
+    and field for anything missing, non-numeric, non-positive, outside its
+    plausible range (:data:`RANGES`; a ``pressure_bar`` that looks like Pa),
+    or an unknown key or table (with the nearest valid name).
     """
     path = Path(path)
     try:
@@ -80,8 +125,12 @@ def read_tyre(path: str | os.PathLike) -> Tyre:
             doc = tomllib.load(fh)
     except FileNotFoundError:
         raise InputError("file not found", source=path) from None
+    except IsADirectoryError:
+        raise InputError("is a directory; expected a tyre TOML file", source=path) from None
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"not a readable TOML file ({exc})", source=path) from None
+    except (RecursionError, MemoryError):
+        raise InputError("not a readable TOML file (nested too deeply)", source=path) from None
     try:
         return _parse(doc, str(path))
     except InputError as exc:
@@ -90,37 +139,51 @@ def read_tyre(path: str | os.PathLike) -> Tyre:
 
 def _parse(doc: dict, source: str) -> Tyre:
     doc = dict(doc)
+    for key, value in doc.items():
+        if key not in TABLES:
+            raise _unknown(key, TABLES, "table" if isinstance(value, dict) else "top-level key")
+        if not isinstance(value, dict):
+            raise InputError(f"{key} = {_show(value)}: expected a [{key}] table")
     tyre = doc.pop("tyre", None)
-    if not isinstance(tyre, dict):
+    if tyre is None:
         raise InputError("missing [tyre] table (radius_m, width_m, pressure_bar)")
     tyre = dict(tyre)
+    for key in tyre:
+        if key not in TYRE_KEYS:
+            raise _unknown(key, TYRE_KEYS, "key in [tyre]")
     for key in ("radius_m", "width_m", "pressure_bar"):
         if key not in tyre:
             raise InputError(f"[tyre] lacks {key}")
+    if isinstance(tyre.get("pressure_bar"), (int, float)) and not isinstance(tyre["pressure_bar"], bool):
+        try:
+            if float(tyre["pressure_bar"]) > MAX_PRESSURE_BAR:
+                raise InputError(
+                    f"[tyre] pressure_bar = {float(tyre['pressure_bar']):g} looks like Pa or kPa, not bar "
+                    f"(expected 0 < pressure_bar <= {MAX_PRESSURE_BAR:g}; 2.2 bar = 2.2e5 Pa)")
+        except OverflowError:
+            pass
+    if isinstance(tyre.get("radius_m"), (int, float)) and not isinstance(tyre["radius_m"], bool):
+        try:
+            if 5.0 < float(tyre["radius_m"]) < 5000.0:
+                raise InputError(f"[tyre] radius_m = {float(tyre['radius_m']):g} looks like mm, expected metres")
+        except OverflowError:
+            pass
     kw = {attr: _number(tyre, key, "tyre") for key, attr in _TYRE_KEYS.items() if key in tyre}
     pressure_bar = _number(tyre, "pressure_bar", "tyre")
-    if pressure_bar > MAX_PRESSURE_BAR:
-        raise InputError(
-            f"[tyre] pressure_bar = {pressure_bar:g} looks like Pa or kPa, not bar "
-            f"(expected 0 < pressure_bar <= {MAX_PRESSURE_BAR:g}; 2.2 bar = 2.2e5 Pa)"
-        )
-    if kw["radius"] > 5.0:
-        raise InputError(f"[tyre] radius_m = {kw['radius']:g} looks like mm, expected metres")
-    name = str(tyre.get("name", ""))
+    name = tyre.get("name", "")
+    if not isinstance(name, str):
+        raise InputError(f"[tyre] name = {_show(name)}: expected a string")
     geometry = TyreGeometry(pressure=pressure_bar * BAR, name=name, **kw)
-    known_tyre = set(_TYRE_KEYS) | {"pressure_bar", "name"}
-    extra = {"tyre": {k: v for k, v in tyre.items() if k not in known_tyre}}
 
     ring_table = dict(doc.pop("ring", {}) or {})
     by_key = {toml_key: short for short, (_, toml_key) in RING_PARAMETERS.items()}
     ring_values = {}
-    for key in list(ring_table):
-        if key in by_key:
-            short = by_key[key]
-            ring_values[short] = _number(ring_table, key, "ring", positive=short not in ("chi",))
-            ring_table.pop(key)
-    extra["ring"] = ring_table
-    extra.update(doc)
+    for key in ring_table:
+        if key not in by_key:
+            raise _unknown(key, list(by_key), "key in [ring]")
+        ring_values[by_key[key]] = _number(ring_table, key, "ring")
+    extra = {"tyre": {}, "ring": {}}
+    extra.update(doc)  # [meta]
     return Tyre(geometry, ring_values, extra, source)
 
 

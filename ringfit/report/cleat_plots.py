@@ -68,10 +68,38 @@ def _polar_curve(field, axis, index, scale, r0):
     return phi, r0 + a / scale
 
 
-def _scale(field, axis, tau_max):
+#: Default end of the window [s] that sets the common scale of snapshots and animation.
+SCALE_WINDOW_S = 0.1
+
+
+def field_scale(field, axis: str = "radial", tau_max_s: float | None = None) -> float:
+    """m/s² per unit radius shared by :func:`plot_polar_snapshots` and :func:`animate_field`.
+
+    The 99.5 % peak of |a| over τ ≤ ``tau_max_s`` (default
+    min(field length, :data:`SCALE_WINDOW_S`)) moves the curve by 80 % of the
+    reference radius, so that snapshots and animation of one field look alike.
+    """
+    tau_max = min(float(field.tau_s[-1]), SCALE_WINDOW_S) if tau_max_s is None else float(tau_max_s)
     a = field.channel(axis)[:, field.tau_s <= tau_max]
     peak = np.nanpercentile(np.abs(a), 99.5) if np.isfinite(a).any() else 1.0
-    return max(peak, 1e-9) / 0.8  # the 99.5 % peak moves the curve by 80 % of r0
+    return max(peak, 1e-9) / 0.8
+
+
+def _frame(ax, scale):
+    """Polar axes in the patch-down orientation: reference circle (no acceleration), patch centre, φ ticks."""
+    _orient(ax)
+    ring = np.linspace(0, 2 * np.pi, 361)
+    ax.plot(ring, np.ones_like(ring), color="k", lw=0.9, ls="--", zorder=1, label="no acceleration")
+    ax.plot([0.0], [2.0], marker="^", color="tab:red", ms=9, clip_on=False, zorder=3)
+    ax.annotate("contact patch (φ = 0)", (0.0, 2.0), xytext=(0, -16), textcoords="offset points", ha="center",
+                va="top", fontsize=7, color="tab:red")
+    ax.set_ylim(0, 2.0)
+    ax.set_yticks([0.5, 1.0, 1.5], [])
+    ticks = np.arange(0, 360, 45)
+    phi = (ticks + 180) % 360 - 180
+    ax.set_xticks(np.radians(ticks), [f"{p:+d}°" if p not in (0, -180) else f"{abs(p)}°" for p in phi], fontsize=7)
+    ax.set_thetalim(0, 2 * np.pi)
+    ax.grid(alpha=0.25)
 
 
 def plot_polar_snapshots(field, times_s, path=None, *, axis: str = "radial", scale: float | None = None,
@@ -79,15 +107,17 @@ def plot_polar_snapshots(field, times_s, path=None, *, axis: str = "radial", sca
     """Figure 37: radial acceleration around the tyre at chosen times after the impact.
 
     **Arguments:** ``field`` an :class:`~ringfit.targets.cleat.AngleTimeField`;
-    ``times_s`` instants [s]; ``scale`` m/s² per unit radius (default from the
-    field's peak); ``baseline`` optional (S,) reading added back (the source's
-    figure shows the static pattern too); ``path`` PNG output.
+    ``times_s`` instants [s]; ``scale`` m/s² per unit radius (default
+    :func:`field_scale`, the same as the animation's); ``baseline`` optional
+    (S,) reading added back (the source's figure shows the static pattern
+    too); ``path`` PNG output. Each panel: the dashed reference circle is zero
+    acceleration, the patch centre φ = 0 at the bottom, angles φ from it.
     """
     plt = _pyplot()
     times_s = list(times_s)
     ncols = min(ncols, len(times_s))
     nrows = -(-len(times_s) // ncols)
-    scale = scale or _scale(field, axis, max(times_s))
+    scale = scale or field_scale(field, axis)
     fig, axes = plt.subplots(nrows, ncols, subplot_kw={"projection": "polar"}, figsize=(3.6 * ncols, 3.7 * nrows),
                              squeeze=False)
     for ax in axes.ravel()[len(times_s):]:
@@ -97,14 +127,11 @@ def plot_polar_snapshots(field, times_s, path=None, *, axis: str = "radial", sca
         phi, r = _polar_curve(field, axis, i, scale, 1.0)
         if baseline is not None:
             r = r + np.append(baseline, baseline[0]) / scale
-        _orient(ax)
-        ax.plot(np.linspace(0, 2 * np.pi, 200), np.ones(200), color="0.8", lw=0.8)
-        ax.plot(phi, r, lw=1.0)
-        ax.set_ylim(0, 2.0)
-        ax.set_yticklabels([])
-        ax.tick_params(labelsize=7)
-        ax.set_title(f"τ = {1e3 * field.tau_s[i]:.1f} ms", fontsize=9)
-    fig.suptitle(f"{axis} acceleration after the cleat impact (1 unit of radius = {scale / G:.0f} g)", fontsize=10)
+        _frame(ax, scale)
+        ax.plot(phi, r, lw=1.2, color="tab:blue", zorder=2)
+        ax.set_title(f"τ = {1e3 * field.tau_s[i]:.1f} ms after the cleat's arrival", fontsize=9)
+    fig.suptitle(f"{axis} acceleration around the tyre after the cleat impact — radius = 1 + a / {scale:.3g} m/s² "
+                 f"({scale / G:.3g} g per unit; inward reading pulls inward); dashed circle: a = 0", fontsize=9)
     fig.tight_layout()
     return _finish(fig, path)
 
@@ -126,20 +153,19 @@ def animate_field(field, path, *, axis: str = "radial", tau_max_s: float | None 
     tau_max = float(field.tau_s[-1] if tau_max_s is None else tau_max_s)
     idx = np.unique(np.clip(np.round(np.linspace(0, tau_max, frames) / field.time_step_s).astype(int), 0,
                             field.tau_s.size - 1))
-    scale = scale or _scale(field, axis, tau_max)
-    fig = plt.figure(figsize=(4.5, 4.8))
+    scale = scale or field_scale(field, axis)
+    fig = plt.figure(figsize=(4.8, 5.2))
     ax = fig.add_subplot(projection="polar")
-    _orient(ax)
-    ax.plot(np.linspace(0, 2 * np.pi, 200), np.ones(200), color="0.8", lw=0.8)
-    (line,) = ax.plot([], [], lw=1.2)
-    ax.set_ylim(0, 2.0)
-    ax.set_yticklabels([])
-    title = ax.set_title("")
+    _frame(ax, scale)
+    (line,) = ax.plot([], [], lw=1.2, color="tab:blue", zorder=2)
+    title = ax.set_title("", fontsize=9)
+    fig.text(0.5, 0.02, f"radius = 1 + a / {scale:.3g} m/s² ({scale / G:.3g} g per unit); dashed circle: a = 0",
+             ha="center", fontsize=7)
 
     def update(i):
         phi, r = _polar_curve(field, axis, i, scale, 1.0)
         line.set_data(phi, r)
-        title.set_text(f"{axis}, τ = {1e3 * field.tau_s[i]:6.2f} ms  (1 unit = {scale / G:.0f} g)")
+        title.set_text(f"{axis} acceleration, τ = {1e3 * field.tau_s[i]:6.2f} ms after the cleat")
         return line, title
 
     anim = FuncAnimation(fig, update, frames=idx, blit=False)

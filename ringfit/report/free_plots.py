@@ -52,14 +52,66 @@ def modes_figure(n, freq_hz, sigma_hz, lsq_hz=None, predictive=None, credible=No
     return fig
 
 
+SYMBOLS = {"rho_a": "ρA", "ei": "EI", "kw": "k_w", "kv": "k_v", "damping_ratio": "ζ", "k_tread": "k_tread",
+           "ea": "EA"}
+UNITS = {"rho_a": "kg/m", "ei": "N m²", "kw": "N/m²", "kv": "N/m²", "damping_ratio": "-", "k_tread": "N/m²",
+         "ea": "N"}
+#: Parameters drawn on a log axis in the corner plot (their posterior spans decades when the data barely fix them).
+LOG_AXES = ("ei", "ea")
+
+
+def _prefix(values) -> tuple[float, str]:
+    """(divisor, SI prefix) that puts the median of ``values`` in [0.1, 1000) for k, M, G (no offset text)."""
+    med = float(np.nanmedian(np.abs(values))) if np.size(values) else 1.0
+    for div, pre in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
+        if med >= div:
+            return div, pre
+    return 1.0, ""
+
+
 def corner_figure(samples, names, truths=None):
-    """Corner plot of posterior draws ``(draws, k)`` (SI units) with the ``corner`` package."""
+    """Corner plot of posterior draws ``(draws, k)`` (SI units) with the ``corner`` package.
+
+    Stiffnesses are shown with an SI prefix (k_w in MN/m², ...) so no axis
+    carries an offset text; EI (and EA) on a log axis; short titles
+    (symbol = median and the 95 % interval) that fit their panel.
+    """
     import corner
 
-    fig = blank_figure(figsize=(7.5, 7.5))
-    corner.corner(np.asarray(samples), labels=[LABELS.get(k, k) for k in names], truths=truths, fig=fig,
-                  quantiles=[0.025, 0.5, 0.975], show_titles=True, title_fmt=".3g",
-                  title_kwargs={"fontsize": 8}, label_kwargs={"fontsize": 9})
+    samples = np.array(samples, dtype=np.float64)
+    truths = None if truths is None else np.array(truths, dtype=np.float64)
+    labels, titles, scales = [], [], []
+    for j, k in enumerate(names):
+        div, pre = (1.0, "") if k in LOG_AXES else _prefix(samples[:, j])
+        samples[:, j] /= div
+        if truths is not None:
+            truths[j] /= div
+        unit = UNITS.get(k, "")
+        labels.append(f"{SYMBOLS.get(k, k)} [{pre}{unit}]" if unit != "-" else f"{SYMBOLS.get(k, k)} [-]")
+        titles.append(SYMBOLS.get(k, k))
+        scales.append("log" if k in LOG_AXES else "linear")
+    size = 2.1 * len(names) + 0.8
+    fig = blank_figure(figsize=(size, size))
+    corner.corner(samples, labels=labels, titles=titles, truths=truths, fig=fig, axes_scale=scales,
+                  quantiles=[0.025, 0.5, 0.975], show_titles=True, title_fmt=".3g", max_n_ticks=4,
+                  title_kwargs={"fontsize": 8}, label_kwargs={"fontsize": 9}, labelpad=0.12)
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    plain = FuncFormatter(lambda v, _: f"{v:.3g}")
+    k = len(names)
+    for idx, ax in enumerate(fig.axes[: k * k]):
+        row, col = divmod(idx, k)
+        for axis, scale, lim, shown in ((ax.xaxis, ax.get_xscale(), ax.get_xlim(), row == k - 1),
+                                        (ax.yaxis, ax.get_yscale(), ax.get_ylim(), col == 0 and row > 0)):
+            if scale == "log":  # a few plainly written ticks per decade, where corner labels the axis
+                decades = np.log10(max(lim) / max(min(lim), 1e-300))
+                subs = (1, 2, 3, 4, 5, 6, 8) if decades <= 1 else ((1, 2, 5) if decades <= 2.5 else (1,))
+                axis.set_major_locator(LogLocator(base=10, subs=subs))
+                axis.set_major_formatter(plain if shown else NullFormatter())
+                axis.set_minor_formatter(NullFormatter())
+        ax.tick_params(which="both", labelsize=7)
+    fig.suptitle("posterior of the ring parameters (median and 95 % interval in each title)", fontsize=9)
+    fig.subplots_adjust(left=0.14, bottom=0.14, top=0.92, wspace=0.08, hspace=0.08)
     return fig
 
 

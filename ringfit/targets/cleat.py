@@ -269,24 +269,23 @@ def load_field(path) -> AngleTimeField:
     """Read a field written by :meth:`AngleTimeField.save`; InputError naming file and key otherwise."""
     path = Path(path)
     z = load_npz(path)
-    with z:
-        if "kind" not in z or str(z["kind"]) != "angle_time_field":
-            raise InputError("not an angle-time field (key 'kind' != 'angle_time_field')", source=path)
-        need = ("sector_deg", "tau_s", "time_step_s", "axes", "mean", "spread", "count", "phi_mean_deg",
-                "tau_mean_s", "arrival_sample", "arrival_angle_deg", "passes", "rotation_hz", "fs_hz")
-        for k in need:
-            if k not in z:
-                raise InputError(f"missing key '{k}'", source=path)
-        fs = float(z["fs_hz"])
-        arr = CleatArrivals(z["arrival_sample"], z["arrival_sample"] / fs, z["arrival_angle_deg"], fs)
-        cond = {k: float(z[k]) for k in ("speed_kmh", "load_n", "pressure_bar", "drum_diameter_m") if k in z}
-        return AngleTimeField(
-            sector_deg=z["sector_deg"], tau_s=z["tau_s"], time_step_s=float(z["time_step_s"]),
-            axes=tuple(str(a) for a in z["axes"]), mean=z["mean"], spread=z["spread"], count=z["count"],
-            phi_mean_deg=z["phi_mean_deg"], tau_mean_s=z["tau_mean_s"], arrivals=arr, passes=int(z["passes"]),
-            rotation_hz=float(z["rotation_hz"]), fs_hz=fs, baseline=str(z["baseline"]) if "baseline" in z else "",
-            condition=cond,
-        )
+    if "kind" not in z or str(z["kind"]) != "angle_time_field":
+        raise InputError("not an angle-time field (key 'kind' != 'angle_time_field')", source=path)
+    need = ("sector_deg", "tau_s", "time_step_s", "axes", "mean", "spread", "count", "phi_mean_deg",
+            "tau_mean_s", "arrival_sample", "arrival_angle_deg", "passes", "rotation_hz", "fs_hz")
+    for k in need:
+        if k not in z:
+            raise InputError(f"missing key '{k}'", source=path)
+    fs = float(z["fs_hz"])
+    arr = CleatArrivals(z["arrival_sample"], z["arrival_sample"] / fs, z["arrival_angle_deg"], fs)
+    cond = {k: float(z[k]) for k in ("speed_kmh", "load_n", "pressure_bar", "drum_diameter_m") if k in z}
+    return AngleTimeField(
+        sector_deg=z["sector_deg"], tau_s=z["tau_s"], time_step_s=float(z["time_step_s"]),
+        axes=tuple(str(a) for a in z["axes"]), mean=z["mean"], spread=z["spread"], count=z["count"],
+        phi_mean_deg=z["phi_mean_deg"], tau_mean_s=z["tau_mean_s"], arrivals=arr, passes=int(z["passes"]),
+        rotation_hz=float(z["rotation_hz"]), fs_hz=fs, baseline=str(z["baseline"]) if "baseline" in z else "",
+        condition=cond,
+    )
 
 
 def _baseline_functions(baseline, axes):
@@ -472,6 +471,9 @@ def angle_time_field(
     mean, spread, count, phi_mean, tau_mean = sums.finish()
     width = 360.0 / sectors
     total_rev = (last - first) / 360.0
+    if not abs(total_rev) >= 2:
+        raise InputError(f"the encoder turns {total_rev:.2f} revolutions over the recording; a cleat field needs at "
+                         "least 2 (a frozen or disconnected encoder?)", source=record.source)
     rotation_hz = total_rev / ((record.samples - 1) / fs)
     return AngleTimeField(
         sector_deg=-180.0 + width * (np.arange(sectors) + 0.5),

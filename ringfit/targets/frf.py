@@ -19,22 +19,25 @@ force is windowed (zero after ``force_window_s``) to keep its noise out.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.io.records import Records
+from ringfit.io.records import MeasuredFRF, Records
 from ringfit.targets.decimation import decimate, decimation_factor
-from ringfit.targets.preprocessing import align_on_impact
+from ringfit.targets.preprocessing import align_on_impact, check_band
 
 
 @dataclass
 class FRFEstimate:
     """H1 accelerance [m/s²/N] and coherence per sensor angle and axis.
 
-    ``freq_hz`` (F,), ``h1`` and ``coherence`` (angles, axes, F), ``angle_deg``
-    (angles,), ``axes``, ``kept`` (records,) bool: impacts used.
+    ``freq_hz`` (F,), ``h1`` and ``coherence`` (angles, axes, F; NaN where a
+    measured FRF came without coherence), ``angle_deg`` (angles,), ``axes``,
+    ``kept`` (records,) bool: impacts used; ``notes`` one-line findings of the
+    pre-processing (offsets, channels left out); ``credible`` False when
+    noise dominates the records; ``measured`` True for FRFs read from a file.
     """
 
     freq_hz: np.ndarray
@@ -43,6 +46,9 @@ class FRFEstimate:
     angle_deg: np.ndarray
     axes: tuple
     kept: np.ndarray
+    notes: list = field(default_factory=list)
+    credible: bool = True
+    measured: bool = False
 
 
 def h1_coherence(force_spec: np.ndarray, acc_spec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -92,13 +98,38 @@ def frf_estimate(
     min_coherence: float = 0.9,
     f_range: tuple[float, float] = (20.0, 400.0),
 ) -> FRFEstimate:
-    """H1 and coherence per sensor angle, with impact rejection (records must carry force)."""
+    """H1 and coherence per sensor angle, with impact rejection (records must carry force).
+
+    Offsets are removed and dead axes left out first
+    (:func:`~ringfit.targets.quality.clean_records`); a record with a junk,
+    flat or out-of-scale channel (:func:`~ringfit.targets.quality.screen_channels`)
+    is left out as a whole, and every such finding is a note of the estimate.
+    """
+    from ringfit.targets.quality import channel_labels, clean_records, screen_channels
+
     if records.force is None:
         raise InputError("FRF needs a force channel; use SSI for records without force", source=records.source)
+    check_band(records, f_max_hz)
+    records, notes = clean_records(records, threshold)
     acc, force = align_on_impact(records, threshold=threshold, delay_s=delay_s, pre_s=pre_s)
     q = decimation_factor(records.fs_hz, f_max_hz)
     acc, fs = decimate(acc, records.fs_hz, q)
     force, _ = decimate(force, records.fs_hz, q)
+    pre = int(round(pre_s * fs))
+    if acc.shape[-1] - pre < 64:
+        raise InputError(f"only {acc.shape[-1] - pre} samples at {fs:g} Hz after the impact; expected at least 64 "
+                         "(records too short?)", source=records.source)
+    r, a, _ = acc.shape
+    try:
+        screen = screen_channels(acc[..., pre:].reshape(r * a, -1), channel_labels(records.sensor_angle_deg, records.axes))
+    except InputError as exc:
+        raise InputError(str(exc), source=records.source) from None
+    notes += screen.notes
+    usable = screen.keep.reshape(r, a).all(axis=1)
+    if not usable.any():
+        raise InputError("every record has a bad channel; nothing left for the FRF", source=records.source)
+    if not usable.all():
+        notes.append(f"{int((~usable).sum())} record(s) with a bad channel left out of the FRF")
     force = force * (np.arange(force.shape[-1]) / fs <= pre_s + force_window_s)
     nfft = max(int(np.ceil(fs / df_hz)), acc.shape[-1])
     f = np.fft.rfftfreq(nfft, 1 / fs)
@@ -110,12 +141,41 @@ def frf_estimate(
     kept = np.ones(records.n_records, bool)
     h1 = np.zeros((angles.size, len(records.axes), f.size), complex)
     coh = np.zeros_like(h1, dtype=float)
+    kept &= usable
     for g in range(angles.size):
-        idx = np.flatnonzero(inverse == g)
+        idx = np.flatnonzero((inverse == g) & usable)
+        if idx.size == 0:
+            continue
         keep = reject_impacts(fspec[idx], aspec[idx], band, min_coherence) if idx.size > 2 else np.ones(idx.size, bool)
         kept[idx[~keep]] = False
         h1[g], coh[g] = h1_coherence(fspec[idx[keep]], aspec[idx[keep]])
-    return FRFEstimate(f, h1, coh, angles, tuple(records.axes), kept)
+    have = np.isin(np.arange(angles.size), inverse[usable])
+    return FRFEstimate(f, h1[have], coh[have], angles[have], tuple(records.axes), kept, notes, screen.credible)
+
+
+def frf_from_measured(m: MeasuredFRF, f_range: tuple[float, float] = (20.0, 400.0)) -> FRFEstimate:
+    """An :class:`FRFEstimate` from FRFs measured by other software (e.g. UFF58 function type 4).
+
+    FRFs of the same sensor angle are averaged (each with the same weight;
+    a note says how many were); the band must lie inside the measured lines.
+    """
+    f = m.freq_hz
+    if f_range[1] > f[-1] or f_range[0] < f[0]:
+        raise InputError(f"band {f_range[0]:g}–{f_range[1]:g} Hz reaches beyond the measured lines "
+                         f"{f[0]:g}–{f[-1]:g} Hz", source=m.source)
+    if np.count_nonzero((f >= f_range[0]) & (f <= f_range[1])) < 8:
+        raise InputError(f"fewer than 8 measured lines in {f_range[0]:g}–{f_range[1]:g} Hz (line spacing "
+                         f"{f[1] - f[0]:g} Hz)", source=m.source)
+    angles, inverse = np.unique(np.round(m.sensor_angle_deg, 9), return_inverse=True)
+    h1 = np.stack([m.frf[inverse == g].mean(axis=0) for g in range(angles.size)])
+    if m.coherence is not None:
+        coh = np.stack([m.coherence[inverse == g].mean(axis=0) for g in range(angles.size)])
+    else:
+        coh = np.full(h1.shape, np.nan)
+    notes = []
+    if angles.size < m.n_records:
+        notes.append(f"{m.n_records} measured FRFs at {angles.size} sensor angles: FRFs of one angle averaged")
+    return FRFEstimate(f, h1, coh, angles, tuple(m.axes), np.ones(m.n_records, bool), notes, True, measured=True)
 
 
 def mode_indicator(frf: FRFEstimate) -> np.ndarray:
@@ -187,7 +247,7 @@ def harmonic_indicators(frf: FRFEstimate, n_max: int | None = None) -> np.ndarra
     return out
 
 
-def frf_modes(records: Records, *, f_range: tuple[float, float] = (20.0, 400.0), delay_s: float = 0.0,
+def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = (20.0, 400.0), delay_s: float = 0.0,
               threshold: float = 0.1, min_coherence: float = 0.9, prominence_db: float = 3.0,
               indicator: str = "harmonic"):
     """Peak picking on H1 (seed §2.2–2.3) → :class:`~ringfit.targets.identify.ModeIdentification`.
@@ -200,12 +260,18 @@ def frf_modes(records: Records, *, f_range: tuple[float, float] = (20.0, 400.0),
     A harmonic's peak counts only where that harmonic dominates the others
     (this drops the noise ripple of the weak harmonics); a peak found in
     several harmonics is kept once, in its strongest one.
+
+    ``records`` may be time records (H1 is estimated here) or FRFs measured
+    by other software (:class:`~ringfit.io.records.MeasuredFRF`, used as they are).
     """
     from ringfit.targets.clustering import PhysicalMode
-    from ringfit.targets.identify import ModeIdentification, mode_table
+    from ringfit.targets.identify import ModeIdentification, mode_table, note_quality
 
-    frf = frf_estimate(records, f_max_hz=f_range[1], delay_s=delay_s, threshold=threshold,
-                       min_coherence=min_coherence, f_range=f_range)
+    if isinstance(records, MeasuredFRF):
+        frf = frf_from_measured(records, f_range)
+    else:
+        frf = frf_estimate(records, f_max_hz=f_range[1], delay_s=delay_s, threshold=threshold,
+                           min_coherence=min_coherence, f_range=f_range)
     f = frf.freq_hz
     if indicator == "sum":
         curves = mode_indicator(frf)[None]
@@ -242,6 +308,15 @@ def frf_modes(records: Records, *, f_range: tuple[float, float] = (20.0, 400.0),
             basis=shape[:, None].astype(complex), shape=shape.astype(complex), pole_index=np.zeros(0, int), n_orders=0,
         ))
     table, modes = mode_table(modes, angle, axis, f"frf-peak-picking-{indicator}")
+    limits = []
+    if not (table.kind == "acoustic").any():
+        limits.append("no acoustic (cavity) row: peak picking finds an acoustic mode only where its peak stands out "
+                      "from the ring modes in a harmonic's indicator (the cavity's n = 1 pattern sits among the "
+                      "higher ring modes); `ringfit ssi` separates it by damping and shape")
+    if frf.measured:
+        table.condition["method"] += " (measured FRFs)"
+    note_quality(table, frf.notes, frf.credible, limits)
     return ModeIdentification(table, modes, angle, axis, float(2 * f[-1]), frf=frf,
                               info={"kept_impacts": int(frf.kept.sum()), "impacts": int(frf.kept.size),
-                                    "indicator": indicator})
+                                    "indicator": indicator, "notes": list(frf.notes), "credible": frf.credible,
+                                    "limits": limits})

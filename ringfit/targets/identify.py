@@ -18,7 +18,13 @@ from ringfit.io.modes import ModeTable
 from ringfit.io.records import Records
 from ringfit.targets.clustering import PhysicalMode, cluster_modes
 from ringfit.targets.decimation import decimate, decimation_factor
-from ringfit.targets.preprocessing import SKIP_AFTER_IMPACT_S, align_on_impact, drop_after_impact, sync_by_group_velocity
+from ringfit.targets.preprocessing import (
+    SKIP_AFTER_IMPACT_S,
+    align_on_impact,
+    check_band,
+    drop_after_impact,
+    sync_by_group_velocity,
+)
 from ringfit.targets.shapes import acoustic_candidates, mode_number, travelling_measure
 from ringfit.targets.ssi import PoleSet, ssi_cov
 from ringfit.targets.stabilization import Stability, stabilization_diagram
@@ -52,7 +58,34 @@ def average_by_angle(acc: np.ndarray, angle_deg: np.ndarray) -> tuple[np.ndarray
     return out / np.bincount(inverse)[:, None, None], angles
 
 
-def prepare_decays(
+@dataclass
+class Decays:
+    """Aligned, decimated free decays of the records, screened for bad channels.
+
+    ``y`` (channels, samples) [m/s²], ``angle_rad`` and ``axis`` per channel,
+    ``fs_hz`` after decimation, ``screen`` the
+    :class:`~ringfit.targets.quality.ChannelScreen` of the channels before
+    the bad ones were left out (None when not screened), ``notes`` one-line
+    findings of the pre-processing (offsets, channels left out, credibility).
+    """
+
+    y: np.ndarray
+    angle_rad: np.ndarray
+    axis: np.ndarray
+    fs_hz: float
+    screen: object = None
+    notes: list = field(default_factory=list)
+
+    @property
+    def credible(self) -> bool:
+        return self.screen is None or bool(self.screen.credible)
+
+
+#: Fewest free-decay samples (after alignment, decimation and the skip) an SSI run accepts.
+MIN_DECAY_SAMPLES = 64
+
+
+def free_decays(
     records: Records,
     *,
     f_max_hz: float = 400.0,
@@ -62,15 +95,22 @@ def prepare_decays(
     delay_s: float = 0.0,
     radius_m: float | None = None,
     average: bool = True,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Aligned, decimated free decays as one ``(channels, samples)`` matrix.
+    screen: bool = True,
+) -> Decays:
+    """Offsets removed, aligned, averaged per angle, decimated free decays; bad channels left out.
 
     **Arguments:** ``f_max_hz`` sets the default decimation
     (:func:`decimation_factor`), ``decimate_to`` [Hz] an explicit target rate;
-    ``radius_m`` is needed when the records carry no force (group-velocity sync).
+    ``radius_m`` is needed when the records carry no force (group-velocity
+    sync); ``screen`` runs :func:`~ringfit.targets.quality.screen_channels`.
 
-    **Returns:** ``(y, angle_rad, axis, fs_hz)``.
+    **Raises** :class:`InputError` when the band lies above the records'
+    Nyquist frequency, the decays are too short, or no channel is usable.
     """
+    from ringfit.targets.quality import channel_labels, clean_records, screen_channels
+
+    check_band(records, f_max_hz)
+    records, notes = clean_records(records, threshold)
     if records.force is not None:
         acc, _ = align_on_impact(records, threshold=threshold, delay_s=delay_s)
     else:
@@ -84,10 +124,27 @@ def prepare_decays(
     acc, fs = decimate(acc, records.fs_hz, q)
     acc = drop_after_impact(acc, fs, skip_s)
     r, a, s = acc.shape
+    if s < MIN_DECAY_SAMPLES:
+        raise InputError(f"only {s} samples of free decay at {fs:g} Hz after alignment, decimation and the skip; "
+                         f"expected at least {MIN_DECAY_SAMPLES} (records too short?)", source=records.source)
     y = acc.reshape(r * a, s)
     angle = np.repeat(np.deg2rad(angle_deg), a)
     axis = np.tile(np.array(records.axes, dtype=object), r)
-    return y, angle, axis, fs
+    found = None
+    if screen:
+        try:
+            found = screen_channels(y, channel_labels(angle_deg, records.axes))
+        except InputError as exc:
+            raise InputError(str(exc), source=records.source) from None
+        notes += found.notes
+        y, angle, axis = y[found.keep], angle[found.keep], axis[found.keep]
+    return Decays(y, angle, axis, fs, found, notes)
+
+
+def prepare_decays(records: Records, **kwargs) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """:func:`free_decays` without the channel screen, as ``(y, angle_rad, axis, fs_hz)``."""
+    d = free_decays(records, screen=False, **kwargs)
+    return d.y, d.angle_rad, d.axis, d.fs_hz
 
 
 def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.ndarray, method: str,
@@ -178,11 +235,42 @@ def ssi_modes(
 
     **Returns:** :class:`ModeIdentification` (``table`` is the mode table).
     """
-    y, angle, axis, fs = prepare_decays(records, f_max_hz=f_range[1], decimate_to=decimate_to, skip_s=skip_s,
-                                        threshold=threshold, delay_s=delay_s, radius_m=radius_m)
+    d = free_decays(records, f_max_hz=f_range[1], decimate_to=decimate_to, skip_s=skip_s,
+                    threshold=threshold, delay_s=delay_s, radius_m=radius_m)
+    y, angle, axis, fs = d.y, d.angle_rad, d.axis, d.fs_hz
     poles = ssi_cov(y, fs, orders=orders, block_rows=block_rows, refs=refs, progress=progress, workers=workers)
     stab = stabilization_diagram(poles, pair_aware=pair_aware)
     modes = cluster_modes(poles, stab, f_range=f_range, min_share=min_share)
     table, modes = mode_table(modes, angle, axis, "ssi-cov", poles=poles)
+    note_quality(table, d.notes, d.credible)
+    from ringfit.targets.quality import psd_singular_values
+
     return ModeIdentification(table, modes, angle, axis, fs, poles=poles, stability=stab,
-                              info={"block_rows": block_rows, "channels": y.shape[0], "samples": y.shape[1]})
+                              info={"block_rows": block_rows, "channels": y.shape[0], "samples": y.shape[1],
+                                    "notes": list(d.notes), "credible": d.credible,
+                                    "psd_singular_values": psd_singular_values(y, fs),
+                                    "source": records.source})
+
+
+def note_quality(table: ModeTable, notes: list[str], credible: bool, limits: list[str] = ()) -> None:
+    """Put the pre-processing findings into the table's sidecar and raise them as warnings.
+
+    Sidecar fields (docs/formats.md §2): ``preprocessing`` (one-line notes:
+    offsets removed, channels left out), ``credible`` (false when noise
+    dominates the records: the rows are then not to be trusted as modes) and
+    ``limits`` (what the method could not see, e.g. acoustic modes for FRF
+    peak picking; not warnings).
+    """
+    import warnings
+
+    if notes:
+        table.condition["preprocessing"] = list(notes)
+    if limits:
+        table.condition["limits"] = list(limits)
+    table.condition["credible"] = bool(credible)
+    src = table.condition.get("method", "identification")
+    for note in notes:
+        warnings.warn(f"{src}: {note}", RuntimeWarning, stacklevel=3)
+    if not credible and len(table):
+        warnings.warn(f"{src}: nothing credible found; the {len(table)} row(s) of the table are likely noise",
+                      RuntimeWarning, stacklevel=3)

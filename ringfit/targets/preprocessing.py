@@ -29,6 +29,13 @@ from ringfit.io.records import Records
 SKIP_AFTER_IMPACT_S = 0.0127
 
 
+def check_band(records: Records, f_max_hz: float) -> None:
+    """The top of the band of interest must lie below the records' Nyquist frequency."""
+    if not 0 < f_max_hz < records.fs_hz / 2:
+        raise InputError(f"band top {f_max_hz:g} Hz is not below the records' Nyquist frequency "
+                         f"{records.fs_hz / 2:g} Hz", source=records.source)
+
+
 def impact_indices(force: np.ndarray, threshold: float = 0.1) -> np.ndarray:
     """Index of the first sample with ``|F| ≥ threshold · max|F|`` in each record.
 

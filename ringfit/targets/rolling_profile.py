@@ -215,7 +215,8 @@ def rolling_profile(
 
     total_rev = (last_angle - first_angle) / 360.0 if first_angle is not None else 0.0
     if total_rev < 2:
-        raise InputError(f"the recording covers {total_rev:.2f} revolutions; a profile needs at least 2",
+        raise InputError(f"the recording covers {total_rev:.2f} revolutions; a profile needs at least 2 "
+                         "(a frozen or disconnected encoder?)",
                          source=record.source)
     if (nrev == 0).any():
         j = int(np.argmax(nrev == 0))

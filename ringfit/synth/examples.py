@@ -1,0 +1,258 @@
+"""Example inputs with a known truth, for ``ringfit example {records,case,cleat,profiles} --out DIR``.
+
+Each kind writes files in the formats of docs/formats.md from the generators
+of :mod:`ringfit.synth`, and a ``README.md`` that states the truth behind
+them (the modes, parameters or effect that were put in) and the one-line
+commands that read them, so that every command of the README can be tried
+at once and its answer checked against the truth:
+
+- ``records`` — roving-sensor hammer records (``impact.records.npz`` and the
+  same as UFF58 ``impact.uff``) of a ring with known modes, and a starting
+  ``tyre.toml``: ``ssi``, ``frf``, ``fit``, ``sample``, ``report``;
+- ``profiles`` — rolling profiles at two drum speeds from a ring with a known
+  tread stiffness, and the tyre file fitted to its free modes: ``fit-rolling``, ``roll``;
+- ``cleat`` — a continuous drum recording with a cleat (encoder, hall
+  pulses), with the travelling waves it excites: ``profile``, ``cleat``;
+- ``case`` — a case folder (docs/formats.md §6) with one injected effect: ``diagnose``.
+
+Files are generated in a temporary folder inside ``DIR`` and moved into
+place only when all are ready; an existing file is replaced only with
+``overwrite`` (``--force``), and never left half-written.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ringfit.errors import InputError
+
+KINDS = ("records", "case", "cleat", "profiles")
+
+
+def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = False, progress: bool = False) -> list[Path]:
+    """Write the example ``kind`` into ``folder`` (created if missing); returns the paths written.
+
+    **Raises** :class:`InputError` for an unknown kind, a ``folder`` that is a
+    file, or files that exist there already (unless ``overwrite``).
+    """
+    from ringfit.io.files import check_output_path
+
+    if kind not in KINDS:
+        raise InputError(f"unknown example {kind!r}; expected one of {', '.join(KINDS)}")
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise InputError("exists and is not a folder; --out names the folder the example is written into",
+                         source=folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".ringfit-example-", dir=folder))
+    try:
+        {"records": _records, "case": _case, "cleat": _cleat, "profiles": _profiles}[kind](tmp, progress)
+        made = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
+        for rel in made:  # every destination checked before anything is moved
+            dst = folder / rel
+            parent = dst.parent
+            while parent != folder and not parent.exists():
+                parent = parent.parent
+            if not parent.is_dir():
+                raise InputError("is a file where the example needs a folder", source=parent)
+            if dst.parent.is_dir():
+                check_output_path(dst, overwrite=overwrite)
+        for rel in made:
+            (folder / rel).parent.mkdir(parents=True, exist_ok=True)
+            os.replace(tmp / rel, folder / rel)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return [folder / rel for rel in made]
+
+
+# ----------------------------------------------------------------------------- the kinds
+
+
+def _true_ring():
+    """Table 9 with every stiffness moved: the truth the fits should find (not the file's starting values)."""
+    from ringfit.params import table9
+
+    geometry, ring = table9()
+    return geometry, ring.replace(rho_a=2.60, ei=0.60, kw=1.40e6, kv=1.08e6, k_tread=15.0e6)
+
+
+def _starting_tyre(folder: Path, name="tyre.toml", ring=None):
+    from ringfit.io.tyre import Tyre, write_tyre
+    from ringfit.params import table9
+
+    geometry, t9 = table9()
+    ring = t9 if ring is None else ring
+    values = {k: float(getattr(ring, k)) for k in ("rho_a", "ei", "kw", "kv", "damping_ratio", "k_tread")}
+    write_tyre(Tyre(geometry, values), folder / name)
+
+
+def _ring_table(ring) -> str:
+    rows = [("ρA", "rho_a_kg_per_m", ring.rho_a, "kg/m"), ("EI", "ei_n_m2", ring.ei, "N m²"),
+            ("k_w", "kw_n_per_m2", ring.kw, "N/m²"), ("k_v", "kv_n_per_m2", ring.kv, "N/m²"),
+            ("ζ", "damping_ratio", ring.damping_ratio, "-"), ("k_tread", "k_tread_n_per_m2", ring.k_tread, "N/m²")]
+    return "| parameter | TOML key | true value | unit |\n|---|---|---|---|\n" + "\n".join(
+        f"| {a} | `{b}` | {float(c):.6g} | {d} |" for a, b, c, d in rows)
+
+
+def _records(folder: Path, progress: bool) -> None:
+    from ringfit.io.records import write_records
+    from ringfit.synth.records import impact_records, ring_modes
+
+    geometry, ring = _true_ring()
+    modes = ring_modes(ring, geometry, n_values=range(1, 10), seed=11)
+    angles = np.arange(24) * 15.0
+    rec = impact_records(modes, angles, ring=ring, geometry=geometry, fs_hz=6400.0, duration_s=0.5,
+                         impacts_per_angle=2, sensor_delay_s=0.4e-3, noise=0.01, seed=12)
+    write_records(rec, folder / "impact.records.npz")
+    write_records(rec, folder / "impact.uff")
+    _starting_tyre(folder)
+    lines = "\n".join(f"| {'cavity' if k == 'acoustic' else int(n)} | {k} | {f:.2f} | {100 * z:.2f} |"
+                      for n, k, f, z in zip(modes.n, modes.kind, modes.freq_hz, modes.damping))
+    (folder / "README.md").write_text(f"""# Example: roving-sensor hammer records with known modes
+
+Written by `ringfit example records`. A free tyre (Table 9 geometry, radius
+{float(geometry.radius)} m) struck radially at 0° and read by one sensor moved round the tread in
+15° steps, two impacts per angle (records × axes × samples = {rec.acc.shape}, {rec.fs_hz:g} Hz,
+radial and tangential, hammer force included, the acceleration 0.4 ms behind the force,
+noise 1 % of the signal's rms). The same records are in UFF58 form in `impact.uff`.
+
+## The truth
+
+Modes in the records (each ring mode a double pole split by 0.2 %):
+
+| n | kind | frequency [Hz] | damping [%] |
+|---|---|---|---|
+{lines}
+
+The ring they come from (eq. 18 of docs/physics.md §2.1):
+
+{_ring_table(ring)}
+
+`tyre.toml` holds the geometry and the Table 9 values as *starting* values, not the truth.
+
+## Try
+
+```bash
+ringfit ssi impact.records.npz --delay 0.0004 --out ssi.modes.csv --plot ssi.png
+ringfit frf impact.records.npz --delay 0.0004 --out frf.modes.csv --plot frf.png
+ringfit ssi impact.uff --delay 0.0004 --out uff.modes.csv
+ringfit fit ssi.modes.csv --tyre tyre.toml --out fitted.toml
+ringfit sample ssi.modes.csv --tyre fitted.toml --out posterior.h5
+ringfit report posterior.h5 --out report.html
+```
+
+`ssi` should list n = 1…9 within 0.3 % of the frequencies above and flag the cavity
+as acoustic; the fit recovers k_w and k_v (EI is weakly identified by free-tyre modes:
+see the identifiability report).
+""")
+
+
+def _profiles(folder: Path, progress: bool) -> None:
+    from ringfit.io.profiles import write_profile
+    from ringfit.synth.profiles import synthetic_profile
+
+    geometry, ring = _true_ring()
+    speeds = (30.0, 60.0)
+    for i, v in enumerate(speeds):
+        prof = synthetic_profile(ring, geometry, v, 4000.0, drum_diameter_m=1.2192, noise_ms2=2.0, seed=20 + i)
+        write_profile(prof, folder / f"run{int(v)}.profile.csv")
+    _starting_tyre(folder, ring=ring.replace(k_tread=19.0e6))
+    (folder / "README.md").write_text(f"""# Example: rolling profiles with a known tread stiffness
+
+Written by `ringfit example profiles`. What the co-rotating sensor reads over one
+revolution on a 1.2192 m drum at {' and '.join(f'{v:g}' for v in speeds)} km/h, load 4000 N
+(docs/formats.md §3; 1024 angles, white noise σ = 2 m/s² per channel, rotation_hz in the sidecar).
+
+## The truth
+
+{_ring_table(ring)}
+
+`tyre.toml` holds the true ρA, EI, k_w, k_v and ζ (as a free-tyre fit would give them) but
+k_tread = 19e6 N/m² (Table 9) as the starting value: the rolling fit should find
+**k_tread = {float(ring.k_tread):.4g} N/m²**.
+
+## Try
+
+```bash
+ringfit fit-rolling run30.profile.csv run60.profile.csv --tyre tyre.toml --out fitted.toml --plot fit.png
+ringfit roll --tyre fitted.toml --speed 45 --drum 1.2192 --out sim45.profile.csv --plot roll.png
+```
+""")
+
+
+def _cleat(folder: Path, progress: bool) -> None:
+    from ringfit.synth.cleat import CleatBench
+
+    geometry, ring = _true_ring()
+    bench = CleatBench(geometry=geometry, ring=ring, steady="ring", fs_hz=12800.0, noise_ms2=5.0, seed=31)
+    seconds = 20.0
+    bench.write(folder / "cleat.records.npz", seconds, progress=progress)
+    m = bench.generating_modes()
+    lines = "\n".join(f"| {n} | {b} | {fr:+.2f} | {ff:.2f} | {100 * z:.2f} |" for n, b, fr, ff, z in
+                      zip(m["n"], m["branch"], m["rotating_hz"], m["fixed_hz"], m["damping_fixed"]))
+    arrivals = bench.arrival_times(seconds)
+    (folder / "README.md").write_text(f"""# Example: a drum recording with a cleat
+
+Written by `ringfit example cleat`. {seconds:g} s of one co-rotating tri-axial sensor
+(radial, tangential) at {bench.fs_hz:g} Hz on a 1.2192 m drum at {bench.speed_kmh:g} km/h, 4000 N,
+with an absolute encoder and the hall sensor that marks each cleat pass
+(docs/records-continuous.md). White noise {bench.noise_ms2:g} m/s², an IEPE high-pass at
+{bench.highpass_hz:g} Hz, gravity included.
+
+## The truth
+
+- wheel rotation: {bench.rotation_hz:.4f} Hz; {arrivals.size} cleat arrivals, one every
+  {bench.drum_period_s:.4f} s; the tyre turns {bench.circumference_ratio:.4f} revolutions per pass;
+- the ring: as in the table below (Table 9 geometry);
+- the travelling waves each cleat hit excites (eq. 25 in the rotating frame, eq. 26 as the
+  fixed observer of the angle–time field sees them, docs/physics.md §3.2–3.3):
+
+| n | branch | rotating frame [Hz] | fixed frame [Hz] | damping seen [%] |
+|---|---|---|---|---|
+{lines}
+
+{_ring_table(ring)}
+
+## Try
+
+```bash
+ringfit profile cleat.records.npz --quiet-after 0.25 --out drum.profile.csv
+ringfit cleat cleat.records.npz --sectors 128 --out field.npz --snapshots snapshots.png --coverage-plot coverage.png
+ringfit cleat cleat.records.npz --sectors 128 --out field2.npz --ssi rolling.modes.csv --animate field.gif
+```
+""")
+
+
+def _case(folder: Path, progress: bool) -> None:
+    from ringfit.synth.cases import make_case
+
+    label = make_case(folder / "case", effect="ground_contact", seed=5)
+    ring = label.ring
+    mag = ", ".join(f"{k} = {v:.4g}" for k, v in label.magnitude.items()) or "-"
+    (folder / "README.md").write_text(f"""# Example: a case folder with one hidden effect
+
+Written by `ringfit example case`. `case/` is a case folder (docs/formats.md §6): `tyre.toml`
+(Table 9 values as a start, not the truth), `free.modes.csv` (the free tyre the ring is fitted
+to) and test tables of the loaded and the spinning tyre, with relative frequency noise
+{100 * label.noise['relative']:.2g} % ({label.noise['colour']}).
+
+## The truth (kept out of the case folder)
+
+- injected effect: **{label.effect}** ({mag}); the diagnosis should answer `{label.expected_verdict}`;
+- the ring: ρA = {ring['rho_a']:.4g} kg/m, EI = {ring['ei']:.4g} N m², k_w = {ring['kw']:.4g} N/m²,
+  k_v = {ring['kv']:.4g} N/m², k_tread = {ring['k_tread']:.4g} N/m².
+
+## Try
+
+```bash
+ringfit diagnose case --out case.diagnosis.json --report case.html
+```
+""")
+
+
+__all__ = ["KINDS", "write_example"]

@@ -1,0 +1,627 @@
+"""Every bad input of issue 14, replayed against the command line in-process.
+
+:func:`build_fixtures` writes a small, valid set of inputs (tyre, mode table
+with sidecar, impact records, rolling profile with sidecar, a continuous cleat
+recording, a case folder) into a folder; :data:`CASES` lists the malformed
+inputs and odd options of the issue, each as a command line over that folder
+plus the files it breaks. :func:`replay` runs one case through
+``ringfit.cli.main`` and says whether it got the promised answer: exit status
+2, ONE line on stderr naming the file, row, field or option, no file written
+or changed in the folder (or, for the few cases marked ``documented``, the
+behaviour the docs promise).
+
+Used by ``tests/test_bad_input_replay.py`` (pytest) and
+``benchmarks/bench_bad_input.py`` (prints how many cases get the promised answer).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import json
+import os
+import re
+import shutil
+import signal
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+#: Sample rate of the fixture records [Hz]: Nyquist 1280 Hz, so a --band top of 5000 Hz is above it.
+FS = 2560.0
+
+
+# ----------------------------------------------------------------------------- fixtures
+
+
+def _impact_records(fs=FS, seconds=0.5, n_angles=8):
+    """Small impact records (NumPy only): two ring modes excited at t0, radial + tangential."""
+    t = np.arange(int(fs * seconds)) / fs
+    angles = np.arange(n_angles) * 360.0 / n_angles
+    t0 = 0.02
+    force = np.where((t >= t0) & (t < t0 + 0.002), 300.0 * np.sin(np.pi * (t - t0) / 0.002), 0.0)
+    acc = np.zeros((n_angles, 2, t.size))
+    tau = np.clip(t - t0, 0, None)
+    for n, f, z in ((2, 110.0, 0.03), (3, 130.0, 0.03), (4, 150.0, 0.03)):
+        decay = np.exp(-z * 2 * np.pi * f * tau) * np.sin(2 * np.pi * f * tau) * (t >= t0)
+        for i, a in enumerate(np.deg2rad(angles)):
+            acc[i, 0] += 50 * np.cos(n * a) * decay
+            acc[i, 1] += 50 / n * np.sin(n * a) * decay
+    acc += 0.01 * np.random.default_rng(0).standard_normal(acc.shape)
+    return dict(acc=acc, axes=np.array(["radial", "tangential"]), sensor_angle_deg=angles, fs_hz=np.float64(fs),
+                force=np.tile(force, (n_angles, 1)))
+
+
+def _profile_csv(points=64, noise=0.0, seed=0):
+    angle = -180.0 + 360.0 * np.arange(points) / points
+    phi = np.deg2rad(angle)
+    rad = 300.0 * (1 - np.exp(-0.5 * (phi / 0.2) ** 2)) - 150.0
+    tan = 40.0 * np.sin(phi) * np.exp(-0.5 * (phi / 0.3) ** 2)
+    if noise:
+        rng = np.random.default_rng(seed)
+        rad, tan = noise * rng.standard_normal(points), noise * rng.standard_normal(points)
+    lines = ["angle_deg,acc_radial_ms2,acc_tangential_ms2"]
+    lines += [f"{float(a)!r},{float(r)!r},{float(s)!r}" for a, r, s in zip(angle, rad, tan)]
+    return "\n".join(lines) + "\n"
+
+
+def _drum_record(fs=2000.0, seconds=3.0, rotation_hz=10.0, drum_period_s=0.3137):
+    """A small continuous drum recording (NumPy only): encoder, hall pulses, a steady pattern and ringing after each hit."""
+    from ringfit.io.continuous import ContinuousRecord
+
+    t = np.arange(int(fs * seconds)) / fs
+    phi = 360.0 * rotation_hz * t - 90.0
+    p = np.deg2rad(phi)
+    hits = np.arange(0.05, seconds, drum_period_s)
+    tau = t[None, :] - hits[:, None]
+    ring = np.where(tau >= 0, np.exp(-30 * np.clip(tau, 0, None)) * np.sin(2 * np.pi * 120 * np.clip(tau, 0, None)),
+                    0.0).sum(axis=0)
+    rng = np.random.default_rng(1)
+    acc = np.stack([400 * np.exp(-0.5 * (np.angle(np.exp(1j * p)) / 0.2) ** 2) + 50 * ring,
+                    40 * np.sin(p) + 20 * ring]) + rng.standard_normal((2, t.size))
+    hall = ((tau >= -0.002) & (tau < 0.003)).any(axis=0).astype(float)
+    return ContinuousRecord(acc=acc, axes=("radial", "tangential"), fs_hz=fs, encoder_angle_deg=phi % 360.0,
+                            hall=hall, hall_delay_s=0.002,
+                            condition={"speed_kmh": 40.0, "load_n": 4000.0, "pressure_bar": 2.2,
+                                       "drum_diameter_m": 1.2192, "rotation_hz": rotation_hz})
+
+
+PROFILE_SIDECAR = {"speed_kmh": 30.0, "load_n": 4000.0, "pressure_bar": 2.2, "revolutions": 26,
+                   "sample_rate_hz": 25600.0, "rotation_hz": 7.66}
+
+
+def build_fixtures(folder: str | os.PathLike) -> Path:
+    """Write the valid inputs every case starts from into ``folder``; returns it."""
+    from ringfit.data import path as data_path
+    from ringfit.io.continuous import ContinuousRecord, write_continuous
+
+    d = Path(folder)
+    d.mkdir(parents=True, exist_ok=True)
+    shutil.copy(data_path("table9.tyre.toml"), d / "tyre.toml")
+    shutil.copy(data_path("free-ssi.modes.csv"), d / "free.modes.csv")
+    shutil.copy(data_path("free-ssi.modes.json"), d / "free.modes.json")
+    np.savez(d / "rec.records.npz", **_impact_records())
+    (d / "run1.profile.csv").write_text(_profile_csv())
+    (d / "run1.profile.json").write_text(json.dumps(PROFILE_SIDECAR))
+    (d / "noise.profile.csv").write_text(_profile_csv(noise=50.0))
+    (d / "noise.profile.json").write_text(json.dumps(PROFILE_SIDECAR))
+    rec = _drum_record()
+    write_continuous(rec, d / "cont.records.npz")
+    frozen = ContinuousRecord(acc=rec.acc, axes=rec.axes, fs_hz=rec.fs_hz,
+                              encoder_angle_deg=np.full(rec.samples, 12.5), hall=rec.hall,
+                              hall_delay_s=rec.hall_delay_s, condition=rec.condition)
+    write_continuous(frozen, d / "frozen.records.npz")
+    case = d / "case"
+    case.mkdir()
+    for name in ("tyre.toml", "free.modes.csv", "free.modes.json"):
+        shutil.copy(d / name, case / name)
+    (d / "post.h5").write_bytes(b"\x89HDF\r\n\x1a\n" + b"\x00" * 64)  # an HDF5 signature, nothing readable
+    return d
+
+
+# ----------------------------------------------------------------------------- breaking files
+
+
+def _write(name, text):
+    def setup(d: Path):
+        (d / name).write_text(text)
+    return setup
+
+
+def _tyre(extra="", ring="", tyre_body=None):
+    body = tyre_body if tyre_body is not None else 'name = "t"\nradius_m = 0.296\nwidth_m = 0.152\npressure_bar = 2.2\n'
+    ring_body = ring if ring else ("rho_a_kg_per_m = 2.715\nei_n_m2 = 0.9426\nkw_n_per_m2 = 1.294e6\n"
+                                   "kv_n_per_m2 = 1.161e6\n")
+    return _write("tyre.toml", f"{extra}[tyre]\n{body}\n[ring]\n{ring_body}")
+
+
+def _top_tyre(line):
+    return _write("tyre.toml", f"{line}\n[tyre]\nradius_m = 0.296\nwidth_m = 0.152\npressure_bar = 2.2\n")
+
+
+def _modes(rows, header="n,a,tag,kind,freq_hz,freq_std_hz,damping_pct"):
+    return _write("free.modes.csv", header + "\n" + "\n".join(rows) + "\n")
+
+
+FREE_ROWS = ["1,0,,structural,107.0,,", "2,0,,structural,116.3,,", "3,0,,structural,130.5,,",
+             "4,0,,structural,148.6,,", "5,0,,structural,170.1,,", "6,0,,structural,194.9,,"]
+
+
+def _bytes(name, data):
+    def setup(d: Path):
+        (d / name).write_bytes(data)
+    return setup
+
+
+def _npz(name, **arrays):
+    def setup(d: Path):
+        base = _impact_records()
+        base.update(arrays)
+        with open(d / name, "wb") as fh:
+            np.savez(fh, **{k: v for k, v in base.items() if v is not None})
+    return setup
+
+
+def _scaled_records(factor):
+    def setup(d: Path):
+        base = _impact_records()
+        base["acc"] = base["acc"] * factor
+        base["force"] = base["force"] * factor
+        with open(d / "rec.records.npz", "wb") as fh:
+            np.savez(fh, **base)
+    return setup
+
+
+def _truncate(name, keep=0.5):
+    def setup(d: Path):
+        data = (d / name).read_bytes()
+        (d / name).write_bytes(data[: int(len(data) * keep)])
+    return setup
+
+
+def _bitflip(name, where=0.5, count=64):
+    def setup(d: Path):
+        data = bytearray((d / name).read_bytes())
+        i = int(len(data) * where)
+        for k in range(i, min(i + count, len(data))):
+            data[k] ^= 0xFF
+        (d / name).write_bytes(bytes(data))
+    return setup
+
+
+def _object_npz(d: Path):
+    base = _impact_records()
+    base["axes"] = np.array(["radial", "tangential"], dtype=object)
+    base["acc"] = base["acc"].astype(object)
+    with open(d / "rec.records.npz", "wb") as fh:
+        np.savez(fh, **base)
+
+
+def _json(name, doc_text):
+    return _write(name, doc_text)
+
+
+def _symlink(name, target):
+    def setup(d: Path):
+        os.symlink(target, d / name)
+    return setup
+
+
+def _mkdir(name):
+    def setup(d: Path):
+        (d / name).mkdir()
+    return setup
+
+
+def _both(*setups):
+    def setup(d: Path):
+        for s in setups:
+            s(d)
+    return setup
+
+
+DEEP_JSON = "[" * 100_000 + "]" * 100_000
+DEEP_TOML_ARRAY = "x = " + "[" * 100_000 + "]" * 100_000
+HUGE_INT = "1" + "0" * 400
+LONG_FIELD = "x" * 140_000
+
+
+# ----------------------------------------------------------------------------- cases
+
+
+@dataclass
+class Case:
+    """One replayed command line.
+
+    - ``argv``: the command line; ``{d}`` is replaced by the fixture folder.
+    - ``setup``: breaks or adds files in the folder before the run.
+    - ``names``: the error line must contain one of these (file, field or option).
+    - ``documented``: instead of a refusal, ``check(status, err, folder)`` must hold.
+    - ``slow``: runs a real fit (kept out of the quick pytest selection).
+    """
+
+    id: str
+    argv: list[str]
+    setup: Callable | None = None
+    names: tuple[str, ...] = ()
+    check: Callable | None = None
+    slow: bool = False
+    item: int = 2
+
+    def args(self, d: Path) -> list[str]:
+        return [a.replace("{d}", str(d)) for a in self.argv]
+
+
+FIT = ["fit", "{d}/free.modes.csv", "--tyre", "{d}/tyre.toml", "--out", "{d}/out.toml"]
+SAMPLE = ["sample", "{d}/free.modes.csv", "--tyre", "{d}/tyre.toml", "--out", "{d}/post_out.h5"]
+SSI = ["ssi", "{d}/rec.records.npz", "--out", "{d}/out.modes.csv"]
+FRF = ["frf", "{d}/rec.records.npz", "--out", "{d}/out.modes.csv"]
+ROLL = ["roll", "--tyre", "{d}/tyre.toml", "--speed", "30", "--out", "{d}/sim.profile.csv"]
+FITROLL = ["fit-rolling", "{d}/run1.profile.csv", "--tyre", "{d}/tyre.toml", "--out", "{d}/out.toml"]
+PROFILE = ["profile", "{d}/cont.records.npz", "--out", "{d}/out.profile.csv"]
+CLEAT = ["cleat", "{d}/cont.records.npz", "--out", "{d}/field.npz", "--sectors", "32"]
+DIAG = ["diagnose", "{d}/case", "--out", "{d}/out.diagnosis.json"]
+REPORT = ["report", "{d}/post.h5", "--out", "{d}/out.html"]
+
+
+def _replace_out(argv, new):
+    out = list(argv)
+    out[out.index("--out") + 1] = new
+    return out
+
+
+CASES: list[Case] = []
+
+
+def add(id, argv, setup=None, names=(), item=2, **kw):
+    CASES.append(Case(id, list(argv), setup, tuple(names), item=item, **kw))
+
+
+# --- 1. inputs never touched --------------------------------------------------------------------------------
+add("fit-out-is-input-sidecar", _replace_out(FIT, "{d}/free.modes.json") + ["--force"], names=("free.modes.json",), item=1)
+add("sample-out-is-input-sidecar", _replace_out(SAMPLE, "{d}/free.modes.json") + ["--force"], names=("free.modes.json",), item=1)
+add("fit-rolling-out-is-profile-sidecar", _replace_out(FITROLL, "{d}/run1.profile.json") + ["--force"],
+    names=("run1.profile.json",), item=1)
+add("fit-rolling-plot-is-profile-sidecar", FITROLL + ["--plot", "{d}/run1.profile.json", "--force"],
+    names=("run1.profile.json",), item=1)
+add("fit-out-is-input", _replace_out(FIT, "{d}/free.modes.csv") + ["--force"], names=("free.modes.csv",), item=1)
+add("fit-out-is-tyre", _replace_out(FIT, "{d}/tyre.toml") + ["--force"], names=("tyre.toml",), item=1)
+add("ssi-plot-is-input", SSI + ["--plot", "{d}/rec.records.npz", "--force"], names=("rec.records.npz",), item=1)
+add("frf-out-is-input", _replace_out(FRF, "{d}/rec.records.npz") + ["--force"], names=("rec.records.npz",), item=1)
+add("cleat-snapshots-is-baseline-sidecar",
+    CLEAT + ["--baseline", "{d}/run1.profile.csv", "--snapshots", "{d}/run1.profile.json", "--force"],
+    names=("run1.profile.json",), item=1)
+add("cleat-ssi-sidecar-is-baseline-sidecar",
+    CLEAT + ["--baseline", "{d}/run1.profile.csv", "--ssi", "{d}/run1.profile.modes", "--force"],
+    names=("run1.profile.json", "run1.profile.modes"), item=1)
+add("profile-out-is-input", _replace_out(PROFILE, "{d}/cont.records.npz") + ["--force"], names=("cont.records.npz",), item=1)
+add("diagnose-out-is-case-sidecar", _replace_out(DIAG, "{d}/case/free.modes.json") + ["--force"],
+    names=("free.modes.json",), item=1)
+add("report-out-is-input", _replace_out(REPORT, "{d}/post.h5") + ["--force"], names=("post.h5",), item=1)
+add("roll-out-is-tyre", _replace_out(ROLL, "{d}/tyre.toml") + ["--force"], names=("tyre.toml",), item=1)
+
+for cmd, argv, out in (("fit", FIT, "out.toml"), ("sample", SAMPLE, "post_out.h5"), ("ssi", SSI, "out.modes.csv"),
+                       ("frf", FRF, "out.modes.csv"), ("roll", ROLL, "sim.profile.csv"),
+                       ("fit-rolling", FITROLL, "out.toml"), ("profile", PROFILE, "out.profile.csv"),
+                       ("cleat", CLEAT, "field.npz"), ("diagnose", DIAG, "out.diagnosis.json"),
+                       ("report", REPORT, "out.html")):
+    add(f"{cmd}-out-is-directory", argv, setup=_mkdir(out), names=(out,), item=1)
+    add(f"{cmd}-out-is-directory-force", argv + ["--force"], setup=_mkdir(out), names=(out,), item=1)
+    add(f"{cmd}-out-is-dangling-symlink", argv, setup=_symlink(out, "nowhere/target"), names=(out,), item=1)
+add("demo-out-is-existing-file", ["demo", "--out", "{d}/tyre.toml"], names=("tyre.toml",), item=2)
+add("demo-out-is-existing-file-force", ["demo", "--out", "{d}/tyre.toml", "--force"], names=("tyre.toml",), item=2)
+
+# --- 2. no tracebacks ---------------------------------------------------------------------------------------
+for line, tag in (("ring = 5", "int"), ('ring = "abc"', "str"), ("ring = [1, 2]", "list"), ("tyre = 5", "tyre-int")):
+    add(f"tyre-toml-{tag}", FIT, setup=_write("tyre.toml", line + ("\n[tyre]\nradius_m = 0.296\nwidth_m = 0.152\n"
+                                                                  "pressure_bar = 2.2\n" if "tyre" not in tag else "\n")),
+        names=("tyre.toml",))
+add("tyre-toml-radius-list", FIT, setup=_tyre(tyre_body="radius_m = [1]\nwidth_m = 0.152\npressure_bar = 2.2\n"),
+    names=("radius_m",))
+add("tyre-toml-huge-int", FIT, setup=_tyre(tyre_body=f"radius_m = {HUGE_INT}\nwidth_m = 0.152\npressure_bar = 2.2\n"),
+    names=("radius_m",))
+add("tyre-toml-huge-int-ring", FIT, setup=_tyre(ring=f"ei_n_m2 = {HUGE_INT}\n"), names=("ei_n_m2",))
+add("tyre-toml-deep-array", FIT, setup=_write("tyre.toml", DEEP_TOML_ARRAY + "\n"), names=("tyre.toml",))
+add("tyre-toml-binary", FIT, setup=_bytes("tyre.toml", b"\xff\xfe\x00garbage"), names=("tyre.toml",))
+for cmd, argv in (("ssi", SSI), ("frf", FRF)):
+    add(f"{cmd}-npz-empty", argv, setup=_bytes("rec.records.npz", b""), names=("rec.records.npz",))
+    add(f"{cmd}-npz-truncated", argv, setup=_truncate("rec.records.npz"), names=("rec.records.npz",))
+    add(f"{cmd}-npz-bitflip", argv, setup=_bitflip("rec.records.npz", 0.5), names=("rec.records.npz",))
+    add(f"{cmd}-npz-bitflip-header", argv, setup=_bitflip("rec.records.npz", 0.0, 40), names=("rec.records.npz",))
+    add(f"{cmd}-npz-object-arrays", argv, setup=_object_npz, names=("rec.records.npz",))
+    add(f"{cmd}-records-all-zero", argv, setup=_npz("rec.records.npz", acc=np.zeros((8, 2, 1280))),
+        names=("rec.records.npz", "acc"))
+    add(f"{cmd}-records-1e300", argv, setup=_scaled_records(1e300), names=("rec.records.npz", "acc"))
+    add(f"{cmd}-fs-1e300", argv, setup=_npz("rec.records.npz", fs_hz=np.float64(1e300)), names=("fs_hz",))
+    add(f"{cmd}-two-samples", argv, setup=_npz("rec.records.npz", acc=np.ones((8, 2, 2)), force=np.ones((8, 2))),
+        names=("rec.records.npz", "samples"))
+    add(f"{cmd}-delay-nan", argv + ["--delay", "nan"], names=("--delay",))
+    add(f"{cmd}-delay-inf", argv + ["--delay", "inf"], names=("--delay",))
+    add(f"{cmd}-threshold-nan", argv + ["--threshold", "nan"], names=("--threshold", "threshold"))
+    add(f"{cmd}-uff-garbage", [argv[0], "{d}/rec.uff", "--out", "{d}/out.modes.csv"],
+        setup=_write("rec.uff", "    -1\n    58\nthis is not a dataset\n"), names=("rec.uff",))
+add("ssi-skip-nan", SSI + ["--skip", "nan"], names=("--skip",))
+add("ssi-block-rows-0", SSI + ["--block-rows", "0"], names=("--block-rows",))
+add("ssi-radius-neg-no-force", SSI + ["--radius", "-1"], setup=_npz("rec.records.npz", force=None), names=("--radius",))
+for cmd, argv in (("profile", PROFILE), ("cleat", CLEAT)):
+    add(f"{cmd}-npz-empty", argv, setup=_bytes("cont.records.npz", b""), names=("cont.records.npz",))
+    add(f"{cmd}-npz-truncated", argv, setup=_truncate("cont.records.npz"), names=("cont.records.npz",))
+    add(f"{cmd}-npz-bitflip", argv, setup=_bitflip("cont.records.npz", 0.3), names=("cont.records.npz",))
+    add(f"{cmd}-npz-bitflip-end", argv, setup=_bitflip("cont.records.npz", 0.995, 32), names=("cont.records.npz",))
+    add(f"{cmd}-not-continuous", [argv[0], "{d}/rec.records.npz", *argv[2:]], names=("rec.records.npz",))
+for w in ("0", "3", "-4"):
+    add(f"sample-walkers-{w}", SAMPLE + ["--walkers", w], names=("--walkers",))
+add("sample-min-steps-0", SAMPLE + ["--min-steps", "0"], names=("--min-steps",))
+add("sample-max-steps-below-min", SAMPLE + ["--min-steps", "100", "--max-steps", "10"], names=("--max-steps",))
+add("sample-seed-negative", SAMPLE + ["--seed", "-1"], names=("--seed",))
+add("report-not-a-posterior", REPORT, names=("post.h5",))
+add("report-empty-file", REPORT, setup=_bytes("post.h5", b""), names=("post.h5",))
+# the readers
+add("modes-n-1e30", FIT, setup=_modes(["1e30,0,,structural,107.0,,"] + FREE_ROWS[1:]), names=("'n'", "row 2"))
+add("modes-huge-int-n", FIT, setup=_modes([f"{HUGE_INT},0,,structural,107.0,,"] + FREE_ROWS[1:]), names=("'n'",))
+add("modes-long-field", FIT, setup=_modes([f"1,0,{LONG_FIELD},structural,107.0,,"] + FREE_ROWS[1:]),
+    names=("free.modes.csv",))
+add("modes-sidecar-huge-int", FIT, setup=_json("free.modes.json", f'{{"state": "free", "load_n": {HUGE_INT}}}'),
+    names=("load_n",))
+add("modes-sidecar-deep", FIT, setup=_json("free.modes.json", DEEP_JSON), names=("free.modes.json",))
+add("modes-sidecar-deep-object", FIT, setup=_json("free.modes.json", '{"x": ' + DEEP_JSON + "}"),
+    names=("free.modes.json",))
+add("modes-sidecar-nan", FIT, setup=_json("free.modes.json", '{"state": "free", "speed_kmh": NaN}'), names=("speed_kmh",))
+add("profile-sidecar-huge-int", FITROLL, setup=_json("run1.profile.json",
+                                                     json.dumps(PROFILE_SIDECAR)[:-1] + f', "load_n": {HUGE_INT}}}'),
+    names=("load_n",))
+add("profile-sidecar-deep", FITROLL, setup=_json("run1.profile.json", DEEP_JSON), names=("run1.profile.json",))
+add("profile-long-field", FITROLL, setup=_write("run1.profile.csv", "angle_deg,acc_radial_ms2,acc_tangential_ms2\n"
+                                               f"{LONG_FIELD},1,2\n"), names=("run1.profile.csv",))
+add("profile-csv-1e300-angle", FITROLL, setup=_write("run1.profile.csv", _profile_csv().replace("-180.0,", "-1e300,", 1)),
+    names=("angle_deg",))
+add("diagnose-case-sidecar-deep", DIAG, setup=_json("case/free.modes.json", DEEP_JSON), names=("free.modes.json",))
+add("diagnose-case-tyre-ring-int", DIAG, setup=lambda d: (d / "case/tyre.toml").write_text(
+    "ring = 5\n[tyre]\nradius_m = 0.296\nwidth_m = 0.152\npressure_bar = 2.2\n"), names=("tyre.toml",))
+add("diagnose-not-a-folder", ["diagnose", "{d}/nope", "--out", "{d}/out.diagnosis.json"], names=("nope",))
+
+# UFF files from other software (tests/data/uff, MIT): truncated, a microphone, FRFs given to SSI, no angle
+UFF_DATA = Path(__file__).parent / "data" / "uff"
+
+
+def _copy_uff(name, as_name=None, cut=None):
+    def setup(d: Path):
+        data = (UFF_DATA / name).read_bytes()
+        (d / (as_name or name)).write_bytes(data if cut is None else data[: int(len(data) * cut)])
+    return setup
+
+
+for cmd in ("ssi", "frf"):
+    add(f"{cmd}-uff-truncated-microphone", [cmd, "{d}/mic.uff", "--out", "{d}/out.modes.csv"],
+        setup=_copy_uff("dataset_milestone_in_header.uff", "mic.uff"), names=("mic.uff",), item=5)
+    add(f"{cmd}-uff-cut-in-half", [cmd, "{d}/half.uff", "--out", "{d}/out.modes.csv"],
+        setup=_copy_uff("binary8byte.uff", "half.uff", cut=0.5), names=("half.uff",), item=5)
+    add(f"{cmd}-uff-direction-0", [cmd, "{d}/b.uff", "--out", "{d}/out.modes.csv"],
+        setup=_copy_uff("binary8byte.uff", "b.uff"), names=("b.uff",), item=5)
+    add(f"{cmd}-uff-no-angle", [cmd, "{d}/b.uff", "--out", "{d}/out.modes.csv", "--axes", "0=radial"],
+        setup=_copy_uff("binary8byte.uff", "b.uff"), names=("b.uff",), item=5)
+    add(f"{cmd}-uff-band-above-nyquist", [cmd, "{d}/b.uff", "--out", "{d}/out.modes.csv", "--axes", "0=radial",
+                                          "--angles", "1=0"], setup=_copy_uff("binary8byte.uff", "b.uff"),
+        names=("--band",), item=5)
+add("ssi-uff-frfs", ["ssi", "{d}/h.uff", "--out", "{d}/out.modes.csv", "--axes", "0=radial", "--angles", "0=0"],
+    setup=_copy_uff("non_ascii_header.uff", "h.uff"), names=("h.uff",), item=5)
+add("frf-uff-frfs-band-beyond-lines", ["frf", "{d}/h.uff", "--out", "{d}/out.modes.csv", "--axes", "0=radial",
+                                       "--angles", "0=0"], setup=_copy_uff("non_ascii_header.uff", "h.uff"),
+    names=("--band",), item=5)
+add("ssi-angles-for-npz", SSI + ["--angles", "1=0"], names=("--angles",))
+add("ssi-angles-garbage", SSI + ["--angles", "one=zero"], names=("--angles",))
+add("ssi-axes-garbage", SSI + ["--axes", "0=vertical"], names=("--axes",))
+
+# --- 3. no silent acceptance --------------------------------------------------------------------------------
+add("tyre-unknown-ring-key", FIT, setup=_tyre(ring="rho_a_kg_per_m = 2.715\nei_nm2 = 0.9\n"), names=("ei_n_m2",), item=3)
+add("tyre-unknown-tyre-key", FIT, setup=_tyre(tyre_body="radius_m = 0.296\nwidht_m = 0.152\nwidth_m = 0.15\n"
+                                                        "pressure_bar = 2.2\n"), names=("width_m",), item=3)
+add("tyre-unknown-table", FIT, setup=_write("tyre.toml", "[tyre]\nradius_m = 0.296\nwidth_m = 0.152\npressure_bar = 2.2\n"
+                                                         "[rign]\nei_n_m2 = 0.9\n"), names=("[ring]", "'ring'"), item=3)
+add("tyre-ei-1e300", FIT, setup=_tyre(ring="ei_n_m2 = 1e300\n"), names=("ei_n_m2",), item=3)
+add("tyre-kw-1e-300", FIT, setup=_tyre(ring="kw_n_per_m2 = 1e-300\n"), names=("kw_n_per_m2",), item=3)
+add("tyre-damping-2", FIT, setup=_tyre(ring="damping_ratio = 2.0\n"), names=("damping_ratio",), item=3)
+add("tyre-width-1e300", FIT, setup=_tyre(tyre_body="radius_m = 0.296\nwidth_m = 1e300\npressure_bar = 2.2\n"),
+    names=("width_m",), item=3)
+add("modes-freq-1e300", FIT, setup=_modes(["1,0,,structural,1e300,,"] + FREE_ROWS[1:]), names=("freq_hz",), item=3)
+add("modes-damping-1e300", FIT, setup=_modes(["1,0,,structural,107,,1e300"] + FREE_ROWS[1:]), names=("damping_pct",),
+    item=3)
+add("modes-std-1e300", FIT, setup=_modes(["1,0,,structural,107,1e300,"] + FREE_ROWS[1:]), names=("freq_std_hz",), item=3)
+add("modes-sidecar-speed-1e300", FIT, setup=_json("free.modes.json", '{"state": "free", "speed_kmh": 1e300}'),
+    names=("speed_kmh",), item=3)
+add("profile-sidecar-speed-1e300", FITROLL, setup=_json("run1.profile.json", json.dumps({**PROFILE_SIDECAR,
+                                                                                       "speed_kmh": 1e300})),
+    names=("speed_kmh",), item=3)
+add("profile-sidecar-load-1e300", FITROLL, setup=_json("run1.profile.json", json.dumps({**PROFILE_SIDECAR,
+                                                                                      "load_n": 1e300})),
+    names=("load_n",), item=3)
+add("profile-acc-1e300", FITROLL, setup=_write("run1.profile.csv", "angle_deg,acc_radial_ms2,acc_tangential_ms2\n" + "\n".join(
+    f"{-180 + 360 * i / 64!r},{1e300!r},0.0" for i in range(64)) + "\n"), names=("acc_radial_ms2",), item=3)
+for cmd, argv in (("ssi", SSI), ("frf", FRF)):
+    add(f"{cmd}-band-above-nyquist", argv + ["--band", "20:5000"], names=("--band",), item=3)
+add("ssi-skip-negative", SSI + ["--skip", "-1"], names=("--skip",), item=3)
+add("ssi-skip-too-long", SSI + ["--skip", "100"], names=("--skip",), item=3)
+for v in ("2", "nan", "-0.5"):
+    add(f"frf-min-coherence-{v}", FRF + ["--min-coherence", v], names=("--min-coherence",), item=3)
+for v in ("-1", "nan", "0"):
+    add(f"diagnose-noise-freq-{v}", DIAG + ["--noise-freq-hz", v], names=("--noise-freq-hz",), item=3)
+    add(f"diagnose-noise-profile-{v}", DIAG + ["--noise-profile", v], names=("--noise-profile",), item=3)
+add("fit-max-steps-0", FIT + ["--max-steps", "0"], names=("--max-steps",), item=3)
+add("fit-max-steps-negative", FIT + ["--max-steps", "-5"], names=("--max-steps",), item=3)
+add("fit-max-iterations-0", FIT + ["--max-iterations", "0"], names=("--max-iterations",), item=3)
+add("sample-max-steps-0", SAMPLE + ["--max-steps", "0"], names=("--max-steps",), item=3)
+add("fit-4-params-2-modes", FIT, setup=_modes(FREE_ROWS[:2]), names=("free.modes.csv", "--free", "modes"), item=3)
+add("fit-4-params-1-mode", FIT, setup=_modes(FREE_ROWS[:1]), names=("free.modes.csv", "--free", "modes"), item=3)
+add("fit-4-params-2-modes-no-prior", FIT + ["--prior", "none"], setup=_modes(FREE_ROWS[:2]),
+    names=("free.modes.csv", "--free", "modes"), item=3)
+add("fit-4-params-modes-used-1", FIT + ["--modes-used", "1"], names=("--modes-used", "--free", "modes"), item=3)
+add("sample-4-params-2-modes", SAMPLE, setup=_modes(FREE_ROWS[:2]), names=("free.modes.csv", "--free", "modes"), item=3)
+add("cleat-frozen-encoder", ["cleat", "{d}/frozen.records.npz", "--out", "{d}/field.npz", "--sectors", "32",
+                             "--no-baseline"], names=("frozen.records.npz",), item=3)
+add("profile-frozen-encoder", ["profile", "{d}/frozen.records.npz", "--out", "{d}/out.profile.csv"],
+    names=("frozen.records.npz",), item=3)
+# other options of every command
+add("roll-speed-nan", ROLL[:4] + ["nan"] + ROLL[5:], names=("--speed",), item=3)
+add("roll-load-1e300", ROLL + ["--load", "1e300"], names=("--load",), item=3)
+add("roll-rotation-neg", ROLL + ["--rotation-hz", "-3"], names=("--rotation-hz",), item=3)
+add("roll-rotation-nan", ROLL + ["--rotation-hz", "nan"], names=("--rotation-hz",), item=3)
+add("roll-drum-inf", ROLL + ["--drum", "inf"], names=("--drum",), item=3)
+add("roll-speed-1e300", ROLL[:4] + ["1e300"] + ROLL[5:], names=("--speed",), item=3)
+add("roll-points-1e9", ROLL + ["--points", "1000000000"], names=("--points",), item=3)
+add("fit-rolling-grid-odd", FITROLL + ["--grid", "63"], names=("--grid",), item=3)
+add("fit-rolling-free-unknown", FITROLL + ["--free", "k_treed"], names=("k_treed", "--free"), item=3)
+add("fit-default-std-nan", FIT + ["--default-std", "nan"], names=("--default-std",), item=3)
+add("fit-modes-used-garbage", FIT + ["--modes-used", "1-x"], names=("--modes-used",), item=3)
+add("fit-free-unknown", FIT + ["--free", "ei,stiffness"], names=("stiffness",), item=3)
+add("profile-points-0", PROFILE + ["--points", "0"], names=("--points", "points"), item=3)
+add("profile-quiet-after-neg", PROFILE + ["--quiet-after", "-1"], names=("--quiet-after",), item=3)
+add("cleat-sectors-0", CLEAT[:-1] + ["0"], names=("--sectors", "sectors"), item=3)
+add("cleat-time-step-neg", CLEAT + ["--time-step", "-1"], names=("--time-step", "time step"), item=3)
+add("cleat-duration-nan", CLEAT + ["--duration", "nan"], names=("--duration",), item=3)
+add("cleat-f-max-nan", CLEAT + ["--ssi", "{d}/c.modes.csv", "--f-max", "nan"], names=("--f-max",), item=3)
+add("cleat-skip-neg", CLEAT + ["--ssi", "{d}/c.modes.csv", "--skip", "-1"], names=("--skip",), item=3)
+add("cleat-channels-0", CLEAT + ["--ssi", "{d}/c.modes.csv", "--channels", "0"], names=("--channels",), item=3)
+add("diagnose-effects-unknown", DIAG + ["--effects", "gravty"], names=("gravty", "--effects"), item=3)
+add("ssi-orders-garbage", SSI + ["--orders", "10:2"], names=("--orders",), item=3)
+add("ssi-workers-0", SSI + ["--workers", "0"], names=("--workers",), item=3)
+
+
+# ----------------------------------------------------------------------------- documented behaviour
+
+
+def _fit_rolling_noise_check(status, err, out, d):
+    """Pure noise: not "converged" with an absurd angle offset; exit 1 (no fit) or a bounded offset."""
+    if status == 1:
+        return not (d / "out.toml").exists()
+    if status != 0:
+        return False
+    m = re.search(r"angle offset ([-+0-9.eE]+)", out)
+    return m is None or abs(float(m.group(1))) <= 180.0
+
+
+add("fit-rolling-pure-noise", ["fit-rolling", "{d}/noise.profile.csv", "--tyre", "{d}/tyre.toml",
+                               "--out", "{d}/out.toml", "--free", "k_tread,angle_offset", "--grid", "128"],
+    check=_fit_rolling_noise_check, slow=True, item=3)
+
+
+
+# ----------------------------------------------------------------------------- running one case
+
+
+def snapshot(folder: Path) -> dict:
+    """Path -> (kind, content hash) of everything under ``folder``, symlinks not followed."""
+    out = {}
+    for root, dirs, files in os.walk(folder, followlinks=False):
+        for name in dirs + files:
+            p = Path(root) / name
+            rel = str(p.relative_to(folder))
+            if p.is_symlink():
+                out[rel] = ("link", os.readlink(p))
+            elif p.is_dir():
+                out[rel] = ("dir", None)
+            else:
+                out[rel] = ("file", hashlib.sha256(p.read_bytes()).hexdigest())
+    return out
+
+
+_PROGRESS = re.compile(r"\d+%\||\|\s*\d+(\.\d+)?[kM]?/\d+|it/s|s/it")
+
+
+def error_lines(err: str) -> list[str]:
+    """The stderr lines a user reads: progress-bar redraws (after '\\r', tqdm bars) left out."""
+    lines = []
+    for raw in err.split("\n"):
+        line = raw.split("\r")[-1].strip()
+        if line and not _PROGRESS.search(line):
+            lines.append(line)
+    return lines
+
+
+@dataclass
+class Outcome:
+    ok: bool
+    status: object
+    why: str = ""
+    err: str = ""
+    extra: dict = field(default_factory=dict)
+
+
+class CaseTimeout(Exception):
+    """A case ran longer than its time limit (a hang, for a bad input)."""
+
+
+def _alarm(signum, frame):
+    raise CaseTimeout()
+
+
+def replay(case: Case, folder: Path, *, timeout_s: float | None = None) -> Outcome:
+    """Run ``case`` in ``folder`` (already holding the fixtures) and judge the answer.
+
+    ``timeout_s`` (POSIX main thread only): a case still running after this
+    long counts as a failure (a bad input that hangs the command).
+    """
+    from ringfit.cli import main
+
+    if case.setup is not None:
+        case.setup(folder)
+    before = snapshot(folder)
+    out_buf, err_buf = io.StringIO(), io.StringIO()
+    status = None
+    old = signal.signal(signal.SIGALRM, _alarm) if timeout_s else None
+    with contextlib.redirect_stdout(out_buf), contextlib.redirect_stderr(err_buf):
+        try:
+            if timeout_s:
+                signal.setitimer(signal.ITIMER_REAL, timeout_s)
+            status = main(case.args(folder))
+        except SystemExit as exc:  # argparse
+            status = exc.code
+        except CaseTimeout:
+            return Outcome(False, "timeout", f"still running after {timeout_s:g} s", err_buf.getvalue()[-2000:])
+        except BaseException as exc:  # noqa: BLE001 - a traceback is exactly what we look for
+            tb = traceback.format_exception(exc)
+            return Outcome(False, "traceback", f"{exc.__class__.__name__}: {str(exc)[:200]}", "".join(tb)[-2000:])
+        finally:
+            if timeout_s:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+                signal.signal(signal.SIGALRM, old)
+    err = err_buf.getvalue()
+    after = snapshot(folder)
+    if case.check is not None:
+        ok = bool(case.check(status, err, out_buf.getvalue(), folder))
+        return Outcome(ok, status, "" if ok else "documented behaviour not met", err)
+    lines = error_lines(err)
+    if status != 2:
+        return Outcome(False, status, f"exit {status}, expected 2", err)
+    if len(lines) != 1:
+        return Outcome(False, status, f"{len(lines)} stderr lines, expected 1", err)
+    if case.names and not any(n in lines[0] for n in case.names):
+        return Outcome(False, status, f"error line names none of {case.names}", err)
+    if after != before:
+        changed = sorted(k for k in set(before) | set(after) if before.get(k) != after.get(k))
+        return Outcome(False, status, f"files written or changed: {changed}", err)
+    return Outcome(True, status, "", err)
+
+
+def run_all(cases=None, *, workdir: Path, fixtures: Path | None = None, verbose=False,
+            timeout_s: float | None = None) -> list[tuple[Case, Outcome]]:
+    """Replay ``cases`` (default all), each in a fresh copy of the fixtures under ``workdir``."""
+    fixtures = fixtures or build_fixtures(workdir / "_fixtures")
+    results = []
+    for i, case in enumerate(cases or CASES):
+        d = workdir / f"c{i:03d}"
+        shutil.copytree(fixtures, d, symlinks=True)
+        cwd = os.getcwd()
+        os.chdir(d)
+        try:
+            outcome = replay(case, d, timeout_s=timeout_s)
+        finally:
+            os.chdir(cwd)
+        results.append((case, outcome))
+        if verbose:
+            print(f"{'ok ' if outcome.ok else 'BAD'} {case.id:<45} {outcome.status!s:<9} {outcome.why}", flush=True)
+        shutil.rmtree(d, ignore_errors=True)
+    return results
