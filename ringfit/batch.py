@@ -119,7 +119,8 @@ class TaskResult:
     - ``status``: exit status, 0 ok, 1 failed, 2 bad input.
     - ``error``: one line, empty when ok; ``log``: the task's stdout and stderr.
     - ``value``: what the callable returned.
-    - ``elapsed_s`` [s]: wall time of the callable on the worker.
+    - ``elapsed_s`` [s]: wall time of the callable on the worker;
+      ``started_at`` [s]: when it started (``time.time()`` of the worker).
     - ``rss_start_mb``, ``peak_rss_mb``, ``peak_delta_mb`` [MiB]: resident
       memory of the worker process when the task started, its peak during the
       task, and the difference.
@@ -137,6 +138,7 @@ class TaskResult:
     value: Any = None
     log: str = ""
     elapsed_s: float = 0.0
+    started_at: float = float("nan")
     rss_start_mb: float = float("nan")
     peak_rss_mb: float = float("nan")
     peak_delta_mb: float = float("nan")
@@ -275,6 +277,7 @@ def execute(name: str, fn: Callable, args: tuple = (), outputs: tuple = (), kind
         log = io.StringIO()
         result = TaskResult(name, outputs=tuple(outputs), worker=f"{socket.gethostname()}:{os.getpid()}",
                             task_index=_TASKS_RUN, kind=kind, kind_index=_KINDS_RUN.get(kind, 0))
+        result.started_at = time.time()
         t0 = time.perf_counter()
         with _PeakMemory() as mem, contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
             try:
@@ -517,14 +520,17 @@ def _token() -> str:
 
 
 def summarize(results: Sequence[TaskResult], wall_s: float | None = None) -> dict:
-    """Figures over a run: counts by state, task time, memory, compilations on warm tasks.
+    """Figures over a run: counts by state, task time, memory, compilations on warm tasks, overhead.
 
     **Returns:** dict with ``tasks``, ``by_state`` (state → count), ``task_s``
     (sum of task wall times) [s], ``median_task_s`` [s], ``max_peak_delta_mb`` and
     ``max_peak_rss_mb`` [MiB] over tasks, ``workers`` (distinct processes),
     ``warm_compiles`` (compilations in tasks that were not the first of their
-    kind on their worker; a new input shape compiles again) and, with ``wall_s``, ``overhead_per_task_s`` = (workers × wall −
-    Σ task time) / tasks [s]: the time a worker spent on anything but tasks.
+    kind on their worker; a new input shape compiles again), ``gap_s`` [s]:
+    the mean time a worker spent between the end of one task and the start
+    of its next (the per-task overhead beyond the work itself) and, with
+    ``wall_s``, ``overhead_per_task_s`` = (workers × wall − Σ task time) /
+    tasks [s], which also counts idle workers at the start and the end.
     """
     import numpy as np
 
@@ -533,13 +539,20 @@ def summarize(results: Sequence[TaskResult], wall_s: float | None = None) -> dic
     for r in results:
         by_state[r.state] = by_state.get(r.state, 0) + 1
     task_s = float(sum(r.elapsed_s for r in ran))
-    workers = len({r.worker for r in ran})
+    per_worker: dict[str, list[TaskResult]] = {}
+    for r in ran:
+        per_worker.setdefault(r.worker, []).append(r)
+    gaps = []
+    for rs in per_worker.values():
+        rs = sorted(rs, key=lambda r: r.started_at)
+        gaps += [b.started_at - (a.started_at + a.elapsed_s) for a, b in zip(rs, rs[1:])]
     out = dict(tasks=len(results), by_state=by_state, task_s=task_s,
                median_task_s=float(np.median([r.elapsed_s for r in ran])) if ran else float("nan"),
                max_peak_delta_mb=max((r.peak_delta_mb for r in ran), default=float("nan")),
                max_peak_rss_mb=max((r.peak_rss_mb for r in ran), default=float("nan")),
-               workers=workers, warm_compiles=int(sum(r.compiles for r in ran if r.kind_index > 0)))
+               workers=len(per_worker), warm_compiles=int(sum(r.compiles for r in ran if r.kind_index > 0)),
+               gap_s=float(np.mean(gaps)) if gaps else float("nan"))
     if wall_s is not None and ran:
         out["wall_s"] = float(wall_s)
-        out["overhead_per_task_s"] = (workers * float(wall_s) - task_s) / len(ran)
+        out["overhead_per_task_s"] = (len(per_worker) * float(wall_s) - task_s) / len(ran)
     return out
