@@ -1,4 +1,4 @@
-"""Many independent jobs as tasks on dask.distributed (docs/formats.md §8).
+"""Many independent jobs as tasks on dask.distributed (docs/formats.md §13).
 
 The generic machinery behind ``ringfit batch`` and ``ringfit campaign``. It
 takes plain callables and knows nothing of the command line:

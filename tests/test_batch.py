@@ -151,16 +151,18 @@ def _raise(exc):
 
 
 # ============================================================================ the cluster
-def test_batch_fit_matches_serial_and_survives_a_broken_input(cluster, tables, tmp_path, capsys):
+def test_batch_fit_matches_serial_and_survives_a_broken_input(cluster, tables, tmp_path, capsys, monkeypatch):
     good, broken = tables
-    inputs = [str(good[0]), str(broken), str(good[1]), str(good[2])]
-    out = tmp_path / "batch"
+    monkeypatch.chdir(tmp_path)  # relative paths: the workers read them from the batch's folder
+    inputs = [os.path.relpath(p) for p in (good[0], broken, good[1], good[2])]
+    broken = inputs[1]
+    out = Path("batch")
     status = main(["batch", "fit", *inputs, "--out", str(out), "--scheduler", cluster.scheduler_address,
                    "--quiet", "--", "--tyre", str(TYRE)])
     printed = capsys.readouterr().out
     assert status == 1
     # the serial command, input by input, in this process
-    serial = tmp_path / "serial"
+    serial = Path("serial")
     serial.mkdir()
     plans = plan_batch("fit", inputs, serial, ["--tyre", str(TYRE)])
     for plan in plans:
@@ -258,6 +260,7 @@ def test_campaign_table_and_report_from_the_saved_files(cluster, tmp_path, capsy
             chain = h5["chain"][()]
             meta = __import__("json").loads(h5.attrs["meta"])
         names = meta["names"]
+        assert set(meta["kinds"]) == {"log"}  # the chain holds log-parameters (docs/formats.md §11)
         draws = np.exp(chain[meta["burn"]::meta["thin"]].reshape(-1, len(names)))
         for j, name in enumerate(names):
             key = {"rho_a": "rho_a_kg_per_m", "ei": "ei_n_m2", "kw": "kw_n_per_m2", "kv": "kv_n_per_m2"}[name]
@@ -266,7 +269,7 @@ def test_campaign_table_and_report_from_the_saved_files(cluster, tmp_path, capsy
                                         float(row[f"{key}_hi"])], [lo, med, hi], rtol=1e-9)
             assert float(row[key]) == pytest.approx(read_tyre(out / tyre / "fitted.tyre.toml").ring_values[name],
                                                     rel=1e-9)
-        assert row["modes"] == str(len(load_posterior(out / tyre / "posterior.h5").data["n"]))
+        assert row["modes"] == str(len(load_posterior(out / tyre / "posterior.h5").meta["data"]["n"]))
         verdict = read_diagnosis(out / tyre / "diagnosis.json")["verdict"]
         assert row["verdict"] == "+".join(verdict["effects"])
     assert rows["tyreA"]["distance"] == ""  # two tyres: too few for the outlier test

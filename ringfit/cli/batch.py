@@ -1,4 +1,4 @@
-"""``ringfit batch`` and ``ringfit campaign``: many inputs as tasks on dask.distributed (docs/formats.md §8).
+"""``ringfit batch`` and ``ringfit campaign``: many inputs as tasks on dask.distributed (docs/formats.md §13).
 
     ringfit batch {ssi,fit,sample,diagnose,profile,estimate} INPUTS… --out DIR
                   [--scheduler ADDRESS | --workers N] [-- OPTIONS OF THE COMMAND]
@@ -19,6 +19,8 @@ import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from ringfit.cli.targets import _positive_int
 
 #: Commands ``ringfit batch`` runs, in help order.
 BATCH_COMMANDS = ("ssi", "fit", "sample", "diagnose", "profile", "estimate")
@@ -41,7 +43,7 @@ class OutputRule:
     defaults: tuple[tuple[str, ...], ...] = ()
 
 
-#: The naming rule of every batch command (docs/formats.md §8).
+#: The naming rule of every batch command (docs/formats.md §13).
 OUTPUT_RULES: dict[str, OutputRule] = {
     "ssi": OutputRule((".records.npz", ".uff", ".unv"), ".modes.csv", (".modes.json",),
                       (("--workers", "1"), ("--no-progress",))),
@@ -78,7 +80,7 @@ class PlannedRun:
 def _batch_options(p: argparse.ArgumentParser, *, inputs: bool) -> None:
     if inputs:
         p.add_argument("inputs", nargs="+", help="input files or case folders, one task each")
-        p.add_argument("--out", required=True, type=Path, help="output folder (created if absent)")
+        p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created if absent)")
     _cluster_options(p)
     p.add_argument("--skip-existing", action="store_true",
                    help="leave out inputs whose outputs are already in DIR (resume an interrupted batch)")
@@ -96,16 +98,6 @@ def _cluster_options(p: argparse.ArgumentParser) -> None:
                         "tried once more (default auto = machine memory / workers)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--verbose", action="store_true", help="print the output of failed tasks and Dask's warnings")
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1; got {text!r}")
-    return value
 
 
 class _InnerParser(argparse.ArgumentParser):
@@ -131,7 +123,7 @@ def register(sub) -> None:
         "batch", help="run one command on many inputs as dask.distributed tasks",
         description="Run `ringfit COMMAND` on every input as one task on a Dask cluster (a LocalCluster of "
                     "worker processes here, or --scheduler). Each output goes to DIR under a name derived from "
-                    "its input (docs/formats.md §8); a failing input does not stop the others and is listed at "
+                    "its input (docs/formats.md §13); a failing input does not stop the others and is listed at "
                     "the end with its one-line error. Exit 0 if every input succeeded, 1 if some failed, 2 for "
                     "bad batch arguments.",
         epilog="usage after COMMAND: INPUTS... --out DIR [batch options] [-- options of the command]. "
@@ -140,7 +132,7 @@ def register(sub) -> None:
     p.add_argument("command", choices=BATCH_COMMANDS, help="the ringfit command to run on every input")
     p.add_argument("rest", nargs=argparse.REMAINDER, metavar="INPUTS... --out DIR [-- OPTIONS]",
                    help="inputs, --out DIR and batch options; after `--`, options for every command")
-    _cluster_options(p)
+    _batch_options(p, inputs=False)
     p.set_defaults(run=run_batch)
 
     c = sub.add_parser(
@@ -149,10 +141,10 @@ def register(sub) -> None:
                     "targets from free.records.npz by SSI where present (else free.modes.csv as is) -> "
                     "`ringfit fit` -> `ringfit sample` -> `ringfit diagnose`; then a campaign table "
                     "(campaign.csv, one row per tyre) and a self-contained HTML report (campaign.html) built "
-                    "from the saved result files (docs/formats.md §8). Exit 0 if every step succeeded, 1 if "
+                    "from the saved result files (docs/formats.md §13). Exit 0 if every step succeeded, 1 if "
                     "some failed (the table and report are still written), 2 for bad arguments.")
     c.add_argument("campaign", type=Path, help="folder holding one case folder per tyre (each with tyre.toml)")
-    c.add_argument("--out", required=True, type=Path, help="output folder (created if absent)")
+    c.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created if absent)")
     _cluster_options(c)
     c.add_argument("--walkers", type=int, default=32, help="emcee walkers of `ringfit sample` (default 32)")
     c.add_argument("--min-steps", type=int, default=2000, help="`ringfit sample --min-steps` (default 2000)")
@@ -169,7 +161,7 @@ def register(sub) -> None:
 
 # ============================================================================ planning
 def output_stems(inputs: list[str], rule: OutputRule) -> list[str]:
-    """The output stem of every input (docs/formats.md §8).
+    """The output stem of every input (docs/formats.md §13).
 
     A folder's stem is its name; a file's is its name less the first of
     ``rule.inputs`` it ends with (else less its last suffix). Inputs that
@@ -285,26 +277,40 @@ def _last_line(text: str) -> str:
     return lines[-1] if lines else ""
 
 
-def run_command(argv: list[str]) -> int:
+def run_command(argv: list[str], cwd: str | None = None) -> int:
     """Run one ringfit command in this process, as the shell would (a batch task).
 
-    Its stdout and stderr go to the caller's streams (the batch captures them).
+    **Arguments:** ``argv`` (without ``ringfit``); ``cwd``: the folder the
+    batch was started in: relative paths in ``argv`` are read from there (the
+    worker's file system must hold it under the same path). Its stdout and
+    stderr go to the caller's streams (the batch captures them).
 
     **Raises:** :class:`ringfit.batch.TaskFailed` with the command's last stderr
     line and its exit status when that status is not 0.
     """
     import contextlib
     import io
+    import os
 
     from ringfit.batch import TaskFailed
     from ringfit.cli import main
 
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err):
+    here = os.getcwd()
+    if cwd is not None and os.path.abspath(cwd) != here:
         try:
-            status = main(list(argv))
-        except SystemExit as exc:  # argparse's own errors
-            status = exc.code if isinstance(exc.code, int) else 2
+            os.chdir(cwd)  # one task at a time per worker process (ringfit.batch.execute), so this is safe
+        except OSError:
+            raise TaskFailed(f"the batch's folder {cwd} is not on this worker (tasks send paths: the inputs "
+                             "and DIR need a file system every worker sees)", status=2) from None
+    err = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(err):
+            try:
+                status = main(list(argv))
+            except SystemExit as exc:  # argparse's own errors
+                status = exc.code if isinstance(exc.code, int) else 2
+    finally:
+        os.chdir(here)
     text = err.getvalue()
     sys.stderr.write(text)
     if status:
@@ -338,6 +344,7 @@ def _split_rest(rest: list[str]) -> tuple[list[str], list[str]]:
 
 
 def run_batch(args) -> int:
+    import os
     import shlex
 
     from ringfit.errors import InputError
@@ -359,7 +366,8 @@ def run_batch(args) -> int:
 
     from ringfit.batch import Task
 
-    tasks = [Task(plan.input, run_command, (plan.argv,), outputs=tuple(plan.outputs), kind=args.command)
+    cwd = os.getcwd()
+    tasks = [Task(plan.input, run_command, (plan.argv, cwd), outputs=tuple(plan.outputs), kind=args.command)
              for plan in plans]
     results = _run(opts, tasks, (args.command,), f"ringfit {args.command}")
     return _report(opts, results)
@@ -444,12 +452,13 @@ def campaign_tyres(folder: Path) -> list[Path]:
     return tyres
 
 
-#: Free-tyre records a campaign turns into targets by SSI, first found wins (docs/formats.md §8).
+#: Free-tyre records a campaign turns into targets by SSI, first found wins (docs/formats.md §13).
 FREE_RECORDS = ("free.records.npz", "free.uff", "free.unv")
 
 
 def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
-    """Tasks of a campaign and, per tyre, its output paths (docs/formats.md §8 layout)."""
+    """Tasks of a campaign and, per tyre, its output paths (docs/formats.md §13 layout)."""
+    import os
     import shutil
 
     from ringfit.batch import Task
@@ -457,9 +466,11 @@ def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
     force = ["--force"] if opts.force else []
     sample_opts = ["--walkers", str(opts.walkers), "--min-steps", str(opts.min_steps), "--max-steps",
                    str(opts.max_steps), "--seed", str(opts.seed), "--prior", opts.prior, "--no-progress"]
+    cwd = os.getcwd()
+
     def step(tyre: str, kind: str, argv: list[str], after: tuple, outputs: list) -> Task:
-        return Task(f"{tyre}/{kind}", run_command, (argv,), after=tuple(after), outputs=tuple(map(str, outputs)),
-                    kind=kind)
+        return Task(f"{tyre}/{kind}", run_command, (argv, cwd), after=tuple(after),
+                    outputs=tuple(map(str, outputs)), kind=kind)
 
     tasks, layout = [], {}
     for tyre in tyres:

@@ -1,4 +1,4 @@
-"""Campaign table and report: many tyres of one model, from their SAVED results (docs/formats.md §8).
+"""Campaign table and report: many tyres of one model, from their SAVED results (docs/formats.md §13).
 
 :func:`collect_campaign` reads, per tyre, the files ``ringfit campaign`` wrote
 — the fitted tyre TOML (least squares), the posterior HDF5 (draws), the
@@ -7,7 +7,7 @@ read only when the step that writes it succeeded in this run (or was kept by
 ``--skip-existing``), so a stale file from an earlier run never enters the table.
 
 Outliers (:func:`batch_distances`): each tyre's posterior mean of the
-log-parameters is compared with the batch of the *other* tyres (leave one
+log-parameters (of the parameters themselves where one can be ≤ 0) is compared with the batch of the *other* tyres (leave one
 out, so an outlier does not widen the yardstick it is measured with):
 Mahalanobis distance d² = (x − m)ᵀ S⁻¹ (x − m) with m, S the others' mean and
 sample covariance. For tyres of one population, (n/(n+1))·d² is Hotelling's
@@ -181,7 +181,9 @@ def collect_campaign(layout: dict[str, dict], results=()) -> Campaign:
         if usable(tyre, "sample", paths.get("posterior")):
             post = load_posterior(paths["posterior"])
             posts[tyre] = post
-            row["modes"] = int(np.asarray(post.data["n"]).size)
+            data = post.meta.get("data") or {}
+            if "n" in data:
+                row["modes"] = int(np.asarray(data["n"]).size)
             row["sampler_converged"] = bool(post.converged)
         if usable(tyre, "diagnose", paths.get("diagnosis")):
             v = read_diagnosis(paths["diagnosis"])["verdict"]
@@ -200,7 +202,9 @@ def collect_campaign(layout: dict[str, dict], results=()) -> Campaign:
         lsq = row.pop("_lsq", {})
         summary = {s["name"]: s for s in post.summary_table()} if post is not None else {}
         if post is not None and set(post.names) == set(parameters):
-            log_mean[i] = [post.log_samples[:, post.names.index(p)].mean() for p in parameters]
+            draws = post.samples
+            log_mean[i] = [np.log(draws[:, j]).mean() if np.all(draws[:, j] > 0) else draws[:, j].mean()
+                           for j in (post.names.index(p) for p in parameters)]
         for j, p in enumerate(parameters):
             key = _toml_key(p)
             row[key] = lsq.get(p)
@@ -230,7 +234,7 @@ def _cell(x) -> str:
 
 
 def campaign_csv(campaign: Campaign) -> str:
-    """The campaign table as CSV text (docs/formats.md §8)."""
+    """The campaign table as CSV text (docs/formats.md §13)."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     cols = campaign.columns
@@ -272,8 +276,8 @@ def spread_figure(campaign: Campaign):
         ax.set_yscale("log")
         ax.set_ylabel(LABELS.get(p, p))
         ax.grid(alpha=0.3, which="both")
-    axes[0, 0].legend(fontsize=7, loc="upper right", ncols=2)
-    axes[0, 0].set_title("Ring parameters across the batch (posterior medians with 95 % intervals)")
+    axes[0, 0].legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncols=4, frameon=False)
+    fig.suptitle("Ring parameters across the batch (posterior medians with 95 % intervals)")
     axes[-1, 0].set_xticks(x, campaign.tyres, rotation=60 if N > 6 else 0, ha="right" if N > 6 else "center",
                            fontsize=7 if N > 12 else 9)
     axes[-1, 0].set_xlabel("tyre")
