@@ -169,6 +169,9 @@ def main() -> None:
         tmp = tempfile.TemporaryDirectory(prefix="bench_batch_")
         root = Path(tmp.name)
 
+    import os
+
+    load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
     tyres = make_tyres(root / "campaign", args.tyres)
     print(f"{args.tyres} synthetic tyres written in {time.perf_counter() - t0:.1f} s; 3 tasks per tyre "
@@ -207,7 +210,13 @@ def main() -> None:
               f"empty-task round trip {1e3 * run['empty_s']:.1f} ms; "
               f"{1e3 * s['overhead_per_task_s']:.0f} ms/task with the idle start and end")
     speed = serial["warm"][1] / runs[2]["passes"]["warm"][1]
-    print(f"speed-up, 2 workers vs serial (warm): {speed:.2f}× on {len(__import__('os').sched_getaffinity(0))} CPUs")
+    ncpu = len(os.sched_getaffinity(0))
+    print(f"speed-up, 2 workers vs serial (warm): {speed:.2f}× on {ncpu} CPUs "
+          f"(load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end: other processes "
+          f"share these CPUs)")
+    eff = runs[1]["passes"]["warm"][1] / runs[2]["passes"]["warm"][1]
+    print(f"2 workers vs 1 worker (warm): {eff:.2f}×; Σ task time {summarize(runs[2]['passes']['warm'][0])['task_s']:.0f} s "
+          f"vs {summarize(runs[1]['passes']['warm'][0])['task_s']:.0f} s (a task runs slower when both CPUs are busy)")
     same, total = identical(serial["warm"][2], runs[2]["passes"]["warm"][2])
     print(f"outputs identical to the serial run's (fitted TOML, diagnosis JSON bytes; posterior draws): "
           f"{same}/{total} tyres")

@@ -101,6 +101,8 @@ def test_bad_batch_arguments_exit_2_before_any_work(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--walkers" in err and len(err.strip().splitlines()) == 2
     assert main(["batch", "fit", str(MODES), str(MODES), "--out", str(out)]) == 2
+    assert main(["batch", "fit", str(MODES), "--out", str(out), "--workers", "2", "--scheduler", "tcp://x:1"]) == 2
+    assert main(["batch", "fit", str(MODES), "--out", str(out), "--memory-limit", "lots"]) == 2
     assert not out.exists()
     if not command_available("estimate"):
         capsys.readouterr()
@@ -186,7 +188,7 @@ def test_warm_workers_do_not_recompile_and_sample_matches_serial(cluster, tables
     import h5py
 
     good, _ = tables
-    plans = plan_batch("sample", [str(p) for p in good], tmp_path / "b", ["--tyre", str(TYRE), *SAMPLE_OPTS])
+    plans = plan_batch("sample", [str(p) for p in good[:2]], tmp_path / "b", ["--tyre", str(TYRE), *SAMPLE_OPTS])
     (tmp_path / "b").mkdir()
     with open_client(cluster.scheduler_address) as client:
         tasks = [Task(p.input, _run, (p.argv,), outputs=tuple(p.outputs), kind="sample") for p in plans]

@@ -106,7 +106,7 @@ class _InnerParser(argparse.ArgumentParser):
     def error(self, message):
         from ringfit.errors import InputError
 
-        raise InputError(message, source="ringfit batch")
+        raise InputError(message)
 
 
 def _inner_parser(command: str) -> argparse.ArgumentParser:
@@ -129,7 +129,8 @@ def register(sub) -> None:
         epilog="usage after COMMAND: INPUTS... --out DIR [batch options] [-- options of the command]. "
                "Example: ringfit batch fit tyres/*/free.modes.csv --out fits -- --prior physical. "
                "`ringfit batch COMMAND -h` lists the batch options.")
-    p.add_argument("command", choices=BATCH_COMMANDS, help="the ringfit command to run on every input")
+    p.add_argument("batch_command", metavar="COMMAND", choices=BATCH_COMMANDS,
+                   help=f"the ringfit command to run on every input: {', '.join(BATCH_COMMANDS)}")
     p.add_argument("rest", nargs=argparse.REMAINDER, metavar="INPUTS... --out DIR [-- OPTIONS]",
                    help="inputs, --out DIR and batch options; after `--`, options for every command")
     _batch_options(p, inputs=False)
@@ -188,7 +189,7 @@ def output_stems(inputs: list[str], rule: OutputRule) -> list[str]:
     for x, s in zip(inputs, stems):
         if s in seen:
             raise InputError(f"{x} and {seen[s]} would write the same output {s!r}; rename one or run them "
-                             "in separate batches", source="ringfit batch")
+                             "in separate batches")
         seen[s] = x
     return stems
 
@@ -214,14 +215,12 @@ def plan_batch(command: str, inputs: list[str], out_dir, extra: list[str] = (), 
     extra = list(extra)
     for a in extra:
         if a == "--out" or a.startswith("--out="):
-            raise InputError("--out after `--`: batch sets each command's output (use the batch's --out DIR)",
-                             source="ringfit batch")
+            raise InputError("--out after `--`: batch sets each command's output (use the batch's --out DIR)")
         for token in re.findall(r"\{[A-Za-z_]+\}", a):
             if token not in PLACEHOLDERS:
-                raise InputError(f"unknown placeholder {token} in {a!r}; known: {', '.join(PLACEHOLDERS)}",
-                                 source="ringfit batch")
+                raise InputError(f"unknown placeholder {token} in {a!r}; known: {', '.join(PLACEHOLDERS)}")
     if len(set(map(str, inputs))) != len(inputs):
-        raise InputError("an input is given twice", source="ringfit batch")
+        raise InputError("an input is given twice")
     for option in rule.defaults:
         if not _has_option(extra, option[0]):
             extra += list(option)
@@ -258,8 +257,7 @@ def check_command_line(argv: list[str]) -> None:
             build_parser().parse_args(argv)
     except SystemExit as exc:
         if exc.code:
-            raise InputError(f"options for `ringfit {argv[0]}`: {_last_line(err.getvalue())}",
-                             source="ringfit batch") from None
+            raise InputError(f"options for `ringfit {argv[0]}`: {_last_line(err.getvalue())}") from None
 
 
 def command_available(command: str) -> bool:
@@ -336,6 +334,21 @@ def warm_up(commands: tuple[str, ...]) -> None:
 
 
 # ============================================================================ the handlers
+def _check_cluster_options(opts) -> None:
+    """Before any work: distributed importable, --workers only for a LocalCluster, a valid --memory-limit."""
+    from ringfit.batch import import_distributed
+    from ringfit.errors import InputError
+
+    try:
+        import_distributed()
+    except ImportError as exc:
+        raise InputError(str(exc)) from None
+    if opts.scheduler and opts.workers:
+        raise InputError("--workers starts a LocalCluster; with --scheduler the cluster's own workers run the "
+                         "tasks (start them with `dask worker`)")
+    opts.memory_limit = _memory_limit(opts.memory_limit)
+
+
 def _split_rest(rest: list[str]) -> tuple[list[str], list[str]]:
     if "--" in rest:
         i = rest.index("--")
@@ -350,11 +363,12 @@ def run_batch(args) -> int:
     from ringfit.errors import InputError
 
     head, extra = _split_rest(list(args.rest))
-    opts = _inner_parser(args.command).parse_args(head, namespace=argparse.Namespace(**vars(args)))
-    if not command_available(args.command):
-        raise InputError(f"this ringfit has no `ringfit {args.command}` command (it comes with a later version); "
-                         "nothing was run", source="ringfit batch")
-    plans = plan_batch(args.command, opts.inputs, opts.out, extra, force=opts.force)
+    opts = _inner_parser(args.batch_command).parse_args(head, namespace=argparse.Namespace(**vars(args)))
+    if not command_available(args.batch_command):
+        raise InputError(f"this ringfit has no `ringfit {args.batch_command}` command (it comes with a later version); "
+                         "nothing was run")
+    _check_cluster_options(opts)
+    plans = plan_batch(args.batch_command, opts.inputs, opts.out, extra, force=opts.force)
     check_command_line(plans[0].argv)
     if opts.dry_run:
         for plan in plans:
@@ -367,14 +381,14 @@ def run_batch(args) -> int:
     from ringfit.batch import Task
 
     cwd = os.getcwd()
-    tasks = [Task(plan.input, run_command, (plan.argv, cwd), outputs=tuple(plan.outputs), kind=args.command)
+    tasks = [Task(plan.input, run_command, (plan.argv, cwd), outputs=tuple(plan.outputs), kind=args.batch_command)
              for plan in plans]
-    results = _run(opts, tasks, (args.command,), f"ringfit {args.command}")
-    return _report(opts, results)
+    results, timing = _run(opts, tasks, (args.batch_command,), f"ringfit {args.batch_command}")
+    return _report(opts, results, timing)
 
 
 def _run(opts, tasks, commands, description):
-    """Open the client, run the tasks, print where and how long."""
+    """Open the client and run the tasks. **Returns:** (results, (start seconds, run seconds))."""
     import functools
     import time
 
@@ -388,14 +402,13 @@ def _run(opts, tasks, commands, description):
     where = opts.scheduler or f"a LocalCluster of {workers} worker process{'es' if workers > 1 else ''}"
     print(f"{description}: {len(tasks)} task{'s' if len(tasks) != 1 else ''} on {where}", file=sys.stderr)
     t0 = time.perf_counter()
-    with open_client(opts.scheduler, workers, memory_limit=_memory_limit(opts.memory_limit),
+    with open_client(opts.scheduler, workers, memory_limit=opts.memory_limit,
                      warmup=functools.partial(warm_up, tuple(commands)), quiet=not opts.verbose) as client:
         t1 = time.perf_counter()
         results = run_tasks(client, tasks, progress=not opts.quiet, skip_existing=opts.skip_existing,
                             description=description)
         t2 = time.perf_counter()
-    opts._timing = (t1 - t0, t2 - t1)
-    return results
+    return results, (t1 - t0, t2 - t1)
 
 
 def _memory_limit(text: str):
@@ -414,10 +427,11 @@ def _memory_limit(text: str):
     return text
 
 
-def _report(opts, results) -> int:
+def _report(opts, results, timing) -> int:
+    """Print the counts, the figures and the table of inputs that did not succeed; the exit status."""
     from ringfit.batch import summarize
 
-    start_s, run_s = opts._timing
+    start_s, run_s = timing
     s = summarize(results, run_s)
     states = ", ".join(f"{n} {k}" for k, n in sorted(s["by_state"].items(), key=lambda kv: kv[0] != "ok"))
     print(f"{states} in {run_s:.1f} s (+ {start_s:.1f} s to start the workers)")
@@ -517,6 +531,7 @@ def run_campaign(args) -> int:
     for option in ("walkers", "min_steps", "max_steps"):
         if getattr(args, option) < 1:
             raise InputError(f"--{option.replace('_', '-')} {getattr(args, option)}: expected a whole number >= 1")
+    _check_cluster_options(args)
     tyres = campaign_tyres(args.campaign)
     if args.out.exists() and not args.out.is_dir():
         raise InputError("exists and is not a folder", source=args.out)
@@ -528,13 +543,13 @@ def run_campaign(args) -> int:
     for path in (table_path, report_path):
         check_output_path(path, overwrite=rebuild)
     tasks, layout = plan_campaign(tyres, args.out, args)
-    results = _run(args, tasks, ("ssi", "fit", "sample", "diagnose"), "ringfit campaign")
+    results, timing = _run(args, tasks, ("ssi", "fit", "sample", "diagnose"), "ringfit campaign")
 
     from ringfit.report.campaign import collect_campaign, write_campaign_csv, write_campaign_report
 
     campaign = collect_campaign(layout, results)
     write_campaign_csv(campaign, table_path, overwrite=rebuild)
     write_campaign_report(campaign, report_path, overwrite=rebuild, title=f"ringfit campaign — {args.campaign.name}")
-    status = _report(args, results)
+    status = _report(args, results, timing)
     print(f"wrote {table_path} and {report_path} ({len(tyres)} tyres; {campaign.summary_line()})")
     return status
