@@ -30,12 +30,16 @@ Workers done right:
   level when it started (Linux: the kernel's high-water mark, reset per task;
   elsewhere sampled every 5 ms). A LocalCluster bounds each worker with
   ``memory_limit``; Dask's nanny restarts a worker that exceeds it.
+- **One task per worker thread.** The client submits a task only when a
+  worker thread is free for it (and its predecessors are done), so a worker
+  never holds queued tasks that its death would take down with it.
 - **Lost workers.** A worker that dies mid-task (crash, memory limit) has its
   task rescheduled by Dask itself; a task whose worker dies twice is reported
   as ``lost`` (:data:`SCHEDULER_CONFIG`, set on a LocalCluster; give your own
   scheduler the same, see the README), not retried forever. Dask counts each
   death of a worker that holds the task, whatever caused it: a task moved
-  onto a worker that another task then crashes has used one of its two lives. An exception *inside* a task is that task's failure: it is
+  onto a worker that another task then crashes has used one of its two
+  lives. An exception *inside* a task is that task's failure: it is
   deterministic, so it is reported at once, not retried. ``retries`` (Dask's)
   covers failures outside the task's own code.
 """
@@ -54,9 +58,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-#: Environment given to every LocalCluster worker process (on top of Dask's own
+#: XLA flag given to every LocalCluster worker process (on top of Dask's own
 #: ``OMP/MKL/OPENBLAS_NUM_THREADS=1``): XLA's CPU runtime on one thread.
-WORKER_ENV = {"XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false"}
+WORKER_XLA_FLAG = "--xla_cpu_multi_thread_eigen=false"
 #: Scheduler settings of a LocalCluster (give your own scheduler the same, see the README): a task whose
 #: worker dies is tried once more, then reported ``lost``.
 SCHEDULER_CONFIG = {"distributed.scheduler.allowed-failures": 1}
@@ -333,6 +337,14 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def worker_env() -> dict[str, str]:
+    """Environment of LocalCluster workers: this process's ``XLA_FLAGS`` plus :data:`WORKER_XLA_FLAG`."""
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_cpu_multi_thread_eigen" not in flags:
+        flags = f"{flags} {WORKER_XLA_FLAG}".strip()
+    return {"XLA_FLAGS": flags}
+
+
 def local_cluster(workers: int | None = None, *, memory_limit: str | float | None = "auto", quiet: bool = True):
     """A ``distributed.LocalCluster`` of ``workers`` processes, one thread each.
 
@@ -356,7 +368,7 @@ def local_cluster(workers: int | None = None, *, memory_limit: str | float | Non
     with dask.config.set(SCHEDULER_CONFIG):
         return distributed.LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-            dashboard_address=None, env=dict(WORKER_ENV),
+            dashboard_address=None, env=worker_env(),
             silence_logs=logging.CRITICAL if quiet else logging.WARNING,
         )
 
