@@ -25,6 +25,7 @@ COMMAND_MODULES = (
     "ringfit.cli.targets",
     "ringfit.cli.cleat",
     "ringfit.cli.example",
+    "ringfit.cli.batch",
 )
 
 

@@ -1,0 +1,570 @@
+"""Many independent jobs as tasks on dask.distributed (docs/formats.md §13).
+
+The generic machinery behind ``ringfit batch`` and ``ringfit campaign``. It
+takes plain callables and knows nothing of the command line:
+
+- :func:`local_cluster` starts a ``distributed.LocalCluster`` of worker
+  *processes* with one thread each; :func:`open_client` gives a client on it or
+  on an existing scheduler (``dask scheduler`` / ``dask worker``) and installs
+  the worker set-up (:class:`WorkerSetup`) on every worker, present and future.
+- :class:`Task` is one job: a picklable callable and its (small) arguments, the
+  tasks it needs first, the files it writes. :func:`run_tasks` submits them,
+  shows a progress bar over tasks on stderr and returns one
+  :class:`TaskResult` per task, in order, whatever happened to it.
+
+Workers done right:
+
+- **Threads.** One task at a time per worker process (a process-wide lock,
+  whatever ``--nthreads`` a remote worker was started with), one BLAS/OpenMP
+  thread per process (Dask's nanny sets ``OMP/MKL/OPENBLAS_NUM_THREADS=1``
+  before the process starts; :class:`WorkerSetup` also caps them with
+  threadpoolctl, for workers started without a nanny) and XLA's CPU runtime on
+  one thread: the cluster's processes are the parallelism.
+- **Inputs read on the worker.** A task's arguments are paths and options;
+  only its small result comes back through the scheduler.
+- **Warm workers.** A worker process lives across tasks, so JAX's compiled
+  functions stay in memory: the first task of a given shape compiles (or loads
+  from the persistent cache), later ones do not. Every :class:`TaskResult`
+  counts the XLA compilations its task triggered, which makes that visible.
+- **Memory.** Each task reports its peak resident memory above the process's
+  level when it started (Linux: the kernel's high-water mark, reset per task;
+  elsewhere sampled every 5 ms). A LocalCluster bounds each worker with
+  ``memory_limit``; Dask's nanny restarts a worker that exceeds it.
+- **One task per worker thread.** The client submits a task only when a
+  worker thread is free for it (and its predecessors are done), so a worker
+  never holds queued tasks that its death would take down with it.
+- **Lost workers.** A worker that dies mid-task (crash, memory limit) has its
+  task rescheduled by Dask itself; a task whose worker dies twice is reported
+  as ``lost`` (:data:`SCHEDULER_CONFIG`, set on a LocalCluster; give your own
+  scheduler the same, see the README), not retried forever. Dask counts each
+  death of a worker that holds the task, whatever caused it: a task moved
+  onto a worker that another task then crashes has used one of its two
+  lives. An exception *inside* a task is that task's failure: it is
+  deterministic, so it is reported at once, not retried. ``retries`` (Dask's)
+  covers failures outside the task's own code.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import socket
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+#: XLA flag given to every LocalCluster worker process (on top of Dask's own
+#: ``OMP/MKL/OPENBLAS_NUM_THREADS=1``): XLA's CPU runtime on one thread.
+WORKER_XLA_FLAG = "--xla_cpu_multi_thread_eigen=false"
+#: Scheduler settings of a LocalCluster (give your own scheduler the same, see the README): a task whose
+#: worker dies is tried once more, then reported ``lost``.
+SCHEDULER_CONFIG = {"distributed.scheduler.allowed-failures": 1}
+INSTALL_HINT = "ringfit batch needs dask.distributed: pip install 'ringfit[batch]' (or pip install distributed)"
+
+try:  # the worker plugin must subclass Dask's; without distributed the rest of this module still works
+    from distributed import WorkerPlugin as _WorkerPlugin
+except ImportError:  # pragma: no cover - exercised only without the extra
+    _WorkerPlugin = object
+
+
+class TaskFailed(Exception):
+    """Raised by a task's callable: the job ran and failed; ``status`` is its exit status (1 or 2)."""
+
+    def __init__(self, message: str, status: int = 1):
+        super().__init__(" ".join(str(message).split()))
+        self.status = int(status)
+
+
+def import_distributed():
+    """``distributed``, or :class:`ImportError` with the install hint."""
+    try:
+        import distributed
+    except ImportError:
+        raise ImportError(INSTALL_HINT) from None
+    return distributed
+
+
+@dataclass(frozen=True)
+class Task:
+    """One job.
+
+    - ``name``: unique within a run (the Dask key and the row of the report).
+    - ``fn``, ``args``: ``fn(*args)`` runs on a worker; both must pickle (a
+      module-level function, paths and options, not data).
+    - ``after``: names of tasks that must succeed first; if one does not,
+      this task is ``skipped``.
+    - ``outputs``: the files it writes (for ``skip_existing`` and the report).
+    - ``kind``: what sort of job (e.g. the command name); :func:`summarize`
+      counts the compilations of tasks that were not the first of their kind
+      on their worker.
+    """
+
+    name: str
+    fn: Callable
+    args: tuple = ()
+    after: tuple[str, ...] = ()
+    outputs: tuple[str, ...] = ()
+    kind: str = ""
+
+
+@dataclass
+class TaskResult:
+    """What became of one :class:`Task`.
+
+    - ``state``: ``ok``; ``failed`` (the callable raised or returned a failure);
+      ``lost`` (its worker died twice while running it); ``skipped`` (a task
+      in ``after`` did not succeed); ``kept`` (``skip_existing`` and every
+      output already there).
+    - ``status``: exit status, 0 ok, 1 failed, 2 bad input.
+    - ``error``: one line, empty when ok; ``log``: the task's stdout and stderr.
+    - ``value``: what the callable returned.
+    - ``elapsed_s`` [s]: wall time of the callable on the worker;
+      ``started_at`` [s]: when it started (``time.time()`` of the worker).
+    - ``rss_start_mb``, ``peak_rss_mb``, ``peak_delta_mb`` [MiB]: resident
+      memory of the worker process when the task started, its peak during the
+      task, and the difference.
+    - ``compiles``: XLA compilations during the task (in-memory cache misses,
+      including loads from the persistent cache); ``compile_s`` [s] their time.
+    - ``worker``: ``host:pid`` of the process that ran it; ``task_index``: how
+      many tasks that process had run before this one; ``kind_index``: how many
+      of the same ``kind``.
+    """
+
+    name: str
+    state: str = "ok"
+    status: int = 0
+    error: str = ""
+    value: Any = None
+    log: str = ""
+    elapsed_s: float = 0.0
+    started_at: float = float("nan")
+    rss_start_mb: float = float("nan")
+    peak_rss_mb: float = float("nan")
+    peak_delta_mb: float = float("nan")
+    compiles: int = 0
+    compile_s: float = 0.0
+    worker: str = ""
+    task_index: int = 0
+    kind_index: int = 0
+    kind: str = ""
+    outputs: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def ok(self) -> bool:
+        return self.state in ("ok", "kept")
+
+
+# ============================================================================ on the worker
+_TASK_LOCK = threading.Lock()
+_TASKS_RUN = 0
+_KINDS_RUN: dict[str, int] = {}
+
+
+class _JaxCompiles:
+    """Counts XLA compilations in this process (JAX's monitoring events)."""
+
+    installed = False
+    count = 0
+    seconds = 0.0
+
+    @classmethod
+    def install(cls) -> None:
+        if cls.installed:
+            return
+        import jax.monitoring
+
+        def listener(event: str, duration: float, **_kw) -> None:
+            if event == "/jax/core/compile/backend_compile_duration":
+                cls.count += 1
+                cls.seconds += duration
+
+        jax.monitoring.register_event_duration_secs_listener(listener)
+        cls.installed = True
+
+
+def limit_threads() -> None:
+    """One BLAS/OpenMP thread in this process (threadpoolctl), once."""
+    if getattr(limit_threads, "_done", False):
+        return
+    try:
+        from threadpoolctl import threadpool_limits
+
+        limit_threads._limiter = threadpool_limits(limits=1)  # kept: the limit holds while referenced
+    except Exception:  # noqa: BLE001 - a missing or odd BLAS must not stop the worker
+        pass
+    limit_threads._done = True
+
+
+def _status_mb(field_name: str) -> float | None:
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith(field_name + ":"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        return None
+    return None
+
+
+class _PeakMemory:
+    """Peak resident memory during a ``with`` block [MiB].
+
+    Linux: reset the kernel's high-water mark (``/proc/self/clear_refs``) at
+    entry and read ``VmHWM`` at exit (exact). Elsewhere: sample the RSS with
+    psutil every 5 ms in a thread.
+    """
+
+    def __enter__(self):
+        self.start = self._rss()
+        self.exact = False
+        try:
+            with open("/proc/self/clear_refs", "w") as fh:
+                fh.write("5")
+            self.exact = _status_mb("VmHWM") is not None
+        except OSError:
+            self.exact = False
+        self.sampled = self.start
+        if not self.exact:
+            self._stop = threading.Event()
+            self._thread = threading.Thread(target=self._sample, daemon=True)
+            self._thread.start()
+        return self
+
+    @staticmethod
+    def _rss() -> float:
+        rss = _status_mb("VmRSS")
+        if rss is not None:
+            return rss
+        try:
+            import psutil
+
+            return psutil.Process().memory_info().rss / 2**20
+        except Exception:  # noqa: BLE001
+            return float("nan")
+
+    def _sample(self):
+        while not self._stop.wait(0.005):
+            self.sampled = max(self.sampled, self._rss())
+
+    def __exit__(self, *exc):
+        if self.exact:
+            self.peak = max(_status_mb("VmHWM") or float("nan"), self.start)
+        else:
+            self._stop.set()
+            self._thread.join()
+            self.peak = max(self.sampled, self._rss())
+        return False
+
+
+def _one_line(text: str, limit: int = 400) -> str:
+    line = " ".join(str(text).split())
+    return line if len(line) <= limit else line[: limit - 1] + "…"
+
+
+def execute(name: str, fn: Callable, args: tuple = (), outputs: tuple = (), kind: str = "") -> TaskResult:
+    """Run one task in this process and measure it (what a worker calls; public for serial runs).
+
+    **Arguments:** ``name``, ``fn``, ``args``, ``outputs``, ``kind`` as in :class:`Task`.
+
+    **Returns:** a :class:`TaskResult`; never raises for a failure of ``fn``.
+    """
+    global _TASKS_RUN
+    with _TASK_LOCK:  # one task at a time per process: stdout capture and memory figures are per process
+        limit_threads()
+        _JaxCompiles.install()
+        c0, s0 = _JaxCompiles.count, _JaxCompiles.seconds
+        log = io.StringIO()
+        result = TaskResult(name, outputs=tuple(outputs), worker=f"{socket.gethostname()}:{os.getpid()}",
+                            task_index=_TASKS_RUN, kind=kind, kind_index=_KINDS_RUN.get(kind, 0))
+        result.started_at = time.time()
+        t0 = time.perf_counter()
+        with _PeakMemory() as mem, contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
+            try:
+                result.value = fn(*args)
+            except TaskFailed as exc:
+                result.state, result.status, result.error = "failed", exc.status or 1, _one_line(exc)
+            except SystemExit as exc:
+                code = exc.code if isinstance(exc.code, int) else 1
+                if code:
+                    result.state, result.status, result.error = "failed", code, f"exit status {code}"
+            except Exception as exc:  # noqa: BLE001 - a task's failure is reported, never raised
+                traceback.print_exc(file=log)
+                result.state, result.status = "failed", 1
+                result.error = _one_line(f"{type(exc).__name__}: {exc}")
+        result.elapsed_s = time.perf_counter() - t0
+        result.rss_start_mb, result.peak_rss_mb = mem.start, mem.peak
+        result.peak_delta_mb = mem.peak - mem.start
+        result.compiles = _JaxCompiles.count - c0
+        result.compile_s = _JaxCompiles.seconds - s0
+        result.log = log.getvalue()
+        _TASKS_RUN += 1
+        _KINDS_RUN[kind] = _KINDS_RUN.get(kind, 0) + 1
+        return result
+
+
+class WorkerSetup(_WorkerPlugin):
+    """Dask worker plugin: thread limits, the compile counter, then an optional warm-up callable.
+
+    Runs on every worker when registered and on every worker that joins or
+    restarts later. ``warmup`` (picklable, no arguments) typically imports the
+    modules the tasks need; its failure is logged by Dask, not fatal.
+    """
+
+    name = "ringfit-worker-setup"
+
+    def __init__(self, warmup: Callable[[], Any] | None = None):
+        self.warmup = warmup
+
+    def setup(self, worker=None):
+        limit_threads()
+        _JaxCompiles.install()
+        if self.warmup is not None:
+            with _TASK_LOCK:
+                self.warmup()
+
+
+# ============================================================================ on the client
+def default_workers() -> int:
+    """Worker processes for a LocalCluster by default: the CPUs this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def worker_env() -> dict[str, str]:
+    """Environment of LocalCluster workers: this process's ``XLA_FLAGS`` plus :data:`WORKER_XLA_FLAG`."""
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_cpu_multi_thread_eigen" not in flags:
+        flags = f"{flags} {WORKER_XLA_FLAG}".strip()
+    return {"XLA_FLAGS": flags}
+
+
+def local_cluster(workers: int | None = None, *, memory_limit: str | float | None = "auto", quiet: bool = True):
+    """A ``distributed.LocalCluster`` of ``workers`` processes, one thread each.
+
+    **Arguments:**
+
+    - ``workers``: worker processes (default :func:`default_workers`).
+    - ``memory_limit``: per worker, in Dask's forms (``"4GB"``, bytes, ``"auto"``
+      = this machine's memory / workers, ``None`` = no limit); a worker above
+      95 % of it is restarted by its nanny and its task rescheduled.
+    - ``quiet``: no Dask log lines (lost workers show in the results); else WARNING and above.
+
+    Tasks whose worker dies twice are reported ``lost`` (:data:`SCHEDULER_CONFIG`).
+    Close it with ``cluster.close()``.
+    """
+    import logging
+
+    import dask
+
+    distributed = import_distributed()
+    workers = int(workers or default_workers())
+    with dask.config.set(SCHEDULER_CONFIG):
+        return distributed.LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, memory_limit=memory_limit,
+            dashboard_address=None, env=worker_env(),
+            silence_logs=logging.CRITICAL if quiet else logging.WARNING,
+        )
+
+
+@contextlib.contextmanager
+def open_client(scheduler: str | None = None, workers: int | None = None, *, memory_limit="auto",
+                warmup: Callable[[], Any] | None = None, timeout: float = 30.0, quiet: bool = True):
+    """A ``distributed.Client`` on ``scheduler`` (an address) or on a new LocalCluster.
+
+    **Arguments:** ``scheduler``: e.g. ``tcp://10.0.0.5:8786``, or ``None`` for a
+    :func:`local_cluster` of ``workers`` processes with ``memory_limit``;
+    ``warmup``: a picklable callable every worker runs once (:class:`WorkerSetup`);
+    ``timeout`` [s]: to reach the scheduler; ``quiet``: as in :func:`local_cluster`.
+
+    **Yields:** the client; on exit the client (and a cluster it started) is closed.
+    """
+    distributed = import_distributed()
+    cluster = None
+    if scheduler:
+        try:
+            client = distributed.Client(scheduler, timeout=timeout)
+        except OSError as exc:
+            from ringfit.errors import InputError
+
+            raise InputError(f"cannot reach the scheduler ({_one_line(exc)})", source=scheduler) from None
+    else:
+        cluster = local_cluster(workers, memory_limit=memory_limit, quiet=quiet)
+        client = distributed.Client(cluster)
+    try:
+        client.register_plugin(WorkerSetup(warmup), name=WorkerSetup.name)
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _all_exist(paths) -> bool:
+    return bool(paths) and all(os.path.exists(p) for p in paths)
+
+
+def _lost_message(exc: BaseException) -> str:
+    name = type(exc).__name__
+    if name == "KilledWorker":
+        return ("its worker died twice while running it (KilledWorker): a crash, or memory above the worker's "
+                "limit")
+    if name == "CancelledError":
+        return "cancelled (scheduler or client went away)"
+    return _one_line(f"{name}: {exc}")
+
+
+def run_tasks(client, tasks: Sequence[Task], *, retries: int = 1, progress: bool = True,
+              skip_existing: bool = False, description: str = "tasks",
+              max_in_flight: int | None = None) -> list[TaskResult]:
+    """Submit ``tasks`` to ``client`` and wait for all of them.
+
+    **Arguments:**
+
+    - ``client``: a ``distributed.Client`` (:func:`open_client`).
+    - ``tasks``: :class:`Task` list; ``after`` names must come earlier in it.
+    - ``retries``: Dask retries of a task whose *wrapper* raised (a task's own
+      failure is a result, not retried; a dead worker is handled by the scheduler).
+    - ``progress``: a tqdm bar over tasks on stderr.
+    - ``skip_existing``: a task whose ``outputs`` all exist is not run (``kept``).
+    - ``max_in_flight``: tasks submitted at once (default: the cluster's
+      worker threads, asked again as workers come and go).
+
+    The client feeds the scheduler: a task is submitted once the tasks it
+    needs have succeeded and a worker thread is free for it, so every worker
+    holds only the task it runs (a worker that dies takes no queued bystander
+    with it, whatever the scheduler's settings) and the scheduler sees only
+    independent tasks. Ready tasks deeper in a chain go first, so whole chains
+    (a tyre's fit → posterior) finish early.
+
+    **Returns:** one :class:`TaskResult` per task, in the order of ``tasks``.
+    Failures never raise; the caller reads ``state``.
+    """
+    from tqdm.auto import tqdm
+
+    distributed = import_distributed()
+    by_name: dict[str, Task] = {}
+    depth: dict[str, int] = {}
+    order: dict[str, int] = {}
+    for i, task in enumerate(tasks):
+        if task.name in by_name:
+            raise ValueError(f"task name {task.name!r} is not unique")
+        missing = [a for a in task.after if a not in by_name]
+        if missing:
+            raise ValueError(f"task {task.name!r} needs {missing}, which come later or do not exist")
+        by_name[task.name], order[task.name] = task, i
+        depth[task.name] = 1 + max((depth[a] for a in task.after), default=0)
+    pending = dict(by_name)
+    done: dict[str, TaskResult] = {}
+    keys: dict[str, str] = {}
+    queue = distributed.as_completed()
+    bar = tqdm(total=len(tasks), desc=description, unit="task", file=sys.stderr, disable=not progress)
+
+    def finish(name: str, result: TaskResult) -> None:
+        done[name] = result
+        bar.update(1)
+        failed = sum(not r.ok for r in done.values())
+        if failed:
+            bar.set_postfix_str(f"{failed} failed")
+
+    def slots() -> int:
+        if max_in_flight is not None:
+            return max(1, int(max_in_flight))
+        return max(1, sum(client.nthreads().values()))
+
+    def launch() -> None:
+        """Settle on the client what needs no worker; submit ready tasks while threads are free."""
+        changed = True
+        while changed:
+            changed = False
+            for name, task in list(pending.items()):
+                if not all(a in done for a in task.after):
+                    continue
+                bad = [done[a] for a in task.after if not done[a].ok]
+                if bad:
+                    finish(name, TaskResult(name, state="skipped", status=1, outputs=tuple(task.outputs),
+                                            error=f"needs {bad[0].name}, which {bad[0].state}"))
+                elif skip_existing and _all_exist(task.outputs):
+                    finish(name, TaskResult(name, state="kept", outputs=tuple(task.outputs)))
+                else:
+                    continue
+                del pending[name]
+                changed = True
+        ready = sorted((n for n, t in pending.items() if all(a in done for a in t.after)),
+                       key=lambda n: (-depth[n], order[n]))
+        free = slots() - len(keys)
+        for name in ready[: max(free, 0)]:
+            task = pending.pop(name)
+            fut = client.submit(execute, name, task.fn, tuple(task.args), tuple(task.outputs), task.kind,
+                                key=f"ringfit-task-{_token()}", pure=False, retries=retries)
+            keys[fut.key] = name
+            queue.add(fut)
+
+    try:
+        launch()
+        for fut in queue:
+            name = keys.pop(fut.key)
+            try:  # a result lost with its worker before it was gathered is recomputed: result() waits for it
+                result = fut.result()
+            except Exception as exc:  # noqa: BLE001 - KilledWorker, cancelled, a wrapper that kept failing
+                result = TaskResult(name, state="lost", status=1, error=_lost_message(exc),
+                                    outputs=tuple(by_name[name].outputs))
+            fut.release()
+            finish(name, result)
+            launch()
+    finally:
+        bar.close()
+    if pending:  # pragma: no cover - every task is settled or submitted once its needs are done
+        raise RuntimeError(f"tasks never ran: {sorted(pending)}")
+    return [done[t.name] for t in tasks]
+
+
+def _token() -> str:
+    import uuid
+
+    return uuid.uuid4().hex
+
+
+def summarize(results: Sequence[TaskResult], wall_s: float | None = None) -> dict:
+    """Figures over a run: counts by state, task time, memory, compilations on warm tasks, overhead.
+
+    **Returns:** dict with ``tasks``, ``by_state`` (state → count), ``task_s``
+    (sum of task wall times) [s], ``median_task_s`` [s], ``max_peak_delta_mb`` and
+    ``max_peak_rss_mb`` [MiB] over tasks, ``workers`` (distinct processes),
+    ``warm_compiles`` (compilations in tasks that were not the first of their
+    kind on their worker; a new input shape compiles again), ``gap_s`` [s]:
+    the mean time a worker spent between the end of one task and the start
+    of its next (the per-task overhead beyond the work itself) and, with
+    ``wall_s``, ``overhead_per_task_s`` = (workers × wall − Σ task time) /
+    tasks [s], which also counts idle workers at the start and the end.
+    """
+    import numpy as np
+
+    ran = [r for r in results if r.worker]
+    by_state: dict[str, int] = {}
+    for r in results:
+        by_state[r.state] = by_state.get(r.state, 0) + 1
+    task_s = float(sum(r.elapsed_s for r in ran))
+    per_worker: dict[str, list[TaskResult]] = {}
+    for r in ran:
+        per_worker.setdefault(r.worker, []).append(r)
+    gaps = []
+    for rs in per_worker.values():
+        rs = sorted(rs, key=lambda r: r.started_at)
+        gaps += [b.started_at - (a.started_at + a.elapsed_s) for a, b in zip(rs, rs[1:])]
+    out = dict(tasks=len(results), by_state=by_state, task_s=task_s,
+               median_task_s=float(np.median([r.elapsed_s for r in ran])) if ran else float("nan"),
+               max_peak_delta_mb=max((r.peak_delta_mb for r in ran), default=float("nan")),
+               max_peak_rss_mb=max((r.peak_rss_mb for r in ran), default=float("nan")),
+               workers=len(per_worker), warm_compiles=int(sum(r.compiles for r in ran if r.kind_index > 0)),
+               gap_s=float(np.mean(gaps)) if gaps else float("nan"))
+    if wall_s is not None and ran:
+        out["wall_s"] = float(wall_s)
+        out["overhead_per_task_s"] = (len(per_worker) * float(wall_s) - task_s) / len(ran)
+    return out
