@@ -16,13 +16,17 @@ from pathlib import Path
 
 from ringfit.errors import InputError
 
+#: Largest plausible inflation pressure [bar] in any file (a tyre file's ``pressure_bar``, a
+#: sidecar's, a record's condition): above it the value is almost surely in Pa or kPa.
+MAX_PRESSURE_BAR = 20.0
+
 #: Plausible range [lo, hi] of the condition fields of sidecars and continuous
 #: records (docs/formats.md §2–§4). Generous on purpose: a value outside is a
 #: unit slip (a pressure in Pa, a speed in m/h) or a corrupted file, not a test.
 CONDITION_RANGES: dict[str, tuple[float, float]] = {
     "speed_kmh": (0.0, 1000.0),
     "load_n": (0.0, 1.0e6),
-    "pressure_bar": (0.0, 20.0),
+    "pressure_bar": (0.0, MAX_PRESSURE_BAR),
     "rotation_hz": (0.0, 1000.0),
     "drum_diameter_m": (0.0, 100.0),
     "revolutions": (1.0, 1.0e9),

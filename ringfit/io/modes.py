@@ -28,8 +28,6 @@ STATES = ("free", "loaded", "rolling")
 FRAMES = ("rotating", "fixed")
 #: Columns of DATA.md §2, in the order ringfit writes them.
 COLUMNS = ("n", "a", "tag", "kind", "freq_hz", "freq_std_hz", "damping_pct", "branch")
-#: A sidecar pressure_bar above this looks like Pa.
-MAX_PRESSURE_BAR = 20.0
 #: Largest plausible natural frequency [Hz] in a mode table (a tyre's modes lie below a few kHz).
 MAX_FREQ_HZ = 1.0e5
 #: Largest circumferential / cross-sectional index accepted.

@@ -43,8 +43,6 @@ OPTIONAL_FIELDS = ("rotation_hz", "drum_diameter_m", "revolutions", "sample_rate
 MIN_POINTS = 16
 #: A spacing larger than this multiple of the median spacing is a gap.
 MAX_GAP_RATIO = 1.5
-#: A sidecar pressure_bar above this looks like Pa.
-MAX_PRESSURE_BAR = 20.0
 #: Largest plausible reading [m/s²] in a profile (10⁷ g: beyond any accelerometer).
 MAX_ACC_MS2 = 1.0e8
 

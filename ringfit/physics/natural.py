@@ -33,9 +33,33 @@ def modal_stiffness(ring: RingParams, geometry: TyreGeometry, n):
 
 
 def modal_mass(ring: RingParams, n):
-    """Denominator of eq. 18 [kg/m]: ``ρA (1 + n²)`` (PHYSICS.md §2.1)."""
+    """Denominator of eq. 18 [kg/m]: ``ρA (1 + n²)`` (docs/physics.md §2.1).
+
+    A mass per unit length scaled by n²; the mass of one standing mode in kg is
+    :func:`ring_modal_mass`.
+    """
     n2 = jnp.asarray(n, dtype=jnp.float64) ** 2
     return ring.rho_a * (1.0 + n2)
+
+
+def ring_modal_mass(ring: RingParams, geometry: TyreGeometry, n):
+    """Generalised mass of one standing mode of the inextensible ring [kg] (docs/physics.md §2.1, §6).
+
+    For the shape ``w = cos nθ`` (unit radial amplitude, ``v = sin nθ / n`` so
+    that ``w + v′ = 0``) the kinetic energy ``½∫ρA(ẇ² + v̇²) R dθ`` gives
+    ``M_n = πRρA(1 + 1/n²)`` for n ≥ 1, i.e. ``πR · modal_mass / n²``; for
+    n = 0 (rigid rotation, unit tangential amplitude) ``M_0 = 2πRρA``, the
+    ring's mass. It is the M of the ``ground_contact`` and ``sensor_mass``
+    effects (§6) and of the synthetic impact and cleat responses.
+
+    **Arguments:** ``n`` — circumferential index ≥ 0, scalar or array.
+
+    **Returns:** M_n [kg], shape of ``n``.
+    """
+    n2 = jnp.asarray(n, dtype=jnp.float64) ** 2
+    rotation = n2 == 0.0
+    per_harmonic = jnp.pi * geometry.radius * modal_mass(ring, n) / jnp.where(rotation, 1.0, n2)
+    return jnp.where(rotation, 2.0 * jnp.pi * geometry.radius * ring.rho_a, per_harmonic)
 
 
 def natural_angular_frequencies(ring: RingParams, geometry: TyreGeometry, n):
@@ -81,6 +105,41 @@ def extensible_natural_frequencies(ring: RingParams, geometry: TyreGeometry, n):
     K = extensible_stiffness_matrix(ring, geometry, n)
     lam = jnp.linalg.eigvalsh(K) / ring.rho_a  # ascending ω²
     return jnp.sqrt(jnp.clip(lam, 0.0)) / TWO_PI
+
+
+def extensible_flexural_shift(ring: RingParams, geometry: TyreGeometry, n, compliance):
+    """``ω²_flexural(EA) − ω²_eq18`` [rad²/s²] of the extensible ring, in compliance form (docs/physics.md §2.2).
+
+    The §2.2 matrix is ``K_n = K⁰_n + (EA/R²) e eᵀ`` with ``K⁰_n`` the matrix at
+    EA = 0 (:func:`extensible_stiffness_matrix`) and ``e = (1, n)`` (the
+    membrane strain ``w + v′``). With the compliance ``c = R²/EA`` and
+    ``u = (n, −1)`` (``uᵀe = 0``: the inextensible shapes), ``det(K_n − λI) = 0``
+    times c is ``c·det(K⁰ − λI) + uᵀ(K⁰ − λI)u = 0``, whose root near
+    ``λ₀ = uᵀK⁰u/(n² + 1) = ρAω²_eq18`` is ``λ₀ + δ`` with
+
+        c δ² − [c(A + B) + n² + 1] δ + c(AB − K⁰₁₂²) = 0,   A = K⁰₁₁ − λ₀,  B = K⁰₂₂ − λ₀
+
+    (the smaller root, written without cancellation). It is exactly 0 at
+    ``compliance = 0`` (EA = ∞), smooth there (slope ``(AB − K⁰₁₂²)/(n² + 1)``
+    per unit c), and equals the flexural branch of
+    :func:`extensible_natural_frequencies` for any finite EA.
+
+    **Arguments:** ``n`` — circumferential index, scalar or array;
+    ``compliance`` — 1/EA [1/N] (≥ 0), broadcast with ``n``.
+
+    **Returns:** ``δ/ρA`` [rad²/s²], shape of ``n`` broadcast with ``compliance``.
+    """
+    n = jnp.asarray(n, dtype=jnp.float64)
+    K0 = extensible_stiffness_matrix(ring.replace(ea=0.0), geometry, n)
+    k11, k12, k22 = K0[..., 0, 0], K0[..., 0, 1], K0[..., 1, 1]
+    n2p1 = n**2 + 1.0
+    lam0 = (n**2 * k11 - 2.0 * n * k12 + k22) / n2p1  # uᵀK⁰u / uᵀu = n² d_n/(n²+1), eq. 18 times ρA
+    c = jnp.asarray(compliance, dtype=jnp.float64) * geometry.radius**2
+    a, b = k11 - lam0, k22 - lam0
+    lin = c * (a + b) + n2p1
+    const = c * (a * b - k12**2)
+    disc = jnp.sqrt(jnp.clip(lin**2 - 4.0 * c * const, 0.0))
+    return 2.0 * const / (lin + disc) / ring.rho_a
 
 
 def rotating_from_static(omega_static, n, omega):

@@ -17,6 +17,7 @@ import numpy as np
 
 from ringfit.gap.effects import register
 from ringfit.gap.effects.base import Effect, Parameter
+from ringfit.physics.natural import ring_modal_mass
 
 SOUND_SPEED = 343.0
 P_ATM = 101325.0
@@ -38,7 +39,7 @@ class CavityMode(Effect):
         rho0 = 1.2 * (geometry.pressure + P_ATM) / P_ATM
         nz = n >= 1
         nn = jnp.where(nz, n, 1.0)
-        m = ring.rho_a * (nn**2 + 1.0) / nn**2
+        m = ring_modal_mass(ring, geometry, nn) / (jnp.pi * geometry.radius)  # ρA(n²+1)/n² [kg/m]
         k = geometry.width**2 * rho0 * SOUND_SPEED**2 * values[0] / m
         wa2 = (2.0 * jnp.pi * rows.cavity_hz * nn) ** 2
         x0 = omega * omega
