@@ -20,7 +20,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ringfit.cli.targets import _positive_int
+from ringfit.cli._args import integer
 
 #: Commands ``ringfit batch`` runs, in help order.
 BATCH_COMMANDS = ("ssi", "fit", "sample", "diagnose", "profile", "estimate")
@@ -91,7 +91,7 @@ def _batch_options(p: argparse.ArgumentParser, *, inputs: bool) -> None:
 def _cluster_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a LocalCluster here)")
-    p.add_argument("--workers", type=_positive_int, default=None, metavar="N",
+    p.add_argument("--workers", type=integer("a whole number >= 1", lo=1), default=None, metavar="N",
                    help="LocalCluster worker processes, one thread each (default: usable CPUs, at most one per task)")
     p.add_argument("--memory-limit", default="auto", metavar="SIZE",
                    help="LocalCluster memory per worker, e.g. 4GB; a worker above it is restarted and its task "
