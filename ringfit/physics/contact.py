@@ -247,10 +247,11 @@ def as_traced(tree):
     """Python floats in a PyTree (parameters, operating point, models) -> float64 arrays.
 
     ``eqx.filter_jit`` treats Python floats as static (a recompile per value);
-    passing arrays keeps one compilation per model structure.
+    passing arrays keeps one compilation per model structure. The arrays are
+    NumPy's (0-d ``float64``): traced all the same, and no eager JAX op.
     """
     return jax.tree.map(
-        lambda x: jnp.asarray(x, dtype=jnp.float64) if isinstance(x, (int, float)) and not isinstance(x, bool) else x,
+        lambda x: np.asarray(x, dtype=np.float64) if isinstance(x, (int, float)) and not isinstance(x, bool) else x,
         tree,
     )
 
