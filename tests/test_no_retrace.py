@@ -103,18 +103,21 @@ def test_simulate_profile_does_not_retrace():
 
 
 def test_fit_rolling_does_not_retrace():
+    """The structure of tests/test_rolling_fit.py (four speeds on the drum, 1024-point profiles): in
+    one session the compiled fit is shared with it, so this costs little beyond that file's own."""
     from ringfit.fit.rolling import fit_rolling
+    from ringfit.synth.profiles import synthetic_profile
 
-    truth = RING.replace(k_tread=25e6)
+    truth = RING.replace(k_tread=25e6, damping_ratio=0.03)
 
-    def profiles(speeds, load):
-        return [simulate_profile(truth, GEOMETRY, speed_kmh=v, load_n=load, rotation_hz=v / 3.6 / (2 * np.pi * 0.3),
-                                 solver=SOLVER, n_points=256) for v in speeds]
+    def profiles(speeds, seed):
+        return [synthetic_profile(truth, GEOMETRY, v, drum_diameter_m=1.2192, noise_ms2=2.0, seed=seed + i)
+                for i, v in enumerate(speeds)]
 
-    first = fit_rolling(profiles((20.0, 40.0), 4000.0), GEOMETRY, RING, solver=SOLVER)
+    first = fit_rolling(profiles((20.0, 30.0, 40.0, 50.0), 0), GEOMETRY, RING.replace(damping_ratio=0.03))
     assert first.converged
-    data = profiles((30.0, 50.0), 3800.0)
+    data = profiles((15.0, 25.0, 35.0, 60.0), 10)
     with count_traces() as seen:
-        res = fit_rolling(data, GEOMETRY, RING.replace(k_tread=15e6), solver=SOLVER)
+        res = fit_rolling(data, GEOMETRY, RING.replace(k_tread=15e6, damping_ratio=0.03))
     assert seen == {TRACE: 0, COMPILE: 0}
-    assert res.converged and res.values["k_tread"] == pytest.approx(25e6, rel=1e-3)
+    assert res.converged and res.values["k_tread"] == pytest.approx(25e6, rel=0.01)
