@@ -183,9 +183,49 @@ def fixed_frame_frequencies(ring: RingParams, geometry: TyreGeometry, n, omega):
     return rot - (n * omega / TWO_PI)[..., None]
 
 
-def cavity_frequency(n=1, sound_speed: float = 343.0, cavity_length: float = 1.568):
-    """Acoustic cavity resonance ``f_n = n c / L_c`` [Hz] (PHYSICS.md §3.6, seed eq. 22)."""
+#: Speed of sound in the cavity air [m/s] (docs/physics.md §3.6).
+SOUND_SPEED = 343.0
+#: The source study's cavity length L_c [m] (docs/physics.md §1, §3.6).
+CAVITY_LENGTH = 1.568
+#: Atmospheric pressure [Pa]; the cavity air is at p0 + P_ATM.
+P_ATM = 101325.0
+
+
+def cavity_frequency(n=1, sound_speed: float = SOUND_SPEED, cavity_length: float = CAVITY_LENGTH):
+    """Acoustic cavity resonance ``f_n = n c / L_c`` [Hz] (docs/physics.md §3.6, seed eq. 22)."""
     return jnp.asarray(n, dtype=jnp.float64) * sound_speed / cavity_length
+
+
+def cavity_coupling(ring: RingParams, geometry: TyreGeometry, n, inverse_area):
+    """Coupling ``k = b²ρ0c²/(A_c m)`` [rad²/s²] of ring harmonic n with the cavity air (docs/physics.md §6 cavity_mode).
+
+    ``m = ρA(n² + 1)/n²`` is the ring's mass per unit length in harmonic n
+    (:func:`ring_modal_mass` / πR) and ``ρ0 = 1.2 (p0 + p_atm)/p_atm`` the cavity
+    air's density [kg/m³].
+
+    **Arguments:** ``n`` ≥ 1, scalar or array; ``inverse_area`` — 1/A_c [1/m²].
+
+    **Returns:** k, shape of ``n`` broadcast with ``inverse_area``.
+    """
+    rho0 = 1.2 * (geometry.pressure + P_ATM) / P_ATM
+    m = ring_modal_mass(ring, geometry, n) / (jnp.pi * geometry.radius)
+    return geometry.width**2 * rho0 * SOUND_SPEED**2 * inverse_area / m
+
+
+def cavity_coupled_shift(omega_structural, omega_acoustic, coupling):
+    """``ω² − ω₀²`` [rad²/s²] of the structural mode coupled with the cavity air (docs/physics.md §6 cavity_mode).
+
+    The structural root of the two-mode pencil, ω² = ω₀² + δ with
+    ``δ² − [(ω_a² − ω₀²) + k] δ − k ω₀² = 0``, the root that vanishes with k
+    (written without cancellation): exactly 0 at k = 0.
+
+    **Arguments:** ``omega_structural`` ω₀ and ``omega_acoustic`` ω_a,n = n·2πf_cav
+    [rad/s]; ``coupling`` k from :func:`cavity_coupling`. Broadcast together.
+    """
+    x0 = omega_structural * omega_structural
+    B = omega_acoustic**2 - x0 + coupling
+    sgn = jnp.where(B >= 0, 1.0, -1.0)
+    return -2.0 * coupling * x0 / (B + sgn * jnp.sqrt(B * B + 4.0 * coupling * x0))
 
 
 def critical_speed(ring: RingParams, geometry: TyreGeometry, n_max: int = 60):
