@@ -43,6 +43,7 @@ from functools import cached_property
 import numpy as np
 
 from ringfit.io.continuous import DEFAULT_CHUNK, ContinuousRecord, ContinuousWriter
+from ringfit.io.profiles import band_limited_resample, grid_angles_deg
 
 KMH = 1.0 / 3.6
 G = 9.81
@@ -175,16 +176,16 @@ class CleatBench:
     # ------------------------------------------------------------------ cleat response (truth)
     @cached_property
     def _modes(self) -> dict:
-        from ringfit.physics.natural import rotating_natural_frequencies
+        from ringfit.physics.natural import ring_modal_mass, rotating_natural_frequencies
 
         n = np.asarray(self.orders, dtype=np.float64)
         f = np.asarray(rotating_natural_frequencies(self.ring, self.geometry, n, self.omega))  # (orders, 2) Hz
         w1, w2 = 2 * np.pi * f[:, 0], 2 * np.pi * f[:, 1]
         zeta = float(self.ring.damping_ratio)
         s = np.stack([1j * w1 - zeta * np.abs(w1), 1j * w2 - zeta * np.abs(w2)], axis=1)  # (orders, 2)
-        R, rho_a = float(self.geometry.radius), float(self.ring.rho_a)
-        # Ẇ_n(0+) of a radial impulse I at one point: I/(2πR) per harmonic over the modal mass ρA(1 + 1/n²)
-        b = self.impulse_ns / (2 * np.pi * R * rho_a * (1.0 + 1.0 / n**2)) * np.exp(-((n / self.rolloff_order) ** 2))
+        # Ẇ_n(0+) of a radial impulse I at one point: I/(2πR) per harmonic over ρA(1 + 1/n²), i.e. I/(2 M_n)
+        b = self.impulse_ns / (2.0 * np.asarray(ring_modal_mass(self.ring, self.geometry, n))) \
+            * np.exp(-((n / self.rolloff_order) ** 2))
         # W_n(t) = b (e^{s1 t} − e^{s2 t}) / (i(ω1 − ω2)); radial reading −∂²w/∂t² with w = Σ 2Re[W_n e^{inθ}]
         sign = np.array([1.0, -1.0])
         coef = -2.0 * b[:, None] * sign[None, :] * s**2 / (1j * (w1 - w2))[:, None]
@@ -270,13 +271,13 @@ class CleatBench:
             rad, tan = self._analytic_steady(2048)
         # band-limited refinement (zero-padded spectrum) so that linear interpolation is accurate
         fine = 16384
-        table = tuple(_refine_periodic(x, fine) for x in (rad, tan))
+        table = tuple(band_limited_resample(x, fine) for x in (rad, tan))
         self._cache["table"] = table
         return table
 
     def _analytic_steady(self, m: int):
         """Smooth stand-in for the rolling model: patch dip with edge peaks, edge doublets, gravity."""
-        phi = -np.pi + 2 * np.pi * np.arange(m) / m
+        phi = np.radians(grid_angles_deg(m))
         a = math.radians(self.contact_half_angle_deg)
         w = math.radians(2.5)
         c = self.omega**2 * self.radius_e
@@ -450,17 +451,8 @@ def _axis_index(axis: str) -> int:
     raise ValueError(f"axis={axis!r}; expected 'radial' or 'tangential'")
 
 
-def _refine_periodic(x: np.ndarray, m: int) -> np.ndarray:
-    """Band-limited resampling of a periodic grid signal onto m points (Nyquist dropped)."""
-    spec = np.fft.rfft(x)
-    spec[-1] = 0.0 if x.size % 2 == 0 else spec[-1]
-    out = np.zeros(m // 2 + 1, dtype=complex)
-    out[: spec.size] = spec
-    return np.fft.irfft(out, m) * (m / x.size)
-
-
 def _interp_periodic(phi_deg: np.ndarray, table: np.ndarray) -> np.ndarray:
     """Linear interpolation of a table on φ_j = −180 + 360 j/M at any angle [deg]."""
     m = table.size
-    grid = -180.0 + 360.0 * np.arange(m) / m
+    grid = grid_angles_deg(m)
     return np.interp(phi_deg, grid, table, period=360.0)
