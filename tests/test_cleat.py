@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from ringfit.errors import InputError
+from ringfit.gap.campbell import compare_with_ring
 from ringfit.io.continuous import write_continuous
 from ringfit.synth.cleat import CleatBench
 from ringfit.targets.cleat import (
@@ -16,7 +17,7 @@ from ringfit.targets.cleat import (
     passes_for_full_coverage,
     predicted_arrival_angles,
 )
-from ringfit.targets.rolling_modes import compare_with_ring, identify_rolling_modes, winding
+from ringfit.targets.rolling_modes import identify_rolling_modes, winding
 
 FS = 6400.0
 SECONDS = 100.0

@@ -1,7 +1,7 @@
 """``ringfit profile`` and ``ringfit cleat``: continuous drum recordings → profiles, angle–time fields, modes.
 
     ringfit profile RECORD --out NAME.profile.csv [--points 2048]
-    ringfit cleat RECORD --sectors 512 --out FIELD.npz [--animate A.gif] [--ssi MODES.csv]
+    ringfit cleat RECORD --sectors 512 --out FIELD.npz [--animate A.gif] [--ssi MODES.csv [--tyre FITTED.toml]]
 
 RECORD is a continuous ``*.records.npz`` (docs/records-continuous.md).
 """
@@ -9,6 +9,7 @@ RECORD is a continuous ``*.records.npz`` (docs/records-continuous.md).
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 
 def register(sub) -> None:
@@ -43,6 +44,9 @@ def register(sub) -> None:
     c.add_argument("--ssi", default=None, metavar="MODES.csv", help="identify the rolling-tyre modes, write a mode table")
     c.add_argument("--channels", type=int, default=128, help="sectors used as SSI channels (default 128)")
     c.add_argument("--f-max", type=float, default=400.0, help="top of the SSI band [Hz] (default 400)")
+    c.add_argument("--tyre", type=Path, default=None,
+                   help="tyre TOML (DATA.md §1): label the SSI modes with (n, direction) of the rolling, loaded "
+                        "tyre's model at the record's speed, load and drum, and flag labels no branch supports")
     c.add_argument("--skip", type=float, default=None, metavar="S",
                    help="drop τ < S (cleat contact) before SSI (default: time for 30° of rotation)")
     c.add_argument("--force", action="store_true", help="replace existing outputs")
@@ -84,8 +88,13 @@ def run_cleat(args: argparse.Namespace) -> int:
     from ringfit.targets.cleat import angle_time_field, coverage_points
 
     outputs = [args.out] + [p for p in (args.animate, args.snapshots, args.coverage_plot, args.ssi) if p]
+    if args.tyre is not None and not args.ssi:
+        from ringfit.errors import InputError
+
+        raise InputError("--tyre labels the SSI modes: give --ssi MODES.csv too")
+    inputs = [args.record] + ([args.baseline] if args.baseline else []) + ([args.tyre] if args.tyre else [])
     for p in outputs:
-        check_output_path(p, overwrite=args.force, inputs=[args.record] + ([args.baseline] if args.baseline else []))
+        check_output_path(p, overwrite=args.force, inputs=inputs)
     baseline = "auto"
     if args.no_baseline:
         baseline = None
@@ -114,14 +123,17 @@ def run_cleat(args: argparse.Namespace) -> int:
 
         modes = identify_rolling_modes(field, channels=args.channels, f_max=args.f_max, skip_s=args.skip,
                                        progress=not args.quiet)
-        write_mode_table(modes.table, args.ssi, overwrite=args.force)
+        table, flags = _label_modes(modes.table, field, args, channels=len(modes.channel_deg))
+        write_mode_table(table, args.ssi, overwrite=args.force)
         extra = {"mode_freq_hz": modes.table.freq_hz, "mode_shapes": modes.shapes,
                  "mode_channel_deg": modes.channel_deg}
-        print(f"{args.ssi}: {len(modes.table)} modes")
-        for i in range(len(modes.table)):
-            t = modes.table
-            print(f"  {t.freq_hz[i]:8.2f} Hz  n={t.n[i]:<2d} {t.branch[i] or t.tag[i]:<9s} "
-                  f"ζ={t.damping_pct[i]:.2f} %")
+        print(f"{args.ssi}: {len(table)} modes" + (f", {sum(map(bool, flags))} flagged" if any(flags) else ""))
+        for i in range(len(table)):
+            model = ""
+            if "model_n" in table.extra and table.extra["model_n"][i]:
+                model = f"  model: n={table.extra['model_n'][i]} {table.extra['model_direction'][i]}"
+            print(f"  {table.freq_hz[i]:8.2f} Hz  n={table.n[i]:<2d} {table.branch[i] or table.tag[i]:<9s} "
+                  f"ζ={table.damping_pct[i]:.2f} %{model}" + (f"  FLAG: {flags[i]}" if flags[i] else ""))
     field.save(args.out, overwrite=args.force, extra=extra)
     print(f"{args.out}: field {field.mean.shape[1]} sectors × {field.mean.shape[2]} time bins "
           f"of {1e3 * field.time_step_s:.4g} ms; baseline: {field.baseline}")
@@ -136,3 +148,18 @@ def run_cleat(args: argparse.Namespace) -> int:
             animate_field(field, args.animate, tau_max_s=min(field.tau_s[-1], 0.1))
             print(f"{args.animate}: animation")
     return 0
+
+
+def _label_modes(table, field, args, *, channels: int):
+    """Model labels and plausibility flags for the identified modes (issue 13 item 6)."""
+    from ringfit.gap.campbell import label_identified_modes
+
+    if args.tyre is None:
+        return label_identified_modes(table, channels=channels)
+    from ringfit.io.tyre import read_tyre
+
+    tyre = read_tyre(args.tyre)
+    cond = field.condition
+    drum = cond.get("drum_diameter_m")
+    return label_identified_modes(table, tyre.ring, tyre.geometry, channels=channels,
+                                  load_n=cond.get("load_n"), drum_diameter_m=drum if drum else None)
