@@ -10,7 +10,7 @@ import numpy as np
 import ringfit  # noqa: F401
 from ringfit.data import path
 from ringfit.fit.least_squares import fit_natural_frequencies, fitted_ring
-from ringfit.fit.posterior import sample_posterior
+from ringfit.fit.posterior import natural_frequency_predictive, sample_posterior
 from ringfit.io.modes import read_mode_table
 from ringfit.io.tyre import read_tyre
 from ringfit.physics.natural import natural_frequencies
@@ -25,7 +25,7 @@ def main(prior="physical"):
     post = sample_posterior(table, tyre.geometry, tyre.ring, prior=prior, modes=TRAIN, progress=False)
     measured = np.array([table.freq_hz[table.n == k][0] for k in TEST])
     lsq_hz = np.asarray(natural_frequencies(fitted_ring(lsq), tyre.geometry, TEST))
-    pred = post.predictive(TEST)
+    pred = natural_frequency_predictive(post, TEST)
     print(f"fit on n = 1…6 ({lsq.status}, prior {prior}); predict n = 7…9\n")
     print(f"{'n':>3}{'measured':>10}{'LSQ':>9}{'error':>8}{'post. median':>14}{'95 % predictive':>20}{'inside':>8}")
     inside = []

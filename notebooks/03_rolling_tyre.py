@@ -19,7 +19,8 @@ from ringfit.fit.rolling import fit_rolling, sample_rolling_posterior
 from ringfit.params import table9
 from ringfit.physics.contact import contact_length, patch_edges
 from ringfit.report.rolling_plots import contact_pressure_figure, deformed_ring_figure, profiles_figure
-from ringfit.synth.profiles import simulate_rolling, synthetic_profile
+from ringfit.physics.profile import simulate_profile
+from ringfit.synth.profiles import synthetic_profile
 
 OUT = Path(os.environ.get("RINGFIT_NOTEBOOK_OUT", "."))
 ringfit.enable_compilation_cache()  # compiled solves and fits go to disk: a second run skips XLA compilation
@@ -31,7 +32,8 @@ DRUM = 1.2192  # m, the source study's test drum
 # The load is imposed; the axle height is solved for together with the contact patch.
 
 # %%
-sol, channels, omega = simulate_rolling(ring, geometry, 30.0, 4000.0, drum_diameter_m=DRUM)
+prof, sol = simulate_profile(ring, geometry, speed_kmh=30.0, load_n=4000.0, drum_diameter_m=DRUM, with_solution=True)
+omega = 2 * np.pi * prof.condition["rotation_hz"]
 lead, trail = np.degrees(patch_edges(sol))
 print(f"Ω = {omega:.2f} rad/s, deflection {1e3 * float(sol.deflection):.2f} mm, "
       f"patch {lead:+.2f}° … {trail:+.2f}° ({1e3 * float(contact_length(sol)):.1f} mm), "
@@ -46,11 +48,11 @@ contact_pressure_figure(sol).savefig(OUT / "03_contact_pressure.png")
 
 # %%
 speeds = (10.0, 30.0, 50.0, 60.0)
-sims = [simulate_rolling(ring, geometry, v, 4000.0, drum_diameter_m=DRUM) for v in speeds]
-model = np.stack([c for _, c, _ in sims])
-angle = np.degrees(np.asarray(sol.phi))
+sims = [simulate_profile(ring, geometry, speed_kmh=v, load_n=4000.0, drum_diameter_m=DRUM) for v in speeds]
+model = np.stack([p.channels for p in sims])
+angle = sims[0].angle_deg
 profiles_figure(angle, model, speeds, title="baseline sensor (mean removed)").savefig(OUT / "03_profiles.png")
-scaled = [c / om**2 for _, c, om in sims]
+scaled = [p.channels / (2 * np.pi * p.condition["rotation_hz"]) ** 2 for p in sims]
 print("max |profile/Ω² − profile(10 km/h)/Ω²| =", max(np.abs(s - scaled[0]).max() for s in scaled), "m")
 
 # %% [markdown]
@@ -74,7 +76,8 @@ profiles_figure(result.extra["angle_deg"], result.extra["model"], result.extra["
 
 # %%
 post = sample_rolling_posterior(result, walkers=8, steps=150, seed=0)
-lo, med, hi = post.summary()["k_tread"]
+row = next(r for r in post.summary_table(level=0.6827) if r["name"] == "k_tread")
+lo, med, hi = row["lo"], row["median"], row["hi"]
 print(f"k_trd posterior: {med:.5g} (68 %: {lo:.5g} … {hi:.5g}); least squares {result.values['k_tread']:.5g} "
       f"± {result.stderr['k_tread']:.2g}; acceptance {np.mean(post.acceptance):.2f}; "
       f"chain {post.chain.shape[0]} steps, τ ≈ {np.nanmax(post.tau):.1f} "

@@ -65,14 +65,18 @@ def test_profile_effect_set():
                                     "rotation", "sensor_mass", "ring_extensibility"}
 
 
-def test_baseline_matches_rolling_fit_model():
-    """The diagnosis's baseline is ringfit.fit.rolling's model (§6 baseline sensor, mean removed)."""
-    from ringfit.fit.rolling import model_profiles
+def test_baseline_matches_the_simulated_profile():
+    """The diagnosis's batched baseline predictor (band, offset, two speeds) reads what the one forward model
+    simulates for each operating point alone (§6 baseline sensor, mean removed)."""
+    from ringfit.physics.profile import simulate_profile
+    from ringfit.physics.sensor import shift_angle
 
     data, g, r = _data()
     ours = _predict((), [], data, offset=0.01)
-    ref = np.asarray(model_profiles(r, g, data.omega, data.load, FlatRoad(), 0.01, solver=SOLVER))
-    np.testing.assert_allclose(ours, ref, atol=1e-9 * np.abs(ref).max())
+    for i, om in enumerate(np.asarray(data.omega)):
+        prof = simulate_profile(r, g, speed_kmh=30.0, load_n=4000.0, rotation_hz=om / (2 * np.pi), solver=SOLVER)
+        ref = np.asarray(shift_angle(prof.channels, 0.01))
+        np.testing.assert_allclose(ours[i], ref, atol=1e-9 * np.abs(ref).max())
 
 
 @pytest.mark.parametrize("name", PROFILE_EFFECTS)
@@ -163,16 +167,16 @@ def test_noise_estimate_recovers_known_sigma(colour):
 def test_wave_damping_viscous_form_in_the_reduced_operator():
     """PHYSICS.md §4.2: viscous c_w = c_v = c adds diag(i nΩc, i nΩc) to D_n, i.e. i nΩ c (1 + 1/n²) to the
     inextensible d_n = uᴴD_n u (u = [1, i/n])."""
-    from ringfit.gap.profile_model import ProfileModel
+    from ringfit.physics.profile import ProfileModel
     from ringfit.physics.rolling import reduced_operator, ring_operator
 
     g, r = table9()
     n = jnp.arange(1.0, 30.0)
     omega, c = 40.0, 800.0
     e = lib.get("wave_damping")
-    base = reduced_operator(ring_operator(r, g, n, omega, ProfileModel().ring_model()), n)
+    base = reduced_operator(ring_operator(r, g, n, omega, ProfileModel().operator_model()), n)
     visc = e.profile_model(jnp.asarray([0.0, c]), ProfileModel())
-    d = np.asarray(reduced_operator(ring_operator(r, g, n, omega, visc.ring_model()), n) - base)
+    d = np.asarray(reduced_operator(ring_operator(r, g, n, omega, visc.operator_model()), n) - base)
     nn = np.asarray(n)
     np.testing.assert_allclose(d, 1j * nn * omega * c * (1 + 1 / nn**2), rtol=1e-9)
 
@@ -180,7 +184,7 @@ def test_wave_damping_viscous_form_in_the_reduced_operator():
 def test_wave_damping_sign_and_speed_growth():
     """PHYSICS.md §4.2: extra loss shifts the contact pressure forward and raises the rearward Fx; the viscous
     form's extra Fx grows with speed (the material sees harmonic n at nΩ)."""
-    from ringfit.gap.profile_model import ProfileModel
+    from ringfit.physics.profile import ProfileModel
     from ringfit.physics.contact import solve_rolling_jit
     from ringfit.physics.operating import OperatingPoint
 
@@ -188,7 +192,7 @@ def test_wave_damping_sign_and_speed_growth():
     e = lib.get("wave_damping")
     out = {}
     for c in (0.0, 1000.0):
-        model = e.profile_model(jnp.asarray([0.0, c]), ProfileModel()).ring_model()
+        model = e.profile_model(jnp.asarray([0.0, c]), ProfileModel()).operator_model()
         for om in (15.0, 50.0):
             sol = solve_rolling_jit(r, g, OperatingPoint(om, 4000.0, FlatRoad()), model=model, solver=SOLVER)
             p = np.asarray(sol.pressure)

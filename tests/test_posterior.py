@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from ringfit.fit.least_squares import fit_natural_frequencies
-from ringfit.fit.posterior import batched_log_probability, load_posterior, sample_posterior
+from ringfit.fit.posterior import load_posterior, log_probability_function, natural_frequency_predictive, sample_posterior
 from ringfit.io.modes import ModeTable
 from ringfit.params import table9
 from ringfit.physics.natural import natural_frequencies
@@ -46,10 +46,10 @@ def test_sampler_diagnostics(posterior):
 
 def test_predictive_interval_contains_data(posterior):
     table, post = posterior
-    p = post.predictive(N9)
+    p = natural_frequency_predictive(post, N9)
     inside = (table.freq_hz >= p["lo"]) & (table.freq_hz <= p["hi"])
     assert inside.sum() >= 8
-    c = post.predictive(N9, noise=False)
+    c = natural_frequency_predictive(post, N9, noise=False)
     assert np.all(c["hi"] - c["lo"] < p["hi"] - p["lo"])
 
 
@@ -65,14 +65,11 @@ def test_save_and_load_round_trip(posterior, tmp_path):
 
 
 def test_log_probability_batch_and_nan_handling():
-    from ringfit.fit.least_squares import RING_FIELDS, ring_vector
-    import jax.numpy as jnp
-
-    fn = batched_log_probability((RING_FIELDS.index("kw"),))
     f = np.asarray(natural_frequencies(RING, GEO, N9))
-    args = (jnp.asarray(ring_vector(RING)), GEO, jnp.asarray(N9, float), jnp.asarray(f), jnp.asarray(0.01 * f),
-            jnp.zeros(1), jnp.ones(1), jnp.zeros(1), jnp.log(jnp.array([1e4])), jnp.log(jnp.array([1e8])))
+    fit = fit_natural_frequencies(ModeTable(freq_hz=f, n=N9), GEO, RING.replace(kw=1e6), free=("kw",))
+    fn, lo, hi = log_probability_function(fit)
+    np.testing.assert_allclose(np.exp([lo[0], hi[0]]), [1e4, 1e8])  # truncated to the plausible range
     y = np.log([[RING.kw], [RING.kw * 1.1], [1e9], [np.nan]])
-    lp = np.asarray(fn(jnp.asarray(y), args))
+    lp = fn(y)
     assert lp[0] == pytest.approx(0.0, abs=1e-12) and lp[1] < lp[0]
     assert lp[2] == -np.inf and lp[3] == -np.inf

@@ -111,7 +111,7 @@ def run_fit(args) -> int:
     result = fit_natural_frequencies(table, tyre.geometry, tyre.ring, free=free, prior=args.prior, modes=modes,
                                      default_relative_std=rel, max_steps=args.max_steps)
     print(result.summary())
-    print(identifiability(result).summary())
+    print(identifiability(result).summary(known=result.flags))
     if not result.converged:
         raise CommandFailed(f"fit did not converge ({result.status}); nothing written. "
                             + ("Try --prior physical or fix EI." if args.prior == "none" else

@@ -70,27 +70,23 @@ def run_roll(args) -> int:
 
     import numpy as np
 
-    from ringfit.io.profiles import Profile, write_profile
+    from ringfit.io.profiles import Profile, band_limited_resample, grid_angles_deg, write_profile
     from ringfit.io.tyre import read_tyre
-    from ringfit.params import BAR
     from ringfit.physics.contact import ContactSolver, contact_length, patch_edges
-    from ringfit.synth.profiles import band_limited_resample, simulate_rolling
+    from ringfit.physics.profile import simulate_profile
 
     tyre = read_tyre(args.tyre)
     solver = ContactSolver(n_grid=args.grid)
-    sol, channels, omega = simulate_rolling(tyre.ring, tyre.geometry, args.speed, args.load,
-                                            drum_diameter_m=args.drum, rotation_hz=args.rotation_hz, solver=solver)
+    grid, sol = simulate_profile(tyre.ring, tyre.geometry, speed_kmh=args.speed, load_n=args.load,
+                                 rotation_hz=args.rotation_hz, drum_diameter_m=args.drum, solver=solver,
+                                 with_solution=True)
     if not bool(sol.ok):
         raise InputError("the contact solve did not converge inside its ±35° window (load too large for this tyre?)")
-    values = band_limited_resample(channels, args.points)
-    rot = omega / (2 * np.pi)
-    condition = {"speed_kmh": args.speed, "load_n": args.load, "pressure_bar": float(tyre.geometry.pressure) / BAR,
-                 "revolutions": 1, "sample_rate_hz": rot * args.points, "rotation_hz": rot}
-    if args.drum is not None:
-        condition["drum_diameter_m"] = args.drum
-    angle = -180.0 + 360.0 * np.arange(args.points) / args.points
-    write_profile(Profile(angle, values[0], values[1], condition=condition), args.out, overwrite=args.force,
-                  inputs=[args.tyre])
+    omega = 2 * np.pi * grid.condition["rotation_hz"]
+    values = band_limited_resample(grid.channels, args.points)
+    condition = dict(grid.condition, sample_rate_hz=grid.condition["rotation_hz"] * args.points)
+    write_profile(Profile(grid_angles_deg(args.points), values[0], values[1], condition=condition), args.out,
+                  overwrite=args.force, inputs=[args.tyre])
     lead, trail = (np.degrees(float(x)) for x in patch_edges(sol))
     r_e = args.speed / 3.6 / omega if omega > 0 else float("nan")
     omega_src = "--rotation-hz" if args.rotation_hz is not None else f"V/R_e, R_e = R_out − δ/3 = {r_e:.4f} m"
@@ -103,7 +99,7 @@ def run_roll(args) -> int:
     if args.plot is not None:
         from ringfit.report.rolling_plots import rolling_solution_figure
 
-        rolling_solution_figure(sol, tyre.geometry, channels, speed_kmh=args.speed).savefig(args.plot)
+        rolling_solution_figure(sol, tyre.geometry, grid.channels, speed_kmh=args.speed).savefig(args.plot)
         print(f"wrote {args.plot}")
     return 0
 

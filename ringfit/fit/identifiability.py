@@ -49,7 +49,24 @@ class Identifiability:
     def well_posed(self) -> bool:
         return not self.flags
 
-    def summary(self) -> str:
+    def to_record(self) -> dict:
+        """A JSON-serialisable dict (saved with a posterior, so a report can redraw it)."""
+        return dict(names=list(self.names), eigenvalues=self.eigenvalues.tolist(),
+                    eigenvectors=self.eigenvectors.tolist(), log_std=np.where(np.isfinite(self.log_std), self.log_std,
+                                                                               1e300).tolist(),
+                    condition_number=self.condition_number if math.isfinite(self.condition_number) else 1e300,
+                    flags=list(self.flags),
+                    profiles={k: [g.tolist(), c.tolist()] for k, (g, c) in self.profiles.items()})
+
+    @classmethod
+    def from_record(cls, record: dict) -> "Identifiability":
+        """The inverse of :meth:`to_record`."""
+        return cls(tuple(record["names"]), np.asarray(record["eigenvalues"]), np.asarray(record["eigenvectors"]),
+                   np.asarray(record["log_std"]), float(record["condition_number"]), list(record["flags"]),
+                   {k: (np.asarray(g), np.asarray(c)) for k, (g, c) in record.get("profiles", {}).items()})
+
+    def summary(self, known=()) -> str:
+        """Plain text: the Fisher spectrum and the findings (``known``: findings already printed, left out)."""
         lines = ["Fisher information of log-parameters (data only):",
                  f"{'λ':>11} {'σ(log)':>8}  dominant loadings"]
         for lam, s, v in zip(self.eigenvalues, self.log_std, self.eigenvectors.T):
@@ -57,7 +74,8 @@ class Identifiability:
             load = ", ".join(f"{v[i]:+.2f} {self.names[i]}" for i in order if abs(v[i]) > 0.2)
             lines.append(f"{lam:11.3g} {s:8.3g}  {load}")
         lines.append(f"condition number {self.condition_number:.3g}")
-        lines += [f"FLAG: {f}" for f in self.flags] or ["all parameters determined by the data"]
+        lines += [f"FLAG: {f}" for f in self.flags if f not in known] or (
+            [] if self.flags else ["all parameters determined by the data"])
         return "\n".join(lines)
 
 

@@ -5,25 +5,24 @@ Model: static inextensible ring, eq. 18 (PHYSICS.md §2.1), via
 ``(f_model(n_i) − f_i) / σ_i`` with σ_i from ``freq_std_hz`` or, where that is
 empty, :data:`DEFAULT_RELATIVE_STD` × f_i. Optional log-normal priors enter as
 extra residual rows ``(log θ − μ)/σ_ln``. The solver (optimistix
-Levenberg–Marquardt with an SVD linear solve) works on ``log θ`` of the free
-parameters; all other ring parameters stay fixed at the initial values.
+Levenberg–Marquardt with an SVD linear solve, :mod:`ringfit.fit.engine`) works on
+``log θ`` of the free parameters; all other ring parameters stay fixed at the
+initial values.
 """
 
 from __future__ import annotations
 
-import functools
-import math
 from dataclasses import dataclass, fields
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
-import optimistix as optx
 
 from ringfit.errors import InputError
-from ringfit.fit.priors import LogNormalPrior, prior_arrays, resolve_priors
-from ringfit.fit.result import FitResult, covariance_from_jacobian, parameter_flags, solver_flags, solver_status
+from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares
+from ringfit.fit.priors import BOUNDS, LogNormalPrior, resolve_priors
+from ringfit.fit.result import FitResult
 from ringfit.io.modes import ModeTable
 from ringfit.params import RING_PARAMETERS, RingParams, TyreGeometry
 from ringfit.physics.natural import natural_frequencies
@@ -99,41 +98,37 @@ def ring_vector(ring: RingParams) -> np.ndarray:
     return np.array([float(getattr(ring, k)) for k in RING_FIELDS])
 
 
-def ring_from_log(log_free, free_index: tuple[int, ...], base):
-    """A :class:`RingParams` whose free entries are ``exp(log_free)`` and the rest ``base``.
-
-    **Arguments:** ``log_free`` — ``(k,)``; ``free_index`` — static positions in
-    :data:`RING_FIELDS`; ``base`` — ``(8,)`` vector of all parameters.
-    """
-    vec = jnp.asarray(base).at[jnp.array(free_index)].set(jnp.exp(log_free))
-    return RingParams(*[vec[i] for i in range(len(RING_FIELDS))])
+def ring_from_vector(theta) -> RingParams:
+    """A :class:`RingParams` from a vector in :data:`RING_FIELDS` order (JAX or NumPy)."""
+    return RingParams(*[theta[i] for i in range(len(RING_FIELDS))])
 
 
-def weighted_residuals(log_free, free_index, base, geometry, n, freq, sigma):
-    """Data rows ``(f_model − f)/σ``, shape ``(m,)`` (eq. 18, PHYSICS.md §2.1)."""
-    ring = ring_from_log(log_free, free_index, base)
-    return (natural_frequencies(ring, geometry, n) - freq) / sigma
+#: Solver coordinates of the ring parameters: logarithms (χ, a share, linear).
+RING_COORDS = tuple(Coordinate(k, LINEAR) if k == "chi" else Coordinate(k, LOG) for k in RING_FIELDS)
 
 
-def _all_residuals(log_free, args, free_index):
-    base, geometry, n, freq, sigma, mu, sd, mask = args
-    data = weighted_residuals(log_free, free_index, base, geometry, n, freq, sigma)
-    prior = mask * (log_free - mu) / sd
-    return jnp.concatenate([data, prior])
+class FrequencyArrays(eqx.Module):
+    """What the eq. 18 residuals need besides θ: geometry and the rows ``(m,)`` n, f [Hz], σ [Hz]."""
+
+    geometry: TyreGeometry
+    n: jax.Array
+    freq: jax.Array
+    sigma: jax.Array
 
 
-@functools.partial(jax.jit, static_argnames=("free_index", "max_steps", "rtol", "atol"))
-def _solve(y0, args, *, free_index, max_steps, rtol, atol):
-    fn = functools.partial(_residual_for_optx, free_index=free_index)
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.SVD())
-    sol = optx.least_squares(fn, solver, y0, args=args, max_steps=max_steps, throw=False)
-    jac = jax.jacfwd(_all_residuals)(sol.value, args, free_index)
-    res = _all_residuals(sol.value, args, free_index)
-    return sol.value, sol.result, sol.stats["num_steps"], jac, res
+class NaturalFrequencyResiduals(AbstractResiduals):
+    """Rows ``(f_model(n_i) − f_i)/σ_i`` of eq. 18 (docs/physics.md §2.1); aux: the model frequencies [Hz]."""
+
+    def __call__(self, theta, data: FrequencyArrays):
+        model = natural_frequencies(ring_from_vector(theta), data.geometry, data.n)
+        return (model - data.freq) / data.sigma, model
 
 
-def _residual_for_optx(y, args, *, free_index):
-    return _all_residuals(y, args, free_index)
+def log_normal_prior(priors: dict) -> GaussianPrior | None:
+    """The engine's prior from ``name -> LogNormalPrior`` (a normal prior on log θ)."""
+    if not priors:
+        return None
+    return GaussianPrior.independent({k: (p.mu, p.sigma_ln) for k, p in priors.items()})
 
 
 def check_free(free) -> tuple[str, ...]:
@@ -187,57 +182,30 @@ def fit_natural_frequencies(
         raise InputError("tyre geometry needs positive radius, width and pressure")
     data = frequency_data(table, modes, default_relative_std)
     priors = resolve_priors(prior, free)
-    mu, sd, mask = prior_arrays(priors, free)
     base = ring_vector(initial)
-    free_index = tuple(RING_FIELDS.index(k) for k in free)
-    start = base[list(free_index)]
+    start = np.array([base[RING_FIELDS.index(k)] for k in free])
     if not np.all(np.isfinite(start) & (start > 0)):
         raise InputError(f"initial values of {list(free)} must be positive and finite, got {start}")
-    y0 = np.log(start)
-    args = (jnp.asarray(base), geometry, jnp.asarray(data.n), jnp.asarray(data.freq_hz),
-            jnp.asarray(data.sigma_hz), jnp.asarray(mu), jnp.asarray(sd), jnp.asarray(mask))
-    y, result, steps, jac, res = _solve(jnp.asarray(y0), args, free_index=free_index,
-                                       max_steps=max_steps, rtol=rtol, atol=atol)
-    return _result(free, free_index, base, geometry, data, priors, np.asarray(y), result,
-                   int(steps), np.asarray(jac), np.asarray(res), table)
-
-
-def _result(free, free_index, base, geometry, data, priors, y, result, steps, jac, res, table) -> FitResult:
-    status, message = solver_status(result)
+    arrays = FrequencyArrays(geometry, data.n, data.freq_hz, data.sigma_hz)
+    problem = Problem(NaturalFrequencyResiduals(), arrays, RING_COORDS, prior=log_normal_prior(priors),
+                      plausible=BOUNDS, data_label="these modes")
+    result = least_squares(problem, base, free, max_steps=max_steps, rtol=rtol, atol=atol)
     m = data.n.size
-    values = dict(zip(RING_FIELDS, base.tolist()))
-    values.update({k: float(np.exp(v)) for k, v in zip(free, y)})
-    cov = covariance_from_jacobian(jac)
-    stderr = {k: float(values[k] * math.sqrt(cov[i, i])) if np.isfinite(cov[i, i]) else math.inf
-              for i, k in enumerate(free)}
-    ring = RingParams(**values)
-    model = np.asarray(natural_frequencies(ring, geometry, data.n))
-    flags = solver_flags(status, message) + parameter_flags(free, values, stderr, data="these modes", priors=priors)
+    model = np.asarray(result.extra.pop("aux"))
     if table.state != "free" or float(table.condition.get("speed_kmh", 0) or 0) > 0:
-        flags.append(f"table state is {table.state!r} (speed {table.condition.get('speed_kmh', 0)} km/h); "
-                     "the eq. 18 model assumes a static, free tyre")
-    return FitResult(
-        status=status,
-        message=message or "converged",
-        names=tuple(free),
-        values=values,
-        stderr=stderr,
-        covariance_log=cov,
-        residuals=res[:m],
-        jacobian=jac,
-        n_data=m,
-        iterations=steps,
-        flags=flags,
-        extra=dict(
-            n=data.n, freq_hz=data.freq_hz, model_hz=model, sigma_hz=data.sigma_hz, rows=data.rows,
-            sigma_source=data.sigma_source, priors=priors, ring=ring, geometry=geometry,
-            fisher_data=jac[:m].T @ jac[:m],
-        ),
+        result.flags.append(f"table state is {table.state!r} (speed {table.condition.get('speed_kmh', 0)} km/h); "
+                            "the eq. 18 model assumes a static, free tyre")
+    J = result.jacobian[:m]
+    result.extra.update(
+        n=data.n, freq_hz=data.freq_hz, model_hz=model, sigma_hz=data.sigma_hz, rows=data.rows,
+        sigma_source=data.sigma_source, priors=priors, ring=fitted_ring(result), geometry=geometry,
+        fisher_data=J.T @ J,
     )
+    return result
 
 
 def fitted_ring(result: FitResult) -> RingParams:
-    """The :class:`RingParams` of a fit (free parameters at their optimum)."""
+    """The :class:`RingParams` of a ring fit (free parameters at their optimum, the rest as given)."""
     return RingParams(**{k: result.values[k] for k in RING_FIELDS})
 
 

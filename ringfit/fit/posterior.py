@@ -1,22 +1,31 @@
-"""Posterior of ring parameters given measured natural frequencies (emcee).
+"""The one posterior of ringfit: emcee on any problem of the least-squares engine.
 
-Likelihood: independent Gaussians on the frequencies with the σ of the
-least-squares fit (:func:`ringfit.fit.least_squares.frequency_data`), model
-eq. 18 (PHYSICS.md §2.1). Priors, on ``log θ`` of each free parameter: the
-log-normal priors chosen (e.g. ``"physical"``), otherwise uniform in ``log θ``
-within :data:`ringfit.fit.priors.BOUNDS`; every parameter is also truncated to
-those bounds.
+:func:`sample` takes a :class:`~ringfit.fit.result.FitResult` of
+:func:`ringfit.fit.engine.least_squares` and samples its free parameters in the
+solver coordinates ``u`` (log for positive parameters, scaled for linear ones):
 
-Sampling: ``emcee.EnsembleSampler(vectorize=True)`` on one jitted, vmapped
-log-probability; walkers start in a small ball around the least-squares
-optimum; the chain is extended in blocks until it is longer than
-:data:`TAU_FACTOR` integrated autocorrelation times (or ``max_steps``, with a
-warning). Draws and everything needed to rebuild a report are saved to HDF5.
+- likelihood ``−½ Σ r²`` of the problem's weighted residuals (divided by the
+  fit's residual σ when the problem's ``sigma`` is ``"estimate"``);
+- prior: the problem's Gaussian prior on ``u``, flat elsewhere, truncated to the
+  coordinates' bounds and the problem's plausible ranges;
+- ``emcee.EnsembleSampler(vectorize=True)`` on one jitted, vmapped log-probability
+  evaluated in fixed chunks of half the walkers (emcee's moves evaluate half the
+  ensemble at a time): one compilation per problem structure;
+- walkers start in a small ball around the least-squares optimum; the chain grows
+  in blocks until it is longer than :data:`TAU_FACTOR` integrated autocorrelation
+  times (or ``max_steps``, with a warning).
+
+:class:`Posterior` holds the draws and diagnostics (arviz R̂ and ESS) and saves to
+HDF5 with whatever the problem wants kept beside them (``meta``), so that a report
+can be rebuilt from the file alone. :func:`sample_posterior` is the free-tyre
+(eq. 18, docs/physics.md §2.1) convenience built on it.
 """
 
 from __future__ import annotations
 
+import functools
 import json
+import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,38 +34,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ringfit.fit.least_squares import (
-    DEFAULT_FREE,
-    DEFAULT_RELATIVE_STD,
-    RING_FIELDS,
-    check_free,
-    fit_natural_frequencies,
-    frequency_data,
-    ring_from_log,
-    ring_vector,
-)
-from ringfit.fit.priors import log_bounds, prior_arrays, resolve_priors
-from ringfit.params import BAR, RingParams, TyreGeometry
-from ringfit.physics.natural import natural_frequencies
+from ringfit.fit.engine import LOG, _Free, _weighted
+from ringfit.params import RingParams
 
 #: Stop when the chain is longer than this many integrated autocorrelation times.
 TAU_FACTOR = 50
-FORMAT = "ringfit-posterior/1"
-
-
-def log_probability(log_free, args, free_index):
-    """Log posterior density of ``log θ`` (one walker), up to a constant.
-
-    ``args = (base (8,), geometry, n (m,), freq (m,), sigma (m,), mu (k,), sd (k,), mask (k,), lo (k,), hi (k,))``.
-    """
-    base, geometry, n, freq, sigma, mu, sd, mask, lo, hi = args
-    ring = ring_from_log(log_free, free_index, base)
-    r = (natural_frequencies(ring, geometry, n) - freq) / sigma
-    loglike = -0.5 * jnp.sum(r**2)
-    logprior = -0.5 * jnp.sum(mask * ((log_free - mu) / sd) ** 2)
-    inside = jnp.all((log_free >= lo) & (log_free <= hi))
-    value = jnp.where(inside, loglike + logprior, -jnp.inf)
-    return jnp.where(jnp.isnan(value), -jnp.inf, value)
+FORMAT = "ringfit-posterior/2"
+#: Earlier files (every free parameter a logarithm) still load.
+FORMATS_READ = ("ringfit-posterior/1", FORMAT)
 
 
 def _arviz():
@@ -68,33 +53,23 @@ def _arviz():
     return arviz
 
 
-_batched = {}
-
-
-def batched_log_probability(free_index: tuple[int, ...]):
-    """The jitted, vmapped log-probability ``(walkers, k) -> (walkers,)`` for a free set (cached)."""
-    fn = _batched.get(free_index)
-    if fn is None:
-        fn = jax.jit(jax.vmap(lambda y, args: log_probability(y, args, free_index), in_axes=(0, None)))
-        _batched[free_index] = fn
-    return fn
-
-
 @dataclass
 class Posterior:
     """Posterior draws and sampler diagnostics.
 
-    - ``names``: free parameters ``(k,)``; ``values0``: all ring parameters
-      (fixed ones at their values; free ones at the least-squares optimum).
-    - ``chain``: ``(steps, walkers, k)`` log-parameters; ``log_prob``: ``(steps, walkers)``.
-    - ``acceptance``: ``(walkers,)`` acceptance fractions.
-    - ``tau``: ``(k,)`` integrated autocorrelation times [steps].
-    - ``burn``, ``thin``: what :attr:`samples` discards and keeps.
-    - ``data``: ``n``, ``freq_hz``, ``sigma_hz`` ``(m,)``, ``sigma_source``;
-      ``geometry``: radius/width/pressure; ``priors``: name -> (median, σ_ln, source).
+    - ``names``: free parameters ``(k,)``; ``kinds``: ``"log"``/``"linear"`` per name, with
+      ``centers``, ``scales`` of the linear ones (θ = center + scale·u).
+    - ``values0``: every parameter of the problem (fixed ones at their values, free ones at
+      the least-squares optimum), natural units.
+    - ``chain``: ``(steps, walkers, k)`` solver coordinates u; ``log_prob``: ``(steps, walkers)``.
+    - ``acceptance``: ``(walkers,)`` acceptance fractions; ``tau``: ``(k,)`` integrated
+      autocorrelation times [steps]; ``burn``, ``thin``: what :attr:`samples` discards and keeps.
+    - ``meta``: what the problem keeps beside the draws (data, geometry, priors, the
+      least-squares fits, …; JSON-serialisable), saved with them.
     """
 
     names: tuple[str, ...]
+    kinds: tuple[str, ...]
     values0: dict[str, float]
     chain: np.ndarray
     log_prob: np.ndarray
@@ -102,11 +77,9 @@ class Posterior:
     tau: np.ndarray
     burn: int
     thin: int
-    data: dict
-    geometry: dict
-    priors: dict
-    source: str = ""
-    lsq: dict = field(default_factory=dict)
+    centers: tuple[float, ...] = ()
+    scales: tuple[float, ...] = ()
+    meta: dict = field(default_factory=dict)
 
     @property
     def steps(self) -> int:
@@ -119,23 +92,26 @@ class Posterior:
 
     @property
     def log_samples(self) -> np.ndarray:
-        """``(draws, k)`` flattened log-parameter draws after burn-in and thinning."""
+        """``(draws, k)`` flattened draws of the solver coordinates after burn-in and thinning."""
         return self.chain[self.burn :: self.thin].reshape(-1, len(self.names))
 
     @property
     def samples(self) -> np.ndarray:
-        """``(draws, k)`` parameter draws in SI units."""
-        return np.exp(self.log_samples)
+        """``(draws, k)`` parameter draws in natural (SI) units."""
+        u = self.log_samples
+        out = np.empty_like(u)
+        for i, kind in enumerate(self.kinds):
+            out[:, i] = np.exp(u[:, i]) if kind == LOG else self.centers[i] + self.scales[i] * u[:, i]
+        return out
 
     def ring_samples(self) -> RingParams:
-        """A RingParams whose free fields are ``(draws,)`` arrays."""
-        s = self.samples
-        values = {k: np.full(s.shape[0], v) for k, v in self.values0.items()}
-        values.update({k: s[:, i] for i, k in enumerate(self.names)})
-        return RingParams(**values)
+        """A RingParams whose free fields are ``(draws,)`` arrays (for problems whose parameters are ring fields)."""
+        from ringfit.fit.least_squares import RING_FIELDS
 
-    def geometry_params(self) -> TyreGeometry:
-        return TyreGeometry(self.geometry["radius"], self.geometry["width"], self.geometry["pressure"])
+        s = self.samples
+        values = {k: np.full(s.shape[0], self.values0[k]) for k in RING_FIELDS}
+        values.update({k: s[:, i] for i, k in enumerate(self.names) if k in values})
+        return RingParams(**values)
 
     def rhat(self) -> np.ndarray:
         """Split-R̂ per parameter, walkers treated as chains (arviz)."""
@@ -150,7 +126,7 @@ class Posterior:
         return np.array([float(az.ess(post[:, :, i].T)) for i in range(len(self.names))])
 
     def summary_table(self, level: float = 0.95) -> list[dict]:
-        """Per parameter: mean, median, sd and the central ``level`` interval (SI)."""
+        """Per parameter: mean, median, sd and the central ``level`` interval (natural units)."""
         s = self.samples
         q = [(1 - level) / 2 * 100, 50, (1 + level) / 2 * 100]
         rows = []
@@ -160,39 +136,22 @@ class Posterior:
                              lo=float(lo), hi=float(hi), tau=float(self.tau[i])))
         return rows
 
-    def predictive(self, n, level: float = 0.95, noise: bool = True, seed: int = 0):
-        """Posterior predictive natural frequencies for indices ``n`` ``(p,)``.
-
-        **Returns:** dict of ``(p,)`` arrays ``median``, ``lo``, ``hi`` [Hz]; with
-        ``noise`` each draw adds the measurement scatter (σ = the data's
-        relative σ, median over modes, × f), i.e. where a new measurement
-        should fall; without it the band is the model's credible band.
-        """
-        n = np.asarray(n, dtype=float)
-        f = np.asarray(natural_frequencies(self.ring_samples(), self.geometry_params(), n[:, None]))  # (p, draws)
-        if noise:
-            rel = float(np.median(np.asarray(self.data["sigma_hz"]) / np.asarray(self.data["freq_hz"])))
-            rng = np.random.default_rng(seed)
-            f = f * (1 + rel * rng.standard_normal(f.shape))
-        q = np.percentile(f, [(1 - level) / 2 * 100, 50, (1 + level) / 2 * 100], axis=1)
-        return dict(n=n, lo=q[0], median=q[1], hi=q[2])
-
     def diagnostics(self) -> dict:
         """τ, chain length / τ, acceptance, R̂ and ESS, with a one-line verdict."""
-        rhat = self.rhat()
-        verdict = (f"chain of {self.steps} steps is {self.steps / np.max(self.tau):.0f} τ long "
-                   f"(target > {TAU_FACTOR} τ)")
+        tmax = float(np.max(self.tau)) if np.all(np.isfinite(self.tau)) else math.nan
+        verdict = (f"chain of {self.steps} steps is {self.steps / tmax:.0f} τ long (target > {TAU_FACTOR} τ)"
+                   if math.isfinite(tmax) else f"chain of {self.steps} steps is too short to estimate τ")
         return dict(tau=self.tau, steps=self.steps, walkers=self.chain.shape[1],
-                    acceptance_mean=float(self.acceptance.mean()), rhat=rhat, ess=self.ess(),
+                    acceptance_mean=float(self.acceptance.mean()), rhat=self.rhat(), ess=self.ess(),
                     converged=self.converged, verdict=verdict)
 
-    def save(self, path, *, overwrite: bool = False) -> Path:
-        """Write to HDF5 (atomic; refuses to overwrite unless asked)."""
+    def save(self, path, *, overwrite: bool = False, inputs=()) -> Path:
+        """Write to HDF5 (atomic; refuses to overwrite unless asked, and never an input)."""
         import h5py
 
         from ringfit.io.files import atomic_write, check_output_path
 
-        path = check_output_path(path, overwrite=overwrite)
+        path = check_output_path(path, overwrite=overwrite, inputs=inputs)
 
         def write(tmp):
             with h5py.File(tmp, "w") as h5:
@@ -201,17 +160,24 @@ class Posterior:
                 h5.create_dataset("log_prob", data=self.log_prob, compression="gzip")
                 h5.create_dataset("acceptance", data=self.acceptance)
                 h5.create_dataset("tau", data=self.tau)
-                meta = dict(names=list(self.names), values0=self.values0, burn=self.burn, thin=self.thin,
-                            geometry=self.geometry, priors=self.priors, source=self.source, lsq=self.lsq,
-                            data={k: (np.asarray(v).tolist() if not isinstance(v, str) else v)
-                                  for k, v in self.data.items()})
-                h5.attrs["meta"] = json.dumps(meta, default=float)
+                head = dict(names=list(self.names), kinds=list(self.kinds), centers=list(self.centers),
+                            scales=list(self.scales), values0=self.values0, burn=self.burn, thin=self.thin,
+                            meta=self.meta)
+                h5.attrs["meta"] = json.dumps(head, default=_json_default, allow_nan=True)
 
         return atomic_write(path, write)
 
 
+def _json_default(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"cannot save {type(x).__name__} with a posterior")
+
+
 def load_posterior(path) -> Posterior:
-    """Read a posterior written by :meth:`Posterior.save`."""
+    """Read a posterior written by :meth:`Posterior.save` (formats ``ringfit-posterior/1`` and ``/2``)."""
     import h5py
 
     from ringfit.errors import InputError
@@ -221,16 +187,30 @@ def load_posterior(path) -> Posterior:
         raise InputError("file not found", source=path)
     try:
         with h5py.File(path, "r") as h5:
-            if h5.attrs.get("format") != FORMAT:
-                raise InputError(f"not a ringfit posterior (format {h5.attrs.get('format')!r})", source=path)
-            meta = json.loads(h5.attrs["meta"])
+            fmt = h5.attrs.get("format")
+            if fmt not in FORMATS_READ:
+                raise InputError(f"not a ringfit posterior (format {fmt!r})", source=path)
+            head = json.loads(h5.attrs["meta"])
             arrays = {k: h5[k][()] for k in ("chain", "log_prob", "acceptance", "tau")}
     except OSError as exc:
         raise InputError(f"not a readable HDF5 file ({exc})", source=path) from None
-    data = {k: (np.asarray(v) if isinstance(v, list) else v) for k, v in meta["data"].items()}
-    return Posterior(names=tuple(meta["names"]), values0=meta["values0"], burn=meta["burn"], thin=meta["thin"],
-                     data=data, geometry=meta["geometry"], priors=meta["priors"], source=meta["source"],
-                     lsq=meta.get("lsq", {}), **arrays)
+    except (KeyError, ValueError, TypeError) as exc:
+        raise InputError(f"damaged posterior file ({exc})", source=path) from None
+    if fmt == "ringfit-posterior/1":  # every free parameter a logarithm; problem details at the top level
+        meta = {k: head[k] for k in ("data", "geometry", "priors", "source", "lsq") if k in head}
+        head = dict(head, kinds=["log"] * len(head["names"]), centers=[], scales=[], meta=meta)
+    meta = head["meta"]
+    if "data" in meta:
+        meta["data"] = {k: (np.asarray(v) if isinstance(v, list) else v) for k, v in meta["data"].items()}
+    k = len(head["names"])
+    return Posterior(names=tuple(head["names"]), kinds=tuple(head["kinds"]), values0=head["values0"],
+                     burn=int(head["burn"]), thin=int(head["thin"]),
+                     centers=tuple(head["centers"]) or (0.0,) * k, scales=tuple(head["scales"]) or (1.0,) * k,
+                     meta=meta, **arrays)
+
+
+#: Steps between updates of the progress bar's target (τ re-estimated, cheap).
+BAR_UPDATE = 250
 
 
 def run_ensemble(log_prob_fn, p0, *, min_steps: int, max_steps: int, check_every: int = 1000, seed: int = 0,
@@ -238,9 +218,12 @@ def run_ensemble(log_prob_fn, p0, *, min_steps: int, max_steps: int, check_every
     """Run ``emcee.EnsembleSampler(vectorize=True)`` until the chain exceeds :data:`TAU_FACTOR` τ.
 
     **Arguments:** ``log_prob_fn`` — ``(walkers, k) -> (walkers,)`` NumPy float64,
-    −inf outside the support; ``p0`` — ``(walkers, k)`` start; the chain grows in
-    blocks of ``check_every`` after ``min_steps`` until it is longer than
-    :data:`TAU_FACTOR` × max τ or reaches ``max_steps``; ``progress`` — tqdm bar on stderr.
+    −inf outside the support; ``p0`` — ``(walkers, k)`` start; the chain grows to
+    ``min_steps``, then in blocks of ``check_every`` until it is longer than
+    :data:`TAU_FACTOR` × max τ or reaches ``max_steps``; ``progress`` — tqdm bar on
+    stderr whose total is the chain length the current τ estimate asks for,
+    re-estimated every :data:`BAR_UPDATE` steps (so it settles early instead of jumping
+    at each check).
 
     **Returns:** ``(sampler, tau)`` with ``tau`` ``(k,)`` the integrated autocorrelation times.
     """
@@ -256,91 +239,146 @@ def run_ensemble(log_prob_fn, p0, *, min_steps: int, max_steps: int, check_every
         bar = tqdm(total=min_steps, desc="sampling", unit="step", leave=False)
     state = p0
     tau = np.full(k, np.inf)
+    target = min_steps  # where the next convergence check happens
     while sampler.iteration < max_steps:
-        block = check_every if sampler.iteration >= min_steps else min_steps - sampler.iteration
-        block = min(block, max_steps - sampler.iteration)
-        for state in sampler.sample(state, iterations=block):
+        stop = min(target, max_steps)
+        while sampler.iteration < stop:
+            chunk = min(BAR_UPDATE, stop - sampler.iteration) if bar is not None else stop - sampler.iteration
+            for state in sampler.sample(state, iterations=chunk):
+                pass
             if bar is not None:
-                bar.update(1)
+                if sampler.iteration > bar.total:  # the next check lies beyond the τ estimate
+                    bar.total = stop
+                bar.update(chunk)
+                if sampler.iteration >= 2 * BAR_UPDATE:
+                    t = float(np.max(sampler.get_autocorr_time(tol=0)))
+                    need = int(min(max_steps, max(min_steps, TAU_FACTOR * t))) if np.isfinite(t) else bar.total
+                    if need > bar.total:
+                        bar.total = need
+                    bar.set_postfix_str(f"τ≈{t:.0f}")
+                    bar.refresh()
         tau = sampler.get_autocorr_time(tol=0)
-        if bar is not None:
-            bar.set_postfix_str(f"τ≈{np.max(tau):.0f}, need {TAU_FACTOR * np.max(tau):.0f} steps")
         if np.all(np.isfinite(tau)) and sampler.iteration > TAU_FACTOR * np.max(tau):
             break
-        if bar is not None:
-            bar.total = min(max_steps, max(sampler.iteration + check_every, int(TAU_FACTOR * np.max(tau))))
-            bar.refresh()
+        target = sampler.iteration + check_every
     if bar is not None:
         bar.close()
     return sampler, np.asarray(tau)
 
 
-def sample_posterior(
-    table,
-    geometry: TyreGeometry,
-    initial: RingParams,
-    *,
-    free=DEFAULT_FREE,
-    prior="physical",
-    modes=None,
-    default_relative_std: float = DEFAULT_RELATIVE_STD,
-    walkers: int = 32,
-    min_steps: int = 2000,
-    max_steps: int = 20000,
-    check_every: int = 1000,
-    seed: int = 0,
-    progress: bool = True,
-) -> Posterior:
-    """Sample the posterior of the free ring parameters with emcee.
+@functools.partial(jax.jit, static_argnames=("model", "treedef"))
+def _batched_log_probability(u, leaves, theta0, free_arrays, prior_w, prior_mean, lo, hi, inv_s2, *, model, treedef):
+    """Log posterior density ``(walkers,)`` of solver coordinates ``u`` ``(walkers, k)``, up to a constant."""
+    data = jax.tree.unflatten(treedef, leaves)
+    free = _Free(*free_arrays)
+    k = u.shape[1]
 
-    **Arguments:** as :func:`~ringfit.fit.least_squares.fit_natural_frequencies`,
-    plus ``walkers``, ``min_steps``/``max_steps`` (chain length bounds),
-    ``check_every`` (steps between autocorrelation checks), ``seed``,
-    ``progress`` (tqdm bar on stderr).
+    def one(ui):
+        r, _ = _weighted(ui, model, data, theta0, free, prior_w, prior_mean)
+        m = r.shape[0] - k
+        value = -0.5 * (inv_s2 * jnp.sum(r[:m] ** 2) + jnp.sum(r[m:] ** 2))
+        inside = jnp.all((ui >= lo) & (ui <= hi))
+        value = jnp.where(inside, value, -jnp.inf)
+        return jnp.where(jnp.isnan(value), -jnp.inf, value)
 
-    **Returns:** :class:`Posterior`. Warns (``RuntimeWarning``) when the chain
-    did not reach :data:`TAU_FACTOR` autocorrelation times by ``max_steps``.
+    return jax.vmap(one)(u)
+
+
+def log_probability_function(result, bounds: dict | None = None, chunk: int | None = None):
+    """``(n, k) -> (n,)`` NumPy log-posterior of a fit's free parameters (see the module docstring).
+
+    **Arguments:** ``result`` — a FitResult of the engine; ``bounds`` — name -> (lo, hi)
+    natural-unit bounds that replace or add to the coordinates' bounds and the problem's
+    plausible ranges; ``chunk`` — evaluate in chunks of exactly this many rows (padded),
+    so one compilation serves every batch size.
+
+    **Returns:** ``(log_prob_fn, lo_u (k,), hi_u (k,))``.
     """
-    free = check_free(free)
-    lsq = fit_natural_frequencies(table, geometry, initial, free=free, prior=prior, modes=modes,
-                                  default_relative_std=default_relative_std)
-    data = frequency_data(table, modes, default_relative_std)
-    priors = resolve_priors(prior, free)
-    mu, sd, mask = prior_arrays(priors, free)
-    lo, hi = log_bounds(free)
-    base = ring_vector(initial)
-    free_index = tuple(RING_FIELDS.index(k) for k in free)
-    args = tuple(jnp.asarray(a) if isinstance(a, np.ndarray) else a for a in
-                 (base, geometry, data.n, data.freq_hz, data.sigma_hz, mu, sd, mask, lo, hi))
-    logp = batched_log_probability(free_index)
+    problem = result.problem
+    free = tuple(result.names)
+    k = len(free)
+    index = [problem.names.index(n) for n in free]
+    coords = [problem.coords[i] for i in index]
+    lo, hi = np.array([c.u_bounds[0] for c in coords]), np.array([c.u_bounds[1] for c in coords])
+    for j, c in enumerate(coords):
+        rng = (bounds or {}).get(c.name) or (problem.plausible or {}).get(c.name)
+        if rng is not None:
+            lo[j], hi[j] = c.to_u(rng[0]) if c.kind != LOG or rng[0] > 0 else -np.inf, c.to_u(rng[1])
+    if problem.prior is not None:
+        W, mean = problem.prior.rows(free, k)
+    else:
+        W, mean = np.zeros((k, k)), np.zeros(k)
+    free_arrays = tuple(jnp.asarray(a) for a in (
+        np.array(index, dtype=np.int32), np.array([c.kind == LOG for c in coords]),
+        np.array([c.center for c in coords]), np.array([c.scale for c in coords]),
+        np.zeros(k, dtype=bool), np.zeros(k), np.ones(k)))
+    leaves, treedef = jax.tree.flatten(problem.data)
+    s = float(result.extra.get("sigma_scale", 1.0))
+    consts = (tuple(jnp.asarray(x) for x in leaves), jnp.asarray(np.append(result.theta, 0.0)), free_arrays,
+              jnp.asarray(W), jnp.asarray(mean), jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(1.0 / s**2))
 
-    def log_prob_fn(x):
-        return np.asarray(logp(jnp.asarray(x), args), dtype=np.float64)
+    def evaluate(u):
+        return np.asarray(_batched_log_probability(u, *consts, model=problem.model, treedef=treedef),
+                          dtype=np.float64)
 
+    def log_prob(u):
+        u = np.asarray(u, dtype=np.float64)
+        if chunk is None:
+            return evaluate(u)
+        n, size = u.shape[0], int(chunk)
+        pad = -n % size
+        if pad:
+            u = np.concatenate([u, np.repeat(u[-1:], pad, axis=0)])
+        return np.concatenate([evaluate(u[i : i + size]) for i in range(0, u.shape[0], size)])[:n]
+
+    return log_prob, lo, hi
+
+
+def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int = 20000, check_every: int = 1000,
+           seed: int = 0, progress: bool = True, bounds: dict | None = None, spread: float = 0.1,
+           meta: dict | None = None) -> "Posterior":
+    """Sample the posterior of a least-squares fit's free parameters with emcee.
+
+    **Arguments:** ``result`` — a :class:`~ringfit.fit.result.FitResult` of the engine;
+    ``walkers`` (≥ 2k, even); ``min_steps``/``max_steps`` — chain length bounds (the chain
+    stops once longer than :data:`TAU_FACTOR` τ); ``check_every`` — steps between τ checks;
+    ``seed``; ``progress`` — tqdm bar on stderr; ``bounds`` — see
+    :func:`log_probability_function`; ``spread`` — walkers start at the optimum plus
+    ``spread`` × its standard error (in u, at most 0.1) times a standard normal draw;
+    ``meta`` — kept with the draws (saved by :meth:`Posterior.save`).
+
+    **Returns:** :class:`Posterior`. Warns (``RuntimeWarning``) when the chain did not reach
+    :data:`TAU_FACTOR` autocorrelation times by ``max_steps``.
+    """
+    from ringfit.errors import InputError
+
+    free = tuple(result.names)
+    k = len(free)
+    if walkers < 2 * k or walkers % 2:
+        raise InputError(f"walkers = {walkers}: emcee needs an even number of at least {2 * k} (2 × {k} parameters)")
+    if not 1 <= min_steps <= max_steps:
+        raise InputError(f"chain length: need 1 <= min_steps ({min_steps}) <= max_steps ({max_steps})")
+    problem = result.problem
+    log_prob, lo, hi = log_probability_function(result, bounds, chunk=walkers // 2)
+    coords = [problem.coordinate(n) for n in free]
+    y_opt = np.array([c.to_u(result.values[n]) for c, n in zip(coords, free)])
+    width = np.where(np.isfinite(hi - lo), hi - lo, np.inf)
+    y_opt = np.clip(y_opt, lo + np.minimum(0.05, 0.01 * width), hi - np.minimum(0.05, 0.01 * width))
+    step = np.sqrt(np.clip(np.diag(result.covariance_log), 1e-8, 0.01))
     rng = np.random.default_rng(seed)
-    y_opt = np.clip(np.log([lsq.values[k] for k in free]), lo + 0.05, hi - 0.05)
-    step = np.sqrt(np.clip(np.diag(lsq.covariance_log), 1e-8, 0.01))
-    p0 = y_opt + 0.1 * step * rng.standard_normal((walkers, len(free)))
-    p0 = np.clip(p0, lo + 1e-6, hi - 1e-6)
-    sampler, tau = run_ensemble(log_prob_fn, p0, min_steps=min_steps, max_steps=max_steps,
-                                check_every=check_every, seed=int(rng.integers(2**31)), progress=progress)
+    p0 = y_opt + spread * step * rng.standard_normal((walkers, k))
+    p0 = np.clip(p0, lo + 1e-9 * np.minimum(width, 1.0), hi - 1e-9 * np.minimum(width, 1.0))
+    sampler, tau = run_ensemble(log_prob, p0, min_steps=min_steps, max_steps=max_steps, check_every=check_every,
+                                seed=int(rng.integers(2**31)), progress=progress)
     chain = sampler.get_chain()
     tmax = float(np.max(tau)) if np.all(np.isfinite(tau)) else chain.shape[0] / 10
     burn = int(min(2 * tmax, chain.shape[0] // 2))
     thin = max(1, int(tmax / 2))
     post = Posterior(
-        names=free,
-        values0={k: float(v) for k, v in zip(RING_FIELDS, base)} | {k: lsq.values[k] for k in free},
-        chain=chain, log_prob=sampler.get_log_prob(), acceptance=sampler.acceptance_fraction,
-        tau=np.asarray(tau), burn=burn, thin=thin,
-        data=dict(n=data.n, freq_hz=data.freq_hz, sigma_hz=data.sigma_hz, sigma_source=data.sigma_source),
-        geometry=dict(radius=float(geometry.radius), width=float(geometry.width),
-                      pressure=float(geometry.pressure), pressure_bar=float(geometry.pressure) / BAR,
-                      name=geometry.name),
-        priors={k: dict(median=p.median, sigma_ln=p.sigma_ln, source=p.source) for k, p in priors.items()},
-        source=table.source,
-        lsq=dict(status=lsq.status, values={k: lsq.values[k] for k in free},
-                 stderr={k: lsq.stderr[k] for k in free}, flags=lsq.flags),
+        names=free, kinds=tuple(c.kind for c in coords), values0=dict(result.values), chain=chain,
+        log_prob=sampler.get_log_prob(), acceptance=sampler.acceptance_fraction, tau=np.asarray(tau),
+        burn=burn, thin=thin, centers=tuple(c.center for c in coords), scales=tuple(c.scale for c in coords),
+        meta=dict(meta or {}),
     )
     if not post.converged:
         warnings.warn(
@@ -351,5 +389,98 @@ def sample_posterior(
     return post
 
 
-__all__ = ["Posterior", "sample_posterior", "run_ensemble", "load_posterior", "log_probability", "batched_log_probability",
-           "TAU_FACTOR"]
+# ----------------------------------------------------------------------------- the free tyre (eq. 18)
+
+
+def sample_posterior(
+    table,
+    geometry,
+    initial: RingParams,
+    *,
+    free=None,
+    prior="physical",
+    modes=None,
+    default_relative_std: float | None = None,
+    walkers: int = 32,
+    min_steps: int = 2000,
+    max_steps: int = 20000,
+    check_every: int = 1000,
+    seed: int = 0,
+    progress: bool = True,
+    lsq=None,
+    data_only=None,
+) -> Posterior:
+    """Posterior of ring parameters given measured natural frequencies (eq. 18, docs/physics.md §2.1).
+
+    Likelihood: independent Gaussians on the frequencies with the σ of the least-squares
+    fit (:func:`ringfit.fit.least_squares.frequency_data`). Priors on ``log θ``: the
+    log-normal priors chosen (e.g. ``"physical"``), otherwise uniform in ``log θ`` within
+    :data:`ringfit.fit.priors.BOUNDS` (every parameter is truncated there).
+
+    **Arguments:** as :func:`~ringfit.fit.least_squares.fit_natural_frequencies`, plus the
+    sampler's (:func:`sample`); ``lsq`` — the least-squares fit to start from (default:
+    fitted here with the same arguments); ``data_only`` — ``(fit, identifiability)`` of the
+    same table without an informative prior (default: computed here, with the profile
+    likelihood of EI when it is free).
+
+    **Returns:** :class:`Posterior` whose ``meta`` holds everything its report draws: the
+    data (``n``, ``freq_hz``, ``sigma_hz``, ``sigma_source``), ``geometry``, ``priors``,
+    ``source``, ``lsq`` (the least-squares fit with the prior: values, standard errors,
+    status, flags, model frequencies), ``data_only`` (the fit without a prior) and
+    ``identifiability`` (its Fisher analysis and profile likelihood).
+    """
+    from ringfit.fit.identifiability import identifiability, profile_natural_frequencies
+    from ringfit.fit.least_squares import DEFAULT_FREE, DEFAULT_RELATIVE_STD, fit_natural_frequencies
+    from ringfit.params import BAR
+
+    free = DEFAULT_FREE if free is None else free
+    rel = DEFAULT_RELATIVE_STD if default_relative_std is None else default_relative_std
+    if lsq is None:
+        lsq = fit_natural_frequencies(table, geometry, initial, free=free, prior=prior, modes=modes,
+                                      default_relative_std=rel)
+    if data_only is None:
+        fit0 = fit_natural_frequencies(table, geometry, initial, free=free, prior="none", modes=modes,
+                                       default_relative_std=rel)
+        again = profile_natural_frequencies(table, geometry, initial, fit0.names, modes=modes,
+                                            default_relative_std=rel)
+        data_only = (fit0, identifiability(fit0, profile=("ei",) if "ei" in fit0.names else (), fit_again=again))
+    ex = lsq.extra
+    meta = dict(
+        model="eq18",
+        data=dict(n=ex["n"], freq_hz=ex["freq_hz"], sigma_hz=ex["sigma_hz"], sigma_source=ex["sigma_source"]),
+        geometry=dict(radius=float(geometry.radius), width=float(geometry.width), pressure=float(geometry.pressure),
+                      pressure_bar=float(geometry.pressure) / BAR, name=geometry.name),
+        priors={k: dict(median=p.median, sigma_ln=p.sigma_ln, source=p.source) for k, p in ex["priors"].items()},
+        source=str(table.source),
+        lsq=lsq.to_record(model_hz=np.asarray(ex["model_hz"]).tolist()),
+        data_only=data_only[0].to_record(model_hz=np.asarray(data_only[0].extra["model_hz"]).tolist()),
+        identifiability=data_only[1].to_record(),
+    )
+    return sample(lsq, walkers=walkers, min_steps=min_steps, max_steps=max_steps, check_every=check_every, seed=seed,
+                  progress=progress, meta=meta)
+
+
+def natural_frequency_predictive(post: Posterior, n, level: float = 0.95, noise: bool = True, seed: int = 0):
+    """Posterior predictive natural frequencies (eq. 18) for indices ``n`` ``(p,)`` of a free-tyre posterior.
+
+    **Returns:** dict of ``(p,)`` arrays ``n``, ``median``, ``lo``, ``hi`` [Hz]; with ``noise``
+    each draw adds the measurement scatter (σ = the data's relative σ, median over modes, × f),
+    i.e. where a new measurement should fall; without it the band is the model's credible band.
+    """
+    from ringfit.params import TyreGeometry
+    from ringfit.physics.natural import natural_frequencies
+
+    g = post.meta["geometry"]
+    geometry = TyreGeometry(g["radius"], g["width"], g["pressure"])
+    n = np.asarray(n, dtype=float)
+    f = np.asarray(natural_frequencies(post.ring_samples(), geometry, n[:, None]))  # (p, draws)
+    if noise:
+        data = post.meta["data"]
+        rel = float(np.median(np.asarray(data["sigma_hz"]) / np.asarray(data["freq_hz"])))
+        f = f * (1 + rel * np.random.default_rng(seed).standard_normal(f.shape))
+    q = np.percentile(f, [(1 - level) / 2 * 100, 50, (1 + level) / 2 * 100], axis=1)
+    return dict(n=n, lo=q[0], median=q[1], hi=q[2])
+
+
+__all__ = ["Posterior", "sample", "sample_posterior", "run_ensemble", "load_posterior", "log_probability_function",
+           "natural_frequency_predictive", "TAU_FACTOR"]

@@ -38,6 +38,10 @@ class FitResult:
     - ``chi2``: sum of squared weighted data residuals; ``dof`` = m − k.
     - ``flags``: human-readable warnings (bound hit, large relative error, ...).
     - ``extra``: fitter-specific arrays (model and measured values, σ, n, ...).
+    - ``theta``: ``(p,)`` every parameter of the problem at the optimum, natural units,
+      in the order of ``coords`` (the :class:`ringfit.fit.engine.Coordinate` s).
+    - ``problem``: the :class:`ringfit.fit.engine.Problem` that was solved (not saved to files;
+      :func:`ringfit.fit.posterior.sample` samples it).
     """
 
     status: str
@@ -52,6 +56,9 @@ class FitResult:
     iterations: int
     flags: list[str] = field(default_factory=list)
     extra: dict = field(default_factory=dict)
+    theta: np.ndarray | None = None
+    coords: tuple = ()
+    problem: object = field(default=None, repr=False)
 
     @property
     def converged(self) -> bool:
@@ -74,21 +81,38 @@ class FitResult:
 
     @property
     def relative_stderr(self) -> dict[str, float]:
-        return {k: self.stderr[k] / abs(self.values[k]) for k in self.names}
+        return {k: self.stderr[k] / abs(self.values[k]) if self.values[k] else math.inf for k in self.names}
+
+    @property
+    def free_index(self) -> np.ndarray:
+        """Positions of the free parameters in ``theta``."""
+        order = [c.name for c in self.coords]
+        return np.array([order.index(k) for k in self.names], dtype=int)
 
     def interval(self, name: str, level: float = 0.95) -> tuple[float, float]:
-        """Approximate interval from the log-normal Laplace approximation."""
+        """Approximate interval from the Laplace approximation in the solver coordinate
+        (log-normal for a log parameter, normal for a linear one)."""
         from scipy.stats import norm
 
         i = self.names.index(name)
         s = math.sqrt(max(self.covariance_log[i, i], 0.0))
         z = norm.ppf(0.5 + level / 2)
         v = self.values[name]
+        coord = next((c for c in self.coords if c.name == name), None)
+        if coord is not None and coord.kind == "linear":
+            return v - z * s * coord.scale, v + z * s * coord.scale
         return v * math.exp(-z * s), v * math.exp(z * s)
 
-    def summary(self) -> str:
-        """A plain-text table of the fit."""
-        lines = [f"status: {self.status} after {self.iterations} iterations — {self.message}"]
+    def to_record(self, **extra) -> dict:
+        """The fit's figures as a JSON-serialisable dict (saved with a posterior; ``extra`` added)."""
+        return dict(status=self.status, message=self.message, names=list(self.names),
+                    values={k: self.values[k] for k in self.names}, stderr=dict(self.stderr),
+                    flags=list(self.flags), chi2=self.chi2, dof=self.dof, n_data=self.n_data,
+                    iterations=self.iterations, **extra)
+
+    def summary(self, flags: bool = True, status: bool = True) -> str:
+        """A plain-text table of the fit (``flags``: with its warnings; ``status``: with the solver's line)."""
+        lines = [f"status: {self.status} after {self.iterations} iterations — {self.message}"] if status else []
         if self.dof > 0:
             lines.append(f"chi2 = {self.chi2:.3g} for {self.n_data} data, {len(self.names)} free (dof {self.dof}; "
                          f"chi2/dof = {self.chi2 / self.dof:.3g})")
@@ -97,8 +121,8 @@ class FitResult:
             rel = self.relative_stderr[k]
             rel_s = f"{rel:.1%}" if rel < 10 else ">1000%"
             lines.append(f"{k:<14}{self.values[k]:>14.6g}{self.stderr[k]:>12.3g}{rel_s:>9}")
-        for flag in self.flags:
-            lines.append(f"WARNING: {flag}")
+        if flags:
+            lines += [f"WARNING: {flag}" for flag in self.flags]
         return "\n".join(lines)
 
 
@@ -125,19 +149,21 @@ def covariance_from_jacobian(jacobian: np.ndarray, rcond: float = 1e-12) -> np.n
 
 
 def solver_status(result) -> tuple[str, str]:
-    """``(status, message)`` from an ``optimistix.RESULTS`` item (outside jit).
+    """``(status, message)`` from an ``optimistix.RESULTS`` item or its integer code (outside jit).
 
     status is ``"converged"``, ``"max_steps_reached"``, ``"divergence"``,
     ``"nonfinite"`` or ``"failed"``; message is optimistix's explanation.
     """
     import optimistix as optx
 
-    if bool(result == optx.RESULTS.successful):
+    code = int(getattr(result, "_value", result))
+    if code == int(optx.RESULTS.successful._value):
         return "converged", "the solver met its tolerances"
+    message = optx.RESULTS._index_to_message[code]
     for name in ("nonlinear_max_steps_reached", "nonlinear_divergence", "nonfinite"):
-        if bool(result == getattr(optx.RESULTS, name)):
-            return name.removeprefix("nonlinear_"), optx.RESULTS[result]
-    return "failed", optx.RESULTS[result]
+        if code == int(getattr(optx.RESULTS, name)._value):
+            return name.removeprefix("nonlinear_"), message
+    return "failed", message
 
 
 def solver_flags(status: str, message: str) -> list[str]:
@@ -145,26 +171,26 @@ def solver_flags(status: str, message: str) -> list[str]:
     return [] if status == "converged" else [f"solver did not converge ({status}): {message}"]
 
 
-def parameter_flags(names, values: dict, stderr: dict, *, data: str = "these data", priors=()) -> list[str]:
+def parameter_flags(names, values: dict, stderr: dict, *, data: str = "these data", priors=(),
+                    plausible: dict | None = None) -> list[str]:
     """Warnings for fitted positive parameters: at the edge of the plausible range, or poorly determined.
 
     A parameter is at the edge when its logarithm lies within 1 % of the log-span
-    of :data:`ringfit.fit.priors.BOUNDS` from either bound (or beyond); poorly
-    determined when its relative standard error exceeds :data:`MAX_RELATIVE_STDERR`.
-    ``data`` names what was fitted (for the message); ``priors`` the parameters
-    that carried an informative prior.
+    of its plausible range (``plausible``: name -> (lo, hi); names not in it are not
+    checked) from either bound (or beyond); poorly determined when its relative
+    standard error exceeds :data:`MAX_RELATIVE_STDERR`. ``data`` names what was
+    fitted (for the message); ``priors`` the parameters that carried an informative prior.
     """
-    from ringfit.fit.priors import BOUNDS
-
     flags = []
     for k in names:
-        lo, hi = BOUNDS[k]
-        span = math.log(hi / lo)
-        y = math.log(values[k]) if values[k] > 0 else -math.inf
-        if y <= math.log(lo) + 0.01 * span or y >= math.log(hi) - 0.01 * span:
-            flags.append(f"{k} = {values[k]:.4g} ran to the edge of its plausible range [{lo:.3g}, {hi:.3g}]: "
-                         "the data do not bound it")
-        rel = stderr[k] / values[k]
+        if plausible and k in plausible:
+            lo, hi = plausible[k]
+            span = math.log(hi / lo)
+            y = math.log(values[k]) if values[k] > 0 else -math.inf
+            if y <= math.log(lo) + 0.01 * span or y >= math.log(hi) - 0.01 * span:
+                flags.append(f"{k} = {values[k]:.4g} ran to the edge of its plausible range [{lo:.3g}, {hi:.3g}]: "
+                             "the data do not bound it")
+        rel = stderr[k] / abs(values[k]) if values[k] else math.inf
         if not rel <= MAX_RELATIVE_STDERR:
             pct = f"{rel:.0%}" if rel < 10 else "over 1000 %"
             hint = " even with its prior" if k in priors else " (consider an informative prior)"

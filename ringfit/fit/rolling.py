@@ -29,21 +29,20 @@ from dataclasses import dataclass
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
-import lineax as lx
 import numpy as np
-import optimistix as optx
 
 from ringfit.errors import InputError
-from ringfit.fit.least_squares import RING_FIELDS, ring_from_log, ring_vector
+from ringfit.fit.engine import LINEAR, AbstractResiduals, Coordinate, Problem, least_squares, sum_of_squares_batch
+from ringfit.fit.least_squares import RING_COORDS, RING_FIELDS, ring_from_vector, ring_vector
 from ringfit.fit.priors import BOUNDS
-from ringfit.fit.result import FitResult, covariance_from_jacobian, parameter_flags, solver_flags, solver_status
-from ringfit.io.profiles import resample_profile
+from ringfit.fit.result import FitResult
+from ringfit.io.profiles import grid_angles_deg, resample_profile
 from ringfit.params import RingParams, TyreGeometry
-from ringfit.physics.contact import ContactSolver, as_traced, solve_rolling, solve_rolling_jit
-from ringfit.physics.operating import Drum, FlatRoad, OperatingPoint, rolling_radius
+from ringfit.physics.contact import ContactSolver, as_traced
+from ringfit.physics.profile import (FlatOrDrum, ProfileModel, effective_rolling_radius, flat_or_drum, full_band,
+                                     profile_channels)
 from ringfit.physics.rolling import RingModel
-from ringfit.physics.sensor import SensorModel, sensor_signals, shift_angle
+from ringfit.physics.sensor import SensorModel
 
 #: Name of the angle-offset nuisance parameter [rad] (PHYSICS.md §5 layer 6).
 ANGLE_OFFSET = "angle_offset"
@@ -70,11 +69,6 @@ class RollingData:
     omega_source: tuple[str, ...]
     sources: tuple[str, ...]
 
-    @property
-    def roads(self):
-        """A road PyTree with a leading batch axis (or the leafless FlatRoad)."""
-        return FlatRoad() if self.drum_diameter is None else Drum(jnp.asarray(self.drum_diameter))
-
 
 def rolling_data(
     profiles, geometry: TyreGeometry, ring: RingParams, *,
@@ -97,9 +91,8 @@ def rolling_data(
     measured, omega, sources = [], [], []
     for p in profiles:
         if p.rotation_hz is None and rolling_radius_m is None:
-            road = FlatRoad() if p.drum_diameter_m is None else Drum(p.drum_diameter_m)
-            standing = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, p.load_n, road), model=model, solver=solver)
-            r_e = float(rolling_radius(geometry.outer_radius, standing.deflection))
+            r_e = effective_rolling_radius(ring, geometry, p.load_n, p.drum_diameter_m,
+                                           model=ProfileModel(ring_model=model), solver=solver)
         else:
             r_e = rolling_radius_m
         om, src = p.omega(r_e)
@@ -120,87 +113,37 @@ def rolling_data(
     )
 
 
-def model_profiles(ring: RingParams, geometry: TyreGeometry, omega, load, roads, offset=0.0, *,
-                   model: RingModel = RingModel(), sensor: SensorModel = SensorModel(),
-                   solver: ContactSolver = ContactSolver()):
-    """Sensor channels for a batch of operating points, ``(P, 2, M)`` [m/s²] on φ_j + ``offset``.
+class RollingArrays(eqx.Module):
+    """What the rolling residuals need besides θ: geometry, operating points ``(P,)`` and the profiles."""
 
-    ``omega``, ``load`` ``(P,)``; ``roads`` a road with ``(P,)`` leaves or leafless. Pure JAX (vmap over P).
+    geometry: TyreGeometry
+    omega: jax.Array
+    load: jax.Array
+    roads: FlatOrDrum
+    band: jax.Array
+    measured: jax.Array
+
+
+class RollingResiduals(AbstractResiduals):
+    """Rows ``model(φ_j) − measured(φ_j)`` [m/s²] of every profile and channel; aux: the model ``(P, 2, M)``.
+
+    θ = the ring fields (:data:`ringfit.fit.least_squares.RING_FIELDS`) then the angle offset [rad];
+    the model is the one forward model (:func:`ringfit.physics.profile.profile_channels`).
     """
 
-    def one(om, fz, road):
-        sol = solve_rolling(ring, geometry, OperatingPoint(om, fz, road), model=model, solver=solver)
-        return jnp.stack(sensor_signals(sol, geometry, sensor))
+    model: ProfileModel = eqx.field(static=True)
+    solver: ContactSolver = eqx.field(static=True)
 
-    channels = jax.vmap(one)(jnp.asarray(omega), jnp.asarray(load), roads)
-    return shift_angle(channels, offset)
-
-
-class _Spec(eqx.Module):
-    """Static description of the free parameters and the model structure."""
-
-    free_index: tuple = eqx.field(static=True)
-    has_offset: bool = eqx.field(static=True)
-    model: RingModel
-    sensor: SensorModel
-    solver: ContactSolver
+    def __call__(self, theta, data: RollingArrays):
+        ring = ring_from_vector(theta)
+        ch = profile_channels(self.model, ring, data.geometry, data.omega, data.load, data.roads, data.band,
+                              theta[len(RING_FIELDS)], self.solver)
+        return (ch - data.measured).ravel(), ch
 
 
-def _residuals(y, args, spec: _Spec):
-    base, geometry, measured, omega, load, roads = args
-    k = len(spec.free_index)
-    ring = ring_from_log(y[:k], spec.free_index, base)
-    offset = y[k] if spec.has_offset else 0.0
-    ch = model_profiles(ring, geometry, omega, load, roads, offset, model=spec.model, sensor=spec.sensor,
-                        solver=spec.solver)
-    return (ch - measured).ravel()
-
-
-def _residuals_and_jacobian(y, args, spec: _Spec):
-    """Residuals ``(m,)`` and their Jacobian ``(m, k)`` by forward mode: one primal and one vmapped tangent pass."""
-
-    def with_aux(y_):
-        r = _residuals(y_, args, spec)
-        return r, r
-
-    jac, res = jax.jacfwd(with_aux, has_aux=True)(y)
-    return res, jac
-
-
-def _dense_jacobian_residuals(args, spec: _Spec):
-    """``y -> residuals`` whose JVP is the dense product ``J(y) ẏ`` (J from :func:`_residuals_and_jacobian`).
-
-    The solver linearises this once per step: the model is traced once (primal +
-    k tangents) and every further Jacobian product it needs is a small matrix
-    product, which keeps the compiled fit small. Differentiates in ``y`` only.
-    """
-
-    @jax.custom_jvp
-    def fn(y):
-        return _residuals(y, args, spec)
-
-    @fn.defjvp
-    def fn_jvp(primals, tangents):
-        (y,), (dy,) = primals, tangents
-        res, jac = _residuals_and_jacobian(y, args, spec)
-        return res, jac @ dy
-
-    return fn
-
-
-@eqx.filter_jit
-def _solve(y0, args, spec, max_steps, rtol, atol):
-    fn = _dense_jacobian_residuals(args, spec)
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.SVD())
-    sol = optx.least_squares(lambda y, _: fn(y), solver, y0, max_steps=max_steps, throw=False)
-    # Residuals and Jacobian at the returned point from the solver's last
-    # linearisation (its state keeps them for the accepted y): no further model trace.
-    f_info = getattr(sol.state, "f_info", None)
-    if f_info is None:  # a solver state without it (other optimistix versions): evaluate once more
-        res, jac = _residuals_and_jacobian(sol.value, args, spec)
-    else:
-        res, jac = f_info.residual, f_info.jac.as_matrix()
-    return sol.value, sol.result, sol.stats["num_steps"], res, jac
+#: Solver coordinates of a rolling fit: the ring's (log) and the angle offset (linear, in degrees, ±10°).
+ROLLING_COORDS = RING_COORDS + (Coordinate(ANGLE_OFFSET, LINEAR, scale=math.radians(1.0), lo=-ANGLE_OFFSET_BOUND,
+                                           hi=ANGLE_OFFSET_BOUND),)
 
 
 def check_rolling_free(free) -> tuple[str, ...]:
@@ -216,15 +159,14 @@ def check_rolling_free(free) -> tuple[str, ...]:
     return free
 
 
-def _problem(data: RollingData, geometry, ring, free, model, sensor, solver):
-    free = check_rolling_free(free)
-    ring_free = tuple(k for k in free if k != ANGLE_OFFSET)
-    free_index = tuple(RING_FIELDS.index(k) for k in ring_free)
-    base = ring_vector(ring)
-    spec = _Spec(free_index, ANGLE_OFFSET in free, model, sensor, solver)
-    args = (jnp.asarray(base), as_traced(geometry), jnp.asarray(data.measured), jnp.asarray(data.omega),
-            jnp.asarray(data.load), data.roads)
-    return free, ring_free, free_index, base, as_traced(spec), args
+def _problem(data: RollingData, geometry, free, model, sensor, solver) -> Problem:
+    check_rolling_free(free)
+    P, _, M = data.measured.shape
+    arrays = RollingArrays(geometry=geometry, omega=data.omega, load=data.load,
+                           roads=flat_or_drum(data.drum_diameter, P), band=full_band(P, M), measured=data.measured)
+    residuals = RollingResiduals(ProfileModel(ring_model=model, sensor=sensor), solver)
+    return Problem(residuals, as_traced(arrays), ROLLING_COORDS, sigma="estimate", plausible=BOUNDS,
+                   data_label="these profiles")
 
 
 def fit_rolling(
@@ -266,16 +208,20 @@ def fit_rolling(
     """
     data = profiles if isinstance(profiles, RollingData) else rolling_data(
         profiles, geometry, ring, solver=solver, sensor=sensor, model=model, rolling_radius_m=rolling_radius_m)
-    free, ring_free, free_index, base, spec, args = _problem(data, geometry, ring, free, model, sensor, solver)
-    y0 = list(np.log(base[list(free_index)]))
-    if spec.has_offset:
-        y0.append(math.radians(initial_offset_deg))
-    y0 = np.array(y0)
-    if not np.all(np.isfinite(y0)):
-        raise InputError(f"initial values of {list(ring_free)} must be positive and finite")
-    y, result, steps, res, jac = _solve(jnp.asarray(y0), args, spec, max_steps, rtol, atol)
-    y, res, jac, steps = np.asarray(y), np.asarray(res), np.asarray(jac), int(steps)
-    return _fit_result(free, ring_free, base, y, result, steps, res, jac, data, geometry, spec)
+    free = check_rolling_free(free)
+    problem = _problem(data, geometry, free, model, sensor, solver)
+    theta0 = np.append(ring_vector(ring), math.radians(initial_offset_deg))
+    result = least_squares(problem, theta0, free, max_steps=max_steps, rtol=rtol, atol=atol)
+    M = data.measured.shape[-1]
+    k = len(free)
+    chi2 = result.extra["chi2_raw"]
+    result.extra.update(
+        model=np.asarray(result.extra.pop("aux")), measured=data.measured, angle_deg=grid_angles_deg(M),
+        omega=data.omega, speed_kmh=data.speed_kmh, omega_source=data.omega_source,
+        sigma_ms2=result.extra["sigma_scale"], rms_ms2=math.sqrt(chi2 / data.measured.size),
+        evaluations=evaluations_used(result.iterations, k), data=data, ring=fitted_ring(result), geometry=geometry,
+    )
+    return result
 
 
 def evaluations_used(steps: int, k: int) -> int:
@@ -286,48 +232,6 @@ def evaluations_used(steps: int, k: int) -> int:
     covariance adds 1 + k.
     """
     return (steps + 1) * (1 + k)
-
-
-def _fit_result(free, ring_free, base, y, result, steps, res, jac, data, geometry, spec) -> FitResult:
-    status, message = solver_status(result)
-    m = res.size
-    k = len(free)
-    values = dict(zip(RING_FIELDS, base.tolist()))
-    values.update({name: float(np.exp(v)) for name, v in zip(ring_free, y)})
-    if spec.has_offset:
-        values[ANGLE_OFFSET] = np.float64(y[-1])
-    chi2 = float(res @ res)
-    dof = max(m - k, 1)
-    sigma = math.sqrt(chi2 / dof)
-    scale = sigma if sigma > 0 else 1.0
-    cov = covariance_from_jacobian(jac / scale)
-    stderr = {}
-    for i, name in enumerate(free):
-        sd = math.sqrt(cov[i, i]) if np.isfinite(cov[i, i]) else math.inf
-        stderr[name] = sd if name == ANGLE_OFFSET else values[name] * sd
-    ring = RingParams(**{f: values[f] for f in RING_FIELDS})
-    model = res.reshape(data.measured.shape) + data.measured
-    flags = solver_flags(status, message) + parameter_flags(ring_free, values, stderr, data="these profiles")
-    M = data.measured.shape[-1]
-    return FitResult(
-        status=status,
-        message=message or "converged",
-        names=tuple(free),
-        values=values,
-        stderr=stderr,
-        covariance_log=cov,
-        residuals=res / scale,
-        jacobian=jac / scale,
-        n_data=m,
-        iterations=steps,
-        flags=flags,
-        extra=dict(
-            model=model, measured=data.measured, angle_deg=-180.0 + 360.0 * np.arange(M) / M,
-            omega=data.omega, speed_kmh=data.speed_kmh, omega_source=data.omega_source,
-            sigma_ms2=sigma, rms_ms2=math.sqrt(chi2 / m), evaluations=evaluations_used(steps, k),
-            data=data, ring=ring, geometry=geometry, spec=spec,
-        ),
-    )
 
 
 @dataclass(frozen=True)
@@ -357,135 +261,33 @@ def tread_stiffness_sweep(
     """
     data = profiles if isinstance(profiles, RollingData) else rolling_data(
         profiles, geometry, ring, solver=solver, sensor=sensor, model=model, rolling_radius_m=rolling_radius_m)
-    _, _, _, _, spec, args = _problem(data, geometry, ring, ("k_tread",), model, sensor, solver)
+    problem = _problem(data, geometry, ("k_tread",), model, sensor, solver)
     k_grid = np.asarray(k_grid, dtype=np.float64)
-    sse = _in_fixed_chunks(lambda ys: _batched_sse(ys, args, spec), np.log(k_grid)[:, None], batch)
+    thetas = np.tile(np.append(ring_vector(ring), 0.0), (k_grid.size, 1))
+    thetas[:, RING_FIELDS.index("k_tread")] = k_grid
+    sse = sum_of_squares_batch(problem, thetas, chunk=batch)
     i = int(np.argmin(sse))
     return SweepResult(k_grid, sse, float(k_grid[i]), float(sse[i]), int(k_grid.size))
 
 
-def _in_fixed_chunks(batched_fn, ys, size: int) -> np.ndarray:
-    """``batched_fn`` over the rows of ``ys`` ``(G, k)`` in chunks of exactly ``min(size, G)`` rows.
-
-    The last chunk is padded with copies of its last row (results dropped), so a
-    jitted ``batched_fn`` compiles once per chunk size, not once per remainder.
-    """
-    ys = np.asarray(ys, dtype=np.float64)
-    n = ys.shape[0]
-    size = max(1, min(int(size), n))
-    pad = -n % size
-    if pad:
-        ys = np.concatenate([ys, np.repeat(ys[-1:], pad, axis=0)])
-    out = [np.asarray(batched_fn(jnp.asarray(ys[i : i + size]))) for i in range(0, ys.shape[0], size)]
-    return np.concatenate(out)[:n]
-
-
-@eqx.filter_jit
-def _batched_sse(ys, args, spec):
-    return jax.vmap(lambda y: jnp.sum(_residuals(y, args, spec) ** 2))(ys)
-
-
 def sum_of_squares(result: FitResult) -> float:
     """Unweighted sum of squared residuals [(m/s²)²] of a :func:`fit_rolling` result."""
-    return float(result.chi2 * result.extra["sigma_ms2"] ** 2)
+    return float(result.extra["chi2_raw"])
 
 
-# ----------------------------------------------------------------------------- posterior
+def sample_rolling_posterior(result: FitResult, *, walkers: int = 16, steps: int = 400, seed: int = 0,
+                             progress: bool = False):
+    """Posterior of a :func:`fit_rolling` result's free parameters: :func:`ringfit.fit.posterior.sample`
+    for exactly ``steps`` steps.
 
-
-@dataclass
-class RollingPosterior:
-    """emcee draws for a rolling fit.
-
-    - ``names``: free parameters ``(k,)`` (positive ones sampled as logs, ``angle_offset`` linear).
-    - ``chain``: ``(steps, walkers, k)`` in the sampler's space; ``log_prob`` ``(steps, walkers)``.
-    - ``acceptance``: ``(walkers,)``; ``tau``: ``(k,)`` integrated autocorrelation times [steps]
-      (NaN if the chain is too short to estimate them); ``burn``: steps discarded; ``sigma_ms2``:
-      the residual σ used in the likelihood.
+    Likelihood: independent Gaussians with the residual σ of the fit (``result.extra["sigma_ms2"]``);
+    prior: flat in ``log θ`` within :data:`ringfit.fit.priors.BOUNDS` (±10° for the angle offset);
+    walkers start in a small ball (¼ of the standard error) at the optimum.
     """
+    from ringfit.fit.posterior import sample
 
-    names: tuple[str, ...]
-    chain: np.ndarray
-    log_prob: np.ndarray
-    acceptance: np.ndarray
-    tau: np.ndarray
-    burn: int
-    sigma_ms2: float
-
-    @property
-    def samples(self) -> np.ndarray:
-        """``(draws, k)`` in SI units (rad for the angle offset)."""
-        flat = self.chain[self.burn :].reshape(-1, len(self.names)).copy()
-        for i, name in enumerate(self.names):
-            if name != ANGLE_OFFSET:
-                flat[:, i] = np.exp(flat[:, i])
-        return flat
-
-    @property
-    def converged(self) -> bool:
-        """Chain longer than 50 integrated autocorrelation times."""
-        return bool(np.all(np.isfinite(self.tau)) and self.chain.shape[0] > 50 * np.max(self.tau))
-
-    def summary(self) -> dict[str, tuple[float, float, float]]:
-        """name -> (16 %, 50 %, 84 %) quantiles in SI units."""
-        s = self.samples
-        return {k: tuple(np.percentile(s[:, i], [16, 50, 84]).tolist()) for i, k in enumerate(self.names)}
-
-
-def _log_probability(y, args, spec, sigma, lo, hi):
-    r = _residuals(y, args, spec)
-    value = -0.5 * jnp.sum(r**2) / sigma**2
-    inside = jnp.all((y >= lo) & (y <= hi))
-    value = jnp.where(inside, value, -jnp.inf)
-    return jnp.where(jnp.isnan(value), -jnp.inf, value)
-
-
-@eqx.filter_jit
-def _batched_log_probability(ys, args, spec, sigma, lo, hi):
-    return jax.vmap(lambda y: _log_probability(y, args, spec, sigma, lo, hi))(ys)
-
-
-def sample_rolling_posterior(
-    result: FitResult, *, walkers: int = 16, steps: int = 400, burn: int | None = None, seed: int = 0,
-    progress: bool = False,
-) -> RollingPosterior:
-    """Posterior of a :func:`fit_rolling` result's free parameters with emcee.
-
-    Likelihood: independent Gaussians with the residual σ of the fit
-    (``result.extra["sigma_ms2"]``); prior: flat in ``log θ`` within
-    :data:`ringfit.fit.priors.BOUNDS` (flat within ±10° for the angle offset).
-    ``emcee.EnsembleSampler(vectorize=True)`` calls one jitted, vmapped
-    log-probability (:func:`ringfit.fit.posterior.run_ensemble`, here for exactly
-    ``steps`` steps); walkers start in a small ball (¼ of the standard error) at the optimum.
-    """
-    from ringfit.fit.posterior import run_ensemble
-
-    spec = result.extra["spec"]
-    data = result.extra["data"]
-    ring = result.extra["ring"]
-    free = result.names
-    free, ring_free, free_index, base, spec, args = _problem(
-        data, result.extra["geometry"], ring, free, spec.model, spec.sensor, spec.solver)
-    y_opt = np.array([math.log(result.values[k]) if k != ANGLE_OFFSET else float(result.values[k]) for k in free])
-    lo = np.array([math.log(BOUNDS[k][0]) if k != ANGLE_OFFSET else -ANGLE_OFFSET_BOUND for k in free])
-    hi = np.array([math.log(BOUNDS[k][1]) if k != ANGLE_OFFSET else ANGLE_OFFSET_BOUND for k in free])
-    sd = np.sqrt(np.clip(np.diag(result.covariance_log), 1e-12, 1.0))
-    sigma = jnp.asarray(result.extra["sigma_ms2"])
-    lo_j, hi_j = jnp.asarray(lo), jnp.asarray(hi)
-
-    # emcee evaluates all walkers once, then each half of the ensemble per move:
-    # fixed chunks of half the walkers keep that to one compilation.
-    def log_prob(ys):
-        out = _in_fixed_chunks(lambda y: _batched_log_probability(y, args, spec, sigma, lo_j, hi_j), ys,
-                               (walkers + 1) // 2)
-        return np.where(np.isnan(out), -np.inf, out)
-
-    rng = np.random.default_rng(seed)
-    p0 = y_opt + 0.25 * sd * rng.standard_normal((walkers, len(free)))
-    sampler, tau = run_ensemble(log_prob, p0, min_steps=steps, max_steps=steps, seed=seed, progress=progress)
-    burn = int(burn if burn is not None else min(steps // 2, max(int(3 * np.nanmax(tau)), steps // 5)))
-    return RollingPosterior(tuple(free), sampler.get_chain(), sampler.get_log_prob(),
-                            sampler.acceptance_fraction, np.asarray(tau), burn, float(sigma))
+    return sample(result, walkers=walkers, min_steps=steps, max_steps=steps, check_every=steps, seed=seed,
+                  progress=progress, spread=0.25, meta={"model": "rolling", "sigma_ms2": result.extra["sigma_ms2"]})
 
 
 def fitted_ring(result: FitResult) -> RingParams:
@@ -494,7 +296,7 @@ def fitted_ring(result: FitResult) -> RingParams:
 
 
 __all__ = [
-    "fit_rolling", "rolling_data", "RollingData", "model_profiles", "tread_stiffness_sweep", "SweepResult",
-    "sample_rolling_posterior", "RollingPosterior", "fitted_ring", "ROLLING_FREE", "ANGLE_OFFSET",
-    "evaluations_used", "sum_of_squares", "check_rolling_free",
+    "fit_rolling", "rolling_data", "RollingData", "RollingResiduals", "tread_stiffness_sweep", "SweepResult",
+    "sample_rolling_posterior", "fitted_ring", "ROLLING_FREE", "ANGLE_OFFSET", "evaluations_used",
+    "sum_of_squares", "check_rolling_free",
 ]

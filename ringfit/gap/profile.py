@@ -40,10 +40,10 @@ profile, interleaved 16-sample angle blocks (4 folds).
 **Candidates**: every effect with a profile hook (sensor_tilt, gravity,
 iepe_highpass, wave_damping, tread_shear, rotation (χ), ring_extensibility
 (EA), sensor_mass); the model of each is composed by
-:class:`ringfit.gap.profile_model.ProfileModel`. One jitted function —
+:class:`ringfit.physics.profile.ProfileModel`. One jitted function —
 prediction and K forward-mode tangents in one pass (:func:`profile_linearised`)
 — serves every prediction and Jacobian of every candidate, chain and case
-with the same number of profiles (flat road or drum alike, :class:`FlatOrDrum`): it is compiled once.
+with the same number of profiles (flat road or drum alike, :class:`ringfit.physics.profile.FlatOrDrum`): it is compiled once.
 """
 
 from __future__ import annotations
@@ -59,11 +59,10 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.gap.effects.base import Effect
 from ringfit.gap.problem import GapProblem
-from ringfit.gap.profile_model import ProfileModel, profile_channels
 from ringfit.gap.profile_noise import noise_dof, profile_noise
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced
-from ringfit.physics.operating import AbstractRoad, Drum, FlatRoad
+from ringfit.physics.profile import ProfileModel, flat_or_drum, profile_channels
 
 #: Model grid of the diagnosis (PHYSICS.md §4.5: within 0.1 % of M = 8192 for the sensor signals).
 GRID = 512
@@ -93,31 +92,6 @@ CHANNELS = ("radial", "tangential")
 #: Ω²e(w‴ + w′)/R at the patch edges are a third derivative). The floor bounds these: below it a
 #: residual is discretisation, not physics.
 MODEL_PRECISION = np.array([1.5e-3, 6e-3])
-
-
-class FlatOrDrum(AbstractRoad):
-    """A flat road or a drum per operating point, chosen by a traced flag (PHYSICS.md §4.3).
-
-    Composes :class:`~ringfit.physics.operating.FlatRoad` and
-    :class:`~ringfit.physics.operating.Drum` (``where`` picks one, so the flat
-    road's distances are its own bit for bit): the predictor's pytree is the
-    same for both, and one compilation serves case folders of either kind.
-    ``diameter`` [m] (ignored where ``is_drum`` is false) and ``is_drum`` have
-    the shape of the batch of operating points.
-    """
-
-    diameter: jax.Array
-    is_drum: jax.Array
-
-    def distance(self, phi, height):
-        return jnp.where(self.is_drum, Drum(self.diameter).distance(phi, height), FlatRoad().distance(phi, height))
-
-
-def flat_or_drum(drum_diameter, P: int) -> FlatOrDrum:
-    """:class:`FlatOrDrum` for ``P`` operating points from ``RollingData.drum_diameter`` (``None`` = flat road)."""
-    if drum_diameter is None:
-        return FlatOrDrum(diameter=jnp.ones(P), is_drum=jnp.zeros(P, dtype=bool))
-    return FlatOrDrum(diameter=jnp.asarray(drum_diameter, dtype=jnp.float64), is_drum=jnp.ones(P, dtype=bool))
 
 
 class ProfileData(eqx.Module):
@@ -203,6 +177,7 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
     of the refit). ``None``: the ring stays as given and only k_trd and the angle offset are fitted.
     """
     from ringfit.fit.rolling import rolling_data
+    from ringfit.io.profiles import grid_angles_deg
     from ringfit.gap.ranking import fit_chain
 
     profiles = list(case.profiles)
@@ -235,7 +210,7 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
     P = rdata.measured.shape[0]
     y = rdata.measured.reshape(-1)
     folds, fold_kind = _folds(P, M)
-    phi_deg = -180.0 + 360.0 * np.arange(M) / M
+    phi_deg = grid_angles_deg(M)
     labels = {
         "angle_deg": np.tile(phi_deg, 2 * P),
         "channel": np.tile(np.repeat(np.array(CHANNELS), M), P),

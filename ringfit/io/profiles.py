@@ -282,6 +282,19 @@ def grid_angles_deg(n_grid: int) -> np.ndarray:
     return -180.0 + 360.0 * np.arange(n_grid) / n_grid
 
 
+def band_limited_resample(signal: np.ndarray, n_points: int) -> np.ndarray:
+    """Periodic grid signal on φ_j = −π + 2πj/M → the same revolution on N points (zero-padded/truncated spectrum).
+
+    ``signal`` shape ``(..., M)``; returns ``(..., N)``. Nyquist harmonics are dropped.
+    """
+    M = signal.shape[-1]
+    spec = np.fft.rfft(signal, axis=-1)
+    keep = (min(M, n_points) - 1) // 2 + 1
+    out = np.zeros(signal.shape[:-1] + (n_points // 2 + 1,), dtype=complex)
+    out[..., :keep] = spec[..., :keep]
+    return np.fft.irfft(out, n_points, axis=-1) * (n_points / M)
+
+
 def resample_profile(profile: Profile, n_grid: int, offset_deg: float = 0.0) -> np.ndarray:
     """Band-limited resampling onto the model grid (DATA.md §3 → PHYSICS.md §4.4 grid).
 
@@ -305,4 +318,4 @@ def resample_profile(profile: Profile, n_grid: int, offset_deg: float = 0.0) -> 
 
 
 __all__ = ["Profile", "read_profile", "parse_profile", "write_profile", "read_condition", "validate_condition",
-           "check_angles", "resample_profile", "grid_angles_deg", "sidecar_path", "COLUMNS", "REQUIRED_FIELDS"]
+           "check_angles", "resample_profile", "band_limited_resample", "grid_angles_deg", "sidecar_path", "COLUMNS", "REQUIRED_FIELDS"]

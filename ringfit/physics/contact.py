@@ -253,6 +253,40 @@ def as_traced(tree):
     )
 
 
+#: Friction coefficient of the brush tread (docs/physics.md §6 tread_shear).
+FRICTION = 1.0
+
+
+class BrushShearLoad(eqx.Module):
+    """Brush tread shear in the patch (docs/physics.md §6 ``tread_shear``) as a load hook
+    ``(solution, ring, geometry) -> (q_w, q_v)`` grid loads [N/m].
+
+    The tip sticks at the leading edge φ_L and then moves with the road; base position
+    ``x_b(φ) = (R+τ+w) sin φ + v cos φ``; shear ``Δx = x_b(φ) − x_b(φ_L) − R_e(φ − φ_L)``;
+    ``q_x = −k_x Δx`` clipped at ``|q_x| ≤ μ p``; loads ``q_w += q_x sin φ``,
+    ``q_v += q_x cos φ``. Free rolling fixes R_e by ``∫ q_v dφ = 0``. ``k_x`` [N/m²].
+    """
+
+    k_x: float
+    mu: float = FRICTION
+
+    def __call__(self, sol, ring, geometry):
+        phi = sol.phi
+        p = sol.pressure
+        inside = jax.lax.stop_gradient(p > 0)
+        x_b = (geometry.outer_radius + sol.w) * jnp.sin(phi) + sol.v * jnp.cos(phi)
+        first = jnp.argmax(inside)  # leading edge: first grid point in the patch (smallest φ)
+        s = phi - phi[first]
+        D = x_b - x_b[first]
+        num = jnp.sum(jnp.where(inside, D * jnp.cos(phi), 0.0))
+        den = jnp.sum(jnp.where(inside, s * jnp.cos(phi), 0.0))
+        r_e = num / jnp.where(den == 0, 1.0, den)
+        q_x = -self.k_x * (D - r_e * s)
+        lim = self.mu * p
+        q_x = jnp.where(inside, jnp.clip(q_x, -lim, lim), 0.0)
+        return q_x * jnp.sin(phi), q_x * jnp.cos(phi)
+
+
 _solve_rolling_compiled = eqx.filter_jit(solve_rolling)
 
 
@@ -289,6 +323,7 @@ def contact_length(solution: RollingSolution):
 
 
 __all__ = [
+    "BrushShearLoad", "FRICTION",
     "ContactSolver", "RollingSolution", "tread_pressure", "circulant_block", "solve_rolling",
     "solve_rolling_jit", "as_traced", "patch_edges", "contact_length",
 ]

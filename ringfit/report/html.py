@@ -65,66 +65,69 @@ def fmt(x, digits=4) -> str:
     return f"{x:.{digits}g}"
 
 
-def write_report(posterior, path, *, overwrite: bool = False, compare: dict | None = None):
+def write_report(posterior, path, *, overwrite: bool = False, inputs=()):
     """Write the free-tyre uncertainty report for a :class:`~ringfit.fit.posterior.Posterior`.
 
     **Arguments:**
 
     - ``posterior``: a Posterior (or a path to a saved one).
-    - ``path``: output ``.html``; refuses to overwrite unless ``overwrite``.
-    - ``compare``: optional label -> ``(m,)`` model frequencies to overlay
-      (e.g. the source study's Table 9 model).
+    - ``path``: output ``.html``; refuses to overwrite unless ``overwrite``, and never an input.
 
-    The report recomputes the least-squares fits (milliseconds) and the
-    identifiability analysis from the data stored with the posterior.
+    The report draws only what the posterior carries (the draws and the fits, the
+    identifiability analysis and any model to compare with, saved in its ``meta`` by
+    :func:`ringfit.fit.posterior.sample_posterior`): it computes nothing new, so it can be
+    rebuilt from the saved file alone and always agrees with what was printed when sampling.
     """
     from ringfit.fit.posterior import Posterior, load_posterior
     from ringfit.io.files import atomic_write_text, check_output_path
 
     if not isinstance(posterior, Posterior):
+        inputs = tuple(inputs) + (posterior,)
         posterior = load_posterior(posterior)
-    path = check_output_path(path, overwrite=overwrite)
-    page = build_free_report(posterior, compare=compare)
+    path = check_output_path(path, overwrite=overwrite, inputs=inputs)
+    page = build_free_report(posterior)
     atomic_write_text(path, page)
     return path
 
 
-def build_free_report(post, compare=None) -> str:
-    from ringfit.fit.identifiability import identifiability, profile_natural_frequencies
-    from ringfit.fit.least_squares import fit_natural_frequencies
-    from ringfit.io.modes import ModeTable
-    from ringfit.params import RingParams
+def build_free_report(post) -> str:
+    """The free-tyre report page from a posterior and the fits saved with it (``post.meta``)."""
+    from ringfit.errors import InputError
+    from ringfit.fit.identifiability import Identifiability
+    from ringfit.fit.posterior import natural_frequency_predictive
     from ringfit.report import free_plots
 
-    data = post.data
+    meta = post.meta
+    missing = [k for k in ("data", "geometry", "lsq") if k not in meta]
+    if missing:
+        raise InputError(f"this posterior carries no {', '.join(missing)}: not a free-tyre posterior "
+                         "(write it with `ringfit sample`)")
+    data, geo, lsq = meta["data"], meta["geometry"], meta["lsq"]
     n, f, sigma = (np.asarray(data[k], dtype=float) for k in ("n", "freq_hz", "sigma_hz"))
-    table = ModeTable(freq_hz=f, n=n.astype(int), freq_std_hz=sigma, source=post.source)
-    geometry = post.geometry_params()
-    initial = RingParams(**post.values0)
+    lsq_hz = np.asarray(lsq.get("model_hz", [np.nan] * n.size), dtype=float)
     free = post.names
-    prior = {k: (v["median"], v["sigma_ln"]) for k, v in post.priors.items()} or "none"
-    lsq = fit_natural_frequencies(table, geometry, initial, free=free, prior=prior)
-    free_fit = fit_natural_frequencies(table, geometry, initial, free=free, prior="none")
-    profile = ("ei",) if "ei" in free else ()
-    ident = identifiability(free_fit, profile=profile,
-                            fit_again=profile_natural_frequencies(table, geometry, initial, free))
+    priors = meta.get("priors", {})
+    data_only = meta.get("data_only")
+    ident = Identifiability.from_record(meta["identifiability"]) if "identifiability" in meta else None
+    profile_name = "ei" if ident is not None and "ei" in ident.profiles else None
     n_grid = np.arange(max(0, int(n.min()) - 1), int(n.max()) + 2)
-    pred = post.predictive(n_grid, noise=True)
-    cred = post.predictive(n_grid, noise=False)
+    pred = natural_frequency_predictive(post, n_grid, noise=True)
+    cred = natural_frequency_predictive(post, n_grid, noise=False)
     diag = post.diagnostics()
     rows_s = post.summary_table()
+    compare = {k: np.asarray(v, dtype=float) for k, v in meta.get("compare", {}).items()}
 
     sections = []
     # --- overview
-    worst = np.max(np.abs(lsq.extra["model_hz"] - f))
+    worst = np.max(np.abs(lsq_hz - f))
     in_band = (f >= np.interp(n, pred["n"], pred["lo"])) & (f <= np.interp(n, pred["n"], pred["hi"]))
     over = [
-        f"<p>Tyre <b>{esc(post.geometry.get('name') or '—')}</b>, R = {post.geometry['radius']:.4g} m, "
-        f"b = {post.geometry['width']:.4g} m, p0 = {post.geometry['pressure_bar']:.3g} bar. "
-        f"Data: {esc(post.source or 'mode table')} ({n.size} modes; σ: {esc(data['sigma_source'])}).</p>",
-        f"<p>Model: static inextensible ring, eq. 18 (PHYSICS.md §2.1); free parameters: "
-        f"{', '.join(esc(k) for k in free)}. Least squares with the stated prior: <b>{esc(lsq.status)}</b> "
-        f"after {lsq.iterations} iterations, χ² = {lsq.chi2:.3g} for {lsq.dof} degrees of freedom, "
+        f"<p>Tyre <b>{esc(geo.get('name') or '—')}</b>, R = {geo['radius']:.4g} m, "
+        f"b = {geo['width']:.4g} m, p0 = {geo['pressure_bar']:.3g} bar. "
+        f"Data: {esc(meta.get('source') or 'mode table')} ({n.size} modes; σ: {esc(data['sigma_source'])}).</p>",
+        f"<p>Model: static inextensible ring, eq. 18 (docs/physics.md §2.1); free parameters: "
+        f"{', '.join(esc(k) for k in free)}. Least squares with the stated prior: <b>{esc(lsq['status'])}</b> "
+        f"after {lsq['iterations']} iterations, χ² = {lsq['chi2']:.3g} for {lsq['dof']} degrees of freedom, "
         f"largest mode error {worst:.2f} Hz. {int(in_band.sum())} of {n.size} measured frequencies lie inside "
         f"their 95 % posterior predictive interval.</p>",
     ]
@@ -133,32 +136,28 @@ def build_free_report(post, compare=None) -> str:
                 f'{"" if post.converged else " — intervals are rough"}.</div>')
     sections.append(("Summary", "".join(over)))
     # --- modes
-    other = None
-    if compare:
-        other = {k: np.asarray(v) for k, v in compare.items()}
-    fig = free_plots.modes_figure(n, f, sigma, lsq_hz=lsq.extra["model_hz"], predictive=pred, credible=cred,
-                                  other=other)
+    fig = free_plots.modes_figure(n, f, sigma, lsq_hz=lsq_hz, predictive=pred, credible=cred, other=compare or None)
     mode_rows = []
     for i in range(n.size):
         lo_i = float(np.interp(n[i], pred["n"], pred["lo"]))
         hi_i = float(np.interp(n[i], pred["n"], pred["hi"]))
-        mode_rows.append([f"{int(n[i])}", fmt(f[i]), fmt(sigma[i], 3), fmt(lsq.extra["model_hz"][i]),
-                          f"{lsq.extra['model_hz'][i] - f[i]:+.2f}", f"{lo_i:.1f} – {hi_i:.1f}",
-                          "yes" if lo_i <= f[i] <= hi_i else "<b>no</b>"])
+        mode_rows.append([f"{int(n[i])}", fmt(f[i]), fmt(sigma[i], 3), fmt(lsq_hz[i]), f"{lsq_hz[i] - f[i]:+.2f}",
+                          f"{lo_i:.1f} – {hi_i:.1f}", "yes" if lo_i <= f[i] <= hi_i else "<b>no</b>"])
     sections.append(("Data vs fit per mode", figure_html(fig, "measured vs fitted natural frequencies") +
                      table_html(["n", "measured [Hz]", "σ [Hz]", "least squares [Hz]", "error [Hz]",
                                  "95 % predictive [Hz]", "inside"], mode_rows)))
     # --- parameters
     prow = []
-    for i, (k, r) in enumerate(zip(free, rows_s)):
-        pri = post.priors.get(k)
+    for k, r in zip(free, rows_s):
+        pri = priors.get(k)
         pri_s = (f"log-normal, median {pri['median']:.3g}, σ_ln {pri['sigma_ln']:.2f}" if pri else
                  "flat in log θ within plausible bounds")
-        prow.append([esc(k), fmt(lsq.values[k]), fmt(lsq.stderr[k], 3), fmt(r["median"]),
-                     f"{fmt(r['lo'])} – {fmt(r['hi'])}", fmt(free_fit.values[k]), esc(pri_s)])
+        no_prior = fmt(data_only["values"][k]) if data_only and k in data_only["values"] else "—"
+        prow.append([esc(k), fmt(lsq["values"][k]), fmt(lsq["stderr"][k], 3), fmt(r["median"]),
+                     f"{fmt(r['lo'])} – {fmt(r['hi'])}", no_prior, esc(pri_s)])
     corr = np.corrcoef(post.log_samples.T)
     crow = [[esc(k)] + [f"{corr[i, j]:+.2f}" for j in range(len(free))] for i, k in enumerate(free)]
-    src = "".join(f"<li><b>{esc(k)}</b>: {esc(v['source'])}</li>" for k, v in post.priors.items() if v.get("source"))
+    src = "".join(f"<li><b>{esc(k)}</b>: {esc(v['source'])}</li>" for k, v in priors.items() if v.get("source"))
     sections.append(("Parameters", table_html(
         ["parameter", "least squares", "std err", "posterior median", "95 % interval", "no-prior LSQ", "prior"],
         prow) + "<p>Posterior correlation (log-parameters):</p>" + table_html([""] + list(free), crow) +
@@ -166,18 +165,18 @@ def build_free_report(post, compare=None) -> str:
     fig = free_plots.corner_figure(post.samples, free)
     sections.append(("Corner plot", figure_html(fig, "corner plot of the posterior")))
     # --- identifiability
-    flags = "".join(f'<div class="flag">{esc(x)}</div>' for x in ident.flags) or \
-        '<div class="ok">Without a prior every parameter is determined by the data.</div>'
-    eig_rows = [[f"{lam:.3g}", f"{s:.3g}", esc(", ".join(f"{v:+.2f} {nm}" for v, nm in zip(vec, free)
-                                                        if abs(v) > 0.2))]
-                for lam, s, vec in zip(ident.eigenvalues, ident.log_std, ident.eigenvectors.T)]
-    fig = free_plots.identifiability_figure(ident, profile_name="ei" if profile else None,
-                                            prior=post.priors.get("ei"))
-    sections.append(("Identifiability (fit without prior)",
-                     "<p>Fisher information of the log-parameters from the data alone; σ(log) = 1/√λ is the "
-                     "one-σ uncertainty of each parameter combination (0.5 ≈ a factor 1.65).</p>" + flags +
-                     table_html(["eigenvalue λ", "σ(log)", "direction"], eig_rows, left_cols=0) +
-                     figure_html(fig, "identifiability: Fisher spectrum and profile likelihood")))
+    if ident is not None:
+        flags = "".join(f'<div class="flag">{esc(x)}</div>' for x in ident.flags) or \
+            '<div class="ok">Without a prior every parameter is determined by the data.</div>'
+        eig_rows = [[f"{lam:.3g}", f"{s:.3g}", esc(", ".join(f"{v:+.2f} {nm}" for v, nm in zip(vec, ident.names)
+                                                            if abs(v) > 0.2))]
+                    for lam, s, vec in zip(ident.eigenvalues, ident.log_std, ident.eigenvectors.T)]
+        fig = free_plots.identifiability_figure(ident, profile_name=profile_name, prior=priors.get("ei"))
+        sections.append(("Identifiability (fit without prior)",
+                         "<p>Fisher information of the log-parameters from the data alone; σ(log) = 1/√λ is the "
+                         "one-σ uncertainty of each parameter combination (0.5 ≈ a factor 1.65).</p>" + flags +
+                         table_html(["eigenvalue λ", "σ(log)", "direction"], eig_rows, left_cols=0) +
+                         figure_html(fig, "identifiability: Fisher spectrum and profile likelihood")))
     # --- sampler
     drow = [[esc(k), f"{t:.1f}", f"{post.steps / t:.0f}", f"{rh:.3f}", f"{es:.0f}"]
             for k, t, rh, es in zip(free, diag["tau"], diag["rhat"], diag["ess"])]

@@ -34,6 +34,8 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 
 #: Effects the generator injects in mode-table cases, with the verdict the diagnosis should give.
@@ -275,6 +277,19 @@ def _free_rows(rng, ring, geometry, zeta0, sigma_rel):
     return [{"n": int(n), "freq_hz": float(f), "damping_pct": float(d)} for n, f, d in zip(n_free, free, damp)]
 
 
+class PitchModulation(eqx.Module):
+    """Out-of-library ``tread_pitch`` truth: the contact pressure modulated by the tread pitch, as a load hook
+    ``−depth·p(φ)·cos(pitches·φ + phase)`` on the radial load (:class:`ringfit.physics.profile.ProfileModel`)."""
+
+    pitches: int = eqx.field(static=True)
+    depth: float
+    phase: float
+
+    def __call__(self, sol, ring, geometry):
+        q_w = -self.depth * sol.pressure * jnp.cos(self.pitches * sol.phi + self.phase)
+        return q_w, jnp.zeros_like(q_w)
+
+
 def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 0) -> CaseLabel:
     """Write a blind rolling-profile case (DATA.md §6) into ``folder`` (created; must be empty or absent).
 
@@ -291,14 +306,14 @@ def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed
     **Returns:** the hidden :class:`CaseLabel` (``noise["grid_rms_ms2"]`` is the noise RMS on the
     diagnosis's 512-point grid, for the ideal shrink).
     """
-    from ringfit.gap.effects.tread_shear import BrushShearLoad
-    from ringfit.io.profiles import Profile, resample_profile, write_profile
+    from ringfit.io.profiles import Profile, grid_angles_deg, resample_profile, write_profile
     from ringfit.io.tyre import Tyre, write_tyre
-    from ringfit.physics.contact import ContactSolver, solve_rolling_jit
-    from ringfit.physics.operating import KMH, OperatingPoint, road_from_drum_diameter, rolling_radius
+    from ringfit.physics.contact import BrushShearLoad, ContactSolver
+    from ringfit.physics.operating import KMH
+    from ringfit.physics.profile import ProfileModel, effective_rolling_radius, simulate_profile
     from ringfit.physics.rolling import Hysteretic, RingModel, Viscous
-    from ringfit.physics.sensor import STANDARD_GRAVITY, SensorModel, sensor_signals_jit, shift_angle
-    from ringfit.synth.profiles import SAMPLE_RATE_HZ, band_limited_resample
+    from ringfit.physics.sensor import STANDARD_GRAVITY, SensorModel
+    from ringfit.synth.profiles import SAMPLE_RATE_HZ
 
     rng = np.random.default_rng(seed)
     effect = effect or str(rng.choice(PROFILE_INJECTIONS))
@@ -314,7 +329,6 @@ def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed
     ring = ring.replace(damping_ratio=zeta0, k_tread=float(ring.k_tread * np.exp(rng.normal(0.0, 0.15))))
     load = float(rng.uniform(3500.0, 4500.0))
     drum = 1.2192 if rng.random() < 0.3 else None
-    road = road_from_drum_diameter(drum)
     solver = ContactSolver(n_grid=int(rng.choice([768, 1024, 2048])), window_deg=40.0)
     n_points = int(rng.choice([360, 720, 1000, 1024, 2048]))
     offset = math.radians(float(rng.uniform(-1.5, 1.5)))
@@ -356,28 +370,19 @@ def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed
                                "k_tread": 19e6, "damping_ratio": 0.025}), folder / "tyre.toml")
     _write_table(folder, "free.modes.csv", _free_rows(rng, ring, geometry, zeta0, float(rng.uniform(5e-4, 2e-3))),
                  {"state": "free", "speed_kmh": 0, "pressure_bar": 2.2, "frame": "fixed"}, False, 0.0)
-    standing = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, load, road), model=model, solver=solver)
-    r_e = float(rolling_radius(geometry.outer_radius, standing.deflection))
+    hooks = (shear,) if shear is not None else (PitchModulation(**pitch),) if pitch is not None else ()
+    truth = ProfileModel(ring_model=model, sensor=sensor, load_hooks=hooks)
+    r_e = effective_rolling_radius(ring, geometry, load, drum, model=ProfileModel(ring_model=model), solver=solver)
     grid_noise = []
     for i, speed in enumerate(speeds):
         omega = speed * KMH / r_e
-        op = OperatingPoint(omega, load, road)
-        sol = solve_rolling_jit(ring, geometry, op, model=model, solver=solver)
-        if shear is not None or pitch is not None:
-            if shear is not None:
-                q_w, q_v = shear(sol, ring, geometry)
-            else:
-                q_w = -pitch["depth"] * sol.pressure * np.cos(pitch["pitches"] * np.asarray(sol.phi) + pitch["phase"])
-                q_v = np.zeros_like(q_w)
-            sol = solve_rolling_jit(ring, geometry, op, model=model, solver=solver,
-                                    extra_load=(np.asarray(q_w), np.asarray(q_v)))
-        channels = np.stack([np.asarray(c) for c in sensor_signals_jit(sol, geometry, sensor)])
-        channels = np.asarray(shift_angle(channels, offset))
-        values = band_limited_resample(channels, n_points)
+        values = simulate_profile(ring, geometry, speed_kmh=speed, load_n=load, rotation_hz=omega / (2.0 * np.pi),
+                                  drum_diameter_m=drum, model=truth, solver=solver, n_points=n_points,
+                                  offset_rad=offset).channels
         level = sigma40 * (speed / 40.0) ** speed_power
         noise = np.stack([coloured_noise(rng, n_points, level, colour),
                           coloured_noise(rng, n_points, level * tangential_factor, colour)])
-        angle = -180.0 + 360.0 * np.arange(n_points) / n_points
+        angle = grid_angles_deg(n_points)
         condition = {"speed_kmh": round(speed, 3), "load_n": round(load, 1), "pressure_bar": 2.2,
                      "revolutions": int(rng.integers(20, 60)), "sample_rate_hz": SAMPLE_RATE_HZ}
         if write_encoder:

@@ -10,7 +10,7 @@ compliance 0 gives eq. 18 bit for bit: with ``c = 1/EA·R²``-scaled compliance,
 ``compliance_per_mn`` = 10⁶ N / EA (null 0 = inextensible, 10 = EA of 1e5 N).
 
 Rolling profiles: the extensible 2×2 operator D_n of PHYSICS.md §4.2 with
-EA = 10⁶/c N (:meth:`ringfit.gap.profile_model.ProfileModel.with_membrane_compliance`;
+EA = 10⁶/c N (:meth:`ringfit.physics.profile.ProfileModel.with_membrane_compliance`;
 c = 0 gives EA = 1e12 N, the inextensible ring to ~1e-8). Signature: belt
 stretch ``s_tan ∝ Ω²Rε′``, small (PHYSICS.md §6).
 """

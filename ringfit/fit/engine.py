@@ -1,0 +1,401 @@
+"""The one least-squares engine of ringfit: every fit (free tyre, rolling profiles, gap refits, load estimate) runs here.
+
+A fit is a *problem definition* — a residual model and how its parameters are
+coordinated — handed to :func:`least_squares`:
+
+- **Model**: an :class:`AbstractResiduals` (an ``eqx.Module``; its fields are
+  static configuration) called as ``model(theta, data) -> (residuals (m,), aux)``
+  with ``theta`` the full parameter vector in natural (SI) units and ``data`` any
+  pytree of arrays. Residuals are weighted, ``(model − measured)/σ``; rows of
+  weight zero (held-out rows) take no part. ``aux`` is whatever the caller wants
+  back at the optimum (the prediction, say).
+- **Coordinates** (:class:`Coordinate`): each parameter is solved for in a
+  coordinate ``u``: ``u = ln θ`` for positive parameters (``kind="log"``), or
+  ``u = (θ − center)/scale`` (``kind="linear"``). Bounds (natural units) where both
+  ends are finite are kept by the change of variables ``u = mid + half·sin z``
+  (the MINUIT transform); the solver works on ``z``. Unbounded coordinates are
+  solved for directly.
+- **Free set**: any subset of the parameters, given per call; the others stay at
+  ``theta0``. The free indices are traced, so one compiled solve serves every
+  free set of the same size (``pad_to`` pads the size, so one compilation serves
+  several sizes).
+- **Prior**: an optional Gaussian on ``u`` (:class:`GaussianPrior`, possibly
+  correlated); its marginal over the free parameters enters as whitened residual
+  rows ``W (u − mean)``.
+
+The solve is one ``eqx.filter_jit`` region: optimistix Levenberg–Marquardt with
+an SVD linear solve, the model linearised once per step by a forward-mode pass
+(primal and k tangents) whose Jacobian the solver then reuses as a dense matrix,
+and the final residuals, Jacobian and ``aux`` at the optimum. Everything after it
+(covariance, standard errors, flags) is NumPy on small arrays:
+
+- covariance of ``u`` = ``(JᵀJ)⁻¹`` of all rows (data and prior) by SVD; a
+  direction with no information gets ``inf``; ``sigma="estimate"`` scales the
+  data rows by the residual RMS ``s = √(χ²/dof)`` first (σ unknown: profiles),
+  ``sigma="inflate"`` multiplies standard errors by ``max(1, s)``;
+- flags: solver not converged, a parameter at its bound, a relative standard
+  error above :data:`ringfit.fit.result.MAX_RELATIVE_STDERR`.
+
+The result is a :class:`~ringfit.fit.result.FitResult`.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+import optimistix as optx
+
+from ringfit.errors import InputError
+from ringfit.fit.result import FitResult, covariance_from_jacobian, parameter_flags, solver_flags, solver_status
+
+LOG, LINEAR = "log", "linear"
+
+
+@dataclass(frozen=True)
+class Coordinate:
+    """How one model parameter θ is solved for.
+
+    - ``name``: the parameter's name (key of ``FitResult.values``).
+    - ``kind``: ``"log"`` (θ > 0, u = ln θ) or ``"linear"`` (u = (θ − center)/scale).
+    - ``center``, ``scale``: of a linear coordinate (natural units).
+    - ``lo``, ``hi``: bounds on θ (natural units; ±inf = none). A fit whose
+      parameter ends within 1e-6 (in u) of a bound is flagged.
+    """
+
+    name: str
+    kind: str = LOG
+    center: float = 0.0
+    scale: float = 1.0
+    lo: float = -math.inf
+    hi: float = math.inf
+
+    def __post_init__(self):
+        if self.kind not in (LOG, LINEAR):
+            raise ValueError(f"coordinate {self.name}: kind must be 'log' or 'linear'")
+        if not self.scale > 0:
+            raise ValueError(f"coordinate {self.name}: scale must be positive")
+        if not self.lo < self.hi:
+            raise ValueError(f"coordinate {self.name}: need lo < hi")
+
+    def to_u(self, theta: float) -> float:
+        return math.log(theta) if self.kind == LOG else (theta - self.center) / self.scale
+
+    def from_u(self, u: float) -> float:
+        return math.exp(u) if self.kind == LOG else self.center + self.scale * u
+
+    @property
+    def u_bounds(self) -> tuple[float, float]:
+        if self.kind == LOG:
+            lo = math.log(self.lo) if self.lo > 0 else -math.inf
+            hi = math.log(self.hi) if math.isfinite(self.hi) else math.inf
+            return lo, hi
+        return (self.lo - self.center) / self.scale, (self.hi - self.center) / self.scale
+
+
+@dataclass(frozen=True)
+class GaussianPrior:
+    """A Gaussian prior on the solver coordinates ``u`` of some parameters.
+
+    ``names`` ``(r,)``; ``mean`` ``(r,)`` in u units (log for log parameters);
+    ``cov`` ``(r, r)``. Parameters not listed have a flat prior (within bounds).
+    """
+
+    names: tuple[str, ...]
+    mean: np.ndarray
+    cov: np.ndarray
+
+    @staticmethod
+    def independent(entries: dict[str, tuple[float, float]]) -> "GaussianPrior":
+        """From ``name -> (mean_u, sd_u)``."""
+        names = tuple(entries)
+        mean = np.array([entries[k][0] for k in names], dtype=np.float64)
+        cov = np.diag(np.array([entries[k][1] for k in names], dtype=np.float64) ** 2)
+        return GaussianPrior(names, mean, cov)
+
+    def combine(self, other: "GaussianPrior | None") -> "GaussianPrior":
+        """Block-diagonal union of two priors on disjoint parameters."""
+        if other is None or not other.names:
+            return self
+        names = self.names + other.names
+        cov = np.zeros((len(names), len(names)))
+        r = len(self.names)
+        cov[:r, :r], cov[r:, r:] = self.cov, other.cov
+        return GaussianPrior(names, np.concatenate([self.mean, other.mean]), cov)
+
+    def rows(self, free: tuple[str, ...], size: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(W (size, size), mean (size,))`` over the free slots: rows ``W (u_free − mean)``.
+
+        The prior's marginal over the free parameters it covers, whitened by the
+        inverse Cholesky factor; slots without a prior get zero rows.
+        """
+        W = np.zeros((size, size))
+        mean = np.zeros(size)
+        slots = [i for i, k in enumerate(free) if k in self.names]
+        if slots:
+            idx = [self.names.index(free[i]) for i in slots]
+            L = np.linalg.cholesky(self.cov[np.ix_(idx, idx)])
+            W[np.ix_(slots, slots)] = np.linalg.inv(L)
+            mean[slots] = self.mean[idx]
+        return W, mean
+
+
+class AbstractResiduals(eqx.Module):
+    """A residual model: ``model(theta, data) -> (residuals (m,), aux)``; fields are static configuration."""
+
+    def __call__(self, theta, data):
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A least-squares problem: the model, its data, how each parameter is solved for, the prior.
+
+    - ``model``: :class:`AbstractResiduals`; ``data``: its data pytree.
+    - ``coords``: one :class:`Coordinate` per entry of ``theta``.
+    - ``prior``: optional :class:`GaussianPrior` on the coordinates.
+    - ``sigma``: ``"fixed"`` (residuals are already in units of their σ), ``"estimate"``
+      (σ unknown: covariance scaled by χ²/dof; a posterior uses that σ) or ``"inflate"``
+      (standard errors × max(1, √(χ²/dof))).
+    - ``plausible``: name -> (lo, hi) plausible ranges of log parameters: a fit that ends at
+      their edge is flagged (soft), a posterior is truncated there.
+    - ``data_label``: what the data are, for flag messages ("these modes").
+    """
+
+    model: AbstractResiduals
+    data: object
+    coords: tuple[Coordinate, ...]
+    prior: GaussianPrior | None = None
+    sigma: str = "fixed"
+    plausible: dict | None = None
+    data_label: str = "these data"
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.coords)
+
+    def coordinate(self, name: str) -> Coordinate:
+        return self.coords[self.names.index(name)]
+
+
+class _Free(eqx.Module):
+    """Traced free set: slot → parameter index, its coordinate transform and its bounds (u units).
+
+    Padding slots point at a dummy entry past the last parameter and change nothing.
+    """
+
+    index: jax.Array  # (K,) int
+    is_log: jax.Array  # (K,) bool
+    center: jax.Array
+    scale: jax.Array
+    bounded: jax.Array  # (K,) bool
+    mid: jax.Array
+    half: jax.Array
+
+    def u_of(self, z):
+        return jnp.where(self.bounded, self.mid + self.half * jnp.sin(z), z)
+
+    def du_dz(self, z):
+        return jnp.where(self.bounded, self.half * jnp.cos(z), 1.0)
+
+    def theta_of(self, u):
+        return jnp.where(self.is_log, jnp.exp(u), self.center + self.scale * u)
+
+
+def _weighted(z, model, data, theta0, free, prior_w, prior_mean):
+    """Residual rows (data, then prior) and the model's aux at solver point z; theta0 has p + 1 entries."""
+    u = free.u_of(z)
+    theta = theta0.at[free.index].set(free.theta_of(u))[:-1]
+    res, aux = model(theta, data)
+    return jnp.concatenate([res, prior_w @ (u - prior_mean)]), aux
+
+
+def _dense(model, data, theta0, free, prior_w, prior_mean):
+    """``z -> (residuals, aux)`` whose JVP is a dense product with the Jacobian of one forward-mode pass.
+
+    The solver linearises this once per step: the model is traced once (primal,
+    aux and k tangents) and the solver's further Jacobian products are small
+    matrix products, which keeps the compiled fit small. ``aux`` carries no tangent.
+    """
+
+    def both(z):
+        r, aux = _weighted(z, model, data, theta0, free, prior_w, prior_mean)
+        return r, (r, aux)
+
+    @jax.custom_jvp
+    def fn(z):
+        return _weighted(z, model, data, theta0, free, prior_w, prior_mean)
+
+    @fn.defjvp
+    def fn_jvp(primals, tangents):
+        (z,), (dz,) = primals, tangents
+        jac, (res, aux) = jax.jacfwd(both, has_aux=True)(z)
+        return (res, aux), (jac @ dz, jax.tree.map(jnp.zeros_like, aux))
+
+    return fn
+
+
+@functools.partial(jax.jit, static_argnames=("model", "treedef", "max_steps", "rtol", "atol"))
+def _solve(leaves, z0, theta0, free_arrays, prior_w, prior_mean, *, model, treedef, max_steps, rtol, atol):
+    """The whole fit in one compiled region; ``data`` arrives as flat leaves (fast dispatch)."""
+    data = jax.tree.unflatten(treedef, leaves)
+    free = _Free(*free_arrays)
+    fn = _dense(model, data, theta0, free, prior_w, prior_mean)
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.SVD())
+    sol = optx.least_squares(lambda z, _: fn(z), solver, z0, has_aux=True, max_steps=max_steps, throw=False)
+    z = sol.value
+    # residuals, Jacobian and aux at the returned point from the solver's last accepted
+    # linearisation: no further trace of the model
+    info = sol.state.f_info
+    res, jac_z, aux = info.residual, info.jac.as_matrix(), sol.state.aux
+    jac_u = jac_z / free.du_dz(z)[None, :]
+    return free.u_of(z), sol.result._value, sol.stats["num_steps"], res, jac_u, aux
+
+
+def least_squares(
+    problem: Problem,
+    theta0,
+    free: tuple[str, ...],
+    *,
+    max_steps: int = 256,
+    rtol: float = 1e-10,
+    atol: float = 1e-10,
+    n_data: int | None = None,
+    pad_to: int | None = None,
+) -> FitResult:
+    """Weighted least squares of ``problem`` over the ``free`` parameters (see the module docstring).
+
+    **Arguments:**
+
+    - ``problem``: the :class:`Problem`.
+    - ``theta0``: ``(p,)`` starting values of every parameter, natural units, in ``problem.coords`` order.
+    - ``free``: names of the parameters to fit (the rest stay at ``theta0``).
+    - ``max_steps``, ``rtol``, ``atol``: optimistix Levenberg–Marquardt limits (Cauchy termination
+      on the solver coordinates and the residuals).
+    - ``n_data``: number of rows that carry data (default: every model row; rows of weight zero
+      should not be counted).
+    - ``pad_to``: pad the free set to this size (one compilation for several free-set sizes).
+
+    **Returns:** :class:`~ringfit.fit.result.FitResult` with ``theta`` (all parameters at the
+    optimum), the model's aux in ``extra["aux"]`` and ``problem``. Never raises on
+    non-convergence: check ``converged``.
+    """
+    model, data, coords, prior = problem.model, problem.data, problem.coords, problem.prior
+    names = problem.names
+    free = tuple(free)
+    unknown = [k for k in free if k not in names]
+    if unknown or not free or len(set(free)) != len(free):
+        raise InputError(f"free parameters {list(free)}: each must be one of {list(names)}, once")
+    theta0 = np.asarray(theta0, dtype=np.float64)
+    if theta0.shape != (len(names),):
+        raise ValueError(f"theta0 has shape {theta0.shape}, coords {len(names)}")
+    index = [names.index(k) for k in free]
+    for i in index:
+        c = coords[i]
+        if not math.isfinite(theta0[i]) or (c.kind == LOG and not theta0[i] > 0):
+            raise InputError(f"starting value of {c.name} must be {'positive and ' if c.kind == LOG else ''}"
+                             f"finite, got {theta0[i]:.6g}")
+    K = max(len(free), pad_to or 0)
+    pad = K - len(free)
+    lo_u = np.array([coords[i].u_bounds[0] for i in index] + [-np.inf] * pad)
+    hi_u = np.array([coords[i].u_bounds[1] for i in index] + [np.inf] * pad)
+    bounded = np.isfinite(lo_u) & np.isfinite(hi_u)
+    mid = np.where(bounded, 0.5 * (np.where(bounded, lo_u, 0.0) + np.where(bounded, hi_u, 0.0)), 0.0)
+    half = np.where(bounded, 0.5 * (np.where(bounded, hi_u, 1.0) - np.where(bounded, lo_u, -1.0)), 1.0)
+    start = np.array([coords[i].to_u(theta0[i]) for i in index] + [0.0] * pad)
+    z0 = np.where(bounded, np.arcsin(np.clip((start - mid) / half, -1.0, 1.0)), start)
+    if prior is not None:
+        W, mean = prior.rows(free + ("",) * pad, K)
+    else:
+        W, mean = np.zeros((K, K)), np.zeros(K)
+    slots = [coords[i] for i in index] + [Coordinate("", LINEAR)] * pad
+    free_arrays = (np.array(index + [len(names)] * pad, dtype=np.int32), np.array([c.kind == LOG for c in slots]),
+                   np.array([c.center for c in slots]), np.array([c.scale for c in slots]), bounded, mid, half)
+    leaves, treedef = jax.tree.flatten(data)
+    out = _solve(leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean, model=model, treedef=treedef,
+                 max_steps=int(max_steps), rtol=float(rtol), atol=float(atol))
+    u_free, result, steps, res, jac, aux = out
+    u_free, res, jac = np.asarray(u_free)[: len(free)], np.asarray(res), np.asarray(jac)[:, : len(free)]
+    m = res.size - K
+    res, jac = np.concatenate([res[:m], res[m:][: len(free)]]), np.concatenate([jac[:m], jac[m:][: len(free)]])
+    status, message = solver_status(result)
+    result = _result(problem, free, index, theta0, u_free, status, message, int(steps), res, jac, m, aux,
+                     n_data, lo_u[: len(free)], hi_u[: len(free)])
+    result.problem = problem
+    return result
+
+
+def _result(problem, free, index, theta0, u_free, status, message, steps, res, jac, m, aux, n_data,
+            lo_u, hi_u) -> FitResult:
+    coords, sigma = problem.coords, problem.sigma
+    priors = tuple(k for k in free if problem.prior is not None and k in problem.prior.names)
+    theta = theta0.copy()
+    for j, i in enumerate(index):
+        theta[i] = coords[i].from_u(float(u_free[j]))
+    k = len(free)
+    data_rows = int(m if n_data is None else n_data)
+    chi2 = float(res[:m] @ res[:m])
+    dof = max(data_rows - k, 1)
+    s = math.sqrt(chi2 / dof) if chi2 > 0 else 1.0
+    J = jac.copy()
+    if sigma == "estimate":
+        J[:m] = J[:m] / s
+    cov = covariance_from_jacobian(J)
+    infl = max(1.0, s) if sigma == "inflate" else 1.0
+    stderr, flags = {}, solver_flags(status, message)
+    values = {c.name: float(t) for c, t in zip(coords, theta)}
+    for j, name in enumerate(free):
+        c = coords[index[j]]
+        sd_u = math.sqrt(cov[j, j]) * infl if np.isfinite(cov[j, j]) else math.inf
+        stderr[name] = values[name] * sd_u if c.kind == LOG else c.scale * sd_u
+        lo, hi = lo_u[j], hi_u[j]
+        span = hi - lo if math.isfinite(hi - lo) else 1.0
+        if (math.isfinite(lo) and u_free[j] <= lo + 1e-6 * span) or (math.isfinite(hi) and u_free[j] >= hi - 1e-6 * span):
+            flags.append(f"{name} = {values[name]:.4g} is at the bound of its range "
+                         f"[{c.from_u(lo) if math.isfinite(lo) else -math.inf:.4g}, "
+                         f"{c.from_u(hi) if math.isfinite(hi) else math.inf:.4g}]: the data do not bound it")
+    logs = tuple(n for j, n in enumerate(free) if coords[index[j]].kind == LOG)
+    flags += parameter_flags(logs, values, stderr, data=problem.data_label, priors=priors,
+                             plausible=problem.plausible)
+    if data_rows < k:
+        flags.append(f"{k} free parameters but only {data_rows} data rows: the fit is under-determined")
+    return FitResult(
+        status=status, message=message or "converged", names=free, values=values, stderr=stderr,
+        covariance_log=cov * infl**2, residuals=res[:m] / (s if sigma == "estimate" else 1.0),
+        jacobian=J, n_data=data_rows, iterations=steps, flags=flags,
+        extra={"aux": aux, "sigma_scale": s if sigma == "estimate" else 1.0, "chi2_raw": chi2},
+        theta=theta, coords=tuple(coords),
+    )
+
+
+@functools.partial(jax.jit, static_argnames=("model", "treedef"))
+def _batched_sum_of_squares(thetas, leaves, *, model, treedef):
+    data = jax.tree.unflatten(treedef, leaves)
+    return jax.vmap(lambda th: jnp.sum(model(th, data)[0] ** 2))(thetas)
+
+
+def sum_of_squares_batch(problem: Problem, thetas, chunk: int = 64) -> np.ndarray:
+    """Σ r² of the data rows for each parameter vector of ``thetas`` ``(G, p)`` (natural units).
+
+    Evaluated in chunks of exactly ``min(chunk, G)`` rows (the last padded), so one
+    compilation serves every grid size.
+    """
+    thetas = np.asarray(thetas, dtype=np.float64)
+    n = thetas.shape[0]
+    size = max(1, min(int(chunk), n))
+    pad = -n % size
+    if pad:
+        thetas = np.concatenate([thetas, np.repeat(thetas[-1:], pad, axis=0)])
+    leaves, treedef = jax.tree.flatten(problem.data)
+    out = [np.asarray(_batched_sum_of_squares(thetas[i : i + size], leaves, model=problem.model, treedef=treedef))
+           for i in range(0, thetas.shape[0], size)]
+    return np.concatenate(out)[:n]
+
+
+__all__ = ["least_squares", "sum_of_squares_batch", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]
