@@ -162,6 +162,12 @@ def test_winding_of_travelling_and_standing_shapes():
     m, ratio, phase = winding(np.stack([back, fwd, cos2]), phi)
     assert list(m[:2]) == [3, -5] and ratio[0] > 1e6 and ratio[1] > 1e6
     assert abs(m[2]) == 2 and ratio[2] == pytest.approx(1.0) and abs(math.cos(2 * phase[2])) == pytest.approx(1.0)
+    # the orientation does not depend on the pole's complex scaling: cos- and sin-type shapes times e^{iψ}
+    for psi in (0.0, 0.7, 2.0):
+        shapes = np.stack([np.cos(3 * np.radians(phi)), np.sin(3 * np.radians(phi))]) * np.exp(1j * psi)
+        m, ratio, phase = winding(shapes, phi)
+        assert abs(math.cos(m[0] * phase[0])) == pytest.approx(1.0)  # cos-type about φ = 0: extr
+        assert abs(math.cos(m[1] * phase[1])) == pytest.approx(0.0, abs=1e-9)  # sin-type: 0
 
 
 def test_rolling_modes_recover_the_generating_waves(bench, field, record):

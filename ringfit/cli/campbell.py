@@ -132,7 +132,7 @@ def run_campbell(args) -> int:
     match = None
     if tables:
         match = match_tables(tables, ring, geometry, load_n=args.load, drum_diameter_m=args.drum,
-                             model_tolerance=args.tolerance, n_max=args.n_max)
+                             model_tolerance=args.tolerance, n_max=args.n_max, speeds_kmh=speeds)
     rows = diagram.rows(args.frame)
     atomic_write_text(args.out, _csv_text(CAMPBELL_COLUMNS, [[r[c] for c in CAMPBELL_COLUMNS] for r in rows]))
     road = "flat road" if args.drum is None else f"drum {args.drum:g} m"

@@ -524,7 +524,7 @@ def match_tables(
     - ``load_n``: load for tables whose sidecar lacks one; ``drum_diameter_m``: None = flat road.
     - ``model_tolerance``: relative σ of the model (default :data:`MODEL_TOLERANCE`).
     - ``speeds_kmh``: extra speeds for the tracking between the tables' speeds
-      (default: every 5 km/h up to the fastest table).
+      (default: every 10 km/h up to the fastest table).
     - ``n_max``, ``harmonics``: as :func:`campbell_diagram`.
 
     **Returns:** :class:`CampbellMatch`. Acoustic rows are matched like the others
@@ -542,7 +542,7 @@ def match_tables(
     diagrams = {}
     for key, idx in groups.items():
         top = max(conds[i].speed_kmh for i in idx)
-        grid = np.arange(0.0, top + 5.0, 5.0) if speeds_kmh is None else np.asarray(speeds_kmh, dtype=np.float64)
+        grid = np.arange(0.0, top + 10.0, 10.0) if speeds_kmh is None else np.asarray(speeds_kmh, dtype=np.float64)
         sp = np.unique(np.round(np.concatenate([grid[grid <= top + 1e-9], [conds[i].speed_kmh for i in idx]]), 9))
         diagrams[key] = campbell_diagram(ring, geometry, key[1], sp, drum_diameter_m=drum_diameter_m,
                                          contact=key[0], n_max=n_max, harmonics=harmonics)
@@ -674,7 +674,15 @@ def _explain(rows, ctx, diagrams, tol):
 
 
 def _trend_checks(rows, ctx, diagrams, tol):
-    """Rows of one label across speeds must follow one branch (or one line of it)."""
+    """Rows of one label across speeds must follow one branch (or one line of it).
+
+    Rows with the same labels (n, tag, branch, a) in tables of one group at different
+    speeds are chained by speed. A pair is consistent when both rows are matched with
+    their labels, or when a branch (a line of it, in the rotating frame) within 3σ of the
+    first row passes within 3σ of the second. Otherwise the row that is not consistent
+    with its other neighbour becomes a ``trend_conflict``, with the branches' course and
+    the alternatives (frame mix-up, other line, other n) in its note.
+    """
     groups: dict = {}
     for ri, (key, s, t, i, lab, c) in enumerate(ctx):
         if lab["n"] < 0 and not lab["tag"] and not lab["branch"]:
@@ -696,6 +704,11 @@ def _trend_checks(rows, ctx, diagrams, tol):
         chain = [by_speed[s] for s in sorted(by_speed)]
         ok_pairs = []
         for a, b in zip(chain[:-1], chain[1:]):
+            if rows[a]["status"] == "matched" and rows[b]["status"] == "matched":
+                # both rows carry their labels on a branch: the label may pass from one branch to another
+                # between the speeds (contact and rotation exchange content), which is no contradiction
+                ok_pairs.append(True)
+                continue
             ok_pairs.append(_pair_consistent(rows[a], rows[b], ctx[a], ctx[b], diagrams, tol))
         for j, (a, b) in enumerate(zip(chain[:-1], chain[1:])):
             if ok_pairs[j] is True:
@@ -746,12 +759,7 @@ def _flag_trend(rows, ctx, diagrams, tol, bad, good, through):
         branches = f"the branches through {rg['freq_hz']:.1f} Hz at {rg['speed_kmh']:g} km/h go to {dest}"
     else:
         branches = f"no branch passes its {rg['speed_kmh']:g} km/h row ({rg['freq_hz']:.1f} Hz)"
-    alt = _alternatives(rb["freq_hz"], float(t.freq_std_hz[i]), dict(lab, n=-1), d, s, c.frame, tol)
-    if rb["explained"] and rb["status"] != "unexplained":
-        alt_txt = (f"on its own it fits {rb['note'].split(':', 1)[0].replace('matched to ', '')}"
-                   if rb["status"] == "matched" else alt)
-    else:
-        alt_txt = alt
+    alt_txt = _alternatives(rb["freq_hz"], float(t.freq_std_hz[i]), lab, d, s, c.frame, tol)
     rb["status"] = "trend_conflict"
     rb["note"] = (f"speed trend contradicts every branch: from {rg['speed_kmh']:g} to {rb['speed_kmh']:g} km/h this "
                   f"row moves {moves:+.1f} Hz while {branches}; {alt_txt}.")
