@@ -86,7 +86,8 @@ class CampbellDiagram:
       ``(S, B)`` (1 = ``extr``, 0 = ``0``); all from the radial acceleration content.
     - ``damping_ratio``: ζ ``(S, B)`` (first order, hysteretic).
     - ``k``: harmonics ``(H,)``; ``line_hz``: signed sensor lines ``(ω + kΩ)/2π`` ``(S, B, H)``;
-      ``line_weight``: their radial-acceleration weights, normalised per mode ``(S, B, H)``.
+      ``line_weight``: their radial-acceleration weights, normalised per mode ``(S, B, H)``
+      (tangential for a mode without radial content, the inextensible ring's n = 0).
     - ``mode_index``: index of each branch among the modes at each speed ``(S, B)``.
     - ``load_n``, ``drum_diameter_m`` (None: flat road), ``contact`` (False: free spinning ring).
     - ``leading_deg``, ``trailing_deg``: patch edges ``(S,)``; ``ok``: contact solve converged ``(S,)``.
@@ -255,12 +256,13 @@ def _labels_impl(modes):
 
     A, _ = material_acceleration(modes)
     lab = mode_labels(A, jnp.zeros_like(A), modes.k[0], modes.angular_frequency, modes.omega)
-    f, wr, _ = sensor_lines(modes, "acceleration")
-    # a mode without radial content (the inextensible ring's n = 0) keeps its displacement labels
+    f, wr, wt = sensor_lines(modes, "acceleration")
+    # a mode without radial content (the inextensible ring's n = 0) keeps its displacement labels and
+    # its tangential lines
     radial = jnp.sum(jnp.abs(modes.radial) ** 2, -1) > 1e-12
     pick = lambda a, b: jnp.where(radial, a, b)  # noqa: E731
     return (pick(lab["order"], modes.order), pick(lab["travel"], modes.travel), pick(lab["symmetry"], jnp.nan),
-            f, jnp.where(radial[..., None], wr, jnp.nan))
+            f, jnp.where(radial[..., None], wr, wt))
 
 
 def _lazy_jit(fn):
@@ -422,12 +424,10 @@ def _candidates(d: CampbellDiagram, s: int, frame: str) -> list[_Candidate]:
         top = np.nanmax(w)
         for j in np.flatnonzero(np.nan_to_num(w) >= MIN_LINE_WEIGHT * top):
             k = int(d.k[j])
-            if k == 0:
-                continue
             line = float(d.line_hz[s, b, j])  # signed (ω + kΩ)/2π
-            back = k * line > 0  # k (ω + kΩ) > 0: a backward-wave harmonic
-            out.append(_Candidate(b, k, abs(line), abs(k), "backward" if back else "forward",
-                                  float(d.symmetry[s, b]), tag[s, b], float(w[j] / top)))
+            sense = "standing" if k == 0 else ("backward" if k * line > 0 else "forward")  # k(ω + kΩ) > 0: backward
+            out.append(_Candidate(b, k, abs(line), abs(k), sense, float(d.symmetry[s, b]), tag[s, b],
+                                  float(w[j] / top)))
     return out
 
 
@@ -554,7 +554,7 @@ def match_tables(
         d = diagrams[key]
         s = int(np.argmin(np.abs(d.speed_kmh - round(c.speed_kmh, 9))))
         if not d.ok[s]:
-            raise InputError(f"the model did not converge at {c.speed_kmh:g} km/h ({c.load_n:g} N)", source=t.source)
+            raise InputError(f"the model did not converge at {c.speed_kmh:.4g} km/h ({c.load_n:g} N)", source=t.source)
         cands = _candidates(d, s, c.frame)
         labs = [_row_labels(t, i) for i in range(len(t))]
         assign = _assign(t, labs, cands, model_tolerance)
@@ -654,7 +654,7 @@ def _explain(rows, ctx, diagrams, tol):
         d = diagrams[key]
         f, std = rec["freq_hz"], float(t.freq_std_hz[i])
         cand = rec.get("_cand")
-        where = f"{c.speed_kmh:g} km/h, {c.frame} frame"
+        where = f"{c.speed_kmh:.4g} km/h, {c.frame} frame"
         if rec["status"] == "matched":
             rec["note"] = (f"matched to {cand.describe(c.frame)}: error {rec['error_hz']:+.2f} Hz "
                            f"({rec['error_pct']:+.1f} %, z = {rec['z']:+.1f}).")
@@ -756,12 +756,12 @@ def _flag_trend(rows, ctx, diagrams, tol, bad, good, through):
     moves = rb["freq_hz"] - rg["freq_hz"]
     if through:
         dest = ", ".join(f"branch {x.branch + 1} → {f:.1f} Hz" for x, f in through[:3])
-        branches = f"the branches through {rg['freq_hz']:.1f} Hz at {rg['speed_kmh']:g} km/h go to {dest}"
+        branches = f"the branches through {rg['freq_hz']:.1f} Hz at {rg['speed_kmh']:.4g} km/h go to {dest}"
     else:
-        branches = f"no branch passes its {rg['speed_kmh']:g} km/h row ({rg['freq_hz']:.1f} Hz)"
+        branches = f"no branch passes its {rg['speed_kmh']:.4g} km/h row ({rg['freq_hz']:.1f} Hz)"
     alt_txt = _alternatives(rb["freq_hz"], float(t.freq_std_hz[i]), lab, d, s, c.frame, tol)
     rb["status"] = "trend_conflict"
-    rb["note"] = (f"speed trend contradicts every branch: from {rg['speed_kmh']:g} to {rb['speed_kmh']:g} km/h this "
+    rb["note"] = (f"speed trend contradicts every branch: from {rg['speed_kmh']:.4g} to {rb['speed_kmh']:.4g} km/h this "
                   f"row moves {moves:+.1f} Hz while {branches}; {alt_txt}.")
 
 
@@ -811,7 +811,7 @@ def resolution_flags(table: ModeTable, channels: int) -> list[str]:
 
 def label_identified_modes(table: ModeTable, ring=None, geometry=None, *, channels: int, load_n: float | None = None,
                            drum_diameter_m: float | None = None, model_tolerance: float = MODEL_TOLERANCE,
-                           n_max: int = DEFAULT_N_MAX) -> tuple[ModeTable, list[str]]:
+                           n_max: int = DEFAULT_N_MAX, speeds_kmh=None) -> tuple[ModeTable, list[str]]:
     """Model labels (n, direction) for a rolling-tyre mode table and flags for implausible labels (issue 13 item 6).
 
     **Arguments:** ``table`` from :func:`ringfit.targets.rolling_modes.identify_rolling_modes`
@@ -829,7 +829,7 @@ def label_identified_modes(table: ModeTable, ring=None, geometry=None, *, channe
     m = len(table)
     if ring is not None and m:
         res = match_tables([table], ring, geometry, load_n=load_n, drum_diameter_m=drum_diameter_m,
-                           model_tolerance=model_tolerance, n_max=n_max)
+                           model_tolerance=model_tolerance, n_max=n_max, speeds_kmh=speeds_kmh)
         cols = {k: [] for k in ("model_branch", "model_n", "model_direction", "model_tag", "model_hz")}
         for j, r in enumerate(res.rows):
             ok = r["explained"]

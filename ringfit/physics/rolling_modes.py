@@ -32,16 +32,20 @@ both amplitudes per harmonic (``extensible=True``, finite ``ring.ea``).
 
 **Solution.** ``G`` is skew-Hermitian and ``M``, ``K + K_c`` Hermitian, so
 with ``λ = iω`` the problem is the Hermitian quadratic ``(ω² M + ω G̃ − K) c = 0``,
-``G̃ = −iG``. Below the critical speed ``K + K_c`` is positive definite and
-the linearisation
+``G̃ = −iG``. ``M`` is diagonal; with ``x = M^{1/2} c``, ``K̂ = M^{-1/2} K M^{-1/2}``,
+``Ĝ = M^{-1/2} G̃ M^{-1/2}`` and, below the critical speed (K + K_c positive
+definite), the Cholesky factor ``K̂ = L Lᴴ``,
 
-    ω [[K, 0], [0, M]] [c; ωc] = [[0, K], [K, −G̃]] [c; ωc]
+    [[0, Lᴴ], [L, −Ĝ]] [Lᴴx/ω; x] = ω [Lᴴx/ω; x]
 
-is a Hermitian-definite pencil: a Cholesky factor of the left matrix turns it
-into one ``eigh`` of size 2·dof with real ω (ω and −ω pairs; the ω > 0 half
-is kept, one mode per degree of freedom). ``jax.numpy.linalg.eigh`` has a
-JVP, so every frequency is differentiable in the ring parameters, the load
-and the speed (exact away from repeated eigenvalues).
+(the Hermitian form of the Hermitian-definite pencil
+``ω [[K, 0], [0, M]] [c; ωc] = [[0, K], [K, −G̃]] [c; ωc]``): one ``eigh`` of
+size 2·dof with real ω (ω and −ω pairs; the ω > 0 half is kept, one mode per
+degree of freedom). ``jax.numpy.linalg.eigh`` has a JVP, so every frequency
+is differentiable in the ring parameters, the load and the speed (exact away
+from repeated eigenvalues). No triangular solves: batched reverse-mode
+gradients of ``cholesky`` + ``solve_triangular`` of complex 130 × 130
+matrices deadlock in jaxlib 0.10.2 on CPU.
 
 **Damping** is a first-order perturbation of the undamped modes by the
 hysteretic loss ``iη K_el`` (η = 2ζ of ``ring.damping_ratio``, §4.2), with the
@@ -287,16 +291,16 @@ def rolling_modes(
     omega = jnp.asarray(omega, dtype=jnp.float64)
     n = M.shape[0]
     Gt = _hermitian(-1j * G)
-    K = _hermitian(K)
-    zero = jnp.zeros_like(K)
-    B = jnp.block([[K, zero], [zero, M]])
-    A = jnp.block([[zero, K], [K, -Gt]])
-    L = jnp.linalg.cholesky(B)
-    X = jax.scipy.linalg.solve_triangular(L, A, lower=True)
-    At = jax.scipy.linalg.solve_triangular(L, jnp.conj(X.T), lower=True)  # L⁻¹ A L⁻ᴴ (A Hermitian)
-    w, Z = jnp.linalg.eigh(_hermitian(At))
+    # M is diagonal in both bases: scale by M^{-1/2}, factor K̂ = L Lᴴ, and the Hermitian matrix
+    # [[0, Lᴴ], [L, −Ĝ]] has the eigenvalues ω of (ω² I + ω Ĝ − K̂) x = 0 (x = z₂/ω, c = M^{-1/2} x)
+    scale = 1.0 / jnp.sqrt(jnp.real(jnp.diagonal(M)))
+    outer = scale[:, None] * scale[None, :]
+    L = jnp.linalg.cholesky(_hermitian(K) * outer)
+    zero = jnp.zeros_like(L)
+    Hm = jnp.block([[zero, jnp.conj(L.T)], [L, -Gt * outer]])
+    w, Z = jnp.linalg.eigh(_hermitian(Hm))
     w, Z = w[n:], Z[:, n:]  # ω > 0 half: one mode per degree of freedom
-    q = jax.scipy.linalg.solve_triangular(jnp.conj(L.T), Z, lower=False)[:n].T  # (N, dof)
+    q = (scale[:, None] * Z[n:] / w[None, :]).T  # (N, dof)
 
     k = jnp.arange(-harmonics, harmonics + 1, dtype=jnp.float64)
     H = k.size
