@@ -159,6 +159,20 @@ def test_rotating_frame_rows_match_lines(tyre, diagram):
     assert first["status"] == "matched" and first["model_k"] == k[2, b] and first["model_branch"] == b + 1
     assert other["explained"] and other["model_branch"] == b + 1 and other["model_k"] == int(d.k[j2])
     assert other["line_weight"] < 1.0
+    # the assignment a diagnosis refits through: (mode index, line k) at the row's Ω, evaluated by the physics
+    import jax
+
+    from ringfit.physics.operating import Drum
+    from ringfit.physics.rolling_modes import campbell_modes_jit, observed_frequencies
+
+    a = res.assignment()
+    assert list(a["fixed_frame"]) == [False, False] and list(a["k"]) == [k[2, b], int(d.k[j2])]
+    pad = np.concatenate([SPEEDS, np.full(4, SPEEDS[-1])])  # as campbell_diagram pads (one compilation)
+    cm = campbell_modes_jit(r, g, 4000.0, pad, Drum(diameter=DRUM), harmonics=32, contact=True)
+    assert float(cm.omega[2]) == pytest.approx(a["omega"][0], rel=1e-9)
+    at40 = jax.tree.map(lambda x: x[2] if getattr(x, "ndim", 0) and x.shape[0] == pad.size else x, cm.modes)
+    f = np.asarray(observed_frequencies(at40, a["mode_index"], a["k"], a["fixed_frame"]))
+    np.testing.assert_allclose(f, [first["model_hz"], other["model_hz"]], rtol=1e-9)
 
 
 def test_flags_for_identified_modes(tyre):

@@ -487,6 +487,24 @@ class CampbellMatch:
     diagrams: dict
     conditions: list
 
+    def assignment(self) -> dict:
+        """Each row's (mode, line) at its speed, for a diagnosis that refits through it (issue 13 item 5).
+
+        **Returns:** dict of arrays, one entry per row (``match.rows`` order): ``omega`` Ω [rad/s],
+        ``load_n``, ``contact`` (bool), ``fixed_frame`` (bool), ``mode_index`` (index among the
+        modes of :func:`ringfit.physics.rolling_modes.rolling_modes` at that speed, ascending
+        frequency; −1 when unmatched), ``k`` (sensor line harmonic; 0 in the fixed frame),
+        ``explained`` (bool). Evaluate with :func:`ringfit.physics.rolling_modes.observed_frequencies`.
+        """
+        keys = ("omega", "load_n", "contact", "fixed_frame", "mode_index", "k", "explained")
+        out = {k: [] for k in keys}
+        for r in self.rows:
+            a = r["_assignment"]
+            for k in keys:
+                out[k].append(a[k])
+        dtypes = {"contact": bool, "fixed_frame": bool, "explained": bool, "mode_index": int, "k": int}
+        return {k: np.asarray(v, dtype=dtypes.get(k, np.float64)) for k, v in out.items()}
+
     @property
     def unexplained(self) -> list[dict]:
         return [r for r in self.rows if r["status"] == "unexplained"]
@@ -597,9 +615,13 @@ def _row_record(t, i, c: TableCondition, d, s, lab, a, tol) -> dict:
         "model_direction": "", "model_tag": "", "model_k": None, "line_weight": math.nan, "error_hz": math.nan,
         "error_pct": math.nan, "z": math.nan, "label_conflicts": "", "note": "",
     }
+    rec["_assignment"] = {"omega": float(c.omega), "load_n": float(c.load_n), "contact": bool(c.contact),
+                          "fixed_frame": c.frame == "fixed", "mode_index": -1, "k": 0, "explained": False}
     if a is None:
         return rec
     cand, z, sig, bad = a
+    rec["_assignment"].update(mode_index=int(d.mode_index[s, cand.branch]), k=int(cand.k or 0),
+                              explained=abs(z) <= EXPLAINED_Z)
     rec.update({
         "sigma_hz": sig, "model_branch": cand.branch + 1, "model_hz": cand.hz, "model_n": cand.n,
         "model_direction": cand.direction, "model_tag": cand.tag, "model_k": cand.k, "line_weight": cand.weight,
@@ -766,22 +788,8 @@ def _flag_trend(rows, ctx, diagrams, tol, bad, good, through):
 
 
 def match_rows_table(match: CampbellMatch) -> list[list]:
-    """``match.rows`` as CSV cells in :data:`MATCH_COLUMNS` order (empty for None/NaN)."""
-    out = []
-    for r in match.rows:
-        cells = []
-        for c in MATCH_COLUMNS:
-            v = r[c]
-            if v is None or (isinstance(v, float) and not math.isfinite(v)):
-                cells.append("")
-            elif isinstance(v, bool):
-                cells.append("true" if v else "false")
-            elif isinstance(v, float):
-                cells.append(f"{v:.6g}")
-            else:
-                cells.append(str(v))
-        out.append(cells)
-    return out
+    """``match.rows`` as lists of values in :data:`MATCH_COLUMNS` order (None/NaN where empty)."""
+    return [[r[c] for c in MATCH_COLUMNS] for r in match.rows]
 
 
 # ----------------------------------------------------------------------------------------------- identification side

@@ -412,6 +412,22 @@ def sensor_lines(modes: RollingModes, quantity: str = "displacement"):
     return f, pr / jnp.sum(pr, -1, keepdims=True), pt / jnp.sum(pt, -1, keepdims=True)
 
 
+def observed_frequencies(modes: RollingModes, mode_index, k, fixed_frame):
+    """Frequencies [Hz] of chosen (mode, line) pairs as their observer sees them (docs/physics.md §3.7).
+
+    **Arguments:** ``modes`` — :class:`RollingModes` (one speed); ``mode_index`` — int
+    array of modes; ``k`` — harmonic of the sensor line (ignored in the fixed frame);
+    ``fixed_frame`` — bool array, broadcast together.
+
+    **Returns:** ``ω_j/2π`` (fixed) or ``|ω_j + kΩ|/2π`` (co-rotating sensor). Pure JAX,
+    differentiable: a diagnosis can keep an assignment made by
+    :func:`ringfit.gap.campbell.match_tables` and refit parameters through it.
+    """
+    w = modes.angular_frequency[jnp.asarray(mode_index)]
+    line = jnp.abs(w + jnp.asarray(k, dtype=jnp.float64) * modes.omega)
+    return jnp.where(jnp.asarray(fixed_frame), w, line) / TWO_PI
+
+
 def loaded_rolling_modes(
     ring: RingParams,
     geometry: TyreGeometry,
@@ -524,6 +540,7 @@ def campbell_modes_jit(ring, geometry, load, speeds, road: AbstractRoad = FlatRo
 
 __all__ = [
     "DEFAULT_HARMONICS", "ContactArc", "contact_arc", "RollingModes", "harmonic_basis", "gyroscopic_matrices",
-    "rolling_modes", "rolling_modes_jit", "mode_labels", "material_acceleration", "sensor_lines", "loaded_rolling_modes", "CampbellModes", "campbell_modes",
+    "rolling_modes", "rolling_modes_jit", "mode_labels", "material_acceleration", "sensor_lines",
+    "observed_frequencies", "loaded_rolling_modes", "CampbellModes", "campbell_modes",
     "campbell_modes_jit", "campbell_modes_traced",
 ]
