@@ -52,10 +52,10 @@ def register(sub) -> None:
     c.add_argument("--f-max", type=number("a frequency in Hz > 0", lo=0.0, hi=1e6, lo_open=True), default=400.0,
                    help="top of the SSI band [Hz] (default 400)")
     c.add_argument("--skip", type=number("a finite number of seconds >= 0", lo=0.0, hi=1e3), default=None, metavar="S",
+                   help="drop τ < S (cleat contact) before SSI (default: time for 30° of rotation)")
     c.add_argument("--tyre", type=Path, default=None,
                    help="tyre TOML (docs/formats.md §1): label the SSI modes with (n, direction) of the rolling, loaded "
                         "tyre's model at the record's speed, load and drum, and flag labels no branch supports")
-                   help="drop τ < S (cleat contact) before SSI (default: time for 30° of rotation)")
     force_flag(c)
     quiet_flag(c)
     c.set_defaults(run=run_cleat)
