@@ -53,7 +53,8 @@ import numpy as np
 import optimistix as optx
 
 from ringfit.errors import InputError
-from ringfit.fit.result import FitResult, covariance_from_jacobian, parameter_flags, solver_flags, solver_status
+from ringfit.fit.result import (BatchFitResult, FitResult, covariance_batch, covariance_from_jacobian, parameter_flags,
+                                solver_flags, solver_status)
 
 LOG, LINEAR = "log", "linear"
 
@@ -241,9 +242,8 @@ def _dense(model, data, theta0, free, prior_w, prior_mean):
     return fn
 
 
-@functools.partial(jax.jit, static_argnames=("model", "treedef", "max_steps", "rtol", "atol"))
-def _solve(leaves, z0, theta0, free_arrays, prior_w, prior_mean, *, model, treedef, max_steps, rtol, atol):
-    """The whole fit in one compiled region; ``data`` arrives as flat leaves (fast dispatch)."""
+def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, *, model, treedef, max_steps, rtol, atol):
+    """One fit (traced): ``data`` arrives as flat leaves (fast dispatch)."""
     data = jax.tree.unflatten(treedef, leaves)
     free = _Free(*free_arrays)
     fn = _dense(model, data, theta0, free, prior_w, prior_mean)
@@ -256,6 +256,62 @@ def _solve(leaves, z0, theta0, free_arrays, prior_w, prior_mean, *, model, treed
     res, jac_z, aux = info.residual, info.jac.as_matrix(), sol.state.aux
     jac_u = jac_z / free.du_dz(z)[None, :]
     return free.u_of(z), sol.result._value, sol.stats["num_steps"], res, jac_u, aux
+
+
+_STATIC = ("model", "treedef", "max_steps", "rtol", "atol")
+#: The whole fit in one compiled region.
+_solve = functools.partial(jax.jit, static_argnames=_STATIC)(_solve_one)
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def _solve_batch(leaves, z0, theta0, free_arrays, prior_w, prior_mean, *, model, treedef, max_steps, rtol, atol):
+    """B fits of one problem structure in one compiled region: data leaves, z0 and theta0 carry a leading axis B."""
+    def one(lv, z, th):
+        return _solve_one(lv, z, th, free_arrays, prior_w, prior_mean, model=model, treedef=treedef,
+                          max_steps=max_steps, rtol=rtol, atol=atol)
+
+    return jax.vmap(one)(leaves, z0, theta0)
+
+
+def _setup(problem: Problem, free: tuple[str, ...], pad_to: int | None):
+    """Free-set arrays of a solve: ``(index, K, free_arrays, prior W, prior mean, lo_u, hi_u)`` (K slots, padded)."""
+    coords, prior, names = problem.coords, problem.prior, problem.names
+    unknown = [k for k in free if k not in names]
+    if unknown or not free or len(set(free)) != len(free):
+        raise InputError(f"free parameters {list(free)}: each must be one of {list(names)}, once")
+    index = [names.index(k) for k in free]
+    K = max(len(free), pad_to or 0)
+    pad = K - len(free)
+    lo_u = np.array([coords[i].u_bounds[0] for i in index] + [-np.inf] * pad)
+    hi_u = np.array([coords[i].u_bounds[1] for i in index] + [np.inf] * pad)
+    bounded = np.isfinite(lo_u) & np.isfinite(hi_u)
+    mid = np.where(bounded, 0.5 * (np.where(bounded, lo_u, 0.0) + np.where(bounded, hi_u, 0.0)), 0.0)
+    half = np.where(bounded, 0.5 * (np.where(bounded, hi_u, 1.0) - np.where(bounded, lo_u, -1.0)), 1.0)
+    if prior is not None:
+        W, mean = prior.rows(free + ("",) * pad, K)
+    else:
+        W, mean = np.zeros((K, K)), np.zeros(K)
+    slots = [coords[i] for i in index] + [Coordinate("", LINEAR)] * pad
+    free_arrays = (np.array(index + [len(names)] * pad, dtype=np.int32), np.array([c.kind == LOG for c in slots]),
+                   np.array([c.center for c in slots]), np.array([c.scale for c in slots]), bounded, mid, half)
+    return index, K, free_arrays, W, mean, lo_u, hi_u
+
+
+def _start(problem: Problem, index, K, free_arrays, theta0) -> np.ndarray:
+    """Solver start ``z0`` ``(B, K)`` from starting values ``theta0`` ``(B, p)`` (checked: finite, positive logs)."""
+    coords = problem.coords
+    for i in index:
+        c = coords[i]
+        bad = ~np.isfinite(theta0[:, i]) | ((c.kind == LOG) & ~(theta0[:, i] > 0))
+        if bad.any():
+            raise InputError(f"starting value of {c.name} must be {'positive and ' if c.kind == LOG else ''}"
+                             f"finite, got {theta0[np.argmax(bad), i]:.6g}")
+    _, is_log, center, scale, bounded, mid, half = free_arrays
+    start = np.zeros((theta0.shape[0], K))
+    for j, i in enumerate(index):
+        t = theta0[:, i]
+        start[:, j] = np.log(t) if coords[i].kind == LOG else (t - coords[i].center) / coords[i].scale
+    return np.where(bounded, np.arcsin(np.clip((start - mid) / half, -1.0, 1.0)), start)
 
 
 def least_squares(
@@ -286,37 +342,14 @@ def least_squares(
     optimum), the model's aux in ``extra["aux"]`` and ``problem``. Never raises on
     non-convergence: check ``converged``.
     """
-    model, data, coords, prior = problem.model, problem.data, problem.coords, problem.prior
+    model, data, coords = problem.model, problem.data, problem.coords
     names = problem.names
     free = tuple(free)
-    unknown = [k for k in free if k not in names]
-    if unknown or not free or len(set(free)) != len(free):
-        raise InputError(f"free parameters {list(free)}: each must be one of {list(names)}, once")
+    index, K, free_arrays, W, mean, lo_u, hi_u = _setup(problem, free, pad_to)
     theta0 = np.asarray(theta0, dtype=np.float64)
     if theta0.shape != (len(names),):
         raise ValueError(f"theta0 has shape {theta0.shape}, coords {len(names)}")
-    index = [names.index(k) for k in free]
-    for i in index:
-        c = coords[i]
-        if not math.isfinite(theta0[i]) or (c.kind == LOG and not theta0[i] > 0):
-            raise InputError(f"starting value of {c.name} must be {'positive and ' if c.kind == LOG else ''}"
-                             f"finite, got {theta0[i]:.6g}")
-    K = max(len(free), pad_to or 0)
-    pad = K - len(free)
-    lo_u = np.array([coords[i].u_bounds[0] for i in index] + [-np.inf] * pad)
-    hi_u = np.array([coords[i].u_bounds[1] for i in index] + [np.inf] * pad)
-    bounded = np.isfinite(lo_u) & np.isfinite(hi_u)
-    mid = np.where(bounded, 0.5 * (np.where(bounded, lo_u, 0.0) + np.where(bounded, hi_u, 0.0)), 0.0)
-    half = np.where(bounded, 0.5 * (np.where(bounded, hi_u, 1.0) - np.where(bounded, lo_u, -1.0)), 1.0)
-    start = np.array([coords[i].to_u(theta0[i]) for i in index] + [0.0] * pad)
-    z0 = np.where(bounded, np.arcsin(np.clip((start - mid) / half, -1.0, 1.0)), start)
-    if prior is not None:
-        W, mean = prior.rows(free + ("",) * pad, K)
-    else:
-        W, mean = np.zeros((K, K)), np.zeros(K)
-    slots = [coords[i] for i in index] + [Coordinate("", LINEAR)] * pad
-    free_arrays = (np.array(index + [len(names)] * pad, dtype=np.int32), np.array([c.kind == LOG for c in slots]),
-                   np.array([c.center for c in slots]), np.array([c.scale for c in slots]), bounded, mid, half)
+    z0 = _start(problem, index, K, free_arrays, theta0[None])[0]
     leaves, treedef = jax.tree.flatten(data)
     out = _solve(leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean, model=model, treedef=treedef,
                  max_steps=int(max_steps), rtol=float(rtol), atol=float(atol))
@@ -374,6 +407,81 @@ def _result(problem, free, index, theta0, u_free, status, message, steps, res, j
     )
 
 
+def least_squares_batch(
+    problem: Problem,
+    theta0,
+    free: tuple[str, ...],
+    data,
+    *,
+    max_steps: int = 256,
+    rtol: float = 1e-10,
+    atol: float = 1e-10,
+    n_data: int | None = None,
+) -> BatchFitResult:
+    """B independent fits of one problem structure, vmapped in one compiled region.
+
+    Each fit is what :func:`least_squares` does for ``problem`` with the b-th data set
+    and the b-th start; the vmapped solver iterates until every fit has met its
+    tolerances (or ``max_steps``), so fits with similar starts (e.g. warm starts from a
+    neighbour) cost about as many steps as the slowest one. One compilation serves
+    every batch of the same size B and structure: pad the last batch.
+
+    **Arguments:**
+
+    - ``problem``: the :class:`Problem` (its ``data`` is not used, only its model, coordinates,
+      prior and ``sigma``).
+    - ``theta0``: ``(B, p)`` or ``(p,)`` starting values, natural units.
+    - ``free``: names of the parameters to fit (the same for every fit).
+    - ``data``: the model's data pytree with a leading axis B on every leaf.
+    - ``max_steps``, ``rtol``, ``atol``, ``n_data``: as :func:`least_squares`.
+
+    **Returns:** :class:`~ringfit.fit.result.BatchFitResult` (arrays with a leading axis B; no flag
+    strings: check ``converged`` and ``at_bound``). Never raises on non-convergence.
+    """
+    free = tuple(free)
+    index, K, free_arrays, W, mean, lo_u, hi_u = _setup(problem, free, None)
+    leaves, treedef = jax.tree.flatten(data)
+    if not leaves:
+        raise ValueError("data has no arrays to batch over")
+    B = int(np.shape(leaves[0])[0])
+    if any(np.shape(x)[:1] != (B,) for x in leaves):
+        raise ValueError("every leaf of data needs the same leading batch axis")
+    p = len(problem.names)
+    theta0 = np.broadcast_to(np.asarray(theta0, dtype=np.float64), (B, p)).copy()
+    z0 = _start(problem, index, K, free_arrays, theta0)
+    theta0_pad = np.concatenate([theta0, np.zeros((B, 1))], axis=1)
+    u, codes, steps, res, jac, aux = _solve_batch(leaves, z0, theta0_pad, free_arrays, W, mean,
+                                                   model=problem.model, treedef=treedef, max_steps=int(max_steps),
+                                                   rtol=float(rtol), atol=float(atol))
+    u, res, jac, codes = np.asarray(u), np.asarray(res), np.asarray(jac), np.asarray(codes)
+    coords = problem.coords
+    theta = theta0.copy()
+    for j, i in enumerate(index):
+        theta[:, i] = np.exp(u[:, j]) if coords[i].kind == LOG else coords[i].center + coords[i].scale * u[:, j]
+    m = res.shape[1] - K
+    chi2 = np.sum(res[:, :m] ** 2, axis=1)
+    rows = int(m if n_data is None else n_data)
+    s = np.where(chi2 > 0, np.sqrt(chi2 / max(rows - K, 1)), 1.0)
+    J = jac.copy()
+    scale = s if problem.sigma == "estimate" else np.ones(B)
+    J[:, :m] /= scale[:, None, None]
+    cov = covariance_batch(J)
+    if problem.sigma == "inflate":
+        cov = cov * np.maximum(1.0, s)[:, None, None] ** 2
+    sd_u = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
+    stderr = np.empty((B, K))
+    for j, i in enumerate(index):
+        stderr[:, j] = theta[:, i] * sd_u[:, j] if coords[i].kind == LOG else coords[i].scale * sd_u[:, j]
+    span = np.where(np.isfinite(hi_u - lo_u), hi_u - lo_u, 1.0)
+    at_bound = ((np.isfinite(lo_u) & (u <= lo_u + 1e-6 * span)) | (np.isfinite(hi_u) & (u >= hi_u - 1e-6 * span)))
+    names = {c: solver_status(c)[0] for c in np.unique(codes)}
+    status = np.array([names[c] for c in codes])
+    return BatchFitResult(names=free, coords=tuple(coords), theta=theta, status=status, iterations=np.asarray(steps),
+                          stderr=stderr, covariance_log=cov, residuals=res[:, :m] / scale[:, None], chi2_raw=chi2,
+                          sigma_scale=s if problem.sigma == "estimate" else np.ones(B), at_bound=at_bound,
+                          aux=jax.tree.map(np.asarray, aux), n_data=rows)
+
+
 @functools.partial(jax.jit, static_argnames=("model", "treedef"))
 def _batched_sum_of_squares(thetas, leaves, *, model, treedef):
     data = jax.tree.unflatten(treedef, leaves)
@@ -398,4 +506,4 @@ def sum_of_squares_batch(problem: Problem, thetas, chunk: int = 64) -> np.ndarra
     return np.concatenate(out)[:n]
 
 
-__all__ = ["least_squares", "sum_of_squares_batch", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]
+__all__ = ["least_squares", "least_squares_batch", "sum_of_squares_batch", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]
