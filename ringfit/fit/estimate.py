@@ -109,8 +109,11 @@ DEFAULT_K_TREAD_SD = 0.3
 NOISE_SMOOTHING = 4
 #: An angle offset beyond this [deg] is flagged (the profile's zero is not the patch centre).
 OFFSET_WARN_DEG = 10.0
-#: A residual RMS above this multiple of the noise is flagged as a poor fit.
+#: A residual RMS above this multiple of the noise is flagged as a poor fit …
 POOR_FIT_RATIO = 1.5
+#: … when it is also above this fraction of the reading's RMS in the fitted band (the estimator's own
+#: discretisation leaves ~0.1 %: noise-free profiles of the same model are not "poor").
+MODEL_FLOOR = 0.005
 
 COORDS = (
     Coordinate(LOAD, LOG, lo=LOAD_RANGE[0], hi=LOAD_RANGE[1]),
@@ -126,22 +129,31 @@ COORDS = (
 class EstimateSettings:
     """How the estimate is computed.
 
-    - ``n_grid``: model grid M of the contact solve (docs/physics.md §4.4–4.5); 256 resolves the
-      harmonics fitted (displacements converge by M = 256).
+    - ``n_grid``: model grid M of the contact solve (docs/physics.md §4.4–4.5). The fitted harmonics
+      converge by M = 256, but the patch's discrete active set makes the load–shape relation a
+      staircase: fitting M = 2048 profiles, M = 256 is biased by up to 1 % (at some loads), 384 by
+      0.3 %, 512 by < 0.1 % (``benchmarks/bench_estimate.py``).
     - ``k_max``: highest revolution harmonic fitted (lowered to the data's band limit).
     - ``window_deg``: contact candidate window (the patch must lie inside).
     - ``k_tread_sd``: σ of ln k_trd; ``None`` = fixed at the tyre file's value (when the file has one).
     - ``highpass_order``: stages of the modelled high-pass (1: the IEPE sensor).
-    - ``max_steps``: Levenberg–Marquardt step cap.
+    - ``max_steps``, ``rtol``, ``atol``: Levenberg–Marquardt step cap and Cauchy tolerances (solver
+      coordinates: log load, degrees of offset; residual rows in m/s²).
+    - ``revolution_window_deg``: candidate window for the per-revolution fits (the patch must fit; a
+      smaller window is a smaller dense contact solve: 20° holds loads up to ~10 kN on the Table 9 tyre
+      and is widened automatically when a recording's patch needs more).
     - ``curve_points``, ``curve_grid``: loads and model grid of the load curves (patch, feature).
     """
 
-    n_grid: int = 256
+    n_grid: int = 512
     k_max: int = 40
     window_deg: float = 35.0
     k_tread_sd: float | None = None
     highpass_order: int = 1
-    max_steps: int = 64
+    max_steps: int = 100
+    rtol: float = 1e-6
+    atol: float = 1e-6
+    revolution_window_deg: float = 20.0
     curve_points: int = 48
     curve_grid: int = 512
 
@@ -200,7 +212,7 @@ class EstimateArrays(eqx.Module):
 
     - ``geometry``, ``ring``: the tyre (k_trd is replaced by θ's).
     - ``omega``: ``(P,)`` Ω [rad/s]; ``roads``: :class:`~ringfit.physics.profile.FlatOrDrum` ``(P,)``.
-    - ``response``: ``(P, K)`` the acquisition's gain on harmonics k_min…k_max (bin averaging; 1 = none).
+    - ``response``: ``(P, K)`` the acquisition's gain on harmonics k_min…k_max (resampling, bin averaging; 1 = none).
     - ``measured``: ``(P, 2K)`` radial harmonic rows (Re, Im) [m/s²]; ``weight``: ``(P, 2K)`` 1/σ per row.
     """
 
@@ -528,7 +540,7 @@ def profile_amplitudes(profile, n_grid: int, k_max: int) -> np.ndarray:
 
 def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings: EstimateSettings = EstimateSettings(),
                   k_tread_in_file: bool = True, omega: float | None = None, omega_source: str | None = None,
-                  noise_per_angle: np.ndarray | None = None) -> LoadEstimate:
+                  noise_per_angle: np.ndarray | None = None, response: np.ndarray | None = None) -> LoadEstimate:
     """Estimate the load and contact patch from one rolling profile (docs/formats.md §3 → §7).
 
     **Arguments:**
@@ -543,6 +555,7 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
     - ``noise_per_angle``: ``(N,)`` standard error of the profile per angle [m/s²] (e.g. the
       revolution spread / √revolutions), used for the reported noise; default: the spread columns
       of a ``ringfit profile`` output, else the residual away from the patch.
+    - ``response``: ``(k_max − 1,)`` the acquisition's gain on harmonics 2…k_max (default 1).
 
     **Returns:** :class:`LoadEstimate`. Never raises on non-convergence (check ``converged``).
     """
@@ -553,6 +566,7 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
         raise InputError(f"{N} angles resolve harmonics up to {(N - 1) // 2}; the estimate needs at least 8",
                          source=profile.source)
     amp = profile_amplitudes(profile, settings.n_grid, k_max)
+    resp = np.ones(k_max - 1) if response is None else np.asarray(response, dtype=np.float64)[: k_max - 1]
     drum = profile.drum_diameter_m
     # Ω (its uncertainty hardly matters: the gain absorbs Ω²) and the model curves
     if omega is None:
@@ -583,18 +597,20 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
     K = amp.shape[-1]
     measured = harmonic_rows(amp)[None]
     arrays = EstimateArrays(geometry=geometry, ring=ring, omega=np.array([omega]), roads=flat_or_drum(drum, 1),
-                            response=np.ones((1, K)), measured=measured, weight=np.ones((1, 2 * K)))
+                            response=resp[None], measured=measured, weight=np.ones((1, 2 * K)))
     theta0 = np.array([load0, curves.gain_at(load0, amp), offset0, 0.3, 0.5, float(ring.k_tread)])
     problem = estimate_problem(arrays, settings, k_max, prior)
-    first = least_squares(problem, theta0, tuple(free), max_steps=settings.max_steps, rtol=1e-8, atol=1e-8)
+    first = least_squares(problem, theta0, tuple(free), max_steps=settings.max_steps, rtol=settings.rtol,
+                          atol=settings.atol)
     # second pass: whiten the residual spectrum
     resid_rows = np.asarray(first.extra["aux"])[0] - measured[0]
     weight = 1.0 / smoothed_noise(resid_rows)
     weight = weight / np.mean(weight)
     arrays = EstimateArrays(geometry=geometry, ring=ring, omega=np.array([omega]), roads=flat_or_drum(drum, 1),
-                            response=np.ones((1, K)), measured=measured, weight=weight[None])
+                            response=resp[None], measured=measured, weight=weight[None])
     problem = estimate_problem(arrays, settings, k_max, prior)
-    fit = least_squares(problem, first.theta, tuple(free), max_steps=settings.max_steps, rtol=1e-8, atol=1e-8)
+    fit = least_squares(problem, first.theta, tuple(free), max_steps=settings.max_steps, rtol=settings.rtol,
+                        atol=settings.atol)
     return _finish(fit, profile, geometry, ring, curves, feature, amp, omega, omega_source, flags, k_max, drum,
                    settings, noise_per_angle)
 
@@ -635,7 +651,8 @@ def _finish(fit, profile, geometry, ring, curves, feature, amp, omega, omega_sou
     if abs(offset_deg) > OFFSET_WARN_DEG:
         flags.append(f"the profile's angle zero is {offset_deg:+.1f}° from the patch centre (angle offset); "
                      "check the encoder offset or the angle convention (docs/formats.md §3)")
-    if rms > POOR_FIT_RATIO * noise:
+    signal_rms = float(np.sqrt(0.5 * np.sum(np.abs(amp) ** 2)))
+    if rms > POOR_FIT_RATIO * noise and rms > MODEL_FLOOR * signal_rms:
         flags.append(f"poor fit: residual RMS {rms:.3g} m/s² is {rms / max(noise, 1e-300):.1f}× the noise level "
                      f"({noise:.3g} m/s²): the model does not explain this profile to its noise; the load may be "
                      "biased beyond its interval")
@@ -662,6 +679,272 @@ def _finish(fit, profile, geometry, ring, curves, feature, amp, omega, omega_sou
         k_max=k_max, omega=float(omega), drum_diameter_m=drum)
 
 
+# ----------------------------------------------------------------------------- per revolution
+
+#: Revolutions fitted together (one vmapped solve; the last batch is padded).
+REVOLUTION_BATCH = 32
+#: Per-revolution Levenberg–Marquardt tolerances (the last step changes ln load by ≲ 1e-3, far more
+#: than the final error after it; per-revolution standard errors are ~0.3 %) and step cap.
+REVOLUTION_TOL = 1e-4
+REVOLUTION_MAX_STEPS = 30
+
+
+@dataclass
+class RevolutionEstimates:
+    """Per-revolution estimates of a continuous recording (arrays of shape ``(R,)``).
+
+    ``revolution`` (numbers counted from the recording's first angle), ``t_s`` (middle of the
+    revolution [s]), ``rotation_hz`` (encoder), ``load_n``, ``lo``, ``hi`` (95 % Laplace interval [N];
+    statistical: the high-pass corner, tilt and k_trd are fixed at the averaged profile's fit),
+    ``length_mm`` (patch length of the model at the load), ``gain``, ``angle_offset_deg``, ``rms``
+    [m/s²] (residual in the fitted band), ``converged``, ``iterations``, ``feature_load_n`` (the
+    classic method on the revolution); ``window_deg``: the contact window used.
+    """
+
+    revolution: np.ndarray
+    t_s: np.ndarray
+    rotation_hz: np.ndarray
+    load_n: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    length_mm: np.ndarray
+    gain: np.ndarray
+    angle_offset_deg: np.ndarray
+    rms: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray
+    feature_load_n: np.ndarray
+    window_deg: float = 0.0
+
+    #: Columns of the per-revolution CSV (docs/formats.md §7), in order.
+    COLUMNS = ("revolution", "t_s", "rotation_hz", "load_n", "lo", "hi", "patch_length_mm", "gain",
+               "angle_offset_deg", "rms_ms2", "converged", "feature_load_n")
+
+    def __len__(self) -> int:
+        return self.revolution.size
+
+    def columns(self) -> dict:
+        """Column name → ``(R,)`` array, in :attr:`COLUMNS` order."""
+        return {"revolution": self.revolution, "t_s": self.t_s, "rotation_hz": self.rotation_hz,
+                "load_n": self.load_n, "lo": self.lo, "hi": self.hi, "patch_length_mm": self.length_mm,
+                "gain": self.gain, "angle_offset_deg": self.angle_offset_deg, "rms_ms2": self.rms,
+                "converged": self.converged.astype(int), "feature_load_n": self.feature_load_n}
+
+    def summary(self) -> dict:
+        """Counts and the load's range over the revolutions (for the JSON)."""
+        ok = self.converged
+        load = self.load_n[ok]
+        return {"revolutions": int(len(self)), "converged": int(ok.sum()),
+                "load_n_median": _num(np.median(load)) if load.size else None,
+                "load_n_min": _num(load.min()) if load.size else None,
+                "load_n_max": _num(load.max()) if load.size else None,
+                "contact_window_deg": float(self.window_deg)}
+
+
+@dataclass
+class RecordingRevolutions:
+    """One pass over a continuous recording: each whole revolution's radial harmonics and the average.
+
+    ``rows`` ``(R, 2K)`` harmonic rows k = 2…k_max (:func:`harmonic_rows`) [m/s²]; ``revolution``,
+    ``t_s``, ``rotation_hz`` ``(R,)``; ``profile``: the averaged profile (docs/formats.md §3, the
+    revolution-to-revolution spread as ``acc_radial_spread_ms2``); ``response`` ``(K,)``: the resampling's
+    gain on the harmonics (sinc²(k/samples per revolution), linear interpolation); ``k_max``.
+    """
+
+    rows: np.ndarray
+    revolution: np.ndarray
+    t_s: np.ndarray
+    rotation_hz: np.ndarray
+    profile: object
+    response: np.ndarray
+    k_max: int
+
+
+def first_rotation_hz(record, samples: int = 1 << 18) -> float:
+    """Rotation rate [Hz] over the first ``samples`` samples of a recording (from its encoder)."""
+    n = int(min(samples, record.samples))
+    ch = next(record.chunks(n, stop=n, acc=False))
+    rate = (ch.angle_deg[-1] - ch.angle_deg[0]) / 360.0 / ((n - 1) / record.fs_hz)
+    if not rate > 0:
+        raise InputError("the encoder angle does not advance over the first samples: is the wheel turning?",
+                         source=record.source)
+    return float(rate)
+
+
+def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progress: bool = False
+                          ) -> RecordingRevolutions:
+    """Walk a continuous recording once (bounded memory): every whole revolution's radial reading on
+    the angle grid (:func:`ringfit.targets.rolling_profile.revolution_grids`, M = the power of two at or
+    above the samples per revolution, so that every sample takes part), its harmonics 2…k_max, and
+    their average and spread over revolutions as a profile.
+
+    **Raises** :class:`InputError` without an encoder or a radial axis, with fewer than 2 whole
+    revolutions, or with too few samples per revolution to resolve harmonic k_max.
+    """
+    from ringfit.io.profiles import Profile
+    from ringfit.targets.rolling_profile import revolution_grids
+
+    if "radial" not in record.axes:
+        raise InputError(f"no 'radial' axis (have: {', '.join(record.axes)}); the estimate reads the radial channel",
+                         source=record.source)
+    if not record.has_encoder:
+        raise InputError("no encoder channel ('encoder_angle_deg' or 'encoder_pulses'); the estimate needs the "
+                         "sensor angle of every sample", source=record.source)
+    spr = record.fs_hz / first_rotation_hz(record)
+    if spr < 4 * (k_max + 2):
+        raise InputError(f"{spr:.0f} samples per revolution are too few to resolve harmonic {k_max} "
+                         f"(need ≥ {4 * (k_max + 2)})", source=record.source)
+    points = int(min(4096, max(128, 2 ** math.ceil(math.log2(spr)))))
+    rows, rev, t_s, rate = [], [], [], []
+    s1, s2 = np.zeros(points), np.zeros(points)
+    for block in revolution_grids(record, points=points, axes=("radial",), progress=progress):
+        values = block.values[0]
+        rows.append(harmonic_rows(harmonic_amplitudes(values, 2, k_max)))
+        rev.append(block.revolution)
+        t_s.append(block.t_s)
+        rate.append(block.rotation_hz)
+        s1 += values.sum(axis=0)
+        s2 += (values**2).sum(axis=0)
+    R = int(sum(r.size for r in rev))
+    if R < 2:
+        raise InputError(f"{R} whole revolution(s) in the recording; the estimate needs at least 2",
+                         source=record.source)
+    mean = s1 / R
+    spread = np.sqrt(np.clip((s2 - R * mean**2) / (R - 1), 0.0, None))
+    rate = np.concatenate(rate)
+    cond = {k: float(record.condition[k]) for k in ("speed_kmh", "pressure_bar", "drum_diameter_m")
+            if record.condition.get(k) is not None}
+    cond.update(revolutions=R, sample_rate_hz=float(record.fs_hz), rotation_hz=float(np.mean(rate)),
+                missing_axes=["tangential"])
+    angle = -180.0 + 360.0 * np.arange(points) / points
+    profile = Profile(angle, mean, np.zeros(points), condition=cond, source=str(record.source),
+                      extra={"acc_radial_spread_ms2": np.array([repr(float(x)) for x in spread], dtype=object)})
+    k = np.arange(2, k_max + 1)
+    return RecordingRevolutions(rows=np.concatenate(rows), revolution=np.concatenate(rev), t_s=np.concatenate(t_s),
+                                rotation_hz=rate, profile=profile, response=np.sinc(k / spr) ** 2, k_max=k_max)
+
+
+def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ring: RingParams, *,
+                         settings: EstimateSettings = EstimateSettings(), batch: int = REVOLUTION_BATCH,
+                         progress: bool = False) -> RevolutionEstimates:
+    """Load and patch for every whole revolution (from :func:`recording_revolutions`).
+
+    Each revolution's harmonics 2…k_max are fitted for the load, the gain and the angle offset,
+    with the high-pass corner, tilt and k_trd fixed at ``reference`` (the fit to the averaged
+    profile; the gain is free because the averaged profile of a recording whose load changes is not
+    the profile of one load, and a gain fixed there would bias every revolution) and Ω from the
+    encoder per revolution. Revolutions are solved ``batch`` at a time by
+    :func:`ringfit.fit.engine.least_squares_batch` (one compilation), each batch started from the
+    previous batch's last revolution (warm start). The first batch is fitted twice: its residual
+    spectrum, averaged over its revolutions, weights every later fit (coloured noise, as in
+    :func:`estimate_load`). A smaller contact window (``settings.revolution_window_deg``, widened to
+    1.3 × the reference patch) makes each solve cheaper; revolutions whose patch comes within 1.5° of
+    it are refitted with ``settings.window_deg``.
+
+    **Returns:** :class:`RevolutionEstimates`.
+    """
+    from tqdm import tqdm
+
+    fit = reference.fit
+    k_max = data.k_max
+    if k_max != reference.k_max:
+        raise ValueError("the reference estimate was fitted to other harmonics")
+    K = k_max - 1
+    geometry = fit.problem.data.geometry
+    half = max(abs(reference.patch["leading_deg"]), abs(reference.patch["trailing_deg"]))
+    window = float(min(settings.window_deg, max(settings.revolution_window_deg, 1.3 * half)))
+    rev_settings = EstimateSettings(**{**settings.__dict__, "window_deg": window})
+    drum = reference.drum_diameter_m
+    response = np.asarray(data.response, dtype=np.float64)
+    template = EstimateArrays(geometry=geometry, ring=ring, omega=np.ones(1), roads=flat_or_drum(drum, 1),
+                              response=response[None], measured=np.zeros((1, 2 * K)), weight=np.ones((1, 2 * K)))
+    problems = {window: estimate_problem(template, rev_settings, k_max)}
+    free = (LOAD, GAIN, ANGLE_OFFSET)
+    theta = np.asarray(fit.theta, dtype=np.float64).copy()
+    rows_all, omega_all = data.rows, 2 * math.pi * data.rotation_hz
+    R = rows_all.shape[0]
+
+    def bcast(x, B):
+        return np.broadcast_to(np.asarray(x, dtype=np.float64), (B,) + np.shape(x)).copy()
+
+    fixed = jax.tree.map(lambda x: bcast(x, batch), (as_traced(geometry), as_traced(ring), flat_or_drum(drum, 1),
+                                                     response[None]))
+
+    def solve(win, rows, omega, weight, theta0):
+        if win not in problems:
+            problems[win] = estimate_problem(template, settings, k_max)
+        geo, rng, roads, resp = fixed
+        arrays = EstimateArrays(geometry=geo, ring=rng, omega=omega[:, None], roads=roads, response=resp,
+                                measured=rows[:, None], weight=weight[:, None])
+        return least_squares_batch(problems[win], theta0, free, arrays, max_steps=REVOLUTION_MAX_STEPS,
+                                   rtol=REVOLUTION_TOL, atol=REVOLUTION_TOL)
+
+    weight_row = None
+    results = []
+    bar = tqdm(total=R, unit="rev", disable=not progress, desc="per-revolution fits")
+    for start in range(0, R, batch):
+        n = min(batch, R - start)
+        take = np.minimum(np.arange(start, start + batch), R - 1)  # the last batch repeats its last revolution
+        rows, omega = rows_all[take], omega_all[take]
+        theta0 = np.tile(theta, (batch, 1))
+        if weight_row is None:  # first batch: equal weights, then its residual spectrum
+            res = solve(window, rows, omega, np.ones((batch, 2 * K)), theta0)
+            resid = res.aux[:n, 0] - rows[:n]
+            sigma = smoothed_noise(np.sqrt(np.mean(resid**2, axis=0)))
+            weight_row = (1.0 / sigma) / np.mean(1.0 / sigma)
+        weight = np.tile(weight_row, (batch, 1))
+        res = solve(window, rows, omega, weight, theta0)
+        patch = reference.curves.patch_at(res.values(LOAD))
+        edge = np.maximum(np.abs(patch["leading_deg"]), np.abs(patch["trailing_deg"]))
+        redo = np.flatnonzero(edge[:n] > window - 1.5) if window < settings.window_deg else np.zeros(0, int)
+        if redo.size:  # the patch outgrew the small window: refit with the full one
+            wide = solve(settings.window_deg, rows, omega, weight, res.theta)
+            for name in ("theta", "status", "iterations", "covariance_log", "stderr", "residuals", "chi2_raw",
+                         "sigma_scale", "at_bound", "aux"):
+                getattr(res, name)[redo] = getattr(wide, name)[redo]
+        ok = res.converged[:n] & ~res.at_bound[:n, 0] & np.all(np.isfinite(res.theta[:n]), axis=1)
+        good = np.flatnonzero(ok)
+        if good.size:
+            theta = res.theta[good[-1]].copy()
+        lo, hi = res.interval(LOAD)
+        resid = res.aux[:n, 0] - rows[:n]
+        results.append(dict(load=res.values(LOAD)[:n], lo=lo[:n], hi=hi[:n], gain=res.values(GAIN)[:n],
+                            offset=np.degrees(res.values(ANGLE_OFFSET)[:n]),
+                            rms=np.sqrt(0.5 * np.sum(resid[:, :K] ** 2 + resid[:, K:] ** 2, axis=1)), ok=ok,
+                            iterations=res.iterations[:n]))
+        bar.update(n)
+    bar.close()
+    cat = {key: np.concatenate([r[key] for r in results]) for key in results[0]}
+    spacing = edge_peaks(rows_all[:, :K] + 1j * rows_all[:, K:], 2)[:, 2]
+    return RevolutionEstimates(
+        revolution=data.revolution, t_s=data.t_s, rotation_hz=data.rotation_hz, load_n=cat["load"], lo=cat["lo"],
+        hi=cat["hi"], length_mm=np.asarray(reference.curves.patch_at(cat["load"])["length_mm"]), gain=cat["gain"],
+        angle_offset_deg=cat["offset"], rms=cat["rms"], converged=cat["ok"], iterations=cat["iterations"],
+        feature_load_n=reference.curves.load_from_spacing(spacing), window_deg=window)
+
+
+def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
+                       settings: EstimateSettings = EstimateSettings(), k_tread_in_file: bool = True,
+                       per_revolution: bool = True, batch: int = REVOLUTION_BATCH, progress: bool = False):
+    """The averaged and the per-revolution estimates of a continuous recording (one pass over it).
+
+    The averaged profile (:func:`recording_revolutions`) is estimated like any profile
+    (:func:`estimate_load`; Ω the encoder's mean rate, noise the revolution spread); its nuisances then
+    serve every revolution (:func:`estimate_revolutions`).
+
+    **Returns:** ``(LoadEstimate, RevolutionEstimates or None)``.
+    """
+    data = recording_revolutions(record, k_max=settings.k_max, progress=progress)
+    rate = float(np.mean(data.rotation_hz))
+    reference = estimate_load(data.profile, geometry, ring, settings=settings, k_tread_in_file=k_tread_in_file,
+                              omega=2 * math.pi * rate, omega_source="encoder (mean over the recording)",
+                              response=data.response)
+    revs = None
+    if per_revolution:
+        revs = estimate_revolutions(data, reference, ring, settings=settings, batch=batch, progress=progress)
+    return reference, revs
+
+
 def _spread_noise(profile) -> np.ndarray | None:
     """Standard error per angle of a ``ringfit profile`` output (spread / √revolutions), or None."""
     col = profile.extra.get("acc_radial_spread_ms2")
@@ -678,7 +961,8 @@ def _spread_noise(profile) -> np.ndarray | None:
 
 
 __all__ = [
-    "estimate_load", "LoadEstimate", "EstimateSettings", "EstimateResiduals", "EstimateArrays", "estimate_problem",
+    "estimate_load", "estimate_revolutions", "estimate_recording", "recording_revolutions", "RevolutionEstimates",
+    "RecordingRevolutions", "LoadEstimate", "EstimateSettings", "EstimateResiduals", "EstimateArrays", "estimate_problem",
     "load_curves", "LoadCurves", "feature_estimate", "FeatureEstimate", "edge_peaks", "harmonic_amplitudes",
     "harmonic_rows", "band_signal", "PARAMETERS", "COORDS", "LOAD_RANGE", "DEFAULT_K_TREAD_SD",
 ]
