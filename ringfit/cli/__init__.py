@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "ringfit.cli.gap",
     "ringfit.cli.targets",
     "ringfit.cli.cleat",
+    "ringfit.cli.estimate",
 )
 
 
