@@ -540,7 +540,8 @@ def profile_amplitudes(profile, n_grid: int, k_max: int) -> np.ndarray:
 
 def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings: EstimateSettings = EstimateSettings(),
                   k_tread_in_file: bool = True, omega: float | None = None, omega_source: str | None = None,
-                  noise_per_angle: np.ndarray | None = None, response: np.ndarray | None = None) -> LoadEstimate:
+                  noise_per_angle: np.ndarray | None = None, noise_source: str | None = None,
+                  response: np.ndarray | None = None) -> LoadEstimate:
     """Estimate the load and contact patch from one rolling profile (docs/formats.md §3 → §7).
 
     **Arguments:**
@@ -553,8 +554,9 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
       (if not, it gets the prior :data:`DEFAULT_K_TREAD_SD` unless the settings set one).
     - ``omega``, ``omega_source``: Ω [rad/s] and its source, when known from elsewhere (a recording).
     - ``noise_per_angle``: ``(N,)`` standard error of the profile per angle [m/s²] (e.g. the
-      revolution spread / √revolutions), used for the reported noise; default: the spread columns
-      of a ``ringfit profile`` output, else the residual away from the patch.
+      revolution spread / √revolutions), used for the reported noise (``noise_source`` says what it
+      is); default: the spread columns of a ``ringfit profile`` output, else the residual away from
+      the patch.
     - ``response``: ``(k_max − 1,)`` the acquisition's gain on harmonics 2…k_max (default 1).
 
     **Returns:** :class:`LoadEstimate`. Never raises on non-convergence (check ``converged``).
@@ -612,11 +614,11 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
     fit = least_squares(problem, first.theta, tuple(free), max_steps=settings.max_steps, rtol=settings.rtol,
                         atol=settings.atol)
     return _finish(fit, profile, geometry, ring, curves, feature, amp, omega, omega_source, flags, k_max, drum,
-                   settings, noise_per_angle)
+                   settings, noise_per_angle, noise_source)
 
 
 def _finish(fit, profile, geometry, ring, curves, feature, amp, omega, omega_source, flags, k_max, drum, settings,
-            noise_per_angle) -> LoadEstimate:
+            noise_per_angle, noise_source=None) -> LoadEstimate:
     load = fit.values[LOAD]
     lo, hi = fit.interval(LOAD)
     model_rows = np.asarray(fit.extra["aux"])[0]
@@ -632,7 +634,7 @@ def _finish(fit, profile, geometry, ring, curves, feature, amp, omega, omega_sou
         noise_per_angle = _spread_noise(profile)
     if noise_per_angle is not None:
         noise = float(np.sqrt(np.mean(np.asarray(noise_per_angle) ** 2) * 2 * K / N))
-        noise_source = "revolution spread / √revolutions, in the fitted band"
+        noise_source = noise_source or "revolution spread / √revolutions, in the fitted band"
     else:
         resid = band_signal(resid_amp, 2, alpha)
         far = np.abs((profile.angle_deg + offset_deg + 180.0) % 360.0 - 180.0) > 60.0
@@ -748,7 +750,9 @@ class RecordingRevolutions:
     ``rows`` ``(R, 2K)`` harmonic rows k = 2…k_max (:func:`harmonic_rows`) [m/s²]; ``revolution``,
     ``t_s``, ``rotation_hz`` ``(R,)``; ``profile``: the averaged profile (docs/formats.md §3, the
     revolution-to-revolution spread as ``acc_radial_spread_ms2``); ``response`` ``(K,)``: the resampling's
-    gain on the harmonics (sinc²(k/samples per revolution), linear interpolation); ``k_max``.
+    gain on the harmonics (sinc²(k/samples per revolution), linear interpolation); ``k_max``; ``noise``
+    ``(M,)`` the standard error of the averaged profile per angle [m/s²], from the differences of
+    successive revolutions (a load that changes does not count as noise, unlike in the spread).
     """
 
     rows: np.ndarray
@@ -758,6 +762,7 @@ class RecordingRevolutions:
     profile: object
     response: np.ndarray
     k_max: int
+    noise: np.ndarray | None = None
 
 
 def first_rotation_hz(record, samples: int = 1 << 18) -> float:
@@ -796,7 +801,8 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
                          f"(need ≥ {4 * (k_max + 2)})", source=record.source)
     points = int(min(4096, max(128, 2 ** math.ceil(math.log2(spr)))))
     rows, rev, t_s, rate = [], [], [], []
-    s1, s2 = np.zeros(points), np.zeros(points)
+    s1, s2, sd = np.zeros(points), np.zeros(points), np.zeros(points)
+    previous = None
     for block in revolution_grids(record, points=points, axes=("radial",), progress=progress):
         values = block.values[0]
         rows.append(harmonic_rows(harmonic_amplitudes(values, 2, k_max)))
@@ -805,12 +811,17 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
         rate.append(block.rotation_hz)
         s1 += values.sum(axis=0)
         s2 += (values**2).sum(axis=0)
+        chain = values if previous is None else np.concatenate([previous, values])
+        sd += (np.diff(chain, axis=0) ** 2).sum(axis=0)
+        previous = values[-1:]
     R = int(sum(r.size for r in rev))
     if R < 2:
         raise InputError(f"{R} whole revolution(s) in the recording; the estimate needs at least 2",
                          source=record.source)
     mean = s1 / R
     spread = np.sqrt(np.clip((s2 - R * mean**2) / (R - 1), 0.0, None))
+    # noise of one revolution from successive differences: blind to a load that changes slowly or in steps
+    noise = np.sqrt(sd / (2 * (R - 1)))
     rate = np.concatenate(rate)
     cond = {k: float(record.condition[k]) for k in ("speed_kmh", "pressure_bar", "drum_diameter_m")
             if record.condition.get(k) is not None}
@@ -821,7 +832,8 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
                       extra={"acc_radial_spread_ms2": np.array([repr(float(x)) for x in spread], dtype=object)})
     k = np.arange(2, k_max + 1)
     return RecordingRevolutions(rows=np.concatenate(rows), revolution=np.concatenate(rev), t_s=np.concatenate(t_s),
-                                rotation_hz=rate, profile=profile, response=np.sinc(k / spr) ** 2, k_max=k_max)
+                                rotation_hz=rate, profile=profile, response=np.sinc(k / spr) ** 2, k_max=k_max,
+                                noise=noise / math.sqrt(R))
 
 
 def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ring: RingParams, *,
@@ -938,7 +950,8 @@ def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
     rate = float(np.mean(data.rotation_hz))
     reference = estimate_load(data.profile, geometry, ring, settings=settings, k_tread_in_file=k_tread_in_file,
                               omega=2 * math.pi * rate, omega_source="encoder (mean over the recording)",
-                              response=data.response)
+                              response=data.response, noise_per_angle=data.noise,
+                              noise_source="differences of successive revolutions / √(2·revolutions), in the fitted band")
     revs = None
     if per_revolution:
         revs = estimate_revolutions(data, reference, ring, settings=settings, batch=batch, progress=progress)
