@@ -193,12 +193,6 @@ def test_edge_peaks_of_a_known_double_peak():
     assert spacing == pytest.approx(trail - lead) and abs(dip) < 0.5
 
 
-class _Decay(AbstractResiduals):
-    def __call__(self, theta, data):
-        y = theta[0] * np.exp(-data["t"] / theta[1]) + theta[2]
-        return (y - data["y"]) / 0.01, y
-
-
 def test_batched_engine_matches_one_fit_at_a_time():
     import jax.numpy as jnp
 
@@ -221,6 +215,10 @@ def test_batched_engine_matches_one_fit_at_a_time():
         assert np.allclose(batch.covariance_log[b], one.covariance_log, rtol=1e-6)
         assert np.allclose(batch.stderr[b], [one.stderr[k] for k in one.names], rtol=1e-6)
         assert np.allclose([x[b] for x in batch.interval("tau")], one.interval("tau"), rtol=1e-9)
+    # one after another, each from the previous optimum, by Gauss–Newton: the same optima
+    chain = least_squares_batch(Problem(Decay(), {"t": t, "y": ys[0]}, coords), [1.5, 1.5, 0.0], ("a", "tau", "c"),
+                                {"t": np.tile(t, (3, 1)), "y": ys}, warm_start=True, method="gauss_newton")
+    assert chain.converged.all() and np.allclose(chain.theta, batch.theta, rtol=1e-6, atol=1e-8)
 
 
 # ----------------------------------------------------------------------------- the command

@@ -23,8 +23,8 @@ coordinated — handed to :func:`least_squares`:
   correlated); its marginal over the free parameters enters as whitened residual
   rows ``W (u − mean)``.
 
-The solve is one ``eqx.filter_jit`` region: optimistix Levenberg–Marquardt with
-an SVD linear solve, the model linearised once per step by a forward-mode pass
+The solve is one ``eqx.filter_jit`` region: optimistix Levenberg–Marquardt (or,
+on request, undamped Gauss–Newton) with an SVD linear solve, the model linearised once per step by a forward-mode pass
 (primal and k tangents) whose Jacobian the solver then reuses as a dense matrix,
 and the final residuals, Jacobian and ``aux`` at the optimum. Everything after it
 (covariance, standard errors, flags) is NumPy on small arrays:
@@ -242,12 +242,20 @@ def _dense(model, data, theta0, free, prior_w, prior_mean):
     return fn
 
 
-def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, *, model, treedef, max_steps, rtol, atol):
+#: Solvers of :func:`least_squares`: Levenberg–Marquardt (the default; trust region, robust from far
+#: away) and undamped Gauss–Newton (every step taken: for well-started fits, e.g. warm-started
+#: sequences, it stops as soon as the steps are small, where Levenberg–Marquardt may spend steps
+#: rejecting round-off-sized trial steps before its tolerance test runs).
+SOLVERS = {"levenberg_marquardt": optx.LevenbergMarquardt, "gauss_newton": optx.GaussNewton}
+
+
+def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, *, model, treedef, max_steps, rtol, atol,
+               method="levenberg_marquardt"):
     """One fit (traced): ``data`` arrives as flat leaves (fast dispatch)."""
     data = jax.tree.unflatten(treedef, leaves)
     free = _Free(*free_arrays)
     fn = _dense(model, data, theta0, free, prior_w, prior_mean)
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.SVD())
+    solver = SOLVERS[method](rtol=rtol, atol=atol, linear_solver=lx.SVD())
     sol = optx.least_squares(lambda z, _: fn(z), solver, z0, has_aux=True, max_steps=max_steps, throw=False)
     z = sol.value
     # residuals, Jacobian and aux at the returned point from the solver's last accepted
@@ -258,19 +266,40 @@ def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, *, model, t
     return free.u_of(z), sol.result._value, sol.stats["num_steps"], res, jac_u, aux
 
 
-_STATIC = ("model", "treedef", "max_steps", "rtol", "atol")
+_STATIC = ("model", "treedef", "max_steps", "rtol", "atol", "method")
 #: The whole fit in one compiled region.
 _solve = functools.partial(jax.jit, static_argnames=_STATIC)(_solve_one)
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
-def _solve_batch(leaves, z0, theta0, free_arrays, prior_w, prior_mean, *, model, treedef, max_steps, rtol, atol):
+def _solve_batch(leaves, z0, theta0, free_arrays, prior_w, prior_mean, *, model, treedef, max_steps, rtol, atol,
+                 method="levenberg_marquardt"):
     """B fits of one problem structure in one compiled region: data leaves, z0 and theta0 carry a leading axis B."""
     def one(lv, z, th):
         return _solve_one(lv, z, th, free_arrays, prior_w, prior_mean, model=model, treedef=treedef,
-                          max_steps=max_steps, rtol=rtol, atol=atol)
+                          max_steps=max_steps, rtol=rtol, atol=atol, method=method)
 
     return jax.vmap(one)(leaves, z0, theta0)
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def _solve_chain(leaves, z0, theta0, free_arrays, prior_w, prior_mean, *, model, treedef, max_steps, rtol, atol,
+                 method="levenberg_marquardt"):
+    """B fits one after another in one compiled region (``lax.scan``), each started at the previous optimum.
+
+    ``z0`` ``(K,)`` starts the first fit; a fit that fails (non-finite, or not successful) hands on
+    the last good start instead of its own end point.
+    """
+    def step(z_start, xs):
+        lv, th = xs
+        out = _solve_one(lv, z_start, th, free_arrays, prior_w, prior_mean, model=model, treedef=treedef,
+                         max_steps=max_steps, rtol=rtol, atol=atol, method=method)
+        z_end = jnp.where(free_arrays[4], jnp.arcsin(jnp.clip((out[0] - free_arrays[5]) / free_arrays[6], -1, 1)),
+                          out[0])
+        good = (out[1] == 0) & jnp.all(jnp.isfinite(z_end))
+        return jnp.where(good, z_end, z_start), out
+
+    return jax.lax.scan(step, z0, (leaves, theta0))[1]
 
 
 def _setup(problem: Problem, free: tuple[str, ...], pad_to: int | None):
@@ -324,6 +353,7 @@ def least_squares(
     atol: float = 1e-10,
     n_data: int | None = None,
     pad_to: int | None = None,
+    method: str = "levenberg_marquardt",
 ) -> FitResult:
     """Weighted least squares of ``problem`` over the ``free`` parameters (see the module docstring).
 
@@ -337,6 +367,7 @@ def least_squares(
     - ``n_data``: number of rows that carry data (default: every model row; rows of weight zero
       should not be counted).
     - ``pad_to``: pad the free set to this size (one compilation for several free-set sizes).
+    - ``method``: ``"levenberg_marquardt"`` (default) or ``"gauss_newton"`` (:data:`SOLVERS`).
 
     **Returns:** :class:`~ringfit.fit.result.FitResult` with ``theta`` (all parameters at the
     optimum), the model's aux in ``extra["aux"]`` and ``problem``. Never raises on
@@ -351,8 +382,10 @@ def least_squares(
         raise ValueError(f"theta0 has shape {theta0.shape}, coords {len(names)}")
     z0 = _start(problem, index, K, free_arrays, theta0[None])[0]
     leaves, treedef = jax.tree.flatten(data)
+    if method not in SOLVERS:
+        raise ValueError(f"method={method!r}; expected one of {list(SOLVERS)}")
     out = _solve(leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean, model=model, treedef=treedef,
-                 max_steps=int(max_steps), rtol=float(rtol), atol=float(atol))
+                 max_steps=int(max_steps), rtol=float(rtol), atol=float(atol), method=method)
     u_free, result, steps, res, jac, aux = out
     u_free, res, jac = np.asarray(u_free)[: len(free)], np.asarray(res), np.asarray(jac)[:, : len(free)]
     m = res.size - K
@@ -417,14 +450,24 @@ def least_squares_batch(
     rtol: float = 1e-10,
     atol: float = 1e-10,
     n_data: int | None = None,
+    warm_start: bool = False,
+    method: str = "levenberg_marquardt",
 ) -> BatchFitResult:
-    """B independent fits of one problem structure, vmapped in one compiled region.
+    """B fits of one problem structure in one compiled region: vmapped, or one after another warm-started.
 
-    Each fit is what :func:`least_squares` does for ``problem`` with the b-th data set
-    and the b-th start; the vmapped solver iterates until every fit has met its
-    tolerances (or ``max_steps``), so fits with similar starts (e.g. warm starts from a
-    neighbour) cost about as many steps as the slowest one. One compilation serves
-    every batch of the same size B and structure: pad the last batch.
+    Each fit is what :func:`least_squares` does for ``problem`` with the b-th data set.
+
+    - ``warm_start=False``: the fits are independent, each from its own start ``theta0[b]``,
+      vmapped. The vmapped solver iterates until every fit has met its tolerances (or
+      ``max_steps``), and every branch of the solver is evaluated for all of them, so a batch
+      costs about B × the slowest fit: best on an accelerator.
+    - ``warm_start=True``: the fits run in order in a ``lax.scan``, the free parameters of fit b
+      starting at fit b − 1's optimum (the first at ``theta0[0]``; a failed fit passes on its own
+      start); the fixed parameters come from ``theta0[b]``. For a sequence of similar data sets
+      (revolutions of a recording) this costs the sum of a few steps each with no Python in
+      between: best on a CPU.
+
+    One compilation serves every batch of the same size B and structure: pad the last batch.
 
     **Arguments:**
 
@@ -433,7 +476,7 @@ def least_squares_batch(
     - ``theta0``: ``(B, p)`` or ``(p,)`` starting values, natural units.
     - ``free``: names of the parameters to fit (the same for every fit).
     - ``data``: the model's data pytree with a leading axis B on every leaf.
-    - ``max_steps``, ``rtol``, ``atol``, ``n_data``: as :func:`least_squares`.
+    - ``max_steps``, ``rtol``, ``atol``, ``n_data``, ``method``: as :func:`least_squares`; ``warm_start``: see above.
 
     **Returns:** :class:`~ringfit.fit.result.BatchFitResult` (arrays with a leading axis B; no flag
     strings: check ``converged`` and ``at_bound``). Never raises on non-convergence.
@@ -450,9 +493,12 @@ def least_squares_batch(
     theta0 = np.broadcast_to(np.asarray(theta0, dtype=np.float64), (B, p)).copy()
     z0 = _start(problem, index, K, free_arrays, theta0)
     theta0_pad = np.concatenate([theta0, np.zeros((B, 1))], axis=1)
-    u, codes, steps, res, jac, aux = _solve_batch(leaves, z0, theta0_pad, free_arrays, W, mean,
-                                                   model=problem.model, treedef=treedef, max_steps=int(max_steps),
-                                                   rtol=float(rtol), atol=float(atol))
+    if method not in SOLVERS:
+        raise ValueError(f"method={method!r}; expected one of {list(SOLVERS)}")
+    solve = _solve_chain if warm_start else _solve_batch
+    u, codes, steps, res, jac, aux = solve(leaves, z0[0] if warm_start else z0, theta0_pad, free_arrays, W, mean,
+                                           model=problem.model, treedef=treedef, max_steps=int(max_steps),
+                                           rtol=float(rtol), atol=float(atol), method=method)
     u, res, jac, codes = np.asarray(u), np.asarray(res), np.asarray(jac), np.asarray(codes)
     coords = problem.coords
     theta = theta0.copy()
@@ -506,4 +552,4 @@ def sum_of_squares_batch(problem: Problem, thetas, chunk: int = 64) -> np.ndarra
     return np.concatenate(out)[:n]
 
 
-__all__ = ["least_squares", "least_squares_batch", "sum_of_squares_batch", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]
+__all__ = ["least_squares", "least_squares_batch", "SOLVERS", "sum_of_squares_batch", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]

@@ -683,8 +683,8 @@ def _finish(fit, profile, geometry, ring, curves, feature, amp, omega, omega_sou
 
 # ----------------------------------------------------------------------------- per revolution
 
-#: Revolutions fitted together (one vmapped solve; the last batch is padded).
-REVOLUTION_BATCH = 32
+#: Revolutions fitted in one call of the engine (one compiled scan or vmap; the last batch is padded).
+REVOLUTION_BATCH = 128
 #: Per-revolution Levenberg–Marquardt tolerances (the last step changes ln load by ≲ 1e-3, far more
 #: than the final error after it; per-revolution standard errors are ~0.3 %) and step cap.
 REVOLUTION_TOL = 1e-4
@@ -838,25 +838,40 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
 
 def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ring: RingParams, *,
                          settings: EstimateSettings = EstimateSettings(), batch: int = REVOLUTION_BATCH,
-                         progress: bool = False) -> RevolutionEstimates:
+                         mode: str = "chain", workers: int | None = None, progress: bool = False
+                         ) -> RevolutionEstimates:
     """Load and patch for every whole revolution (from :func:`recording_revolutions`).
 
     Each revolution's harmonics 2…k_max are fitted for the load, the gain and the angle offset,
     with the high-pass corner, tilt and k_trd fixed at ``reference`` (the fit to the averaged
     profile; the gain is free because the averaged profile of a recording whose load changes is not
     the profile of one load, and a gain fixed there would bias every revolution) and Ω from the
-    encoder per revolution. Revolutions are solved ``batch`` at a time by
-    :func:`ringfit.fit.engine.least_squares_batch` (one compilation), each batch started from the
-    previous batch's last revolution (warm start). The first batch is fitted twice: its residual
-    spectrum, averaged over its revolutions, weights every later fit (coloured noise, as in
-    :func:`estimate_load`). A smaller contact window (``settings.revolution_window_deg``, widened to
-    1.3 × the reference patch) makes each solve cheaper; revolutions whose patch comes within 1.5° of
-    it are refitted with ``settings.window_deg``.
+    encoder per revolution. Revolutions go ``batch`` at a time to
+    :func:`ringfit.fit.engine.least_squares_batch` (one compilation):
+
+    - ``mode="chain"`` (default; best on a CPU): in order, each fit warm-started from the previous
+      revolution's, the whole batch in one compiled ``lax.scan``; each batch continues from the
+      previous batch's last fit. ``workers`` (default: the usable CPUs) split the recording into
+      that many contiguous stretches fitted in parallel threads.
+    - ``mode="batch"``: each batch vmapped, every fit started from the previous batch's last one
+      (best on an accelerator; on a CPU every fit of a batch pays for the slowest).
+
+    Each fit is undamped Gauss–Newton (``method="gauss_newton"`` of the engine: from a neighbour's
+    optimum it stops after 3–4 steps); a fit that does not settle is redone alone with
+    Levenberg–Marquardt from the reference. The first batch is fitted twice: its residual spectrum, averaged over its revolutions, weights
+    every fit (coloured noise, as in :func:`estimate_load`). A smaller contact window
+    (``settings.revolution_window_deg``, widened to 1.3 × the reference patch) makes each solve
+    cheaper; a batch in which a patch comes within 1.5° of it is refitted with ``settings.window_deg``.
 
     **Returns:** :class:`RevolutionEstimates`.
     """
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
     from tqdm import tqdm
 
+    if mode not in ("chain", "batch"):
+        raise ValueError(f"mode={mode!r}; expected 'chain' or 'batch'")
     fit = reference.fit
     k_max = data.k_max
     if k_max != reference.k_max:
@@ -865,68 +880,90 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
     geometry = fit.problem.data.geometry
     half = max(abs(reference.patch["leading_deg"]), abs(reference.patch["trailing_deg"]))
     window = float(min(settings.window_deg, max(settings.revolution_window_deg, 1.3 * half)))
-    rev_settings = EstimateSettings(**{**settings.__dict__, "window_deg": window})
     drum = reference.drum_diameter_m
     response = np.asarray(data.response, dtype=np.float64)
     template = EstimateArrays(geometry=geometry, ring=ring, omega=np.ones(1), roads=flat_or_drum(drum, 1),
                               response=response[None], measured=np.zeros((1, 2 * K)), weight=np.ones((1, 2 * K)))
-    problems = {window: estimate_problem(template, rev_settings, k_max)}
+    problems = {window: estimate_problem(template, EstimateSettings(**{**settings.__dict__, "window_deg": window}),
+                                         k_max),
+                settings.window_deg: estimate_problem(template, settings, k_max)}
     free = (LOAD, GAIN, ANGLE_OFFSET)
-    theta = np.asarray(fit.theta, dtype=np.float64).copy()
     rows_all, omega_all = data.rows, 2 * math.pi * data.rotation_hz
     R = rows_all.shape[0]
+    fixed = jax.tree.map(lambda x: np.broadcast_to(np.asarray(x, dtype=np.float64), (batch,) + np.shape(x)).copy(),
+                         (as_traced(geometry), as_traced(ring), flat_or_drum(drum, 1), response[None]))
 
-    def bcast(x, B):
-        return np.broadcast_to(np.asarray(x, dtype=np.float64), (B,) + np.shape(x)).copy()
-
-    fixed = jax.tree.map(lambda x: bcast(x, batch), (as_traced(geometry), as_traced(ring), flat_or_drum(drum, 1),
-                                                     response[None]))
-
-    def solve(win, rows, omega, weight, theta0):
-        if win not in problems:
-            problems[win] = estimate_problem(template, settings, k_max)
+    def _arrays(take, weight):
         geo, rng, roads, resp = fixed
-        arrays = EstimateArrays(geometry=geo, ring=rng, omega=omega[:, None], roads=roads, response=resp,
-                                measured=rows[:, None], weight=weight[:, None])
-        return least_squares_batch(problems[win], theta0, free, arrays, max_steps=REVOLUTION_MAX_STEPS,
-                                   rtol=REVOLUTION_TOL, atol=REVOLUTION_TOL)
+        return EstimateArrays(geometry=geo, ring=rng, omega=omega_all[take][:, None], roads=roads, response=resp,
+                              measured=rows_all[take][:, None], weight=np.broadcast_to(weight, (batch, 1, 2 * K)))
 
-    weight_row = None
-    results = []
-    bar = tqdm(total=R, unit="rev", disable=not progress, desc="per-revolution fits")
-    for start in range(0, R, batch):
-        n = min(batch, R - start)
-        take = np.minimum(np.arange(start, start + batch), R - 1)  # the last batch repeats its last revolution
-        rows, omega = rows_all[take], omega_all[take]
-        theta0 = np.tile(theta, (batch, 1))
-        if weight_row is None:  # first batch: equal weights, then its residual spectrum
-            res = solve(window, rows, omega, np.ones((batch, 2 * K)), theta0)
-            resid = res.aux[:n, 0] - rows[:n]
-            sigma = smoothed_noise(np.sqrt(np.mean(resid**2, axis=0)))
-            weight_row = (1.0 / sigma) / np.mean(1.0 / sigma)
-        weight = np.tile(weight_row, (batch, 1))
-        res = solve(window, rows, omega, weight, theta0)
+    def solve(start, theta, weight, win):
+        """Fit revolutions start … start + batch − 1 (the last batch repeats its last revolution)."""
+        take = np.minimum(np.arange(start, start + batch), R - 1)
+        return least_squares_batch(problems[win], theta, free, _arrays(take, weight), max_steps=REVOLUTION_MAX_STEPS,
+                                   rtol=REVOLUTION_TOL, atol=REVOLUTION_TOL, warm_start=mode == "chain",
+                                   method="gauss_newton"), take
+
+    def fit_batch(start, theta, weight):
+        res, take = solve(start, theta, weight, window)
         patch = reference.curves.patch_at(res.values(LOAD))
-        edge = np.maximum(np.abs(patch["leading_deg"]), np.abs(patch["trailing_deg"]))
-        redo = np.flatnonzero(edge[:n] > window - 1.5) if window < settings.window_deg else np.zeros(0, int)
-        if redo.size:  # the patch outgrew the small window: refit with the full one
-            wide = solve(settings.window_deg, rows, omega, weight, res.theta)
+        win = window
+        if window < settings.window_deg and np.any(np.maximum(np.abs(patch["leading_deg"]),
+                                                              np.abs(patch["trailing_deg"])) > window - 1.5):
+            win = settings.window_deg
+            res, take = solve(start, res.theta[0] if mode == "chain" else res.theta, weight, win)
+        n = min(batch, R - start)
+        for b in np.flatnonzero(~(res.converged[:n] & np.all(np.isfinite(res.theta[:n]), axis=1))):
+            # Gauss–Newton did not settle: Levenberg–Marquardt from the reference, this revolution alone
+            one = least_squares_batch(problems[win], theta_ref, free, jax.tree.map(
+                lambda x: x[b : b + 1], _arrays(take, weight)), max_steps=settings.max_steps, rtol=REVOLUTION_TOL,
+                atol=REVOLUTION_TOL)
             for name in ("theta", "status", "iterations", "covariance_log", "stderr", "residuals", "chi2_raw",
                          "sigma_scale", "at_bound", "aux"):
-                getattr(res, name)[redo] = getattr(wide, name)[redo]
-        ok = res.converged[:n] & ~res.at_bound[:n, 0] & np.all(np.isfinite(res.theta[:n]), axis=1)
-        good = np.flatnonzero(ok)
-        if good.size:
-            theta = res.theta[good[-1]].copy()
-        lo, hi = res.interval(LOAD)
-        resid = res.aux[:n, 0] - rows[:n]
-        results.append(dict(load=res.values(LOAD)[:n], lo=lo[:n], hi=hi[:n], gain=res.values(GAIN)[:n],
-                            offset=np.degrees(res.values(ANGLE_OFFSET)[:n]),
-                            rms=np.sqrt(0.5 * np.sum(resid[:, :K] ** 2 + resid[:, K:] ** 2, axis=1)), ok=ok,
-                            iterations=res.iterations[:n]))
-        bar.update(n)
+                getattr(res, name)[b] = getattr(one, name)[0]
+        return res, take
+
+    # weights from the first batch's residual spectrum
+    theta_ref = np.asarray(fit.theta, dtype=np.float64).copy()
+    first, take = fit_batch(0, theta_ref, np.ones(2 * K))
+    n0 = min(batch, R)
+    sigma = smoothed_noise(np.sqrt(np.mean((first.aux[:n0, 0] - rows_all[take[:n0]]) ** 2, axis=0)))
+    weight = (1.0 / sigma) / np.mean(1.0 / sigma)
+
+    workers = max(1, min(int(workers or len(os.sched_getaffinity(0))), -(-R // batch)))
+    starts = np.arange(0, R, batch)
+    segments = np.array_split(starts, workers)
+    bar = tqdm(total=R, unit="rev", disable=not progress, desc="per-revolution fits")
+    results = {}
+
+    def run_segment(segment):
+        theta = theta_ref
+        for start in segment:
+            res, _ = fit_batch(int(start), theta, weight)
+            n = min(batch, R - int(start))
+            ok = res.converged[:n] & ~res.at_bound[:n, 0] & np.all(np.isfinite(res.theta[:n]), axis=1)
+            if ok.any():
+                theta = res.theta[np.flatnonzero(ok)[-1]].copy()
+            results[int(start)] = (res, n, ok)
+            bar.update(n)
+
+    if workers == 1:
+        run_segment(segments[0])
+    else:
+        with ThreadPoolExecutor(workers) as pool:
+            list(pool.map(run_segment, segments))
     bar.close()
-    cat = {key: np.concatenate([r[key] for r in results]) for key in results[0]}
+    parts = []
+    for start in starts:
+        res, n, ok = results[int(start)]
+        lo, hi = res.interval(LOAD)
+        resid = res.aux[:n, 0] - rows_all[start:start + n]
+        parts.append(dict(load=res.values(LOAD)[:n], lo=lo[:n], hi=hi[:n], gain=res.values(GAIN)[:n],
+                          offset=np.degrees(res.values(ANGLE_OFFSET)[:n]),
+                          rms=np.sqrt(0.5 * np.sum(resid[:, :K] ** 2 + resid[:, K:] ** 2, axis=1)), ok=ok,
+                          iterations=res.iterations[:n]))
+    cat = {key: np.concatenate([r[key] for r in parts]) for key in parts[0]}
     spacing = edge_peaks(rows_all[:, :K] + 1j * rows_all[:, K:], 2)[:, 2]
     return RevolutionEstimates(
         revolution=data.revolution, t_s=data.t_s, rotation_hz=data.rotation_hz, load_n=cat["load"], lo=cat["lo"],
@@ -937,7 +974,8 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
 
 def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
                        settings: EstimateSettings = EstimateSettings(), k_tread_in_file: bool = True,
-                       per_revolution: bool = True, batch: int = REVOLUTION_BATCH, progress: bool = False):
+                       per_revolution: bool = True, batch: int = REVOLUTION_BATCH, mode: str = "chain",
+                       workers: int | None = None, progress: bool = False):
     """The averaged and the per-revolution estimates of a continuous recording (one pass over it).
 
     The averaged profile (:func:`recording_revolutions`) is estimated like any profile
@@ -954,7 +992,8 @@ def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
                               noise_source="differences of successive revolutions / √(2·revolutions), in the fitted band")
     revs = None
     if per_revolution:
-        revs = estimate_revolutions(data, reference, ring, settings=settings, batch=batch, progress=progress)
+        revs = estimate_revolutions(data, reference, ring, settings=settings, batch=batch, mode=mode, workers=workers,
+                                    progress=progress)
     return reference, revs
 
 
