@@ -14,8 +14,8 @@ issue's targets:
    second high-pass stage, tread shear, a finite EA, χ < 1, a k_tread 10 % off) — load errors, coverage
    and whether the fit flags itself as poor.
 3. **Speed**: a synthetic drum recording at 100 km/h (14 revolutions/s, 25.6 kHz): revolutions/s of the
-   per-revolution fits, warm: a compiled warm-started chain (the default), vmapped batches, and one
-   Python-level engine call per revolution, for comparison; the pass over the recording, and the time for a 30-minute recording (measured on
+   per-revolution fits, warm: vmapped batches of 16 (the default), larger batches, compiled
+   warm-started chains (``lax.scan``), and one Python-level engine call per revolution, for comparison; the pass over the recording, and the time for a 30-minute recording (measured on
    ``--minutes`` of recording and extrapolated per revolution and per sample; ``--long`` synthesises
    and times a real 30-minute file instead, ~1.2 GB in a temporary folder).
 
@@ -229,26 +229,21 @@ def speed():
                 data.profile, GEOMETRY, RING, settings=SETTINGS, omega=2 * math.pi * float(np.mean(data.rotation_hz)),
                 omega_source="encoder", response=data.response, noise_per_angle=data.noise))
         R = data.rows.shape[0]
-        cores = len(os.sched_getaffinity(0))
 
         def fits(**kw):
             estimate_revolutions(data, ref, RING, settings=SETTINGS, **kw)  # warm-up (compilation)
             return cpu_and_wall(lambda: estimate_revolutions(data, ref, RING, settings=SETTINGS, **kw))
 
-        revs, c_fit, w_fit = fits(mode="chain", workers=1)
-        print(f"   per-revolution fits, one compiled warm-started chain per 128 revolutions (lax.scan), 1 thread: "
+        revs, c_fit, w_fit = fits(mode="batch", batch=16)
+        print(f"   per-revolution fits, vmapped batches of 16, each from the previous batch's last fit (the default): "
               f"{R / w_fit:5.0f} rev/s wall, {R / c_fit:5.0f} rev/s per CPU-second  (target ≥ 200 per core); "
-              f"{revs.converged.mean() * 100:.1f} % converged, median {np.median(revs.iterations):.0f} steps")
+              f"{revs.converged.mean() * 100:.1f} % converged, median {np.median(revs.iterations):.0f} Gauss–Newton steps")
         keep = (revs, c_fit, w_fit)
-        if cores > 1:
-            revs2, c2, w2 = fits(mode="chain", workers=cores)
-            print(f"   the same with {cores} threads (contiguous stretches): {R / w2:5.0f} rev/s wall, "
-                  f"{R / c2:5.0f} rev/s per CPU-second")
-            keep = (revs2, c2, w2)
-        for batch in (32, 128):
-            revs_b, c_b, w_b = fits(mode="batch", batch=batch, workers=1)
-            print(f"   vmapped batches of {batch:3d} (each fit from the previous batch's last): {R / w_b:5.0f} rev/s wall, "
-                  f"{R / c_b:5.0f} rev/s per CPU-second; median {np.median(revs_b.iterations):.0f} steps")
+        for mode, batch in (("batch", 64), ("chain", 32), ("chain", 128)):
+            revs_b, c_b, w_b = fits(mode=mode, batch=batch)
+            what = (f"vmapped batches of {batch}" if mode == "batch"
+                    else f"compiled warm-started chains of {batch} (lax.scan, each fit from the previous revolution's)")
+            print(f"   {what}: {R / w_b:5.0f} rev/s wall, {R / c_b:5.0f} rev/s per CPU-second")
         n_seq = min(R, 256)
         _, c_seq, w_seq = sequential_fits(data, ref, n_seq)
         print(f"   one least_squares call (Gauss–Newton) per revolution, warm-started from Python: {n_seq / w_seq:5.0f} rev/s wall, "

@@ -125,14 +125,23 @@ def test_laplace_interval_agrees_with_emcee(estimates, name):
     assert row["hi"] == pytest.approx(est.hi, abs=0.3 * half)
 
 
-def test_per_revolution_estimates_follow_a_load_step():
+STEP = 0.65
+
+
+@pytest.fixture(scope="module")
+def step_recording():
+    """60 km/h on the drum, the load stepping from 3.0 to 5.2 kN at 0.65 s; a quantised absolute encoder."""
     from ringfit.synth.cleat import CleatBench
 
-    step = 0.65
-    bench = CleatBench(speed_kmh=60.0, load_n=3000.0, load_steps=((step, 5200.0),), fs_hz=6144.0, noise_ms2=4.0,
+    bench = CleatBench(speed_kmh=60.0, load_n=3000.0, load_steps=((STEP, 5200.0),), fs_hz=6144.0, noise_ms2=4.0,
                        highpass_hz=0.5, encoder_offset_deg=-97.0, seed=3)
-    record = bench.record(1.4, cleat=False)
-    ref, revs = estimate_recording(record, GEOMETRY, RING, settings=SETTINGS, batch=16)
+    return bench, bench.record(1.4, cleat=False)
+
+
+def test_per_revolution_estimates_follow_a_load_step(step_recording):
+    bench, record = step_recording
+    step = STEP
+    ref, revs = estimate_recording(record, GEOMETRY, RING, settings=SETTINGS)
     # the averaged profile mixes two loads: the fit says so instead of pretending
     assert any(f.startswith("poor fit") for f in ref.flags)
     assert len(revs) >= 9 and revs.converged.all()
@@ -150,9 +159,40 @@ def test_per_revolution_estimates_follow_a_load_step():
     before = engine._solve_batch._cache_size()
     data = recording_revolutions(record, k_max=SETTINGS.k_max)
     data.rows = data.rows[::-1].copy()
-    again = estimate_revolutions(data, ref, RING, settings=SETTINGS, batch=16)
+    again = estimate_revolutions(data, ref, RING, settings=SETTINGS)
     assert engine._solve_batch._cache_size() == before
     assert np.allclose(np.sort(again.load_n), np.sort(revs.load_n), rtol=2e-3)
+
+
+def test_without_an_encoder_the_angle_comes_from_the_patch_passages(step_recording):
+    from ringfit.io.continuous import ContinuousRecord
+    from ringfit.targets.rolling_profile import patch_passages
+
+    bench, record = step_recording
+    condition = {k: v for k, v in record.condition.items() if k in ("pressure_bar", "drum_diameter_m")}
+    bare = ContinuousRecord(acc=record.acc, axes=record.axes, fs_hz=record.fs_hz, condition=condition,
+                            source="no-encoder")
+    passages = patch_passages(bare, chunk=5000) / record.fs_hz
+    # the sensor is at φ = 0 (straight down) at t = (360 k − φ0)/Ω
+    k = np.round((bench.start_angle_deg + np.degrees(bench.omega) * passages) / 360.0)
+    truth = (360.0 * k - bench.start_angle_deg) / np.degrees(bench.omega)
+    assert passages.size >= 10 and np.all(np.abs(passages - truth) < 2e-4)  # 0.2 ms: 0.6° at 60 km/h
+    ref, revs = estimate_recording(bare, GEOMETRY, RING, settings=SETTINGS)
+    assert ref.rotation_source.startswith("patch passages")
+    assert ref.rotation_hz == pytest.approx(bench.rotation_hz, rel=1e-3)
+    load = bench.load_at(revs.t_s)
+    clean = np.abs(revs.t_s - STEP) > 0.6 / bench.rotation_hz
+    assert revs.converged.all() and np.all(np.abs(revs.load_n[clean] / load[clean] - 1) < 0.015)
+
+
+def test_an_inverted_radial_channel_is_refused(estimates):
+    from ringfit.errors import InputError
+
+    prof, _ = synthetic(*CASES["flat"])
+    flipped = Profile(prof.angle_deg, -prof.acc_radial_ms2, prof.acc_tangential_ms2, condition=prof.condition,
+                      source="flipped.profile.csv")
+    with pytest.raises(InputError, match="flipped.profile.csv.*inverted"):
+        estimate_load(flipped, GEOMETRY, RING, settings=SETTINGS)
 
 
 def test_estimates_reuse_the_compiled_fit(estimates):

@@ -19,7 +19,7 @@ def register(sub) -> None:
                     "high-pass corner, sensor tilt and angle offset as nuisances; 95 % Laplace interval; the "
                     "contact patch of the model at that load; the classic edge-peak method beside it. For a "
                     "continuous recording the averaged profile and, with --per-revolution or --plot, every "
-                    "revolution. Writes NAME.estimate.json (docs/formats.md §7); exit 1 if the fit does not "
+                    "revolution (the angle from the encoder, or from the patch passages when there is none). Writes NAME.estimate.json (docs/formats.md §7); exit 1 if the fit does not "
                     "converge (nothing written).")
     p.add_argument("input", type=Path, help="*.profile.csv (+ .json sidecar, load_n not needed) or a continuous "
                                             "*.records.npz")

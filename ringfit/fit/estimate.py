@@ -530,6 +530,21 @@ def _ring_for(ring: RingParams, geometry: TyreGeometry, profile) -> tuple[TyreGe
     return geometry, notes
 
 
+def check_sign(amplitudes, curves: LoadCurves, source) -> None:
+    """Refuse a radial reading that is the model turned upside down (positive outward, docs/formats.md §3).
+
+    The circular cross-correlation of the measured and the model reading (4 kN, harmonics 2…k_max) is
+    largest in magnitude at the patch's shift; a negative value there means the sign convention is
+    inverted. **Raises** :class:`InputError` naming ``source``.
+    """
+    model = curves.amplitudes[int(np.argmin(np.abs(np.log(curves.load_n / 4000.0))))]
+    xcorr = grid_signal(np.asarray(amplitudes) * np.conj(model), 2, 1024)
+    peak = xcorr[int(np.argmax(np.abs(xcorr)))]
+    if peak < 0:
+        raise InputError("the radial reading looks inverted (the contact patch shows as a peak): docs/formats.md §3 "
+                         "wants acc_radial_ms2 positive toward the wheel centre", source=source or None)
+
+
 def profile_amplitudes(profile, n_grid: int, k_max: int) -> np.ndarray:
     """Radial harmonic amplitudes ``(K,)`` (k = 2…k_max) of a profile (band-limited, trapezoid weights)."""
     from ringfit.io.profiles import resample_profile
@@ -575,6 +590,7 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
         omega, omega_source, notes = rotation_from_profile(profile, geometry, ring, 4000.0, settings)
         flags += notes
     curves = load_curves(geometry, ring, omega, drum, settings=settings, k_max=k_max)
+    check_sign(amp, curves, profile.source)
     feature = feature_estimate(amp, curves, float(geometry.outer_radius))
 
     # starting values: the feature method's load and patch position, gain from a linear fit
@@ -683,8 +699,9 @@ def _finish(fit, profile, geometry, ring, curves, feature, amp, omega, omega_sou
 
 # ----------------------------------------------------------------------------- per revolution
 
-#: Revolutions fitted in one call of the engine (one compiled scan or vmap; the last batch is padded).
-REVOLUTION_BATCH = 128
+#: Revolutions fitted in one call of the engine (one compiled vmap or scan; the last batch is padded).
+#: 16 is the fastest on a CPU (benchmarks/bench_estimate.py); an accelerator wants more.
+REVOLUTION_BATCH = 16
 #: Per-revolution Levenberg–Marquardt tolerances (the last step changes ln load by ≲ 1e-3, far more
 #: than the final error after it; per-revolution standard errors are ~0.3 %) and step cap.
 REVOLUTION_TOL = 1e-4
@@ -763,6 +780,7 @@ class RecordingRevolutions:
     response: np.ndarray
     k_max: int
     noise: np.ndarray | None = None
+    rotation_source: str = "encoder (mean over the recording)"
 
 
 def first_rotation_hz(record, samples: int = 1 << 18) -> float:
@@ -783,19 +801,28 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     above the samples per revolution, so that every sample takes part), its harmonics 2…k_max, and
     their average and spread over revolutions as a profile.
 
-    **Raises** :class:`InputError` without an encoder or a radial axis, with fewer than 2 whole
-    revolutions, or with too few samples per revolution to resolve harmonic k_max.
+    The sensor angle comes from the encoder; a recording without one gets it from the patch
+    passages in the radial reading (:func:`ringfit.targets.rolling_profile.patch_passages`, one more
+    pass): φ = 0 at each passage, linear in time in between (the angle offset then takes up where
+    the dip sits relative to the patch centre).
+
+    **Raises** :class:`InputError` without a radial axis, without an encoder and without clear patch
+    passages, with fewer than 2 whole revolutions, or with too few samples per revolution.
     """
     from ringfit.io.profiles import Profile
-    from ringfit.targets.rolling_profile import revolution_grids
+    from ringfit.targets.rolling_profile import patch_passages, revolution_grids
 
     if "radial" not in record.axes:
         raise InputError(f"no 'radial' axis (have: {', '.join(record.axes)}); the estimate reads the radial channel",
                          source=record.source)
-    if not record.has_encoder:
-        raise InputError("no encoder channel ('encoder_angle_deg' or 'encoder_pulses'); the estimate needs the "
-                         "sensor angle of every sample", source=record.source)
-    spr = record.fs_hz / first_rotation_hz(record)
+    passages = None
+    if record.has_encoder:
+        spr = record.fs_hz / first_rotation_hz(record)
+        source = "encoder (mean over the recording)"
+    else:  # the sensor angle from the patch passages in the reading itself
+        passages = patch_passages(record, progress=progress)
+        spr = float(np.median(np.diff(passages)))
+        source = "patch passages in the radial reading (no encoder; mean over the recording)"
     if spr < 4 * (k_max + 2):
         raise InputError(f"{spr:.0f} samples per revolution are too few to resolve harmonic {k_max} "
                          f"(need ≥ {4 * (k_max + 2)})", source=record.source)
@@ -803,7 +830,7 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     rows, rev, t_s, rate = [], [], [], []
     s1, s2, sd = np.zeros(points), np.zeros(points), np.zeros(points)
     previous = None
-    for block in revolution_grids(record, points=points, axes=("radial",), progress=progress):
+    for block in revolution_grids(record, points=points, axes=("radial",), passages=passages, progress=progress):
         values = block.values[0]
         rows.append(harmonic_rows(harmonic_amplitudes(values, 2, k_max)))
         rev.append(block.revolution)
@@ -833,13 +860,12 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     k = np.arange(2, k_max + 1)
     return RecordingRevolutions(rows=np.concatenate(rows), revolution=np.concatenate(rev), t_s=np.concatenate(t_s),
                                 rotation_hz=rate, profile=profile, response=np.sinc(k / spr) ** 2, k_max=k_max,
-                                noise=noise / math.sqrt(R))
+                                noise=noise / math.sqrt(R), rotation_source=source)
 
 
 def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ring: RingParams, *,
                          settings: EstimateSettings = EstimateSettings(), batch: int = REVOLUTION_BATCH,
-                         mode: str = "chain", workers: int | None = None, progress: bool = False
-                         ) -> RevolutionEstimates:
+                         mode: str = "batch", progress: bool = False) -> RevolutionEstimates:
     """Load and patch for every whole revolution (from :func:`recording_revolutions`).
 
     Each revolution's harmonics 2…k_max are fitted for the load, the gain and the angle offset,
@@ -849,12 +875,14 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
     encoder per revolution. Revolutions go ``batch`` at a time to
     :func:`ringfit.fit.engine.least_squares_batch` (one compilation):
 
-    - ``mode="chain"`` (default; best on a CPU): in order, each fit warm-started from the previous
-      revolution's, the whole batch in one compiled ``lax.scan``; each batch continues from the
-      previous batch's last fit. ``workers`` (default: the usable CPUs) split the recording into
-      that many contiguous stretches fitted in parallel threads.
-    - ``mode="batch"``: each batch vmapped, every fit started from the previous batch's last one
-      (best on an accelerator; on a CPU every fit of a batch pays for the slowest).
+    - ``mode="batch"`` (default): each batch vmapped, every fit warm-started from the previous
+      batch's last revolution (on a CPU, batches of 16 are ~20 % faster than the chain: the small
+      matrix work vectorises across the batch, and Gauss–Newton takes 3–4 steps in every fit).
+    - ``mode="chain"``: in order, each fit warm-started from the previous revolution's, the whole
+      batch in one compiled ``lax.scan``; each batch continues from the previous batch's last fit.
+
+    (Fitting stretches of the recording in parallel threads deadlocked XLA's CPU runtime here:
+    one thread; on a CPU the batches run at ~600 revolutions per second.)
 
     Each fit is undamped Gauss–Newton (``method="gauss_newton"`` of the engine: from a neighbour's
     optimum it stops after 3–4 steps); a fit that does not settle is redone alone with
@@ -865,9 +893,6 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
 
     **Returns:** :class:`RevolutionEstimates`.
     """
-    import os
-    from concurrent.futures import ThreadPoolExecutor
-
     from tqdm import tqdm
 
     if mode not in ("chain", "batch"):
@@ -931,28 +956,18 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
     sigma = smoothed_noise(np.sqrt(np.mean((first.aux[:n0, 0] - rows_all[take[:n0]]) ** 2, axis=0)))
     weight = (1.0 / sigma) / np.mean(1.0 / sigma)
 
-    workers = max(1, min(int(workers or len(os.sched_getaffinity(0))), -(-R // batch)))
     starts = np.arange(0, R, batch)
-    segments = np.array_split(starts, workers)
     bar = tqdm(total=R, unit="rev", disable=not progress, desc="per-revolution fits")
     results = {}
-
-    def run_segment(segment):
-        theta = theta_ref
-        for start in segment:
-            res, _ = fit_batch(int(start), theta, weight)
-            n = min(batch, R - int(start))
-            ok = res.converged[:n] & ~res.at_bound[:n, 0] & np.all(np.isfinite(res.theta[:n]), axis=1)
-            if ok.any():
-                theta = res.theta[np.flatnonzero(ok)[-1]].copy()
-            results[int(start)] = (res, n, ok)
-            bar.update(n)
-
-    if workers == 1:
-        run_segment(segments[0])
-    else:
-        with ThreadPoolExecutor(workers) as pool:
-            list(pool.map(run_segment, segments))
+    theta = theta_ref
+    for start in starts:
+        res, _ = fit_batch(int(start), theta, weight)
+        n = min(batch, R - int(start))
+        ok = res.converged[:n] & ~res.at_bound[:n, 0] & np.all(np.isfinite(res.theta[:n]), axis=1)
+        if ok.any():
+            theta = res.theta[np.flatnonzero(ok)[-1]].copy()
+        results[int(start)] = (res, n, ok)
+        bar.update(n)
     bar.close()
     parts = []
     for start in starts:
@@ -974,8 +989,8 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
 
 def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
                        settings: EstimateSettings = EstimateSettings(), k_tread_in_file: bool = True,
-                       per_revolution: bool = True, batch: int = REVOLUTION_BATCH, mode: str = "chain",
-                       workers: int | None = None, progress: bool = False):
+                       per_revolution: bool = True, batch: int = REVOLUTION_BATCH, mode: str = "batch",
+                       progress: bool = False):
     """The averaged and the per-revolution estimates of a continuous recording (one pass over it).
 
     The averaged profile (:func:`recording_revolutions`) is estimated like any profile
@@ -987,12 +1002,12 @@ def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
     data = recording_revolutions(record, k_max=settings.k_max, progress=progress)
     rate = float(np.mean(data.rotation_hz))
     reference = estimate_load(data.profile, geometry, ring, settings=settings, k_tread_in_file=k_tread_in_file,
-                              omega=2 * math.pi * rate, omega_source="encoder (mean over the recording)",
+                              omega=2 * math.pi * rate, omega_source=data.rotation_source,
                               response=data.response, noise_per_angle=data.noise,
                               noise_source="differences of successive revolutions / √(2·revolutions), in the fitted band")
     revs = None
     if per_revolution:
-        revs = estimate_revolutions(data, reference, ring, settings=settings, batch=batch, mode=mode, workers=workers,
+        revs = estimate_revolutions(data, reference, ring, settings=settings, batch=batch, mode=mode,
                                     progress=progress)
     return reference, revs
 
