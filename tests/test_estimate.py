@@ -164,6 +164,24 @@ def test_per_revolution_estimates_follow_a_load_step(step_recording):
     assert np.allclose(np.sort(again.load_n), np.sort(revs.load_n), rtol=2e-3)
 
 
+def test_per_revolution_fits_that_do_not_settle_are_redone(step_recording, monkeypatch):
+    """Gauss–Newton capped at one step settles nowhere: every revolution goes to Levenberg–Marquardt alone,
+    reusing the averaged profile's compiled fit."""
+    import ringfit.fit.estimate as estimate
+
+    bench, record = step_recording
+    data = recording_revolutions(record, k_max=SETTINGS.k_max)
+    ref = estimate_load(data.profile, GEOMETRY, RING, settings=SETTINGS, omega=2 * math.pi * data.rotation_hz.mean(),
+                        omega_source="encoder", response=data.response, noise_per_angle=data.noise)
+    before = engine._solve._cache_size()
+    monkeypatch.setattr(estimate, "REVOLUTION_MAX_STEPS", 1)
+    revs = estimate_revolutions(data, ref, RING, settings=SETTINGS)
+    assert engine._solve._cache_size() == before
+    assert revs.converged.all() and np.all(revs.iterations > 1)
+    clean = np.abs(revs.t_s - STEP) > 0.6 / bench.rotation_hz
+    assert np.all(np.abs(revs.load_n[clean] / bench.load_at(revs.t_s[clean]) - 1) < 0.015)
+
+
 def test_without_an_encoder_the_angle_comes_from_the_patch_passages(step_recording):
     from ringfit.io.continuous import ContinuousRecord
     from ringfit.targets.rolling_profile import patch_passages

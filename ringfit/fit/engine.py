@@ -522,10 +522,10 @@ def least_squares_batch(
     at_bound = ((np.isfinite(lo_u) & (u <= lo_u + 1e-6 * span)) | (np.isfinite(hi_u) & (u >= hi_u - 1e-6 * span)))
     names = {c: solver_status(c)[0] for c in np.unique(codes)}
     status = np.array([names[c] for c in codes])
-    return BatchFitResult(names=free, coords=tuple(coords), theta=theta, status=status, iterations=np.asarray(steps),
+    return BatchFitResult(names=free, coords=tuple(coords), theta=theta, status=status, iterations=np.array(steps),
                           stderr=stderr, covariance_log=cov, residuals=res[:, :m] / scale[:, None], chi2_raw=chi2,
                           sigma_scale=s if problem.sigma == "estimate" else np.ones(B), at_bound=at_bound,
-                          aux=jax.tree.map(np.asarray, aux), n_data=rows)
+                          aux=jax.tree.map(np.array, aux), n_data=rows)
 
 
 @functools.partial(jax.jit, static_argnames=("model", "treedef"))

@@ -70,8 +70,8 @@ previous one).
 
 from __future__ import annotations
 
+import dataclasses
 import math
-import warnings
 from dataclasses import dataclass, field
 
 import equinox as eqx
@@ -517,7 +517,7 @@ def rotation_from_profile(profile, geometry: TyreGeometry, ring: RingParams, loa
     return omega, f"speed_kmh / R_e (nominal speed, R_e = {r_e:.4f} m)", [msg]
 
 
-def _ring_for(ring: RingParams, geometry: TyreGeometry, profile) -> tuple[TyreGeometry, list[str]]:
+def _geometry_at_pressure(geometry: TyreGeometry, profile) -> tuple[TyreGeometry, list[str]]:
     """The geometry at the profile's pressure (with a warning when it differs from the tyre file's by > 5 %)."""
     notes = []
     pb = profile.condition.get("pressure_bar")
@@ -576,7 +576,7 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
 
     **Returns:** :class:`LoadEstimate`. Never raises on non-convergence (check ``converged``).
     """
-    geometry, flags = _ring_for(ring, geometry, profile)
+    geometry, flags = _geometry_at_pressure(geometry, profile)
     N = len(profile)
     k_max = int(min(settings.k_max, (N - 1) // 2 - 1, settings.n_grid // 2 - 2))
     if k_max < 8:
@@ -593,7 +593,7 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
     check_sign(amp, curves, profile.source)
     feature = feature_estimate(amp, curves, float(geometry.outer_radius))
 
-    # starting values: the feature method's load and patch position, gain from a linear fit
+    # starting values: the feature method's load and patch position, the gain from the load curve's reading
     load0 = feature.load_n if math.isfinite(feature.load_n) else 4000.0
     offset0 = 0.0
     if math.isfinite(feature.leading_deg) and math.isfinite(feature.trailing_deg):
@@ -629,12 +629,13 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
     problem = estimate_problem(arrays, settings, k_max, prior)
     fit = least_squares(problem, first.theta, tuple(free), max_steps=settings.max_steps, rtol=settings.rtol,
                         atol=settings.atol)
-    return _finish(fit, profile, geometry, ring, curves, feature, amp, omega, omega_source, flags, k_max, drum,
-                   settings, noise_per_angle, noise_source)
+    return _finish(fit, profile, curves, feature, amp, omega, omega_source, flags, k_max, drum, settings,
+                   noise_per_angle, noise_source)
 
 
-def _finish(fit, profile, geometry, ring, curves, feature, amp, omega, omega_source, flags, k_max, drum, settings,
+def _finish(fit, profile, curves, feature, amp, omega, omega_source, flags, k_max, drum, settings,
             noise_per_angle, noise_source=None) -> LoadEstimate:
+    """The :class:`LoadEstimate` of a fit: interval, patch, fit quality, flags, nuisances."""
     load = fit.values[LOAD]
     lo, hi = fit.interval(LOAD)
     model_rows = np.asarray(fit.extra["aux"])[0]
@@ -702,8 +703,9 @@ def _finish(fit, profile, geometry, ring, curves, feature, amp, omega, omega_sou
 #: Revolutions fitted in one call of the engine (one compiled vmap or scan; the last batch is padded).
 #: 16 is the fastest on a CPU (benchmarks/bench_estimate.py); an accelerator wants more.
 REVOLUTION_BATCH = 16
-#: Per-revolution Levenberg–Marquardt tolerances (the last step changes ln load by ≲ 1e-3, far more
-#: than the final error after it; per-revolution standard errors are ~0.3 %) and step cap.
+#: Per-revolution Gauss–Newton tolerances (Cauchy test on the solver coordinates and the residual rows;
+#: near the optimum the steps shrink fast, so the error left after the last step is far below the
+#: per-revolution standard error of ~0.2–0.3 %) and step cap.
 REVOLUTION_TOL = 1e-4
 REVOLUTION_MAX_STEPS = 30
 
@@ -915,7 +917,7 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
     free = (LOAD, GAIN, ANGLE_OFFSET)
     rows_all, omega_all = data.rows, 2 * math.pi * data.rotation_hz
     R = rows_all.shape[0]
-    fixed = jax.tree.map(lambda x: np.broadcast_to(np.asarray(x, dtype=np.float64), (batch,) + np.shape(x)).copy(),
+    fixed = jax.tree.map(lambda x: np.broadcast_to(np.asarray(x), (batch,) + np.shape(x)).copy(),
                          (as_traced(geometry), as_traced(ring), flat_or_drum(drum, 1), response[None]))
 
     def _arrays(take, weight):
@@ -940,13 +942,17 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
             res, take = solve(start, res.theta[0] if mode == "chain" else res.theta, weight, win)
         n = min(batch, R - start)
         for b in np.flatnonzero(~(res.converged[:n] & np.all(np.isfinite(res.theta[:n]), axis=1))):
-            # Gauss–Newton did not settle: Levenberg–Marquardt from the reference, this revolution alone
-            one = least_squares_batch(problems[win], theta_ref, free, jax.tree.map(
-                lambda x: x[b : b + 1], _arrays(take, weight)), max_steps=settings.max_steps, rtol=REVOLUTION_TOL,
-                atol=REVOLUTION_TOL)
-            for name in ("theta", "status", "iterations", "covariance_log", "stderr", "residuals", "chi2_raw",
-                         "sigma_scale", "at_bound", "aux"):
-                getattr(res, name)[b] = getattr(one, name)[0]
+            # Gauss–Newton did not settle: Levenberg–Marquardt from the reference, this revolution alone (the
+            # averaged profile's compiled fit: same model, free set padded to its size)
+            alone = dataclasses.replace(problems[settings.window_deg],
+                                        data=as_traced(jax.tree.map(lambda x: x[b], _arrays(take, weight))))
+            one = least_squares(alone, theta_ref, free, max_steps=settings.max_steps, rtol=settings.rtol,
+                                atol=settings.atol, pad_to=len(fit.names))
+            res.theta[b], res.status[b], res.iterations[b] = one.theta, one.status, one.iterations
+            res.covariance_log[b], res.stderr[b] = one.covariance_log, [one.stderr[k] for k in free]
+            res.residuals[b], res.chi2_raw[b] = one.residuals, one.extra["chi2_raw"]
+            res.sigma_scale[b], res.aux[b] = one.extra["sigma_scale"], np.asarray(one.extra["aux"])
+            res.at_bound[b] = [any(f.startswith(k) and "at the bound" in f for f in one.flags) for k in free]
         return res, take
 
     # weights from the first batch's residual spectrum
