@@ -36,7 +36,8 @@ time records, NumPy only (``ringfit ssi``, ``frf``, ``profile``, ``cleat``):
     read_case, Case, diagnose, Diagnosis, read_diagnosis
 
 **State estimation** — load and contact patch from the sensor
-(``ringfit estimate``): not yet in this package (issue 15).
+(``ringfit estimate``):
+    estimate_load, LoadEstimate, estimate_recording, RevolutionEstimates, EstimateSettings
 
 **Batch** — many inputs as tasks on dask.distributed (``ringfit batch``,
 ``campaign``; ``pip install 'ringfit[batch]'``):
@@ -145,8 +146,11 @@ _EXPORTS = {
     "Diagnosis": "ringfit.gap.diagnosis",
     "read_diagnosis": "ringfit.gap.diagnosis",
     # state estimation
-    # TODO(issue 15): export estimate_load (and its result type) here and list it under
-    # "State estimation" in the docstring once ringfit/fit/estimate.py is on main.
+    "estimate_load": "ringfit.fit.estimate",
+    "LoadEstimate": "ringfit.fit.estimate",
+    "estimate_recording": "ringfit.fit.estimate",
+    "RevolutionEstimates": "ringfit.fit.estimate",
+    "EstimateSettings": "ringfit.fit.estimate",
     # batch
     "Task": "ringfit.batch",
     "TaskResult": "ringfit.batch",

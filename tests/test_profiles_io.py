@@ -59,7 +59,7 @@ def test_omega_from_encoder_or_rolling_radius():
         ("nonnumeric", "row 4, column 'acc_radial_ms2'.*not a number"),
         ("range", "outside \\[-180, 180\\)"),
         ("no_sidecar", "missing sidecar"),
-        ("sidecar_field", "missing field 'load_n'"),
+        ("sidecar_field", "missing field 'speed_kmh'"),
         ("sidecar_value", "'pressure_bar'.*Pa"),
         ("short", "at least 16"),
     ],
@@ -83,7 +83,7 @@ def test_bad_profiles_raise_one_line_input_errors(tmp_path, case, match):
     elif case == "no_sidecar":
         condition = None
     elif case == "sidecar_field":
-        del condition["load_n"]
+        del condition["speed_kmh"]
     elif case == "sidecar_value":
         condition["pressure_bar"] = 220000
     elif case == "short":
@@ -104,3 +104,14 @@ def test_resampling_is_exact_for_band_limited_profiles_with_offset():
     off = 1.5
     shifted = resample_profile(prof, 256, offset_deg=off)
     np.testing.assert_allclose(shifted[0], 3.0 * np.cos(2 * (grid - np.radians(off))) + 1.0, atol=1e-12)
+
+
+def test_a_sidecar_without_load_reads_but_its_load_is_an_error_naming_the_file(tmp_path):
+    """``ringfit estimate`` reads profiles whose load is unknown; every command that needs it still fails."""
+    condition = dict(CONDITION)
+    del condition["load_n"]
+    prof = read_profile(write_raw(tmp_path, good_rows(), "angle_deg,acc_radial_ms2,acc_tangential_ms2", condition))
+    assert "load_n" not in prof.condition and prof.speed_kmh == 30.0
+    with pytest.raises(InputError, match="run.profile.*missing field 'load_n'") as info:
+        prof.load_n
+    assert "\n" not in str(info.value)

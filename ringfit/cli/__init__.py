@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     "ringfit.cli.example",
     "ringfit.cli.batch",
     "ringfit.cli.campbell",
+    "ringfit.cli.estimate",
 )
 
 

@@ -23,8 +23,8 @@ coordinated — handed to :func:`least_squares`:
   correlated); its marginal over the free parameters enters as whitened residual
   rows ``W (u − mean)``.
 
-The solve is one ``eqx.filter_jit`` region: optimistix Levenberg–Marquardt with
-an SVD linear solve, the model linearised once per step by a forward-mode pass
+The solve is one ``eqx.filter_jit`` region: optimistix Levenberg–Marquardt (or,
+on request, undamped Gauss–Newton) with an SVD linear solve, the model linearised once per step by a forward-mode pass
 (primal and k tangents) whose Jacobian the solver then reuses as a dense matrix,
 and the final residuals, Jacobian and ``aux`` at the optimum. Everything after it
 (covariance, standard errors, flags) is NumPy on small arrays:
@@ -53,7 +53,8 @@ import numpy as np
 import optimistix as optx
 
 from ringfit.errors import InputError
-from ringfit.fit.result import FitResult, covariance_from_jacobian, parameter_flags, solver_flags, solver_status
+from ringfit.fit.result import (BatchFitResult, FitResult, covariance_batch, covariance_from_jacobian, parameter_flags,
+                                solver_flags, solver_status)
 
 LOG, LINEAR = "log", "linear"
 
@@ -246,11 +247,19 @@ def _dense(model, data, theta0, free, prior_w, prior_mean):
 STALL_STEPS = 4
 
 
-#: Diagonal of JᵀJ at the start in the solver's scaled variables (see :func:`_solve`).
+#: Diagonal of JᵀJ at the start in the solver's scaled variables (see :func:`_solve_one`).
 JTJ_DIAGONAL = 1e3
 #: Static cap on solver steps; the step limit of a call is traced (``least_squares(max_steps=…)``),
 #: so every limit shares one compiled solve.
 STEP_CAP = 100_000
+
+
+def _limited_terminate(done, result, state, args):
+    """Stop at the traced step limit ``args`` and, after two accepted steps, after STALL_STEPS rejections."""
+    stalled = (state.num_accepted_steps >= 2) & (state.num_steps_since_acceptance >= STALL_STEPS)
+    limit = (state.num_steps >= jnp.maximum(args, 1)) & ~(done | stalled)
+    result = optx.RESULTS.where(limit & (args > 0), optx.RESULTS.nonlinear_max_steps_reached, result)
+    return done | stalled | limit, result
 
 
 class _LevenbergMarquardt(optx.LevenbergMarquardt):
@@ -258,7 +267,7 @@ class _LevenbergMarquardt(optx.LevenbergMarquardt):
 
     - The step limit is ``args`` (a traced integer): reaching it without convergence
       reports ``nonlinear_max_steps_reached``, as optimistix's own ``max_steps`` does.
-      A limit of 1 evaluates the residuals, Jacobian and aux at the start and stops
+      A limit of 0 evaluates the residuals, Jacobian and aux at the start and stops
       (:func:`evaluate`).
     - Near the optimum of a model that is smooth only to rounding (the contact solve's
       active set, float64 sums over thousands of rows) every further Gauss–Newton step
@@ -270,28 +279,44 @@ class _LevenbergMarquardt(optx.LevenbergMarquardt):
 
     def terminate(self, fn, y, args, options, state, tags):
         done, result = super().terminate(fn, y, args, options, state, tags)
-        stalled = (state.num_accepted_steps >= 2) & (state.num_steps_since_acceptance >= STALL_STEPS)
-        limit = (state.num_steps >= args) & ~(done | stalled)
-        result = optx.RESULTS.where(limit & (args > 1), optx.RESULTS.nonlinear_max_steps_reached, result)
-        return done | stalled | limit, result
+        return _limited_terminate(done, result, state, args)
 
 
-@functools.partial(jax.jit, static_argnames=("model", "treedef", "rtol", "atol"))
-def _solve(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, *, model, treedef, rtol, atol):
-    """The whole fit in one compiled region; ``data`` arrives as flat leaves (fast dispatch)."""
+class _GaussNewton(optx.GaussNewton):
+    """optimistix Gauss–Newton with the same traced step limit (every step is accepted)."""
+
+    def terminate(self, fn, y, args, options, state, tags):
+        done, result = super().terminate(fn, y, args, options, state, tags)
+        return _limited_terminate(done, result, state, args)
+
+
+#: Solvers of :func:`least_squares`: Levenberg–Marquardt (the default; trust region, robust from far
+#: away) and undamped Gauss–Newton (every step taken: for well-started fits, e.g. warm-started
+#: sequences, it stops as soon as the steps are small, where Levenberg–Marquardt may spend steps
+#: rejecting round-off-sized trial steps before its tolerance test runs).
+SOLVERS = {"levenberg_marquardt": _LevenbergMarquardt, "gauss_newton": _GaussNewton}
+
+
+def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, *, model, treedef, rtol, atol,
+               method="levenberg_marquardt"):
+    """One fit (traced): ``data`` arrives as flat leaves (fast dispatch); ``max_steps`` is traced."""
     data = jax.tree.unflatten(treedef, leaves)
     free = _Free(*free_arrays)
     fn = _dense(model, data, theta0, free, prior_w, prior_mean)
-    # the solver works on s = d·z with d ∝ the Jacobian column norms at the start (Marquardt's scaling,
-    # scipy's x_scale="jac"): the damping then acts alike on every direction; the diagonal of JᵀJ in s
-    # is JTJ_DIAGONAL, so optimistix's initial damping λ = 1 starts near Gauss–Newton (λ/diag = 1e-3)
-    # (a one-step evaluation needs no scaling: skip that linearisation)
-    def column_norms(z):
-        return jnp.sqrt(jnp.sum(jax.jacfwd(lambda x: fn(x)[0])(z) ** 2, axis=0))
+    if method == "levenberg_marquardt":
+        # the solver works on s = d·z with d ∝ the Jacobian column norms at the start (Marquardt's
+        # scaling, scipy's x_scale="jac"): the damping then acts alike on every direction; the diagonal
+        # of JᵀJ in s is JTJ_DIAGONAL, so optimistix's initial damping λ = 1 starts near Gauss–Newton
+        # (λ/diag = 1e-3) (a one-step evaluation needs no scaling: skip that linearisation).
+        # Gauss–Newton is invariant to the scaling: it works on z.
+        def column_norms(z):
+            return jnp.sqrt(jnp.sum(jax.jacfwd(lambda x: fn(x)[0])(z) ** 2, axis=0))
 
-    norms = jax.lax.cond(max_steps > 1, column_norms, jnp.ones_like, z0)
-    d = jnp.where(norms > 0, norms, 1.0) / jnp.sqrt(JTJ_DIAGONAL)
-    solver = _LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.SVD())
+        norms = jax.lax.cond(max_steps > 0, column_norms, jnp.ones_like, z0)
+        d = jnp.where(norms > 0, norms, 1.0) / jnp.sqrt(JTJ_DIAGONAL)
+    else:
+        d = jnp.ones_like(z0)
+    solver = SOLVERS[method](rtol=rtol, atol=atol, linear_solver=lx.SVD())
     sol = optx.least_squares(lambda s, _: fn(s / d), solver, z0 * d, args=max_steps, has_aux=True,
                              max_steps=STEP_CAP, throw=False)
     z = sol.value / d
@@ -301,6 +326,83 @@ def _solve(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, *, m
     res, jac_s, aux = info.residual, info.jac.as_matrix(), sol.state.aux
     jac_u = jac_s * d[None, :] / free.du_dz(z)[None, :]
     return free.u_of(z), sol.result._value, sol.stats["num_steps"], res, jac_u, aux
+
+
+_STATIC = ("model", "treedef", "rtol", "atol", "method")
+#: The whole fit in one compiled region.
+_solve = functools.partial(jax.jit, static_argnames=_STATIC)(_solve_one)
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def _solve_batch(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, *, model, treedef, rtol, atol,
+                 method="levenberg_marquardt"):
+    """B fits of one problem structure in one compiled region: data leaves, z0 and theta0 carry a leading axis B."""
+    def one(lv, z, th):
+        return _solve_one(lv, z, th, free_arrays, prior_w, prior_mean, max_steps, model=model, treedef=treedef,
+                          rtol=rtol, atol=atol, method=method)
+
+    return jax.vmap(one)(leaves, z0, theta0)
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def _solve_chain(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, *, model, treedef, rtol, atol,
+                 method="levenberg_marquardt"):
+    """B fits one after another in one compiled region (``lax.scan``), each started at the previous optimum.
+
+    ``z0`` ``(K,)`` starts the first fit; a fit that fails (non-finite, or not successful) hands on
+    the last good start instead of its own end point.
+    """
+    def step(z_start, xs):
+        lv, th = xs
+        out = _solve_one(lv, z_start, th, free_arrays, prior_w, prior_mean, max_steps, model=model,
+                         treedef=treedef, rtol=rtol, atol=atol, method=method)
+        z_end = jnp.where(free_arrays[4], jnp.arcsin(jnp.clip((out[0] - free_arrays[5]) / free_arrays[6], -1, 1)),
+                          out[0])
+        good = (out[1] == 0) & jnp.all(jnp.isfinite(z_end))
+        return jnp.where(good, z_end, z_start), out
+
+    return jax.lax.scan(step, z0, (leaves, theta0))[1]
+
+
+def _setup(problem: Problem, free: tuple[str, ...], pad_to: int | None):
+    """Free-set arrays of a solve: ``(index, K, free_arrays, prior W, prior mean, lo_u, hi_u)`` (K slots, padded)."""
+    coords, prior, names = problem.coords, problem.prior, problem.names
+    unknown = [k for k in free if k not in names]
+    if unknown or not free or len(set(free)) != len(free):
+        raise InputError(f"free parameters {list(free)}: each must be one of {list(names)}, once")
+    index = [names.index(k) for k in free]
+    K = max(len(free), pad_to or 0)
+    pad = K - len(free)
+    lo_u = np.array([coords[i].u_bounds[0] for i in index] + [-np.inf] * pad)
+    hi_u = np.array([coords[i].u_bounds[1] for i in index] + [np.inf] * pad)
+    bounded = np.isfinite(lo_u) & np.isfinite(hi_u)
+    mid = np.where(bounded, 0.5 * (np.where(bounded, lo_u, 0.0) + np.where(bounded, hi_u, 0.0)), 0.0)
+    half = np.where(bounded, 0.5 * (np.where(bounded, hi_u, 1.0) - np.where(bounded, lo_u, -1.0)), 1.0)
+    if prior is not None:
+        W, mean = prior.rows(free + ("",) * pad, K)
+    else:
+        W, mean = np.zeros((K, K)), np.zeros(K)
+    slots = [coords[i] for i in index] + [Coordinate("", LINEAR)] * pad
+    free_arrays = (np.array(index + [len(names)] * pad, dtype=np.int32), np.array([c.kind == LOG for c in slots]),
+                   np.array([c.center for c in slots]), np.array([c.scale for c in slots]), bounded, mid, half)
+    return index, K, free_arrays, W, mean, lo_u, hi_u
+
+
+def _start(problem: Problem, index, K, free_arrays, theta0) -> np.ndarray:
+    """Solver start ``z0`` ``(B, K)`` from starting values ``theta0`` ``(B, p)`` (checked: finite, positive logs)."""
+    coords = problem.coords
+    for i in index:
+        c = coords[i]
+        bad = ~np.isfinite(theta0[:, i]) | ((c.kind == LOG) & ~(theta0[:, i] > 0))
+        if bad.any():
+            raise InputError(f"starting value of {c.name} must be {'positive and ' if c.kind == LOG else ''}"
+                             f"finite, got {theta0[np.argmax(bad), i]:.6g}")
+    _, is_log, center, scale, bounded, mid, half = free_arrays
+    start = np.zeros((theta0.shape[0], K))
+    for j, i in enumerate(index):
+        t = theta0[:, i]
+        start[:, j] = np.log(t) if coords[i].kind == LOG else (t - coords[i].center) / coords[i].scale
+    return np.where(bounded, np.arcsin(np.clip((start - mid) / half, -1.0, 1.0)), start)
 
 
 def least_squares(
@@ -313,6 +415,7 @@ def least_squares(
     atol: float = 1e-10,
     n_data: int | None = None,
     pad_to: int | None = None,
+    method: str = "levenberg_marquardt",
 ) -> FitResult:
     """Weighted least squares of ``problem`` over the ``free`` parameters (see the module docstring).
 
@@ -326,47 +429,27 @@ def least_squares(
     - ``n_data``: number of rows that carry data (default: every model row; rows of weight zero
       should not be counted).
     - ``pad_to``: pad the free set to this size (one compilation for several free-set sizes).
+    - ``method``: ``"levenberg_marquardt"`` (default) or ``"gauss_newton"`` (:data:`SOLVERS`).
 
     **Returns:** :class:`~ringfit.fit.result.FitResult` with ``theta`` (all parameters at the
     optimum), the model's aux in ``extra["aux"]`` and ``problem``. Never raises on
     non-convergence: check ``converged``.
     """
-    model, data, coords, prior = problem.model, problem.data, problem.coords, problem.prior
+    model, data, coords = problem.model, problem.data, problem.coords
     names = problem.names
     free = tuple(free)
-    unknown = [k for k in free if k not in names]
-    if unknown or not free or len(set(free)) != len(free):
-        raise InputError(f"free parameters {list(free)}: each must be one of {list(names)}, once")
+    index, K, free_arrays, W, mean, lo_u, hi_u = _setup(problem, free, pad_to)
     theta0 = np.asarray(theta0, dtype=np.float64)
     if theta0.shape != (len(names),):
         raise ValueError(f"theta0 has shape {theta0.shape}, coords {len(names)}")
-    index = [names.index(k) for k in free]
-    for i in index:
-        c = coords[i]
-        if not math.isfinite(theta0[i]) or (c.kind == LOG and not theta0[i] > 0):
-            raise InputError(f"starting value of {c.name} must be {'positive and ' if c.kind == LOG else ''}"
-                             f"finite, got {theta0[i]:.6g}")
-    K = max(len(free), pad_to or 0)
-    pad = K - len(free)
-    lo_u = np.array([coords[i].u_bounds[0] for i in index] + [-np.inf] * pad)
-    hi_u = np.array([coords[i].u_bounds[1] for i in index] + [np.inf] * pad)
-    bounded = np.isfinite(lo_u) & np.isfinite(hi_u)
-    mid = np.where(bounded, 0.5 * (np.where(bounded, lo_u, 0.0) + np.where(bounded, hi_u, 0.0)), 0.0)
-    half = np.where(bounded, 0.5 * (np.where(bounded, hi_u, 1.0) - np.where(bounded, lo_u, -1.0)), 1.0)
-    start = np.array([coords[i].to_u(theta0[i]) for i in index] + [0.0] * pad)
-    z0 = np.where(bounded, np.arcsin(np.clip((start - mid) / half, -1.0, 1.0)), start)
-    if prior is not None:
-        W, mean = prior.rows(free + ("",) * pad, K)
-    else:
-        W, mean = np.zeros((K, K)), np.zeros(K)
-    slots = [coords[i] for i in index] + [Coordinate("", LINEAR)] * pad
-    free_arrays = (np.array(index + [len(names)] * pad, dtype=np.int32), np.array([c.kind == LOG for c in slots]),
-                   np.array([c.center for c in slots]), np.array([c.scale for c in slots]), bounded, mid, half)
+    z0 = _start(problem, index, K, free_arrays, theta0[None])[0]
     leaves, treedef = jax.tree.flatten(data)
-    if not 1 <= int(max_steps) <= STEP_CAP:
-        raise InputError(f"max_steps = {max_steps}: expected 1 … {STEP_CAP}")
+    if method not in SOLVERS:
+        raise ValueError(f"method={method!r}; expected one of {list(SOLVERS)}")
+    if not 0 <= int(max_steps) <= STEP_CAP:
+        raise InputError(f"max_steps = {max_steps}: expected 1 … {STEP_CAP} (0: evaluate only)")
     out = _solve(leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean, np.int64(max_steps), model=model,
-                 treedef=treedef, rtol=float(rtol), atol=float(atol))
+                 treedef=treedef, rtol=float(rtol), atol=float(atol), method=method)
     u_free, result, steps, res, jac, aux = out
     u_free, res, jac = np.asarray(u_free)[: len(free)], np.asarray(res), np.asarray(jac)[:, : len(free)]
     m = res.size - K
@@ -421,6 +504,96 @@ def _result(problem, free, index, theta0, u_free, status, message, steps, res, j
     )
 
 
+def least_squares_batch(
+    problem: Problem,
+    theta0,
+    free: tuple[str, ...],
+    data,
+    *,
+    max_steps: int = 256,
+    rtol: float = 1e-10,
+    atol: float = 1e-10,
+    n_data: int | None = None,
+    warm_start: bool = False,
+    method: str = "levenberg_marquardt",
+) -> BatchFitResult:
+    """B fits of one problem structure in one compiled region: vmapped, or one after another warm-started.
+
+    Each fit is what :func:`least_squares` does for ``problem`` with the b-th data set.
+
+    - ``warm_start=False``: the fits are independent, each from its own start ``theta0[b]``,
+      vmapped. The vmapped solver iterates until every fit has met its tolerances (or
+      ``max_steps``), and every branch of the solver is evaluated for all of them, so a batch
+      costs about B × the slowest fit: best on an accelerator.
+    - ``warm_start=True``: the fits run in order in a ``lax.scan``, the free parameters of fit b
+      starting at fit b − 1's optimum (the first at ``theta0[0]``; a failed fit passes on its own
+      start); the fixed parameters come from ``theta0[b]``. For a sequence of similar data sets
+      (revolutions of a recording) this costs the sum of a few steps each with no Python in
+      between: best on a CPU.
+
+    One compilation serves every batch of the same size B and structure: pad the last batch.
+
+    **Arguments:**
+
+    - ``problem``: the :class:`Problem` (its ``data`` is not used, only its model, coordinates,
+      prior and ``sigma``).
+    - ``theta0``: ``(B, p)`` or ``(p,)`` starting values, natural units.
+    - ``free``: names of the parameters to fit (the same for every fit).
+    - ``data``: the model's data pytree with a leading axis B on every leaf.
+    - ``max_steps``, ``rtol``, ``atol``, ``n_data``, ``method``: as :func:`least_squares`; ``warm_start``: see above.
+
+    **Returns:** :class:`~ringfit.fit.result.BatchFitResult` (arrays with a leading axis B; no flag
+    strings: check ``converged`` and ``at_bound``). Never raises on non-convergence.
+    """
+    free = tuple(free)
+    index, K, free_arrays, W, mean, lo_u, hi_u = _setup(problem, free, None)
+    leaves, treedef = jax.tree.flatten(data)
+    if not leaves:
+        raise ValueError("data has no arrays to batch over")
+    B = int(np.shape(leaves[0])[0])
+    if any(np.shape(x)[:1] != (B,) for x in leaves):
+        raise ValueError("every leaf of data needs the same leading batch axis")
+    p = len(problem.names)
+    theta0 = np.broadcast_to(np.asarray(theta0, dtype=np.float64), (B, p)).copy()
+    z0 = _start(problem, index, K, free_arrays, theta0)
+    theta0_pad = np.concatenate([theta0, np.zeros((B, 1))], axis=1)
+    if method not in SOLVERS:
+        raise ValueError(f"method={method!r}; expected one of {list(SOLVERS)}")
+    if not 1 <= int(max_steps) <= STEP_CAP:
+        raise InputError(f"max_steps = {max_steps}: expected 1 … {STEP_CAP}")
+    solve = _solve_chain if warm_start else _solve_batch
+    u, codes, steps, res, jac, aux = solve(leaves, z0[0] if warm_start else z0, theta0_pad, free_arrays, W, mean,
+                                           np.int64(max_steps), model=problem.model, treedef=treedef,
+                                           rtol=float(rtol), atol=float(atol), method=method)
+    u, res, jac, codes = np.asarray(u), np.asarray(res), np.asarray(jac), np.asarray(codes)
+    coords = problem.coords
+    theta = theta0.copy()
+    for j, i in enumerate(index):
+        theta[:, i] = np.exp(u[:, j]) if coords[i].kind == LOG else coords[i].center + coords[i].scale * u[:, j]
+    m = res.shape[1] - K
+    chi2 = np.sum(res[:, :m] ** 2, axis=1)
+    rows = int(m if n_data is None else n_data)
+    s = np.where(chi2 > 0, np.sqrt(chi2 / max(rows - K, 1)), 1.0)
+    J = jac.copy()
+    scale = s if problem.sigma == "estimate" else np.ones(B)
+    J[:, :m] /= scale[:, None, None]
+    cov = covariance_batch(J)
+    if problem.sigma == "inflate":
+        cov = cov * np.maximum(1.0, s)[:, None, None] ** 2
+    sd_u = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
+    stderr = np.empty((B, K))
+    for j, i in enumerate(index):
+        stderr[:, j] = theta[:, i] * sd_u[:, j] if coords[i].kind == LOG else coords[i].scale * sd_u[:, j]
+    span = np.where(np.isfinite(hi_u - lo_u), hi_u - lo_u, 1.0)
+    at_bound = ((np.isfinite(lo_u) & (u <= lo_u + 1e-6 * span)) | (np.isfinite(hi_u) & (u >= hi_u - 1e-6 * span)))
+    names = {c: solver_status(c)[0] for c in np.unique(codes)}
+    status = np.array([names[c] for c in codes])
+    return BatchFitResult(names=free, coords=tuple(coords), theta=theta, status=status, iterations=np.array(steps),
+                          stderr=stderr, covariance_log=cov, residuals=res[:, :m] / scale[:, None], chi2_raw=chi2,
+                          sigma_scale=s if problem.sigma == "estimate" else np.ones(B), at_bound=at_bound,
+                          aux=jax.tree.map(np.array, aux), n_data=rows)
+
+
 @functools.partial(jax.jit, static_argnames=("model", "treedef"))
 def _batched_sum_of_squares(thetas, leaves, *, model, treedef):
     data = jax.tree.unflatten(treedef, leaves)
@@ -452,10 +625,10 @@ def evaluate(problem: Problem, theta, free: tuple[str, ...], **kwargs) -> FitRes
     compilation); ``kwargs`` as there (``pad_to``, ``n_data``, ``rtol``, ``atol`` must
     match the fits it should share a compilation with). ``status`` is ``"evaluated"``.
     """
-    result = least_squares(problem, theta, free, max_steps=1, **kwargs)
+    result = least_squares(problem, theta, free, max_steps=0, **kwargs)
     result.status, result.message = "evaluated", "residuals and Jacobian at the given parameters (no fit)"
     result.flags = []
     return result
 
 
-__all__ = ["least_squares", "evaluate", "sum_of_squares_batch", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]
+__all__ = ["least_squares", "least_squares_batch", "SOLVERS", "evaluate", "sum_of_squares_batch", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]

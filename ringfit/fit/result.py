@@ -126,6 +126,73 @@ class FitResult:
         return "\n".join(lines)
 
 
+@dataclass
+class BatchFitResult:
+    """What :func:`ringfit.fit.engine.least_squares_batch` returns: B fits of one problem structure.
+
+    - ``names``: the free parameters (``k``); ``coords``: every parameter's coordinate.
+    - ``theta``: ``(B, p)`` every parameter at each optimum, natural units.
+    - ``status``: ``(B,)`` solver status strings (as :attr:`FitResult.status`); ``converged`` ``(B,)`` bool.
+    - ``iterations``: ``(B,)`` solver steps.
+    - ``stderr``: ``(B, k)`` standard errors, natural units; ``covariance_log``: ``(B, k, k)`` in the
+      solver coordinates (as :attr:`FitResult.covariance_log`).
+    - ``residuals``: ``(B, m)`` weighted data residuals (scaled by ``sigma_scale`` for ``sigma="estimate"``);
+      ``chi2_raw``: ``(B,)`` Σ r² before that scaling; ``sigma_scale``: ``(B,)``.
+    - ``at_bound``: ``(B, k)`` bool, a free parameter within 1e-6 of a bound of its coordinate.
+    - ``aux``: the model's aux at each optimum (leading axis B); ``n_data``: data rows per fit.
+    """
+
+    names: tuple[str, ...]
+    coords: tuple
+    theta: np.ndarray
+    status: np.ndarray
+    iterations: np.ndarray
+    stderr: np.ndarray
+    covariance_log: np.ndarray
+    residuals: np.ndarray
+    chi2_raw: np.ndarray
+    sigma_scale: np.ndarray
+    at_bound: np.ndarray
+    aux: object
+    n_data: int
+
+    @property
+    def converged(self) -> np.ndarray:
+        return self.status == "converged"
+
+    def __len__(self) -> int:
+        return self.theta.shape[0]
+
+    def values(self, name: str) -> np.ndarray:
+        """``(B,)`` values of one parameter, natural units."""
+        return self.theta[:, [c.name for c in self.coords].index(name)]
+
+    def interval(self, name: str, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
+        """``(lo, hi)`` ``(B,)`` Laplace intervals, as :meth:`FitResult.interval`."""
+        from scipy.stats import norm
+
+        i = self.names.index(name)
+        s = np.sqrt(np.clip(self.covariance_log[:, i, i], 0.0, None))
+        z = norm.ppf(0.5 + level / 2)
+        v = self.values(name)
+        coord = next(c for c in self.coords if c.name == name)
+        if coord.kind == "linear":
+            return v - z * s * coord.scale, v + z * s * coord.scale
+        return v * np.exp(-z * s), v * np.exp(z * s)
+
+
+def covariance_batch(jacobian: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
+    """:func:`covariance_from_jacobian` of a stack of Jacobians ``(B, m, k)`` → ``(B, k, k)`` (one batched SVD)."""
+    J = np.asarray(jacobian, dtype=np.float64)
+    _, s, vt = np.linalg.svd(J, full_matrices=False)
+    keep = s > rcond * s[:, :1]
+    inv = np.where(keep, 1.0 / np.where(keep, s, 1.0) ** 2, 0.0)
+    cov = np.einsum("bji,bj,bjl->bil", vt, inv, vt)
+    for b in np.flatnonzero(~keep.all(axis=1)):
+        cov[b] = covariance_from_jacobian(J[b], rcond)
+    return cov
+
+
 def covariance_from_jacobian(jacobian: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
     """``(JᵀJ)⁻¹`` via the SVD of J; directions with no information get ``inf`` variance.
 

@@ -36,9 +36,10 @@ from ringfit.io.files import atomic_write, check_output_path, read_text_file
 #: Columns of DATA.md §3, in the order ringfit writes them.
 COLUMNS = ("angle_deg", "acc_radial_ms2", "acc_tangential_ms2")
 #: Sidecar fields every profile must have, and the optional ones (DATA.md §3).
-REQUIRED_FIELDS = ("speed_kmh", "load_n", "pressure_bar")
-#: revolutions and sample_rate_hz describe the averaging; ringfit uses them only when present.
-OPTIONAL_FIELDS = ("rotation_hz", "drum_diameter_m", "revolutions", "sample_rate_hz")
+REQUIRED_FIELDS = ("speed_kmh", "pressure_bar")
+#: load_n is needed by every command but ``ringfit estimate`` (which estimates it): :attr:`Profile.load_n`
+#: raises then. revolutions and sample_rate_hz describe the averaging; ringfit uses them only when present.
+OPTIONAL_FIELDS = ("load_n", "rotation_hz", "drum_diameter_m", "revolutions", "sample_rate_hz")
 #: Fewest angle samples accepted per revolution.
 MIN_POINTS = 16
 #: A spacing larger than this multiple of the median spacing is a gap.
@@ -80,7 +81,12 @@ class Profile:
 
     @property
     def load_n(self) -> float:
-        return float(self.condition["load_n"])
+        """Vertical load [N] from the sidecar; :class:`InputError` naming the file when it has none."""
+        value = self.condition.get("load_n")
+        if value is None:
+            raise InputError("missing field 'load_n' in the sidecar (this command needs the load; only "
+                             "`ringfit estimate` reads profiles without it)", source=self.source or None)
+        return float(value)
 
     @property
     def rotation_hz(self) -> float | None:

@@ -63,6 +63,8 @@ class CleatBench:
 
     - ``geometry``, ``ring``: the tyre (default Table 9, PHYSICS.md §1).
     - ``speed_kmh``, ``load_n``, ``drum_diameter_m``: operating condition.
+    - ``load_steps``: ``((t_s, load_n), ...)``: the load changes to ``load_n`` at ``t_s`` (the steady
+      reading switches to that load's; ``load_n`` before the first step). Empty: ``load_n`` throughout.
     - ``rolling_radius_m``: R_e (Ω = V/R_e); default ``R_out − δ/3`` with the
       Table 9 drum deflection (:func:`ringfit.physics.operating.rolling_radius`).
     - ``fs_hz``: sample rate.
@@ -90,6 +92,7 @@ class CleatBench:
     ring: object = None
     speed_kmh: float = 40.0
     load_n: float = 4000.0
+    load_steps: tuple = ()
     drum_diameter_m: float = 1.2192
     rolling_radius_m: float | None = None
     fs_hz: float = 25600.0
@@ -336,25 +339,34 @@ class CleatBench:
         return out
 
     # ------------------------------------------------------------------ steady rolling
-    def _steady_table(self) -> tuple[np.ndarray, np.ndarray]:
-        """(radial, tangential) specific-force readings on a fine grid φ_j = −180 + 360 j/M [m/s²], DC kept."""
-        if "table" in self._cache:
-            return self._cache["table"]
-        if self.steady == "ring":
-            from ringfit.physics.contact import ContactSolver, solve_rolling
-            from ringfit.physics.operating import Drum, OperatingPoint
-            from ringfit.physics.sensor import STANDARD_GRAVITY, SensorModel, sensor_signals
+    def load_at(self, t) -> np.ndarray:
+        """Load [N] at times ``t`` [s] (``load_n`` before the first of ``load_steps``)."""
+        t = np.asarray(t, dtype=np.float64)
+        out = np.full(t.shape, float(self.load_n))
+        for t0, load in sorted(self.load_steps):
+            out = np.where(t >= t0, float(load), out)
+        return out
 
-            op = OperatingPoint(omega=self.omega, load=self.load_n, road=Drum(diameter=self.drum_diameter_m))
-            sol = solve_rolling(self.ring, self.geometry, op, solver=ContactSolver(n_grid=2048))
+    def _steady_table(self, load: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(radial, tangential) specific-force readings on a fine grid φ_j = −180 + 360 j/M [m/s²], DC kept."""
+        load = float(self.load_n if load is None else load)
+        if ("table", load) in self._cache:
+            return self._cache[("table", load)]
+        if self.steady == "ring":
+            from ringfit.physics.contact import ContactSolver, solve_rolling_jit
+            from ringfit.physics.operating import Drum, OperatingPoint
+            from ringfit.physics.sensor import STANDARD_GRAVITY, SensorModel, sensor_signals_jit
+
+            op = OperatingPoint(omega=self.omega, load=load, road=Drum(diameter=self.drum_diameter_m))
+            sol = solve_rolling_jit(self.ring, self.geometry, op, solver=ContactSolver(n_grid=2048))
             sensor = SensorModel(gravity=STANDARD_GRAVITY if self.gravity else 0.0, tilt_gain=1.0, remove_mean=False)
-            rad, tan = (np.asarray(x) for x in sensor_signals(sol, self.geometry, sensor))
+            rad, tan = (np.asarray(x) for x in sensor_signals_jit(sol, self.geometry, sensor))
         else:
             rad, tan = self._analytic_steady(2048)
         # band-limited refinement (zero-padded spectrum) so that linear interpolation is accurate
         fine = 16384
         table = tuple(band_limited_resample(x, fine) for x in (rad, tan))
-        self._cache["table"] = table
+        self._cache[("table", load)] = table
         return table
 
     def _analytic_steady(self, m: int):
@@ -374,10 +386,18 @@ class CleatBench:
             tan = tan + G * np.sin(phi)
         return rad, tan
 
-    def steady_reading(self, phi_deg, axis: str = "radial") -> np.ndarray:
-        """Steady sensor reading at φ [deg] before the high-pass (DC included) [m/s²]."""
-        table = self._steady_table()[_axis_index(axis)]
-        return _interp_periodic(np.asarray(phi_deg, dtype=np.float64), table)
+    def steady_reading(self, phi_deg, axis: str = "radial", t=None) -> np.ndarray:
+        """Steady sensor reading at φ [deg] (at times ``t`` [s] with ``load_steps``) before the high-pass
+        (DC included) [m/s²]."""
+        phi_deg = np.asarray(phi_deg, dtype=np.float64)
+        if not self.load_steps or t is None:
+            return _interp_periodic(phi_deg, self._steady_table()[_axis_index(axis)])
+        loads = np.broadcast_to(self.load_at(t), phi_deg.shape)
+        out = np.empty(phi_deg.shape)
+        for load in np.unique(loads):
+            m = loads == load
+            out[m] = _interp_periodic(phi_deg[m], self._steady_table(load)[_axis_index(axis)])
+        return out
 
     def profile_truth(self, angle_deg, axis: str = "radial") -> np.ndarray:
         """The rolling profile the sensor reports at ``angle_deg`` [m/s²] (DATA.md §3: high-pass included).
@@ -408,7 +428,7 @@ class CleatBench:
             if axis == "lateral":
                 acc[j] = 0.0
             else:
-                acc[j] = self.steady_reading(phi, axis)
+                acc[j] = self.steady_reading(phi, axis, t)
                 if tau is not None:
                     acc[j] += self.cleat_field(phi, tau, axis)
         if self.noise_ms2 > 0:
@@ -457,7 +477,7 @@ class CleatBench:
         phi = self.sensor_angle(t)
         zi = []
         for axis in self.axes:
-            x = self.steady_reading(phi, axis) if axis != "lateral" else np.zeros(t.size)
+            x = self.steady_reading(phi, axis, t) if axis != "lateral" else np.zeros(t.size)
             _, z = signal.lfilter(b, a, x, zi=signal.lfilter_zi(b, a) * x[0])
             zi.append(z)
         return zi

@@ -18,6 +18,7 @@ with :func:`ringfit.io.profiles.write_profile` after :meth:`RollingProfile.to_pr
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -251,4 +252,200 @@ def profile_rms_error(profile: RollingProfile, truth, axis: str = "radial") -> f
     return float(np.sqrt(np.mean((profile.channel(axis) - truth(profile.angle_deg)) ** 2)))
 
 
-__all__ = ["RollingProfile", "rolling_profile", "periodic_interpolator", "profile_rms_error", "DEFAULT_POINTS"]
+# ----------------------------------------------------------------------------- single revolutions
+
+#: Samples of the neighbouring revolutions on either side kept in a revolution's angle fit and interpolation.
+REVOLUTION_MARGIN = 8
+
+
+@dataclass
+class RevolutionGrid:
+    """Whole revolutions of a continuous recording, each resampled onto the angle grid (see :func:`revolution_grids`).
+
+    **Fields** (r revolutions): ``revolution`` (r,) numbers (revolution n covers the unwrapped sensor
+    angle [360 n − 180, 360 n + 180) deg); ``t_s`` (r,) time of its middle [s] from the first sample;
+    ``rotation_hz`` (r,) its rotation rate [Hz] (angle fit); ``values`` (axes, r, M) the readings at
+    φ_j = −180 + 360 j/M [m/s²]; ``samples`` (r,) samples it holds.
+    """
+
+    revolution: np.ndarray
+    t_s: np.ndarray
+    rotation_hz: np.ndarray
+    values: np.ndarray
+    samples: np.ndarray
+
+    def __len__(self) -> int:
+        return self.revolution.size
+
+
+def revolution_grids(record: ContinuousRecord, *, points: int, axes=("radial",), chunk: int = DEFAULT_CHUNK,
+                     passages=None, progress: bool = False):
+    """Walk a recording and yield each whole revolution's readings on the angle grid (bounded memory).
+
+    Per revolution, the decoded encoder angle is replaced by a quadratic fit of angle against time
+    over the revolution's samples (removing the encoder's quantisation and pulse interpolation
+    while following a steady acceleration), and the readings are interpolated linearly at
+    φ_j = −180 + 360 j/M. Unlike the bins of :func:`rolling_profile`, whose average is not the
+    bin's centre when a bin holds a few samples, the grid values sit at known angles; linear
+    interpolation between samples Δ apart attenuates revolution harmonic k by about
+    sinc²(kΔ/2π) (0.998 at k = 40 with 1800 samples per revolution).
+
+    **Arguments:** ``record`` (with an encoder), ``points`` M, ``axes``, ``chunk``, ``progress``;
+    ``passages``: without an encoder, the sample positions of the sensor's passages through the
+    contact patch (:func:`patch_passages`): the angle is then 360° × the passage count, linear in
+    time between passages (φ = 0 at each passage, so the angle offset is the dip's lag behind the
+    patch centre), and samples before the first or after the last passage are left out.
+    **Yields:** :class:`RevolutionGrid` blocks (the first and last, partial revolutions are left out).
+
+    **Raises:** :class:`InputError` without an encoder and passages, or when ``points`` < 16.
+    """
+    if passages is not None:
+        passages = np.asarray(passages, dtype=np.float64)
+        if passages.size < 3 or np.any(np.diff(passages) <= 0):
+            raise InputError("fewer than 3 patch passages, or not increasing", source=record.source)
+    elif not record.has_encoder:
+        raise InputError("no encoder channel ('encoder_angle_deg' or 'encoder_pulses'); "
+                         "per-revolution readings need the sensor angle", source=record.source)
+    points = int(points)
+    if points < 16:
+        raise InputError(f"points = {points}; a revolution needs at least 16 angles")
+    axes = tuple(axes)
+    rows = [record.axis_index(a) for a in axes]
+    grid = 360.0 * np.arange(points) / points  # from the revolution's start
+    fs = float(record.fs_hz)
+    tail = None  # (idx, phi, x) of the samples not yet used
+    from tqdm import tqdm
+
+    bar = tqdm(total=record.samples, unit="sample", unit_scale=True, disable=not progress, desc="revolutions")
+    for ch in record.chunks(chunk):
+        idx = np.arange(ch.start, ch.stop, dtype=np.float64)
+        x = ch.acc[rows]
+        if passages is None:
+            phi = ch.angle_deg
+        else:
+            inside = (idx >= passages[0]) & (idx <= passages[-1])
+            idx, x = idx[inside], x[:, inside]
+            phi = 360.0 * np.interp(idx, passages, np.arange(passages.size, dtype=np.float64))
+        if tail is not None:
+            idx, phi, x = np.concatenate([tail[0], idx]), np.concatenate([tail[1], phi]), np.concatenate([tail[2], x], 1)
+        bar.update(len(ch))
+        if idx.size == 0:
+            continue
+        rev = np.floor((phi + 180.0) / 360.0).astype(np.int64)
+        # whole revolutions with REVOLUTION_MARGIN samples of their neighbours on both sides in the buffer
+        numbers = np.arange(rev[0] + 1, rev[-1])
+        lo = np.searchsorted(rev, numbers, side="left")
+        hi = np.searchsorted(rev, numbers, side="right")
+        ready = (lo >= REVOLUTION_MARGIN) & (hi + REVOLUTION_MARGIN <= rev.size) & (hi - lo >= 8)
+        numbers, lo, hi = numbers[ready], lo[ready], hi[ready]
+        if numbers.size:
+            out = np.empty((len(axes), numbers.size, points))
+            t_mid = np.empty(numbers.size)
+            rate = np.empty(numbers.size)
+            for j, (n, a, b) in enumerate(zip(numbers, lo, hi)):
+                s = slice(a - REVOLUTION_MARGIN, b + REVOLUTION_MARGIN)
+                t = idx[s] / fs
+                tc = 0.5 * (t[REVOLUTION_MARGIN] + t[-REVOLUTION_MARGIN - 1])
+                c = np.polyfit(t - tc, phi[s], 2)
+                smooth = np.polyval(c, t - tc)
+                target = 360.0 * n - 180.0 + grid
+                for i in range(len(axes)):
+                    out[i, j] = np.interp(target, smooth, x[i, s])
+                t_mid[j] = tc
+                rate[j] = c[1] / 360.0
+            yield RevolutionGrid(numbers, t_mid, rate, out, hi - lo)
+            cut = max(int(hi[-1]) - REVOLUTION_MARGIN, 0)
+        else:  # keep everything from the first candidate revolution on
+            cut = max(int(np.searchsorted(rev, rev[0] + 1, side="left")) - REVOLUTION_MARGIN, 0)
+        tail = (idx[cut:], phi[cut:], x[:, cut:])
+    bar.close()
+
+
+#: Passages are searched in the reading smoothed over this fraction of a revolution.
+PASSAGE_SMOOTHING = 1.0 / 200.0
+#: Samples at the start of a recording from which the threshold and the revolution period are learnt.
+PASSAGE_LEARN = 1 << 20
+
+
+def patch_passages(record: ContinuousRecord, *, axis: str = "radial", chunk: int = DEFAULT_CHUNK,
+                   progress: bool = False) -> np.ndarray:
+    """Sample positions of the sensor's passages through the contact patch, from the reading alone.
+
+    Inside the patch the belt is flat and the radial reading (toward the centre +) drops by about
+    Ω²R below its level elsewhere (docs/physics.md §5): far more than gravity (1 g) at any speed
+    above ~10 km/h. The reading, smoothed over :data:`PASSAGE_SMOOTHING` of a revolution, is
+    thresholded halfway between its median and its deep-dip level (the 0.5th percentile of the first
+    :data:`PASSAGE_LEARN` samples, which also give the revolution period by autocorrelation); each run below the threshold is one passage, placed at the centroid of its depth below
+    the threshold. Runs shorter than 1/400 of a revolution or closer than half a revolution to the
+    previous passage are dropped.
+
+    **Arguments:** the recording, the axis (``radial``), ``chunk``, ``progress``.
+    **Returns:** ``(P,)`` fractional sample indices, increasing.
+    **Raises:** :class:`InputError` when the reading shows no regular dips.
+    """
+    row = record.axis_index(axis)
+    first = record.read(f"acc:{axis}", 0, min(record.samples, PASSAGE_LEARN))
+    base, deep = float(np.median(first)), float(np.percentile(first, 0.5))
+    threshold = 0.5 * (base + deep)
+    # the revolution period: the first autocorrelation peak (above 80 % of the largest) after it turns negative
+    n = first.size
+    y = first - base
+    ac = np.fft.irfft(np.abs(np.fft.rfft(y, 2 * n)) ** 2)[: n // 2] / (n - np.arange(n // 2))
+    negative = np.flatnonzero(ac < 0)
+    period = math.nan
+    if negative.size and deep < base and ac[negative[0]:].max() > 0.3 * ac[0]:  # regular dips
+        lag = ac[negative[0]:]
+        peaks = np.flatnonzero((lag[1:-1] > lag[:-2]) & (lag[1:-1] >= lag[2:])) + 1
+        peaks = peaks[lag[peaks] > 0.8 * lag.max()] if peaks.size else peaks
+        if peaks.size:
+            period = float(negative[0] + peaks[0])
+    if not period > 8 or period * 3 > n:
+        raise InputError(f"no regular dips in the '{axis}' reading of the first {n} samples: the patch "
+                         "passages cannot be found (and there is no encoder)", source=record.source)
+    width = max(1, int(round(PASSAGE_SMOOTHING * period)))
+    kernel = np.ones(width) / width
+    from tqdm import tqdm
+
+    bar = tqdm(total=record.samples, unit="sample", unit_scale=True, disable=not progress, desc="patch passages")
+    out = []
+    carry = np.zeros(0)  # the last width − 1 samples of the previous chunk (for the moving average)
+    run = None  # (Σ weight·index, Σ weight, length) of a run still open at the chunk end
+    for ch in record.chunks(chunk):
+        bar.update(len(ch))
+        x = np.concatenate([carry, ch.acc[row]])
+        smooth = np.convolve(x, kernel, mode="valid")  # smooth[j] averages x[j : j + width]
+        pos = ch.start - carry.size + np.arange(smooth.size) + 0.5 * (width - 1)
+        carry = x[-(width - 1):] if width > 1 else np.zeros(0)
+        depth = np.where(smooth < threshold, threshold - smooth, 0.0)
+        inside = depth > 0
+        edges = np.flatnonzero(np.diff(np.concatenate([[False], inside, [False]]).astype(np.int8)))
+        runs = list(zip(edges[::2], edges[1::2]))
+        if run is not None and (not runs or runs[0][0] > 0):  # the open run ended at the chunk boundary
+            out.append(run)
+            run = None
+        for a, b in runs:
+            stats = ((depth[a:b] * pos[a:b]).sum(), depth[a:b].sum(), b - a)
+            if run is not None:  # continues the run left open by the previous chunk
+                stats = tuple(u + v for u, v in zip(stats, run))
+                run = None
+            if b == inside.size:
+                run = stats
+            else:
+                out.append(stats)
+    if run is not None:
+        out.append(run)
+    bar.close()
+    times = np.array([s / w for s, w, n in out if n >= period / 400.0 and w > 0])
+    keep = [0]
+    for i in range(1, times.size):
+        if times[i] - times[keep[-1]] > 0.5 * period:
+            keep.append(i)
+    times = times[keep] if times.size else times
+    if times.size < 3:
+        raise InputError(f"only {times.size} patch passages found in the '{axis}' reading (and no encoder)",
+                         source=record.source)
+    return times
+
+
+__all__ = ["RollingProfile", "rolling_profile", "periodic_interpolator", "profile_rms_error", "DEFAULT_POINTS",
+           "revolution_grids", "RevolutionGrid", "patch_passages"]

@@ -1,0 +1,290 @@
+"""Load estimate (issue 15): accuracy on synthetic profiles, robustness, speed per revolution.
+
+Run ``python benchmarks/bench_estimate.py`` (about 3–5 minutes on one core). It prints, against the
+issue's targets:
+
+1. **Accuracy** on randomly drawn synthetic profiles: loads 2–6.5 kN, 20–90 km/h, flat road and
+   1.2192 m drum, 1 % noise (σ = 1 % of the radial reading's largest magnitude; white, pink, red or a
+   resonance band, ``ringfit.synth.cases.coloured_noise``), gravity on or off, IEPE high-pass 0–3 Hz,
+   sensor tilt 0–1.1, an angle offset of ±2°, ``rotation_hz`` in half the sidecars (the others carry a
+   nominal speed off by up to ±4 %). The truth is the one forward model on a 2048-point grid written at
+   720–3600 angles; the estimator solves on 512 points. Load error median (target < 1 %) and worst
+   (< 3 %), 95 % interval coverage (≥ 90 %), the edge-peak feature method beside it.
+2. **Robustness** (no target): effects the estimator does not model (sensor offset, a band limit, a
+   second high-pass stage, tread shear, a finite EA, χ < 1, a k_tread 10 % off) — load errors, coverage
+   and whether the fit flags itself as poor.
+3. **Speed**: a synthetic drum recording at 100 km/h (14 revolutions/s, 25.6 kHz): revolutions/s of the
+   per-revolution fits, warm: vmapped batches of 16 (the default), larger batches, compiled
+   warm-started chains (``lax.scan``), and one Python-level engine call per revolution, for comparison; the pass over the recording, and the time for a 30-minute recording (measured on
+   ``--minutes`` of recording and extrapolated per revolution and per sample; ``--long`` synthesises
+   and times a real 30-minute file instead, ~1.2 GB in a temporary folder).
+
+``--cores N`` pins the process to N cores before JAX starts (default 1: the figures are per core).
+Timings are wall-clock on this machine; the CPU time of the process is printed beside them (on a
+machine shared with other jobs, the CPU time is the honest per-core figure).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+
+def parse():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--cases", type=int, default=48, help="random accuracy cases (default 48)")
+    ap.add_argument("--robust-cases", type=int, default=6, help="cases per robustness variation (default 6)")
+    ap.add_argument("--cores", type=int, default=1, help="pin to this many cores (0: no pinning)")
+    ap.add_argument("--minutes", type=float, default=1.0, help="recording length timed for the speed figures")
+    ap.add_argument("--long", action="store_true", help="synthesise and time a real 30-minute recording")
+    ap.add_argument("--skip", default="", help="comma-separated sections to skip: accuracy,robustness,speed")
+    return ap.parse_args()
+
+
+ARGS = parse()
+if ARGS.cores:
+    os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[: ARGS.cores]))
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+
+import ringfit  # noqa: E402,F401  (float64)
+from ringfit.fit.estimate import (EstimateSettings, estimate_load, estimate_problem, estimate_recording,  # noqa: E402
+                                  estimate_revolutions, recording_revolutions, EstimateArrays, LOAD, GAIN,
+                                  ANGLE_OFFSET, REVOLUTION_TOL, REVOLUTION_MAX_STEPS)
+from ringfit.io.profiles import Profile  # noqa: E402
+from ringfit.params import table9  # noqa: E402
+from ringfit.physics.contact import BrushShearLoad, ContactSolver  # noqa: E402
+from ringfit.physics.profile import ProfileModel, flat_or_drum, simulate_profile  # noqa: E402
+from ringfit.synth.cases import coloured_noise  # noqa: E402
+
+GEOMETRY, RING = table9()
+TRUTH_SOLVER = ContactSolver(n_grid=2048)
+SETTINGS = EstimateSettings()
+DRUM = 1.2192
+COLOURS = ("white", "pink", "red", "band")
+
+
+def truth_profile(rng, *, load, speed, drum, model, points, offset_deg, colour, with_rate, speed_error=0.0,
+                  ring=RING, band_limit=None):
+    prof = simulate_profile(ring, GEOMETRY, speed_kmh=speed, load_n=load, drum_diameter_m=drum, model=model,
+                            solver=TRUTH_SOLVER, n_points=points, offset_rad=math.radians(offset_deg))
+    ch = prof.channels
+    if band_limit is not None:  # e.g. another simulator's coarser grid or an anti-alias filter
+        spec = np.fft.rfft(ch, axis=-1)
+        spec[:, band_limit + 1:] = 0.0
+        ch = np.fft.irfft(spec, points, axis=-1)
+    sigma = 0.01 * np.max(np.abs(ch[0]))
+    ch = ch + np.stack([coloured_noise(rng, points, sigma, colour) for _ in range(2)])
+    cond = {k: v for k, v in prof.condition.items() if k != "load_n"}
+    if not with_rate:
+        cond.pop("rotation_hz")
+        cond["speed_kmh"] = speed * (1.0 + speed_error)
+    return Profile(prof.angle_deg, ch[0], ch[1], condition=cond, source="bench")
+
+
+def summarise(rows, label):
+    err = np.array([r["err"] for r in rows])
+    ferr = np.array([r["feat"] for r in rows])
+    cover = np.array([r["cover"] for r in rows])
+    conv = np.array([r["conv"] for r in rows])
+    half = np.array([r["half"] for r in rows])
+    fe = np.abs(ferr[np.isfinite(ferr)])
+    return (f"   {label:<34s} n={len(rows):3d}  |error| median {100 * np.median(np.abs(err)):5.2f} %  "
+            f"worst {100 * np.max(np.abs(err)):5.2f} %  coverage {100 * cover.mean():5.1f} %  "
+            f"half-width {100 * np.median(half):4.2f} %  converged {conv.sum()}/{len(rows)}  | feature: median "
+            f"{100 * np.median(fe) if fe.size else math.nan:5.2f} % worst {100 * np.max(fe) if fe.size else math.nan:6.2f} %"
+            f" ({np.isfinite(ferr).sum()} found)")
+
+
+def run_case(profile, load, ring=RING):
+    t = time.perf_counter()
+    est = estimate_load(profile, GEOMETRY, ring, settings=SETTINGS)
+    dt = time.perf_counter() - t
+    return dict(err=est.load_n / load - 1, cover=est.lo < load < est.hi, conv=est.converged,
+                half=0.5 * (est.hi - est.lo) / est.load_n, feat=est.feature.load_n / load - 1,
+                poor=any(f.startswith("poor fit") for f in est.flags), ratio=est.rms / est.noise, time=dt)
+
+
+def accuracy():
+    print(f"\n1. Accuracy: {ARGS.cases} random synthetic profiles (truth M = 2048, estimator M = {SETTINGS.n_grid}, "
+          f"harmonics 2…{SETTINGS.k_max})")
+    rng = np.random.default_rng(2026)
+    rows = []
+    for i in range(ARGS.cases):
+        load = rng.uniform(2000.0, 6500.0)
+        speed = rng.uniform(20.0, 90.0)
+        drum = DRUM if i % 2 else None
+        gravity = rng.random() < 0.75
+        corner = float(rng.choice([0.0, 0.1, 0.5, 1.0, 3.0]))
+        tilt = float(rng.choice([0.0, 0.5, 1.0, 1.1])) if gravity else 0.0
+        model = ProfileModel().with_sensor(gravity=9.81 if gravity else 0.0, corner_hz=corner, tilt_gain=tilt)
+        with_rate = bool(i % 4 < 2)
+        prof = truth_profile(rng, load=load, speed=speed, drum=drum, model=model,
+                             points=int(rng.choice([720, 1000, 1024, 2048, 3600])),
+                             offset_deg=rng.uniform(-2.0, 2.0), colour=COLOURS[i % 4], with_rate=with_rate,
+                             speed_error=rng.uniform(-0.04, 0.04))
+        row = run_case(prof, load)
+        row.update(drum=drum is not None, rate=with_rate, gravity=gravity, colour=COLOURS[i % 4])
+        rows.append(row)
+    print(summarise(rows, "all") + "   (targets: median < 1 %, worst < 3 %, coverage ≥ 90 %)")
+    for label, key, value in (("flat road", "drum", False), ("drum", "drum", True),
+                              ("rotation_hz given", "rate", True), ("speed_kmh only (±4 %)", "rate", False),
+                              ("with gravity", "gravity", True), ("without gravity", "gravity", False)):
+        print(summarise([r for r in rows if r[key] == value], label))
+    for colour in COLOURS:
+        print(summarise([r for r in rows if r["colour"] == colour], f"{colour} noise"))
+    times = [r["time"] for r in rows[1:]]
+    print(f"   one profile, warm: median {statistics.median(times):.2f} s (two Levenberg–Marquardt fits + load curves)")
+
+
+def robustness():
+    print(f"\n2. Robustness: effects the estimator does not model ({ARGS.robust_cases} cases each; loads 2–6.5 kN, "
+          "30–80 km/h, gravity, 0.5 Hz high-pass, tilt 1, white 1 % noise)")
+    base = ProfileModel().with_sensor(gravity=9.81, corner_hz=0.5, tilt_gain=1.0)
+    variations = [
+        ("none (reference)", base, RING, None),
+        ("sensor offset e = 5 mm", base.with_sensor(offset=0.005), RING, None),
+        ("band limit: harmonics ≤ 60", base, RING, 60),
+        ("two high-pass stages (IEPE + DAQ)", base.with_sensor(highpass_order=2), RING, None),
+        ("tread shear k_x = 20 MN/m²", base.with_load_hook(BrushShearLoad(20e6)), RING, None),
+        ("extensible belt EA = 1 MN", base.with_membrane_compliance(1e-6), RING, None),
+        ("centrifugal share χ = 0.9", base.with_ring_changes(chi=0.9), RING, None),
+        ("tread stiffness +10 % vs tyre file", base, RING.replace(k_tread=1.1 * float(RING.k_tread)), None),
+    ]
+    for label, model, ring, band in variations:
+        rng = np.random.default_rng(7)
+        rows = []
+        for i in range(ARGS.robust_cases):
+            load = float(np.linspace(2000, 6500, ARGS.robust_cases)[i])
+            prof = truth_profile(rng, load=load, speed=30.0 if i % 2 else 80.0, drum=DRUM if i % 3 == 0 else None,
+                                 model=model, points=1024, offset_deg=0.5, colour="white", with_rate=True, ring=ring,
+                                 band_limit=band)
+            rows.append(run_case(prof, load))
+        poor = sum(r["poor"] for r in rows)
+        ratio = statistics.median(r["ratio"] for r in rows)
+        print(summarise(rows, label) + f"  | flagged poor {poor}/{len(rows)}, rms/noise {ratio:.2f}")
+
+
+def cpu_and_wall(fn):
+    c, w = time.process_time(), time.perf_counter()
+    out = fn()
+    return out, time.process_time() - c, time.perf_counter() - w
+
+
+def sequential_fits(data, reference, n):
+    """The alternative: one engine fit per revolution, warm-started from the previous one."""
+    from ringfit.fit.engine import least_squares
+
+    K = data.k_max - 1
+    geometry = reference.fit.problem.data.geometry
+    settings = EstimateSettings(window_deg=SETTINGS.revolution_window_deg)
+    theta = np.asarray(reference.fit.theta).copy()
+    problems = []
+    for r in range(n):
+        arrays = EstimateArrays(geometry=geometry, ring=RING, omega=np.array([2 * math.pi * data.rotation_hz[r]]),
+                                roads=flat_or_drum(reference.drum_diameter_m, 1), response=data.response[None],
+                                measured=data.rows[r][None], weight=np.ones((1, 2 * K)))
+        problems.append(estimate_problem(arrays, settings, data.k_max))
+    least_squares(problems[0], theta, (LOAD, GAIN, ANGLE_OFFSET), max_steps=REVOLUTION_MAX_STEPS, rtol=REVOLUTION_TOL,
+                  atol=REVOLUTION_TOL, method="gauss_newton")  # compile
+
+    def go():
+        th = theta
+        for p in problems:
+            th = least_squares(p, th, (LOAD, GAIN, ANGLE_OFFSET), max_steps=REVOLUTION_MAX_STEPS, rtol=REVOLUTION_TOL,
+                               atol=REVOLUTION_TOL, method="gauss_newton").theta
+        return th
+
+    return cpu_and_wall(go)
+
+
+def speed():
+    from ringfit.io.continuous import read_continuous
+    from ringfit.synth.cleat import CleatBench
+
+    minutes = 30.0 if ARGS.long else ARGS.minutes
+    duration = 60.0 * minutes
+    steps = tuple((t, 3000.0 + 2500.0 * (k % 2)) for k, t in enumerate(np.arange(5.0, duration, 10.0), start=1))
+    bench = CleatBench(speed_kmh=100.0, load_n=3000.0, load_steps=steps, fs_hz=25600.0, noise_ms2=8.0,
+                       highpass_hz=0.5, seed=11)
+    print(f"\n3. Speed: drum recording at 100 km/h ({bench.rotation_hz:.1f} revolutions/s), 25.6 kHz, radial and "
+          f"tangential, load stepping 3 ↔ 5.5 kN every 10 s; {minutes:g} min timed; "
+          f"JAX on {jax.devices()[0].platform}, {len(os.sched_getaffinity(0))} core(s)")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "run.records.npz"
+        _, _, t_syn = cpu_and_wall(lambda: bench.write(path, duration, cleat=False, acc_dtype=np.float32))
+        print(f"   synthesised {duration * bench.fs_hz / 1e6:.1f} M samples in {t_syn:.1f} s")
+        with read_continuous(path) as rec:
+            samples = rec.samples
+            _, c0, w0 = cpu_and_wall(lambda: estimate_recording(rec, GEOMETRY, RING, settings=SETTINGS))
+            print(f"   first call (compilation included): {w0:.1f} s wall, {c0:.1f} s CPU")
+            data, c_pass, w_pass = cpu_and_wall(lambda: recording_revolutions(rec, k_max=SETTINGS.k_max))
+            ref, c_ref, w_ref = cpu_and_wall(lambda: estimate_load(
+                data.profile, GEOMETRY, RING, settings=SETTINGS, omega=2 * math.pi * float(np.mean(data.rotation_hz)),
+                omega_source="encoder", response=data.response, noise_per_angle=data.noise))
+        R = data.rows.shape[0]
+
+        def fits(**kw):
+            estimate_revolutions(data, ref, RING, settings=SETTINGS, **kw)  # warm-up (compilation)
+            return cpu_and_wall(lambda: estimate_revolutions(data, ref, RING, settings=SETTINGS, **kw))
+
+        revs, c_fit, w_fit = fits(mode="batch", batch=16)
+        print(f"   per-revolution fits, vmapped batches of 16, each from the previous batch's last fit (the default): "
+              f"{R / w_fit:5.0f} rev/s wall, {R / c_fit:5.0f} rev/s per CPU-second  (target ≥ 200 per core); "
+              f"{revs.converged.mean() * 100:.1f} % converged, median {np.median(revs.iterations):.0f} Gauss–Newton steps")
+        keep = (revs, c_fit, w_fit)
+        for mode, batch in (("batch", 64), ("chain", 32), ("chain", 128)):
+            revs_b, c_b, w_b = fits(mode=mode, batch=batch)
+            what = (f"vmapped batches of {batch}" if mode == "batch"
+                    else f"compiled warm-started chains of {batch} (lax.scan, each fit from the previous revolution's)")
+            print(f"   {what}: {R / w_b:5.0f} rev/s wall, {R / c_b:5.0f} rev/s per CPU-second")
+        n_seq = min(R, 256)
+        _, c_seq, w_seq = sequential_fits(data, ref, n_seq)
+        print(f"   one least_squares call (Gauss–Newton) per revolution, warm-started from Python: {n_seq / w_seq:5.0f} rev/s wall, "
+              f"{n_seq / c_seq:5.0f} rev/s per CPU-second")
+        revs, c_fit, w_fit = keep
+        truth = bench.load_at(revs.t_s)
+        d = (revs.t_s - 5.0) % 10.0
+        clean = np.minimum(d, 10.0 - d) > 0.6 / bench.rotation_hz  # not a revolution with a step in it
+        err = revs.load_n[clean] / truth[clean] - 1
+        cover = ((revs.lo < truth) & (truth < revs.hi))[clean]
+        print(f"   per-revolution accuracy ({clean.sum()} revolutions away from the steps): |error| median "
+              f"{100 * np.median(np.abs(err)):.2f} %, worst {100 * np.max(np.abs(err)):.2f} %, 95 % coverage "
+              f"{100 * cover.mean():.1f} %, median half-width {50 * np.median((revs.hi - revs.lo) / revs.load_n):.2f} %")
+        per_sample_w, per_sample_c = w_pass / samples, c_pass / samples
+        per_rev_w, per_rev_c = w_fit / R, c_fit / R
+        print(f"   pass over the recording (read, decode encoder, resample {R} revolutions): {w_pass:.1f} s wall, "
+              f"{c_pass:.1f} s CPU ({samples / w_pass / 1e6:.1f} M samples/s); averaged-profile fit {w_ref:.2f} s")
+        n30, r30 = 30 * 60 * bench.fs_hz, 30 * 60 * bench.rotation_hz
+        if ARGS.long:
+            print(f"   30-minute recording, measured: {w_pass + w_ref + w_fit:.1f} s wall, {c_pass + c_ref + c_fit:.1f} s "
+                  f"CPU (target < 60 s)")
+        else:
+            wall = per_sample_w * n30 + w_ref + per_rev_w * r30
+            cpu = per_sample_c * n30 + c_ref + per_rev_c * r30
+            print(f"   30-minute recording ({n30 / 1e6:.0f} M samples, {r30:.0f} revolutions), extrapolated from "
+                  f"{minutes:g} min per sample and per revolution: {wall:.0f} s wall, {cpu:.0f} s CPU (target < 60 s); "
+                  "--long measures it")
+
+
+def main():
+    skip = set(filter(None, ARGS.skip.split(",")))
+    print(f"JAX {jax.__version__} on {jax.devices()[0].platform}, float64; "
+          f"{len(os.sched_getaffinity(0))} core(s) for this process")
+    if "accuracy" not in skip:
+        accuracy()
+    if "robustness" not in skip:
+        robustness()
+    if "speed" not in skip:
+        speed()
+    print("\nGPU: not measured here (no accelerator in this session); the project never needs one.")
+
+
+if __name__ == "__main__":
+    main()

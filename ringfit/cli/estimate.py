@@ -1,0 +1,168 @@
+"""``ringfit estimate`` — wheel load and contact patch from the one accelerometer (docs/formats.md §7).
+
+    ringfit estimate INPUT --tyre FITTED.toml --out NAME.estimate.json [--per-revolution REVS.csv] [--plot P.png]
+
+INPUT is a rolling profile ``*.profile.csv`` (its sidecar may omit ``load_n``) or a continuous
+recording ``*.records.npz`` (docs/records-continuous.md).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "estimate", help="estimate the wheel load and contact patch from a profile or a recording",
+        description="Invert the fitted rolling model (tyre file fixed) for the vertical load that the radial "
+                    "reading shows: a gradient fit of its revolution harmonics 2…k_max with a free gain, the "
+                    "high-pass corner, sensor tilt and angle offset as nuisances; 95 % Laplace interval; the "
+                    "contact patch of the model at that load; the classic edge-peak method beside it. For a "
+                    "continuous recording the averaged profile and, with --per-revolution or --plot, every "
+                    "revolution (the angle from the encoder, or from the patch passages when there is none). Writes NAME.estimate.json (docs/formats.md §7); exit 1 if the fit does not "
+                    "converge (nothing written).")
+    p.add_argument("input", type=Path, help="*.profile.csv (+ .json sidecar, load_n not needed) or a continuous "
+                                            "*.records.npz")
+    p.add_argument("--tyre", required=True, type=Path, help="fitted tyre TOML (ring parameters and k_tread fixed)")
+    p.add_argument("--out", required=True, type=Path, help="output NAME.estimate.json")
+    p.add_argument("--per-revolution", type=Path, default=None, metavar="REVS.csv",
+                   help="continuous recordings: write one row per revolution (load, interval, patch length, …)")
+    p.add_argument("--plot", type=Path, default=None, metavar="P.png",
+                   help="PNG: the fit to the profile, and for a recording the load against time with its band")
+    p.add_argument("--k-tread-sd", type=float, default=None, metavar="S",
+                   help="σ of ln k_tread: free the tread stiffness with this log-normal prior around the tyre "
+                        "file's value and propagate it into the interval (default: fixed; 0.3 when the tyre "
+                        "file has no k_tread)")
+    p.add_argument("--harmonics", type=int, default=40, metavar="K",
+                   help="highest revolution harmonic fitted (default 40)")
+    p.add_argument("--grid", type=int, default=512, help="model grid M of the contact solve (default 512)")
+    p.add_argument("--force", action="store_true", help="replace existing outputs")
+    p.add_argument("--quiet", action="store_true", help="no progress bar, no warnings on stderr")
+    p.set_defaults(run=run_estimate)
+
+
+def run_estimate(args) -> int:
+    from ringfit._cache import enable_compilation_cache
+
+    enable_compilation_cache()  # a second run skips XLA compilation
+    import sys
+
+    from ringfit.cli import CommandFailed
+    from ringfit.errors import InputError
+    from ringfit.io.files import check_output_path
+    from ringfit.io.profiles import sidecar_path
+
+    kind = _input_kind(args.input)
+    if args.grid < 128 or args.grid % 2:
+        raise InputError(f"--grid {args.grid}: expected an even number >= 128")
+    if not 8 <= args.harmonics < args.grid // 2 - 1:
+        raise InputError(f"--harmonics {args.harmonics}: expected 8 … {args.grid // 2 - 2}")
+    if args.k_tread_sd is not None and not args.k_tread_sd >= 0:
+        raise InputError(f"--k-tread-sd {args.k_tread_sd}: expected a number >= 0")
+    if args.per_revolution is not None and kind != "recording":
+        raise InputError("--per-revolution needs a continuous recording (*.records.npz), not a profile",
+                         source=args.input)
+    inputs = [args.input, args.tyre] + ([sidecar_path(args.input)] if kind == "profile" else [])
+    outputs = [p for p in (args.out, args.per_revolution, args.plot) if p is not None]
+    if len(set(map(str, outputs))) != len(outputs):
+        raise InputError("--out, --per-revolution and --plot must be different files")
+    for p in outputs:
+        check_output_path(p, overwrite=args.force, inputs=inputs)
+
+    import json
+
+    from ringfit.fit.estimate import EstimateSettings, estimate_load, estimate_recording
+    from ringfit.io.files import atomic_write_text
+    from ringfit.io.tyre import read_tyre
+
+    tyre = read_tyre(args.tyre)
+    settings = EstimateSettings(n_grid=args.grid, k_max=args.harmonics, k_tread_sd=args.k_tread_sd)
+    k_in_file = "k_tread" in tyre.ring_values
+    revs = None
+    if kind == "profile":
+        from ringfit.io.profiles import read_profile
+
+        profile = read_profile(args.input)
+        est = estimate_load(profile, tyre.geometry, tyre.ring, settings=settings, k_tread_in_file=k_in_file)
+    else:
+        from ringfit.io.continuous import read_continuous
+
+        want_revs = args.per_revolution is not None or args.plot is not None
+        with read_continuous(args.input) as rec:
+            est, revs = estimate_recording(rec, tyre.geometry, tyre.ring, settings=settings,
+                                           k_tread_in_file=k_in_file, per_revolution=want_revs,
+                                           progress=not args.quiet)
+    if not args.quiet:
+        for flag in est.flags:
+            print(f"ringfit estimate: {flag}", file=sys.stderr)
+    _print_estimate(est)
+    if not est.converged:
+        raise CommandFailed(f"the load estimate did not converge (status {est.status}"
+                            + (f"; {est.flags[-1]}" if est.flags else "") + "); nothing written")
+    record = est.to_record(args.input.name)
+    if revs is not None:
+        record["per_revolution"] = revs.summary()
+        print(f"per revolution: {len(revs)} revolutions, {int(revs.converged.sum())} converged; load "
+              f"{record['per_revolution']['load_n_min']:.0f} … {record['per_revolution']['load_n_max']:.0f} N "
+              f"(median {record['per_revolution']['load_n_median']:.0f} N)"
+              if revs.converged.any() else f"per revolution: {len(revs)} revolutions, none converged")
+        if not revs.converged.any():
+            raise CommandFailed("no revolution's fit converged; nothing written")
+    atomic_write_text(args.out, json.dumps(record, indent=2, allow_nan=False) + "\n")
+    print(f"wrote {args.out}")
+    if args.per_revolution is not None:
+        atomic_write_text(args.per_revolution, _revolutions_csv(revs))
+        print(f"wrote {args.per_revolution} ({len(revs)} rows)")
+    if args.plot is not None:
+        from ringfit.report.estimate_plots import estimate_figure
+
+        estimate_figure(est, revs, title=args.input.name).savefig(args.plot, dpi=110)
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def _input_kind(path: Path) -> str:
+    from ringfit.errors import InputError
+
+    name = path.name.lower()
+    if name.endswith(".csv"):
+        return "profile"
+    if name.endswith(".npz"):
+        return "recording"
+    raise InputError("expected a *.profile.csv or a continuous *.records.npz", source=path)
+
+
+def _print_estimate(est) -> None:
+    p = est.patch
+    print(f"load {est.load_n:.0f} N (95 %: {est.lo:.0f} … {est.hi:.0f} N); patch {p['length_mm']:.1f} mm "
+          f"({p['leading_deg']:+.2f}° … {p['trailing_deg']:+.2f}°)")
+    print(f"rotation {est.rotation_hz:.4g} Hz from {est.rotation_source}")
+    print(f"fit: {est.status}, residual RMS {est.rms:.3g} m/s², noise {est.noise:.3g} m/s² ({est.noise_source}); "
+          f"harmonics 2…{est.k_max} of the radial reading")
+    f = est.feature
+    feat = f"{f.load_n:.0f} N" if f.load_n == f.load_n else "not found"
+    print(f"feature method (edge peaks {f.leading_deg:+.2f}° / {f.trailing_deg:+.2f}°, {f.spacing_mm:.1f} mm): {feat}")
+
+
+def _revolutions_csv(revs) -> str:
+    import csv
+    import io
+
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    cols = revs.columns()
+    w.writerow(list(cols))
+    for i in range(len(revs)):
+        w.writerow([_cell(cols[k][i]) for k in cols])
+    return buf.getvalue()
+
+
+def _cell(x) -> str:
+    import math
+
+    import numpy as np
+
+    if isinstance(x, (int, np.integer)):
+        return str(int(x))
+    x = float(x)
+    return repr(x) if math.isfinite(x) else ""

@@ -1,0 +1,79 @@
+"""Figures of a load estimate (``ringfit estimate``): the fit to the radial reading, the load against time.
+
+Each function returns a matplotlib Figure (Agg backend via :func:`ringfit.report.figures.new_figure`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ringfit.report.figures import new_figure
+
+G = 9.81
+
+
+def draw_profile_fit(ax_fit, ax_res, est) -> None:
+    """The radial reading and the model at the estimate, both in the fitted band (k = 2…k_max), and the residual.
+
+    ``est``: a :class:`ringfit.fit.estimate.LoadEstimate`; the patch edges of the model are marked
+    at the recorded angle (φ − angle offset).
+    """
+    angle = np.asarray(est.angle_deg)
+    order = np.argsort(angle)
+    offset = est.nuisances["angle_offset_deg"]["value"]
+    ax_fit.plot(angle[order], np.asarray(est.measured)[order] / G, color="C1", lw=0.9, label="measured (band)")
+    ax_fit.plot(angle[order], np.asarray(est.model)[order] / G, color="C0", lw=1.0, label="model at the estimate")
+    for edge in (est.patch["leading_deg"], est.patch["trailing_deg"]):
+        ax_fit.axvline(edge - offset, color="k", lw=0.6, ls="--")
+    ax_fit.set_ylabel("radial reading [g]")
+    ax_fit.set_title(f"load {est.load_n:.0f} N (95 %: {est.lo:.0f} … {est.hi:.0f}); patch "
+                     f"{est.patch['length_mm']:.1f} mm (dashed: edges); harmonics 2…{est.k_max}", fontsize=9)
+    ax_fit.legend(fontsize=8, loc="lower right")
+    ax_fit.grid(alpha=0.3)
+    ax_res.plot(angle[order], (np.asarray(est.measured) - np.asarray(est.model))[order] / G, color="C3", lw=0.7)
+    ax_res.set_ylabel("residual [g]")
+    ax_res.set_xlabel("recorded sensor angle [deg]")
+    ax_res.set_title(f"residual RMS {est.rms:.3g} m/s², noise {est.noise:.3g} m/s²", fontsize=9)
+    ax_res.grid(alpha=0.3)
+    for ax in (ax_fit, ax_res):
+        ax.set_xlim(-90, 90)
+
+
+def draw_load_against_time(ax, revs, est=None) -> None:
+    """Per-revolution load [kN] against time with its 95 % band; the feature method as dots; the averaged
+    profile's estimate as a line (``est``)."""
+    t = np.asarray(revs.t_s)
+    ok = np.asarray(revs.converged, dtype=bool)
+    ax.fill_between(t, revs.lo / 1e3, revs.hi / 1e3, color="C0", alpha=0.3, lw=0, label="95 % interval")
+    ax.plot(t[ok], revs.load_n[ok] / 1e3, color="C0", lw=1.0, label="model fit per revolution")
+    if (~ok).any():
+        ax.plot(t[~ok], revs.load_n[~ok] / 1e3, "x", color="C3", ms=4, label="not converged")
+    feat = np.asarray(revs.feature_load_n)
+    ax.plot(t, feat / 1e3, ".", color="C2", ms=2, label="edge-peak feature method")
+    if est is not None:
+        ax.axhline(est.load_n / 1e3, color="k", lw=0.7, ls=":", label="averaged profile")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("wheel load [kN]")
+    ax.set_title(f"load per revolution ({len(revs)} revolutions)", fontsize=9)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+
+
+def estimate_figure(est, revs=None, *, title: str = ""):
+    """The fit (and, for a recording, the load against time) of a load estimate.
+
+    **Arguments:** ``est`` :class:`ringfit.fit.estimate.LoadEstimate`; ``revs``
+    :class:`ringfit.fit.estimate.RevolutionEstimates` or None; ``title``.
+    """
+    rows = 3 if revs is not None else 2
+    fig, axes = new_figure(rows, 1, figsize=(9, 2.8 * rows + 0.4), squeeze=False,
+                           gridspec_kw={"height_ratios": [2, 1] + ([2] if revs is not None else [])})
+    draw_profile_fit(axes[0, 0], axes[1, 0], est)
+    if revs is not None:
+        draw_load_against_time(axes[2, 0], revs, est)
+    fig.suptitle(f"load estimate{': ' + title if title else ''}")
+    fig.tight_layout()
+    return fig
+
+
+__all__ = ["estimate_figure", "draw_profile_fit", "draw_load_against_time"]
