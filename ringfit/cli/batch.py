@@ -20,7 +20,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ringfit.cli.targets import _positive_int
+from ringfit.cli._args import integer
 
 #: Commands ``ringfit batch`` runs, in help order.
 BATCH_COMMANDS = ("ssi", "fit", "sample", "diagnose", "profile", "estimate")
@@ -46,9 +46,9 @@ class OutputRule:
 #: The naming rule of every batch command (docs/formats.md §13).
 OUTPUT_RULES: dict[str, OutputRule] = {
     "ssi": OutputRule((".records.npz", ".uff", ".unv"), ".modes.csv", (".modes.json",),
-                      (("--workers", "1"), ("--no-progress",))),
+                      (("--workers", "1"), ("--quiet",))),
     "fit": OutputRule((".modes.csv",), ".fitted.tyre.toml", (), (("--tyre", "{dir}/tyre.toml"),)),
-    "sample": OutputRule((".modes.csv",), ".posterior.h5", (), (("--tyre", "{dir}/tyre.toml"), ("--no-progress",))),
+    "sample": OutputRule((".modes.csv",), ".posterior.h5", (), (("--tyre", "{dir}/tyre.toml"), ("--quiet",))),
     "diagnose": OutputRule((), ".diagnosis.json", (), (("--quiet",),)),
     "profile": OutputRule((".records.npz",), ".profile.csv", (".profile.json",), (("--quiet",),)),
     "estimate": OutputRule((".profile.csv", ".records.npz"), ".estimate.json"),
@@ -91,7 +91,7 @@ def _batch_options(p: argparse.ArgumentParser, *, inputs: bool) -> None:
 def _cluster_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a LocalCluster here)")
-    p.add_argument("--workers", type=_positive_int, default=None, metavar="N",
+    p.add_argument("--workers", type=integer("a positive number of workers", lo=1), default=None, metavar="N",
                    help="LocalCluster worker processes, one thread each (default: usable CPUs, at most one per task)")
     p.add_argument("--memory-limit", default="auto", metavar="SIZE",
                    help="LocalCluster memory per worker, e.g. 4GB; a worker above it is restarted and its task "
@@ -479,7 +479,7 @@ def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
 
     force = ["--force"] if opts.force else []
     sample_opts = ["--walkers", str(opts.walkers), "--min-steps", str(opts.min_steps), "--max-steps",
-                   str(opts.max_steps), "--seed", str(opts.seed), "--prior", opts.prior, "--no-progress"]
+                   str(opts.max_steps), "--seed", str(opts.seed), "--prior", opts.prior, "--quiet"]
     cwd = os.getcwd()
 
     def step(tyre: str, kind: str, argv: list[str], after: tuple, outputs: list) -> Task:
@@ -507,7 +507,7 @@ def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
             targets = case / "free.modes.csv"
             paths.update(case=str(case), targets=str(targets), records=str(records))
             tasks.append(step(name, "ssi", ["ssi", str(records), "--out", str(targets), "--workers", "1",
-                                             "--no-progress", *force], (), [targets, targets.with_suffix(".json")]))
+                                             "--quiet", *force], (), [targets, targets.with_suffix(".json")]))
             after = (f"{name}/ssi",)
         else:
             case, targets = tyre, tyre / "free.modes.csv"
