@@ -192,7 +192,7 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     keep = ~acoustic | ~(damping > spurious_damping_factor * ref)
     idx = np.flatnonzero(keep)
     modes = [modes[i] for i in idx]
-    fmt = lambda x: f"{x:.6g}"  # noqa: E731
+    fmt = lambda x: f"{x:.6g}" if np.isfinite(x) else ""  # noqa: E731  (empty: unknown)
     table = ModeTable(
         freq_hz=freq[idx],
         n=np.where(acoustic[idx], -1, n[idx]),
@@ -274,7 +274,7 @@ def apply_uncertainty(table: ModeTable, modes: Sequence[PhysicalMode], unc) -> l
     import dataclasses
 
     table.freq_std_hz = np.asarray(unc.freq_std_hz, dtype=np.float64).copy()
-    table.extra["damping_std_pct"] = np.array(["" if not np.isfinite(z) else f"{100 * z:.6g}" for z in unc.damping_std],
+    table.extra["damping_std_pct"] = np.array([f"{100 * z:.6g}" if np.isfinite(z) else "" for z in unc.damping_std],
                                               dtype=object)
     table.condition["method"] = f"{table.condition.get('method', 'ssi-cov')}; σ: {unc.method}"
     return [dataclasses.replace(m, freq_std_hz=float(f), damping_std=float(z))
