@@ -43,7 +43,7 @@ def test_one_quiet_flag():
 def test_max_steps_means_chain_steps_only(capsys):
     owners = [name for name, p in _subparsers().items()
               if any("--max-steps" in a.option_strings and a.help != argparse.SUPPRESS for a in p._actions)]
-    assert owners == ["sample"]
+    assert owners == ["sample", "campaign"]  # campaign's --max-steps is `ringfit sample --max-steps`, passed on
     assert main(["fit", "m.modes.csv", "--tyre", "t.toml", "--out", "o.toml", "--max-steps", "10"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--max-iterations" in err
