@@ -174,3 +174,19 @@ def test_frf_two_sigma_covers_the_true_frequencies(zeta):
                 z.append((t.freq_hz[rows[0]] - truth.freq_hz[i]) / t.freq_std_hz[rows[0]])
     z = np.array(z)
     assert z.size >= 14 and np.mean(np.abs(z) <= 2) >= 0.9, z.round(2)
+
+
+def test_cli_ssi_no_jackknife_says_so(tmp_path):
+    from ringfit.cli import main
+    from ringfit.io.modes import read_mode_table
+    from ringfit.io.records import write_records
+
+    geometry, ring = table9()
+    truth = ring_modes(ring, geometry, n_values=range(1, 3), cavity=False, seed=0)
+    write_records(impact_records(truth, np.arange(8) * 45.0, fs_hz=FS_RAW, duration_s=0.5, seed=6),
+                  tmp_path / "r.records.npz")
+    out = tmp_path / "r.modes.csv"
+    assert main(["ssi", str(tmp_path / "r.records.npz"), "--out", str(out), "--no-jackknife", "--quiet",
+                 "--orders", "2:40:2"]) == 0
+    method = read_mode_table(out).condition["method"]
+    assert method == "ssi-cov; σ: spread over the model orders only (jackknife not asked for)"
