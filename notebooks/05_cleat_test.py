@@ -17,11 +17,12 @@ from pathlib import Path
 import numpy as np
 
 import ringfit  # noqa: F401  (float64)
+from ringfit.gap.campbell import compare_with_ring
 from ringfit.io.continuous import read_continuous
 from ringfit.report.cleat_plots import animate_field, plot_coverage, plot_field_map, plot_polar_snapshots
 from ringfit.synth.cleat import CleatBench
 from ringfit.targets.cleat import angle_time_field, coverage_points, field_error
-from ringfit.targets.rolling_modes import compare_with_ring, identify_rolling_modes
+from ringfit.targets.rolling_modes import identify_rolling_modes
 from ringfit.targets.rolling_profile import rolling_profile
 
 OUT = Path(os.environ.get("RINGFIT_NOTEBOOK_OUT", "."))

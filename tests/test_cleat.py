@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from ringfit.errors import InputError
+from ringfit.gap.campbell import compare_with_ring
 from ringfit.io.continuous import write_continuous
 from ringfit.synth.cleat import CleatBench
 from ringfit.targets.cleat import (
@@ -16,7 +17,7 @@ from ringfit.targets.cleat import (
     passes_for_full_coverage,
     predicted_arrival_angles,
 )
-from ringfit.targets.rolling_modes import compare_with_ring, identify_rolling_modes, winding
+from ringfit.targets.rolling_modes import identify_rolling_modes, winding
 
 FS = 6400.0
 SECONDS = 100.0
@@ -161,6 +162,12 @@ def test_winding_of_travelling_and_standing_shapes():
     m, ratio, phase = winding(np.stack([back, fwd, cos2]), phi)
     assert list(m[:2]) == [3, -5] and ratio[0] > 1e6 and ratio[1] > 1e6
     assert abs(m[2]) == 2 and ratio[2] == pytest.approx(1.0) and abs(math.cos(2 * phase[2])) == pytest.approx(1.0)
+    # the orientation does not depend on the pole's complex scaling: cos- and sin-type shapes times e^{iψ}
+    for psi in (0.0, 0.7, 2.0):
+        shapes = np.stack([np.cos(3 * np.radians(phi)), np.sin(3 * np.radians(phi))]) * np.exp(1j * psi)
+        m, ratio, phase = winding(shapes, phi)
+        assert abs(math.cos(m[0] * phase[0])) == pytest.approx(1.0)  # cos-type about φ = 0: extr
+        assert abs(math.cos(m[1] * phase[1])) == pytest.approx(0.0, abs=1e-9)  # sin-type: 0
 
 
 def test_rolling_modes_recover_the_generating_waves(bench, field, record):

@@ -50,10 +50,14 @@ def test_blind_subset_and_json_contract(tmp_path):
             assert {"effect", "rms", "heldout_rms", "shrink_pct", "heldout_shrink_pct", "evidence", "params"} <= set(cand)
         assert c["verdict"]["effects"][0] == c["verdict"]["effect"]
         if effect == "ground_contact":
-            p = c["candidates"][0]["params"]["half_angle_deg"]
-            assert p["lo"] <= label.magnitude["half_angle_deg"] <= p["hi"] or \
-                abs(p["value"] - label.magnitude["half_angle_deg"]) < 0.5
-            assert c["where"][0]["region"].startswith("loaded")
+            # the fitted patch scale times the patch the load gives is the injected half-angle
+            fitted = next(x for x in c["candidates"] if x["effect"] == "ground_contact" and x["variant"] == "fitted")
+            cond = next(iter(c["baseline"]["conditions"].values()))
+            computed_deg = float(cond.split("patch half-angle ")[1].split(" ")[0])
+            p = fitted["params"]["patch_scale"]
+            truth = label.magnitude["half_angle_deg"] / computed_deg
+            assert p["lo"] <= truth <= p["hi"] or abs(p["value"] - truth) < 0.05, (p, truth)
+            assert "loaded" in c["where"][0]["region"]
             # held-out shrink within 10 points of the ideal shrink
             assert abs(c["candidates"][0]["heldout_shrink_pct"] - c["baseline"]["ideal_shrink_pct"]) < 10
     out = tmp_path / "g.diagnosis.json"
@@ -68,7 +72,11 @@ def test_cli_diagnose(tmp_path, capsys):
     out = tmp_path / "x.diagnosis.json"
     assert main(["diagnose", str(folder), "--out", str(out), "--effects", "cavity_mode,ring_extensibility",
                  "--quiet"]) == 0
-    assert read_diagnosis(out)["verdict"]["effect"] in ("none", "unexplained", "cavity_mode", "ring_extensibility")
+    d = read_diagnosis(out)
+    # the real free tyre alone: eq. 18 explains it within its noise, neither effect claims anything
+    assert d["verdict"]["effects"] == ["none"]
+    assert {c["effect"] for c in d["candidates"]} == {"cavity_mode", "ring_extensibility"}
+    assert all(not c["accepted"] for c in d["candidates"])
     assert main(["diagnose", str(folder), "--out", str(out), "--quiet"]) == 2  # exists, no --force
     assert main(["diagnose", str(tmp_path / "missing"), "--out", str(tmp_path / "y.json"), "--quiet"]) == 2
     assert main(["diagnose", str(folder), "--out", str(tmp_path / "z.json"), "--effects", "bogus", "--quiet"]) == 2

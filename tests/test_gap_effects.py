@@ -13,14 +13,26 @@ from ringfit.physics.natural import (extensible_natural_frequencies, natural_ang
                                      rotating_natural_frequencies)
 
 
+def _modal_rows(n, patch_deg=0.0, **kw):
+    """ModalRows of one table (index 0) with the given columns; the rest at free-table defaults."""
+    n = jnp.asarray(n, dtype=jnp.float64)
+    m = n.shape[0]
+    cols = dict(is_freq=jnp.ones(m), contact=jnp.zeros(m, dtype=jnp.int32), spin=jnp.zeros(m), branch=jnp.zeros(m),
+                fixed_frame=jnp.zeros(m), cavity_hz=jnp.asarray(218.75), reference=jnp.ones(m),
+                freq_hz=jnp.full(m, 150.0), table=jnp.zeros(m, dtype=jnp.int32),
+                table_patch=jnp.asarray([math.radians(patch_deg)]))
+    cols.update({k: jnp.asarray(v) for k, v in kw.items()})
+    cols.setdefault("patch", jnp.where(cols["contact"] > 0, math.radians(patch_deg), 0.0))
+    return ModalRows(n=n, **cols)
+
+
 def _rows():
     n = np.array([0, 1, 2, 3, 5, 8, 2, 3, 2, 4, 3, 6, 2], float)
-    return ModalRows(
-        n=jnp.asarray(n), is_freq=jnp.asarray([1.0] * 12 + [0.0]),
+    return _modal_rows(
+        n, patch_deg=11.69, is_freq=[1.0] * 12 + [0.0],
         contact=jnp.asarray([0, 0, 0, 0, 0, 0, 1, 2, 0, 0, 0, 0, 0], dtype=jnp.int32),
-        spin=jnp.asarray([0.0] * 8 + [40.0, 40.0, 40.0, 40.0, 0.0]),
-        branch=jnp.asarray([0.0] * 8 + [1.0, -1.0, 1.0, -1.0, 0.0]),
-        fixed_frame=jnp.asarray([0.0] * 10 + [1.0, 1.0, 0.0]), cavity_hz=jnp.asarray(218.75))
+        spin=[0.0] * 8 + [40.0, 40.0, 40.0, 40.0, 0.0], branch=[0.0] * 8 + [1.0, -1.0, 1.0, -1.0, 0.0],
+        fixed_frame=[0.0] * 10 + [1.0, 1.0, 0.0])
 
 
 def test_registry_has_every_data_md_name():
@@ -56,9 +68,7 @@ def test_rotation_matches_eq25_eq26():
     assert f[8] == pytest.approx(ref[0, 0], rel=1e-12)  # co-rotating backward n=2
     assert f[9] == pytest.approx(-ref[1, 1], rel=1e-12)  # co-rotating forward n=4
     # PHYSICS.md §7: Ω = 43.95, n = 2, fixed frame backward 111.74 Hz
-    rows2 = ModalRows(n=jnp.asarray([2.0, 5.0]), is_freq=jnp.ones(2), contact=jnp.zeros(2, dtype=jnp.int32),
-                      spin=jnp.full(2, 43.95), branch=jnp.ones(2), fixed_frame=jnp.ones(2),
-                      cavity_hz=jnp.asarray(218.75))
+    rows2 = _modal_rows([2.0, 5.0], spin=jnp.full(2, 43.95), branch=jnp.ones(2), fixed_frame=jnp.ones(2))
     o3, _ = e.modal(jnp.asarray([1.0]), natural_angular_frequencies(r, g, rows2.n), jnp.zeros(2), rows2, r, g)
     np.testing.assert_allclose(np.asarray(o3) / (2 * math.pi), [111.74, 162.71], atol=0.01)
 
@@ -90,3 +100,17 @@ def test_sensor_mass_rayleigh_and_cavity_veering():
     ks, wa = m * float(omega[1]) ** 2, 2 * math.pi * 218.75
     x = np.sort(np.roots([m, -(ks + m * wa**2 + kappa), ks * wa**2]).real)
     assert float(o3[1]) == pytest.approx(math.sqrt(x[0]), rel=1e-10)
+
+
+def test_ground_contact_computed_patch_gives_the_loaded_modes():
+    """docs/physics.md §7: with a = 11.69° the loaded tyre's cos-type modes are 110.8, 128.9, 153.2 Hz and its
+    sin-type ones 107.2, 121.1, 142.8 Hz (n = 1…3); a patch scale of 1 on that patch reproduces them."""
+    g, r = table9()
+    rows = _modal_rows([1.0, 2.0, 3.0, 1.0, 2.0, 3.0], patch_deg=11.69,
+                       contact=jnp.asarray([1, 1, 1, 2, 2, 2], dtype=jnp.int32))
+    e = lib.get("ground_contact")
+    omega = natural_angular_frequencies(r, g, rows.n)
+    o2, _ = e.modal(jnp.asarray([1.0]), omega, jnp.zeros_like(omega), rows, r, g)
+    np.testing.assert_allclose(np.asarray(o2) / (2 * math.pi), [110.8, 128.9, 153.2, 107.2, 121.1, 142.8], atol=0.1)
+    half, _ = e.modal(jnp.asarray([0.5]), omega, jnp.zeros_like(omega), rows, r, g)
+    assert np.all(np.asarray(half) < np.asarray(o2)) and np.all(np.asarray(half) > np.asarray(omega))

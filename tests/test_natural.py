@@ -50,6 +50,40 @@ def test_extensible_tends_to_inextensible():
         assert np.max(np.abs(flex - inext)) < tol
 
 
+def test_ring_modal_mass_is_the_kinetic_energy_of_the_mode():
+    # independent: M_n = ∫ ρA (w² + v²) R dθ over one revolution for w = cos nθ, v = sin nθ / n (w + v′ = 0),
+    # and the rigid rotation v = 1 (n = 0); docs/physics.md §1: ring mass 2πRρA = 5.049 kg.
+    theta = np.linspace(0.0, 2 * np.pi, 4097)[:-1]
+    R, rho_a = float(GEO.radius), float(RING.rho_a)
+    for n in (1, 2, 3, 7):
+        w, v = np.cos(n * theta), np.sin(n * theta) / n
+        expect = rho_a * R * np.mean(w**2 + v**2) * 2 * np.pi
+        assert float(N.ring_modal_mass(RING, GEO, n)) == pytest.approx(expect, rel=1e-12)
+    assert float(N.ring_modal_mass(RING, GEO, 0)) == pytest.approx(5.049, abs=5e-4)
+    # eq. 18 is K_n / M_n with K_n = πR d_n (the loaded-tyre basis, docs/physics.md §6)
+    n = np.arange(1, 8)
+    d_n = np.asarray(N.modal_stiffness(RING, GEO, n)) / n**2
+    omega = 2 * np.pi * np.asarray(N.natural_frequencies(RING, GEO, n))
+    np.testing.assert_allclose(np.pi * R * d_n / np.asarray(N.ring_modal_mass(RING, GEO, n)), omega**2, rtol=1e-12)
+
+
+def test_extensible_flexural_shift_is_the_2x2_eigenproblem():
+    n = np.arange(1, 10)
+    omega18 = 2 * np.pi * np.asarray(N.natural_frequencies(RING, GEO, n))
+    for ea in (2e4, 1e5, 1e6):
+        flex = 2 * np.pi * np.asarray(N.extensible_natural_frequencies(RING.replace(ea=ea), GEO, n))[:, 0]
+        shift = np.asarray(N.extensible_flexural_shift(RING, GEO, n, 1.0 / ea))
+        np.testing.assert_allclose(omega18**2 + shift, flex**2, rtol=1e-10)
+    # inextensible: exactly nothing, and the slope there matches a finite difference of the eigen-solve
+    assert np.all(np.asarray(N.extensible_flexural_shift(RING, GEO, n, 0.0)) == 0.0)
+    slope = np.asarray(jax.vmap(jax.grad(lambda m, c: N.extensible_flexural_shift(RING, GEO, m, c), argnums=1),
+                                in_axes=(0, None))(jnp.asarray(n, float), 0.0))
+    ea = 1e9
+    flex = 2 * np.pi * np.asarray(N.extensible_natural_frequencies(RING.replace(ea=ea), GEO, n))[:, 0]
+    np.testing.assert_allclose(slope, (flex**2 - omega18**2) * ea, rtol=1e-3)
+    assert np.all(slope < 0)  # a finite EA lowers the flexural modes
+
+
 def test_extensible_tangential_branch_values():
     f = np.asarray(N.extensible_natural_frequencies(RING.replace(ea=1e6), GEO, np.arange(4)))[:, 1]
     np.testing.assert_allclose(f, [342.8, 473.7, 737.7, 1037.6], atol=0.06)

@@ -1,7 +1,12 @@
-"""Package-level promises: float64 on import, every public name resolves, bundled data present."""
+"""Package-level promises: float64 on import, a cheap import, every public name is its module's own
+object, documented and listed by task in help(ringfit), bundled data present."""
 
+import importlib
+import re
 import subprocess
 import sys
+
+import pytest
 
 import ringfit
 
@@ -12,9 +17,49 @@ def test_import_enables_x64_in_a_fresh_process():
     assert out.strip() == "float64"
 
 
-def test_every_public_name_resolves():
+def _public_names_in_docstring() -> set[str]:
+    """The names the module docstring lists under its tasks (indented lines of comma-separated names)."""
+    names = set()
+    for line in ringfit.__doc__.splitlines():
+        if line.startswith("    ") and re.fullmatch(r"[A-Za-z_0-9, ]+,?", line.strip()):
+            names.update(n.strip() for n in line.split(",") if n.strip())
+    return names
+
+
+def test_every_public_name_is_the_object_its_module_defines():
+    exports = ringfit._EXPORTS
+    assert ringfit.__all__ == sorted(exports)  # __all__ lists exactly the exported names
+    assert len(exports) == len(set(exports))
+    for name, module_name in exports.items():
+        obj = getattr(ringfit, name)
+        module = importlib.import_module(module_name)
+        assert obj is getattr(module, name), name
+        # defined there, not re-exported from elsewhere (the map names the defining module)
+        assert getattr(obj, "__module__", None) == module_name, (name, getattr(obj, "__module__", None))
+        assert module_name.split(".")[-1] != "__init__" and not hasattr(obj, "__path__"), name  # not a package
+
+
+def test_every_public_name_is_documented():
     for name in ringfit.__all__:
-        assert getattr(ringfit, name) is not None, name
+        doc = getattr(ringfit, name).__doc__ or ""
+        # its own text: a dataclass without a docstring gets an auto-generated "Name(field: type, ...)"
+        assert doc.strip() and not doc.startswith(f"{name}("), name
+
+
+def test_help_lists_every_entry_point_by_task():
+    assert _public_names_in_docstring() == set(ringfit.__all__)
+    for task in ("Free tyre", "fitting engine", "Targets from recordings", "Rolling tyre", "Sim-to-real gap",
+                 "State estimation", "Batch"):
+        assert task in ringfit.__doc__, task
+    assert set(ringfit.__all__) <= set(dir(ringfit))
+    with pytest.raises(AttributeError, match="no attribute 'fit_everything'"):
+        ringfit.fit_everything  # noqa: B018
+
+
+def test_import_ringfit_stays_cheap():
+    code = "import sys, ringfit; print(sorted(m for m in ('jax', 'numpy', 'scipy', 'matplotlib') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
 
 
 def test_bundled_seed_data():

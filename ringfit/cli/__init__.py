@@ -26,6 +26,7 @@ COMMAND_MODULES = (
     "ringfit.cli.cleat",
     "ringfit.cli.example",
     "ringfit.cli.batch",
+    "ringfit.cli.campbell",
 )
 
 

@@ -148,8 +148,9 @@ def register(sub) -> None:
     c.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created if absent)")
     _cluster_options(c)
     c.add_argument("--walkers", type=int, default=32, help="emcee walkers of `ringfit sample` (default 32)")
-    c.add_argument("--min-steps", type=int, default=2000, help="`ringfit sample --min-steps` (default 2000)")
-    c.add_argument("--max-steps", type=int, default=20000, help="`ringfit sample --max-steps` (default 20000)")
+    steps = integer("a whole number of steps >= 1", lo=1)
+    c.add_argument("--min-steps", type=steps, default=2000, help="`ringfit sample --min-steps` (default 2000)")
+    c.add_argument("--max-steps", type=steps, default=20000, help="`ringfit sample --max-steps` (default 20000)")
     c.add_argument("--seed", type=int, default=0, help="`ringfit sample --seed` (default 0)")
     c.add_argument("--prior", default="physical", choices=("physical", "none"),
                    help="prior of `ringfit fit` and `ringfit sample` (default physical)")

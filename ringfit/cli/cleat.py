@@ -1,7 +1,7 @@
 """``ringfit profile`` and ``ringfit cleat``: continuous drum recordings → profiles, angle–time fields, modes.
 
     ringfit profile RECORD --out NAME.profile.csv [--points 2048]
-    ringfit cleat RECORD --sectors 512 --out FIELD.npz [--animate A.gif] [--ssi MODES.csv]
+    ringfit cleat RECORD --sectors 512 --out FIELD.npz [--animate A.gif] [--ssi MODES.csv [--tyre FITTED.toml]]
 
 RECORD is a continuous ``*.records.npz`` (docs/records-continuous.md).
 """
@@ -9,6 +9,7 @@ RECORD is a continuous ``*.records.npz`` (docs/records-continuous.md).
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ringfit.cli._args import force_flag, integer, number, quiet_flag
 
@@ -52,6 +53,9 @@ def register(sub) -> None:
                    help="top of the SSI band [Hz] (default 400)")
     c.add_argument("--skip", type=number("a finite number of seconds >= 0", lo=0.0, hi=1e3), default=None, metavar="S",
                    help="drop τ < S (cleat contact) before SSI (default: time for 30° of rotation)")
+    c.add_argument("--tyre", type=Path, default=None,
+                   help="tyre TOML (docs/formats.md §1): label the SSI modes with (n, direction) of the rolling, loaded "
+                        "tyre's model at the record's speed, load and drum, and flag labels no branch supports")
     force_flag(c)
     quiet_flag(c)
     c.set_defaults(run=run_cleat)
@@ -93,7 +97,12 @@ def run_cleat(args: argparse.Namespace) -> int:
 
     outputs = [args.out, args.animate, args.snapshots, args.coverage_plot, args.ssi,
                sidecar_path(args.ssi) if args.ssi else None]
-    check_output_paths(outputs, overwrite=args.force, inputs=[args.record] + ([args.baseline] if args.baseline else []))
+    if args.tyre is not None and not args.ssi:
+        from ringfit.errors import InputError
+
+        raise InputError("--tyre labels the SSI modes: give --ssi MODES.csv too")
+    inputs = [args.record] + ([args.baseline] if args.baseline else []) + ([args.tyre] if args.tyre else [])
+    check_output_paths(outputs, overwrite=args.force, inputs=inputs)
     baseline = "auto"
     if args.no_baseline:
         baseline = None
@@ -122,14 +131,17 @@ def run_cleat(args: argparse.Namespace) -> int:
 
         modes = identify_rolling_modes(field, channels=args.channels, f_max=args.f_max, skip_s=args.skip,
                                        progress=not args.quiet)
-        write_mode_table(modes.table, args.ssi, overwrite=args.force)
+        table, flags = _label_modes(modes.table, field, args, channels=len(modes.channel_deg))
+        write_mode_table(table, args.ssi, overwrite=args.force)
         extra = {"mode_freq_hz": modes.table.freq_hz, "mode_shapes": modes.shapes,
                  "mode_channel_deg": modes.channel_deg}
-        print(f"{args.ssi}: {len(modes.table)} modes")
-        for i in range(len(modes.table)):
-            t = modes.table
-            print(f"  {t.freq_hz[i]:8.2f} Hz  n={t.n[i]:<2d} {t.branch[i] or t.tag[i]:<9s} "
-                  f"ζ={t.damping_pct[i]:.2f} %")
+        print(f"{args.ssi}: {len(table)} modes" + (f", {sum(map(bool, flags))} flagged" if any(flags) else ""))
+        for i in range(len(table)):
+            model = ""
+            if "model_n" in table.extra and table.extra["model_n"][i]:
+                model = f"  model: n={table.extra['model_n'][i]} {table.extra['model_direction'][i]}"
+            print(f"  {table.freq_hz[i]:8.2f} Hz  n={table.n[i]:<2d} {table.branch[i] or table.tag[i]:<9s} "
+                  f"ζ={table.damping_pct[i]:.2f} %{model}" + (f"  FLAG: {flags[i]}" if flags[i] else ""))
     field.save(args.out, overwrite=args.force, extra=extra)
     print(f"{args.out}: field {field.mean.shape[1]} sectors × {field.mean.shape[2]} time bins "
           f"of {1e3 * field.time_step_s:.4g} ms; baseline: {field.baseline}")
@@ -147,3 +159,18 @@ def run_cleat(args: argparse.Namespace) -> int:
             animate_field(field, args.animate, tau_max_s=window, scale=scale)
             print(f"{args.animate}: animation ({scale:.3g} m/s² per unit radius)")
     return 0
+
+
+def _label_modes(table, field, args, *, channels: int):
+    """Model labels and plausibility flags for the identified modes (issue 13 item 6)."""
+    from ringfit.gap.campbell import label_identified_modes
+
+    if args.tyre is None:
+        return label_identified_modes(table, channels=channels)
+    from ringfit.io.tyre import read_tyre
+
+    tyre = read_tyre(args.tyre)
+    cond = field.condition
+    drum = cond.get("drum_diameter_m")
+    return label_identified_modes(table, tyre.ring, tyre.geometry, channels=channels,
+                                  load_n=cond.get("load_n"), drum_diameter_m=drum if drum else None)

@@ -32,9 +32,11 @@ from ringfit.gap import effects as effect_library
 from ringfit.gap.localisation import localise
 from ringfit.gap.problem import GapProblem
 from ringfit.fit.result import FitResult
-from ringfit.gap.ranking import drift, fit_chain, heldout, prior_distance, rms, shrink_interval, theta_names
+from ringfit.gap.modal import OUTLIER_Z
+from ringfit.gap.ranking import (COMPUTED, chain_start, drift, effect_of, fit_chain, heldout, prior_distance,
+                                 reference_drift, rms, shrink, shrink_interval, theta_names)
 from ringfit.gap.screening import SCREEN_MIN_SCORE, screen
-from ringfit.gap.verdict import RULES, acceptance, residual_test
+from ringfit.gap.verdict import P_NOISE, P_TRY_DAMPING, RULES, acceptance, residual_test
 
 
 @dataclass
@@ -102,12 +104,27 @@ def read_diagnosis(path: str | os.PathLike) -> dict:
 
 
 # --------------------------------------------------------------------------- one part
-def _candidate_entry(problem: GapProblem, name: str, fit: FitResult, current: FitResult, current_ho: np.ndarray,
+def candidate_elements(problem: GapProblem) -> list[str]:
+    """The candidates of a problem: each effect fitted, and also computed where its condition fixes it."""
+    out = []
+    for e in problem.effects:
+        if e.computable(problem.domain) and problem.domain in ("modes", "damping"):
+            out.append(e.name + COMPUTED)
+        out.append(e.name)
+    return out
+
+
+def _variant(element: str) -> str:
+    return "computed" if element.endswith(COMPUTED) else "fitted"
+
+
+def _candidate_entry(problem: GapProblem, element: str, fit: FitResult, current: FitResult, current_ho: np.ndarray,
                      reference: FitResult, scores: dict, on_top_of: tuple, group: str | None = None) -> dict:
     y = problem.y
+    name = effect_of(element)
     rb, rc = y - current.extra["pred"], y - fit.extra["pred"]
     hb, hc = y - current_ho, y - fit.extra["heldout_pred"]
-    rms_b, rms_c, hrms_b, hrms_c = rms(problem, rb), rms(problem, rc), rms(problem, hb), rms(problem, hc)
+    rms_c, hrms_c = rms(problem, rc), rms(problem, hc)
     lo, hi = shrink_interval(problem, hb, hc)
     m = problem.m
     dk = len(fit.names) - len(current.names)
@@ -116,25 +133,34 @@ def _candidate_entry(problem: GapProblem, name: str, fit: FitResult, current: Fi
     sl = problem.slices()[name]
     effect = next(e for e in problem.effects if e.name == name)
     names = theta_names(problem)
+    computed = element.endswith(COMPUTED)
+    cond_sd = problem.meta.get("condition_sd", {}).get(name, {})
     for p, i in zip(problem.effect_params(effect), range(sl.start, sl.stop)):
-        v, se = fit.theta[i], fit.stderr[names[i]]
+        v = fit.theta[i]
+        se = float(cond_sd.get(p.name, 0.0)) if computed else fit.stderr[names[i]]
         plo, phi = v - 1.959964 * se, v + 1.959964 * se
         params[p.name] = {"value": _r(v, 6), "lo": _r(max(plo, p.lo), 6), "hi": _r(min(phi, p.hi), 6),
-                          "null": p.null, "unit": p.unit, "excludes_null": bool(abs(v - p.null) > 1.959964 * se)}
+                          "null": p.null, "unit": p.unit, "excludes_null": bool(abs(v - p.null) > 1.959964 * se),
+                          **({"fixed_by": "the measured condition"} if computed else {})}
     d = drift(problem, fit, reference)
     guarded = set(problem.meta.get("prior_guarded", ()))
     d2, kp = prior_distance(problem, fit.theta, effect.baseline_partners)
     d2_ref, _ = prior_distance(problem, reference.theta, effect.baseline_partners)
+    ref_drift = reference_drift(problem, fit, reference)
     entry = {
         "effect": name,
+        "variant": _variant(element),
+        **({"condition": problem.meta.get("conditions", {})} if computed and problem.meta.get("conditions") else {}),
         "rms": _r(rms_c), "heldout_rms": _r(hrms_c),
-        "shrink_pct": _r(100.0 * (1.0 - rms_c / rms_b), 2) if rms_b > 0 else 0.0,
-        "heldout_shrink_pct": _r(100.0 * (1.0 - hrms_c / hrms_b), 2) if hrms_b > 0 else 0.0,
+        "shrink_pct": _r(shrink(problem, rb, rc), 2),
+        "heldout_shrink_pct": _r(shrink(problem, hb, hc, heldout=True), 2),
         "heldout_shrink_interval_pct": [_r(lo, 2), _r(hi, 2)],
         **_group_shrink(problem, group, hb, hc),
+        "rows": _deciding_rows(problem, group),
         "evidence": {"delta_bic": _r(dchi2 + dk * math.log(m), 2), "delta_chi2": _r(dchi2, 2),
-                     "screen_score": _r(scores.get(name, {}).get("score", math.nan), 3),
-                     "alignment": _r(scores.get(name, {}).get("alignment", math.nan), 4)},
+                     "free_parameters_added": dk,
+                     "screen_score": _r(scores.get(element, {}).get("score", math.nan), 3),
+                     "alignment": _r(scores.get(element, {}).get("alignment", math.nan), 4)},
         "params": params,
         "baseline_drift_sigma": {k: _r(v, 2) for k, v in d.items()},
         "baseline_drift_max_sigma": _r(max((abs(v) for v in d.values()), default=0.0), 2),
@@ -142,13 +168,15 @@ def _candidate_entry(problem: GapProblem, name: str, fit: FitResult, current: Fi
                                     for i, k in enumerate(problem.base) if not problem.is_linear(i)},
         "baseline_drift_max_relative": _r(max((abs(fit.theta[i] / reference.theta[i] - 1.0)
                                                for i, k in enumerate(problem.base)
-                                               if k not in effect.baseline_partners and not problem.is_linear(i)
+                                               if k.split(":")[0] not in effect.baseline_partners
+                                               and not problem.is_linear(i)
                                                and i not in guarded), default=0.0), 4),
+        **({"reference_drift_sigma": _r(ref_drift, 3)} if ref_drift is not None else {}),
         **({"baseline_prior_distance": {"d2": _r(d2, 2), "d2_baseline_fit": _r(d2_ref, 2), "k": kp,
                                         "parameters": [problem.base[i] for i in sorted(guarded)
                                                        if problem.base[i] not in effect.baseline_partners]}}
            if kp else {}),
-        "on_top_of": list(on_top_of),
+        "on_top_of": [effect_of(c) for c in on_top_of],
         "screened_out": False,
     }
     ok, why = acceptance(entry)
@@ -158,6 +186,12 @@ def _candidate_entry(problem: GapProblem, name: str, fit: FitResult, current: Fi
     return entry
 
 
+def _deciding_rows(problem: GapProblem, group) -> int:
+    """Rows of the group that decided the structure test (all rows when there is one group)."""
+    groups = np.asarray(problem.labels["group"])
+    return int(np.sum(groups == group)) if group is not None and len(set(groups.tolist())) > 1 else problem.m
+
+
 def _group_shrink(problem: GapProblem, group, hb: np.ndarray, hc: np.ndarray) -> dict:
     """Held-out shrink and its interval on the rows of ``group`` (the residual group that decided the
     structure test), ``{}`` when the problem has a single group."""
@@ -165,23 +199,22 @@ def _group_shrink(problem: GapProblem, group, hb: np.ndarray, hc: np.ndarray) ->
     if group is None or len(set(groups.tolist())) < 2:
         return {}
     sel = groups == group
-    b, c = rms(problem, hb, sel), rms(problem, hc, sel)
-    lo, hi = shrink_interval(problem, hb[sel], hc[sel])
-    return {"group": str(group), "heldout_shrink_in_group_pct": _r(100.0 * (1.0 - c / b), 2) if b > 0 else 0.0,
+    lo, hi = shrink_interval(problem, hb, hc, mask=sel)
+    return {"group": str(group), "heldout_shrink_in_group_pct": _r(shrink(problem, hb, hc, sel, heldout=True), 2),
             "heldout_shrink_in_group_interval_pct": [_r(lo, 2), _r(hi, 2)]}
 
 
-def _screened_entry(problem, name, current, current_ho, scores, on_top_of, reason=None):
+def _screened_entry(problem, element, current, current_ho, scores, on_top_of, reason=None):
     y = problem.y
     r, h = rms(problem, y - current.extra["pred"]), rms(problem, y - current_ho)
     min_frac = float(problem.meta.get("screen_min_fraction", 0.0))
     reason = reason or (f"screen score < {SCREEN_MIN_SCORE} or alignment^2 < {min_frac:g}: "
                         "the residual does not look like this effect")
-    return {"effect": name, "rms": _r(r), "heldout_rms": _r(h), "shrink_pct": 0.0, "heldout_shrink_pct": 0.0,
-            "heldout_shrink_interval_pct": [0.0, 0.0],
-            "evidence": {"delta_bic": 0.0, "screen_score": _r(scores.get(name, {}).get("score", 0.0), 3),
-                         "alignment": _r(scores.get(name, {}).get("alignment", 0.0), 4)},
-            "params": {}, "on_top_of": list(on_top_of), "screened_out": True, "accepted": False,
+    return {"effect": effect_of(element), "variant": _variant(element), "rms": _r(r), "heldout_rms": _r(h),
+            "shrink_pct": 0.0, "heldout_shrink_pct": 0.0, "heldout_shrink_interval_pct": [0.0, 0.0],
+            "evidence": {"delta_bic": 0.0, "screen_score": _r(scores.get(element, {}).get("score", 0.0), 3),
+                         "alignment": _r(scores.get(element, {}).get("alignment", 0.0), 4)},
+            "params": {}, "on_top_of": [effect_of(c) for c in on_top_of], "screened_out": True, "accepted": False,
             "rejected_because": [reason]}
 
 
@@ -193,55 +226,84 @@ def _screened_out(problem: GapProblem, score: dict) -> bool:
 
 def _structure(problem: GapProblem, heldout_pred: np.ndarray) -> dict:
     """:func:`~ringfit.gap.verdict.residual_test` of the held-out residual (noise series from ``problem.meta``)."""
-    return residual_test((problem.y - heldout_pred) / problem.sigma, problem.labels["group"],
-                         problem.labels.get("series"), problem.meta.get("series_dof"))
+    return residual_test(problem.standardised(problem.y - heldout_pred, heldout=True), problem.labels["group"],
+                         problem.labels.get("series"), problem.meta.get("series_dof"),
+                         p_try=P_TRY_DAMPING if problem.domain == "damping" else P_NOISE)
+
+
+def _row_names(problem: GapProblem) -> list[str]:
+    lab = problem.labels
+    return list(lab.get("label", [])) if problem.domain != "profiles" else []
+
+
+def _rows_table(problem: GapProblem, base_ho: np.ndarray, final_ho: np.ndarray) -> list[dict]:
+    """Per row of a mode-table problem: measured, baseline and final held-out predictions, σ, z, outlier flag."""
+    if problem.domain == "profiles":
+        return []
+    lab = problem.labels
+    sigma = problem.sigma_heldout if problem.sigma_heldout is not None else problem.sigma
+    zb = (problem.y - base_ho) / sigma
+    zf = (problem.y - final_ho) / sigma
+    matched = lab.get("matched", {})
+    out = []
+    for i in range(problem.m):
+        out.append({"row": lab["label"][i], "short": lab["short"][i], "measured": _r(problem.y[i], 5),
+                    "baseline": _r(base_ho[i], 5), "with_effects": _r(final_ho[i], 5), "sigma": _r(sigma[i], 4),
+                    "z_baseline": _r(zb[i], 2), "z_with_effects": _r(zf[i], 2),
+                    "outlier": bool(abs(zf[i]) > OUTLIER_Z), **({"match": matched[lab["label"][i]]}
+                                                            if lab["label"][i] in matched else {})})
+    return out
 
 
 def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
     """Run baseline, where, screen, candidates and the greedy chain on one problem."""
     t0 = time.perf_counter()
     base = fit_chain(problem, ())
-    base_ho = heldout(problem, base)
+    extrapolates = problem.domain in ("modes", "damping")
+    base_ho = heldout(problem, base, variance=extrapolates)
+    if extrapolates:  # one σ for every held-out statistic: noise and the baseline's held-out prediction variance
+        problem.sigma_heldout = np.sqrt(problem.sigma**2 + base.extra["heldout_var"])
     ref_mask = problem.meta.get("reference_mask")
     reference = fit_chain(problem, (), train=ref_mask) if ref_mask is not None and not np.all(ref_mask) else base
     part = PartResult(problem, base, reference)
     part.fits[()] = base
     test = _structure(problem, base_ho)
-    scores = screen(problem, base)
+    elements = candidate_elements(problem)
+    scores = screen(problem, base, elements=elements)
     y = problem.y
     noise_rms = float(np.sqrt(np.mean((problem.sigma * problem.scale) ** 2)))
     hrms_b = rms(problem, y - base_ho)
+    ss_b = float(np.sum(problem.standardised(y - base_ho, heldout=True) ** 2))
     loc = localise(problem, y - base.extra["pred"])
 
-    bar = _progress(problem, progress)
+    bar = _progress(problem, progress, len(elements))
     current, current_ho, chain, rounds = base, base_ho, (), []
-    remaining = [e.name for e in problem.effects]
+    remaining = list(elements)
     cur = test
     rescreen = float(problem.meta.get("screen_min_fraction", 0.0)) > 0
     while True:
         entries = []
-        round_scores = scores if not chain else (screen(problem, current, remaining) if rescreen else {})
-        for name in remaining:
+        round_scores = scores if not chain else (screen(problem, current, elements=remaining) if rescreen else {})
+        for element in remaining:
             if bar is not None:
-                bar.set_description(f"{problem.domain}: {'+'.join(chain + (name,))}")
+                bar.set_description(f"{problem.domain}: {'+'.join(chain + (element,))}")
             if not test["excess"]:  # nothing to explain: the screen's figures are all there is to report
-                entries.append(_screened_entry(problem, name, current, current_ho, round_scores, chain,
+                entries.append(_screened_entry(problem, element, current, current_ho, round_scores, chain,
                                                "not refitted: the baseline residual is at the noise level"))
-            elif (not chain or rescreen) and _screened_out(problem, round_scores.get(name, {})):
-                entries.append(_screened_entry(problem, name, current, current_ho, round_scores, chain))
+            elif (not chain or rescreen) and _screened_out(problem, round_scores.get(element, {})):
+                entries.append(_screened_entry(problem, element, current, current_ho, round_scores, chain))
             else:
-                start = current.theta.copy()
-                sl = problem.slices()[name]
-                eff = next(e for e in problem.effects if e.name == name)
-                start[sl] = [q.start for q in problem.effect_params(eff)]
-                fit = fit_chain(problem, chain + (name,), start=start)
+                start = chain_start(problem, (element,), current.theta)
+                fit = fit_chain(problem, chain + (element,), start=start)
                 heldout(problem, fit)
-                part.fits[chain + (name,)] = fit
-                entries.append(_candidate_entry(problem, name, fit, current, current_ho, reference, round_scores,
+                part.fits[chain + (element,)] = fit
+                entries.append(_candidate_entry(problem, element, fit, current, current_ho, reference, round_scores,
                                                 chain, cur["group"]))
             if bar is not None:
                 bar.update(1)
-        entries.sort(key=lambda c: -(c["heldout_shrink_pct"] if c["heldout_shrink_pct"] is not None else -1e9))
+        order = {e: i for i, e in enumerate(remaining)}
+        entries.sort(key=lambda c: (-(c["heldout_shrink_pct"] if c["heldout_shrink_pct"] is not None else -1e9),
+                                    c.get("variant") != "computed"))
         rounds.append(entries)
         if not cur["excess"]:
             break
@@ -250,11 +312,12 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
             if cur["structured"]:
                 chain = chain + ("unexplained",)
             break
-        best = accepted[0]["effect"]
+        best = accepted[0]["effect"] + (COMPUTED if accepted[0].get("variant") == "computed" else "")
         chain = chain + (best,)
         current = part.fits[chain]
         current_ho = current.extra["heldout_pred"]
-        remaining.remove(best)
+        remaining = [e for e in remaining if effect_of(e) != effect_of(best)]
+        del order
         cur = _structure(problem, current_ho)
         if not remaining or not cur["excess"]:
             if cur["structured"]:
@@ -263,95 +326,121 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
     if bar is not None:
         bar.close()
     part.chain_fit = current
-    effects_list = list(chain) or ["none"]
-    final_h = rms(problem, y - current_ho)
+    effects_list = [effect_of(c) for c in chain] or ["none"]
+    ss_f = float(np.sum(problem.standardised(y - current_ho, heldout=True) ** 2))
+    names = _row_names(problem)
+    zb, zf = problem.standardised(y - base_ho, heldout=True), problem.standardised(y - current_ho, heldout=True)
+    raw = (y - current_ho) / (problem.sigma_heldout if problem.sigma_heldout is not None else problem.sigma)
+    explains = [names[i] for i in range(len(names)) if abs(zb[i]) > 2 and abs(zf[i]) <= 2]
+    leaves = [names[i] for i in range(len(names)) if abs(zf[i]) > 2]
+    outliers = [names[i] for i in range(len(names)) if abs(raw[i]) > OUTLIER_Z]
     verdict = {"effect": effects_list[0], "effects": effects_list,
-               "heldout_shrink_pct": _r(100.0 * (1.0 - final_h / hrms_b), 2) if effects_list[0] not in
-               ("none", "unexplained") and hrms_b > 0 else 0.0,
+               "variants": [_variant(c) for c in chain if c != "unexplained"],
+               "heldout_shrink_pct": _r(100.0 * (1.0 - ss_f / ss_b), 2) if effects_list[0] not in
+               ("none", "unexplained") and ss_b > 0 else 0.0,
+               **({"explains": explains, "leaves": leaves, "outliers": outliers} if names else {}),
                "rule": {**RULES, "screen": (
                    f"a candidate is refitted only if its linearised score (chi2 it would remove) >= {SCREEN_MIN_SCORE}"
                    f" and alignment^2 >= {float(problem.meta.get('screen_min_fraction', 0.0)):g} of the residual"),
+                   "shrink": ("100 (1 - SS_after/SS_before) over held-out rows, SS = sum of psi(residual/sigma)^2, "
+                              "each residual weighted by its own noise sigma; psi = Huber on robust rows"),
                    "noise": problem.noise_method, "heldout": problem.fold_kind}}
     part.summary = {
         "data": problem.data_files,
+        "family": {"modes": "frequency", "damping": "damping", "profiles": "profile"}[problem.domain],
         "baseline": {"model": problem.baseline_model, "rms": _r(rms(problem, y - base.extra["pred"])),
                      "unit": problem.unit, "heldout_rms": _r(hrms_b), "noise_rms": _r(noise_rms),
-                     "ideal_shrink_pct": _r(100.0 * (1.0 - noise_rms / hrms_b), 2) if hrms_b > 0 else 0.0,
+                     "ideal_shrink_pct": _r(100.0 * (1.0 - problem.m / ss_b), 2) if ss_b > problem.m else 0.0,
                      "reduced_chi2": _r(test["reduced_chi2"], 3), "noise_p_value": test["p"],
                      "noise_dof": _r(test["dof"], 1), "worst_group": test["group"],
                      "excess": test["excess"], "structured": test["structured"],
-                     "reduced_chi2_in_sample": _r(float(np.mean(((y - base.extra["pred"]) / problem.sigma) ** 2)), 3),
+                     "reduced_chi2_in_sample": _r(float(np.mean(problem.standardised(y - base.extra["pred"]) ** 2)), 3),
                      "remaining_reduced_chi2": _r(cur["reduced_chi2"], 3), "remaining_structured": cur["structured"],
                      "noise_method": problem.noise_method, "heldout_method": problem.fold_kind,
                      "parameters": {k: _r(v, 6) for k, v in zip(problem.base, base.theta)},
+                     **({"reference_fit": problem.meta["reference_fit"]} if "reference_fit" in problem.meta else {}),
+                     **({"conditions": problem.meta["conditions"]} if problem.meta.get("conditions") else {}),
                      **({"sources": problem.meta["sources"]} if "sources" in problem.meta else {})},
         "where": loc["where"],
         "where_detail": {k: v for k, v in loc.items() if k != "where"},
         "candidates": rounds[0],
-        "chain": [{"added": c, "candidates": r} for c, r in zip(chain[:len(rounds) - 1], rounds[1:])],
+        "chain": [{"added": effect_of(c), "variant": _variant(c), "candidates": r}
+                  for c, r in zip(chain[:len(rounds) - 1], rounds[1:])],
         "not_applicable": problem.not_applicable,
         "verdict": verdict,
+        **({"rows": _rows_table(problem, base_ho, current_ho)} if names else {}),
         "elapsed_s": round(time.perf_counter() - t0, 2),
     }
     return part
 
 
-def _progress(problem, progress):
+def _progress(problem, progress, total):
     if not progress:
         return None
     from tqdm.auto import tqdm
 
-    return tqdm(total=len(problem.effects), file=sys.stderr, leave=False, unit="candidate")
+    return tqdm(total=total, file=sys.stderr, leave=False, unit="candidate")
 
 
 # --------------------------------------------------------------------------- folder
 def build_problems(case, effects, noise=None) -> list[GapProblem]:
-    """The problems of a case: mode tables (always; the free table is data too) and profiles (if any)."""
-    from ringfit.gap.modal import build_modal_problem
-    from ringfit.gap.ranking import fit_baseline
+    """The problems of a case: mode-table frequencies and damping (:mod:`ringfit.gap.modal`) and profiles (if any)."""
+    from ringfit.gap.modal import build_modal_problems
 
-    problems = [build_modal_problem([case.free, *case.tests], case.tyre.geometry, case.tyre.ring, effects,
-                                    noise=noise, fit_reference=fit_baseline)]
+    problems = build_modal_problems([case.free, *case.tests], case.tyre, effects, noise=noise)
     if case.profiles:
         from ringfit.gap.profile import build_profile_problem
 
-        ring, sources, prior = _ring_from_free(problems[0], case.tyre)
+        ring, sources, prior = _ring_from_free(problems, case.tyre)
         problems.append(build_profile_problem(case, ring, effects, noise=noise, sources=sources, ring_prior=prior))
     return problems
 
 
-def _ring_from_free(modal_problem: GapProblem, tyre):
-    """The ring for the profile baseline and its uncertainty, from the eq. 18 fit to ``free.modes.csv``.
+def _ring_from_free(modal_problems: list[GapProblem], tyre):
+    """The ring for the profile baseline and its uncertainty, from the fits to ``free.modes.csv``.
 
-    ρA, EI, k_w, k_v (and ζ when the free table has damping) come from that fit; the rest (ζ
-    otherwise, the k_trd start) from ``tyre.toml``. The prior of the profile refit is the fit's
-    Laplace posterior of log EI, log k_w, log k_v (, log ζ): the covariance of the free-table
-    reference fit (σ inflated by √(χ²/dof) when > 1). Eq. 18 pins the stiffnesses only relative to
-    the pressure term P(n²−1), which dominates for n ≥ 3, so EI is known to ~10–30 % from a free
+    ρA, EI, k_w, k_v come from ``ringfit fit``'s fit (the frequency problem's reference
+    fit), ζ from the free table's damping level when it has damping (else ``tyre.toml``),
+    the k_trd start from ``tyre.toml``. The prior of the profile refit is the fit's Laplace
+    posterior of log EI, log k_w, log k_v (σ inflated by √(χ²/dof) when > 1) and, for ζ,
+    the damping level's standard error. Eq. 18 pins the stiffnesses only relative to the
+    pressure term P(n²−1), which dominates for n ≥ 3, so EI is known to ~10–30 % from a free
     table while the profiles' bending-length features determine it far better.
 
     **Returns:** ``(ring, sources, prior)``; ``prior = {"names": (…), "cov": (k, k)}``.
     """
-    from ringfit.gap.profile import RING_BASE
-    from ringfit.gap.ranking import fit_chain
+    from ringfit.gap.profile import RING_BASE, RING_PRIOR_SD_FALLBACK
 
-    fitted = {k: float(v) for k, v in zip(modal_problem.base, modal_problem.base_values)}
-    sources = {k: "eq. 18 fit to free.modes.csv" for k in fitted}
-    if "damping_ratio" in sources:
-        sources["damping_ratio"] = "median-anchored fit to free.modes.csv damping_pct"
-    for k in ("damping_ratio", "k_tread"):
-        if k not in fitted:
-            sources[k] = ("tyre.toml [ring]" if k in tyre.ring_values else "Table 9 default") + \
-                (" (start of the fit)" if k == "k_tread" else "")
-    ref = fit_chain(modal_problem, (), train=modal_problem.meta.get("reference_mask"))
-    names = tuple(n for n in RING_BASE if n in modal_problem.base)
-    idx = [modal_problem.base.index(n) for n in names]
-    cov = ref.covariance_log[np.ix_(idx, idx)]  # inflated by max(1, χ²/dof) in the fit
+    freq = modal_problems[0]
+    fit = freq.meta["reference_result"]
+    fitted = {k: float(fit.values[k]) for k in freq.base}
+    sources = {k: "ringfit fit of free.modes.csv (eq. 18, physical EI prior)" for k in fitted}
+    damping = next((p for p in modal_problems[1:] if p.domain == "damping" and 0 in p.meta["tables"]), None)
+    names = [n for n in RING_BASE if n in fit.names]
+    infl = max(1.0, fit.chi2 / max(fit.dof, 1))
+    idx = [fit.names.index(n) for n in names]
+    blocks = [fit.covariance_log[np.ix_(idx, idx)] * infl]
+    if damping is not None:
+        level = float(damping.base_values[0])
+        sel = damping.labels["table"] == 0
+        sd = float(np.median(damping.sigma[sel])) / math.sqrt(max(int(sel.sum()), 1))
+        fitted["damping_ratio"] = level
+        sources["damping_ratio"] = "median damping of free.modes.csv"
+        names.append("damping_ratio")
+        blocks.append(np.array([[sd**2]]))
+    else:
+        sources["damping_ratio"] = "tyre.toml [ring]" if "damping_ratio" in tyre.ring_values else "Table 9 default"
+    sources["k_tread"] = ("tyre.toml [ring]" if "k_tread" in tyre.ring_values else "Table 9 default") + \
+        " (start of the fit)"
+    k = sum(b.shape[0] for b in blocks)
+    cov = np.zeros((k, k))
+    i = 0
+    for blk in blocks:
+        cov[i : i + blk.shape[0], i : i + blk.shape[0]] = blk
+        i += blk.shape[0]
     if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
-        from ringfit.gap.profile import RING_PRIOR_SD_FALLBACK
-
-        cov = np.eye(len(names)) * RING_PRIOR_SD_FALLBACK**2
-    return tyre.ring.replace(**fitted), sources, {"names": names, "cov": cov}
+        cov = np.eye(k) * RING_PRIOR_SD_FALLBACK**2
+    return tyre.ring.replace(**fitted), sources, {"names": tuple(names), "cov": cov}
 
 
 def resolve_effects(effects=None):
@@ -382,10 +471,10 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
     chosen = resolve_effects(effects)
     t0 = time.perf_counter()
     problems = build_problems(case, chosen, noise)
-    # the modal part is only a test when the folder holds test tables or nothing else
+    # the mode-table parts are only a test when the folder holds test tables or nothing else
     parts = []
     for prob in problems:
-        if prob.domain == "modes" and case.profiles and not case.tests:
+        if prob.domain in ("modes", "damping") and case.profiles and not case.tests:
             continue
         parts.append(diagnose_problem(prob, progress))
     content = _combine(parts)
@@ -395,22 +484,39 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
 
 
 def _combine(parts: list[PartResult]) -> dict:
-    if len(parts) == 1:
-        return dict(parts[0].summary)
-    primary = max(parts, key=lambda p: p.summary["baseline"]["reduced_chi2"] or 0.0)
+    """One DATA.md §5 dict from the parts: the structural parts (frequencies, profiles) decide the verdict;
+    the damping part adds only the damping effects it accepts — its own unexplained residual is reported
+    under ``verdict.damping``, never as a structural ``unexplained``."""
+    structural = [p for p in parts if p.problem.domain != "damping"] or parts
+    damping = [p for p in parts if p.problem.domain == "damping"]
+    primary = max(structural, key=lambda p: p.summary["baseline"]["reduced_chi2"] or 0.0)
+    if all(p.summary["verdict"]["effects"] == ["none"] for p in structural) and damping and \
+            damping[0].summary["verdict"]["effects"][0] not in ("none", "unexplained"):
+        primary = damping[0]  # the only finding is a damping effect: its figures lead
     out = dict(primary.summary)
     effects, unexplained = [], False
-    for p in parts:
+    for p in structural:
         for e in p.summary["verdict"]["effects"]:
             if e == "unexplained":
                 unexplained = True
             elif e != "none" and e not in effects:
+                effects.append(e)
+    for p in damping:
+        for e in p.summary["verdict"]["effects"]:
+            if e not in ("none", "unexplained") and e not in effects:
                 effects.append(e)
     if unexplained:
         effects.append("unexplained")
     effects = effects or ["none"]
     v = dict(primary.summary["verdict"])
     v.update(effect=effects[0], effects=effects)
+    if damping:
+        dv = damping[0].summary["verdict"]
+        v["damping"] = {"effects": dv["effects"], "structured": damping[0].summary["baseline"]["structured"],
+                        "note": ("damping residuals are judged on their own scale (ln of the damping ratio) and "
+                                 "decide no structural verdict; only damping effects are tried on them"),
+                        **{k: dv[k] for k in ("explains", "leaves", "outliers") if k in dv}}
     out["verdict"] = v
-    out["parts"] = [p.summary for p in parts]
+    if len(parts) > 1:
+        out["parts"] = [p.summary for p in parts]
     return out

@@ -37,7 +37,7 @@ def localise(problem: GapProblem, resid: np.ndarray) -> dict:
     e = (resid / problem.sigma) ** 2
     total = float(e.sum())
     lab = problem.labels
-    if problem.domain == "modes":
+    if problem.domain in ("modes", "damping"):
         where = _top(list(zip(lab["label"], e)), total)
         fams = {}
         for f, v in zip(lab["family"], e):

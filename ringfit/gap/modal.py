@@ -1,27 +1,67 @@
-"""The mode-table side of the gap diagnosis: baseline eq. 18 fitted to ``free.modes.csv`` (PHYSICS.md §2.1, §6).
+"""The mode-table side of the gap diagnosis (docs/physics.md §2.1, §3, §6; docs/formats.md §2, §5, §6).
 
-Every structural row with an assigned n of every mode table in the case
-(the free table and the test tables: loaded, rolling, spinning) is one
-frequency observation; rows with ``damping_pct`` add a damping observation.
-The baseline predicts ``f_n`` of eq. 18 and one damping ratio ζ0 for all of
-them, whatever the table's state; the effects (ground contact, rotation,
-cavity, sensor mass, extensibility, wave damping) change the rows they speak
-to (:meth:`ringfit.gap.effects.base.Effect.modal`).
+Two problems, one per family of observations, because frequencies and damping
+ratios are measured on different scales and a damping residual must never
+decide a structural verdict (only an effect that models damping,
+``wave_damping``, is tried on it):
 
-Noise (when the table has no ``freq_std_hz``): from the data, by second
-differences along n of the baseline residual within each sequence (one
-table, one tag/branch, one family): for white noise
-``Var(r_{n+1} − 2r_n + r_{n−1}) = 6σ²``, while a residual that varies smoothly
-with n (what most effects produce) largely cancels. Robust form
-``σ = 1.4826·median|Δ²r|/√6`` pooled over sequences, with floors of
-:data:`FREQ_SIGMA_FLOOR_HZ` and :data:`DAMPING_SIGMA_FLOOR`. A user value
-overrides it (``noise={"freq_hz": 0.3, "damping": 0.002}``).
+**Frequencies** — every structural row of every table (``free.modes.csv``, the
+reference state, first; then the test tables: loaded, rolling, spinning).
+
+- *Baseline from the reference state only.* The ring (ρA, EI, k_w, k_v) is
+  :func:`ringfit.fit.least_squares.fit_natural_frequencies` on ``free.modes.csv``
+  — ``ringfit fit``'s engine, model, prior (the physical EI prior) and weights
+  (``freq_std_hz`` where given, else the relative σ estimated below: the same
+  fit as ``ringfit fit --default-std σ``). Test tables never refit it: their
+  rows see the ring through a stop-gradient, so in every refit the ring answers
+  to the free table (and its prior) alone, while an effect's parameters answer
+  to every row. With no effect, test rows are pure predictions (held out by
+  construction); the free rows are held out by leave-modes-out refits of the ring.
+- *Effects fixed by the measured condition are computed, not fitted*: the contact
+  patch of a loaded or rolling table from its ``load_n`` through the rolling
+  model's static contact solve (:func:`ringfit.physics.contact.solve_rolling` at
+  Ω = 0 with the fitted ring and ``k_tread`` from the tyre file — or, when it has
+  none, 19 MN/m² with a log-normal σ of :data:`K_TREAD_PRIOR_SD`, whose effect on
+  the patch is reported); the wheel speed of a spinning table from ``rotation_hz``
+  or ``speed_kmh``. Such a candidate (variant ``computed``) is a prediction with no
+  free parameter. The same effect with its parameter free (variant ``fitted``:
+  patch scale, speed gain) is tried beside it; both are reported.
+- *Loaded-tyre tags*: rows tagged ``extr``/``vert`` take the contact-symmetric
+  (cos-type) mode of their n, ``0``/``hort`` the contact-antisymmetric (sin-type)
+  one (:mod:`ringfit.physics.loaded`); rows without n are matched by frequency to
+  the nearest mode of the model their condition computes (eq. 18, the loaded modes
+  with the computed patch, eq. 25/26 at the condition's speed), and the match is
+  stated (``labels["matched"]``).
+- *Noise*: a relative σ per table. The free table's from its reference fit:
+  ``freq_std_hz`` where given; else the larger of two robust scales of the fit's
+  relative residual — second differences along n, ``1.4826·median|Δ²r|/√6`` (white
+  noise gives Var Δ²r = 6σ²; one outlying row moves the median little) and the MAD
+  ``1.4826·median|r − median r|·√(m/(m−4))`` (the misfit eq. 18 leaves on a real
+  tyre, which second differences would cancel, is part of what a prediction of
+  another state must be judged against) — floored at
+  :data:`FREQ_SIGMA_FLOOR_REL` and :data:`FREQ_SIGMA_FLOOR_HZ`; raised to the
+  identification spread ``|f_a − f_b|/√2`` (robust RMS over matched n) when the
+  folder holds a second table of the reference state (e.g. SSI and FRF of the same
+  free tyre). A test row's σ adds, in quadrature, the reference fit's prediction
+  uncertainty at that row (its covariance propagated through eq. 18) and the test
+  table's own measurement σ (``freq_std_hz`` where given, else the free table's).
+- *Heavy tails*: test rows enter refits and statistics through the Huber function
+  (``ψ(z) = z`` for ``|z| ≤`` :data:`HUBER`, ``sign(z)·√(2c|z| − c²)`` beyond), so
+  one outlying row counts linearly, not quadratically; rows with held-out
+  ``|z| >`` :data:`OUTLIER_Z` are named outliers.
+
+**Damping** — every row with ``damping_pct``, as ``ln ζ`` (damping is scattered
+tenfold: logarithms make a factor the same size everywhere). Baseline: one level
+ζ0 per table (identification methods disagree on damping far more than on
+frequency; each table has its own level), Huber on every row. Noise per table:
+second differences of ``ln ζ`` along n (robust), floored at
+:data:`DAMPING_SIGMA_FLOOR`. Effects: those whose modal hook changes ζ
+(``wave_damping``, using each row's measured frequency).
 """
 
 from __future__ import annotations
 
 import math
-from functools import partial
 
 import equinox as eqx
 import jax
@@ -39,25 +79,45 @@ from ringfit.physics.natural import cavity_frequency, natural_angular_frequencie
 FREQ_SIGMA_FLOOR_HZ = 0.02
 #: Relative floor: a frequency is rarely identified better than this.
 FREQ_SIGMA_FLOOR_REL = 2e-4
-DAMPING_SIGMA_FLOOR = 5e-4
-#: Relative floor on the damping noise: modal damping is rarely identified better than 10 %.
-DAMPING_SIGMA_FLOOR_REL = 0.10
-#: Baseline parameters of the mode-table side (eq. 18 + one damping ratio).
-BASE = ("rho_a", "ei", "kw", "kv", "damping_ratio")
-#: log-normal prior σ around the free-table fit in refits (weak: keeps ρA, which eq. 18
-#: determines only through p0·b/R, from wandering off).
-BASE_PRIOR_SD = 0.5
+#: Floor of the damping noise (ln ζ): modal damping is rarely identified better than 10 %.
+DAMPING_SIGMA_FLOOR = 0.10
+#: Huber threshold on standardised residuals of test rows (refits and statistics).
+HUBER = 2.0
+#: A row whose held-out standardised residual exceeds this is named an outlier.
+OUTLIER_Z = 3.0
+#: log-normal σ of k_trd when the tyre file gives none (its median is then the Table 9 value).
+K_TREAD_PRIOR_SD = 0.5
+#: log σ of k_trd when the tyre file gives it (a fitted value: ``ringfit fit-rolling``'s typical error).
+K_TREAD_FITTED_SD = 0.1
+DEFAULT_K_TREAD = 19e6
+#: Baseline parameters of the frequency side: the ring of eq. 18 (``ringfit fit``'s default free set).
+BASE = ("rho_a", "ei", "kw", "kv")
 KMH = 1.0 / 3.6
+#: Effect parameters a chain frees at most besides the baseline (the refit's padded free-set size).
+MAX_CHAIN_PARAMETERS = 4
+#: Rows are padded to a multiple of this (dummy rows, weight 0, dropped from every output), so one
+#: compiled refit serves mode tables of similar size.
+ROW_BUCKET = 32
+#: Largest n a row without n is matched to.
+MATCH_N_MAX = 15
+#: Harmonics of the loaded-mode basis used for predictions (docs/physics.md §6 ground_contact).
+LOADED_HARMONICS = 40
 
 
 class ModalRows(eqx.Module):
     """The observations of a mode-table diagnosis as arrays, shape ``(m,)`` each.
 
-    - ``n``: circumferential index (float); ``is_freq``: 1 frequency row, 0 damping row.
+    - ``n``: circumferential index (float; matched by frequency where the table gave none);
+      ``is_freq``: 1 frequency row, 0 damping row.
     - ``contact``: 0 untagged / free, 1 cosine type (``extr``, ``vert``), 2 sine type (``0``, ``hort``).
     - ``spin``: wheel speed Ω of the table's condition [rad/s] (0 = static).
     - ``branch``: +1 backward, −1 forward, 0 none; ``fixed_frame``: 1 fixed observer, 0 co-rotating.
     - ``cavity_hz``: uncoupled cavity frequency used by ``cavity_mode`` [Hz] (same for all rows).
+    - ``reference``: 1 for rows of ``free.modes.csv`` (the ring answers to them only).
+    - ``patch``: contact half-angle computed from the table's load [rad] (0: no contact / unknown).
+    - ``freq_hz``: the row's measured frequency [Hz] (damping rows: their mode's).
+    - ``table``: index of the row's table (0 = free table); ``table_patch``: ``(T,)`` the
+      computed contact half-angle of each table [rad] (0: none).
     """
 
     n: jax.Array
@@ -67,6 +127,11 @@ class ModalRows(eqx.Module):
     branch: jax.Array
     fixed_frame: jax.Array
     cavity_hz: jax.Array
+    reference: jax.Array
+    patch: jax.Array
+    freq_hz: jax.Array
+    table: jax.Array
+    table_patch: jax.Array
 
 
 class ModalData(eqx.Module):
@@ -75,7 +140,60 @@ class ModalData(eqx.Module):
     geometry: TyreGeometry
 
 
+def _apply_effects(theta, ring, geometry, rows, effects, sizes, i0):
+    omega = natural_angular_frequencies(ring, geometry, rows.n)
+    zeta = jnp.zeros_like(omega) + ring.damping_ratio
+    i = i0
+    for effect, k in zip(effects, sizes):
+        omega, zeta = effect.modal(theta[i : i + k], omega, zeta, rows, ring, geometry)
+        i += k
+    return omega, zeta
+
+
+class ModalPredictor(eqx.Module):
+    """Frequencies [Hz] of every (padded) row: eq. 18 of the ring ``theta[:4]`` with the effects applied.
+
+    Rows of the reference table see the ring itself, every other row a stop-gradient
+    copy: in a refit the ring answers to the free table alone (module docstring).
+    """
+
+    effects: tuple = eqx.field(static=True)
+    base: tuple = eqx.field(static=True)
+    sizes: tuple = eqx.field(static=True)
+
+    def __call__(self, theta, data: ModalData):
+        ring = data.ring.replace(**{k: theta[i] for i, k in enumerate(self.base)})
+        frozen = jax.lax.stop_gradient(ring)
+        nb = len(self.base)
+        live, _ = _apply_effects(theta, ring, data.geometry, data.rows, self.effects, self.sizes, nb)
+        test, _ = _apply_effects(theta, frozen, data.geometry, data.rows, self.effects, self.sizes, nb)
+        return jnp.where(data.rows.reference > 0, live, test) / (2.0 * jnp.pi)
+
+
+class DampingPredictor(eqx.Module):
+    """``ln ζ`` of every (padded) damping row: one level per table (``theta[:T]``) with the effects applied.
+
+    Effects see each row's measured frequency as ω (the damping side needs no ring model).
+    """
+
+    effects: tuple = eqx.field(static=True)
+    base: tuple = eqx.field(static=True)
+    sizes: tuple = eqx.field(static=True)
+
+    def __call__(self, theta, data: ModalData):
+        rows = data.rows
+        levels = jnp.stack([theta[i] for i in range(len(self.base))])
+        zeta = levels[rows.table]
+        omega = 2.0 * jnp.pi * rows.freq_hz
+        i = len(self.base)
+        for effect, k in zip(self.effects, self.sizes):
+            omega, zeta = effect.modal(theta[i : i + k], omega, zeta, rows, data.ring, data.geometry)
+            i += k
+        return jnp.log(jnp.clip(zeta, 1e-6))
+
+
 def table_label(table: ModeTable, index: int) -> str:
+    """A short name for a table: its state (and speed, load) for the free table, else its file name."""
     c = table.condition
     state = table.state
     parts = [state]
@@ -84,7 +202,7 @@ def table_label(table: ModeTable, index: int) -> str:
         parts.append(f"{sp:g} km/h")
     if state != "free" and c.get("load_n"):
         parts.append(f"{c['load_n']:g} N")
-    name = str(table.source).rsplit("/", 1)[-1]
+    name = str(table.source).rsplit("/", 1)[-1].removesuffix(".modes.csv")
     return " ".join(parts) if index == 0 else f"{name} ({' '.join(parts)})"
 
 
@@ -98,113 +216,16 @@ def spin_of(table: ModeTable, outer_radius: float) -> float:
     return 0.0
 
 
-def build_rows(tables: list[ModeTable], geometry: TyreGeometry):
-    """Observation rows of all tables (the free table first).
-
-    **Returns:** ``(rows: ModalRows, y, user_sigma, meta)``; ``user_sigma`` is NaN where the
-    table gives none; ``meta`` holds per-row ``table``, ``label``, ``family``, ``sequence``.
-    """
-    cols = {k: [] for k in ("n", "is_freq", "contact", "spin", "branch", "fixed_frame")}
-    y, user_sigma, table_idx, label, family, sequence = [], [], [], [], [], []
-    cavity = [float(f) for t in tables for f, k in zip(t.freq_hz, t.kind) if k == "acoustic"]
-    for ti, t in enumerate(tables):
-        spin = spin_of(t, geometry.outer_radius)
-        fixed = 1.0 if t.condition.get("frame", "rotating" if spin > 0 else "fixed") == "fixed" else 0.0
-        tl = table_label(t, ti)
-        for i in range(len(t)):
-            if t.kind[i] != "structural" or t.n[i] < 0:
-                continue
-            tag = t.tag[i]
-            contact = 0
-            if t.state != "free":
-                contact = 1 if tag in ("extr", "vert") else 2 if tag in ("0", "hort") else 0
-            branch = {"backward": 1.0, "forward": -1.0}.get(t.branch[i], 0.0)
-            qual = " ".join(x for x in (tag and f"{tag}", t.branch[i]) if x)
-            seq = f"{ti}|{tag}|{t.branch[i]}|a{t.a[i]}"
-            for is_freq in (1.0, 0.0):
-                if is_freq:
-                    value, sd = float(t.freq_hz[i]), float(t.freq_std_hz[i])
-                else:
-                    if not math.isfinite(t.damping_pct[i]):
-                        continue
-                    value, sd = float(t.damping_pct[i]) / 100.0, math.nan
-                cols["n"].append(float(t.n[i]))
-                cols["is_freq"].append(is_freq)
-                cols["contact"].append(contact)
-                cols["spin"].append(spin)
-                cols["branch"].append(branch)
-                cols["fixed_frame"].append(fixed)
-                y.append(value)
-                user_sigma.append(sd)
-                table_idx.append(ti)
-                fam = f"{tl}{' ' + qual if qual else ''}" + ("" if is_freq else " damping")
-                family.append(fam)
-                label.append(f"{tl} n={t.n[i]}{' ' + qual if qual else ''}" + ("" if is_freq else " damping"))
-                sequence.append(seq + ("f" if is_freq else "d"))
-    if not y:
-        raise InputError("no structural modes with an assigned n in the case's mode tables")
-    cav = cavity[0] if cavity else float(cavity_frequency(1))
-    rows = ModalRows(
-        n=jnp.asarray(cols["n"]), is_freq=jnp.asarray(cols["is_freq"]),
-        contact=jnp.asarray(cols["contact"], dtype=jnp.int32), spin=jnp.asarray(cols["spin"]),
-        branch=jnp.asarray(cols["branch"]), fixed_frame=jnp.asarray(cols["fixed_frame"]),
-        cavity_hz=jnp.asarray(cav),
-    )
-    meta = dict(table=np.asarray(table_idx), group=np.where(np.asarray(cols["is_freq"]) > 0, "frequency", "damping"), label=label, family=family, sequence=sequence,
-                cavity_hz=cav, cavity_source="acoustic row" if cavity else "eq. 22 (343/1.568)")
-    return rows, np.asarray(y), np.asarray(user_sigma), meta
+def _is_reference_state(table: ModeTable) -> bool:
+    c = table.condition
+    return table.state == "free" and not float(c.get("speed_kmh") or 0) and not float(c.get("rotation_hz") or 0)
 
 
-class ModalPredictor(eqx.Module):
-    """Prediction of every (padded) row of a mode-table problem: frequency [Hz] or damping ratio [-].
-
-    ``theta`` = baseline parameters (``base`` names) then each effect's parameters
-    (``sizes`` of them each), natural units.
-    """
-
-    effects: tuple = eqx.field(static=True)
-    base: tuple = eqx.field(static=True)
-    sizes: tuple = eqx.field(static=True)
-
-    def __call__(self, theta, data):
-        return _modal(theta, data, self.effects, self.base, self.sizes)
-
-
-def _modal(theta, data: ModalData, effects: tuple, base: tuple, sizes: tuple):
-    ring = data.ring.replace(**{k: theta[i] for i, k in enumerate(base)})
-    rows = data.rows
-    omega = natural_angular_frequencies(ring, data.geometry, rows.n)
-    zeta = jnp.zeros_like(omega) + ring.damping_ratio
-    i = len(base)
-    for effect, k in zip(effects, sizes):
-        omega, zeta = effect.modal(theta[i : i + k], omega, zeta, rows, ring, data.geometry)
-        i += k
-    return jnp.where(rows.is_freq > 0, omega / (2.0 * jnp.pi), zeta)
-
-
-#: Effect parameters a chain frees at most besides the baseline (the refit's padded free-set size).
-MAX_CHAIN_PARAMETERS = 4
-#: Rows are padded to a multiple of this (dummy n = 2 rows, dropped from every output), so one
-#: compiled predictor serves mode tables of similar size.
-ROW_BUCKET = 32
-
-
-def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
-    """``rows`` padded with dummy rows (n = 2, frequency, untagged, static) to a multiple of ``bucket``."""
-    m = int(rows.n.shape[0])
-    extra = (-m) % bucket
-    if extra == 0:
-        return rows
-    fill = {"n": 2.0, "is_freq": 1.0, "contact": 0, "spin": 0.0, "branch": 0.0, "fixed_frame": 0.0}
-    return ModalRows(**{k: jnp.concatenate([getattr(rows, k), jnp.full(extra, v, dtype=getattr(rows, k).dtype)])
-                        for k, v in fill.items()}, cavity_hz=rows.cavity_hz)
-
-
-def second_difference_sigma(residual: np.ndarray, sequence: list[str], n: np.ndarray) -> tuple[float, int]:
+def second_difference_sigma(residual: np.ndarray, sequence, n: np.ndarray) -> tuple[float, int]:
     """Robust noise σ from second differences along n within each sequence; returns ``(σ, count)``."""
     d2 = []
     seq = np.asarray(sequence)
-    for s in dict.fromkeys(sequence):
+    for s in dict.fromkeys(seq.tolist()):
         idx = np.flatnonzero(seq == s)
         idx = idx[np.argsort(n[idx])]
         r = residual[idx]
@@ -215,101 +236,365 @@ def second_difference_sigma(residual: np.ndarray, sequence: list[str], n: np.nda
     return float(1.4826 * np.median(d2) / math.sqrt(6.0)), len(d2)
 
 
-def build_modal_problem(tables: list[ModeTable], geometry: TyreGeometry, ring: RingParams,
-                        effects: tuple[Effect, ...], noise: dict | None = None, fit_reference=None) -> GapProblem:
-    """Assemble the mode-table problem: rows, baseline reference fit on the free table, noise, folds.
+def contact_patch(ring: RingParams, geometry: TyreGeometry, load_n: float, drum_diameter_m=None,
+                  k_tread_sd: float = K_TREAD_FITTED_SD) -> tuple[float, float]:
+    """Contact half-angle [rad] of the standing tyre at ``load_n`` and its σ from the k_trd uncertainty.
 
-    **Arguments:** ``tables`` — the free table first, then test tables;
-    ``ring`` — starting ring (tyre.toml); ``effects`` — candidates;
-    ``noise`` — optional user σ (``freq_hz`` [Hz], ``damping`` [-]);
-    ``fit_reference`` — callable ``(problem, mask) -> theta`` fitting the
-    baseline on the rows in ``mask`` (:func:`ringfit.gap.ranking.fit_baseline`).
+    The static contact solve of the rolling model (docs/physics.md §4.3–4.4, Ω = 0): the
+    half-angle is half the patch between its edges; σ from k_trd·e^{±k_tread_sd}.
     """
-    rows, y, user_sigma, meta = build_rows(tables, geometry)
-    is_freq = np.asarray(rows.is_freq) > 0
-    n = np.asarray(rows.n)
-    free_rows = meta["table"] == 0
-    has_damping = bool(np.any(~is_freq))
-    base = BASE if has_damping else BASE[:4]
-    damping0 = float(np.median(y[~is_freq & free_rows])) if np.any(~is_freq & free_rows) else ring.damping_ratio
-    ring = ring.replace(damping_ratio=damping0)
-    base_values = np.array([getattr(ring, k) for k in base], dtype=np.float64)
+    from ringfit.physics.contact import ContactSolver, patch_edges, solve_rolling_jit
+    from ringfit.physics.operating import OperatingPoint, road_from_drum_diameter
 
+    road = road_from_drum_diameter(drum_diameter_m)
+    out = []
+    for factor in (1.0, math.exp(-k_tread_sd), math.exp(k_tread_sd)):
+        r = ring.replace(k_tread=float(ring.k_tread) * factor)
+        sol = solve_rolling_jit(r, geometry, OperatingPoint(0.0, float(load_n), road), solver=ContactSolver())
+        lead, trail = (float(x) for x in patch_edges(sol))
+        out.append(0.5 * (trail - lead))
+    return out[0], 0.5 * abs(out[2] - out[1])
+
+
+def _table_rows(tables, geometry, patches, spins):
+    """Per structural row: dict of its attributes (before n-matching)."""
+    cavity = [float(f) for t in tables for f, k in zip(t.freq_hz, t.kind) if k == "acoustic"]
+    rows = []
+    for ti, t in enumerate(tables):
+        fixed = t.condition.get("frame", "rotating" if spins[ti] > 0 else "fixed") == "fixed"
+        tl = table_label(t, ti)
+        for i in range(len(t)):
+            if t.kind[i] != "structural":
+                continue
+            tag, branch = str(t.tag[i]), str(t.branch[i])
+            contact = 0
+            if t.state != "free":
+                contact = 1 if tag in ("extr", "vert") else 2 if tag in ("0", "hort") else 0
+            rows.append(dict(
+                table=ti, tlabel=tl, n=int(t.n[i]), tag=tag, branch=branch, contact=contact,
+                spin=spins[ti], fixed=fixed, patch=patches[ti][0] if contact else 0.0,
+                freq=float(t.freq_hz[i]), std=float(t.freq_std_hz[i]), damping=float(t.damping_pct[i]),
+                reference=ti == 0, a=int(t.a[i]),
+            ))
+    return rows, (cavity[0] if cavity else float(cavity_frequency(1)))
+
+
+def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch) -> ModalRows:
+    def col(key, dtype=jnp.float64):
+        return jnp.asarray([r[key] for r in rows], dtype=dtype)
+
+    return ModalRows(
+        n=col("n"), is_freq=jnp.full(len(rows), is_freq), contact=col("contact", jnp.int32), spin=col("spin"),
+        branch=jnp.asarray([{"backward": 1.0, "forward": -1.0}.get(r["branch"], 0.0) for r in rows]),
+        fixed_frame=jnp.asarray([1.0 if r["fixed"] else 0.0 for r in rows]), cavity_hz=jnp.asarray(cavity_hz),
+        reference=jnp.asarray([1.0 if r["reference"] else 0.0 for r in rows]), patch=col("patch"),
+        freq_hz=col("freq"), table=col("table", jnp.int32),
+        table_patch=jnp.asarray(np.asarray(table_patch, dtype=np.float64)),
+    )
+
+
+def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
+    """``rows`` padded with dummy rows (n = 2, untagged, static, reference) to a multiple of ``bucket``."""
+    m = int(rows.n.shape[0])
+    extra = (-m) % bucket
+    if extra == 0:
+        return rows
+    fill = {"n": 2.0, "is_freq": rows.is_freq[0] if m else 1.0, "contact": 0, "spin": 0.0, "branch": 0.0,
+            "fixed_frame": 0.0, "reference": 1.0, "patch": 0.0, "freq_hz": 100.0, "table": 0}
+    return ModalRows(**{k: jnp.concatenate([getattr(rows, k), jnp.full(extra, v, dtype=getattr(rows, k).dtype)])
+                        for k, v in fill.items()}, cavity_hz=rows.cavity_hz, table_patch=rows.table_patch)
+
+
+def _match_missing_n(rows, ring, geometry):
+    """Assign n to rows without one: nearest mode of the model their condition computes; returns notes."""
+    from ringfit.physics.loaded import loaded_natural_frequencies
+    from ringfit.physics.natural import fixed_frame_frequencies, natural_frequencies, rotating_natural_frequencies
+
+    notes = {}
+    n_all = np.arange(1, MATCH_N_MAX + 1, dtype=float)
+    free = np.asarray(natural_frequencies(ring, geometry, n_all))
+    for j, r in enumerate(rows):
+        if r["n"] >= 0:
+            continue
+        if r["contact"] and r["patch"] > 0:
+            c, s = (np.asarray(x)[:MATCH_N_MAX] for x in loaded_natural_frequencies(ring, geometry, r["patch"]))
+            cand = c if r["contact"] == 1 else s
+            model = "loaded modes at the computed patch"
+        elif r["spin"] > 0 and r["branch"]:
+            fn = fixed_frame_frequencies if r["fixed"] else rotating_natural_frequencies
+            waves = np.abs(np.asarray(fn(ring, geometry, n_all, r["spin"])))
+            cand = waves[:, 0 if r["branch"] == "backward" else 1]
+            model = "eq. 26" if r["fixed"] else "eq. 25"
+        else:
+            cand, model = free, "eq. 18"
+        k = int(np.argmin(np.abs(cand - r["freq"])))
+        r["n"] = k + 1
+        notes[j] = (f"n matched to {k + 1} by frequency ({r['freq']:.1f} Hz vs {cand[k]:.1f} Hz of {model})")
+    return notes
+
+
+def _reference_fit(free: ModeTable, geometry, ring, user_sigma_hz=None):
+    """``ringfit fit``'s fit of the ring to the free table, with the relative σ estimated from its own residual.
+
+    **Returns:** ``(fit, sigma_rel, method)``; ``sigma_rel`` NaN when ``freq_std_hz`` is complete.
+    """
+    from ringfit.fit.least_squares import DEFAULT_RELATIVE_STD, fit_natural_frequencies, frequency_data
+
+    base = frequency_data(free)
+    if base.sigma_source == "freq_std_hz":
+        return fit_natural_frequencies(free, geometry, ring, prior="physical"), math.nan, "freq_std_hz of the table"
+    if user_sigma_hz is not None:
+        rel = float(user_sigma_hz) / float(np.median(base.freq_hz))
+        fit = fit_natural_frequencies(free, geometry, ring, prior="physical", default_relative_std=rel)
+        return fit, rel, f"user value {float(user_sigma_hz):.3g} Hz"
+    rel = DEFAULT_RELATIVE_STD
+    for _ in range(2):  # σ weights the fit, the fit's residual gives σ
+        fit = fit_natural_frequencies(free, geometry, ring, prior="physical", default_relative_std=rel)
+        r = (fit.extra["model_hz"] - fit.extra["freq_hz"]) / fit.extra["freq_hz"]
+        s2, cnt = second_difference_sigma(r, np.zeros(r.size), fit.extra["n"])
+        mad = 1.4826 * float(np.median(np.abs(r - np.median(r)))) * math.sqrt(r.size / max(r.size - len(BASE), 1))
+        rel = max(s2 if math.isfinite(s2) else 0.0, mad, FREQ_SIGMA_FLOOR_REL)
+    fit = fit_natural_frequencies(free, geometry, ring, prior="physical", default_relative_std=rel)
+    which = "second differences along n" if math.isfinite(s2) and s2 >= mad else "the MAD (dof-corrected)"
+    return fit, rel, (f"relative σ {rel:.3g}, the larger of two robust scales of the reference fit's relative "
+                      f"residual (second differences along n {s2:.3g}, MAD {mad:.3g}): {which}")
+
+
+def _identification_spread(tables, ref_index=0) -> tuple[float, str] | None:
+    """Relative σ of one identification from two tables of the reference state: RMS(Δf/f)/√2 over matched n."""
+    ref = tables[ref_index]
+    for t in tables[1:]:
+        if not _is_reference_state(t):
+            continue
+        d = []
+        for n in set(ref.n[(ref.kind == "structural") & (ref.n >= 0)].tolist()):
+            a = ref.freq_hz[(ref.n == n) & (ref.kind == "structural")]
+            b = t.freq_hz[(t.n == n) & (t.kind == "structural")]
+            if a.size == 1 and b.size == 1:
+                d.append((b[0] - a[0]) / a[0])
+        if len(d) >= 3:
+            d = np.asarray(d)
+            spread = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0)
+            rms = float(np.sqrt(np.mean(d**2))) / math.sqrt(2.0)
+            s = max(spread, min(rms, 2.0 * spread))
+            name = str(t.source).rsplit("/", 1)[-1]
+            return s, f"identification spread {s:.3g} (relative) between free.modes.csv and {name}"
+    return None
+
+
+def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, ...],
+                         noise: dict | None = None) -> list[GapProblem]:
+    """The frequency problem and (when there are damping rows) the damping problem of a case's mode tables.
+
+    **Arguments:** ``tables`` — the free table first, then test tables; ``tyre`` — the case's
+    :class:`~ringfit.io.tyre.Tyre` (geometry; starting ring; ``k_tread`` if known);
+    ``effects`` — candidates; ``noise`` — optional user σ (``freq_hz`` [Hz], ``damping`` [ln ζ]).
+    """
+    noise = noise or {}
+    geometry = tyre.geometry
+    free = tables[0]
+    fit, sigma_rel, sigma_method = _reference_fit(free, geometry, tyre.ring, noise.get("freq_hz"))
+    if fit.status != "converged":
+        raise InputError(f"the ring fit to free.modes.csv did not converge ({fit.status}): the baseline is "
+                         "undefined; check the table with `ringfit fit`", source=free.source or None)
+    has_kt = "k_tread" in getattr(tyre, "ring_values", {})
+    ring_ref = tyre.ring.replace(**{k: fit.values[k] for k in BASE})
+    if not has_kt:
+        ring_ref = ring_ref.replace(k_tread=DEFAULT_K_TREAD)
+    kt_sd = K_TREAD_FITTED_SD if has_kt else K_TREAD_PRIOR_SD
+    spins = [spin_of(t, geometry.outer_radius) for t in tables]
+    patches, conditions = [], []
+    for t in tables:
+        load = t.condition.get("load_n")
+        if t.state in ("loaded", "rolling") and load:
+            a, sa = contact_patch(ring_ref, geometry, float(load), t.condition.get("drum_diameter_m"), kt_sd)
+            patches.append((a, sa))
+            conditions.append(f"patch half-angle {math.degrees(a):.2f} ± {math.degrees(sa):.2f} deg from "
+                              f"load_n = {float(load):g} N (k_trd {ring_ref.k_tread:.3g} N/m^2"
+                              f"{'' if has_kt else ', tyre.toml has none: its prior'})")
+        else:
+            patches.append((0.0, 0.0))
+            conditions.append("")
+    rows, cavity_hz = _table_rows(tables, geometry, patches, spins)
+    match_notes = _match_missing_n(rows, ring_ref, geometry)
+    problems = [_frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_rel, sigma_method,
+                                   match_notes, patches, conditions, effects, noise)]
+    damp = [r for r in rows if math.isfinite(r["damping"]) and r["damping"] > 0]
+    if len(damp) >= 4:
+        problems.append(_damping_problem(tables, damp, cavity_hz, geometry, ring_ref, effects, noise))
+    return problems
+
+
+def _labels(rows, suffix=""):
+    out = []
+    for r in rows:
+        qual = " ".join(x for x in (r["tag"], r["branch"]) if x)
+        out.append(f"{r['tlabel']} n={r['n']}{' ' + qual if qual else ''}{suffix}")
+    return out
+
+
+def _short_labels(rows, tables):
+    out = []
+    for r in rows:
+        st = "free" if r["reference"] else tables[r["table"]].state
+        qual = r["tag"] or {"backward": "b", "forward": "f"}.get(r["branch"], "")
+        out.append(f"{st} {r['n']}{qual}" if r["reference"] else f"T{r['table']} {st} {r['n']}{qual}")
+    return out
+
+
+#: Up to this many rows, the held-out predictions are leave-one-out (few rows: every fold matters).
+LEAVE_ONE_OUT_ROWS = 12
+
+
+def _folds(rows, m):
+    K = m if m <= LEAVE_ONE_OUT_ROWS else int(min(5, max(2, m // 4)))
+    order = np.lexsort(([r["n"] for r in rows], [r["table"] for r in rows]))
+    folds = np.empty(m, dtype=int)
+    folds[order] = np.arange(m) % K
+    return folds
+
+
+def _usable(effects, mrows, domain_note):
     usable, dropped = [], {}
     for e in effects:
-        mask = e.modal_mask(rows)
+        mask = e.modal_mask(mrows)
         if mask is None:
             dropped[e.name] = "does not act on mode tables"
         elif not np.any(mask):
-            dropped[e.name] = "no row of these mode tables is affected (e.g. no loaded/spinning table, no damping)"
+            dropped[e.name] = domain_note
         else:
             usable.append(e)
-    usable = tuple(usable)
-    sizes = tuple(len(e.params_for("modes")) for e in usable)
-    data = ModalData(rows=pad_rows(rows), ring=ring, geometry=geometry)
-    m = len(y)
-    n_theta = len(base) + sum(sizes)
-    static = dict(effects=usable, base=base, sizes=sizes)
+    return tuple(usable), dropped
 
-    # provisional σ: user's, else 0.5 % of f and 20 % of ζ0 — only to fit the reference baseline
-    sigma = np.where(is_freq, 0.005 * y, 0.2 * damping0)
-    sigma = np.where(np.isfinite(user_sigma), user_sigma, sigma)
+
+def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_rel, sigma_method, match_notes,
+                       patches, conditions, effects, noise) -> GapProblem:
+    from ringfit.fit.priors import PHYSICAL_PRIORS
+    from ringfit.physics.natural import natural_frequencies
+
+    m = len(rows)
+    mrows = _rows_module(rows, 1.0, cavity_hz, [p[0] for p in patches])
+    y = np.array([r["freq"] for r in rows])
+    n = np.array([r["n"] for r in rows], dtype=float)
+    ref = np.array([r["reference"] for r in rows])
+    std = np.array([r["std"] for r in rows])
+    usable, dropped = _usable(effects, mrows, "no row of these mode tables is affected (no loaded/spinning table)")
+    sizes = tuple(len(e.params_for("modes")) for e in usable)
+    # --- noise
+    spread = _identification_spread(tables)
+    notes = [f"free.modes.csv: {sigma_method}"]
+    rel = sigma_rel
+    if spread is not None:
+        if not math.isfinite(rel) or spread[0] > rel:
+            notes.append(spread[1] + " (raises the measurement σ of every table)")
+            rel = spread[0]
+        else:
+            notes.append(spread[1] + f" (below the reference fit's {rel:.3g}: kept)")
+    ref_sigma = np.where(np.isfinite(std) & (std > 0), std, (rel if math.isfinite(rel) else 0.0) * y)
+    user = noise.get("freq_hz")
+    meas = np.where(np.isfinite(std) & (std > 0), std,
+                    float(user) if user is not None else (rel if math.isfinite(rel) else 0.0) * y)
+    meas = np.where(ref, ref_sigma, meas)
+    # prediction uncertainty of the reference fit at each test row (eq. 18, its covariance)
+    J = np.asarray(jax.jacfwd(lambda u: natural_frequencies(
+        ring_ref.replace(**{k: jnp.exp(u[i]) for i, k in enumerate(BASE)}), geometry, jnp.asarray(n)))(
+        jnp.log(jnp.asarray([fit.values[k] for k in BASE]))))
+    cov = fit.covariance_log * max(1.0, fit.chi2 / max(fit.dof, 1))
+    pred_sd = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", J, cov, J), 0.0, None))
+    sigma = np.where(ref, meas, np.sqrt(meas**2 + pred_sd**2))
+    sigma = np.maximum(np.maximum(sigma, FREQ_SIGMA_FLOOR_HZ), FREQ_SIGMA_FLOOR_REL * y)
+    if any(not r["reference"] for r in rows):
+        notes.append("test rows: sqrt(measurement σ^2 + the reference fit's prediction σ^2), measurement σ from "
+                     "freq_std_hz where given, else the free table's")
+    notes.append(f"Huber weighting of test rows beyond |z| = {HUBER:g}; outliers named at |z| > {OUTLIER_Z:g}")
+    # --- problem
+    labels = _labels(rows)
+    for j, note in match_notes.items():
+        labels[j] += " (n matched)"
+    prior_mean = np.array([fit.values[k] for k in BASE])
+    prior_sd = np.full(len(BASE), np.inf)
+    ei = PHYSICAL_PRIORS["ei"]
+    prior_mean[1], prior_sd[1] = ei.median, ei.sigma_ln
+    data = ModalData(rows=pad_rows(mrows), ring=ring_ref, geometry=geometry)
+    meta_labels = dict(
+        table=np.array([r["table"] for r in rows]), group=np.full(m, "frequency"), label=labels,
+        short=_short_labels(rows, tables), family=[r["tlabel"] for r in rows],
+        sequence=[f"{r['table']}|{r['tag']}|{r['branch']}" for r in rows],
+        matched={labels[j]: note for j, note in match_notes.items()},
+        cavity_hz=cavity_hz, measured_freq=y)
     problem = GapProblem(
-        domain="modes", data_files=[], y=y, sigma=sigma, unit="Hz", scale=np.ones_like(y),
-        folds=np.zeros(len(y), dtype=int), fold_kind="leave-modes-out", labels=meta, base=base,
-        base_values=base_values, base_prior_sd=np.full(len(base), BASE_PRIOR_SD), effects=usable,
-        data=data, noise_method="", baseline_model="eq18-free",
-        not_applicable=dropped, meta={"reference_mask": free_rows, "block": 1,
-                                      "tangents": min(n_theta, len(base) + MAX_CHAIN_PARAMETERS),
-                                      "padded_rows": int(data.rows.n.shape[0])},
-        predictor=ModalPredictor(**static),
+        domain="modes", data_files=[str(t.source).rsplit("/", 1)[-1] for t in tables], y=y, sigma=sigma,
+        unit="Hz", scale=np.ones(m), folds=_folds(rows, m), fold_kind="leave-modes-out (free rows); test rows are "
+        "predictions of the free-table fit", labels=meta_labels, base=BASE, base_values=prior_mean.copy(),
+        base_prior_sd=prior_sd, effects=usable, data=data, noise_method="; ".join(notes),
+        baseline_model="eq18-free (ringfit fit on free.modes.csv)", not_applicable=dropped,
+        meta={"reference_mask": ref, "block": 1, "tangents": len(BASE) + MAX_CHAIN_PARAMETERS,
+              "padded_rows": int(data.rows.n.shape[0]), "files": [str(t.source).rsplit("/", 1)[-1] for t in tables],
+              "reference_fit": fit.to_record(sigma_rel=sigma_rel, sigma_method=sigma_method),
+              "conditions": {table_label(t, i): c for i, (t, c) in enumerate(zip(tables, conditions)) if c},
+              "reference_result": fit,
+              "condition_sd": _condition_sd(patches)},
+        base_prior_mean=prior_mean, predictor=ModalPredictor(effects=usable, base=BASE, sizes=sizes),
+        robust=~ref, huber=HUBER,
     )
-    if fit_reference is not None:
-        for _ in range(2):  # σ depends on the residual, the residual on σ (weights): two passes suffice
-            theta = fit_reference(problem, free_rows)
-            problem.base_values = theta[: len(base)]
-            resid = y - predict(problem, problem.null_theta())
-            problem.sigma, problem.noise_method = _noise(resid, y, is_freq, user_sigma, meta, n, noise, damping0)
-    # relative scale for the RMS figures: Hz rows as they are; damping rows in σ units × median Hz σ
-    fs = float(np.median(problem.sigma[is_freq]))
-    problem.scale = np.where(is_freq, 1.0, fs / problem.sigma)
-    problem.unit = "Hz" if not has_damping else "Hz (damping rows scaled to frequency-noise units)"
-    # interleaved folds over the rows of each table (leave-modes-out)
-    K = int(min(5, max(2, len(y) // 4)))
-    order = np.lexsort((n, meta["table"]))
-    folds = np.empty(len(y), dtype=int)
-    folds[order] = np.arange(len(y)) % K
-    problem.folds = folds
-    problem.meta["files"] = [str(t.source).rsplit("/", 1)[-1] for t in tables]
-    problem.data_files = problem.meta["files"]
+    problem.base_values = np.array([fit.values[k] for k in BASE])
     return problem
 
 
-def _noise(resid, y, is_freq, user_sigma, meta, n, noise, damping0):
-    noise = noise or {}
-    seq = meta["sequence"]
-    out = np.empty_like(y)
+def _condition_sd(patches) -> dict:
+    """σ of the condition-fixed effect parameters: the patch scale's from the k_trd uncertainty (RMS over tables)."""
+    rel = [sa / a for a, sa in patches if a > 0]
+    return {"ground_contact": {"patch_scale": float(np.sqrt(np.mean(np.square(rel))))}} if rel else {}
+
+
+def _damping_problem(tables, rows, cavity_hz, geometry, ring_ref, effects, noise) -> GapProblem:
+    m = len(rows)
+    table_ids = sorted({r["table"] for r in rows})
+    remap = {t: i for i, t in enumerate(table_ids)}
+    mrows = _rows_module([dict(r, table=remap[r["table"]]) for r in rows], 0.0, cavity_hz, np.zeros(len(table_ids)))
+    y = np.log(np.array([r["damping"] for r in rows]) / 100.0)
+    n = np.array([r["n"] for r in rows], dtype=float)
+    tab = np.array([remap[r["table"]] for r in rows])
+    usable, dropped = _usable(effects, mrows, "no damping rows")
+    sizes = tuple(len(e.params_for("modes")) for e in usable)
+    base = tuple(f"damping_ratio:{table_label(tables[t], t)}" for t in table_ids)
+    levels = np.array([math.exp(float(np.median(y[tab == i]))) for i in range(len(table_ids))])
+    sigma = np.empty(m)
     notes = []
-    for fam, mask, floor in (("freq_hz", is_freq, None), ("damping", ~is_freq, DAMPING_SIGMA_FLOOR)):
-        if not np.any(mask):
-            continue
-        if fam in noise:
-            s = float(noise[fam])
-            notes.append(f"{fam}: user value {s:.3g}")
+    user = noise.get("damping")
+    for i, t in enumerate(table_ids):
+        sel = tab == i
+        if user is not None:
+            s = float(user)
+            notes.append(f"{table_label(tables[t], t)}: user value {s:.3g}")
         else:
-            idx = np.flatnonzero(mask)
-            s, cnt = second_difference_sigma(resid[idx], [seq[i] for i in idx], n[idx])
+            s, cnt = second_difference_sigma(y[sel] - np.median(y[sel]), np.zeros(int(sel.sum())), n[sel])
             if not math.isfinite(s):
-                s = 0.005 * float(np.median(y[mask])) if fam == "freq_hz" else 0.2 * damping0
-                notes.append(f"{fam}: too few modes for second differences, default {s:.3g}")
+                s = 2 * DAMPING_SIGMA_FLOOR
+                notes.append(f"{table_label(tables[t], t)}: too few modes for second differences, {s:.3g}")
             else:
-                notes.append(f"{fam}: {s:.3g} from second differences along n of the baseline residual ({cnt} values)")
-        if fam == "freq_hz":
-            sig = np.maximum(np.maximum(s, FREQ_SIGMA_FLOOR_HZ), FREQ_SIGMA_FLOOR_REL * y)
-        else:
-            sig = np.full(len(y), max(s, floor, DAMPING_SIGMA_FLOOR_REL * float(np.median(y[mask]))))
-        out[mask] = sig[mask]
-    out = np.where(np.isfinite(user_sigma) & is_freq, np.maximum(user_sigma, 1e-9), out)
-    if np.any(np.isfinite(user_sigma) & is_freq):
-        notes.insert(0, "freq_std_hz column where given")
-    return out, "; ".join(notes)
+                notes.append(f"{table_label(tables[t], t)}: {max(s, DAMPING_SIGMA_FLOOR):.3g} from second "
+                             f"differences of ln(damping) along n ({cnt} values)")
+        sigma[sel] = max(s, DAMPING_SIGMA_FLOOR)
+    notes.append(f"one damping level per table; Huber weighting beyond |z| = {HUBER:g}")
+    labels = _labels(rows, " damping")
+    data = ModalData(rows=pad_rows(mrows), ring=ring_ref, geometry=geometry)
+    problem = GapProblem(
+        domain="damping", data_files=[str(tables[t].source).rsplit("/", 1)[-1] for t in table_ids], y=y,
+        sigma=sigma, unit="ln(damping ratio)", scale=np.ones(m), folds=_folds(rows, m), fold_kind="leave-modes-out",
+        labels=dict(table=tab, group=np.full(m, "damping"), label=labels, short=_short_labels(rows, tables),
+                    family=[r["tlabel"] + " damping" for r in rows],
+                    sequence=[f"{r['table']}|{r['tag']}|{r['branch']}" for r in rows], matched={},
+                    measured_freq=np.array([r["freq"] for r in rows])),
+        base=base, base_values=levels, base_prior_sd=np.full(len(base), np.inf), effects=usable, data=data,
+        noise_method="; ".join(notes), baseline_model="one damping ratio per table", not_applicable=dropped,
+        meta={"block": 1, "tangents": len(base) + MAX_CHAIN_PARAMETERS, "padded_rows": int(data.rows.n.shape[0]),
+              "files": [str(tables[t].source).rsplit("/", 1)[-1] for t in table_ids], "tables": table_ids},
+        predictor=DampingPredictor(effects=usable, base=base, sizes=sizes),
+        robust=np.ones(m, dtype=bool), huber=HUBER,
+    )
+    return problem
+
+
+__all__ = ["build_modal_problems", "ModalRows", "ModalData", "ModalPredictor", "DampingPredictor",
+           "second_difference_sigma", "contact_patch", "spin_of", "table_label", "HUBER", "OUTLIER_Z"]

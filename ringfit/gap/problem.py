@@ -47,6 +47,11 @@ class GapProblem:
       (e.g. the profiles' angle offset [rad], which may be negative) instead of as a log;
       ``base_linear_scale`` its typical size and ``base_linear_bound`` its hard bound ±.
       ``None`` = every baseline parameter positive and log-fitted.
+    - ``sigma_heldout``: optional ``(m,)`` σ of a held-out residual: √(σ² + the variance of the
+      baseline's held-out prediction at that row); set by the diagnosis where a held-out refit
+      extrapolates (mode tables), used by every held-out statistic (``None`` = ``sigma``).
+    - ``robust``: optional bool ``(m,)``: rows whose standardised residual enters refits and
+      statistics through the Huber function with threshold ``huber`` (heavy-tailed data).
     - ``predictor``: the un-jitted prediction ``predictor(theta, data) -> (m_padded,)`` (an
       ``eqx.Module`` with static configuration; rows past ``m`` are padding) — what every refit
       differentiates inside the engine's one compiled solve.
@@ -76,6 +81,9 @@ class GapProblem:
     base_prior_mean: np.ndarray | None = None
     base_prior_cov: np.ndarray | None = None
     predictor: Any = None
+    robust: np.ndarray | None = None
+    huber: float | None = None
+    sigma_heldout: np.ndarray | None = None
 
     def prior_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The baseline prior as whitened residual rows: ``(index, mean_u, W)`` with rows ``W (u[index] − mean_u)``.
@@ -97,6 +105,17 @@ class GapProblem:
     def is_linear(self, i: int) -> bool:
         """Whether baseline parameter ``i`` is fitted linearly (a nuisance) rather than as a log."""
         return bool(self.base_linear is not None and self.base_linear[i])
+
+    def standardised(self, resid: np.ndarray, mask=None, heldout: bool = False) -> np.ndarray:
+        """``resid/σ`` with the Huber function applied to the robust rows (what refits and tests see);
+        ``heldout``: σ of a held-out residual (:attr:`sigma_heldout` where set)."""
+        sigma = self.sigma_heldout if heldout and self.sigma_heldout is not None else self.sigma
+        z = np.asarray(resid, dtype=np.float64) / sigma
+        if self.robust is not None and self.huber is not None:
+            c = self.huber
+            a = np.abs(z)
+            z = np.where(self.robust & (a > c), np.sign(z) * np.sqrt(np.maximum(2 * c * a - c * c, 0.0)), z)
+        return z if mask is None else z[mask]
 
     @property
     def m(self) -> int:

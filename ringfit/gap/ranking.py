@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, evaluate,
@@ -44,26 +45,46 @@ RTOL, ATOL = 1e-8, 1e-8
 BASE_LOG_RANGE = 3.0
 
 
+#: Suffix of a chain element that is an effect's *computed* variant (parameters fixed by the condition).
+COMPUTED = "@computed"
+
+
+def effect_of(element: str) -> str:
+    """The effect name of a chain element (``"ground_contact@computed"`` → ``"ground_contact"``)."""
+    return element.removesuffix(COMPUTED)
+
+
 class GapResiduals(AbstractResiduals):
-    """``(prediction(θ) − y)·w`` for a gap problem's predictor; aux: the prediction of every row."""
+    """``ψ((prediction(θ) − y)·w)`` for a gap problem's predictor (ψ: Huber on the robust rows, else identity);
+    aux: the prediction of every row."""
 
     predictor: object = eqx.field(static=True)
+    huber: float = eqx.field(static=True, default=0.0)
 
     def __call__(self, theta, data):
-        pdata, y, w = data
+        pdata, y, w, robust = data
         pred = self.predictor(theta, pdata)
-        return (pred - y) * w, pred
+        z = (pred - y) * w
+        if self.huber > 0:
+            c = self.huber
+            a = jnp.abs(z)
+            soft = jnp.sign(z) * jnp.sqrt(jnp.maximum(2.0 * c * a - c * c, 1e-300))
+            z = jnp.where(robust & (a > c), soft, z)
+        return z, pred
 
 
 def _engine_problem(problem: GapProblem, train) -> Problem:
-    """The engine's problem of a gap refit: residuals ``(prediction − y)/σ`` on the ``train`` rows."""
+    """The engine's problem of a gap refit: residuals ``ψ((prediction − y)/σ)`` on the ``train`` rows."""
     m = problem.m
     w = np.where(train, 1.0 / problem.sigma, 0.0)
     y = problem.y
+    robust = np.zeros(m, dtype=bool) if problem.robust is None else np.asarray(problem.robust, dtype=bool)
     pad = int(problem.meta.get("padded_rows", m)) - m  # rows the predictor pads (weight 0)
     if pad:
         y, w = np.concatenate([y, np.zeros(pad)]), np.concatenate([w, np.zeros(pad)])
-    return Problem(GapResiduals(problem.predictor), (problem.data, y, w), coordinates(problem),
+        robust = np.concatenate([robust, np.zeros(pad, dtype=bool)])
+    huber = float(problem.huber) if problem.huber and problem.robust is not None and robust.any() else 0.0
+    return Problem(GapResiduals(problem.predictor, huber), (problem.data, y, w, robust), coordinates(problem),
                    prior=gap_prior(problem), sigma="inflate", data_label="the gap data")
 
 
@@ -142,29 +163,41 @@ def gap_prior(problem: GapProblem) -> GaussianPrior | None:
 
 
 def _free_names(problem: GapProblem, chain) -> tuple[str, ...]:
+    """The baseline's parameters and those of the chain's fitted effects (computed ones stay fixed)."""
     names = theta_names(problem)
     sl = problem.slices()
     idx = list(range(len(problem.base)))
     for name in chain:
-        idx.extend(range(sl[name].start, sl[name].stop))
+        if not name.endswith(COMPUTED):
+            idx.extend(range(sl[name].start, sl[name].stop))
     return tuple(names[i] for i in idx)
+
+
+def chain_start(problem: GapProblem, chain, theta) -> np.ndarray:
+    """``theta`` with each chain effect set to its start (fitted) or its condition value (computed)."""
+    theta = np.array(theta, dtype=np.float64)
+    for element in chain:
+        name = effect_of(element)
+        sl = problem.slices()[name]
+        e = next(e for e in problem.effects if e.name == name)
+        params = problem.effect_params(e)
+        theta[sl] = [p.condition for p in params] if element.endswith(COMPUTED) else [p.start for p in params]
+    return theta
 
 
 def fit_chain(problem: GapProblem, chain: tuple[str, ...] = (), train=None, start=None,
               max_steps: int = 60) -> FitResult:
     """Refit the baseline + ``chain`` on the ``train`` rows (default all) with the engine.
 
+    A chain element ``"name"`` frees the effect's parameters; ``"name@computed"`` holds them
+    at the values the measured condition fixes (``Parameter.condition``).
+
     **Returns:** :class:`~ringfit.fit.result.FitResult` (standard errors inflated by √(χ²/dof)
     when > 1); ``extra``: ``chain``, ``pred`` ``(m,)``, ``train`` ``(m,)`` bool.
     """
     m = problem.m
     train = np.ones(m, dtype=bool) if train is None else np.asarray(train, dtype=bool)
-    theta0 = problem.null_theta() if start is None else np.array(start, dtype=np.float64)
-    if start is None:  # effects of the chain at their interior start
-        for name in chain:
-            sl = problem.slices()[name]
-            e = next(e for e in problem.effects if e.name == name)
-            theta0[sl] = [p.start for p in problem.effect_params(e)]
+    theta0 = chain_start(problem, chain, problem.null_theta()) if start is None else np.array(start, dtype=np.float64)
     engine_problem = _engine_problem(problem, train)
     for i, c in enumerate(engine_problem.coords):  # a warm start just outside a bound (rounding) comes back inside
         if c.kind == LINEAR:
@@ -177,15 +210,30 @@ def fit_chain(problem: GapProblem, chain: tuple[str, ...] = (), train=None, star
     return fit
 
 
-def heldout(problem: GapProblem, fit: FitResult, max_steps: int = 60) -> np.ndarray:
-    """Held-out predictions ``(m,)``: each fold predicted by a refit on the others (warm start from ``fit``)."""
+def heldout(problem: GapProblem, fit: FitResult, max_steps: int = 60, variance: bool = False) -> np.ndarray:
+    """Held-out predictions ``(m,)``: each fold predicted by a refit on the others (warm start from ``fit``).
+
+    ``variance``: also the variance of each held-out prediction from its refit's covariance
+    (``fit.extra["heldout_var"]``), for problems whose held-out refits extrapolate (mode tables).
+    """
     out = np.full(problem.m, np.nan)
+    var = np.zeros(problem.m)
+    coords = coordinates(problem)
     for f in np.unique(problem.folds):
         test = problem.folds == f
         sub = fit_chain(problem, fit.extra["chain"], train=fit.extra["train"] & ~test, start=fit.theta,
                         max_steps=max_steps)
         out[test] = sub.extra["pred"][test]
+        if variance:
+            free = sub.free_index
+            _, J = predict_and_jacobian(problem, sub.theta, free)
+            dtheta_du = np.array([sub.theta[i] if coords[i].kind == LOG else coords[i].scale for i in free])
+            Ju = J[test] * dtheta_du[None, :]
+            cov = np.where(np.isfinite(sub.covariance_log), sub.covariance_log, 0.0)
+            var[test] = np.einsum("ij,jk,ik->i", Ju, cov, Ju)
     fit.extra["heldout_pred"] = out
+    if variance:
+        fit.extra["heldout_var"] = var
     return out
 
 
@@ -197,11 +245,23 @@ def rms(problem: GapProblem, resid: np.ndarray, mask=None) -> float:
     return float(np.sqrt(np.mean(r**2)))
 
 
+def shrink(problem: GapProblem, r_base: np.ndarray, r_cand: np.ndarray, mask=None, heldout: bool = False) -> float:
+    """Shrink [%] = 100·(1 − SS_after/SS_before), SS = Σ ψ(r/σ)² over the rows in ``mask`` (default all).
+
+    Each residual is weighted by 1/σ² of its own noise estimate (σ per run and channel for
+    profiles, per row family for mode tables) and passed through the Huber function where the
+    problem marks rows robust (docs/formats.md §5).
+    """
+    zb, zc = problem.standardised(r_base, mask, heldout), problem.standardised(r_cand, mask, heldout)
+    sb = float(np.sum(zb**2))
+    return 100.0 * (1.0 - float(np.sum(zc**2)) / sb) if sb > 0 else 0.0
+
+
 def shrink_interval(problem: GapProblem, r_base: np.ndarray, r_cand: np.ndarray, n_boot: int = 400,
-                    seed: int = 0) -> tuple[float, float]:
-    """95 % block-bootstrap interval of the shrink ``1 − rms_cand/rms_base`` [%] over rows."""
-    scale = problem.scale if problem.scale.shape == r_base.shape else 1.0  # a subset of rows: already scaled
-    rb2, rc2 = (r_base * scale) ** 2, (r_cand * scale) ** 2
+                    seed: int = 0, mask=None, heldout: bool = True) -> tuple[float, float]:
+    """95 % block-bootstrap interval of the held-out :func:`shrink` [%] over rows (blocks of ``meta["block"]``)."""
+    rb2 = problem.standardised(r_base, mask, heldout) ** 2
+    rc2 = problem.standardised(r_cand, mask, heldout) ** 2
     m = rb2.size
     block = int(problem.meta.get("block", 1))
     nb = max(1, math.ceil(m / block))
@@ -209,8 +269,22 @@ def shrink_interval(problem: GapProblem, r_base: np.ndarray, r_cand: np.ndarray,
     starts = rng.integers(0, m, size=(n_boot, nb))
     idx = (starts[:, :, None] + np.arange(block)[None, None, :]).reshape(n_boot, -1) % m
     sb, sc = rb2[idx].sum(1), rc2[idx].sum(1)
-    s = 100.0 * (1.0 - np.sqrt(sc / np.maximum(sb, 1e-300)))
+    s = 100.0 * (1.0 - sc / np.maximum(sb, 1e-300))
     return float(np.percentile(s, 2.5)), float(np.percentile(s, 97.5))
+
+
+def reference_drift(problem: GapProblem, fit: FitResult, reference: FitResult) -> float | None:
+    """How far a refit moved the reference-state predictions: RMS over the reference rows of the
+    baseline's prediction (every effect at its null) with the refit's baseline parameters minus that
+    with the reference fit's, in units of each row's σ. ``None`` without reference rows."""
+    mask = problem.meta.get("reference_mask")
+    if mask is None or not np.any(mask):
+        return None
+    nb = len(problem.base)
+    a = problem.null_theta(fit.theta[:nb])
+    b = problem.null_theta(reference.theta[:nb])
+    d = (predict(problem, a) - predict(problem, b))[mask] / problem.sigma[mask]
+    return float(np.sqrt(np.mean(d**2)))
 
 
 def drift(problem: GapProblem, fit: FitResult, reference: FitResult) -> dict[str, float]:

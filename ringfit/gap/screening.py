@@ -26,17 +26,20 @@ import numpy as np
 
 from ringfit.gap.problem import GapProblem
 from ringfit.fit.result import FitResult
-from ringfit.gap.ranking import predict, predict_and_jacobian
+from ringfit.gap.ranking import COMPUTED, effect_of, predict, predict_and_jacobian
 
 SCREEN_MIN_SCORE = 1.0
 STEP = 0.05
 
 
-def screen(problem: GapProblem, baseline: FitResult, names=None) -> dict[str, dict]:
-    """Score and alignment of the applicable effects (``names``; default all) at ``baseline``.
+def screen(problem: GapProblem, baseline: FitResult, elements=None) -> dict[str, dict]:
+    """Score and alignment of the candidates (``elements``: effect names, and ``name@computed`` for an
+    effect held at its condition values; default every effect fitted) at ``baseline``.
 
-    ``baseline`` is a :class:`~ringfit.fit.result.FitResult` of :func:`ringfit.gap.ranking.fit_chain` (the baseline, or the baseline plus an
-    accepted chain, whose own free parameters are projected out too).
+    ``baseline`` is a :class:`~ringfit.fit.result.FitResult` of :func:`ringfit.gap.ranking.fit_chain`
+    (the baseline, or the baseline plus an accepted chain, whose own free parameters are projected out
+    too). A computed candidate has no free parameter: its score is the χ² its fixed change Δ removes,
+    ``‖r‖² − ‖r − Δ⊥‖²`` (Δ⊥: the part of Δ the baseline cannot mimic).
     """
     th0 = baseline.theta
     p0 = baseline.extra["pred"]
@@ -49,8 +52,17 @@ def screen(problem: GapProblem, baseline: FitResult, names=None) -> dict[str, di
     Q, _ = np.linalg.qr(Jb)
     out = {}
     sl = problem.slices()
-    for e in problem.effects:
-        if names is not None and e.name not in names:
+    if elements is None:
+        elements = [e.name for e in problem.effects]
+    for element in elements:
+        e = next(x for x in problem.effects if x.name == effect_of(element))
+        if element.endswith(COMPUTED):
+            th = th0.copy()
+            th[sl[e.name]] = [p.condition for p in problem.effect_params(e)]
+            delta = (predict(problem, th) - p0) / sig
+            delta = delta - Q @ (Q.T @ delta)
+            score = float(2.0 * r @ delta - delta @ delta)
+            out[element] = dict(score=score, alignment=float(np.sqrt(max(score, 0.0) / max(np.sum(r**2), 1e-300))))
             continue
         cols = []
         for j, p in zip(range(sl[e.name].start, sl[e.name].stop), problem.effect_params(e)):
@@ -66,10 +78,10 @@ def screen(problem: GapProblem, baseline: FitResult, names=None) -> dict[str, di
         norm = np.linalg.norm(S, axis=0)
         ok = norm > 1e-12 * max(1.0, np.linalg.norm(r))
         if not np.any(ok):
-            out[e.name] = dict(score=0.0, alignment=0.0)
+            out[element] = dict(score=0.0, alignment=0.0)
             continue
         S = S[:, ok]
         coef, *_ = np.linalg.lstsq(S, r, rcond=None)
         score = float(np.sum((S @ coef) ** 2))
-        out[e.name] = dict(score=score, alignment=float(np.sqrt(score / max(np.sum(r**2), 1e-300))))
+        out[element] = dict(score=score, alignment=float(np.sqrt(score / max(np.sum(r**2), 1e-300))))
     return out

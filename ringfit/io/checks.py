@@ -9,6 +9,8 @@ same thing (and has the same plausible range) in every file that carries it
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import math
 import os
@@ -16,13 +18,17 @@ from pathlib import Path
 
 from ringfit.errors import InputError
 
+#: Largest plausible inflation pressure [bar] in any file (a tyre file's ``pressure_bar``, a
+#: sidecar's, a record's condition): above it the value is almost surely in Pa or kPa.
+MAX_PRESSURE_BAR = 20.0
+
 #: Plausible range [lo, hi] of the condition fields of sidecars and continuous
 #: records (docs/formats.md §2–§4). Generous on purpose: a value outside is a
 #: unit slip (a pressure in Pa, a speed in m/h) or a corrupted file, not a test.
 CONDITION_RANGES: dict[str, tuple[float, float]] = {
     "speed_kmh": (0.0, 1000.0),
     "load_n": (0.0, 1.0e6),
-    "pressure_bar": (0.0, 20.0),
+    "pressure_bar": (0.0, MAX_PRESSURE_BAR),
     "rotation_hz": (0.0, 1000.0),
     "drum_diameter_m": (0.0, 100.0),
     "revolutions": (1.0, 1.0e9),
@@ -95,3 +101,46 @@ def check_condition_field(doc: dict, key: str, *, source=None, what: str = "fiel
     if key == "revolutions" and not value.is_integer():
         raise InputError(f"{what} 'revolutions' = {value:g}: expected a whole number >= 1", source=source)
     return value
+
+
+def csv_columns(text: str, required: tuple[str, ...], *, source: str,
+                empty: str) -> tuple[list[str], dict[str, list[str]], list[int]]:
+    """The columns of a CSV file's text as stripped strings (docs/formats.md §0).
+
+    One header row (names stripped of spaces; a duplicate name is an error),
+    any column order, blank rows skipped, a missing trailing cell empty, a row
+    with more cells than the header an error.
+
+    **Arguments:** ``required`` — columns that must be present; ``source`` —
+    the file, for messages; ``empty`` — what the header should hold, for the
+    message about an empty file.
+
+    **Returns:** ``(header, columns, lines)``: the names in file order, each
+    column's cells, and the file line number of each kept row.
+    """
+    try:
+        reader = csv.DictReader(io.StringIO(text))
+        header = [h.strip() for h in (reader.fieldnames or [])]
+        if not header:
+            raise InputError(f"empty file; expected a header row {empty}", source=source)
+        reader.fieldnames = header
+        missing = [c for c in required if c not in header]
+        if missing:
+            listed = ", ".join(repr(c) for c in missing)
+            raise InputError(f"missing column{'s' if len(missing) > 1 else ''} {listed} "
+                             f"(have: {', '.join(header)}; expected {', '.join(required)})", source=source)
+        if len(set(header)) != len(header):
+            raise InputError(f"duplicate column names in header {header}", source=source)
+        cols: dict[str, list[str]] = {h: [] for h in header}
+        lines: list[int] = []
+        for line_no, row in enumerate(reader, start=2):
+            if None in row:
+                raise InputError(f"row {line_no}: more cells than header columns", source=source)
+            if all((v or "").strip() == "" for v in row.values()):
+                continue
+            lines.append(line_no)
+            for h in header:
+                cols[h].append((row.get(h) or "").strip())
+    except csv.Error as exc:  # a cell over the field size limit, a NUL byte
+        raise InputError(f"not a readable CSV file ({exc})", source=source) from None
+    return header, cols, lines

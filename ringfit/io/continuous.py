@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.io.files import atomic_write, check_output_path
+from ringfit.io.files import atomic_write, check_output_path, existing_file
 
 KIND = "continuous"
 AXES = ("radial", "tangential", "lateral")
@@ -468,11 +468,7 @@ def read_continuous(path: str | os.PathLike, *, verify: bool = True) -> Continuo
     missing or misshapen keys, an unknown axis, two encoders, channels of
     unequal length.
     """
-    path = Path(path)
-    if not path.exists():
-        raise InputError("file not found", source=path)
-    if path.is_dir():
-        raise InputError("is a directory; expected a continuous .npz record", source=path)
+    path = existing_file(path, "a continuous .npz record")
     try:
         zf = zipfile.ZipFile(path)
         if verify:

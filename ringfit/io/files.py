@@ -112,6 +112,20 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
     return atomic_write(path, lambda tmp: tmp.write_text(text))
 
 
+def existing_file(path: str | os.PathLike, expected: str) -> Path:
+    """``path`` as a :class:`~pathlib.Path` to a file that exists; :class:`InputError` naming it otherwise.
+
+    **Arguments:** ``expected`` — what the file should be, for the message
+    (``"an .npz file"``): a directory in its place is refused with it.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError("file not found", source=path)
+    if path.is_dir():
+        raise InputError(f"is a directory; expected {expected}", source=path)
+    return path
+
+
 def read_text_file(path: str | os.PathLike) -> str:
     """Text of ``path`` (UTF-8, BOM tolerated); :class:`InputError` naming the file if missing or unreadable."""
     path = Path(path)
@@ -134,11 +148,7 @@ def load_npz(path: str | os.PathLike) -> dict:
 
     import numpy as np
 
-    path = Path(path)
-    if not path.exists():
-        raise InputError("file not found", source=path)
-    if path.is_dir():
-        raise InputError("is a directory; expected an .npz file", source=path)
+    path = existing_file(path, "an .npz file")
     try:
         with open(path, "rb") as fh:
             magic = fh.read(4)

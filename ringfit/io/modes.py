@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.io.checks import check_condition_field, read_json_object, short_repr
+from ringfit.io.checks import check_condition_field, csv_columns, read_json_object, short_repr
 from ringfit.io.files import atomic_write, check_output_path, read_text_file
 
 KINDS = ("structural", "acoustic")
@@ -28,8 +28,6 @@ STATES = ("free", "loaded", "rolling")
 FRAMES = ("rotating", "fixed")
 #: Columns of DATA.md §2, in the order ringfit writes them.
 COLUMNS = ("n", "a", "tag", "kind", "freq_hz", "freq_std_hz", "damping_pct", "branch")
-#: A sidecar pressure_bar above this looks like Pa.
-MAX_PRESSURE_BAR = 20.0
 #: Largest plausible natural frequency [Hz] in a mode table (a tyre's modes lie below a few kHz).
 MAX_FREQ_HZ = 1.0e5
 #: Largest circumferential / cross-sectional index accepted.
@@ -160,30 +158,7 @@ def read_mode_table(path: str | os.PathLike, *, sidecar: bool = True) -> ModeTab
 
 def parse_mode_table(text: str, *, source: str = "<text>") -> ModeTable:
     """Parse the CSV text of a mode table (see :func:`read_mode_table`)."""
-    try:
-        return _parse_mode_table(text, source)
-    except csv.Error as exc:  # a cell over the field size limit, a NUL byte
-        raise InputError(f"not a readable CSV file ({exc})", source=source) from None
-
-
-def _parse_mode_table(text: str, source: str) -> ModeTable:
-    reader = csv.DictReader(io.StringIO(text))
-    header = [h.strip() for h in (reader.fieldnames or [])]
-    if not header:
-        raise InputError("empty file; expected a header row with at least freq_hz", source=source)
-    reader.fieldnames = header
-    if "freq_hz" not in header:
-        raise InputError(f"missing column 'freq_hz' (have: {', '.join(header)})", source=source)
-    if len(set(header)) != len(header):
-        raise InputError(f"duplicate column names in header {header}", source=source)
-    cols: dict[str, list] = {h: [] for h in header}
-    for line_no, row in enumerate(reader, start=2):
-        if None in row:
-            raise InputError(f"row {line_no}: more cells than header columns", source=source)
-        if all((v or "").strip() == "" for v in row.values()):
-            continue
-        for h in header:
-            cols[h].append((row.get(h) or "").strip())
+    header, cols, _ = csv_columns(text, ("freq_hz",), source=source, empty="with at least freq_hz")
     m = len(cols["freq_hz"])
     if m == 0:
         raise InputError("no data rows", source=source)

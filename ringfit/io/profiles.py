@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.io.checks import check_condition_field, number_in_range, read_json_object, short_repr
+from ringfit.io.checks import check_condition_field, csv_columns, number_in_range, read_json_object, short_repr
 from ringfit.io.files import atomic_write, check_output_path, read_text_file
 
 #: Columns of DATA.md §3, in the order ringfit writes them.
@@ -43,8 +43,6 @@ OPTIONAL_FIELDS = ("rotation_hz", "drum_diameter_m", "revolutions", "sample_rate
 MIN_POINTS = 16
 #: A spacing larger than this multiple of the median spacing is a gap.
 MAX_GAP_RATIO = 1.5
-#: A sidecar pressure_bar above this looks like Pa.
-MAX_PRESSURE_BAR = 20.0
 #: Largest plausible reading [m/s²] in a profile (10⁷ g: beyond any accelerometer).
 MAX_ACC_MS2 = 1.0e8
 
@@ -139,34 +137,7 @@ def read_profile(path: str | os.PathLike) -> Profile:
 
 def parse_profile(text: str, *, source: str = "<text>") -> Profile:
     """Parse and validate the CSV text of a profile (see :func:`read_profile`); no sidecar."""
-    try:
-        return _parse_profile(text, source)
-    except csv.Error as exc:  # a cell over the field size limit, a NUL byte
-        raise InputError(f"not a readable CSV file ({exc})", source=source) from None
-
-
-def _parse_profile(text: str, source: str) -> Profile:
-    reader = csv.DictReader(io.StringIO(text))
-    header = [h.strip() for h in (reader.fieldnames or [])]
-    if not header:
-        raise InputError(f"empty file; expected a header row {', '.join(COLUMNS)}", source=source)
-    reader.fieldnames = header
-    missing = [c for c in COLUMNS if c not in header]
-    if missing:
-        raise InputError(f"missing column(s) {', '.join(repr(c) for c in missing)} "
-                         f"(have: {', '.join(header)}; expected {', '.join(COLUMNS)})", source=source)
-    if len(set(header)) != len(header):
-        raise InputError(f"duplicate column names in header {header}", source=source)
-    cols: dict[str, list[str]] = {h: [] for h in header}
-    lines: list[int] = []
-    for line_no, row in enumerate(reader, start=2):
-        if None in row:
-            raise InputError(f"row {line_no}: more cells than header columns", source=source)
-        if all((v or "").strip() == "" for v in row.values()):
-            continue
-        lines.append(line_no)
-        for h in header:
-            cols[h].append((row.get(h) or "").strip())
+    header, cols, lines = csv_columns(text, COLUMNS, source=source, empty=", ".join(COLUMNS))
     if len(lines) < MIN_POINTS:
         raise InputError(f"{len(lines)} data rows; a profile needs at least {MIN_POINTS} angles over one revolution",
                          source=source)

@@ -18,12 +18,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ringfit.errors import InputError
+from ringfit.io.checks import MAX_PRESSURE_BAR
 from ringfit.io.files import atomic_write_text, check_output_path
 from ringfit.params import BAR, RING_PARAMETERS, RingParams, TyreGeometry
 
 _TYRE_KEYS = {"radius_m": "radius", "width_m": "width", "tread_thickness_m": "tread_thickness"}
-#: A [tyre] pressure_bar above this is almost surely a value in Pa or kPa.
-MAX_PRESSURE_BAR = 20.0
 #: Keys of the [tyre] table.
 TYRE_KEYS = ("name", "radius_m", "width_m", "pressure_bar", "tread_thickness_m")
 #: Top-level tables of a tyre file; ``meta`` is free-form (notes, provenance).

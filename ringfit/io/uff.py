@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.io.files import atomic_write, check_output_path
+from ringfit.io.files import atomic_write, check_output_path, existing_file
 from ringfit.io.record_types import AXES, MeasuredFRF, Records
 
 #: ringfit's axis -> UFF direction code (the accelerometer's x, y, z inside the tyre).
@@ -262,10 +262,7 @@ class _Context:
 
 
 def _read_sets(path: Path) -> list[dict]:
-    if not path.exists():
-        raise InputError("file not found", source=path)
-    if path.is_dir():
-        raise InputError("is a directory; expected a UFF file", source=path)
+    path = existing_file(path, "a UFF file")
     _check_complete(path)
     pyuff = _pyuff()
     try:

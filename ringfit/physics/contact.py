@@ -30,7 +30,9 @@ import math
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from ringfit.io.profiles import grid_angles_deg
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.operating import OperatingPoint
 from ringfit.physics.rolling import (
@@ -61,8 +63,8 @@ class ContactSolver(eqx.Module):
     max_iter: int = eqx.field(static=True, default=30)
 
     def grid(self):
-        """φ_j = −π + 2πj/M [rad], shape ``(M,)``."""
-        return -jnp.pi + 2.0 * jnp.pi * jnp.arange(self.n_grid) / self.n_grid
+        """φ_j = −π + 2πj/M [rad], shape ``(M,)``: the profile grid :func:`~ringfit.io.profiles.grid_angles_deg` in radians."""
+        return jnp.asarray(np.radians(grid_angles_deg(self.n_grid)))
 
     def window(self) -> tuple[int, int]:
         """(first index, K) of the candidate window |φ_j| ≤ window_deg (static ints)."""
@@ -245,10 +247,11 @@ def as_traced(tree):
     """Python floats in a PyTree (parameters, operating point, models) -> float64 arrays.
 
     ``eqx.filter_jit`` treats Python floats as static (a recompile per value);
-    passing arrays keeps one compilation per model structure.
+    passing arrays keeps one compilation per model structure. The arrays are
+    NumPy's (0-d ``float64``): traced all the same, and no eager JAX op.
     """
     return jax.tree.map(
-        lambda x: jnp.asarray(x, dtype=jnp.float64) if isinstance(x, (int, float)) and not isinstance(x, bool) else x,
+        lambda x: np.asarray(x, dtype=np.float64) if isinstance(x, (int, float)) and not isinstance(x, bool) else x,
         tree,
     )
 

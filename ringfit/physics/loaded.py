@@ -26,7 +26,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from ringfit.params import RingParams, TyreGeometry
-from ringfit.physics.natural import modal_mass, modal_stiffness
+from ringfit.physics.natural import modal_stiffness, ring_modal_mass
 
 #: Harmonics kept in the loaded-mode basis: N = 40 reproduces the PHYSICS.md §7
 #: values to 0.05 Hz (N = 20 is within 0.2 Hz; checked in tests/test_loaded.py).
@@ -71,8 +71,8 @@ def loaded_angular_frequencies(
     n = jnp.arange(1, n_max + 1, dtype=jnp.float64)
     R = geometry.radius
     kt = ring.k_tread if k_tread is None else k_tread
-    # per-harmonic forms of eq. 18 (natural.py): n² d_n and ρA(1+n²); M_n = πR ρA(1+1/n²), K_n = πR d_n
-    mass = jnp.pi * R * modal_mass(ring, n) / n**2
+    # M_n = πRρA(1 + 1/n²) (natural.ring_modal_mass), K_n = πR d_n with n² d_n the numerator of eq. 18
+    mass = ring_modal_mass(ring, geometry, n)
     stiff = jnp.pi * R * modal_stiffness(ring, geometry, n) / n**2
     cc, ss = patch_overlap(half_angle, n_max)
     scale = 1.0 / jnp.sqrt(mass[:, None] * mass[None, :])

@@ -191,20 +191,27 @@ def full_band(P: int, n_grid: int) -> np.ndarray:
     return np.ones((P, n_grid // 2 + 1))
 
 
+def _rolling_radius(model, ring, geometry, load, road, solver):
+    """R_e = R_out − δ/3 [m] of the standing tyre under ``model`` at ``load`` (traceable; docs/physics.md §4.3)."""
+    sol = solve_rolling(ring, geometry, OperatingPoint(0.0, load, road), model=model.operator_model(), solver=solver)
+    return rolling_radius(geometry.outer_radius, sol.deflection)
+
+
 @eqx.filter_jit
-def _simulate(model, ring, geometry, omega, load, road, offset, solver):  # noqa: PLR0913
+def _simulate(model, ring, geometry, speed_or_omega, load, road, offset, solver, from_speed):  # noqa: PLR0913
+    """One jit region for :func:`simulate_profile`: Ω (from V/R_e when ``from_speed``), solution, channels."""
     ring = model.ring(ring)
+    omega = speed_or_omega / _rolling_radius(model, ring, geometry, load, road, solver) if from_speed \
+        else speed_or_omega
     sol, channels = rolling_state(model, ring, geometry, OperatingPoint(omega, load, road), solver)
     channels = spectral_stage(model, channels[None], ring, geometry, omega[None], full_band(1, solver.n_grid),
                               offset)[0]
-    return sol, channels
+    return sol, channels, omega
 
 
 @eqx.filter_jit
-def _standing_deflection(model, ring, geometry, load, road, solver):
-    ring = model.ring(ring)
-    sol = solve_rolling(ring, geometry, OperatingPoint(0.0, load, road), model=model.operator_model(), solver=solver)
-    return sol.deflection
+def _effective_rolling_radius(model, ring, geometry, load, road, solver):
+    return _rolling_radius(model, model.ring(ring), geometry, load, road, solver)
 
 
 def effective_rolling_radius(ring: RingParams, geometry: TyreGeometry, load_n: float, drum_diameter_m=None, *,
@@ -214,9 +221,8 @@ def effective_rolling_radius(ring: RingParams, geometry: TyreGeometry, load_n: f
     What Ω = V/R_e uses when a profile has no encoder rate (docs/formats.md §3).
     """
     road = Drum(float(drum_diameter_m)) if drum_diameter_m else FlatRoad()
-    deflection = float(_standing_deflection(*as_traced((model, ring, geometry)), np.float64(load_n),
-                                            as_traced(road), solver))
-    return float(rolling_radius(geometry.outer_radius, deflection))
+    return float(_effective_rolling_radius(*as_traced((model, ring, geometry)), np.float64(load_n),
+                                           as_traced(road), solver))
 
 
 def simulate_profile(
@@ -258,14 +264,11 @@ def simulate_profile(
 
     road = Drum(float(drum_diameter_m)) if drum_diameter_m else FlatRoad()
     traced = as_traced((model, ring, geometry))
-    if rotation_hz is None:
-        omega = speed_kmh * KMH / effective_rolling_radius(ring, geometry, load_n, drum_diameter_m, model=model,
-                                                           solver=solver)
-    else:
-        omega = 2.0 * np.pi * float(rotation_hz)
-    sol, channels = _simulate(*traced, np.float64(omega), np.float64(load_n), as_traced(road),
-                              np.float64(offset_rad), solver)
-    channels = np.asarray(channels)
+    from_speed = rotation_hz is None  # Ω = V/R_e, R_e from the standing deflection (same model and load)
+    speed_or_omega = speed_kmh * KMH if from_speed else 2.0 * np.pi * float(rotation_hz)
+    sol, channels, omega = _simulate(*traced, np.float64(speed_or_omega), np.float64(load_n), as_traced(road),
+                                     np.float64(offset_rad), solver, from_speed)
+    channels, omega = np.asarray(channels), float(omega)
     points = solver.n_grid if n_points is None else int(n_points)
     values = band_limited_resample(channels, points) if points != channels.shape[-1] else channels
     condition = {"speed_kmh": float(speed_kmh), "load_n": float(load_n),

@@ -31,6 +31,7 @@ import abc
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.natural import extensible_stiffness_matrix
@@ -41,7 +42,7 @@ from ringfit.physics.natural import extensible_stiffness_matrix
 DEFAULT_GRID = 512
 
 # complex-basis pattern of the real-basis K_n (w ∝ e^{inφ}: off-diagonals ±i·k12)
-_COMPLEX_BASIS = jnp.array([[1.0, 1.0j], [-1.0j, 1.0]], dtype=jnp.complex128)
+_COMPLEX_BASIS = np.array([[1.0, 1.0j], [-1.0j, 1.0]], dtype=np.complex128)  # a constant: no JAX op at import
 
 
 def harmonic_numbers(n_grid: int):

@@ -105,7 +105,8 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
 
     from ringfit.io.tyre import Tyre, write_tyre
     from ringfit.physics.loaded import loaded_natural_frequencies
-    from ringfit.physics.natural import (extensible_natural_frequencies, natural_frequencies,
+    from ringfit.physics.natural import (CAVITY_LENGTH, SOUND_SPEED, cavity_coupled_shift, cavity_coupling,
+                                         extensible_natural_frequencies, natural_frequencies,
                                          rotating_natural_frequencies)
 
     rng = np.random.default_rng(seed)
@@ -158,19 +159,11 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
         magnitude["cavity_area_m2"] = area
         f_cav = float(rng.uniform(215.0, 232.0))
         magnitude["cavity_hz"] = f_cav
-        rho0 = 1.2 * (geometry.pressure + 101325.0) / 101325.0
-        kappa = geometry.width**2 * rho0 * 343.0**2 / area
 
-        def couple(n, f):
-            out = []
-            for ni, fi in zip(n, f):
-                m = ring.rho_a * (ni**2 + 1) / ni**2
-                ks, wa = m * (2 * np.pi * fi) ** 2, 2 * np.pi * f_cav * ni
-                # 2×2: [ks − mω², acoustic coupling] in symmetric form; eigenvalues of the pencil
-                roots = np.roots([m, -(ks + m * wa**2 + kappa), ks * wa**2])
-                x = np.sort(roots.real)
-                out.append(np.sqrt(x[0] if fi < f_cav * ni else x[1]) / (2 * np.pi))
-            return np.array(out)
+        def couple(n, f):  # the structural root of the ring–air pencil (docs/physics.md §6 cavity_mode)
+            n, w0 = np.asarray(n, dtype=np.float64), 2 * np.pi * np.asarray(f, dtype=np.float64)
+            k = cavity_coupling(ring, geometry, n, 1.0 / area)
+            return np.sqrt(w0**2 + np.asarray(cavity_coupled_shift(w0, 2 * np.pi * f_cav * n, k))) / (2 * np.pi)
 
         free, load_cos, rot_b = couple(n_free, free), couple(n_load, load_cos), couple(n_rot, rot_b)
         load_sin, rot_f = load_cos.copy(), rot_b.copy()
@@ -203,7 +196,7 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
     for f, ft, d, dt in zip(free_noisy, free, damp_free, damp_truth):
         row_noise += [("freq", float(f - ft)), ("damping", float(d - dt) / 100.0)]
     if effect == "cavity_mode" or rng.random() < 0.5:
-        rows.append({"kind": "acoustic", "freq_hz": float(magnitude.get("cavity_hz", 343 / 1.568) * (1 + 0.01 * rng.random()))})
+        rows.append({"kind": "acoustic", "freq_hz": float(magnitude.get("cavity_hz", SOUND_SPEED / CAVITY_LENGTH) * (1 + 0.01 * rng.random()))})
     _write_table(folder, "free.modes.csv", rows, {"state": "free", "speed_kmh": 0, "pressure_bar": 2.2,
                                                    "frame": "fixed"}, with_std, sigma_rel)
     lrows = []

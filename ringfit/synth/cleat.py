@@ -15,7 +15,11 @@ field → rolling-tyre modes can be tested:
   waves at the co-rotating frequencies of seed eq. 25
   (:func:`ringfit.physics.natural.rotating_natural_frequencies`, PHYSICS.md
   §3.2), decaying with the ring's damping ratio; a fixed observer sees them
-  Doppler-shifted by −nΩ (eq. 26, §3.3). The cleat itself travels through
+  Doppler-shifted by −nΩ (eq. 26, §3.3). With ``modes="loaded"`` the waves
+  are instead the modes of the rolling ring **with** the tread springs of the
+  patch (:mod:`ringfit.physics.rolling_modes`, docs/physics.md §3.7): each
+  fixed-frame mode spreads over neighbouring harmonics, and the response to
+  the impulse is their modal superposition. The cleat itself travels through
   the patch with the belt and adds a short, large ridge along
   φ = φ_L + Ωτ (the enveloping phase);
 * **the measurement chain** — absolute encoder (quantised) or incremental
@@ -43,6 +47,7 @@ from functools import cached_property
 import numpy as np
 
 from ringfit.io.continuous import DEFAULT_CHUNK, ContinuousRecord, ContinuousWriter
+from ringfit.io.profiles import band_limited_resample, grid_angles_deg
 
 KMH = 1.0 / 3.6
 G = 9.81
@@ -61,7 +66,10 @@ class CleatBench:
     - ``rolling_radius_m``: R_e (Ω = V/R_e); default ``R_out − δ/3`` with the
       Table 9 drum deflection (:func:`ringfit.physics.operating.rolling_radius`).
     - ``fs_hz``: sample rate.
-    - ``orders``: circumferential orders n excited by the cleat.
+    - ``orders``: circumferential orders n excited by the cleat (``modes="loaded"``: the modes
+      whose dominant order is one of these).
+    - ``modes``: ``"free"`` (eq. 25 waves of the free spinning ring) or ``"loaded"`` (modes of the
+      rolling ring with the patch ``|φ| ≤ contact_half_angle_deg``, docs/physics.md §3.7).
     - ``impulse_ns``: radial impulse of a cleat hit [N s]; ``rolloff_order``:
       order n_c of the Gaussian roll-off exp(−(n/n_c)²) of the cleat's footprint.
     - ``contact_half_angle_deg``: patch half-angle a; the hit is at φ_L = −a.
@@ -86,6 +94,7 @@ class CleatBench:
     rolling_radius_m: float | None = None
     fs_hz: float = 25600.0
     orders: tuple = (1, 2, 3, 4, 5, 6, 7, 8)
+    modes: str = "free"
     impulse_ns: float = 2.0
     rolloff_order: float = 6.0
     contact_half_angle_deg: float = 11.6
@@ -115,6 +124,8 @@ class CleatBench:
             object.__setattr__(self, "ring", self.ring or ring)
         if self.steady not in ("ring", "analytic"):
             raise ValueError(f"steady={self.steady!r}; expected 'ring' or 'analytic'")
+        if self.modes not in ("free", "loaded"):
+            raise ValueError(f"modes={self.modes!r}; expected 'free' or 'loaded'")
         if self.encoder not in ("angle", "pulses"):
             raise ValueError(f"encoder={self.encoder!r}; expected 'angle' or 'pulses'")
 
@@ -175,22 +186,74 @@ class CleatBench:
     # ------------------------------------------------------------------ cleat response (truth)
     @cached_property
     def _modes(self) -> dict:
-        from ringfit.physics.natural import rotating_natural_frequencies
+        if self.modes == "loaded":
+            return self._loaded_modes()
+        from ringfit.physics.natural import ring_modal_mass, rotating_natural_frequencies
 
         n = np.asarray(self.orders, dtype=np.float64)
         f = np.asarray(rotating_natural_frequencies(self.ring, self.geometry, n, self.omega))  # (orders, 2) Hz
         w1, w2 = 2 * np.pi * f[:, 0], 2 * np.pi * f[:, 1]
         zeta = float(self.ring.damping_ratio)
         s = np.stack([1j * w1 - zeta * np.abs(w1), 1j * w2 - zeta * np.abs(w2)], axis=1)  # (orders, 2)
-        R, rho_a = float(self.geometry.radius), float(self.ring.rho_a)
-        # Ẇ_n(0+) of a radial impulse I at one point: I/(2πR) per harmonic over the modal mass ρA(1 + 1/n²)
-        b = self.impulse_ns / (2 * np.pi * R * rho_a * (1.0 + 1.0 / n**2)) * np.exp(-((n / self.rolloff_order) ** 2))
+        # Ẇ_n(0+) of a radial impulse I at one point: I/(2πR) per harmonic over ρA(1 + 1/n²), i.e. I/(2 M_n)
+        b = self.impulse_ns / (2.0 * np.asarray(ring_modal_mass(self.ring, self.geometry, n))) \
+            * np.exp(-((n / self.rolloff_order) ** 2))
         # W_n(t) = b (e^{s1 t} − e^{s2 t}) / (i(ω1 − ω2)); radial reading −∂²w/∂t² with w = Σ 2Re[W_n e^{inθ}]
         sign = np.array([1.0, -1.0])
         coef = -2.0 * b[:, None] * sign[None, :] * s**2 / (1j * (w1 - w2))[:, None]
         # fixed frame: θ − θ0 = φ − φ_L − Ωτ → complex rate s − inΩ
         rate = s - 1j * n[:, None] * self.omega
         return {"n": n, "f_rot": f, "s": s, "coef": coef, "rate": rate}
+
+    def _loaded_modes(self) -> dict:
+        """Impulse response of the rolling ring with the patch, by modal superposition (docs/physics.md §3.7)."""
+        import jax
+
+        from ringfit.physics.rolling_modes import (
+            ContactArc, gyroscopic_matrices, harmonic_basis, material_acceleration, mode_labels, rolling_modes_jit,
+        )
+
+        a = math.radians(self.contact_half_angle_deg)
+        arc = ContactArc.symmetric(a, self.ring.k_tread)
+        model = jax.device_get(rolling_modes_jit(self.ring, self.geometry, self.omega, arc))
+        K = (model.k.size - 1) // 2
+        M, Gm, Km, _, kd = (np.asarray(x) for x in gyroscopic_matrices(self.ring, self.geometry, self.omega, arc,
+                                                                     harmonics=K))
+        k = np.asarray(model.k)
+        b = np.asarray(harmonic_basis(k, False))[:, :, 0]  # (H, 2): (W_k, V_k) = b_k q_k
+        R = float(self.geometry.radius)
+        # radial impulse at the leading edge α0 = −a, footprint roll-off exp(−(k/n_c)²), per unit length
+        Q = self.impulse_ns / (2 * np.pi * R) * np.exp(1j * k * a) * np.exp(-((k / self.rolloff_order) ** 2))
+        f = np.conj(b[:, 0]) * Q
+        d = k.size
+        Minv = np.linalg.inv(M)
+        A = np.block([[np.zeros((d, d)), np.eye(d)], [-Minv @ Km, -Minv @ Gm]])
+        lam, vec = np.linalg.eig(A)
+        coef = np.linalg.solve(vec, np.concatenate([np.zeros(d), Minv @ f]))
+        pos = lam.imag > 0
+        lam, vec, coef = lam[pos], vec[:d, pos], coef[pos]
+        w = lam.imag
+        # each positive-frequency pole ↔ the model mode at the same ω: its damping ratio and labels
+        mi = np.argmin(np.abs(w[:, None] - np.asarray(model.angular_frequency)[None, :]), axis=1)
+        rate = 1j * w - np.asarray(model.damping_ratio)[mi] * w
+        q = vec * coef[None, :]  # (H, modes): modal amplitude of q_k
+        mu = rate[None, :] + 1j * k[:, None] * self.omega  # rate the material sees at harmonic k
+        acc_r = -(mu**2) * b[:, 0:1] * q  # radial acceleration content (H, modes)
+        acc_t = -(mu**2) * b[:, 1:2] * q
+        A_r, _ = material_acceleration(model)
+        lab = jax.device_get(mode_labels(A_r, 0 * A_r, model.k, model.angular_frequency, model.omega))
+        # labels from the radial acceleration content; a mode without radial content (n = 0) keeps its own
+        radial = np.sum(np.abs(np.asarray(model.radial)) ** 2, axis=-1) > 1e-12
+        order = np.where(radial, np.asarray(lab["order"]), np.asarray(model.order))[mi]
+        keep = np.isin(order, np.asarray(self.orders)) & radial[mi]
+        travel = np.asarray(lab["travel"])[mi][keep]
+        symmetry = np.asarray(lab["symmetry"])[mi][keep]
+        # spatial patterns on a fine grid φ_j = −π + 2πj/L for fast interpolation (2 Re: the conjugate poles)
+        L = 4096
+        phi = -np.pi + 2 * np.pi * np.arange(L) / L
+        basis = np.exp(1j * np.outer(k, phi))  # (H, L)
+        tables = {"radial": 2.0 * (acc_r[:, keep].T @ basis), "tangential": 2.0 * (acc_t[:, keep].T @ basis)}
+        return {"n": order[keep], "travel": travel, "symmetry": symmetry, "rate": rate[keep], "tables": tables}
 
     def generating_modes(self) -> dict:
         """The travelling waves the cleat excites, as seen by a fixed observer (the angle–time field).
@@ -199,9 +262,22 @@ class CleatBench:
         ``n``, ``branch`` (``backward``/``forward``), ``rotating_hz`` (eq. 25,
         signed), ``fixed_hz`` (eq. 26, |ω_nk − nΩ|/2π, what the field's time
         series oscillate at), ``decay_per_s`` (σ), ``damping_fixed`` (σ/|ω_fixed|,
-        the damping ratio SSI sees on the field).
+        the damping ratio SSI sees on the field). With ``modes="loaded"``: one entry
+        per mode, ``n`` its dominant order and ``branch`` its direction
+        (``backward``/``forward``/``standing``) in the radial acceleration content,
+        ``tag`` (``extr``/``0``, ``vert``/``hort``) for standing modes, ``rotating_hz`` NaN.
         """
         m = self._modes
+        if self.modes == "loaded":
+            rate = m["rate"]
+            direction = np.where(m["travel"] >= 3, "backward", np.where(m["travel"] <= -3, "forward", "standing"))
+            cos_type = m["symmetry"] >= 0.5
+            tag = np.where(m["n"] == 1, np.where(cos_type, "vert", "hort"), np.where(cos_type, "extr", "0"))
+            return {
+                "n": m["n"].astype(int), "branch": direction, "tag": np.where(direction == "standing", tag, ""),
+                "rotating_hz": np.full(rate.size, np.nan), "fixed_hz": np.abs(rate.imag) / (2 * np.pi),
+                "decay_per_s": -rate.real, "damping_fixed": -rate.real / np.abs(rate),
+            }
         n = np.repeat(m["n"], 2)
         rate = m["rate"].ravel()
         return {
@@ -232,11 +308,20 @@ class CleatBench:
         t = tau[on]
         m = self._modes
         acc = np.zeros(p.shape)
-        for i, n in enumerate(m["n"]):
-            for k in range(2):
-                c = m["coef"][i, k] if axis == "radial" else (-1j / n) * m["coef"][i, k]
-                r = m["rate"][i, k]
-                acc += np.abs(c) * np.exp(r.real * t) * np.cos(n * p + r.imag * t + np.angle(c))
+        if axis not in ("radial", "tangential"):
+            raise ValueError(f"axis={axis!r}; cleat_field has radial and tangential")
+        if self.modes == "loaded":  # modal superposition: Re(S_j(φ) e^{rate_j τ}), S_j tabulated
+            for j, r in enumerate(m["rate"]):
+                tab = m["tables"][axis][j]
+                e = np.exp(r * t)
+                acc += _interp_periodic(np.degrees(phi[on]), tab.real) * e.real
+                acc -= _interp_periodic(np.degrees(phi[on]), tab.imag) * e.imag
+        else:
+            for i, n in enumerate(m["n"]):
+                for k in range(2):
+                    c = m["coef"][i, k] if axis == "radial" else (-1j / n) * m["coef"][i, k]
+                    r = m["rate"][i, k]
+                    acc += np.abs(c) * np.exp(r.real * t) * np.cos(n * p + r.imag * t + np.angle(c))
         if axis == "radial" and self.ridge_ms2 > 0:
             env = self.envelope_s
             inside = t < env
@@ -247,8 +332,6 @@ class CleatBench:
                     * np.sin(np.pi * t[inside] / env)
                     * np.exp(-0.5 * (d / math.radians(self.ridge_width_deg)) ** 2)
                 )
-        elif axis not in ("radial", "tangential"):
-            raise ValueError(f"axis={axis!r}; cleat_field has radial and tangential")
         out[on] = acc
         return out
 
@@ -270,13 +353,13 @@ class CleatBench:
             rad, tan = self._analytic_steady(2048)
         # band-limited refinement (zero-padded spectrum) so that linear interpolation is accurate
         fine = 16384
-        table = tuple(_refine_periodic(x, fine) for x in (rad, tan))
+        table = tuple(band_limited_resample(x, fine) for x in (rad, tan))
         self._cache["table"] = table
         return table
 
     def _analytic_steady(self, m: int):
         """Smooth stand-in for the rolling model: patch dip with edge peaks, edge doublets, gravity."""
-        phi = -np.pi + 2 * np.pi * np.arange(m) / m
+        phi = np.radians(grid_angles_deg(m))
         a = math.radians(self.contact_half_angle_deg)
         w = math.radians(2.5)
         c = self.omega**2 * self.radius_e
@@ -450,17 +533,8 @@ def _axis_index(axis: str) -> int:
     raise ValueError(f"axis={axis!r}; expected 'radial' or 'tangential'")
 
 
-def _refine_periodic(x: np.ndarray, m: int) -> np.ndarray:
-    """Band-limited resampling of a periodic grid signal onto m points (Nyquist dropped)."""
-    spec = np.fft.rfft(x)
-    spec[-1] = 0.0 if x.size % 2 == 0 else spec[-1]
-    out = np.zeros(m // 2 + 1, dtype=complex)
-    out[: spec.size] = spec
-    return np.fft.irfft(out, m) * (m / x.size)
-
-
 def _interp_periodic(phi_deg: np.ndarray, table: np.ndarray) -> np.ndarray:
     """Linear interpolation of a table on φ_j = −180 + 360 j/M at any angle [deg]."""
     m = table.size
-    grid = -180.0 + 360.0 * np.arange(m) / m
+    grid = grid_angles_deg(m)
     return np.interp(phi_deg, grid, table, period=360.0)

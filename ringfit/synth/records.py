@@ -107,8 +107,11 @@ def ring_modes(
     return out
 
 
-def _shapes(modes: SyntheticModes, i: int, theta: np.ndarray, axes, rho_a: float, radius: float):
-    """Poles (2,), complex shapes (2, len(theta), axes) of mode i's pair, and modal masses (2,)."""
+def _shapes(modes: SyntheticModes, i: int, theta: np.ndarray, axes, modal_mass: float):
+    """Poles (2,), complex shapes (2, len(theta), axes) of mode i's pair, and modal masses (2,).
+
+    ``modal_mass``: M_n of the mode's n [kg] (:func:`ringfit.physics.natural.ring_modal_mass`).
+    """
     n = int(modes.n[i]) if modes.n[i] >= 0 else 1
     alpha = modes.orientation_rad[i]
     beta = modes.travelling[i] * np.pi / 4
@@ -127,7 +130,7 @@ def _shapes(modes: SyntheticModes, i: int, theta: np.ndarray, axes, rho_a: float
         freqs = f0 * np.array([1 - split / 2, 1 + split / 2])
     wn = 2 * np.pi * freqs
     lam = -zeta * wn + 1j * wn * np.sqrt(1 - zeta**2)
-    mass = np.pi * radius * rho_a * (1 + 1 / n**2) / modes.amplitude[i]
+    mass = modal_mass / modes.amplitude[i]
     return lam, psi, np.full(len(freqs), mass)
 
 
@@ -182,7 +185,10 @@ def impact_records(
         from ringfit.params import table9
 
         geometry, ring = table9()
-    rho_a, radius = float(ring.rho_a), float(geometry.radius)
+    from ringfit.physics.natural import ring_modal_mass
+
+    # M_n = πRρA(1 + 1/n²) of each mode's n (unassigned and acoustic rows: n = 1, as their shapes)
+    masses = np.asarray(ring_modal_mass(ring, geometry, np.where(modes.n >= 0, modes.n, 1)))
     rng = np.random.default_rng(seed)
     angles = np.repeat(np.asarray(angles_deg, dtype=np.float64), int(impacts_per_angle))
     theta = np.deg2rad(angles)
@@ -193,8 +199,8 @@ def impact_records(
     # accelerance per record and axis: (records, axes, freqs)
     h = np.zeros((angles.size, len(axes), w.size), dtype=complex)
     for i in range(len(modes.n)):
-        lam, psi, mass = _shapes(modes, i, theta, axes, rho_a, radius)
-        _, psi0, _ = _shapes(modes, i, np.zeros(1), ("radial",), rho_a, radius)
+        lam, psi, mass = _shapes(modes, i, theta, axes, float(masses[i]))
+        _, psi0, _ = _shapes(modes, i, np.zeros(1), ("radial",), float(masses[i]))
         for k in range(lam.shape[0]):
             res = psi[k] * np.conj(psi0[k][0, 0]) / (2j * lam[k].imag * mass[k])  # (records, axes); generalised force of an inward push
             h += res[..., None] / (iw - lam[k]) + np.conj(res)[..., None] / (iw - np.conj(lam[k]))

@@ -30,10 +30,11 @@ Steps:
    loaded-tyre ``tag``: ``extr``/``0`` (n ≥ 2) or ``vert``/``hort`` (n = 1)
    for a cos-/sin-type shape about the patch centre.
 
-:func:`compare_with_ring` sets the table beside eq. 25/26 of the ring
-(:func:`ringfit.physics.natural.rotating_natural_frequencies`,
-:func:`~ringfit.physics.natural.fixed_frame_frequencies`): the bifurcation of
-each n into backward and forward waves and their Doppler shift.
+The model side — which branch of the rolling, loaded tyre each row is, with
+the labels the model gives — lives beside the ring models, in
+:mod:`ringfit.gap.campbell` (``match_tables``, ``label_identified_modes``,
+and ``compare_with_ring`` for the free spinning ring's eq. 25/26): this
+module stays NumPy only.
 """
 
 from __future__ import annotations
@@ -109,8 +110,10 @@ def winding(shapes: np.ndarray, angle_deg: np.ndarray) -> tuple[np.ndarray, np.n
     **Returns** ``(m, ratio, phase)``: m (k,) the harmonic with the largest
     |c_m|, ``c_m = Σ_j shape_j e^{−imφ_j}`` (m > 0: backward wave for a
     positive-frequency pole, see module docstring); ratio (k,) |c_m|/|c_−m|;
-    phase (k,) arg(c_m·c_−m)/2 — the standing wave's orientation (a cos-type
-    shape about φ = 0 has phase ≈ 0 or π).
+    phase (k,) the standing wave's orientation φ0 [rad] (mod π/|m|): a shape
+    ``cos(m(φ − φ0))`` times any complex factor has ``c_−m/c_m = e^{2imφ0}``, so
+    ``φ0 = arg(c_−m/c_m)/2m``; a cos-type shape about φ = 0 has |cos(mφ0)| = 1,
+    a sin-type one |cos(mφ0)| = 0, whatever the pole's complex scaling.
     """
     phi = np.radians(np.asarray(angle_deg, dtype=np.float64))
     l = phi.size
@@ -124,7 +127,7 @@ def winding(shapes: np.ndarray, angle_deg: np.ndarray) -> tuple[np.ndarray, np.n
     ratio = np.abs(c[np.arange(len(mm)), best]) / np.maximum(opp, 1e-300)
     cm = c[np.arange(len(mm)), best]
     cn = np.array([c[i, np.flatnonzero(m == -mm[i])[0]] for i in range(len(mm))])
-    phase = 0.5 * np.angle(cm * cn)
+    phase = 0.5 * np.angle(cn / np.where(cm != 0, cm, 1.0)) / np.where(mm != 0, mm, 1)
     return mm, ratio, phase
 
 
@@ -254,40 +257,3 @@ def identify_rolling_modes(
     shapes = np.array([r["shape"] for r in rows]) if rows else np.zeros((0, l), complex)
     return RollingModes(table=table, shapes=shapes, channel_deg=ch_deg, poles=poles, stability=stability,
                         pole_winding=m, fs_hz=fs_d, skip_s=float(skip_s))
-
-
-def compare_with_ring(table, ring, geometry, rotation_hz: float) -> list[dict]:
-    """Each identified mode beside the rotating ring's prediction (PHYSICS.md §3.2–3.3).
-
-    For a row with order n and a branch (or a standing tag, compared with
-    both branches) the prediction is the fixed-frame frequency |ω_nk − nΩ|/2π
-    (eq. 26) of that wave, and the co-rotating one |ω_nk|/2π (eq. 25): the
-    difference between the two is the Doppler shift nΩ/2π, and the fixed-frame
-    gap between the forward and backward waves of one n is the bifurcation.
-
-    **Returns** one dict per row: ``n``, ``branch``, ``tag``, ``freq_hz``,
-    ``fixed_pred_hz``, ``rotating_pred_hz``, ``doppler_hz``, ``error_hz``,
-    ``bifurcation_pred_hz`` (fixed-frame forward − backward for that n).
-    """
-    from ringfit.physics.natural import fixed_frame_frequencies, rotating_natural_frequencies
-
-    omega = 2.0 * math.pi * float(rotation_hz)
-    out = []
-    for i in range(len(table)):
-        n = int(table.n[i])
-        if n < 1:
-            continue
-        fixed = np.abs(np.asarray(fixed_frame_frequencies(ring, geometry, float(n), omega)))
-        rot = np.abs(np.asarray(rotating_natural_frequencies(ring, geometry, float(n), omega)))
-        branch = table.branch[i]
-        if branch:
-            k = 0 if branch == "backward" else 1
-        else:  # standing: the nearer of the two waves
-            k = int(np.argmin(np.abs(fixed - table.freq_hz[i])))
-        out.append({
-            "n": n, "branch": branch or ("backward" if k == 0 else "forward"), "tag": table.tag[i],
-            "freq_hz": float(table.freq_hz[i]), "fixed_pred_hz": float(fixed[k]),
-            "rotating_pred_hz": float(rot[k]), "doppler_hz": float(n * omega / (2 * math.pi)),
-            "error_hz": float(table.freq_hz[i] - fixed[k]), "bifurcation_pred_hz": float(fixed[1] - fixed[0]),
-        })
-    return out

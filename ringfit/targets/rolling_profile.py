@@ -24,6 +24,7 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.io.continuous import DEFAULT_CHUNK, ContinuousRecord
+from ringfit.io.profiles import band_limited_resample, grid_angles_deg
 
 #: Default number of angle points of a profile (0.18° spacing).
 DEFAULT_POINTS = 2048
@@ -106,17 +107,11 @@ def periodic_interpolator(values: np.ndarray, refine: int = 16384):
     accurate for the sharp patch-edge features without per-sample FFTs.
     """
     values = np.asarray(values, dtype=np.float64)
-    m = values.size
-    spec = np.fft.rfft(values)
-    if m % 2 == 0:
-        spec[-1] = 0.0
-    refine = max(int(refine), m)
-    padded = np.zeros(refine // 2 + 1, dtype=complex)
-    padded[: spec.size] = spec
+    refine = max(int(refine), values.size)
+    table = band_limited_resample(values, refine)
     # one period closed at +180 (np.interp's `period=` would re-sort the table at every call)
-    table = np.fft.irfft(padded, refine) * (refine / m)
     table = np.append(table, table[0])
-    grid = -180.0 + 360.0 * np.arange(refine + 1) / refine
+    grid = np.append(grid_angles_deg(refine), 180.0)
 
     def interp(phi_deg):
         return np.interp(np.mod(np.add(phi_deg, 180.0), 360.0) - 180.0, grid, table)
@@ -221,7 +216,7 @@ def rolling_profile(
     if (nrev == 0).any():
         j = int(np.argmax(nrev == 0))
         raise InputError(
-            f"angle bin {-180 + 360 * j / points:.3f} deg got no samples; use fewer points than {points} "
+            f"angle bin {grid_angles_deg(points)[j]:.3f} deg got no samples; use fewer points than {points} "
             "or a longer recording", source=record.source)
     mean = s1 / nrev
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -229,7 +224,7 @@ def rolling_profile(
     spread = np.sqrt(np.clip(np.where(nrev > 1, var, np.nan), 0.0, None))
     rotation_hz = total_rev / ((record.samples - 1) / record.fs_hz)
     return RollingProfile(
-        angle_deg=-180.0 + 360.0 * np.arange(points) / points,
+        angle_deg=grid_angles_deg(points),
         axes=axes,
         mean=mean,
         spread=spread,

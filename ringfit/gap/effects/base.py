@@ -32,6 +32,10 @@ class Parameter:
     - ``prior``: optional Gaussian ``(mean, sd)`` entering the refit as an
       extra residual row; ``None`` = flat within the bounds.
     - ``description``: one line for reports.
+    - ``condition``: the value the measured condition fixes (e.g. 1 for a patch scale
+      when the contact patch is computed from the table's load); an effect whose every
+      parameter has one is also tried as a *computed* candidate — a prediction with no
+      free parameter. ``None`` = the parameter can only be fitted.
     """
 
     name: str
@@ -42,6 +46,7 @@ class Parameter:
     start: float
     prior: tuple[float, float] | None = None
     description: str = ""
+    condition: float | None = None
 
     def __post_init__(self):
         if not (self.lo <= self.null <= self.hi and self.lo <= self.start <= self.hi and self.lo < self.hi):
@@ -114,6 +119,11 @@ class Effect:
         ``values`` JAX ``(k,)``. ``None`` (default) = not a profile effect.
         """
         return None
+
+    def computable(self, domain: str) -> bool:
+        """Whether the measured condition fixes every parameter on ``domain`` (a *computed* candidate exists)."""
+        params = self.params_for(domain)
+        return bool(params) and all(p.condition is not None for p in params)
 
     @property
     def speaks_to_profiles(self) -> bool:

@@ -1,12 +1,15 @@
-"""``ground_contact`` — the loaded tyre pressed on the ground: modes shift and split into ``extr`` and ``0`` (PHYSICS.md §6).
+"""``ground_contact`` — the loaded tyre pressed on the ground: modes shift and split into ``extr`` and ``0`` (docs/physics.md §6).
 
 Modal data only. Rows of a loaded (or rolling) table tagged ``extr``/``vert``
-take the k-th cosine-type mode of :mod:`ringfit.physics.loaded`, rows tagged
-``0``/``hort`` the k-th sine-type mode (k = n). Parameter: the contact
-half-angle a [deg] (null 0: no patch, eq. 18 exactly). Its prior is centred
-on the half-angle of the Table 9 tyre at 4 kN (11.7°, PHYSICS.md §7) with a
-wide spread; ``k_trd`` is the ring's (tyre.toml, default 19e6 N/m²).
-Changes made by earlier effects in a chain are carried over additively.
+take the k-th cosine-type (contact-symmetric) mode of :mod:`ringfit.physics.loaded`,
+rows tagged ``0``/``hort`` the k-th sine-type (contact-antisymmetric) one (k = n).
+The contact half-angle of each row is ``s · a_row``: ``a_row`` is the patch the
+rolling model's static contact solve gives at the row's table load
+(:func:`ringfit.gap.modal.contact_patch`, ``rows.patch``), ``s`` the parameter
+``patch_scale`` — null 0 (no patch: eq. 18 exactly), fixed by the measured
+condition at 1 (the *computed* candidate: a prediction with no free parameter),
+free in the *fitted* candidate (a patch the load does not explain is a finding
+too). Changes made by earlier effects in a chain are carried over additively.
 """
 
 import jax.numpy as jnp
@@ -22,20 +25,25 @@ class GroundContact(Effect):
     name = "ground_contact"
     summary = "tread springs in the contact patch stiffen the cos-type (extr) modes of the loaded tyre"
     parameters = (
-        Parameter("half_angle_deg", "deg", null=0.0, lo=0.0, hi=30.0, start=10.0, prior=(11.7, 8.0),
-                  description="contact half-angle a of the patch at the test load"),
+        Parameter("patch_scale", "-", null=0.0, lo=0.0, hi=3.0, start=1.0, condition=1.0,
+                  description="contact half-angle / the half-angle the table's load gives in the contact solve"),
     )
 
     def modal_mask(self, rows):
-        return (np.asarray(rows.contact) != 0) & (np.asarray(rows.is_freq) > 0)
+        return (np.asarray(rows.contact) != 0) & (np.asarray(rows.is_freq) > 0) & (np.asarray(rows.patch) > 0)
 
     def modal(self, values, omega, zeta, rows, ring, geometry):
-        a_deg = values[0]
-        cos_t, sin_t = loaded_angular_frequencies(ring, geometry, jnp.deg2rad(a_deg), DEFAULT_HARMONICS)
+        # one eigen-solve per table (a static loop: batched LAPACK eigen-solves under forward-mode
+        # differentiation are avoided on purpose), each row picks its mode
         k = jnp.clip(rows.n, 1, DEFAULT_HARMONICS).astype(jnp.int32) - 1
-        loaded = jnp.where(rows.contact == 1, cos_t[k], sin_t[k])
+        loaded = jnp.zeros_like(omega)
+        for t in range(rows.table_patch.shape[0]):
+            cos_t, sin_t = loaded_angular_frequencies(ring, geometry, values[0] * rows.table_patch[t],
+                                                      DEFAULT_HARMONICS)
+            pick = jnp.where(rows.contact == 1, cos_t[k], sin_t[k])
+            loaded = jnp.where(rows.table == t, pick, loaded)
         free = natural_angular_frequencies(ring, geometry, rows.n)
-        use = (rows.contact != 0) & (rows.n >= 1) & (a_deg > 0)
+        use = (rows.contact != 0) & (rows.n >= 1) & (rows.patch > 0) & (values[0] > 0)
         return jnp.where(use, omega + (loaded - free), omega), zeta
 
 

@@ -1,18 +1,17 @@
-"""``ring_extensibility`` — a finite membrane stiffness EA of the belt (PHYSICS.md §2.2, §6).
+"""``ring_extensibility`` — a finite membrane stiffness EA of the belt (docs/physics.md §2.2, §6).
 
 Modal data: the flexural branch of ``det(K_n − ρAω² I) = 0`` with the §2.2
-stiffness matrix. Written as a correction to the inextensible ω² so that
-compliance 0 gives eq. 18 bit for bit: with ``c = 1/EA·R²``-scaled compliance,
-``λ = ρAω²``, ``a = EI n⁴/R⁴ + k_w + P(n²−1)``, ``B = EI n²/R⁴ + k_v``,
-``b₃ = EI n³/R⁴`` and ``λ₀`` the inextensible value, the flexural root is
-``λ = λ₀ + δ`` with ``c δ² − [c(A′+B′) + n²+1] δ + c(A′B′ − b₃²) = 0``,
-``A′ = a − λ₀``, ``B′ = B − λ₀`` (the smaller root). Parameter
-``compliance_per_mn`` = 10⁶ N / EA (null 0 = inextensible, 10 = EA of 1e5 N).
+stiffness matrix, added to the model's ω² as a correction,
+``ω² → ω² + (ω²_flexural − ω²_eq18)`` at EA = 10⁶/c N
+(:func:`ringfit.physics.natural.extensible_flexural_shift`): compliance 0
+gives the model back bit for bit, and the correction is smooth there.
+Parameter ``compliance_per_mn`` = 10⁶ N / EA (null 0 = inextensible, 10 = EA
+of 1e5 N).
 
-Rolling profiles: the extensible 2×2 operator D_n of PHYSICS.md §4.2 with
+Rolling profiles: the extensible 2×2 operator D_n of docs/physics.md §4.2 with
 EA = 10⁶/c N (:meth:`ringfit.physics.profile.ProfileModel.with_membrane_compliance`;
 c = 0 gives EA = 1e12 N, the inextensible ring to ~1e-8). Signature: belt
-stretch ``s_tan ∝ Ω²Rε′``, small (PHYSICS.md §6).
+stretch ``s_tan ∝ Ω²Rε′``, small (docs/physics.md §6).
 """
 
 import jax.numpy as jnp
@@ -20,6 +19,7 @@ import numpy as np
 
 from ringfit.gap.effects import register
 from ringfit.gap.effects.base import Effect, Parameter
+from ringfit.physics.natural import extensible_flexural_shift
 
 
 class RingExtensibility(Effect):
@@ -37,20 +37,8 @@ class RingExtensibility(Effect):
         return (np.asarray(rows.is_freq) > 0) & (np.asarray(rows.n) >= 1)
 
     def modal(self, values, omega, zeta, rows, ring, geometry):
-        n = rows.n
-        R = geometry.radius
-        c = values[0] * 1e-6 * R**2  # R²/EA [m²/N]: multiplies stiffnesses per unit length
-        b4 = ring.ei / R**4
-        lam0 = ring.rho_a * omega * omega
-        A1 = b4 * n**4 + ring.kw + geometry.hoop_pressure_stiffness * (n**2 - 1.0) - lam0
-        B1 = b4 * n**2 + ring.kv - lam0
-        b3 = b4 * n**3
-        lin = c * (A1 + B1) + n**2 + 1.0
-        const = c * (A1 * B1 - b3**2)
-        disc = jnp.sqrt(jnp.clip(lin**2 - 4.0 * c * const, 0.0))
-        delta = 2.0 * const / (lin + disc)
-        use = n >= 1
-        return jnp.where(use, jnp.sqrt(omega * omega + delta / ring.rho_a), omega), zeta
+        shift = extensible_flexural_shift(ring, geometry, rows.n, values[0] * 1e-6)  # compliance 1/EA [1/N]
+        return jnp.where(rows.n >= 1, jnp.sqrt(omega * omega + shift), omega), zeta
 
 
 EFFECT = register(RingExtensibility())

@@ -3,8 +3,9 @@
 Modal data: rows of a spinning table (``rotation_hz`` or ``speed_kmh`` > 0)
 with a ``branch`` (backward / forward) follow eq. 25 (co-rotating frame) or
 eq. 26 (fixed frame) at Ω' = g·Ω, where Ω is the condition's wheel speed and g
-the parameter ``speed_gain`` (null 0: the static eq. 18, the baseline). g ≈ 1
-means the splitting matches the nominal speed. The formulas act on the
+the parameter ``speed_gain`` (null 0: the static eq. 18, the baseline), fixed at 1
+by the measured condition in the *computed* candidate (Ω from ``rotation_hz`` or
+``speed_kmh``: a prediction with no free parameter), free in the *fitted* one. The formulas act on the
 current ω of each row, so the effect composes with others.
 
 Rolling profiles: the centrifugal share not carried as belt tension,
@@ -36,8 +37,8 @@ class Rotation(Effect):
     name = "rotation"
     summary = "a spinning ring: Coriolis splitting of backward/forward waves and centrifugal tension"
     parameters = (
-        Parameter("speed_gain", "-", null=0.0, lo=0.0, hi=2.0, start=1.0,
-                  description="wheel speed seen by the modes / nominal wheel speed (eq. 25/26)"),
+        Parameter("speed_gain", "-", null=0.0, lo=0.0, hi=2.0, start=1.0, condition=1.0,
+                  description="wheel speed seen by the modes / the table's wheel speed (eq. 25/26)"),
     )
     profile_parameters = (
         Parameter("chi_deficit", "-", null=0.0, lo=0.0, hi=1.0, start=0.3,

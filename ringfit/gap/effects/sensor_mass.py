@@ -1,4 +1,4 @@
-"""``sensor_mass`` — the accelerometer and its mount as a point mass on the ring (PHYSICS.md §6).
+"""``sensor_mass`` — the accelerometer and its mount as a point mass on the ring (docs/physics.md §6).
 
 Modal data: the mode a single sensor sees has its antinode at the sensor,
 so its modal mass grows by m_s (Rayleigh): ``ω' = ω √(M_n/(M_n + m_s))`` with
@@ -8,7 +8,7 @@ so its modal mass grows by m_s (Rayleigh): ``ω' = ω √(M_n/(M_n + m_s))`` wit
 
 Rolling profiles: mass loading of the belt at the sensor, revolution harmonic
 k seen at ω = kΩ through ``Z/(Z + iωm_s)`` with the belt's wave impedance
-``Z = 2√(T0 ρA)`` (≈ 330 N s/m, corner ≈ 17 kHz for 3 g: PHYSICS.md §6) — a
+``Z = 2√(T0 ρA)`` (≈ 330 N s/m, corner ≈ 17 kHz for 3 g: docs/physics.md §6) — a
 gentle low-pass of both channels, expected negligible; the bound (50 g) keeps
 it physical. The centrifugal point load m_sΩ²R is a revolution-mean term the
 baseline's mean removal takes out.
@@ -20,6 +20,7 @@ import numpy as np
 
 from ringfit.gap.effects import register
 from ringfit.gap.effects.base import Effect, Parameter
+from ringfit.physics.natural import ring_modal_mass
 
 
 class MassLoading(eqx.Module):
@@ -52,10 +53,7 @@ class SensorMass(Effect):
         return np.asarray(rows.is_freq) > 0
 
     def modal(self, values, omega, zeta, rows, ring, geometry):
-        n = rows.n
-        circ = jnp.pi * geometry.radius * ring.rho_a
-        nz = n != 0
-        modal_mass = jnp.where(nz, circ * (1.0 + 1.0 / jnp.where(nz, n, 1.0) ** 2), 2.0 * circ)
+        modal_mass = ring_modal_mass(ring, geometry, rows.n)  # M_n [kg], docs/physics.md §6
         return omega * jnp.sqrt(modal_mass / (modal_mass + values[0])), zeta
 
 

@@ -1,0 +1,155 @@
+"""``ringfit campbell`` — Campbell diagram of the rolling, loaded tyre; measured mode tables matched to its branches.
+
+    ringfit campbell --tyre FITTED.toml --load 4000 --speeds 0:80:5 [--frame sensor|fixed] [--drum D]
+                     --out NAME.campbell.csv [--plot C.png] [--modes T1.modes.csv ...]
+
+Writes ``NAME.campbell.csv`` (one row per branch and speed) and, with
+``--modes``, ``NAME.matched.csv`` beside it (one row per measured row), both
+described in docs/formats.md ("Campbell diagram").
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "campbell", help="Campbell diagram of the rolling, loaded tyre; match measured mode tables to its branches",
+        description="Modes of the tyre rolling on a flat road or drum at each speed (ring with the tread springs "
+                    "of the steady contact patch, docs/physics.md §3.7), tracked into branches, in the fixed frame "
+                    "and as the co-rotating sensor sees them (lines ω + kΩ). With --modes each measured row is "
+                    "matched to a branch (n, direction, frame) with its error and σ; rows no branch explains, and "
+                    "rows whose speed trend or n label contradicts every branch, are named with one sentence each.")
+    p.add_argument("--tyre", required=True, type=Path, help="tyre TOML (DATA.md §1) with fitted [ring] values")
+    p.add_argument("--load", type=float, default=4000.0,
+                   help="vertical load Fz [N] (default 4000; tables with load_n in their sidecar use their own)")
+    p.add_argument("--speeds", default="0:80:5",
+                   help="speeds [km/h]: START:STOP:STEP (STOP included) or a comma list (default 0:80:5)")
+    p.add_argument("--frame", choices=("sensor", "fixed"), default="fixed",
+                   help="frame of the freq_hz column and of the plot: the co-rotating sensor or a fixed observer "
+                        "(default fixed); measured tables use the frame in their sidecar")
+    p.add_argument("--drum", type=float, default=None, metavar="DIAMETER_M",
+                   help="drum diameter [m]; omit for a flat road")
+    p.add_argument("--out", required=True, type=Path, help="output NAME.campbell.csv")
+    p.add_argument("--plot", type=Path, default=None, help="optional PNG: branches vs speed, measured rows overlaid")
+    p.add_argument("--modes", nargs="+", type=Path, default=(), metavar="T.modes.csv",
+                   help="measured mode tables (DATA.md §2, with their .json sidecars) to match; writes "
+                        "NAME.matched.csv beside --out")
+    p.add_argument("--n-max", type=int, default=15, help="highest dominant order n of the branches (default 15)")
+    p.add_argument("--tolerance", type=float, default=0.02,
+                   help="relative σ of the model used in the matching (default 0.02 = 2 %%)")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.set_defaults(run=run_campbell)
+
+
+def parse_speeds(text: str):
+    """``"0:80:5"`` (stop included) or ``"20,40,60"`` → sorted speeds [km/h]; :class:`InputError` otherwise."""
+    import numpy as np
+
+    from ringfit.errors import InputError
+
+    try:
+        if ":" in text:
+            start, stop, step = (float(x) for x in text.split(":"))
+            if not step > 0 or stop < start:
+                raise ValueError
+            speeds = np.arange(start, stop + 0.5 * step, step)
+        else:
+            speeds = np.array([float(x) for x in text.split(",") if x.strip()])
+    except ValueError:
+        raise InputError(f"--speeds {text!r}: expected START:STOP:STEP with STEP > 0 or a comma list of km/h") from None
+    if speeds.size == 0 or np.any(~np.isfinite(speeds)) or np.any(speeds < 0):
+        raise InputError(f"--speeds {text!r}: expected speeds >= 0 km/h")
+    return np.unique(speeds)
+
+
+def matched_path(out: Path) -> Path:
+    """``NAME.campbell.csv`` → ``NAME.matched.csv`` (else ``<stem>.matched.csv``)."""
+    name = out.name
+    stem = name[: -len(".campbell.csv")] if name.endswith(".campbell.csv") else out.stem
+    return out.with_name(stem + ".matched.csv")
+
+
+def _csv_text(header, rows) -> str:
+    import csv
+    import io
+    import math
+
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    for r in rows:
+        cells = []
+        for v in r:
+            if v is None or (isinstance(v, float) and not math.isfinite(v)):
+                cells.append("")
+            elif isinstance(v, bool):
+                cells.append("true" if v else "false")
+            elif isinstance(v, float):
+                cells.append(f"{v:.10g}")
+            else:
+                cells.append(str(v))
+        w.writerow(cells)
+    return buf.getvalue()
+
+
+def run_campbell(args) -> int:
+    from ringfit._cache import enable_compilation_cache
+
+    enable_compilation_cache()
+    from ringfit.cli import CommandFailed
+    from ringfit.errors import InputError
+    from ringfit.io.files import atomic_write_text, check_output_path
+    from ringfit.io.modes import sidecar_path
+
+    speeds = parse_speeds(args.speeds)
+    if not args.load > 0:
+        raise InputError(f"--load {args.load}: expected a positive load in N")
+    if args.drum is not None and not args.drum > 0:
+        raise InputError(f"--drum {args.drum}: expected a positive diameter in metres")
+    if not args.tolerance > 0:
+        raise InputError(f"--tolerance {args.tolerance}: expected a positive relative σ")
+    inputs = [args.tyre, *args.modes, *(sidecar_path(m) for m in args.modes)]
+    outputs = [args.out] + ([matched_path(args.out)] if args.modes else []) + ([args.plot] if args.plot else [])
+    if len({Path(o).resolve() for o in outputs}) < len(outputs):
+        raise InputError(f"output paths {', '.join(map(str, outputs))} must differ")
+    for o in outputs:
+        check_output_path(o, overwrite=args.force, inputs=inputs)
+
+    from ringfit.gap.campbell import CAMPBELL_COLUMNS, MATCH_COLUMNS, campbell_diagram, match_rows_table, match_tables
+    from ringfit.io.modes import read_mode_table
+    from ringfit.io.tyre import read_tyre
+
+    tyre = read_tyre(args.tyre)
+    tables = [read_mode_table(m) for m in args.modes]
+    ring, geometry = tyre.ring, tyre.geometry
+    diagram = campbell_diagram(ring, geometry, args.load, speeds, drum_diameter_m=args.drum, n_max=args.n_max)
+    if not diagram.ok.all():
+        bad = ", ".join(f"{v:g}" for v in diagram.speed_kmh[~diagram.ok])
+        raise CommandFailed(f"the contact solve or the eigenproblem failed at {bad} km/h (patch outside its window, "
+                            "or beyond the critical speed); nothing written")
+    match = None
+    if tables:
+        match = match_tables(tables, ring, geometry, load_n=args.load, drum_diameter_m=args.drum,
+                             model_tolerance=args.tolerance, n_max=args.n_max, speeds_kmh=speeds)
+    rows = diagram.rows(args.frame)
+    atomic_write_text(args.out, _csv_text(CAMPBELL_COLUMNS, [[r[c] for c in CAMPBELL_COLUMNS] for r in rows]))
+    road = "flat road" if args.drum is None else f"drum {args.drum:g} m"
+    print(f"{args.out}: {diagram.branches} branches (n ≤ {args.n_max}) × {len(speeds)} speeds "
+          f"{speeds[0]:g}–{speeds[-1]:g} km/h, {args.load:g} N on a {road}; R_e = {diagram.rolling_radius_m:.4f} m, "
+          f"patch {diagram.leading_deg[0]:+.2f}° … {diagram.trailing_deg[0]:+.2f}° at {speeds[0]:g} km/h")
+    if match is not None:
+        path = matched_path(args.out)
+        atomic_write_text(path, _csv_text(MATCH_COLUMNS, match_rows_table(match)))
+        print(f"{path}: {match.summary()}")
+        for r in match.rows:
+            name = Path(r["source"]).name
+            print(f"  {name} row {r['row']}: {r['freq_hz']:.2f} Hz at {r['speed_kmh']:g} km/h [{r['status']}] "
+                  f"{r['note']}")
+    if args.plot:
+        from ringfit.report.campbell_plots import plot_campbell
+
+        plot_campbell(diagram, args.plot, frame=args.frame, match=match, overwrite=args.force)
+        print(f"{args.plot}: Campbell plot")
+    return 0

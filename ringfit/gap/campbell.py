@@ -1,0 +1,900 @@
+"""Campbell diagram of the rolling, loaded tyre, and measured mode tables matched to its branches (docs/physics.md §3.7).
+
+The model side is :mod:`ringfit.physics.rolling_modes` (fixed-frame modes of
+the ring rotating at Ω with the tread springs of the steady contact patch).
+This module turns it into what an engineer reads:
+
+* :func:`campbell_diagram` — the modes at a series of speeds (one jit,
+  vmapped), **tracked** into branches by continuity of their harmonic content
+  (MAC between neighbouring speeds), each branch with its dominant order n,
+  travelling direction (backward / forward / standing), contact character
+  (``extr``/``0``, ``vert``/``hort``) and the lines the co-rotating sensor sees,
+  ``ω + kΩ`` with their weights (docs/physics.md §3.7 *Observers*). Labels
+  are read from the **radial acceleration** content, ``−(ω + kΩ)² W_k``, the
+  content an accelerometer's data (a co-rotating sensor, a cleat field) carry.
+* :func:`match_tables` — every row of measured mode tables (docs/formats.md
+  §2; condition from the sidecar) matched to a branch (fixed frame) or to a
+  line of a branch (co-rotating frame) at the table's speed, with its error
+  and σ; rows no branch explains are named; with several speeds, rows whose
+  **trend** with speed or whose **n label** contradicts every branch are
+  flagged, and a frame mix-up, a line ``ω + kΩ`` of another mode or a
+  different n is tested as the explanation — one sentence per row.
+* :func:`label_identified_modes` — model labels (n, direction) for the
+  modes ``ringfit cleat --ssi`` identifies, with flags for implausible labels.
+* :func:`compare_with_ring` — the free spinning ring's eq. 25/26 beside a
+  table (docs/physics.md §3.2–3.3).
+
+Matching. A row at frequency f with σ_f = ``freq_std_hz`` (0 when empty) is
+compared with each candidate at f̂ through ``z = (f − f̂)/σ``,
+``σ = √(σ_f² + (tol·f̂)²)``, tol = :data:`MODEL_TOLERANCE` (2 %: the model's
+own accuracy after a free-tyre fit; a stated default, ``model_tolerance=``).
+The cost is ``z²`` plus :data:`LABEL_PENALTY` for each label the candidate
+contradicts (n; branch; tag via the contact symmetry) and, for a sensor line,
+``−2 ln(weight/strongest weight of its mode)``; rows of one table are assigned
+one-to-one (Hungarian). A row is *explained* when ``|z| ≤`` :data:`EXPLAINED_Z`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ringfit.errors import InputError
+from ringfit.io.modes import ModeTable
+from ringfit.physics.operating import KMH, road_from_drum_diameter
+
+#: Highest dominant order kept in a diagram (the issue's n ≤ 15).
+DEFAULT_N_MAX = 15
+#: Relative σ of the model's frequencies used in the matching (stated default).
+MODEL_TOLERANCE = 0.02
+#: |z| up to which a row counts as explained.
+EXPLAINED_Z = 3.0
+#: Cost of each contradicted label, in units of z² (a label is worth 2σ of frequency).
+LABEL_PENALTY = 4.0
+#: Sensor lines weaker than this share of their mode's strongest line are not candidates.
+MIN_LINE_WEIGHT = 0.05
+#: A mode whose dominant order's backward/forward amplitude ratio is below this is standing
+#: (the same threshold as the cleat SSI, :data:`ringfit.targets.rolling_modes.TRAVELLING_RATIO`).
+TRAVELLING_RATIO = 3.0
+#: Speeds of one diagram are padded to a multiple of this, so that tables at a few speeds share a compilation.
+SPEED_BUCKET = 8
+#: Frames of DATA.md §2 (``rotating`` = the co-rotating sensor; the CLI calls it ``sensor``).
+FRAMES = ("rotating", "fixed")
+
+
+def frame_name(frame: str) -> str:
+    """``sensor``/``rotating`` → ``rotating``; ``fixed`` → ``fixed`` (DATA.md §2 names)."""
+    f = {"sensor": "rotating", "rotating": "rotating", "fixed": "fixed"}.get(frame)
+    if f is None:
+        raise InputError(f"frame {frame!r}; expected 'sensor' (= 'rotating') or 'fixed'")
+    return f
+
+
+# ----------------------------------------------------------------------------------------------- diagram
+@dataclass
+class CampbellDiagram:
+    """Tracked branches of the rolling, loaded tyre against speed (docs/physics.md §3.7).
+
+    **Fields** (S speeds ascending, B branches, H = 2K + 1 harmonics k = −K…K):
+
+    - ``speed_kmh``, ``omega`` (Ω [rad/s]): ``(S,)``; Ω = V/R_e, ``rolling_radius_m`` R_e = R_out − δ/3.
+    - ``fixed_hz``: fixed-frame frequency of each branch ``(S, B)`` [Hz].
+    - ``order``: dominant n ``(S, B)``; ``travel``: signed backward/forward amplitude ratio of
+      that order; ``symmetry``: share of the radial content even about the patch centre
+      ``(S, B)`` (1 = ``extr``, 0 = ``0``); all from the radial acceleration content.
+    - ``damping_ratio``: ζ ``(S, B)`` (first order, hysteretic).
+    - ``k``: harmonics ``(H,)``; ``line_hz``: signed sensor lines ``(ω + kΩ)/2π`` ``(S, B, H)``;
+      ``line_weight``: their radial-acceleration weights, normalised per mode ``(S, B, H)``
+      (tangential for a mode without radial content, the inextensible ring's n = 0).
+    - ``mode_index``: index of each branch among the modes at each speed ``(S, B)``.
+    - ``load_n``, ``drum_diameter_m`` (None: flat road), ``contact`` (False: free spinning ring).
+    - ``leading_deg``, ``trailing_deg``: patch edges ``(S,)``; ``ok``: contact solve converged ``(S,)``.
+    """
+
+    speed_kmh: np.ndarray
+    omega: np.ndarray
+    fixed_hz: np.ndarray
+    order: np.ndarray
+    travel: np.ndarray
+    symmetry: np.ndarray
+    damping_ratio: np.ndarray
+    k: np.ndarray
+    line_hz: np.ndarray
+    line_weight: np.ndarray
+    mode_index: np.ndarray
+    load_n: float
+    drum_diameter_m: float | None
+    contact: bool
+    rolling_radius_m: float
+    leading_deg: np.ndarray
+    trailing_deg: np.ndarray
+    ok: np.ndarray
+
+    @property
+    def rotation_hz(self) -> np.ndarray:
+        """Wheel rotation rate Ω/2π [Hz], ``(S,)``."""
+        return self.omega / (2.0 * math.pi)
+
+    @property
+    def branches(self) -> int:
+        return self.fixed_hz.shape[1]
+
+    def direction(self) -> np.ndarray:
+        """``backward``/``forward``/``standing`` per speed and branch ``(S, B)`` (|travel| ≥ 3 is travelling)."""
+        return np.where(self.travel >= TRAVELLING_RATIO, "backward",
+                        np.where(self.travel <= -TRAVELLING_RATIO, "forward", "standing")).astype(object)
+
+    def tag(self) -> np.ndarray:
+        """Loaded-tyre tag of standing modes (``extr``/``0``, ``vert``/``hort`` for n = 1), ``""`` otherwise ``(S, B)``."""
+        standing = self.direction() == "standing"
+        cos_type = self.symmetry >= 0.5
+        one = self.order == 1
+        tag = np.where(one, np.where(cos_type, "vert", "hort"), np.where(cos_type, "extr", "0"))
+        ok = standing & (self.order >= 1) & np.isfinite(self.symmetry) & self.contact
+        return np.where(ok, tag, "").astype(object)
+
+    def sensor_line(self):
+        """The strongest sensor line of each branch: ``(hz, k, weight)``, each ``(S, B)`` (hz = |ω + kΩ|/2π)."""
+        w = np.where(np.isfinite(self.line_weight), self.line_weight, -1.0)
+        j = np.argmax(w, axis=-1)
+        hz = np.abs(np.take_along_axis(self.line_hz, j[..., None], -1)[..., 0])
+        return hz, self.k[j].astype(int), np.take_along_axis(self.line_weight, j[..., None], -1)[..., 0]
+
+    def frequencies(self, frame: str) -> np.ndarray:
+        """Branch frequencies in ``frame`` (``fixed``, or ``rotating``/``sensor``: the strongest line) ``(S, B)`` [Hz]."""
+        return self.fixed_hz if frame_name(frame) == "fixed" else self.sensor_line()[0]
+
+    def rows(self, frame: str = "fixed") -> list[dict]:
+        """One dict per (branch, speed): the columns of ``*.campbell.csv`` (docs/formats.md)."""
+        frame = frame_name(frame)
+        f = self.frequencies(frame)
+        shz, sk, sw = self.sensor_line()
+        direction, tag = self.direction(), self.tag()
+        out = []
+        for b in range(self.branches):
+            for s in range(len(self.speed_kmh)):
+                out.append({
+                    "branch": b + 1, "speed_kmh": float(self.speed_kmh[s]), "rotation_hz": float(self.rotation_hz[s]),
+                    "frame": frame, "freq_hz": float(f[s, b]), "fixed_hz": float(self.fixed_hz[s, b]),
+                    "sensor_hz": float(shz[s, b]), "sensor_k": int(sk[s, b]), "sensor_weight": float(sw[s, b]),
+                    "n": int(self.order[s, b]), "direction": direction[s, b], "tag": tag[s, b],
+                    "travel": float(self.travel[s, b]), "symmetry": _float_or_nan(self.symmetry[s, b]),
+                    "damping_pct": 100.0 * float(self.damping_ratio[s, b]), "load_n": float(self.load_n),
+                    "contact": bool(self.contact), "ok": bool(self.ok[s]),
+                })
+        return out
+
+
+def _float_or_nan(x) -> float:
+    x = float(x)
+    return x if math.isfinite(x) else math.nan
+
+
+CAMPBELL_COLUMNS = ("branch", "speed_kmh", "rotation_hz", "frame", "freq_hz", "fixed_hz", "sensor_hz", "sensor_k",
+                    "sensor_weight", "n", "direction", "tag", "travel", "symmetry", "damping_pct", "load_n",
+                    "contact", "ok")
+
+
+def campbell_diagram(
+    ring,
+    geometry,
+    load_n: float,
+    speeds_kmh,
+    *,
+    drum_diameter_m: float | None = None,
+    contact: bool = True,
+    n_max: int = DEFAULT_N_MAX,
+    harmonics: int | None = None,
+) -> CampbellDiagram:
+    """Branches of the tyre's modes against speed (docs/physics.md §3.7).
+
+    **Arguments:**
+
+    - ``ring``, ``geometry``: the tyre (``ring.k_tread`` is the tread spring).
+    - ``load_n``: Fz [N]; ``speeds_kmh``: ``(S,)`` road speeds [km/h], ascending, ≥ 0.
+    - ``drum_diameter_m``: drum under the tyre (None: flat road).
+    - ``contact``: ``False`` for a free spinning ring (no patch; ``load_n`` unused, R_e = R_out).
+    - ``n_max``: branches whose dominant order exceeds n_max at every speed are dropped.
+    - ``harmonics``: Hill basis K (default :data:`ringfit.physics.rolling_modes.DEFAULT_HARMONICS`; ≥ 2 n_max).
+
+    **Returns:** :class:`CampbellDiagram` (check ``ok``). One compilation per
+    bucket of :data:`SPEED_BUCKET` speeds and settings.
+    """
+    import jax
+
+    from ringfit.physics.rolling_modes import DEFAULT_HARMONICS, campbell_modes_jit
+    from ringfit.targets.ssi import small_matrix_threads
+
+    K = DEFAULT_HARMONICS if harmonics is None else int(harmonics)
+    if n_max < 1 or 2 * n_max > K:
+        raise InputError(f"n_max = {n_max}: expected 1 ≤ n_max ≤ K/2 = {K // 2} (Hill basis K = {K})")
+    speeds = np.asarray(speeds_kmh, dtype=np.float64).ravel()
+    if speeds.size == 0 or not np.all(np.isfinite(speeds)) or np.any(speeds < 0) or np.any(np.diff(speeds) <= 0):
+        raise InputError(f"speeds {speeds.tolist()}: expected finite speeds ≥ 0 km/h in increasing order")
+    if contact and not (math.isfinite(load_n) and load_n > 0):
+        raise InputError(f"load {load_n}: expected a positive load in N")
+    S = speeds.size
+    pad = np.concatenate([speeds, np.full(-S % SPEED_BUCKET, speeds[-1])])
+    road = road_from_drum_diameter(drum_diameter_m)
+    with small_matrix_threads():
+        cm = campbell_modes_jit(ring, geometry, float(load_n) if contact else 0.0, pad, road, harmonics=K,
+                                contact=contact)
+        labels = _acceleration_labels(cm.modes)
+        cm, labels = jax.device_get((cm, labels))
+    m = cm.modes
+    sl = slice(0, S)
+    freq = np.asarray(m.angular_frequency)[sl] / (2 * math.pi)
+    content = np.concatenate([np.asarray(m.radial)[sl], np.asarray(m.tangential)[sl]], axis=-1)
+    perm = track_branches(freq, content)
+    order, travel, symmetry, line_hz, line_w = (np.asarray(x)[sl] for x in labels)
+    take = lambda a: np.take_along_axis(a, perm if a.ndim == 2 else perm[..., None], axis=1)  # noqa: E731
+    order, travel, symmetry = take(order), take(travel), take(symmetry)
+    keep = np.flatnonzero(np.any(order <= n_max, axis=0))
+    keep = keep[np.argsort(take(freq)[0, keep], kind="stable")]
+    sel = lambda a: a[:, keep]  # noqa: E731
+    ok = np.asarray(cm.ok)[sl] & np.all(np.isfinite(freq), axis=1)
+    return CampbellDiagram(
+        speed_kmh=speeds, omega=np.asarray(cm.omega)[sl], fixed_hz=sel(take(freq)), order=sel(order).astype(int),
+        travel=sel(travel), symmetry=sel(symmetry), damping_ratio=sel(take(np.asarray(m.damping_ratio)[sl])),
+        k=np.asarray(m.k)[0], line_hz=sel(take(line_hz)), line_weight=sel(take(line_w)), mode_index=sel(perm),
+        load_n=float(load_n), drum_diameter_m=drum_diameter_m, contact=bool(contact),
+        rolling_radius_m=float(cm.rolling_radius), leading_deg=np.degrees(np.asarray(cm.leading)[sl]),
+        trailing_deg=np.degrees(np.asarray(cm.trailing)[sl]), ok=ok,
+    )
+
+
+def _acceleration_labels(modes):
+    return _acceleration_labels_jit(modes)
+
+
+def _labels_impl(modes):
+    import jax.numpy as jnp
+
+    from ringfit.physics.rolling_modes import material_acceleration, mode_labels, sensor_lines
+
+    A, _ = material_acceleration(modes)
+    lab = mode_labels(A, jnp.zeros_like(A), modes.k[0], modes.angular_frequency, modes.omega)
+    f, wr, wt = sensor_lines(modes, "acceleration")
+    # a mode without radial content (the inextensible ring's n = 0) keeps its displacement labels and
+    # its tangential lines
+    radial = jnp.sum(jnp.abs(modes.radial) ** 2, -1) > 1e-12
+    pick = lambda a, b: jnp.where(radial, a, b)  # noqa: E731
+    return (pick(lab["order"], modes.order), pick(lab["travel"], modes.travel), pick(lab["symmetry"], jnp.nan),
+            f, jnp.where(radial[..., None], wr, wt))
+
+
+def _lazy_jit(fn):
+    cache = {}
+
+    def call(*args):
+        if "f" not in cache:
+            import equinox as eqx
+
+            cache["f"] = eqx.filter_jit(fn)
+        return cache["f"](*args)
+
+    return call
+
+
+_acceleration_labels_jit = _lazy_jit(_labels_impl)
+
+
+def track_branches(freq: np.ndarray, content: np.ndarray) -> np.ndarray:
+    """Order the modes at each speed by continuity with the previous speed.
+
+    **Arguments:** ``freq`` ``(S, N)`` [Hz]; ``content`` ``(S, N, D)`` complex harmonic content.
+
+    **Returns:** ``perm`` ``(S, N)``: ``perm[s, b]`` is the mode at speed s on branch b
+    (branch b = mode b at the first speed). Neighbouring speeds are assigned one-to-one
+    (Hungarian) on ``(1 − MAC) + ½ min(1, |Δf|/(0.1 f))``: harmonic content first,
+    frequency to break ties (e.g. between a standing pair that rotation starts to mix).
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    S, N = freq.shape
+    perm = np.zeros((S, N), dtype=int)
+    perm[0] = np.arange(N)
+    unit = content / np.maximum(np.linalg.norm(content, axis=-1, keepdims=True), 1e-300)
+    for s in range(1, S):
+        prev = unit[s - 1, perm[s - 1]]
+        mac = np.abs(np.conj(prev) @ unit[s].T) ** 2
+        fp = freq[s - 1, perm[s - 1]][:, None]
+        df = np.abs(freq[s][None, :] - fp) / np.maximum(0.1 * np.abs(fp), 1e-12)
+        cost = (1.0 - mac) + 0.5 * np.minimum(1.0, np.nan_to_num(df, nan=1.0))
+        r, c = linear_sum_assignment(cost)
+        perm[s, r] = c
+    return perm
+
+
+# ----------------------------------------------------------------------------------------------- conditions
+@dataclass
+class TableCondition:
+    """A table's operating condition as the matching uses it.
+
+    ``speed_kmh`` (km/h, for the diagram), ``omega`` Ω [rad/s], ``load_n``, ``contact``
+    (loaded/rolling), ``frame`` (``rotating``/``fixed``), ``frame_given`` (from the sidecar),
+    ``source_speed`` (what Ω came from).
+    """
+
+    speed_kmh: float
+    omega: float
+    load_n: float
+    contact: bool
+    frame: str
+    frame_given: bool
+    source_speed: str
+
+
+def _group_key(contact: bool, load_n: float, drum: float | None):
+    return (bool(contact), round(float(load_n), 6) if contact else 0.0, drum)
+
+
+def table_conditions(tables, ring, geometry, *, load_n: float | None = None, drum_diameter_m: float | None = None):
+    """Resolve each table's speed, load, contact and frame (docs/formats.md §2).
+
+    Ω is ``2π·rotation_hz`` when the sidecar gives it, else ``V/R_e`` with
+    ``R_e = R_out − δ/3`` (δ of the standing tyre at the table's load; R_out for a free
+    tyre). ``load_n`` (the sidecar's, else the argument) is required for ``loaded``
+    and ``rolling`` tables. ``loaded`` tables stand (Ω = 0). ``frame`` defaults to
+    ``rotating`` for a spinning tyre and ``fixed`` for a standing one (as the diagnosis does).
+
+    **Returns:** list of :class:`TableCondition`; raises :class:`InputError` naming the table.
+    """
+    out = []
+    radii = {}
+    for t in tables:
+        c = t.condition
+        src = t.source or "<table>"
+        state = t.state
+        contact = state in ("loaded", "rolling")
+        load = c.get("load_n") if c.get("load_n") else load_n
+        if contact and not (load and load > 0):
+            raise InputError(f"{state} table without 'load_n' in its sidecar; give the load (--load)", source=src)
+        load = float(load) if contact else 0.0
+        key = _group_key(contact, load, drum_diameter_m)
+        if key not in radii:
+            radii[key] = _rolling_radius(ring, geometry, load, drum_diameter_m, contact)
+        r_e = radii[key]
+        rot, speed = c.get("rotation_hz"), c.get("speed_kmh")
+        if state == "loaded":
+            omega, v, how = 0.0, 0.0, "loaded: standing"
+        elif rot:
+            omega = 2 * math.pi * float(rot)
+            v, how = omega * r_e / KMH, "rotation_hz"
+        elif speed:
+            v = float(speed)
+            omega, how = v * KMH / r_e, f"speed_kmh / R_e (R_e = {r_e:.4f} m)"
+        else:
+            if state == "rolling":
+                raise InputError("rolling table without 'speed_kmh' or 'rotation_hz' in its sidecar", source=src)
+            omega, v, how = 0.0, 0.0, "standing"
+        frame = c.get("frame")
+        given = frame is not None
+        if frame is None:
+            frame = "rotating" if omega > 0 else "fixed"
+        out.append(TableCondition(speed_kmh=v, omega=omega, load_n=load, contact=contact, frame=frame,
+                                  frame_given=given, source_speed=how))
+    return out
+
+
+def _rolling_radius(ring, geometry, load, drum, contact) -> float:
+    if not contact:
+        return float(geometry.outer_radius)
+    from ringfit.physics.contact import solve_rolling_jit
+    from ringfit.physics.operating import OperatingPoint, rolling_radius
+
+    sol = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, float(load), road_from_drum_diameter(drum)))
+    if not bool(sol.ok):
+        raise InputError(f"the standing contact solve at {load:g} N did not converge (patch outside its window)")
+    return float(rolling_radius(float(geometry.outer_radius), float(sol.deflection)))
+
+
+# ----------------------------------------------------------------------------------------------- candidates
+@dataclass
+class _Candidate:
+    branch: int  # 0-based
+    k: int | None  # sensor line harmonic (None: fixed frame)
+    hz: float
+    n: int
+    direction: str  # backward / forward / standing
+    symmetry: float
+    tag: str
+    weight: float  # line weight relative to the mode's strongest line (1 in the fixed frame)
+
+    def describe(self, frame: str) -> str:
+        qual = self.direction if self.direction != "standing" else (f"standing, {self.tag}" if self.tag else "standing")
+        if frame == "fixed" or self.k is None:
+            return f"branch {self.branch + 1} (n={self.n} {qual}) at {self.hz:.1f} Hz"
+        return (f"the ω{self.k:+d}Ω line of branch {self.branch + 1} (n={self.n} {qual}) at {self.hz:.1f} Hz")
+
+
+def _candidates(d: CampbellDiagram, s: int, frame: str) -> list[_Candidate]:
+    out = []
+    direction, tag = d.direction(), d.tag()
+    for b in range(d.branches):
+        if frame == "fixed":
+            out.append(_Candidate(b, None, float(d.fixed_hz[s, b]), int(d.order[s, b]), direction[s, b],
+                                  float(d.symmetry[s, b]), tag[s, b], 1.0))
+            continue
+        w = d.line_weight[s, b]
+        if not np.any(np.isfinite(w)):
+            continue
+        top = np.nanmax(w)
+        for j in np.flatnonzero(np.nan_to_num(w) >= MIN_LINE_WEIGHT * top):
+            k = int(d.k[j])
+            line = float(d.line_hz[s, b, j])  # signed (ω + kΩ)/2π
+            sense = "standing" if k == 0 else ("backward" if k * line > 0 else "forward")  # k(ω + kΩ) > 0: backward
+            out.append(_Candidate(b, k, abs(line), abs(k), sense, float(d.symmetry[s, b]), tag[s, b],
+                                  float(w[j] / top)))
+    return out
+
+
+def _sigma(f_pred: float, std: float, tol: float) -> float:
+    sd = std if math.isfinite(std) else 0.0
+    return math.sqrt(sd**2 + (tol * f_pred) ** 2)
+
+
+def _row_labels(table: ModeTable, i: int) -> dict:
+    n = int(table.n[i])
+    tag = table.tag[i]
+    if n < 0 and tag in ("vert", "hort"):
+        n = 1
+    return {"n": n, "tag": tag, "branch": table.branch[i]}
+
+
+def _label_penalties(lab: dict, c: _Candidate) -> tuple[float, list[str]]:
+    """Penalty and the list of contradicted labels."""
+    pen, bad = 0.0, []
+    if lab["n"] >= 0 and lab["n"] != c.n:
+        pen += LABEL_PENALTY
+        bad.append("n")
+    if lab["branch"]:
+        if c.direction == "standing":
+            pen += 1.0
+        elif c.direction != lab["branch"]:
+            pen += LABEL_PENALTY
+            bad.append("direction")
+    if lab["tag"]:
+        s = c.symmetry if math.isfinite(c.symmetry) else 0.5
+        share = (1.0 - s) if lab["tag"] in ("extr", "vert") else s
+        pen += LABEL_PENALTY * share
+        if share > 0.5:
+            bad.append("tag")
+    return pen, bad
+
+
+def _score(f: float, std: float, lab: dict, c: _Candidate, tol: float, use_labels: bool = True):
+    sig = _sigma(c.hz, std, tol)
+    z = (f - c.hz) / sig
+    pen, bad = _label_penalties(lab, c) if use_labels else (0.0, [])
+    line = -2.0 * math.log(max(c.weight, 1e-12))
+    return z * z + pen + line, z, sig, bad
+
+
+# ----------------------------------------------------------------------------------------------- matching
+@dataclass
+class CampbellMatch:
+    """Measured tables matched to the branches of the model (docs/physics.md §3.7).
+
+    - ``rows``: one dict per measured row (the columns of ``*.matched.csv``, docs/formats.md).
+    - ``diagrams``: the diagrams used, one per (contact, load, drum) group, keyed by group.
+    - ``conditions``: the :class:`TableCondition` of each table.
+    """
+
+    rows: list[dict]
+    diagrams: dict
+    conditions: list
+
+    def assignment(self) -> dict:
+        """Each row's (mode, line) at its speed, for a diagnosis that refits through it (issue 13 item 5).
+
+        **Returns:** dict of arrays, one entry per row (``match.rows`` order): ``omega`` Ω [rad/s],
+        ``load_n``, ``contact`` (bool), ``fixed_frame`` (bool), ``mode_index`` (index among the
+        modes of :func:`ringfit.physics.rolling_modes.rolling_modes` at that speed, ascending
+        frequency; −1 when unmatched), ``k`` (sensor line harmonic; 0 in the fixed frame),
+        ``explained`` (bool). Evaluate with :func:`ringfit.physics.rolling_modes.observed_frequencies`.
+        """
+        keys = ("omega", "load_n", "contact", "fixed_frame", "mode_index", "k", "explained")
+        out = {k: [] for k in keys}
+        for r in self.rows:
+            a = r["_assignment"]
+            for k in keys:
+                out[k].append(a[k])
+        dtypes = {"contact": bool, "fixed_frame": bool, "explained": bool, "mode_index": int, "k": int}
+        return {k: np.asarray(v, dtype=dtypes.get(k, np.float64)) for k, v in out.items()}
+
+    @property
+    def unexplained(self) -> list[dict]:
+        return [r for r in self.rows if r["status"] == "unexplained"]
+
+    def summary(self) -> str:
+        st = [r["status"] for r in self.rows]
+        parts = [f"{st.count(s)} {s}" for s in ("matched", "label_conflict", "trend_conflict", "unexplained") if s in st]
+        return f"{len(self.rows)} rows: " + ", ".join(parts)
+
+
+MATCH_COLUMNS = ("source", "row", "speed_kmh", "rotation_hz", "load_n", "frame", "freq_hz", "sigma_hz", "n", "tag",
+                 "branch", "status", "explained", "model_branch", "model_hz", "model_n", "model_direction",
+                 "model_tag", "model_k", "line_weight", "error_hz", "error_pct", "z", "label_conflicts", "note")
+
+
+def match_tables(
+    tables,
+    ring,
+    geometry,
+    *,
+    load_n: float | None = None,
+    drum_diameter_m: float | None = None,
+    model_tolerance: float = MODEL_TOLERANCE,
+    speeds_kmh=None,
+    n_max: int = DEFAULT_N_MAX,
+    harmonics: int | None = None,
+) -> CampbellMatch:
+    """Match every row of ``tables`` to the model's branches (docs/physics.md §3.7; issue 13 items 3–4).
+
+    **Arguments:**
+
+    - ``tables``: :class:`~ringfit.io.modes.ModeTable` list (condition from each sidecar:
+      state, load_n, speed_kmh or rotation_hz, frame; see :func:`table_conditions`).
+    - ``ring``, ``geometry``: the fitted tyre.
+    - ``load_n``: load for tables whose sidecar lacks one; ``drum_diameter_m``: None = flat road.
+    - ``model_tolerance``: relative σ of the model (default :data:`MODEL_TOLERANCE`).
+    - ``speeds_kmh``: extra speeds for the tracking between the tables' speeds
+      (default: every 10 km/h up to the fastest table).
+    - ``n_max``, ``harmonics``: as :func:`campbell_diagram`.
+
+    **Returns:** :class:`CampbellMatch`. Acoustic rows are matched like the others
+    (the ring has no cavity mode: they come out unexplained, as they should).
+    """
+    tables = list(tables)
+    if not tables:
+        raise InputError("no mode table to match")
+    if not model_tolerance > 0:
+        raise InputError(f"model tolerance {model_tolerance}: expected a positive relative σ")
+    conds = table_conditions(tables, ring, geometry, load_n=load_n, drum_diameter_m=drum_diameter_m)
+    groups: dict = {}
+    for ti, c in enumerate(conds):
+        groups.setdefault(_group_key(c.contact, c.load_n, drum_diameter_m), []).append(ti)
+    diagrams = {}
+    for key, idx in groups.items():
+        top = max(conds[i].speed_kmh for i in idx)
+        grid = np.arange(0.0, top + 10.0, 10.0) if speeds_kmh is None else np.asarray(speeds_kmh, dtype=np.float64)
+        sp = np.unique(np.round(np.concatenate([grid[grid <= top + 1e-9], [conds[i].speed_kmh for i in idx]]), 9))
+        diagrams[key] = campbell_diagram(ring, geometry, key[1], sp, drum_diameter_m=drum_diameter_m,
+                                         contact=key[0], n_max=n_max, harmonics=harmonics)
+    rows: list[dict] = []
+    ctx: list[tuple] = []  # (diagram key, speed index, table, row index, labels)
+    for ti, t in enumerate(tables):
+        c = conds[ti]
+        key = _group_key(c.contact, c.load_n, drum_diameter_m)
+        d = diagrams[key]
+        s = int(np.argmin(np.abs(d.speed_kmh - round(c.speed_kmh, 9))))
+        if not d.ok[s]:
+            raise InputError(f"the model did not converge at {c.speed_kmh:.4g} km/h ({c.load_n:g} N)", source=t.source)
+        cands = _candidates(d, s, c.frame)
+        labs = [_row_labels(t, i) for i in range(len(t))]
+        assign = _assign(t, labs, cands, model_tolerance)
+        for i in range(len(t)):
+            row = _row_record(t, i, c, d, s, labs[i], assign[i], model_tolerance)
+            rows.append(row)
+            ctx.append((key, s, t, i, labs[i], c))
+    _explain(rows, ctx, diagrams, model_tolerance)
+    return CampbellMatch(rows=rows, diagrams=diagrams, conditions=conds)
+
+
+def _assign(table, labs, cands, tol):
+    """One candidate per row (Hungarian on the cost), or None."""
+    from scipy.optimize import linear_sum_assignment
+
+    m = len(table)
+    if not cands:
+        return [None] * m
+    cost = np.empty((m, len(cands)))
+    info = {}
+    for i in range(m):
+        for j, c in enumerate(cands):
+            val, z, sig, bad = _score(float(table.freq_hz[i]), float(table.freq_std_hz[i]), labs[i], c, tol)
+            cost[i, j] = val
+            info[i, j] = (z, sig, bad)
+    r, col = linear_sum_assignment(np.minimum(cost, 1e6))
+    out = [None] * m
+    for i, j in zip(r, col):
+        out[i] = (cands[j], *info[i, j])
+    return out
+
+
+def _row_record(t, i, c: TableCondition, d, s, lab, a, tol) -> dict:
+    f = float(t.freq_hz[i])
+    rec = {
+        "source": str(t.source), "row": i + 1, "speed_kmh": round(float(c.speed_kmh), 6),
+        "rotation_hz": float(c.omega / (2 * math.pi)), "load_n": float(c.load_n), "frame": c.frame, "freq_hz": f,
+        "sigma_hz": math.nan, "n": lab["n"] if lab["n"] >= 0 else None, "tag": lab["tag"], "branch": lab["branch"],
+        "status": "unexplained", "explained": False, "model_branch": None, "model_hz": math.nan, "model_n": None,
+        "model_direction": "", "model_tag": "", "model_k": None, "line_weight": math.nan, "error_hz": math.nan,
+        "error_pct": math.nan, "z": math.nan, "label_conflicts": "", "note": "",
+    }
+    rec["_assignment"] = {"omega": float(c.omega), "load_n": float(c.load_n), "contact": bool(c.contact),
+                          "fixed_frame": c.frame == "fixed", "mode_index": -1, "k": 0, "explained": False}
+    if a is None:
+        return rec
+    cand, z, sig, bad = a
+    rec["_assignment"].update(mode_index=int(d.mode_index[s, cand.branch]), k=int(cand.k or 0),
+                              explained=abs(z) <= EXPLAINED_Z)
+    rec.update({
+        "sigma_hz": sig, "model_branch": cand.branch + 1, "model_hz": cand.hz, "model_n": cand.n,
+        "model_direction": cand.direction, "model_tag": cand.tag, "model_k": cand.k, "line_weight": cand.weight,
+        "error_hz": f - cand.hz, "error_pct": 100.0 * (f - cand.hz) / cand.hz, "z": z, "label_conflicts": ",".join(bad),
+    })
+    rec["explained"] = abs(z) <= EXPLAINED_Z
+    rec["status"] = "matched" if rec["explained"] and not bad else ("label_conflict" if rec["explained"] else "unexplained")
+    rec["_cand"] = cand
+    return rec
+
+
+def _best(f, std, lab, cands, tol, *, use_labels=True, require=None):
+    best = None
+    for c in cands:
+        if require is not None and not require(c):
+            continue
+        val, z, sig, bad = _score(f, std, lab, c, tol, use_labels)
+        if best is None or val < best[0]:
+            best = (val, c, z, bad)
+    return best
+
+
+def _alternatives(f, std, lab, d, s, frame, tol) -> str:
+    """Test a frame mix-up, a line of another mode and a different n; a clause for the first that explains the row."""
+    other = "fixed" if frame == "rotating" else "rotating"
+    oc = _candidates(d, s, other)
+    b = _best(f, std, lab, oc, tol)
+    if b is not None and abs(b[2]) <= EXPLAINED_Z and not b[3]:
+        return f"a frame mix-up explains it: seen in the {other} frame it is {b[1].describe(other)} (z = {b[2]:+.1f})"
+    cands = _candidates(d, s, frame)
+    if frame == "rotating":
+        weak = _best(f, std, lab, cands, tol, require=lambda c: c.weight < 0.999)
+        if weak is not None and abs(weak[2]) <= EXPLAINED_Z and not weak[3]:
+            return f"it is a secondary line: {weak[1].describe(frame)} (z = {weak[2]:+.1f})"
+    free_n = dict(lab, n=-1)
+    b = _best(f, std, free_n, cands, tol)
+    if b is not None and abs(b[2]) <= EXPLAINED_Z and lab["n"] >= 0 and b[1].n != lab["n"]:
+        return f"a different n explains it: {b[1].describe(frame)} (z = {b[2]:+.1f})"
+    nolab = _best(f, std, lab, cands, tol, use_labels=False)
+    if nolab is not None and abs(nolab[2]) <= EXPLAINED_Z:
+        return f"only by ignoring its labels: {nolab[1].describe(frame)} (z = {nolab[2]:+.1f})"
+    near = min(cands + oc, key=lambda c: abs(c.hz - f), default=None)
+    if near is None:
+        return "the model has no branch in this frame"
+    fr = frame if near in cands else other
+    return f"no frame mix-up, other line or other n explains it (nearest: {near.describe(fr)}, {f - near.hz:+.1f} Hz)"
+
+
+def _explain(rows, ctx, diagrams, tol):
+    """Notes for every row: match, label conflicts, speed-trend conflicts, alternatives (issue 13 item 4)."""
+    for rec, (key, s, t, i, lab, c) in zip(rows, ctx):
+        d = diagrams[key]
+        f, std = rec["freq_hz"], float(t.freq_std_hz[i])
+        cand = rec.get("_cand")
+        where = f"{c.speed_kmh:.4g} km/h, {c.frame} frame"
+        if rec["status"] == "matched":
+            rec["note"] = (f"matched to {cand.describe(c.frame)}: error {rec['error_hz']:+.2f} Hz "
+                           f"({rec['error_pct']:+.1f} %, z = {rec['z']:+.1f}).")
+        elif rec["status"] == "label_conflict":
+            near = [x for x in _candidates(d, s, c.frame) if abs((f - x.hz) / _sigma(x.hz, std, tol)) <= EXPLAINED_Z]
+            what = ", ".join(sorted({x.describe(c.frame).split(" at ")[0] for x in near})[:4])
+            bad = rec["label_conflicts"].split(",")
+            conflict = " and ".join(bad) + (" labels contradict" if len(bad) > 1 else " label contradicts")
+            rec["note"] = (f"its {conflict} every branch within {EXPLAINED_Z:g}σ at {where} "
+                           f"({what}); {_alternatives(f, std, lab, d, s, c.frame, tol)}.")
+        else:
+            rec["note"] = (f"unexplained at {where}: no branch within {EXPLAINED_Z:g}σ; "
+                           f"{_alternatives(f, std, lab, d, s, c.frame, tol)}.")
+    _trend_checks(rows, ctx, diagrams, tol)
+    for rec in rows:
+        rec.pop("_cand", None)
+
+
+def _trend_checks(rows, ctx, diagrams, tol):
+    """Rows of one label across speeds must follow one branch (or one line of it).
+
+    Rows with the same labels (n, tag, branch, a) in tables of one group at different
+    speeds are chained by speed. A pair is consistent when both rows are matched with
+    their labels, or when a branch (a line of it, in the rotating frame) within 3σ of the
+    first row passes within 3σ of the second. Otherwise the row that is not consistent
+    with its other neighbour becomes a ``trend_conflict``, with the branches' course and
+    the alternatives (frame mix-up, other line, other n) in its note.
+    """
+    groups: dict = {}
+    for ri, (key, s, t, i, lab, c) in enumerate(ctx):
+        if lab["n"] < 0 and not lab["tag"] and not lab["branch"]:
+            continue
+        gk = (key, c.frame, lab["n"], lab["tag"], lab["branch"], round(float(t.a[i])))
+        groups.setdefault(gk, []).append(ri)
+    for gk, members in groups.items():
+        speeds = {ctx[r][1] for r in members}
+        if len(speeds) < 2:
+            continue
+        members = sorted(members, key=lambda r: ctx[r][1])
+        # one row per speed: the one best explained at that speed
+        by_speed: dict = {}
+        for r in members:
+            s = ctx[r][1]
+            if s not in by_speed or abs(rows[r]["z"] if math.isfinite(rows[r]["z"]) else 1e9) < abs(
+                    rows[by_speed[s]]["z"] if math.isfinite(rows[by_speed[s]]["z"]) else 1e9):
+                by_speed[s] = r
+        chain = [by_speed[s] for s in sorted(by_speed)]
+        ok_pairs = []
+        for a, b in zip(chain[:-1], chain[1:]):
+            if rows[a]["status"] == "matched" and rows[b]["status"] == "matched":
+                # both rows carry their labels on a branch: the label may pass from one branch to another
+                # between the speeds (contact and rotation exchange content), which is no contradiction
+                ok_pairs.append(True)
+                continue
+            ok_pairs.append(_pair_consistent(rows[a], rows[b], ctx[a], ctx[b], diagrams, tol))
+        for j, (a, b) in enumerate(zip(chain[:-1], chain[1:])):
+            if ok_pairs[j] is True:
+                continue
+            # blame the row that is not consistent with its other neighbour
+            nxt_ok = j + 1 < len(ok_pairs) and ok_pairs[j + 1] is True
+            bad, good = (a, b) if nxt_ok else (b, a)
+            if rows[bad]["status"] == "trend_conflict":
+                continue
+            _flag_trend(rows, ctx, diagrams, tol, bad, good, ok_pairs[j])
+
+
+def _pair_consistent(ra, rb, ca, cb, diagrams, tol):
+    """True if one branch (same line) passes both rows; else the branches through ``ra`` and where they go."""
+    key, sa = ca[0], ca[1]
+    sb = cb[1]
+    frame = ca[5].frame
+    d = diagrams[key]
+    fa, fb = ra["freq_hz"], rb["freq_hz"]
+    stda, stdb = float(ca[2].freq_std_hz[ca[3]]), float(cb[2].freq_std_hz[cb[3]])
+    through = []
+    for c in _candidates(d, sa, frame):
+        if abs((fa - c.hz) / _sigma(c.hz, stda, tol)) > EXPLAINED_Z:
+            continue
+        follow = _follow(d, c, sb, frame)
+        if follow is None:
+            continue
+        through.append((c, follow))
+        if abs((fb - follow) / _sigma(follow, stdb, tol)) <= EXPLAINED_Z:
+            return True
+    return through
+
+
+def _follow(d, c, s, frame):
+    if frame == "fixed":
+        return float(d.fixed_hz[s, c.branch])
+    j = int(np.flatnonzero(d.k == c.k)[0])
+    return abs(float(d.line_hz[s, c.branch, j]))
+
+
+def _flag_trend(rows, ctx, diagrams, tol, bad, good, through):
+    rb, rg = rows[bad], rows[good]
+    key, s, t, i, lab, c = ctx[bad]
+    d = diagrams[key]
+    moves = rb["freq_hz"] - rg["freq_hz"]
+    if through:
+        dest = ", ".join(f"branch {x.branch + 1} → {f:.1f} Hz" for x, f in through[:3])
+        branches = f"the branches through {rg['freq_hz']:.1f} Hz at {rg['speed_kmh']:.4g} km/h go to {dest}"
+    else:
+        branches = f"no branch passes its {rg['speed_kmh']:.4g} km/h row ({rg['freq_hz']:.1f} Hz)"
+    alt_txt = _alternatives(rb["freq_hz"], float(t.freq_std_hz[i]), lab, d, s, c.frame, tol)
+    rb["status"] = "trend_conflict"
+    rb["note"] = (f"speed trend contradicts every branch: from {rg['speed_kmh']:.4g} to {rb['speed_kmh']:.4g} km/h this "
+                  f"row moves {moves:+.1f} Hz while {branches}; {alt_txt}.")
+
+
+def match_rows_table(match: CampbellMatch) -> list[list]:
+    """``match.rows`` as lists of values in :data:`MATCH_COLUMNS` order (None/NaN where empty)."""
+    return [[r[c] for c in MATCH_COLUMNS] for r in match.rows]
+
+
+# ----------------------------------------------------------------------------------------------- identification side
+#: Without a tyre model, a winding above channels/this is flagged (fewer than 4 channels per wavelength).
+CHANNELS_PER_WAVELENGTH = 4
+
+
+def resolution_flags(table: ModeTable, channels: int) -> list[str]:
+    """Flags for orders the SSI channel spacing cannot resolve reliably (no model needed).
+
+    A winding m is estimated from ``channels`` evenly spaced sectors; it is unique only for
+    |m| < channels/2 and with fewer than :data:`CHANNELS_PER_WAVELENGTH` channels per
+    wavelength (|m| > channels/4) aliasing and noise poles with random shapes dominate.
+    **Returns:** one string per row ("" when plausible).
+    """
+    limit = channels / CHANNELS_PER_WAVELENGTH
+    out = []
+    for i in range(len(table)):
+        n = int(table.n[i])
+        if n > limit:
+            out.append(f"n = {n} is beyond what {channels} channels resolve (|n| ≤ {limit:g}: "
+                       f"{CHANNELS_PER_WAVELENGTH} channels per wavelength); likely a noise pole or an alias")
+        else:
+            out.append("")
+    return out
+
+
+def label_identified_modes(table: ModeTable, ring=None, geometry=None, *, channels: int, load_n: float | None = None,
+                           drum_diameter_m: float | None = None, model_tolerance: float = MODEL_TOLERANCE,
+                           n_max: int = DEFAULT_N_MAX, speeds_kmh=None) -> tuple[ModeTable, list[str]]:
+    """Model labels (n, direction) for a rolling-tyre mode table and flags for implausible labels (issue 13 item 6).
+
+    **Arguments:** ``table`` from :func:`ringfit.targets.rolling_modes.identify_rolling_modes`
+    (fixed frame); ``ring``, ``geometry`` (None: only the channel-resolution check of
+    :func:`resolution_flags`); ``channels`` — SSI channels; the rest as :func:`match_tables`.
+
+    **Returns:** ``(table, flags)``: a copy with extra columns ``model_branch``, ``model_n``,
+    ``model_direction``, ``model_tag``, ``model_hz``, ``label_flag`` (docs/formats.md §2:
+    unknown columns are kept), and one flag sentence per row ("" when plausible).
+    """
+    from dataclasses import replace
+
+    flags = resolution_flags(table, channels)
+    extra = dict(table.extra)
+    m = len(table)
+    if ring is not None and m:
+        res = match_tables([table], ring, geometry, load_n=load_n, drum_diameter_m=drum_diameter_m,
+                           model_tolerance=model_tolerance, n_max=n_max, speeds_kmh=speeds_kmh)
+        cols = {k: [] for k in ("model_branch", "model_n", "model_direction", "model_tag", "model_hz")}
+        for j, r in enumerate(res.rows):
+            ok = r["explained"]
+            cols["model_branch"].append(str(r["model_branch"]) if ok else "")
+            cols["model_n"].append(str(r["model_n"]) if ok else "")
+            cols["model_direction"].append(r["model_direction"] if ok else "")
+            cols["model_tag"].append(r["model_tag"] if ok else "")
+            cols["model_hz"].append(f"{r['model_hz']:.4f}" if ok else "")
+            if r["status"] != "matched":
+                flags[j] = "; ".join(x for x in (flags[j], r["note"]) if x)
+        extra.update({k: np.array(v, dtype=object) for k, v in cols.items()})
+    extra["label_flag"] = np.array(flags, dtype=object)
+    return replace(table, extra=extra), flags
+
+
+# ----------------------------------------------------------------------------------------------- free ring
+def compare_with_ring(table, ring, geometry, rotation_hz: float) -> list[dict]:
+    """Each identified mode beside the free rotating ring's prediction (docs/physics.md §3.2–3.3).
+
+    For a row with order n and a branch (or a standing tag, compared with
+    both branches) the prediction is the fixed-frame frequency |ω_nk − nΩ|/2π
+    (eq. 26) of that wave, and the co-rotating one |ω_nk|/2π (eq. 25): the
+    difference between the two is the Doppler shift nΩ/2π, and the fixed-frame
+    gap between the forward and backward waves of one n is the bifurcation.
+    No contact: for the loaded tyre use :func:`match_tables`.
+
+    **Returns** one dict per row: ``n``, ``branch``, ``tag``, ``freq_hz``,
+    ``fixed_pred_hz``, ``rotating_pred_hz``, ``doppler_hz``, ``error_hz``,
+    ``bifurcation_pred_hz`` (fixed-frame forward − backward for that n).
+    """
+    from ringfit.physics.natural import fixed_frame_frequencies, rotating_natural_frequencies
+
+    omega = 2.0 * math.pi * float(rotation_hz)
+    out = []
+    for i in range(len(table)):
+        n = int(table.n[i])
+        if n < 1:
+            continue
+        fixed = np.abs(np.asarray(fixed_frame_frequencies(ring, geometry, float(n), omega)))
+        rot = np.abs(np.asarray(rotating_natural_frequencies(ring, geometry, float(n), omega)))
+        branch = table.branch[i]
+        if branch:
+            k = 0 if branch == "backward" else 1
+        else:  # standing: the nearer of the two waves
+            k = int(np.argmin(np.abs(fixed - table.freq_hz[i])))
+        out.append({
+            "n": n, "branch": branch or ("backward" if k == 0 else "forward"), "tag": table.tag[i],
+            "freq_hz": float(table.freq_hz[i]), "fixed_pred_hz": float(fixed[k]),
+            "rotating_pred_hz": float(rot[k]), "doppler_hz": float(n * omega / (2 * math.pi)),
+            "error_hz": float(table.freq_hz[i] - fixed[k]), "bifurcation_pred_hz": float(fixed[1] - fixed[0]),
+        })
+    return out
+
+
+__all__ = [
+    "DEFAULT_N_MAX", "MODEL_TOLERANCE", "EXPLAINED_Z", "LABEL_PENALTY", "CampbellDiagram", "campbell_diagram",
+    "track_branches", "TableCondition", "table_conditions", "CampbellMatch", "match_tables", "MATCH_COLUMNS",
+    "CAMPBELL_COLUMNS", "match_rows_table", "resolution_flags", "label_identified_modes", "compare_with_ring",
+    "frame_name",
+]

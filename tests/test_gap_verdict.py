@@ -1,0 +1,140 @@
+"""The verdict rule of the gap diagnosis, one acceptance condition at a time, and the residual test's two levels.
+
+Each test starts from a candidate that passes every condition and breaks exactly one: the rule must
+reject it for that reason and no other (docs/formats.md §5, ringfit/gap/verdict.py).
+"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import chi2 as chi2_dist
+
+from ringfit.gap import verdict as V
+
+
+def good(**changes) -> dict:
+    """A candidate (diagnosis JSON form) that meets every condition with a margin."""
+    c = {
+        "effect": "sensor_tilt",
+        "heldout_shrink_pct": V.MIN_HELDOUT_SHRINK_PCT + 20.0,
+        "heldout_shrink_interval_pct": [V.MIN_HELDOUT_SHRINK_LO_PCT + 10.0, 90.0],
+        "evidence": {"delta_bic": V.MAX_DELTA_BIC - 50.0},
+        "params": {"tilt_gain": {"value": 0.9, "excludes_null": True}},
+        "baseline_drift_max_relative": 0.5 * V.MAX_DRIFT_RELATIVE,
+    }
+    c.update(changes)
+    return c
+
+
+def test_a_good_candidate_is_accepted():
+    ok, why = V.acceptance(good())
+    assert ok and why == []
+
+
+def test_condition_1_heldout_shrink():
+    ok, why = V.acceptance(good(heldout_shrink_pct=V.MIN_HELDOUT_SHRINK_PCT - 0.1))
+    assert not ok and len(why) == 1 and "heldout shrink" in why[0] and "lower bound" not in why[0]
+
+
+def test_condition_1_shrink_lower_bound():
+    ok, why = V.acceptance(good(heldout_shrink_interval_pct=[V.MIN_HELDOUT_SHRINK_LO_PCT - 0.1, 80.0]))
+    assert not ok and len(why) == 1 and "lower bound" in why[0]
+    # few rows: the bootstrap interval of a ratio is reported, not used
+    few = good(heldout_shrink_interval_pct=[-50.0, 80.0], rows=V.MIN_INTERVAL_ROWS - 1)
+    assert V.acceptance(few) == (True, [])
+    assert not V.acceptance(dict(few, rows=V.MIN_INTERVAL_ROWS))[0]
+
+
+def test_condition_1_group_shrink_rescues_a_diluted_effect():
+    """An effect that acts on one group only (e.g. the damping rows) passes on that group's shrink."""
+    diluted = good(heldout_shrink_pct=5.0, heldout_shrink_interval_pct=[1.0, 9.0], group="damping",
+                   heldout_shrink_in_group_pct=V.MIN_HELDOUT_SHRINK_PCT + 5.0,
+                   heldout_shrink_in_group_interval_pct=[V.MIN_HELDOUT_SHRINK_LO_PCT + 1.0, 60.0])
+    assert V.acceptance(diluted) == (True, [])
+    weak = dict(diluted, heldout_shrink_in_group_pct=V.MIN_HELDOUT_SHRINK_PCT - 1.0)
+    ok, why = V.acceptance(weak)
+    assert not ok and "in damping" in why[0]
+
+
+def test_condition_2_delta_bic():
+    ok, why = V.acceptance(good(evidence={"delta_bic": V.MAX_DELTA_BIC + 0.1}))
+    assert not ok and len(why) == 1 and "delta BIC" in why[0]
+
+
+def test_condition_3_an_interval_must_exclude_the_null():
+    ok, why = V.acceptance(good(params={"tilt_gain": {"value": 0.1, "excludes_null": False}}))
+    assert not ok and len(why) == 1 and "null" in why[0]
+    two = {"a": {"excludes_null": False}, "b": {"excludes_null": True}}
+    assert V.acceptance(good(params=two))[0]  # one of several suffices
+
+
+def test_condition_4_relative_drift_of_the_baseline():
+    ok, why = V.acceptance(good(baseline_drift_max_relative=V.MAX_DRIFT_RELATIVE + 0.01))
+    assert not ok and len(why) == 1 and "drifted" in why[0]
+
+
+def test_condition_4_reference_state_drift_replaces_the_relative_one():
+    """Mode tables judge drift by what it does to the free-table predictions, in σ, not by percentages."""
+    big_relative = good(baseline_drift_max_relative=10.0, reference_drift_sigma=0.5 * V.MAX_REFERENCE_DRIFT_SIGMA)
+    assert V.acceptance(big_relative) == (True, [])
+    ok, why = V.acceptance(good(reference_drift_sigma=V.MAX_REFERENCE_DRIFT_SIGMA + 0.01))
+    assert not ok and len(why) == 1 and "reference-state" in why[0]
+
+
+def test_condition_4_independent_prior_region():
+    k = 3
+    limit = float(chi2_dist.ppf(V.PRIOR_REGION, k))
+    inside = good(baseline_prior_distance={"d2": limit - 0.1, "d2_baseline_fit": 0.0, "k": k})
+    assert V.acceptance(inside) == (True, [])
+    outside = good(baseline_prior_distance={"d2": limit + 0.1, "d2_baseline_fit": 0.0, "k": k})
+    ok, why = V.acceptance(outside)
+    assert not ok and len(why) == 1 and "prior" in why[0]
+    # no further out than the baseline-only fit: allowed
+    assert V.acceptance(good(baseline_prior_distance={"d2": limit + 5, "d2_baseline_fit": limit + 6, "k": k}))[0]
+
+
+def test_every_failure_is_reported_together():
+    bad = good(heldout_shrink_pct=0.0, evidence={"delta_bic": 3.0}, params={"x": {"excludes_null": False}},
+               baseline_drift_max_relative=1.0)
+    ok, why = V.acceptance(bad)
+    assert not ok and len(why) == 4
+
+
+def test_residual_test_levels_on_white_noise_and_structure():
+    rng = np.random.default_rng(0)
+    groups = np.array(["a"] * 200 + ["b"] * 200)
+    noise = V.residual_test(rng.standard_normal(400), groups)
+    assert not noise["excess"] and not noise["structured"]
+    z = rng.standard_normal(400)
+    z[200:] *= math.sqrt(2.0)  # reduced chi2 ≈ 2 in group b: an excess, not yet structured
+    excess = V.residual_test(z, groups)
+    assert excess["group"] == "b" and excess["excess"] and not excess["structured"]
+    z[200:] *= math.sqrt(2.5)  # ≈ 5: structured
+    structured = V.residual_test(z, groups)
+    assert structured["group"] == "b" and structured["structured"]
+
+
+def test_one_row_cannot_make_a_residual_structured():
+    z = np.zeros(9) + 0.5
+    z[0] = 30.0  # one wild row (an n = 1 damping outlier, say)
+    out = V.residual_test(z, np.zeros(9))
+    assert out["excess"] and not out["structured"]
+    z[1] = -30.0  # two rows: structure
+    assert V.residual_test(z, np.zeros(9))["structured"]
+
+
+def test_residual_test_effective_dof_of_coloured_noise():
+    """A few effective degrees of freedom (red noise) make the same χ² far less significant."""
+    z = np.full(100, math.sqrt(2.0))
+    white = V.residual_test(z, np.zeros(100), series=np.zeros(100), series_dof={0: 100.0})
+    red = V.residual_test(z, np.zeros(100), series=np.zeros(100), series_dof={0: 4.0})
+    assert red["p"] > 100 * white["p"]
+    assert white["excess"] and not red["excess"]
+
+
+@pytest.mark.parametrize("shrink_rms, shrink_ss", [(10.0, 19.0), (5.0, 9.75)])
+def test_thresholds_are_the_rms_thresholds_on_the_sum_of_squares(shrink_rms, shrink_ss):
+    """1 − SS_after/SS_before = 1 − (RMS_after/RMS_before)²: the stated equivalence of the constants."""
+    assert 100 * (1 - (1 - shrink_rms / 100) ** 2) == pytest.approx(shrink_ss)
+    assert shrink_ss in (V.MIN_HELDOUT_SHRINK_PCT, V.MIN_HELDOUT_SHRINK_LO_PCT)
