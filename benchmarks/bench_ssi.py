@@ -35,6 +35,12 @@ step 2, synthetic free ring n = 1…20 with double poles + cavity mode):
 Decimation (and alignment) happen once, outside the timed call, and both
 tools get the same decimated array: neither tool's time includes it.
 
+Case (c) also times the σ step of ``ringfit ssi`` (issue 12 item 4,
+:func:`ringfit.targets.uncertainty.jackknife_modes` after clustering; the
+other cases are one excitation seen by every channel, where a jackknife over
+sensor angles does not apply) as a share of the SSI's wall time, and
+:func:`ringfit.targets.ssi.ssi_cov_factors` (the SSI keeping its SVD factors).
+
 Timed scope on both sides, the same job: covariances and block Hankel
 matrix (30 block rows), SVD, A, C and the eigen-decomposition (poles AND
 mode shapes) of every model order 2, 4, …, 160, and stabilization labels
@@ -105,8 +111,9 @@ def make_case(case: str, path: Path) -> None:
         angles = np.arange(16) * 22.5
         rec = impact_records(modes, angles, fs_hz=FS_RAW, duration_s=4.0 + 0.1, seed=3)
         y, _, _, fs = prepare_decays(rec, decimate_to=FS, average=False)
+        angle = np.repeat(np.deg2rad(angles), 2)  # radial, tangential per record: the jackknife's groups
     truth = modes.freq_hz[(modes.freq_hz > BAND[0]) & (modes.freq_hz < BAND[1])]
-    np.savez(path, y=y, fs=fs, truth=truth)
+    np.savez(path, y=y, fs=fs, truth=truth, **({"angle": angle} if case == "c" else {}))
 
 
 def worker(tool: str, data: Path, out: Path, block_rows: int, ordmax: int, channels: int, repeats: int,
@@ -168,6 +175,28 @@ def worker(tool: str, data: Path, out: Path, block_rows: int, ordmax: int, chann
             stabilization_diagram(poles)
             t["stabilization"] = time.perf_counter() - c
             stage_s = {k: min(v, stage_s.get(k, np.inf)) for k, v in t.items()}
+    unc = {}
+    if tool == "ringfit" and "angle" in d.files:  # hammer decays: the σ step of `ringfit ssi` (issue 12 item 4)
+        from ringfit.targets.identify import mode_table
+        from ringfit.targets.uncertainty import angle_groups, jackknife_modes
+
+        angle = d["angle"][:channels]
+        groups = angle_groups(angle)[0]
+        axis = np.tile(np.array(["radial", "tangential"], dtype=object), angle.size // 2)
+        walls_f, walls_j = [], []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            poles_f, factors = ssi.ssi_cov_factors(y, fs, orders=orders, block_rows=block_rows, workers=workers,
+                                                   unbiased=False)
+            walls_f.append(time.perf_counter() - t0)
+            modes_f = mode_table(cluster_modes(poles_f, stabilization_diagram(poles_f), f_range=BAND), angle, axis,
+                                 "ssi-cov", poles=poles_f)[1]
+            t0 = time.perf_counter()
+            res = jackknife_modes(factors, poles_f, modes_f, groups,
+                                  workers=ssi.default_workers() if workers is None else workers)
+            walls_j.append(time.perf_counter() - t0)
+        unc = {"ssi_factors_s": min(walls_f), "jackknife_s": min(walls_j), "groups": res.groups,
+               "modes": len(modes_f)}
     if tool == "ringfit":
         poles = first
         t1 = time.perf_counter()
@@ -184,7 +213,7 @@ def worker(tool: str, data: Path, out: Path, block_rows: int, ordmax: int, chann
         stable_f, stable_o, freq = fn[ok], order[ok], []
     json.dump({"wall_s": min(walls), "cpu_s": min(cpus), "walls": walls, "cluster_s": t_cluster,
                "peak_mb": peak / 2**20, "stages": stage_s, "modes": freq, "stable_f": stable_f.tolist(),
-               "stable_o": stable_o.tolist()}, open(out, "w"))
+               "stable_o": stable_o.tolist(), "uncertainty": unc}, open(out, "w"))
 
 
 def run_worker(tool, data, block_rows=BLOCK_ROWS, ordmax=ORDMAX, channels=10**6, repeats=3, stages=False,
@@ -254,6 +283,12 @@ def main():
             print(f"ringfit {key:<7}: wall {r['wall_s']:7.3f} s  cpu {r['cpu_s']:7.3f} s  peak +{r['peak_mb']:7.1f} MB  "
                   f"(+ clustering {r['cluster_s']:.2f} s, {len(r['modes'])} modes)")
             print("  stages (wall s): " + ", ".join(f"{k} {v:.3f}" for k, v in r["stages"].items()))
+            u = r.get("uncertainty") or {}
+            if u:
+                print(f"  σ of the modes (jackknife over {u['groups']} groups of sensor angles, {u['modes']} modes): "
+                      f"{u['jackknife_s']:.3f} s = {100 * u['jackknife_s'] / r['wall_s']:.0f} % of the SSI wall time; "
+                      f"SSI keeping the SVD factors {u['ssi_factors_s']:.3f} s (+"
+                      f"{100 * (u['ssi_factors_s'] / r['wall_s'] - 1):.0f} %, stabilization not included)")
         rf_hits = {f0: found(rf["x1"]["stable_f"], rf["x1"]["stable_o"], f0, n_orders) for f0 in truth}
         print(f"ringfit finds {sum(v is not None for v in rf_hits.values())}/{truth.size} true modes "
               f"(stable poles within 0.5 % at >= 15 % of orders)")

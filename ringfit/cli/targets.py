@@ -88,8 +88,9 @@ def register(sub) -> None:
                                    "velocity without force), decimate, drop the first 0.0127 s, leave out dead or "
                                    "junk channels (said so), run SSI-cov over the model orders, label the "
                                    "stabilization diagram (frequency 1 %%, damping 5 %%, pair-aware shape check), "
-                                   "cluster stable poles into modes (one per double pole), assign n from the shapes "
-                                   "and write the mode table.")
+                                   "cluster stable poles into modes (one per double pole), assign n from the shapes, "
+                                   "estimate each mode's σ by a jackknife over groups of sensor angles and write "
+                                   "the mode table.")
     _common(p)
     p.add_argument("--orders", type=_orders, default=range(2, 161, 2), metavar="START:STOP[:STEP]",
                    help="model orders (state dimensions), default 2:160:2")
@@ -100,7 +101,12 @@ def register(sub) -> None:
     p.add_argument("--radius", type=number("a tyre radius in metres, 0 < R <= 5", lo=0.0, hi=5.0, lo_open=True),
                    default=None, help="tyre radius [m], for records without force")
     p.add_argument("--workers", type=integer("a whole number >= 1", lo=1, hi=4096), default=None, metavar="N",
-                   help="threads for the SVD and the order sweep (default: the CPUs this process may use, at most 8)")
+                   help="threads for the SVD, the order sweep and the jackknife (default: the CPUs this process may "
+                        "use, at most 8)")
+    p.add_argument("--no-jackknife", dest="jackknife", action="store_false",
+                   help="freq_std_hz and damping_std_pct from the spread over the model orders only, which "
+                        "understates them (default: a jackknife over groups of sensor angles plus half that spread, "
+                        "docs/formats.md §2)")
     quiet_flag(p)
     p.set_defaults(run=run_ssi)
 
@@ -184,7 +190,8 @@ def run_ssi(args) -> int:
     _check_records(args, records)
     result = ssi_modes(records, orders=args.orders, block_rows=args.block_rows, f_range=args.band,
                        skip_s=args.skip, threshold=args.threshold, delay_s=args.delay, radius_m=args.radius,
-                       progress=not args.quiet and sys.stderr is not None, workers=args.workers)
+                       jackknife=args.jackknife, progress=not args.quiet and sys.stderr is not None,
+                       workers=args.workers)
 
     def plot(res):
         from ringfit.report.targets_plots import plot_ssi_summary

@@ -3,7 +3,8 @@
 ``records → align (force threshold and delay, or group velocity) → decimate
 → drop the first 0.0127 s → average repeated impacts per angle → SSI-cov
 → stabilization → clustering → n, travelling measure, acoustic flag →
-ModeTable`` (DATA.md §2; sidecar state ``free``, frame ``fixed``).
+σ by jackknife → ModeTable`` (docs/formats.md §2; sidecar state ``free``,
+frame ``fixed``).
 """
 
 from __future__ import annotations
@@ -26,8 +27,9 @@ from ringfit.targets.preprocessing import (
     sync_by_group_velocity,
 )
 from ringfit.targets.shapes import acoustic_candidates, mode_number, travelling_measure
-from ringfit.targets.ssi import PoleSet, ssi_cov
+from ringfit.targets.ssi import PoleSet, default_workers, ssi_cov_factors
 from ringfit.targets.stabilization import Stability, stabilization_diagram
+from ringfit.targets.uncertainty import angle_groups, jackknife_modes
 
 
 @dataclass
@@ -190,7 +192,7 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     keep = ~acoustic | ~(damping > spurious_damping_factor * ref)
     idx = np.flatnonzero(keep)
     modes = [modes[i] for i in idx]
-    fmt = lambda x: f"{x:.6g}"  # noqa: E731
+    fmt = lambda x: f"{x:.6g}" if np.isfinite(x) else ""  # noqa: E731  (empty: unknown)
     table = ModeTable(
         freq_hz=freq[idx],
         n=np.where(acoustic[idx], -1, n[idx]),
@@ -222,6 +224,7 @@ def ssi_modes(
     refs: np.ndarray | None = None,
     pair_aware: bool = True,
     min_share: float = 0.3,
+    jackknife: bool = True,
     progress: bool = False,
     workers: int | None = None,
 ) -> ModeIdentification:
@@ -230,26 +233,52 @@ def ssi_modes(
     **Arguments:** ``orders`` model orders; ``block_rows`` p; ``f_range`` [Hz]
     band of interest (its top sets the decimation); the pre-processing
     arguments of :func:`prepare_decays`; ``refs`` reference channels;
-    ``workers`` threads for the SVD products and the order sweep (default:
-    the usable CPUs, see :func:`ringfit.targets.ssi.default_workers`).
+    ``jackknife``: σ of each mode by the jackknife over groups of sensor
+    angles (:mod:`ringfit.targets.uncertainty`; ~20 % of the SSI's time);
+    ``False``: σ = the spread over the model orders, said so in the method;
+    ``workers`` threads for the SVD products, the order sweep and the
+    jackknife's replicates (default: the usable CPUs, see
+    :func:`ringfit.targets.ssi.default_workers`).
 
     **Returns:** :class:`ModeIdentification` (``table`` is the mode table).
     """
     d = free_decays(records, f_max_hz=f_range[1], decimate_to=decimate_to, skip_s=skip_s,
                     threshold=threshold, delay_s=delay_s, radius_m=radius_m)
     y, angle, axis, fs = d.y, d.angle_rad, d.axis, d.fs_hz
-    poles = ssi_cov(y, fs, orders=orders, block_rows=block_rows, refs=refs, progress=progress, workers=workers)
+    # free decays: covariances normalised by N, not N − i (ringfit.targets.ssi.output_covariances)
+    poles, factors = ssi_cov_factors(y, fs, orders=orders, block_rows=block_rows, refs=refs, unbiased=False,
+                                     progress=progress, workers=workers)
     stab = stabilization_diagram(poles, pair_aware=pair_aware)
     modes = cluster_modes(poles, stab, f_range=f_range, min_share=min_share)
     table, modes = mode_table(modes, angle, axis, "ssi-cov", poles=poles)
     note_quality(table, d.notes, d.credible)
+    unc = jackknife_modes(factors, poles, modes, angle_groups(angle)[0] if jackknife else np.zeros(0),
+                          workers=default_workers() if workers is None else workers)
+    modes = apply_uncertainty(table, modes, unc)
     from ringfit.targets.quality import psd_singular_values
 
     return ModeIdentification(table, modes, angle, axis, fs, poles=poles, stability=stab,
                               info={"block_rows": block_rows, "channels": y.shape[0], "samples": y.shape[1],
                                     "notes": list(d.notes), "credible": d.credible,
                                     "psd_singular_values": psd_singular_values(y, fs),
-                                    "source": records.source})
+                                    "uncertainty": unc, "source": records.source})
+
+
+def apply_uncertainty(table: ModeTable, modes: Sequence[PhysicalMode], unc) -> list:
+    """Write σ of a :class:`~ringfit.targets.uncertainty.ModeUncertainty` into the table (in place) and the modes.
+
+    ``freq_std_hz``, the extra column ``damping_std_pct`` (empty where
+    unknown) and the sidecar's ``method`` (``"ssi-cov; σ: <how>"``,
+    docs/formats.md §2). **Returns** the modes with the same σ.
+    """
+    import dataclasses
+
+    table.freq_std_hz = np.asarray(unc.freq_std_hz, dtype=np.float64).copy()
+    table.extra["damping_std_pct"] = np.array([f"{100 * z:.6g}" if np.isfinite(z) else "" for z in unc.damping_std],
+                                              dtype=object)
+    table.condition["method"] = f"{table.condition.get('method', 'ssi-cov')}; σ: {unc.method}"
+    return [dataclasses.replace(m, freq_std_hz=float(f), damping_std=float(z))
+            for m, f, z in zip(modes, unc.freq_std_hz, unc.damping_std)]
 
 
 def note_quality(table: ModeTable, notes: list[str], credible: bool, limits: list[str] = ()) -> None:

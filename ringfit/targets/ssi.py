@@ -87,10 +87,12 @@ _FFT_COV_CHUNK_BYTES = 4 * 2**20
 _HANKEL_CHUNK_COLS = 32
 
 
-def output_covariances(y: np.ndarray, max_lag: int, refs: np.ndarray | None = None) -> np.ndarray:
-    """Unbiased output covariances Λ_0 … Λ_max_lag (seed eq. 6, 16).
+def output_covariances(y: np.ndarray, max_lag: int, refs: np.ndarray | None = None, *,
+                       unbiased: bool = True) -> np.ndarray:
+    """Output covariances Λ_0 … Λ_max_lag (seed eq. 6, 16).
 
-    ``Λ_i = 1/(N−i) Σ_{k=0}^{N−i−1} y(k+i) y_ref(k)ᵀ`` for every lag at once.
+    ``Λ_i = 1/(N−i) Σ_{k=0}^{N−i−1} y(k+i) y_ref(k)ᵀ`` for every lag at once
+    (``unbiased=False``: ``1/N`` for every lag; see below).
     Long records (N ≥ 8 L, L = max_lag + 1 ≥ 16 lags): blocked FFT correlation
     (see :func:`_covariances_fft`); otherwise one batched matrix product over a
     zero-padded sliding-window view of ``y`` (no copy of the lagged data).
@@ -100,6 +102,13 @@ def output_covariances(y: np.ndarray, max_lag: int, refs: np.ndarray | None = No
     - ``y``: outputs, shape ``(channels, samples)``.
     - ``max_lag``: largest lag i (< samples).
     - ``refs``: indices of the reference channels (default: all).
+    - ``unbiased``: divide lag i by its number of products N − i (stationary
+      responses: ambient or white-noise excitation). ``False`` divides every
+      lag by N: right for FREE DECAYS that have died out within the record
+      (docs/physics.md §9): there ``Σ_k y(k+i) y(k)ᵀ = C Aⁱ G`` exactly, and
+      the lag-dependent factor 1/(N − i) ≈ (1 + 1/N)ⁱ/N would shift every
+      pole's decay rate by ≈ fs/N (on 0.5 s decays: −12 % on a 2.5 %
+      damping at 107 Hz) while leaving the frequencies alone.
 
     **Returns:** shape ``(max_lag + 1, channels, refs)``.
     """
@@ -115,7 +124,7 @@ def output_covariances(y: np.ndarray, max_lag: int, refs: np.ndarray | None = No
         padded = np.concatenate([y, np.zeros((l, lags))], axis=1)
         lagged = np.lib.stride_tricks.sliding_window_view(padded, n, axis=1)[:, :lags]  # (l, lags, n)
         cov = np.matmul(lagged.transpose(1, 0, 2), yref.T)  # (lags, l, r)
-    cov /= (n - np.arange(lags))[:, None, None]
+    cov /= (n - np.arange(lags))[:, None, None] if unbiased else n
     return cov
 
 
@@ -248,8 +257,9 @@ def truncated_svd(
     oversample: int | None = None,
     seed: int = 0,
     workers: int = 1,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Leading ``rank`` left singular vectors and values of ``h``.
+    return_v: bool = False,
+):
+    """Leading ``rank`` left singular vectors and values of ``h`` (and the right vectors on request).
 
     **Arguments:**
 
@@ -262,27 +272,31 @@ def truncated_svd(
     - ``oversample``: extra random vectors (default ``max(20, rank // 4)``).
     - ``workers``: threads for the randomized method's products ``H X``,
       ``Hᵀ Z`` (column blocks, one BLAS thread each); 1 = BLAS's own threading.
+    - ``return_v``: also return ``V = Hᵀ U S⁻¹`` (the right factor of the
+      rank-``rank`` projection ``U Uᵀ H = U S Vᵀ``; the randomized method gets
+      it from the ``Hᵀ Q`` it forms anyway, at n·k·rank more flops).
 
     Accuracy: singular triplets above the noise floor of H come out to
     round-off (~1e-13 relative on the benchmark data); those inside a flat
     noise floor (σ_k/σ_{k+1} ≈ 1) are not resolved individually by any
     iterative method — the rank-``rank`` approximation error stays ≈ σ_{rank+1}.
 
-    **Returns:** ``(u, s)`` with shapes ``(rows, rank)`` and ``(rank,)``, s descending.
+    **Returns:** ``(u, s)`` with shapes ``(rows, rank)`` and ``(rank,)``, s descending;
+    ``(u, s, v)`` with v of shape ``(columns, rank)`` when ``return_v``.
     """
     m, n = h.shape
     rank = int(min(rank, m, n))
     if method == "full" or rank >= min(m, n) - 1:
         dense = h.toarray() if hasattr(h, "toarray") else h
-        u, s, _ = scipy.linalg.svd(dense, full_matrices=False, check_finite=False)
-        return u[:, :rank], s[:rank]
+        u, s, vt = scipy.linalg.svd(dense, full_matrices=False, check_finite=False)
+        return (u[:, :rank], s[:rank]) + ((vt[:rank].T,) if return_v else ())
     if method == "svds":
         from scipy.sparse.linalg import svds
 
         dense = h.toarray() if hasattr(h, "toarray") else h
-        u, s, _ = svds(dense, k=rank, random_state=seed)
+        u, s, vt = svds(dense, k=rank, random_state=seed)
         order = np.argsort(s)[::-1]
-        return u[:, order], s[order]
+        return (u[:, order], s[order]) + ((vt[order].T,) if return_v else ())
     if method != "randomized":
         raise ValueError(f"unknown SVD method {method!r}; expected randomized, svds or full")
     k = min(rank + (max(20, rank // 4) if oversample is None else int(oversample)), min(m, n))
@@ -294,9 +308,13 @@ def truncated_svd(
         qmat = scipy.linalg.qr(basis, mode="economic", check_finite=False, overwrite_a=True)[0]
         # SVD of the k × n projection B = QᵀH through the R factor of Bᵀ = Q₂R (B = RᵀQ₂ᵀ: same U and s, and
         # the k × k SVD of Rᵀ is half the work of gesdd on B, which would also form the unused right vectors)
-        r_b = scipy.linalg.qr(apply(h.T, qmat), mode="r", check_finite=False, overwrite_a=True)[0][:k]
+        z = apply(h.T, qmat)  # HᵀQ (n × k)
+        r_b = scipy.linalg.qr(z, mode="r", check_finite=False, overwrite_a=not return_v)[0][:k]
     ub, s, _ = scipy.linalg.svd(r_b.T, check_finite=False, overwrite_a=True)
-    return (qmat @ ub[:, :rank]), s[:rank]
+    u = qmat @ ub[:, :rank]
+    if return_v:  # HᵀU S⁻¹ = (HᵀQ) U_b S⁻¹
+        return u, s[:rank], (z @ ub[:, :rank]) / np.where(s[:rank] > 0, s[:rank], 1.0)
+    return u, s[:rank]
 
 
 @contextlib.contextmanager
@@ -432,27 +450,14 @@ def _sweep(orders, g, c_r, dt, max_damping, workers: int, bar=None) -> list:
     Orders run in ``workers`` threads (largest first, for balance): the LAPACK
     calls of :func:`ringfit.targets.eigen.eig_shapes` release the GIL.
     """
-    from ringfit.targets.eigen import eig_shapes
-
-    def continuous(wr, wi):  # λ_c = ln(μ)/Δt (eq. 13)
-        return np.log(wr + 1j * wi) / dt
-
-    def keep(wr, wi):
-        up = np.flatnonzero(wi > 0)  # first of each complex pair
-        lam = continuous(wr[up], wi[up])
-        zeta = -lam.real / np.abs(lam)
-        return up[(zeta > 0) & (zeta < max_damping)]
-
     def one(n):
         try:
-            wr, wi, j, phi = eig_shapes(g[:n, :n], c_r[:, :n], keep)
+            lam, phi = discrete_poles(g[:n, :n], c_r[:, :n], dt, max_damping)
         except np.linalg.LinAlgError as exc:
             raise InputError(f"eigen-decomposition of model order {n} did not converge ({exc})") from None
-        if j.size == 0:
+        if lam.size == 0:
             return None
-        lam = continuous(wr[j], wi[j])
-        phi = phi / np.linalg.norm(phi, axis=0, keepdims=True)
-        return np.full(j.size, n), lam, phi.T
+        return np.full(lam.size, n), lam, phi
 
     results = {}
     if workers <= 1:
@@ -470,6 +475,36 @@ def _sweep(orders, g, c_r, dt, max_damping, workers: int, bar=None) -> list:
                 if bar is not None:
                     bar.update()
     return [results[n] for n in orders if results[n] is not None]
+
+
+def discrete_poles(a: np.ndarray, c: np.ndarray, dt: float, max_damping: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous poles and unit-norm shapes of one state matrix (seed eq. 13–15).
+
+    **Arguments:** ``a`` ``(n, n)`` (A or any matrix similar to it), ``c``
+    ``(l, n)`` the output matrix in the same basis, ``dt`` [s]; poles with ζ
+    outside (0, ``max_damping``) and the lower member of each complex pair are
+    dropped.
+
+    **Returns:** ``(lam, phi)``: λ_c = ln(μ)/Δt [rad/s] ``(poles,)`` and φ = Cψ
+    ``(poles, l)``, complex. **Raises** ``np.linalg.LinAlgError`` when the
+    eigen-decomposition does not converge.
+    """
+    from ringfit.targets.eigen import eig_shapes
+
+    def continuous(wr, wi):  # λ_c = ln(μ)/Δt (eq. 13)
+        return np.log(wr + 1j * wi) / dt
+
+    def keep(wr, wi):
+        up = np.flatnonzero(wi > 0)  # first of each complex pair
+        lam = continuous(wr[up], wi[up])
+        zeta = -lam.real / np.abs(lam)
+        return up[(zeta > 0) & (zeta < max_damping)]
+
+    wr, wi, j, phi = eig_shapes(a, c, keep)
+    if j.size == 0:
+        return np.zeros(0, complex), np.zeros((0, c.shape[0]), complex)
+    phi = phi / np.linalg.norm(phi, axis=0, keepdims=True)
+    return continuous(wr[j], wi[j]), phi.T
 
 
 def default_workers() -> int:
@@ -497,6 +532,7 @@ def ssi_cov(
     refs: np.ndarray | None = None,
     svd_method: str = "randomized",
     max_damping: float = 0.3,
+    unbiased: bool = True,
     progress: bool = False,
     workers: int | None = None,
 ) -> PoleSet:
@@ -510,12 +546,52 @@ def ssi_cov(
     - ``block_rows``: p (= q block columns); default :func:`default_block_rows`.
     - ``refs``: reference channel indices (SSI-cov/ref); default all channels.
     - ``svd_method``: see :func:`truncated_svd`.
+    - ``unbiased``: covariance normalisation (:func:`output_covariances`);
+      ``False`` for free decays.
     - ``workers``: threads for the SVD's products and the order sweep
       (default :func:`default_workers`; 1 = serial). Results do not depend on it
       beyond round-off in the SVD.
 
     **Returns:** :class:`PoleSet`.
     """
+    return _ssi_cov(y, fs_hz, orders, block_rows, refs, svd_method, max_damping, unbiased, progress, workers,
+                    factors=False)[0]
+
+
+@dataclass
+class HankelFactors:
+    """The rank-k factorisation ``H ≈ U S Vᵀ`` of the block Hankel matrix of one SSI run (:func:`ssi_cov_factors`).
+
+    **Fields:** ``u`` ``(p·l, k)`` (row ``i·l + c``: block row i, channel c),
+    ``s`` ``(k,)``, ``v`` ``(q·r, k)`` (column ``j·r + m``: block column j,
+    reference m), ``v = Hᵀ u / s``; ``block_rows`` p; ``n_channels`` l;
+    ``refs`` the channel index of each reference ``(r,)``; ``dt`` [s].
+    """
+
+    u: np.ndarray
+    s: np.ndarray
+    v: np.ndarray
+    block_rows: int
+    n_channels: int
+    refs: np.ndarray
+    dt: float
+
+
+def ssi_cov_factors(y: np.ndarray, fs_hz: float, *, orders: Sequence[int] = range(2, 161, 2),
+                    block_rows: int | None = None, refs: np.ndarray | None = None, svd_method: str = "randomized",
+                    max_damping: float = 0.3, unbiased: bool = True, progress: bool = False,
+                    workers: int | None = None) -> tuple[PoleSet, HankelFactors]:
+    """:func:`ssi_cov`, also returning the SVD factors of H (:class:`HankelFactors`) for re-identifications.
+
+    Used by :func:`ringfit.targets.uncertainty.jackknife_modes`; the extra
+    cost is one n·k·max(orders) product (V from the ``Hᵀ Q`` the SVD forms).
+    """
+    return _ssi_cov(y, fs_hz, orders, block_rows, refs, svd_method, max_damping, unbiased, progress, workers,
+                    factors=True)
+
+
+def _ssi_cov(y, fs_hz, orders, block_rows, refs, svd_method, max_damping, unbiased, progress, workers, *, factors):
+    """Body of :func:`ssi_cov` and :func:`ssi_cov_factors`: ``(poles, factors or None)``."""
     y = np.asarray(y, dtype=np.float64)
     if y.ndim != 2:
         raise InputError(f"outputs have shape {y.shape}; expected (channels, samples)")
@@ -527,9 +603,15 @@ def ssi_cov(
     p = default_block_rows(max(orders), l, r) if block_rows is None else int(block_rows)
     workers = _workers(workers)
     with _own_threads(workers):
-        h = hankel_for_svd(output_covariances(y, 2 * p - 1, refs), p)
-        return poles_from_hankel(h, l, orders, 1.0 / fs_hz, svd_method=svd_method, max_damping=max_damping,
-                                 progress=progress, workers=workers)
+        h = hankel_for_svd(output_covariances(y, 2 * p - 1, refs, unbiased=unbiased), p)
+        if not factors:
+            return poles_from_hankel(h, l, orders, 1.0 / fs_hz, svd_method=svd_method, max_damping=max_damping,
+                                     progress=progress, workers=workers), None
+        u, s, v = truncated_svd(h, max(orders), method=svd_method, workers=workers, return_v=True)
+        poles = poles_from_svd(u, s, l, orders, 1.0 / fs_hz, max_damping=max_damping, progress=progress,
+                               workers=workers)
+    ref_index = np.arange(l) if refs is None else np.asarray(refs, dtype=np.int64)
+    return poles, HankelFactors(u, s, v, p, l, ref_index, 1.0 / fs_hz)
 
 
 def poles_from_hankel(
