@@ -8,11 +8,14 @@ reused across candidates and cases; a first, uncounted diagnosis of a
 four-speed profile folder with every candidate measures the cold start,
 compilation included (the "< 20 s on 2 cores" figure).
 
-Ideal shrink = 1 − (true noise RMS)/(baseline held-out RMS): the fraction of
-the residual that is not noise. The true noise comes from the hidden label: for
-profile cases its RMS on the diagnosis grid, for mode-table cases the realised
-noise of every frequency and damping row (damping rows in the diagnosis's
-frequency-noise units).
+Ideal shrink = 1 − SS_noise/SS_before (docs/formats.md §5: the shrink is
+1 − SS_after/SS_before of noise-weighted sums of squares): the fraction of the
+baseline's held-out residual that is not noise. The true noise comes from the
+hidden label: for profile cases its RMS on the diagnosis grid (SS ratio =
+(noise RMS / held-out RMS)²), for mode-table cases the realised noise of every
+frequency row, weighted and Huber-transformed as the diagnosis weights its
+held-out residuals. The measured shrink is the verdict's (the accepted chain
+against the baseline).
 
 The generator varies what a self-fitting benchmark would hold fixed: the truth's
 grid (M = 1024 … 4096 harmonics), the number of recorded angles (360 … 2048),
@@ -40,15 +43,28 @@ from ringfit.synth.cases import MODAL_INJECTIONS, PROFILE_INJECTIONS, make_case,
 
 
 def modal_ideal(d, label) -> float:
-    """Ideal held-out shrink [%] of a mode-table case from the realised noise of every row (hidden label),
-    in the diagnosis's own units (damping rows scaled as the diagnosis scales them)."""
+    """Ideal held-out shrink [%] of a mode-table case: 100 (1 − SS_noise/SS_before) over the frequency rows,
+    SS_noise from the realised noise of every row (hidden label), weighted and ψ-transformed exactly as the
+    diagnosis weights its held-out residuals (docs/formats.md §5)."""
     part = next(p for p in d.parts if p.problem.domain == "modes")
     prob = part.problem
-    e = np.array([v for _, v in label.noise["rows"]])
-    if e.size != prob.m:  # row order not reproduced: fall back on the diagnosis's own noise estimate
+    e = np.array([v for kind, v in label.noise["rows"] if kind == "freq"])
+    if e.size != prob.m:  # row order not reproduced: fall back on the diagnosis's own estimate
         return part.summary["baseline"]["ideal_shrink_pct"]
-    noise_rms = float(np.sqrt(np.mean((e * prob.scale) ** 2)))
-    return 100.0 * (1.0 - noise_rms / part.summary["baseline"]["heldout_rms"])
+    ss_noise = float(np.sum(prob.standardised(e, heldout=True) ** 2))
+    ss_before = float(np.sum(prob.standardised(prob.y - part.baseline.extra["heldout_pred"], heldout=True) ** 2))
+    return 100.0 * (1.0 - ss_noise / ss_before)
+
+
+def profile_ideal(d, label) -> float:
+    """Ideal held-out shrink [%] of a profile case: the true noise RMS on the diagnosis grid, weighted by each
+    row's own σ as the diagnosis weights its held-out residuals."""
+    part = next(p for p in d.parts if p.problem.domain == "profiles")
+    prob = part.problem
+    sigma = prob.sigma_heldout if prob.sigma_heldout is not None else prob.sigma
+    ss_noise = float(label.noise["grid_rms_ms2"] ** 2 * np.sum(1.0 / sigma**2))
+    ss_before = float(np.sum(prob.standardised(prob.y - part.baseline.extra["heldout_pred"], heldout=True) ** 2))
+    return 100.0 * (1.0 - ss_noise / ss_before)
 
 
 def run(kind: str, n: int, offset: int, tmp: Path, confusion: Counter, errors: list, times: list) -> None:
@@ -67,15 +83,15 @@ def run(kind: str, n: int, offset: int, tmp: Path, confusion: Counter, errors: l
         b = d.content["baseline"]
         note = ""
         if kind == "profiles":
-            ideal = 100.0 * (1.0 - label.noise["grid_rms_ms2"] / b["heldout_rms"])
+            ideal = profile_ideal(d, label)
             note = (f"noise {label.noise['colour']:5s} true {label.noise['grid_rms_ms2']:.3g} "
                     f"est {b['noise_rms']:.3g}; M {label.ring['grid']} pts {label.ring['n_points']} ")
         else:
             ideal = modal_ideal(d, label)
         if got == label.expected_verdict and got not in ("none", "unexplained"):
-            cand = next(c for c in d.content["candidates"] if c["effect"] == got)
-            errors.append((kind, cand["heldout_shrink_pct"] - ideal))
-            note += f"shrink {cand['heldout_shrink_pct']:5.1f} ideal {ideal:5.1f}"
+            shrink = d.verdict["heldout_shrink_pct"]
+            errors.append((kind, shrink - ideal))
+            note += f"shrink {shrink:5.1f} ideal {ideal:5.1f}"
         else:
             note += f"ideal {ideal:5.1f}"
         flag = "" if got == label.expected_verdict else "  <-- MISS"

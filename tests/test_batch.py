@@ -86,6 +86,10 @@ def test_output_names_follow_the_documented_rule(tmp_path):
                              str(tmp_path / "out" / "free.fitted.tyre.toml"), "--plot",
                              str(tmp_path / "out" / "free") + ".png", "--prior", "none", "--tyre",
                              str(tmp_path / "a" / "tyre.toml"), "--force"]
+    est = plan_batch("estimate", ["r/run1.profile.csv", "r/drive.records.npz"], "o", ["--tyre", "fitted.toml"])
+    assert est[0].argv == ["estimate", "r/run1.profile.csv", "--out", "o/run1.estimate.json", "--tyre",
+                           "fitted.toml", "--quiet"]
+    assert est[1].outputs == ["o/drive.estimate.json"]
     ssi = plan_batch("ssi", ["r/t1.records.npz"], "o", ["--workers", "3"])[0]
     assert ssi.argv.count("--workers") == 1 and ssi.outputs == ["o/t1.modes.csv", "o/t1.modes.json"]
     with pytest.raises(InputError, match="--out"):

@@ -116,6 +116,22 @@ def test_c_real_looking_loaded_table_is_ground_contact(tmp_path):
     assert any("match" in r and "n matched to 6" in r["match"] for r in c["rows"])
     # the damping family is judged apart: the 20 % n = 1 row is a damping matter, not a structural one
     assert "damping" in v
+    # every row names the model mode it was compared with: tags extr/0 → the contact branches of their n
+    by_row = {r["row"]: r for r in rows}
+    assert "contact-symmetric" in by_row["loaded (loaded 4000 N) n=4 extr"]["model_mode"]
+    assert "contact-antisymmetric" in by_row["loaded (loaded 4000 N) n=4 0"]["model_mode"]
+    assert by_row["loaded (loaded 4000 N) n=4 0"]["short"] == "loaded 4 0"
+    # the report: the verdict sentence names the rows, a per-row table per family, no damping row in a
+    # frequency figure (separate parts)
+    from ringfit.report.gap_report import verdict_sentence, write_gap_report
+
+    sentence = verdict_sentence(c)
+    assert "It explains loaded (loaded 4000 N) n=" in sentence
+    html = write_gap_report(d, tmp_path / "c.html").read_text()
+    assert "Rows — frequency" in html and "Rows — damping" in html and "model mode" in html
+    assert "mode frequencies: held-out residual per mode" in html and "modal damping: held-out residual" in html
+    freq_rows = next(p for p in c["parts"] if p["family"] == "frequency")["rows"]
+    assert not any("damping" in r["row"] for r in freq_rows)
 
 
 def test_diagnosis_baseline_is_ringfit_fit(tmp_path):
@@ -132,3 +148,27 @@ def test_diagnosis_baseline_is_ringfit_fit(tmp_path):
         assert fitted[k] == pytest.approx(ref["values"][k], rel=1e-8)
         assert d.content["baseline"]["parameters"][k] == pytest.approx(ref["values"][k], rel=1e-5)
     assert json.loads(d.to_json())["verdict"]["effects"] == ["none"]
+
+
+def test_rows_own_identification_sigma_is_used(tmp_path):
+    """freq_std_hz and damping_std_pct of a table (what `ringfit ssi` writes) reach the diagnosis's σ:
+    a row with a wide damping σ is weighted by it, a row with a wide frequency σ too."""
+    from ringfit.gap.effects import get
+    from ringfit.gap.modal import build_modal_problems
+
+    folder = _folder(tmp_path, "sig")
+    table, _, _ = _real_looking_loaded_table(folder)
+    tyre = read_tyre(folder / "tyre.toml")
+    free = read_mode_table(folder / "free.modes.csv")
+    std = np.full(len(table), "", dtype=object)
+    std[3] = "10"  # ± 10 percentage points on a ~3 % damping: δζ/ζ ≈ 3, far above a table's scatter
+    fstd = np.full(len(table), np.nan)
+    fstd[4] = 20.0  # ± 20 Hz
+    loaded = ModeTable(freq_hz=table.freq_hz, n=table.n, tag=table.tag, damping_pct=table.damping_pct,
+                       freq_std_hz=fstd, condition=table.condition, extra={"damping_std_pct": std})
+    freq, damp = build_modal_problems([free, loaded], tyre, (get("ground_contact"),))
+    m_free = int((free.kind == "structural").sum())
+    assert damp.sigma[m_free + 3] == pytest.approx(10 / table.damping_pct[3], rel=1e-9)
+    others = np.delete(damp.sigma[m_free:], 3)
+    assert np.all(others < 0.5 * damp.sigma[m_free + 3])
+    assert freq.sigma[m_free + 4] >= 20.0 and np.all(np.delete(freq.sigma[m_free:], 4) < 10.0)

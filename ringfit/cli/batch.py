@@ -51,7 +51,8 @@ OUTPUT_RULES: dict[str, OutputRule] = {
     "sample": OutputRule((".modes.csv",), ".posterior.h5", (), (("--tyre", "{dir}/tyre.toml"), ("--quiet",))),
     "diagnose": OutputRule((), ".diagnosis.json", (), (("--quiet",),)),
     "profile": OutputRule((".records.npz",), ".profile.csv", (".profile.json",), (("--quiet",),)),
-    "estimate": OutputRule((".profile.csv", ".records.npz"), ".estimate.json"),
+    "estimate": OutputRule((".profile.csv", ".records.npz"), ".estimate.json", (),
+                           (("--tyre", "{dir}/tyre.toml"), ("--quiet",))),
 }
 PLACEHOLDERS = ("{input}", "{dir}", "{stem}", "{out}")
 
@@ -62,7 +63,7 @@ WARM_MODULES = {
     "sample": ("ringfit.fit.posterior", "ringfit.io.tyre"),
     "diagnose": ("ringfit.gap",),
     "profile": ("ringfit.io.continuous", "ringfit.targets.rolling_profile"),
-    "estimate": (),
+    "estimate": ("ringfit.fit.estimate", "ringfit.io.profiles", "ringfit.io.tyre"),
 }
 
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ringfit.cli._args import integer, number
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -29,13 +31,13 @@ def register(sub) -> None:
                    help="continuous recordings: write one row per revolution (load, interval, patch length, …)")
     p.add_argument("--plot", type=Path, default=None, metavar="P.png",
                    help="PNG: the fit to the profile, and for a recording the load against time with its band")
-    p.add_argument("--k-tread-sd", type=float, default=None, metavar="S",
+    p.add_argument("--k-tread-sd", type=number("a σ of ln k_tread in [0, 5]", lo=0.0, hi=5.0), default=None, metavar="S",
                    help="σ of ln k_tread: free the tread stiffness with this log-normal prior around the tyre "
                         "file's value and propagate it into the interval (default: fixed; 0.3 when the tyre "
                         "file has no k_tread)")
-    p.add_argument("--harmonics", type=int, default=40, metavar="K",
+    p.add_argument("--harmonics", type=integer("a number of harmonics >= 8", lo=8), default=40, metavar="K",
                    help="highest revolution harmonic fitted (default 40)")
-    p.add_argument("--grid", type=int, default=512, help="model grid M of the contact solve (default 512)")
+    p.add_argument("--grid", type=integer("an even grid size >= 128", lo=128, hi=1 << 16), default=512, help="model grid M of the contact solve (default 512)")
     p.add_argument("--force", action="store_true", help="replace existing outputs")
     p.add_argument("--quiet", action="store_true", help="no progress bar, no warnings on stderr")
     p.set_defaults(run=run_estimate)

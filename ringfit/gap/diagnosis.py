@@ -250,7 +250,9 @@ def _rows_table(problem: GapProblem, base_ho: np.ndarray, final_ho: np.ndarray) 
         out.append({"row": lab["label"][i], "short": lab["short"][i], "measured": _r(problem.y[i], 5),
                     "baseline": _r(base_ho[i], 5), "with_effects": _r(final_ho[i], 5), "sigma": _r(sigma[i], 4),
                     "z_baseline": _r(zb[i], 2), "z_with_effects": _r(zf[i], 2),
-                    "outlier": bool(abs(zf[i]) > OUTLIER_Z), **({"match": matched[lab["label"][i]]}
+                    "outlier": bool(abs(zf[i]) > OUTLIER_Z),
+                    **({"model_mode": lab["model_mode"][i]} if "model_mode" in lab else {}),
+                    **({"match": matched[lab["label"][i]]}
                                                             if lab["label"][i] in matched else {})})
     return out
 

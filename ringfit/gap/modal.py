@@ -55,7 +55,8 @@ tenfold: logarithms make a factor the same size everywhere). Baseline: one level
 ζ0 per table (identification methods disagree on damping far more than on
 frequency; each table has its own level), Huber on every row. Noise per table:
 second differences of ``ln ζ`` along n (robust), floored at
-:data:`DAMPING_SIGMA_FLOOR`. Effects: those whose modal hook changes ζ
+:data:`DAMPING_SIGMA_FLOOR`; a row whose own ``damping_std_pct`` (``ringfit ssi``'s
+jackknife σ) is wider in ``ln ζ`` (δζ/ζ) takes that. Effects: those whose modal hook changes ζ
 (``wave_damping``, using each row's measured frequency).
 """
 
@@ -274,9 +275,21 @@ def _table_rows(tables, geometry, patches, spins):
                 table=ti, tlabel=tl, n=int(t.n[i]), tag=tag, branch=branch, contact=contact,
                 spin=spins[ti], fixed=fixed, patch=patches[ti][0] if contact else 0.0,
                 freq=float(t.freq_hz[i]), std=float(t.freq_std_hz[i]), damping=float(t.damping_pct[i]),
+                damping_std=_optional_float(t.extra.get("damping_std_pct"), i),
                 reference=ti == 0, a=int(t.a[i]),
             ))
     return rows, (cavity[0] if cavity else float(cavity_frequency(1)))
+
+
+def _optional_float(column, i: int) -> float:
+    """Value of an optional extra column (strings; empty or unparsable → NaN)."""
+    if column is None:
+        return math.nan
+    try:
+        x = float(column[i])
+    except (TypeError, ValueError):
+        return math.nan
+    return x if math.isfinite(x) and x >= 0 else math.nan
 
 
 def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch) -> ModalRows:
@@ -434,11 +447,35 @@ def _labels(rows, suffix=""):
 
 
 def _short_labels(rows, tables):
+    """Plot labels: state and n (``loaded 4 extr``, ``rolling 3 b``); the table number only where two
+    test tables share a state (``loaded#2 4 extr``)."""
+    states = [("free" if i == 0 else t.state) for i, t in enumerate(tables)]
     out = []
     for r in rows:
-        st = "free" if r["reference"] else tables[r["table"]].state
+        st = states[r["table"]]
+        if states.count(st) > 1 and not r["reference"]:
+            st = f"{st}#{r['table']}"
         qual = r["tag"] or {"backward": "b", "forward": "f"}.get(r["branch"], "")
-        out.append(f"{st} {r['n']}{qual}" if r["reference"] else f"T{r['table']} {st} {r['n']}{qual}")
+        out.append(f"{st} {r['n']}{' ' + qual if qual else ''}")
+    return out
+
+
+#: What the model takes for a row (``rows[*].model_mode`` of the diagnosis JSON), by its contact tag.
+CONTACT_BRANCH = {1: "contact-symmetric (cos-type) mode", 2: "contact-antisymmetric (sin-type) mode"}
+
+
+def _model_modes(rows) -> list[str]:
+    """Per row, the model mode it is compared with: n and branch (contact character, travelling direction)."""
+    out = []
+    for r in rows:
+        what = f"n={r['n']}"
+        if r["contact"]:
+            what += " " + CONTACT_BRANCH[r["contact"]]
+        elif r["branch"] in ("backward", "forward"):
+            what += f" {r['branch']} wave ({'fixed' if r['fixed'] else 'co-rotating'} frame)"
+        else:
+            what += " (eq. 18)"
+        out.append(what)
     return out
 
 
@@ -518,7 +555,7 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
     data = ModalData(rows=pad_rows(mrows), ring=ring_ref, geometry=geometry)
     meta_labels = dict(
         table=np.array([r["table"] for r in rows]), group=np.full(m, "frequency"), label=labels,
-        short=_short_labels(rows, tables), family=[r["tlabel"] for r in rows],
+        short=_short_labels(rows, tables), family=[r["tlabel"] for r in rows], model_mode=_model_modes(rows),
         sequence=[f"{r['table']}|{r['tag']}|{r['branch']}" for r in rows],
         matched={labels[j]: note for j, note in match_notes.items()},
         cavity_hz=cavity_hz, measured_freq=y)
@@ -576,6 +613,13 @@ def _damping_problem(tables, rows, cavity_hz, geometry, ring_ref, effects, noise
                 notes.append(f"{table_label(tables[t], t)}: {max(s, DAMPING_SIGMA_FLOOR):.3g} from second "
                              f"differences of ln(damping) along n ({cnt} values)")
         sigma[sel] = max(s, DAMPING_SIGMA_FLOOR)
+    # a row's own identification σ (damping_std_pct, e.g. from `ringfit ssi`) in ln ζ (δζ/ζ): it can only
+    # widen the row's σ (the per-table scale already holds the identification noise of a typical row)
+    own = np.array([r.get("damping_std", math.nan) / r["damping"] for r in rows])
+    wider = np.isfinite(own) & (own > sigma)
+    if user is None and wider.any():
+        sigma[wider] = own[wider]
+        notes.append(f"{int(wider.sum())} rows widened to their own damping_std_pct / damping_pct")
     notes.append(f"one damping level per table; Huber weighting beyond |z| = {HUBER:g}")
     labels = _labels(rows, " damping")
     data = ModalData(rows=pad_rows(mrows), ring=ring_ref, geometry=geometry)

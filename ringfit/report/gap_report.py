@@ -12,7 +12,14 @@ Figures, per kind of data in the diagnosis:
   by the fit to the *other* speeds (baseline and the accepted chain) over the
   measurement; for mode tables a scatter.
 
-The verdict is one sentence for a tyre engineer (:func:`verdict_sentence`).
+The verdict is one sentence for a tyre engineer (:func:`verdict_sentence`) that
+names the rows the accepted effects explain and the rows they leave; for mode
+tables a per-row table follows (measured, baseline, with the effects, σ, z,
+outlier flag, the model mode each row was compared with and how rows without
+n were matched). Frequencies and damping ratios are separate parts with their
+own figures: no damping row is drawn in a frequency plot.
+
+One colour means one thing in every figure (:data:`COLOURS`).
 """
 
 from __future__ import annotations
@@ -22,11 +29,26 @@ from pathlib import Path
 
 import numpy as np
 
+from ringfit.gap.ranking import COMPUTED
 from ringfit.report.figures import new_figure, png_data_uri
 from ringfit.report.html import esc, html_document, table_html
 
 #: Candidates drawn in the residual figures (besides the baseline).
 TOP = 2
+#: Colours by meaning, the same in every figure: the measurement, the baseline model, the accepted
+#: chain (model with its effects), a candidate that was not accepted, the noise band.
+COLOURS = {"measured": "k", "baseline": "0.35", "accepted": "C2", "candidate": "C0", "rejected": "C3",
+           "noise": "C2"}
+#: Rows listed by name in the verdict sentence before "and k more".
+NAMED_ROWS = 6
+#: What each part's rows are, for titles and axes.
+PART_TITLE = {"modes": "mode frequencies", "damping": "modal damping", "profiles": "profiles"}
+
+
+def _row_list(rows: list[str]) -> str:
+    rows = [r.replace(" damping", "") for r in rows]
+    head = ", ".join(rows[:NAMED_ROWS])
+    return head + (f" and {len(rows) - NAMED_ROWS} more" if len(rows) > NAMED_ROWS else "")
 
 
 def verdict_sentence(content: dict) -> str:
@@ -43,8 +65,14 @@ def verdict_sentence(content: dict) -> str:
                 f"removes it on held-out data: the cause lies outside the library.")
     chain = " and then ".join(e.replace("_", " ") for e in effs if e != "unexplained")
     tail = "; a structured residual still remains" if "unexplained" in effs else ""
+    rows = ""
+    if v.get("explains"):
+        rows += f" It explains {_row_list(v['explains'])}"
+        rows += f" and leaves {_row_list(v['leaves'])}." if v.get("leaves") else "."
+    if v.get("outliers"):
+        rows += f" Outliers (|z| > 3 after the effects): {_row_list(v['outliers'])}."
     return (f"Adding {chain} to the model explains the gap: it removes {v['heldout_shrink_pct']:.0f} % of the "
-            f"residual RMS on data that took no part in the fit{tail}.")
+            f"held-out weighted sum of squared residuals (1 − SS_after/SS_before){tail}.{rows}")
 
 
 def _top_fits(part):
@@ -53,11 +81,12 @@ def _top_fits(part):
     cands.sort(key=lambda c: (not c.get("accepted"), -(c["heldout_shrink_pct"] or 0.0)))
     out = []
     for c in cands[:TOP]:
-        fit = part.fits.get((c["effect"],))
+        computed = c.get("variant") == "computed"
+        fit = part.fits.get((c["effect"] + (COMPUTED if computed else ""),))
         if fit is not None:
-            out.append((f"+ {c['effect']}", fit))
+            out.append((f"+ {c['effect']}" + (" (computed)" if computed else ""), fit))
     if part.chain_fit is not None and len(part.chain_fit.extra["chain"]) > 1:
-        out.append(("+ " + " + ".join(part.chain_fit.extra["chain"]), part.chain_fit))
+        out.append(("+ " + " + ".join(_element_label(e) for e in part.chain_fit.extra["chain"]), part.chain_fit))
     return out
 
 
@@ -124,19 +153,41 @@ def _profile_heldout_figure(part):
     return fig
 
 
+def _element_label(element: str) -> str:
+    return element.removesuffix(COMPUTED) + (" (computed)" if element.endswith(COMPUTED) else "")
+
+
+def _fit_colour(name: str, part) -> str:
+    if name == "baseline":
+        return COLOURS["baseline"]
+    accepted = {c["effect"] + (" (computed)" if c.get("variant") == "computed" else "")
+                for c in part.summary["candidates"] if c.get("accepted")}
+    effects = name.removeprefix("+ ").split(" + ")
+    return COLOURS["accepted"] if set(effects) <= accepted else COLOURS["candidate"]
+
+
 def _modal_residual_figure(part):
+    """Held-out residual / σ per row: short labels (state, n, tag), the baseline drawn on top."""
     prob = part.problem
     fits = [("baseline", part.baseline)] + _top_fits(part)
-    fig, ax = new_figure(figsize=(max(6.0, 0.18 * prob.m), 3.4))
+    fig, ax = new_figure(figsize=(max(6.0, 0.22 * prob.m), 3.6))
     x = np.arange(prob.m)
+    sigma = prob.sigma_heldout if prob.sigma_heldout is not None else prob.sigma
+    markers = ["o", "s", "^", "D"]
     for i, (name, fit) in enumerate(fits):
-        ax.plot(x + 0.12 * i, (prob.y - fit.extra["pred"]) / prob.sigma, "o" if i == 0 else ".",
-                color="0.4" if i == 0 else f"C{i}", ms=4, label=name)
-    ax.axhspan(-1, 1, color="C2", alpha=0.12, lw=0)
-    ax.set_xticks(x, prob.labels["label"], rotation=90, fontsize=5)
-    ax.set_ylabel("residual / noise σ")
-    ax.legend(fontsize=7)
-    ax.set_title("residual per mode (band = ±1 noise σ)", fontsize=9)
+        pred = fit.extra.get("heldout_pred")
+        pred = fit.extra["pred"] if pred is None else pred
+        base = i == 0
+        ax.plot(x + (0.0 if base else 0.14 * i), (prob.y - pred) / sigma, markers[i % len(markers)],
+                color=_fit_colour(name, part), ms=5 if base else 4, mfc="none" if base else None,
+                mew=1.2 if base else 1.0, zorder=5 if base else 3, label=name)
+    ax.axhspan(-1, 1, color=COLOURS["noise"], alpha=0.12, lw=0, label="±1 noise σ")
+    ax.axhline(0.0, color="k", lw=0.4)
+    ax.set_xticks(x, prob.labels["short"], rotation=90, fontsize=6)
+    ax.set_xlabel("row (state, n, tag)")
+    ax.set_ylabel("held-out residual / noise σ [–]")
+    ax.legend(fontsize=7, ncols=2)
+    ax.set_title(f"{PART_TITLE.get(prob.domain, prob.domain)} [{prob.unit}]: held-out residual per mode", fontsize=9)
     return fig
 
 
@@ -145,17 +196,20 @@ def _forest_figure(part):
     fig, ax = new_figure(figsize=(6, 0.38 * len(allc) + 1.2))
     for i, c in enumerate(allc):
         lo, hi = c["heldout_shrink_interval_pct"]
-        ax.plot([lo, hi], [i, i], "-", color="C0", lw=2)
-        ax.plot([c["heldout_shrink_pct"]], [i], "o", color="C2" if c.get("accepted") else "C3")
-    ax.set_yticks(range(len(allc)), [c["effect"] + (" (screened)" if c.get("screened_out") else "") for c in allc],
-                  fontsize=8)
+        ax.plot([lo, hi], [i, i], "-", color=COLOURS["candidate"], lw=2)
+        ax.plot([c["heldout_shrink_pct"]], [i], "o", color=COLOURS["accepted"] if c.get("accepted")
+                else COLOURS["rejected"])
+    ax.set_yticks(range(len(allc)), [c["effect"] + (f" @{c['variant']}" if c.get("variant") == "computed" else "")
+                                     + (" (screened)" if c.get("screened_out") else "") for c in allc], fontsize=8)
     ax.invert_yaxis()
     ax.axvline(0, color="k", lw=0.5)
     ideal = part.summary["baseline"].get("ideal_shrink_pct")
     if ideal is not None:
         ax.axvline(ideal, color="k", ls="--", lw=0.8, label=f"ideal shrink {ideal:.0f} %")
         ax.legend(fontsize=7, loc="lower right")
-    ax.set_xlabel("held-out RMS shrink [%] (95 % bootstrap interval; green = accepted)")
+    ax.set_xlabel("held-out shrink 1 − SS_after/SS_before [%] (interval; green = accepted, red = not)")
+    ax.set_ylabel("candidate effect")
+    ax.set_title(PART_TITLE.get(part.problem.domain, part.problem.domain), fontsize=9)
     return fig
 
 
@@ -163,14 +217,17 @@ def _modal_heldout_figure(part):
     prob = part.problem
     y = prob.y
     fit = part.chain_fit if part.chain_fit is not None else part.baseline
-    fig, ax = new_figure(figsize=(4.5, 4.5))
-    ax.plot(y, part.baseline.extra["heldout_pred"], "k.", label="baseline")
+    fig, ax = new_figure(figsize=(4.6, 4.6))
     if fit.extra.get("heldout_pred") is not None and fit is not part.baseline:
-        ax.plot(y, fit.extra["heldout_pred"], ".", color="C2", label=" + ".join(fit.extra["chain"]))
+        ax.plot(y, fit.extra["heldout_pred"], "s", ms=4, color=COLOURS["accepted"],
+                label="+ " + " + ".join(_element_label(e) for e in fit.extra["chain"]))
+    ax.plot(y, part.baseline.extra["heldout_pred"], "o", mfc="none", ms=5, color=COLOURS["baseline"], zorder=5,
+            label="baseline")
     lim = [np.nanmin(y), np.nanmax(y)]
-    ax.plot(lim, lim, "k-", lw=0.5)
-    ax.set_xlabel("measured")
-    ax.set_ylabel("held-out predicted")
+    ax.plot(lim, lim, "-", color=COLOURS["measured"], lw=0.5)
+    ax.set_xlabel(f"measured [{prob.unit}]")
+    ax.set_ylabel(f"held-out predicted [{prob.unit}]")
+    ax.set_title(PART_TITLE.get(prob.domain, prob.domain), fontsize=9)
     ax.legend(fontsize=7)
     return fig
 
@@ -184,12 +241,14 @@ def figures(diag) -> list[tuple[str, str]]:
             out.append(("profiles: residual vs angle before/after, per channel and speed",
                         png_data_uri(_profile_residual_figure(part))))
         else:
-            out.append(("mode tables: residual per mode before/after", png_data_uri(_modal_residual_figure(part))))
-        out.append((f"{dom}: ranked candidates (forest plot)", png_data_uri(_forest_figure(part))))
+            out.append((f"{PART_TITLE.get(dom, dom)}: held-out residual per mode, baseline and effects",
+                        png_data_uri(_modal_residual_figure(part))))
+        out.append((f"{PART_TITLE.get(dom, dom)}: ranked candidates (forest plot)", png_data_uri(_forest_figure(part))))
         if dom == "profiles":
             out.append(("profiles: held-out predicted vs measured", png_data_uri(_profile_heldout_figure(part))))
         else:
-            out.append(("mode tables: held-out predicted vs measured", png_data_uri(_modal_heldout_figure(part))))
+            out.append((f"{PART_TITLE.get(dom, dom)}: held-out predicted vs measured",
+                        png_data_uri(_modal_heldout_figure(part))))
     return out
 
 
@@ -198,13 +257,32 @@ def _params_text(candidate: dict) -> str:
                      for k, v in candidate.get("params", {}).items())
 
 
+def _row_sections(content: dict) -> list[tuple[str, str]]:
+    """Per part of mode tables: one row per measured mode (held-out predictions; docs/formats.md §5 ``rows``)."""
+    out = []
+    for pc in content.get("parts") or [content]:
+        rows = pc.get("rows") or []
+        if not rows:
+            continue
+        unit = pc["baseline"].get("unit", "")
+        body = [[esc(r["row"]), esc(r.get("model_mode", "")), esc(r["measured"]), esc(r["baseline"]),
+                 esc(r["with_effects"]), esc(r["sigma"]), esc(r["z_baseline"]), esc(r["z_with_effects"]),
+                 "<b>outlier</b>" if r["outlier"] else "", esc(r.get("match", ""))] for r in rows]
+        family = pc.get("family", "")
+        out.append((f"Rows — {family}" if family else "Rows",
+                    table_html(["row", "model mode", f"measured [{unit}]", f"baseline [{unit}]",
+                                f"with effects [{unit}]", f"σ [{unit}]", "z baseline", "z with effects", "outlier",
+                                "match"], body)))
+    return out
+
+
 def write_gap_report(diag, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
     """Write the HTML report of a :class:`ringfit.gap.Diagnosis` (atomic; refuses to overwrite unless asked)."""
     from ringfit.io.files import atomic_write_text, check_output_path
 
     path = check_output_path(path, overwrite=overwrite)
     c = diag.content
-    rows = [[esc(x["effect"]), esc(x["heldout_shrink_pct"]), esc(x["heldout_shrink_interval_pct"]),
+    rows = [[esc(x["effect"]), esc(x.get("variant", "")), esc(x["heldout_shrink_pct"]), esc(x["heldout_shrink_interval_pct"]),
              esc(x["evidence"].get("delta_bic")), esc(_params_text(x)),
              "yes" if x.get("accepted") else esc("; ".join(x.get("rejected_because", [])))]
             for x in c["candidates"]]
@@ -219,8 +297,9 @@ def write_gap_report(diag, path: str | os.PathLike, *, overwrite: bool = False) 
         f"{esc(b.get('noise_method', ''))}. Held-out reduced χ² {b.get('reduced_chi2')} (effective dof "
         f"{b.get('noise_dof')}); ideal shrink {b.get('ideal_shrink_pct')} %.</p>")
     sections = [("Verdict", summary), ("Where", f"<ul>{where}</ul>"),
-                ("Which", table_html(["effect", "held-out shrink %", "95 % interval", "ΔBIC",
+                ("Which", table_html(["effect", "variant", "held-out shrink %", "95 % interval", "ΔBIC",
                                       "parameters [95 % interval]", "accepted"], rows)),
                 ("Rules", f"<ul>{rule_items}</ul>")]
+    sections += _row_sections(c)
     sections += [(title, f'<figure><img src="{src}" alt="{esc(title)}"></figure>') for title, src in figures(diag)]
     return atomic_write_text(path, html_document("Sim-to-real gap diagnosis", sections))
