@@ -43,12 +43,14 @@ from ringfit.synth.cases import MODAL_INJECTIONS, PROFILE_INJECTIONS, make_case,
 
 
 def modal_ideal(d, label) -> float:
-    """Ideal held-out shrink [%] of a mode-table case: 100 (1 − SS_noise/SS_before) over the frequency rows,
-    SS_noise from the realised noise of every row (hidden label), weighted and ψ-transformed exactly as the
-    diagnosis weights its held-out residuals (docs/formats.md §5)."""
-    part = next(p for p in d.parts if p.problem.domain == "modes")
+    """Ideal held-out shrink [%] of a mode-table case: 100 (1 − SS_noise/SS_before) over the rows of the part
+    the effect acts on (frequency rows; damping rows in ln ζ for wave_damping), SS_noise from the realised
+    noise of every row (hidden label), weighted and ψ-transformed exactly as the diagnosis weights its
+    held-out residuals (docs/formats.md §5)."""
+    damping = label.expected_verdict == "wave_damping"
+    part = next(p for p in d.parts if p.problem.domain == ("damping" if damping else "modes"))
     prob = part.problem
-    e = np.array([v for kind, v in label.noise["rows"] if kind == "freq"])
+    e = np.array([v for kind, v in label.noise["rows"] if kind == ("ln_damping" if damping else "freq")])
     if e.size != prob.m:  # row order not reproduced: fall back on the diagnosis's own estimate
         return part.summary["baseline"]["ideal_shrink_pct"]
     ss_noise = float(np.sum(prob.standardised(e, heldout=True) ** 2))
@@ -57,12 +59,19 @@ def modal_ideal(d, label) -> float:
 
 
 def profile_ideal(d, label) -> float:
-    """Ideal held-out shrink [%] of a profile case: the true noise RMS on the diagnosis grid, weighted by each
-    row's own σ as the diagnosis weights its held-out residuals."""
+    """Ideal held-out shrink [%] of a profile case: the true noise RMS of each run and channel on the
+    diagnosis grid, weighted by each row's own σ as the diagnosis weights its held-out residuals."""
     part = next(p for p in d.parts if p.problem.domain == "profiles")
     prob = part.problem
     sigma = prob.sigma_heldout if prob.sigma_heldout is not None else prob.sigma
-    ss_noise = float(label.noise["grid_rms_ms2"] ** 2 * np.sum(1.0 / sigma**2))
+    by_run = np.asarray(label.noise["grid_rms_by_run_ms2"])  # (P, 2)
+    P = by_run.shape[0]
+    M = prob.m // (2 * P)
+    true = np.repeat(by_run.reshape(-1), M)  # rows: run-major, radial then tangential (docs/formats.md §5)
+    if true.size != prob.m:
+        return part.summary["baseline"]["ideal_shrink_pct"]
+    ss_noise = float(np.sum((true * prob.scale / sigma) ** 2)) if prob.scale is not None else \
+        float(np.sum((true / sigma) ** 2))
     ss_before = float(np.sum(prob.standardised(prob.y - part.baseline.extra["heldout_pred"], heldout=True) ** 2))
     return 100.0 * (1.0 - ss_noise / ss_before)
 

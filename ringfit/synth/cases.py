@@ -194,7 +194,7 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
     # damping per mode; then loaded.modes.csv, spinning.modes.csv): for the ideal shrink of the benchmark
     row_noise = []
     for f, ft, d, dt in zip(free_noisy, free, damp_free, damp_truth):
-        row_noise += [("freq", float(f - ft)), ("damping", float(d - dt) / 100.0)]
+        row_noise += [("freq", float(f - ft)), ("ln_damping", float(np.log(d / dt)))]
     if effect == "cavity_mode" or rng.random() < 0.5:
         rows.append({"kind": "acoustic", "freq_hz": float(magnitude.get("cavity_hz", SOUND_SPEED / CAVITY_LENGTH) * (1 + 0.01 * rng.random()))})
     _write_table(folder, "free.modes.csv", rows, {"state": "free", "speed_kmh": 0, "pressure_bar": 2.2,
@@ -297,7 +297,8 @@ def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed
     40–70 pitches per revolution): expected verdict ``unexplained``.
 
     **Returns:** the hidden :class:`CaseLabel` (``noise["grid_rms_ms2"]`` is the noise RMS on the
-    diagnosis's 512-point grid, for the ideal shrink).
+    diagnosis's 512-point grid, ``noise["grid_rms_by_run_ms2"]`` the same per run as [radial,
+    tangential], for the ideal shrink).
     """
     from ringfit.io.profiles import Profile, grid_angles_deg, resample_profile, write_profile
     from ringfit.io.tyre import Tyre, write_tyre
@@ -366,7 +367,7 @@ def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed
     hooks = (shear,) if shear is not None else (PitchModulation(**pitch),) if pitch is not None else ()
     truth = ProfileModel(ring_model=model, sensor=sensor, load_hooks=hooks)
     r_e = effective_rolling_radius(ring, geometry, load, drum, model=ProfileModel(ring_model=model), solver=solver)
-    grid_noise = []
+    grid_noise, grid_by_run = [], []
     for i, speed in enumerate(speeds):
         omega = speed * KMH / r_e
         values = simulate_profile(ring, geometry, speed_kmh=speed, load_n=load, rotation_hz=omega / (2.0 * np.pi),
@@ -386,10 +387,12 @@ def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed
         write_profile(Profile(angle, data[0], data[1], condition=condition), folder / f"run{i + 1}.profile.csv")
         on_grid = resample_profile(Profile(angle, noise[0], noise[1]), 512)
         grid_noise.append(np.mean((on_grid - on_grid.mean(-1, keepdims=True)) ** 2))
+        grid_by_run.append([float(np.sqrt(x)) for x in np.mean((on_grid - on_grid.mean(-1, keepdims=True)) ** 2, -1)])
     return CaseLabel(
         effect=effect, expected_verdict=EXPECTED.get(effect, effect), magnitude=magnitude,
         noise={"colour": colour, "sigma40_ms2": sigma40, "speed_power": speed_power,
-               "tangential_factor": tangential_factor, "grid_rms_ms2": float(np.sqrt(np.mean(grid_noise)))},
+               "tangential_factor": tangential_factor, "grid_rms_ms2": float(np.sqrt(np.mean(grid_noise))),
+               "grid_rms_by_run_ms2": grid_by_run},
         ring={**ring.as_dict(), "load_n": load, "drum_diameter_m": drum, "grid": solver.n_grid,
               "n_points": n_points, "angle_offset_deg": math.degrees(offset), "encoder": write_encoder},
         seed=seed)
