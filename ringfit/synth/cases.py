@@ -219,6 +219,90 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
                      ring=ring.as_dict(), seed=seed)
 
 
+#: Road speeds [km/h] and load [N] of the rolling tables of :func:`make_rolling_case` (the source study's cleat tests).
+ROLLING_SPEEDS = (20.0, 40.0, 60.0)
+ROLLING_LOAD_N = 4000.0
+
+
+def make_rolling_case(folder: str | os.PathLike, contact: bool = True, seed: int = 0) -> CaseLabel:
+    """Write a case folder (docs/formats.md §6) with rolling mode tables at 20/40/60 km/h and 4 kN.
+
+    ``tyre.toml`` (bundled Table 9 values, not the truth), ``free.modes.csv`` (eq. 18 of the true
+    ring, noisy, with damping) and ``roll20/40/60.modes.csv`` + sidecars (``state = rolling``,
+    ``load_n``, ``speed_kmh``, ``frame = rotating``): what the co-rotating sensor sees of the
+    rolling tyre's modes — the strongest line ω + kΩ of each branch of n = 1 … 6–8 of the model of
+    docs/physics.md §3.7 (:func:`ringfit.gap.campbell.campbell_diagram` of the true ring with K = 40
+    harmonics, not the diagnosis's basis), with ``contact=False`` the free spinning ring (the
+    control: eq. 25 lines, no patch). Made to look like identified tables: relative noise of
+    0.05–0.2 % (the same identification as the free table, up to 1.3× its level), one or two
+    modes missing per table, ``extr``/``0`` (``vert``/``hort``) tags on the modes the model calls
+    standing and no ``branch`` anywhere, one row per table without n, scattered damping, no
+    ``freq_std_hz``.
+
+    **Returns:** the hidden :class:`CaseLabel`: ``effect`` / ``expected_verdict``
+    ``"rotation+ground_contact"`` (``"rotation"`` for the control; the order of the chain is
+    free), ``noise["rows"]`` the realised noise of every observation in the order the diagnosis
+    reads them (docs/formats.md §15).
+    """
+    from ringfit.gap.campbell import campbell_diagram
+    from ringfit.io.tyre import Tyre, write_tyre
+    from ringfit.physics.natural import natural_frequencies
+
+    rng = np.random.default_rng(seed)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    if any(folder.iterdir()):
+        raise FileExistsError(f"{folder} is not empty")
+    geometry, ring = _ring(rng)
+    sigma_rel = float(rng.uniform(0.0005, 0.002))
+    sigma_roll = sigma_rel * float(rng.uniform(1.0, 1.3))
+    zeta0 = float(rng.uniform(0.015, 0.035))
+    n_free = np.arange(1, int(rng.integers(8, 11)) + 1)
+    free = np.asarray(natural_frequencies(ring, geometry, jnp.asarray(n_free, float)))
+    free_noisy = free * (1.0 + sigma_rel * rng.normal(0.0, 1.0, free.size))
+    damp = 100.0 * zeta0 * np.exp(rng.normal(0.0, 0.1, free.size))
+    row_noise = []
+    for f, ft, d in zip(free_noisy, free, damp):
+        row_noise += [("freq", float(f - ft)), ("damping", float(d / 100.0 - zeta0))]
+    write_tyre(Tyre(geometry, {"rho_a": 2.715, "ei": 0.9426, "kw": 1.294e6, "kv": 1.161e6,
+                               "k_tread": 19e6, "damping_ratio": 0.025}), folder / "tyre.toml")
+    _write_table(folder, "free.modes.csv",
+                 [{"n": int(n), "freq_hz": float(f), "damping_pct": float(d)} for n, f, d in zip(n_free, free_noisy, damp)],
+                 {"state": "free", "speed_kmh": 0, "pressure_bar": 2.2, "frame": "fixed"}, False, 0.0)
+    grid = np.unique(np.concatenate([np.arange(0.0, max(ROLLING_SPEEDS) + 1.0, 10.0), ROLLING_SPEEDS]))
+    d = campbell_diagram(ring, geometry, ROLLING_LOAD_N, grid, contact=contact, n_max=15, harmonics=40)
+    n_top = int(rng.integers(6, 9))
+    hz, _, _ = d.sensor_line()
+    tags = d.tag()
+    truth = {}
+    for speed in ROLLING_SPEEDS:
+        s = int(np.argmin(np.abs(d.speed_kmh - speed)))
+        keep = [b for b in range(d.branches) if 1 <= d.order[s, b] <= n_top]
+        keep = sorted(keep, key=lambda b: hz[s, b])
+        drop = set(rng.choice(len(keep), size=int(rng.integers(1, 3)), replace=False).tolist())
+        keep = [b for j, b in enumerate(keep) if j not in drop]
+        no_n = int(rng.integers(0, len(keep)))
+        rows, true_hz = [], []
+        for j, b in enumerate(keep):
+            f = float(hz[s, b])
+            noisy = f * (1.0 + sigma_roll * float(rng.normal()))
+            rows.append({"n": -1 if j == no_n else int(d.order[s, b]), "tag": str(tags[s, b]), "freq_hz": noisy,
+                         "damping_pct": float(100.0 * zeta0 * np.exp(rng.normal(0.3, 0.4)))})
+            row_noise.append(("freq", noisy - f))
+            true_hz.append(f)
+        name = f"roll{int(speed)}.modes.csv"
+        truth[name] = true_hz
+        _write_table(folder, name, rows, {"state": "rolling", "load_n": ROLLING_LOAD_N, "speed_kmh": speed,
+                                          "pressure_bar": 2.2, "frame": "rotating"}, False, 0.0)
+    effect = "rotation+ground_contact" if contact else "rotation"
+    return CaseLabel(effect=effect, expected_verdict=effect,
+                     magnitude={"load_n": ROLLING_LOAD_N, "speeds_kmh": list(ROLLING_SPEEDS), "contact": contact,
+                                "true_hz": truth},
+                     noise={"relative": sigma_rel, "relative_rolling": sigma_roll, "colour": "white",
+                            "freq_std_given": False, "rows": row_noise},
+                     ring=ring.as_dict(), seed=seed)
+
+
 def write_label(label: CaseLabel, path: str | os.PathLike) -> None:
     """Write a label as JSON (keep it outside the case folder)."""
     Path(path).write_text(json.dumps(label.__dict__, indent=1))
