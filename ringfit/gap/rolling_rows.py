@@ -162,7 +162,7 @@ def _single_effect_labels(rows, ring, geometry, patches, notes, sel):
         said = []
         if not r["branch"] and r["spin"] > 0:
             fn = fixed_frame_frequencies if r["fixed"] else rotating_natural_frequencies
-            w = np.abs(np.asarray(fn(ring, geometry, float(r["n"]), r["spin"]))) / (2 * math.pi)
+            w = np.abs(np.asarray(fn(ring, geometry, float(r["n"]), r["spin"])))  # [Hz]
             b = int(np.argmin(np.abs(w - r["freq"])))
             r["wave"] = ("backward", "forward")[b]
             said.append(f"rotation alone: the {r['wave']} wave of eq. {'26' if r['fixed'] else '25'} "
