@@ -25,7 +25,7 @@ respect to ``patch_scale`` and ``speed_gain``.
 **How the two effects combine on these rows** (:class:`RollingJoint`). With both
 ``ground_contact`` (patch scale s) and ``rotation`` (speed gain g) away from their
 nulls, a rolling row is ``rolling_modes(ring, g·Ω, arc scaled by s)`` at its assigned
-mode and line — the joint model, one eigen-solve per rolling table (a static loop:
+mode and line — the joint model, one eigen-solve per rolling table (a sequential ``lax.map``:
 batched eigen-solves under forward-mode differentiation are avoided on purpose),
 added to what the chain's other effects did (``+ (joint − eq. 18)``). With one of
 the two alone, the rows get that effect alone: ``rotation`` eq. 25/26 on the row's
@@ -51,8 +51,9 @@ import jax.numpy as jnp
 import numpy as np
 
 #: Harmonics |k| ≤ K of the Hill basis for the diagnosis's rolling rows (n ≤ 12 branches are
-#: kept; K = 24 moves the n ≤ 10 modes of the Table 9 tyre at 4 kN, 0–80 km/h, by < 1e-4
-#: relative from K = 32 — tests/test_gap_rolling.py).
+#: kept). K = 24 keeps the 16 lowest modes of the Table 9 tyre (to 290 Hz; 4 kN, 60 km/h) within
+#: 3e-4 relative of K = 64, below the identification noise of rolling tables (tests/test_gap_rolling.py),
+#: at half the cost of the Campbell default K = 32 (6e-5).
 ROLLING_HARMONICS = 24
 #: Highest dominant order matched on rolling tables (≤ K/2).
 ROLLING_N_MAX = 12
@@ -205,17 +206,21 @@ class RollingJoint(eqx.Module):
 
         s, g = theta[self.contact_at], theta[self.rotation_at]
 
+        tables = jnp.asarray(self.tables, dtype=jnp.int32)
+
+        def one(t):  # every row seen at table t's condition, (m,)
+            arc = ContactArc(s * rows.table_leading[t], s * rows.table_trailing[t], ring.k_tread,
+                             jnp.zeros((), dtype=jnp.float64))
+            modes = rolling_modes(ring, geometry, g * rows.table_omega[t], arc, harmonics=self.harmonics)
+            N = modes.angular_frequency.shape[0]
+            f = observed_frequencies(modes, jnp.clip(rows.mode_index, 0, N - 1), rows.line_k, rows.fixed_frame > 0)
+            return 2.0 * jnp.pi * f
+
         def compute(_):
-            out = jnp.zeros_like(rows.freq_hz)
-            for t in self.tables:
-                arc = ContactArc(s * rows.table_leading[t], s * rows.table_trailing[t], ring.k_tread,
-                                 jnp.zeros((), dtype=jnp.float64))
-                modes = rolling_modes(ring, geometry, g * rows.table_omega[t], arc, harmonics=self.harmonics)
-                N = modes.angular_frequency.shape[0]
-                f = observed_frequencies(modes, jnp.clip(rows.mode_index, 0, N - 1), rows.line_k,
-                                         rows.fixed_frame > 0)
-                out = jnp.where(rows.table == t, 2.0 * jnp.pi * f, out)
-            return out
+            # a sequential loop over the rolling tables (lax.map: one eigen-solve compiled once, run per
+            # table; batched eigen-solves under forward-mode differentiation are avoided on purpose)
+            every = jax.lax.map(one, tables)  # (R, m)
+            return jnp.sum(jnp.where(rows.table[None, :] == tables[:, None], every, 0.0), axis=0)
 
         # the eigen-solves run only when both effects are on (every other candidate skips them)
         return jax.lax.cond((s > 0) & (g > 0), compute, lambda _: jnp.zeros_like(rows.freq_hz), None)
