@@ -137,12 +137,13 @@ class ModalRows(eqx.Module):
     freq_hz: jax.Array
     table: jax.Array
     table_patch: jax.Array
-    joint: jax.Array
-    mode_index: jax.Array
-    line_k: jax.Array
-    table_omega: jax.Array
-    table_leading: jax.Array
-    table_trailing: jax.Array
+    # rolling tables (None where a caller builds rows without them: no rolling model)
+    joint: jax.Array | None = None
+    mode_index: jax.Array | None = None
+    line_k: jax.Array | None = None
+    table_omega: jax.Array | None = None
+    table_leading: jax.Array | None = None
+    table_trailing: jax.Array | None = None
 
 
 class ModalData(eqx.Module):
@@ -332,8 +333,11 @@ def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
     fill = {"n": 2.0, "is_freq": rows.is_freq[0] if m else 1.0, "contact": 0, "spin": 0.0, "branch": 0.0,
             "fixed_frame": 0.0, "reference": 1.0, "patch": 0.0, "freq_hz": 100.0, "table": 0, "joint": 0.0,
             "mode_index": 0, "line_k": 0.0}
-    return ModalRows(**{k: jnp.concatenate([getattr(rows, k), jnp.full(extra, v, dtype=getattr(rows, k).dtype)])
-                        for k, v in fill.items()}, cavity_hz=rows.cavity_hz, table_patch=rows.table_patch,
+    def grow(k, v):
+        col = getattr(rows, k)
+        return None if col is None else jnp.concatenate([col, jnp.full(extra, v, dtype=col.dtype)])
+
+    return ModalRows(**{k: grow(k, v) for k, v in fill.items()}, cavity_hz=rows.cavity_hz, table_patch=rows.table_patch,
                      table_omega=rows.table_omega, table_leading=rows.table_leading,
                      table_trailing=rows.table_trailing)
 
