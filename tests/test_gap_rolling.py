@@ -141,3 +141,15 @@ def test_fewer_harmonics_keep_the_low_modes():
     assert f[64][-1] > 280.0
     assert np.max(np.abs(f[24] / f[64] - 1)) < 3e-4
     assert np.max(np.abs(f[16] / f[64] - 1)) > 3e-4  # the check can fail: too few harmonics do
+
+
+def test_example_writes_a_rolling_case_folder(tmp_path, capsys):
+    from ringfit.gap.case import read_case
+    from ringfit.gap.rolling_rows import is_rolling
+
+    assert main(["example", "rolling", "--out", str(tmp_path), "--quiet"]) == 0
+    case = read_case(tmp_path / "rolling")
+    assert [is_rolling(t) for t in case.tests] == [True, True, True]
+    assert sorted(t.condition["speed_kmh"] for t in case.tests) == [20.0, 40.0, 60.0]
+    assert all(t.condition["frame"] == "rotating" and not any(t.branch) for t in case.tests)
+    assert "rotation` and `ground_contact`" in (tmp_path / "README.md").read_text()
