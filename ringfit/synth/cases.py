@@ -224,6 +224,35 @@ ROLLING_SPEEDS = (20.0, 40.0, 60.0)
 ROLLING_LOAD_N = 4000.0
 
 
+def _sensor_view(ring, geometry, contact: bool):
+    """What the co-rotating sensor sees of each mode at :data:`ROLLING_SPEEDS` (docs/physics.md §3.7), from
+    the physics layer alone (not the diagnosis's matching): the strongest radial-acceleration line
+    ``|ω + kΩ|/2π`` [Hz], the dominant order and the tag of standing modes (|travel| < 3: ``extr``/``0``,
+    ``vert``/``hort`` for n = 1; "" otherwise), each ``(speeds, modes)``. K = 40 harmonics."""
+    import jax
+
+    from ringfit.physics.rolling_modes import campbell_modes_jit, material_acceleration, mode_labels, sensor_lines
+
+    cm = campbell_modes_jit(ring, geometry, ROLLING_LOAD_N, np.asarray(ROLLING_SPEEDS), contact=contact, harmonics=40)
+    m = cm.modes
+    acc, _ = material_acceleration(m)
+    lab = jax.device_get(mode_labels(acc, jnp.zeros_like(acc), m.k[0], m.angular_frequency, m.omega))
+    f, w_rad, w_tan = (np.asarray(x) for x in sensor_lines(m, "acceleration"))
+    # a mode without radial content (the inextensible ring's n = 0, the belt turning on its sidewalls) is
+    # read on the tangential axis, with its displacement order
+    radial = np.sum(np.abs(np.asarray(m.radial)) ** 2, axis=-1) > 1e-12
+    weight = np.where(radial[..., None], w_rad, w_tan)
+    best = np.argmax(np.nan_to_num(weight, nan=-1.0), axis=-1)
+    hz = np.abs(np.take_along_axis(f, best[..., None], -1)[..., 0])
+    hz = np.where(np.all(np.isnan(weight), axis=-1), np.nan, hz)
+    order, travel, sym = (np.asarray(lab[k]) for k in ("order", "travel", "symmetry"))
+    order = np.where(radial, order, np.asarray(m.order))
+    standing = (np.abs(travel) < 3.0) & np.isfinite(sym) & contact
+    cos_type = np.nan_to_num(sym) >= 0.5
+    tag = np.where(order == 1, np.where(cos_type, "vert", "hort"), np.where(cos_type, "extr", "0"))
+    return hz, order, np.where(standing, tag, "")
+
+
 def make_rolling_case(folder: str | os.PathLike, contact: bool = True, seed: int = 0) -> CaseLabel:
     """Write a case folder (docs/formats.md §6) with rolling mode tables at 20/40/60 km/h and 4 kN.
 
@@ -231,8 +260,8 @@ def make_rolling_case(folder: str | os.PathLike, contact: bool = True, seed: int
     ring, noisy, with damping) and ``roll20/40/60.modes.csv`` + sidecars (``state = rolling``,
     ``load_n``, ``speed_kmh``, ``frame = rotating``): what the co-rotating sensor sees of the
     rolling tyre's modes — the strongest line ω + kΩ of each branch of n = 1 … 6–8 of the model of
-    docs/physics.md §3.7 (:func:`ringfit.gap.campbell.campbell_diagram` of the true ring with K = 40
-    harmonics, not the diagnosis's basis), with ``contact=False`` the free spinning ring (the
+    docs/physics.md §3.7 (:func:`ringfit.physics.rolling_modes.campbell_modes` of the true ring with K = 40
+    harmonics, not the diagnosis's basis; lines and labels read here, not by the diagnosis's matching), with ``contact=False`` the free spinning ring (the
     control: eq. 25 lines, no patch). Made to look like identified tables: relative noise of
     0.05–0.2 % (the same identification as the free table, up to 1.3× its level), one or two
     modes missing per table, ``extr``/``0`` (``vert``/``hort``) tags on the modes the model calls
@@ -244,7 +273,6 @@ def make_rolling_case(folder: str | os.PathLike, contact: bool = True, seed: int
     free), ``noise["rows"]`` the realised noise of every observation in the order the diagnosis
     reads them (docs/formats.md §15).
     """
-    from ringfit.gap.campbell import campbell_diagram
     from ringfit.io.tyre import Tyre, write_tyre
     from ringfit.physics.natural import natural_frequencies
 
@@ -269,15 +297,11 @@ def make_rolling_case(folder: str | os.PathLike, contact: bool = True, seed: int
     _write_table(folder, "free.modes.csv",
                  [{"n": int(n), "freq_hz": float(f), "damping_pct": float(d)} for n, f, d in zip(n_free, free_noisy, damp)],
                  {"state": "free", "speed_kmh": 0, "pressure_bar": 2.2, "frame": "fixed"}, False, 0.0)
-    grid = np.unique(np.concatenate([np.arange(0.0, max(ROLLING_SPEEDS) + 1.0, 10.0), ROLLING_SPEEDS]))
-    d = campbell_diagram(ring, geometry, ROLLING_LOAD_N, grid, contact=contact, n_max=15, harmonics=40)
     n_top = int(rng.integers(6, 9))
-    hz, _, _ = d.sensor_line()
-    tags = d.tag()
+    hz, order, tags = _sensor_view(ring, geometry, contact)
     truth = {}
-    for speed in ROLLING_SPEEDS:
-        s = int(np.argmin(np.abs(d.speed_kmh - speed)))
-        keep = [b for b in range(d.branches) if 1 <= d.order[s, b] <= n_top]
+    for s, speed in enumerate(ROLLING_SPEEDS):
+        keep = [b for b in range(order.shape[1]) if 1 <= order[s, b] <= n_top and np.isfinite(hz[s, b])]
         keep = sorted(keep, key=lambda b: hz[s, b])
         drop = set(rng.choice(len(keep), size=int(rng.integers(1, 3)), replace=False).tolist())
         keep = [b for j, b in enumerate(keep) if j not in drop]
@@ -286,7 +310,7 @@ def make_rolling_case(folder: str | os.PathLike, contact: bool = True, seed: int
         for j, b in enumerate(keep):
             f = float(hz[s, b])
             noisy = f * (1.0 + sigma_roll * float(rng.normal()))
-            rows.append({"n": -1 if j == no_n else int(d.order[s, b]), "tag": str(tags[s, b]), "freq_hz": noisy,
+            rows.append({"n": -1 if j == no_n else int(order[s, b]), "tag": str(tags[s, b]), "freq_hz": noisy,
                          "damping_pct": float(100.0 * zeta0 * np.exp(rng.normal(0.3, 0.4)))})
             row_noise.append(("freq", noisy - f))
             true_hz.append(f)
