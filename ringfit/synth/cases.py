@@ -231,9 +231,15 @@ def _sensor_view(ring, geometry, contact: bool):
     ``vert``/``hort`` for n = 1; "" otherwise), each ``(speeds, modes)``. K = 40 harmonics."""
     import jax
 
+    from ringfit.physics.contact import solve_rolling_jit
+    from ringfit.physics.operating import KMH, OperatingPoint, rolling_radius
     from ringfit.physics.rolling_modes import campbell_modes_jit, material_acceleration, mode_labels, sensor_lines
 
-    cm = campbell_modes_jit(ring, geometry, ROLLING_LOAD_N, np.asarray(ROLLING_SPEEDS), contact=contact, harmonics=40)
+    # the tyre rolls under its load either way: Ω = V/R_e (R_e = R_out − δ/3 of the standing tyre at the load)
+    standing = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, ROLLING_LOAD_N))
+    r_e = float(rolling_radius(geometry.outer_radius, float(standing.deflection)))
+    omegas = np.asarray(ROLLING_SPEEDS) * KMH / r_e
+    cm = campbell_modes_jit(ring, geometry, ROLLING_LOAD_N, omegas, speed_unit="rad/s", contact=contact, harmonics=40)
     m = cm.modes
     acc, _ = material_acceleration(m)
     lab = jax.device_get(mode_labels(acc, jnp.zeros_like(acc), m.k[0], m.angular_frequency, m.omega))
@@ -261,8 +267,9 @@ def make_rolling_case(folder: str | os.PathLike, contact: bool = True, seed: int
     ``load_n``, ``speed_kmh``, ``frame = rotating``): what the co-rotating sensor sees of the
     rolling tyre's modes — the strongest line ω + kΩ of each branch of n = 1 … 6–8 of the model of
     docs/physics.md §3.7 (:func:`ringfit.physics.rolling_modes.campbell_modes` of the true ring with K = 40
-    harmonics, not the diagnosis's basis; lines and labels read here, not by the diagnosis's matching), with ``contact=False`` the free spinning ring (the
-    control: eq. 25 lines, no patch). Made to look like identified tables: relative noise of
+    harmonics, not the diagnosis's basis; lines and labels read here, not by the diagnosis's matching),
+    with ``contact=False`` the free spinning ring (the control: eq. 25 lines, no patch; Ω = V/R_e of the
+    loaded tyre in both). Made to look like identified tables: relative noise of
     0.05–0.2 % (the same identification as the free table, up to 1.3× its level), one or two
     modes missing per table, ``extr``/``0`` (``vert``/``hort``) tags on the modes the model calls
     standing and no ``branch`` anywhere, one row per table without n, scattered damping, no
