@@ -114,7 +114,11 @@ def test_joint_prediction_is_the_campbell_line_and_the_null_is_eq18(contact_case
     np.testing.assert_allclose(null[test], np.asarray(natural_frequencies(ring, case.tyre.geometry, n[test])),
                                rtol=1e-6)
     theta[len(prob.base):] = 1.0  # both effects at their computed condition
-    pred = predict(prob, theta)
+    from test_no_retrace import COMPILE, TRACE, count_traces
+
+    with count_traces() as seen:  # the refits' compiled evaluation serves this too: nothing traced or compiled
+        pred = predict(prob, theta)
+    assert seen[TRACE] == 0 and seen[COMPILE] == 0, seen
     # the speed grid of the diagnosis's matching (every 10 km/h to the fastest table), so that branches
     # are numbered alike
     d = campbell_diagram(ring, case.tyre.geometry, 4000.0, np.arange(0.0, 70.0, 10.0), n_max=12,
