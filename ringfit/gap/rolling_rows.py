@@ -157,11 +157,23 @@ def _single_effect_labels(rows, ring, geometry, patches, notes, sel):
     from ringfit.physics.natural import fixed_frame_frequencies, rotating_natural_frequencies
 
     loaded = {}
+    n_all = np.arange(1, ROLLING_N_MAX + 1, dtype=float)
     for j, r in enumerate(rows):
-        if r["table"] not in sel or r["n"] < 1:
+        if r["table"] not in sel:
             continue
         said = []
-        if not r["branch"] and r["spin"] > 0:
+        if r["n"] < 1 and r["spin"] > 0:
+            # no n from the table nor a flexural branch of the rolling model (e.g. matched to its n = 0
+            # mode): the nearest wave of eq. 25/26 over n = 1 … ROLLING_N_MAX gives n and the wave
+            fn = fixed_frame_frequencies if r["fixed"] else rotating_natural_frequencies
+            w = np.abs(np.asarray(fn(ring, geometry, n_all, r["spin"])))  # [Hz], (n, 2)
+            k, b = np.unravel_index(int(np.argmin(np.abs(w - r["freq"]))), w.shape)
+            r["n"], r["wave"] = int(k) + 1, ("backward", "forward")[b]
+            said.append(f"n matched to {r['n']} by eq. {'26' if r['fixed'] else '25'} ({r['wave']} wave at "
+                        f"{w[k, b]:.1f} Hz)")
+        if r["n"] < 1:
+            continue
+        if not r["branch"] and not r["wave"] and r["spin"] > 0:
             fn = fixed_frame_frequencies if r["fixed"] else rotating_natural_frequencies
             w = np.abs(np.asarray(fn(ring, geometry, float(r["n"]), r["spin"])))  # [Hz]
             b = int(np.argmin(np.abs(w - r["freq"])))
