@@ -15,7 +15,8 @@ at the computed condition: the ring fitted to ``free.modes.csv``, ``k_trd`` of t
 diagnosis, Ω = V/R_e (R_e = R_out − δ/3), the patch of the steady rolling solution at
 that speed, :data:`ROLLING_HARMONICS` harmonics. Tags ``extr``/``0`` (``vert``/``hort``)
 are matched to the contact-symmetric/antisymmetric branches through the modes'
-symmetry; rows without n, tag or branch are matched by frequency; the match (branch,
+symmetry; rows without n, tag or branch are matched by frequency (a row without n matched to
+the n = 0 mode, or to none, takes n and wave from the nearest eq. 25/26 wave); the match (branch,
 n, direction, line, error, z) is stated per row (``labels["matched"]``,
 ``labels["rolling"]``: the JSON ``rows[].match`` and ``rows[].rolling_match``). The
 assignment — mode index at that speed and sensor line k — is static; inside the
