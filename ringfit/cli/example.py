@@ -1,4 +1,4 @@
-"""``ringfit example {records,case,cleat,profiles} --out DIR`` — synthetic inputs with a README of their truth.
+"""``ringfit example {records,case,cleat,profiles,rolling} --out DIR`` — synthetic inputs with a README of their truth.
 
 The one command of the product that imports :mod:`ringfit.synth` (the
 test-data generators); see :mod:`ringfit.synth.examples`.
@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ringfit.cli._args import force_flag, quiet_flag
 
-KINDS = ("records", "case", "cleat", "profiles")
+KINDS = ("records", "case", "cleat", "profiles", "rolling")
 
 
 def register(sub) -> None:
@@ -19,7 +19,8 @@ def register(sub) -> None:
                                    "folder, with a README.md that states the truth and the one-line commands that "
                                    "read them: records (hammer records -> ssi, frf, fit, sample, report), profiles "
                                    "(rolling profiles -> fit-rolling, roll), cleat (drum recording -> profile, "
-                                   "cleat), case (case folder -> diagnose).")
+                                   "cleat), case (case folder -> diagnose), rolling (case folder with rolling mode "
+                                   "tables at 20/40/60 km/h -> diagnose, campbell).")
     p.add_argument("kind", choices=KINDS, help="which example: " + ", ".join(KINDS))
     p.add_argument("--out", required=True, type=Path, help="folder to write into (created if missing)")
     force_flag(p)

@@ -245,6 +245,7 @@ def _rows_table(problem: GapProblem, base_ho: np.ndarray, final_ho: np.ndarray) 
     zb = (problem.y - base_ho) / sigma
     zf = (problem.y - final_ho) / sigma
     matched = lab.get("matched", {})
+    rolling = lab.get("rolling", {})  # rows of rolling tables: their branch of the rolling model (modal.py)
     out = []
     for i in range(problem.m):
         out.append({"row": lab["label"][i], "short": lab["short"][i], "measured": _r(problem.y[i], 5),
@@ -252,8 +253,8 @@ def _rows_table(problem: GapProblem, base_ho: np.ndarray, final_ho: np.ndarray) 
                     "z_baseline": _r(zb[i], 2), "z_with_effects": _r(zf[i], 2),
                     "outlier": bool(abs(zf[i]) > OUTLIER_Z),
                     **({"model_mode": lab["model_mode"][i]} if "model_mode" in lab else {}),
-                    **({"match": matched[lab["label"][i]]}
-                                                            if lab["label"][i] in matched else {})})
+                    **({"match": matched[lab["label"][i]]} if lab["label"][i] in matched else {}),
+                    **({"rolling_match": rolling[lab["label"][i]]} if lab["label"][i] in rolling else {})})
     return out
 
 
@@ -475,14 +476,27 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
     problems = build_problems(case, chosen, noise)
     # the mode-table parts are only a test when the folder holds test tables or nothing else
     parts = []
-    for prob in problems:
-        if prob.domain in ("modes", "damping") and case.profiles and not case.tests:
-            continue
-        parts.append(diagnose_problem(prob, progress))
+    with _blas_for(problems):
+        for prob in problems:
+            if prob.domain in ("modes", "damping") and case.profiles and not case.tests:
+                continue
+            parts.append(diagnose_problem(prob, progress))
     content = _combine(parts)
     content["data"] = case.data_files
     content["elapsed_s"] = round(time.perf_counter() - t0, 2)
     return Diagnosis(content, parts, getattr(case, "folder", None))
+
+
+def _blas_for(problems):
+    """One BLAS thread while refits run the rolling model's eigen-solves (``ringfit.gap.rolling_rows``):
+    multi-threaded BLAS on its ~100 × 100 matrices only synchronises, 50× slower on a busy machine."""
+    import contextlib
+
+    if any(getattr(p.predictor, "joint", None) is not None for p in problems):
+        from ringfit.targets.ssi import small_matrix_threads
+
+        return small_matrix_threads()
+    return contextlib.nullcontext()
 
 
 def _combine(parts: list[PartResult]) -> dict:

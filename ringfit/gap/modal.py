@@ -73,6 +73,7 @@ from ringfit.errors import InputError
 from ringfit.gap.effects.base import Effect
 from ringfit.gap.problem import GapProblem
 from ringfit.gap.ranking import predict
+from ringfit.gap.rolling_rows import JOINT, assign_rolling_rows, joint_for
 from ringfit.io.modes import ModeTable
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.natural import cavity_frequency, natural_angular_frequencies
@@ -119,6 +120,10 @@ class ModalRows(eqx.Module):
     - ``freq_hz``: the row's measured frequency [Hz] (damping rows: their mode's).
     - ``table``: index of the row's table (0 = free table); ``table_patch``: ``(T,)`` the
       computed contact half-angle of each table [rad] (0: none).
+    - ``joint``: 1 for a row of a ``rolling`` table assigned to a mode of the rolling model
+      (:mod:`ringfit.gap.rolling_rows`), ``mode_index`` its mode (int) and ``line_k`` its
+      sensor line k; ``table_omega``, ``table_leading``, ``table_trailing``: ``(T,)`` Ω [rad/s]
+      and the contact arc edges [rad] of each rolling table (0 for the others).
     """
 
     n: jax.Array
@@ -133,6 +138,13 @@ class ModalRows(eqx.Module):
     freq_hz: jax.Array
     table: jax.Array
     table_patch: jax.Array
+    # rolling tables (None where a caller builds rows without them: no rolling model)
+    joint: jax.Array | None = None
+    mode_index: jax.Array | None = None
+    line_k: jax.Array | None = None
+    table_omega: jax.Array | None = None
+    table_leading: jax.Array | None = None
+    table_trailing: jax.Array | None = None
 
 
 class ModalData(eqx.Module):
@@ -141,13 +153,21 @@ class ModalData(eqx.Module):
     geometry: TyreGeometry
 
 
-def _apply_effects(theta, ring, geometry, rows, effects, sizes, i0):
-    omega = natural_angular_frequencies(ring, geometry, rows.n)
+def _apply_effects(theta, ring, geometry, rows, effects, sizes, i0, joint=None):
+    """ω, ζ of every row: eq. 18, then each effect in turn; rolling rows with both effects of
+    :data:`ringfit.gap.rolling_rows.JOINT` on take the joint rolling model instead of the two
+    (``joint``: :class:`~ringfit.gap.rolling_rows.RollingJoint`, docs/physics.md §3.7, §6)."""
+    omega0 = natural_angular_frequencies(ring, geometry, rows.n)
+    omega = omega0
     zeta = jnp.zeros_like(omega) + ring.damping_ratio
+    on = None if joint is None else joint.active(theta, rows)
     i = i0
     for effect, k in zip(effects, sizes):
-        omega, zeta = effect.modal(theta[i : i + k], omega, zeta, rows, ring, geometry)
+        new, zeta = effect.modal(theta[i : i + k], omega, zeta, rows, ring, geometry)
+        omega = jnp.where(on, omega, new) if on is not None and effect.name in JOINT else new
         i += k
+    if on is not None:
+        omega = jnp.where(on, omega + joint.angular_frequencies(theta, ring, geometry, rows) - omega0, omega)
     return omega, zeta
 
 
@@ -156,18 +176,21 @@ class ModalPredictor(eqx.Module):
 
     Rows of the reference table see the ring itself, every other row a stop-gradient
     copy: in a refit the ring answers to the free table alone (module docstring).
+    ``joint``: the rolling model's prediction of rolling rows (:mod:`ringfit.gap.rolling_rows`),
+    ``None`` without rolling tables or without both ``ground_contact`` and ``rotation``.
     """
 
     effects: tuple = eqx.field(static=True)
     base: tuple = eqx.field(static=True)
     sizes: tuple = eqx.field(static=True)
+    joint: object = eqx.field(static=True, default=None)
 
     def __call__(self, theta, data: ModalData):
         ring = data.ring.replace(**{k: theta[i] for i, k in enumerate(self.base)})
         frozen = jax.lax.stop_gradient(ring)
         nb = len(self.base)
         live, _ = _apply_effects(theta, ring, data.geometry, data.rows, self.effects, self.sizes, nb)
-        test, _ = _apply_effects(theta, frozen, data.geometry, data.rows, self.effects, self.sizes, nb)
+        test, _ = _apply_effects(theta, frozen, data.geometry, data.rows, self.effects, self.sizes, nb, self.joint)
         return jnp.where(data.rows.reference > 0, live, test) / (2.0 * jnp.pi)
 
 
@@ -272,11 +295,11 @@ def _table_rows(tables, geometry, patches, spins):
             if t.state != "free":
                 contact = 1 if tag in ("extr", "vert") else 2 if tag in ("0", "hort") else 0
             rows.append(dict(
-                table=ti, tlabel=tl, n=int(t.n[i]), tag=tag, branch=branch, contact=contact,
+                table=ti, i=i, tlabel=tl, n=int(t.n[i]), tag=tag, branch=branch, contact=contact,
                 spin=spins[ti], fixed=fixed, patch=patches[ti][0] if contact else 0.0,
                 freq=float(t.freq_hz[i]), std=float(t.freq_std_hz[i]), damping=float(t.damping_pct[i]),
                 damping_std=_optional_float(t.extra.get("damping_std_pct"), i),
-                reference=ti == 0, a=int(t.a[i]),
+                reference=ti == 0, a=int(t.a[i]), joint=0.0, mode_index=0, line_k=0.0, wave="",
             ))
     return rows, (cavity[0] if cavity else float(cavity_frequency(1)))
 
@@ -292,17 +315,25 @@ def _optional_float(column, i: int) -> float:
     return x if math.isfinite(x) and x >= 0 else math.nan
 
 
-def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch) -> ModalRows:
+def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=None) -> ModalRows:
     def col(key, dtype=jnp.float64):
         return jnp.asarray([r[key] for r in rows], dtype=dtype)
 
+    def per_table(field):
+        return jnp.asarray(np.zeros(len(table_patch)) if rolling is None else getattr(rolling, field),
+                           dtype=jnp.float64)
+
     return ModalRows(
         n=col("n"), is_freq=jnp.full(len(rows), is_freq), contact=col("contact", jnp.int32), spin=col("spin"),
-        branch=jnp.asarray([{"backward": 1.0, "forward": -1.0}.get(r["branch"], 0.0) for r in rows]),
+        # a rolling row without a branch: the wave of eq. 25/26 it was matched to (rotation alone)
+        branch=jnp.asarray([{"backward": 1.0, "forward": -1.0}.get(r["branch"] or r.get("wave", ""), 0.0)
+                            for r in rows]),
         fixed_frame=jnp.asarray([1.0 if r["fixed"] else 0.0 for r in rows]), cavity_hz=jnp.asarray(cavity_hz),
         reference=jnp.asarray([1.0 if r["reference"] else 0.0 for r in rows]), patch=col("patch"),
         freq_hz=col("freq"), table=col("table", jnp.int32),
         table_patch=jnp.asarray(np.asarray(table_patch, dtype=np.float64)),
+        joint=col("joint"), mode_index=col("mode_index", jnp.int32), line_k=col("line_k"),
+        table_omega=per_table("omega"), table_leading=per_table("leading"), table_trailing=per_table("trailing"),
     )
 
 
@@ -313,9 +344,15 @@ def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
     if extra == 0:
         return rows
     fill = {"n": 2.0, "is_freq": rows.is_freq[0] if m else 1.0, "contact": 0, "spin": 0.0, "branch": 0.0,
-            "fixed_frame": 0.0, "reference": 1.0, "patch": 0.0, "freq_hz": 100.0, "table": 0}
-    return ModalRows(**{k: jnp.concatenate([getattr(rows, k), jnp.full(extra, v, dtype=getattr(rows, k).dtype)])
-                        for k, v in fill.items()}, cavity_hz=rows.cavity_hz, table_patch=rows.table_patch)
+            "fixed_frame": 0.0, "reference": 1.0, "patch": 0.0, "freq_hz": 100.0, "table": 0, "joint": 0.0,
+            "mode_index": 0, "line_k": 0.0}
+    def grow(k, v):
+        col = getattr(rows, k)
+        return None if col is None else jnp.concatenate([col, jnp.full(extra, v, dtype=col.dtype)])
+
+    return ModalRows(**{k: grow(k, v) for k, v in fill.items()}, cavity_hz=rows.cavity_hz, table_patch=rows.table_patch,
+                     table_omega=rows.table_omega, table_leading=rows.table_leading,
+                     table_trailing=rows.table_trailing)
 
 
 def _match_missing_n(rows, ring, geometry):
@@ -429,9 +466,15 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
             patches.append((0.0, 0.0))
             conditions.append("")
     rows, cavity_hz = _table_rows(tables, geometry, patches, spins)
+    rolling, rolling_notes, rolling_records = assign_rolling_rows(tables, rows, ring_ref, geometry, patches)
+    if rolling is not None:
+        for ti, note in rolling.notes.items():
+            conditions[ti] = "; ".join(x for x in (conditions[ti], note) if x)
     match_notes = _match_missing_n(rows, ring_ref, geometry)
+    for j, note in rolling_notes.items():
+        match_notes[j] = "; ".join(x for x in (note, match_notes.get(j)) if x)
     problems = [_frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_rel, sigma_method,
-                                   match_notes, patches, conditions, effects, noise)]
+                                   match_notes, patches, conditions, effects, noise, rolling, rolling_records)]
     damp = [r for r in rows if math.isfinite(r["damping"]) and r["damping"] > 0]
     if len(damp) >= 4:
         problems.append(_damping_problem(tables, damp, cavity_hz, geometry, ring_ref, effects, noise))
@@ -439,11 +482,16 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
 
 
 def _labels(rows, suffix=""):
+    """One label per row; rows a table labels alike (e.g. two n = 5 rows of a rolling table without tags)
+    are told apart by their measured frequency, so that every per-row record keyed by label stays unique."""
     out = []
     for r in rows:
         qual = " ".join(x for x in (r["tag"], r["branch"]) if x)
-        out.append(f"{r['tlabel']} n={r['n']}{' ' + qual if qual else ''}{suffix}")
-    return out
+        out.append(f"{r['tlabel']} n={r['n']}{' ' + qual if qual else ''}")
+    seen: dict = {}
+    for lab in out:
+        seen[lab] = seen.get(lab, 0) + 1
+    return [f"{lab} at {r['freq']:.1f} Hz{suffix}" if seen[lab] > 1 else lab + suffix for lab, r in zip(out, rows)]
 
 
 def _short_labels(rows, tables):
@@ -505,12 +553,12 @@ def _usable(effects, mrows, domain_note):
 
 
 def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_rel, sigma_method, match_notes,
-                       patches, conditions, effects, noise) -> GapProblem:
+                       patches, conditions, effects, noise, rolling=None, rolling_records=None) -> GapProblem:
     from ringfit.fit.priors import PHYSICAL_PRIORS
     from ringfit.physics.natural import natural_frequencies
 
     m = len(rows)
-    mrows = _rows_module(rows, 1.0, cavity_hz, [p[0] for p in patches])
+    mrows = _rows_module(rows, 1.0, cavity_hz, [p[0] for p in patches], rolling)
     y = np.array([r["freq"] for r in rows])
     n = np.array([r["n"] for r in rows], dtype=float)
     ref = np.array([r["reference"] for r in rows])
@@ -547,7 +595,8 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
     # --- problem
     labels = _labels(rows)
     for j, note in match_notes.items():
-        labels[j] += " (n matched)"
+        if "n matched" in note:
+            labels[j] += " (n matched)"
     prior_mean = np.array([fit.values[k] for k in BASE])
     prior_sd = np.full(len(BASE), np.inf)
     ei = PHYSICAL_PRIORS["ei"]
@@ -558,6 +607,7 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
         short=_short_labels(rows, tables), family=[r["tlabel"] for r in rows], model_mode=_model_modes(rows),
         sequence=[f"{r['table']}|{r['tag']}|{r['branch']}" for r in rows],
         matched={labels[j]: note for j, note in match_notes.items()},
+        rolling={labels[j]: rec for j, rec in (rolling_records or {}).items()},
         cavity_hz=cavity_hz, measured_freq=y)
     problem = GapProblem(
         domain="modes", data_files=[str(t.source).rsplit("/", 1)[-1] for t in tables], y=y, sigma=sigma,
@@ -571,11 +621,18 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
               "conditions": {table_label(t, i): c for i, (t, c) in enumerate(zip(tables, conditions)) if c},
               "reference_result": fit,
               "condition_sd": _condition_sd(patches)},
-        base_prior_mean=prior_mean, predictor=ModalPredictor(effects=usable, base=BASE, sizes=sizes),
+        base_prior_mean=prior_mean,
+        predictor=ModalPredictor(effects=usable, base=BASE, sizes=sizes,
+                                 joint=joint_for(usable, sizes, len(BASE), rolling_tables(rows))),
         robust=~ref, huber=HUBER,
     )
     problem.base_values = np.array([fit.values[k] for k in BASE])
     return problem
+
+
+def rolling_tables(rows) -> tuple[int, ...]:
+    """Indices of the tables with rows the rolling model predicts (assigned rows of ``rolling`` tables)."""
+    return tuple(sorted({r["table"] for r in rows if r["joint"] > 0}))
 
 
 def _condition_sd(patches) -> dict:

@@ -219,6 +219,121 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
                      ring=ring.as_dict(), seed=seed)
 
 
+#: Road speeds [km/h] and load [N] of the rolling tables of :func:`make_rolling_case` (the source study's cleat tests).
+ROLLING_SPEEDS = (20.0, 40.0, 60.0)
+ROLLING_LOAD_N = 4000.0
+
+
+def _sensor_view(ring, geometry, contact: bool):
+    """What the co-rotating sensor sees of each mode at :data:`ROLLING_SPEEDS` (docs/physics.md §3.7), from
+    the physics layer alone (not the diagnosis's matching): the strongest radial-acceleration line
+    ``|ω + kΩ|/2π`` [Hz], the dominant order and the tag of standing modes (|travel| < 3: ``extr``/``0``,
+    ``vert``/``hort`` for n = 1; "" otherwise), each ``(speeds, modes)``. K = 40 harmonics."""
+    import jax
+
+    from ringfit.physics.contact import solve_rolling_jit
+    from ringfit.physics.operating import KMH, OperatingPoint, rolling_radius
+    from ringfit.physics.rolling_modes import campbell_modes_jit, material_acceleration, mode_labels, sensor_lines
+
+    # the tyre rolls under its load either way: Ω = V/R_e (R_e = R_out − δ/3 of the standing tyre at the load)
+    standing = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, ROLLING_LOAD_N))
+    r_e = float(rolling_radius(geometry.outer_radius, float(standing.deflection)))
+    omegas = np.asarray(ROLLING_SPEEDS) * KMH / r_e
+    cm = campbell_modes_jit(ring, geometry, ROLLING_LOAD_N, omegas, speed_unit="rad/s", contact=contact, harmonics=40)
+    m = cm.modes
+    acc, _ = material_acceleration(m)
+    lab = jax.device_get(mode_labels(acc, jnp.zeros_like(acc), m.k[0], m.angular_frequency, m.omega))
+    f, w_rad, w_tan = (np.asarray(x) for x in sensor_lines(m, "acceleration"))
+    # a mode without radial content (the inextensible ring's n = 0, the belt turning on its sidewalls) is
+    # read on the tangential axis, with its displacement order
+    radial = np.sum(np.abs(np.asarray(m.radial)) ** 2, axis=-1) > 1e-12
+    weight = np.where(radial[..., None], w_rad, w_tan)
+    best = np.argmax(np.nan_to_num(weight, nan=-1.0), axis=-1)
+    hz = np.abs(np.take_along_axis(f, best[..., None], -1)[..., 0])
+    hz = np.where(np.all(np.isnan(weight), axis=-1), np.nan, hz)
+    order, travel, sym = (np.asarray(lab[k]) for k in ("order", "travel", "symmetry"))
+    order = np.where(radial, order, np.asarray(m.order))
+    standing = (np.abs(travel) < 3.0) & np.isfinite(sym) & contact
+    cos_type = np.nan_to_num(sym) >= 0.5
+    tag = np.where(order == 1, np.where(cos_type, "vert", "hort"), np.where(cos_type, "extr", "0"))
+    return hz, order, np.where(standing, tag, "")
+
+
+def make_rolling_case(folder: str | os.PathLike, contact: bool = True, seed: int = 0) -> CaseLabel:
+    """Write a case folder (docs/formats.md §6) with rolling mode tables at 20/40/60 km/h and 4 kN.
+
+    ``tyre.toml`` (bundled Table 9 values, not the truth), ``free.modes.csv`` (eq. 18 of the true
+    ring, noisy, with damping) and ``roll20/40/60.modes.csv`` + sidecars (``state = rolling``,
+    ``load_n``, ``speed_kmh``, ``frame = rotating``): what the co-rotating sensor sees of the
+    rolling tyre's modes — the strongest line ω + kΩ of each branch of n = 1 … 6–8 of the model of
+    docs/physics.md §3.7 (:func:`ringfit.physics.rolling_modes.campbell_modes` of the true ring with K = 40
+    harmonics, not the diagnosis's basis; lines and labels read here, not by the diagnosis's matching),
+    with ``contact=False`` the free spinning ring (the control: eq. 25 lines, no patch; Ω = V/R_e of the
+    loaded tyre in both). Made to look like identified tables: relative noise of
+    0.05–0.2 % (the same identification as the free table, up to 1.3× its level), one or two
+    modes missing per table, ``extr``/``0`` (``vert``/``hort``) tags on the modes the model calls
+    standing and no ``branch`` anywhere, one row per table without n, scattered damping, no
+    ``freq_std_hz``.
+
+    **Returns:** the hidden :class:`CaseLabel`: ``effect`` / ``expected_verdict``
+    ``"rotation+ground_contact"`` (``"rotation"`` for the control; the order of the chain is
+    free), ``noise["rows"]`` the realised noise of every observation in the order the diagnosis
+    reads them (docs/formats.md §15).
+    """
+    from ringfit.io.tyre import Tyre, write_tyre
+    from ringfit.physics.natural import natural_frequencies
+
+    rng = np.random.default_rng(seed)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    if any(folder.iterdir()):
+        raise FileExistsError(f"{folder} is not empty")
+    geometry, ring = _ring(rng)
+    sigma_rel = float(rng.uniform(0.0005, 0.002))
+    sigma_roll = sigma_rel * float(rng.uniform(1.0, 1.3))
+    zeta0 = float(rng.uniform(0.015, 0.035))
+    n_free = np.arange(1, int(rng.integers(8, 11)) + 1)
+    free = np.asarray(natural_frequencies(ring, geometry, jnp.asarray(n_free, float)))
+    free_noisy = free * (1.0 + sigma_rel * rng.normal(0.0, 1.0, free.size))
+    damp = 100.0 * zeta0 * np.exp(rng.normal(0.0, 0.1, free.size))
+    row_noise = []
+    for f, ft, d in zip(free_noisy, free, damp):
+        row_noise += [("freq", float(f - ft)), ("damping", float(d / 100.0 - zeta0))]
+    write_tyre(Tyre(geometry, {"rho_a": 2.715, "ei": 0.9426, "kw": 1.294e6, "kv": 1.161e6,
+                               "k_tread": 19e6, "damping_ratio": 0.025}), folder / "tyre.toml")
+    _write_table(folder, "free.modes.csv",
+                 [{"n": int(n), "freq_hz": float(f), "damping_pct": float(d)} for n, f, d in zip(n_free, free_noisy, damp)],
+                 {"state": "free", "speed_kmh": 0, "pressure_bar": 2.2, "frame": "fixed"}, False, 0.0)
+    n_top = int(rng.integers(6, 9))
+    hz, order, tags = _sensor_view(ring, geometry, contact)
+    truth = {}
+    for s, speed in enumerate(ROLLING_SPEEDS):
+        keep = [b for b in range(order.shape[1]) if 1 <= order[s, b] <= n_top and np.isfinite(hz[s, b])]
+        keep = sorted(keep, key=lambda b: hz[s, b])
+        drop = set(rng.choice(len(keep), size=int(rng.integers(1, 3)), replace=False).tolist())
+        keep = [b for j, b in enumerate(keep) if j not in drop]
+        no_n = int(rng.integers(0, len(keep)))
+        rows, true_hz = [], []
+        for j, b in enumerate(keep):
+            f = float(hz[s, b])
+            noisy = f * (1.0 + sigma_roll * float(rng.normal()))
+            rows.append({"n": -1 if j == no_n else int(order[s, b]), "tag": str(tags[s, b]), "freq_hz": noisy,
+                         "damping_pct": float(100.0 * zeta0 * np.exp(rng.normal(0.3, 0.4)))})
+            row_noise.append(("freq", noisy - f))
+            true_hz.append(f)
+        name = f"roll{int(speed)}.modes.csv"
+        truth[name] = true_hz
+        _write_table(folder, name, rows, {"state": "rolling", "load_n": ROLLING_LOAD_N, "speed_kmh": speed,
+                                          "pressure_bar": 2.2, "frame": "rotating"}, False, 0.0)
+    effect = "rotation+ground_contact" if contact else "rotation"
+    return CaseLabel(effect=effect, expected_verdict=effect,
+                     magnitude={"load_n": ROLLING_LOAD_N, "speeds_kmh": list(ROLLING_SPEEDS), "contact": contact,
+                                "true_hz": truth},
+                     noise={"relative": sigma_rel, "relative_rolling": sigma_roll, "colour": "white",
+                            "freq_std_given": False, "rows": row_noise},
+                     ring=ring.as_dict(), seed=seed)
+
+
 def write_label(label: CaseLabel, path: str | os.PathLike) -> None:
     """Write a label as JSON (keep it outside the case folder)."""
     Path(path).write_text(json.dumps(label.__dict__, indent=1))

@@ -1,4 +1,4 @@
-"""Example inputs with a known truth, for ``ringfit example {records,case,cleat,profiles} --out DIR``.
+"""Example inputs with a known truth, for ``ringfit example {records,case,cleat,profiles,rolling} --out DIR``.
 
 Each kind writes files in the formats of docs/formats.md from the generators
 of :mod:`ringfit.synth`, and a ``README.md`` that states the truth behind
@@ -13,7 +13,9 @@ at once and its answer checked against the truth:
   tread stiffness, and the tyre file fitted to its free modes: ``fit-rolling``, ``roll``;
 - ``cleat`` — a continuous drum recording with a cleat (encoder, hall
   pulses), with the travelling waves it excites: ``profile``, ``cleat``;
-- ``case`` — a case folder (docs/formats.md §6) with one injected effect: ``diagnose``.
+- ``case`` — a case folder (docs/formats.md §6) with one injected effect: ``diagnose``;
+- ``rolling`` — a case folder with rolling mode tables (20/40/60 km/h, 4 kN, co-rotating sensor):
+  ``diagnose`` (rotation + ground_contact), ``campbell``.
 
 Files are generated in a temporary folder inside ``DIR`` and moved into
 place only when all are ready; an existing file is replaced only with
@@ -31,7 +33,7 @@ import numpy as np
 
 from ringfit.errors import InputError
 
-KINDS = ("records", "case", "cleat", "profiles")
+KINDS = ("records", "case", "cleat", "profiles", "rolling")
 
 
 def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = False, progress: bool = False) -> list[Path]:
@@ -51,7 +53,8 @@ def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = Fal
     folder.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".ringfit-example-", dir=folder))
     try:
-        {"records": _records, "case": _case, "cleat": _cleat, "profiles": _profiles}[kind](tmp, progress)
+        {"records": _records, "case": _case, "cleat": _cleat, "profiles": _profiles,
+         "rolling": _rolling}[kind](tmp, progress)
         made = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
         for rel in made:  # every destination checked before anything is moved
             dst = folder / rel
@@ -251,6 +254,38 @@ to) and test tables of the loaded and the spinning tyre, with relative frequency
 
 ```bash
 ringfit diagnose case --out case.diagnosis.json --report case.html
+```
+""")
+
+
+def _rolling(folder: Path, progress: bool) -> None:
+    from ringfit.synth.cases import make_rolling_case
+
+    label = make_rolling_case(folder / "rolling", contact=True, seed=0)
+    ring = label.ring
+    (folder / "README.md").write_text(f"""# Example: a case folder with rolling mode tables
+
+Written by `ringfit example rolling`. `rolling/` is a case folder (docs/formats.md §6): `tyre.toml`
+(Table 9 values as a start, not the truth), `free.modes.csv` (the free tyre the ring is fitted to) and
+`roll20/40/60.modes.csv`: the modes of the tyre rolling at 20, 40 and 60 km/h under 4 kN as the
+co-rotating sensor sees them (docs/physics.md §3.7), with modes missing, `extr`/`0` tags instead of
+branches, one row per table without n, no `freq_std_hz`, relative frequency noise
+{100 * label.noise['relative_rolling']:.2g} %.
+
+## The truth (kept out of the case folder)
+
+- the lines are those of the rolling, loaded tyre's model (contact patch of the steady rolling solution,
+  rotation at Ω = V/R_e): the diagnosis should answer `rotation` and `ground_contact` (either order);
+- the ring: ρA = {ring['rho_a']:.4g} kg/m, EI = {ring['ei']:.4g} N m², k_w = {ring['kw']:.4g} N/m²,
+  k_v = {ring['kv']:.4g} N/m², k_tread = {ring['k_tread']:.4g} N/m².
+
+## Try
+
+```bash
+ringfit diagnose rolling --effects ground_contact,rotation --out rolling.diagnosis.json
+ringfit fit rolling/free.modes.csv --tyre rolling/tyre.toml --out fitted.toml
+ringfit campbell --tyre fitted.toml --load 4000 --speeds 0:60:5 --modes rolling/roll20.modes.csv \
+    rolling/roll40.modes.csv rolling/roll60.modes.csv --out rolling.campbell.csv --plot campbell.png
 ```
 """)
 
