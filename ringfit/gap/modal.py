@@ -62,6 +62,7 @@ jackknife σ) is wider in ``ln ζ`` (δζ/ζ) takes that. Effects: those whose m
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import equinox as eqx
@@ -124,6 +125,7 @@ class ModalRows(eqx.Module):
       (:mod:`ringfit.gap.rolling_rows`), ``mode_index`` its mode (int) and ``line_k`` its
       sensor line k; ``table_omega``, ``table_leading``, ``table_trailing``: ``(T,)`` Ω [rad/s]
       and the contact arc edges [rad] of each rolling table (0 for the others).
+    - ``contact_tables`` (static): the tables whose ``table_patch`` > 0.
     """
 
     n: jax.Array
@@ -145,6 +147,9 @@ class ModalRows(eqx.Module):
     table_omega: jax.Array | None = None
     table_leading: jax.Array | None = None
     table_trailing: jax.Array | None = None
+    #: indices of the tables with a contact patch (static: effects solve only these tables' contact
+    #: problems); None = every table
+    contact_tables: tuple | None = eqx.field(static=True, default=None)
 
 
 class ModalData(eqx.Module):
@@ -189,7 +194,10 @@ class ModalPredictor(eqx.Module):
         ring = data.ring.replace(**{k: theta[i] for i, k in enumerate(self.base)})
         frozen = jax.lax.stop_gradient(ring)
         nb = len(self.base)
-        live, _ = _apply_effects(theta, ring, data.geometry, data.rows, self.effects, self.sizes, nb)
+        # reference rows never touch the ground (the free table has no patch): their pass solves no
+        # contact problem
+        live_rows = dataclasses.replace(data.rows, contact_tables=())
+        live, _ = _apply_effects(theta, ring, data.geometry, live_rows, self.effects, self.sizes, nb)
         test, _ = _apply_effects(theta, frozen, data.geometry, data.rows, self.effects, self.sizes, nb, self.joint)
         return jnp.where(data.rows.reference > 0, live, test) / (2.0 * jnp.pi)
 
@@ -334,6 +342,7 @@ def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=No
         table_patch=jnp.asarray(np.asarray(table_patch, dtype=np.float64)),
         joint=col("joint"), mode_index=col("mode_index", jnp.int32), line_k=col("line_k"),
         table_omega=per_table("omega"), table_leading=per_table("leading"), table_trailing=per_table("trailing"),
+        contact_tables=tuple(int(i) for i, a in enumerate(np.asarray(table_patch, dtype=np.float64)) if a > 0),
     )
 
 
@@ -352,7 +361,7 @@ def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
 
     return ModalRows(**{k: grow(k, v) for k, v in fill.items()}, cavity_hz=rows.cavity_hz, table_patch=rows.table_patch,
                      table_omega=rows.table_omega, table_leading=rows.table_leading,
-                     table_trailing=rows.table_trailing)
+                     table_trailing=rows.table_trailing, contact_tables=rows.contact_tables)
 
 
 def _match_missing_n(rows, ring, geometry):

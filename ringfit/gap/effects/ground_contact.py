@@ -37,7 +37,8 @@ class GroundContact(Effect):
         # differentiation are avoided on purpose), each row picks its mode
         k = jnp.clip(rows.n, 1, DEFAULT_HARMONICS).astype(jnp.int32) - 1
         loaded = jnp.zeros_like(omega)
-        for t in range(rows.table_patch.shape[0]):
+        tables = getattr(rows, "contact_tables", None)
+        for t in range(rows.table_patch.shape[0]) if tables is None else tables:  # tables with a patch only
             cos_t, sin_t = loaded_angular_frequencies(ring, geometry, values[0] * rows.table_patch[t],
                                                       DEFAULT_HARMONICS)
             pick = jnp.where(rows.contact == 1, cos_t[k], sin_t[k])
