@@ -107,6 +107,10 @@ def ring_from_vector(theta) -> RingParams:
 RING_COORDS = tuple(Coordinate(k, LINEAR) if k == "chi" else Coordinate(k, LOG) for k in RING_FIELDS)
 
 
+#: Rows of a frequency fit are padded to a multiple of this (zero-weight rows): one compilation per bucket.
+ROW_BUCKET = 16
+
+
 class FrequencyArrays(eqx.Module):
     """What the eq. 18 residuals need besides θ: geometry and the rows ``(m,)`` n, f [Hz], σ [Hz]."""
 
@@ -186,12 +190,19 @@ def fit_natural_frequencies(
     start = np.array([base[RING_FIELDS.index(k)] for k in free])
     if not np.all(np.isfinite(start) & (start > 0)):
         raise InputError(f"initial values of {list(free)} must be positive and finite, got {start}")
-    arrays = FrequencyArrays(geometry, data.n, data.freq_hz, data.sigma_hz)
+    # rows padded to a multiple of ROW_BUCKET with rows of infinite σ (residual and Jacobian exactly 0):
+    # tables of 8, 9 … 16 modes share one compiled fit (and one compiled posterior)
+    m = data.n.size
+    pad = (-m) % ROW_BUCKET
+    arrays = FrequencyArrays(geometry, np.concatenate([data.n, np.ones(pad)]),
+                             np.concatenate([data.freq_hz, np.full(pad, 100.0)]),
+                             np.concatenate([data.sigma_hz, np.full(pad, np.inf)]))
     problem = Problem(NaturalFrequencyResiduals(), arrays, RING_COORDS, prior=log_normal_prior(priors),
                       plausible=BOUNDS, data_label="these modes")
-    result = least_squares(problem, base, free, max_steps=max_steps, rtol=rtol, atol=atol)
-    m = data.n.size
-    model = np.asarray(result.extra.pop("aux"))
+    result = least_squares(problem, base, free, max_steps=max_steps, rtol=rtol, atol=atol, n_data=m)
+    model = np.asarray(result.extra.pop("aux"))[:m]
+    result.residuals = result.residuals[:m]
+    result.jacobian = np.concatenate([result.jacobian[:m], result.jacobian[m + pad:]])
     if table.state != "free" or float(table.condition.get("speed_kmh", 0) or 0) > 0:
         result.flags.append(f"table state is {table.state!r} (speed {table.condition.get('speed_kmh', 0)} km/h); "
                             "the eq. 18 model assumes a static, free tyre")

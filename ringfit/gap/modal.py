@@ -324,23 +324,23 @@ def _optional_float(column, i: int) -> float:
 
 
 def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=None) -> ModalRows:
-    def col(key, dtype=jnp.float64):
-        return jnp.asarray([r[key] for r in rows], dtype=dtype)
+    def col(key, dtype=np.float64):
+        return np.asarray([r[key] for r in rows], dtype=dtype)
 
     def per_table(field):
-        return jnp.asarray(np.zeros(len(table_patch)) if rolling is None else getattr(rolling, field),
-                           dtype=jnp.float64)
+        return np.asarray(np.zeros(len(table_patch)) if rolling is None else getattr(rolling, field),
+                           dtype=np.float64)
 
     return ModalRows(
-        n=col("n"), is_freq=jnp.full(len(rows), is_freq), contact=col("contact", jnp.int32), spin=col("spin"),
+        n=col("n"), is_freq=np.full(len(rows), is_freq), contact=col("contact", np.int32), spin=col("spin"),
         # a rolling row without a branch: the wave of eq. 25/26 it was matched to (rotation alone)
-        branch=jnp.asarray([{"backward": 1.0, "forward": -1.0}.get(r["branch"] or r.get("wave", ""), 0.0)
+        branch=np.asarray([{"backward": 1.0, "forward": -1.0}.get(r["branch"] or r.get("wave", ""), 0.0)
                             for r in rows]),
-        fixed_frame=jnp.asarray([1.0 if r["fixed"] else 0.0 for r in rows]), cavity_hz=jnp.asarray(cavity_hz),
-        reference=jnp.asarray([1.0 if r["reference"] else 0.0 for r in rows]), patch=col("patch"),
-        freq_hz=col("freq"), table=col("table", jnp.int32),
-        table_patch=jnp.asarray(np.asarray(table_patch, dtype=np.float64)),
-        joint=col("joint"), mode_index=col("mode_index", jnp.int32), line_k=col("line_k"),
+        fixed_frame=np.asarray([1.0 if r["fixed"] else 0.0 for r in rows]), cavity_hz=np.asarray(cavity_hz),
+        reference=np.asarray([1.0 if r["reference"] else 0.0 for r in rows]), patch=col("patch"),
+        freq_hz=col("freq"), table=col("table", np.int32),
+        table_patch=np.asarray(np.asarray(table_patch, dtype=np.float64)),
+        joint=col("joint"), mode_index=col("mode_index", np.int32), line_k=col("line_k"),
         table_omega=per_table("omega"), table_leading=per_table("leading"), table_trailing=per_table("trailing"),
         contact_tables=tuple(int(i) for i, a in enumerate(np.asarray(table_patch, dtype=np.float64)) if a > 0),
     )
@@ -357,7 +357,7 @@ def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
             "mode_index": 0, "line_k": 0.0}
     def grow(k, v):
         col = getattr(rows, k)
-        return None if col is None else jnp.concatenate([col, jnp.full(extra, v, dtype=col.dtype)])
+        return None if col is None else np.concatenate([col, np.full(extra, v, dtype=col.dtype)])
 
     return ModalRows(**{k: grow(k, v) for k, v in fill.items()}, cavity_hz=rows.cavity_hz, table_patch=rows.table_patch,
                      table_omega=rows.table_omega, table_leading=rows.table_leading,
