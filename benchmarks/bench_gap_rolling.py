@@ -9,6 +9,12 @@ ideal one (the injected noise, the diagnosis's Huber weighting); the candidates 
 ``ground_contact`` and ``rotation`` (``--all``: every registered effect).
 
 Run: ``python benchmarks/bench_gap_rolling.py [n_seeds] [--all]`` (default 4 seeds).
+
+Figures at the time of writing (8 seeds, 2 shared cores, loaded): 15/16 verdicts right, held-out
+shrink within 1.8 points of the ideal on every case, 16 s per case (38 s for the first, with
+compilation). The one miss (seed 3, control) is ``rotation`` + ``unexplained``: the rolling rows' σ
+is the free table's (no ``freq_std_hz``), whose robust estimate from 8 rows came out at 0.054 %
+against the 0.13 % put into the rolling tables, so the remaining noise reads as structure.
 """
 
 from __future__ import annotations

@@ -15,8 +15,7 @@ at the computed condition: the ring fitted to ``free.modes.csv``, ``k_trd`` of t
 diagnosis, Ω = V/R_e (R_e = R_out − δ/3), the patch of the steady rolling solution at
 that speed, :data:`ROLLING_HARMONICS` harmonics. Tags ``extr``/``0`` (``vert``/``hort``)
 are matched to the contact-symmetric/antisymmetric branches through the modes'
-symmetry; rows without n, tag or branch are matched by frequency (a row without n matched to
-the n = 0 mode, or to none, takes n and wave from the nearest eq. 25/26 wave); the match (branch,
+symmetry; rows without n, tag or branch are matched by frequency; the match (branch,
 n, direction, line, error, z) is stated per row (``labels["matched"]``,
 ``labels["rolling"]``: the JSON ``rows[].match`` and ``rows[].rolling_match``). The
 assignment — mode index at that speed and sensor line k — is static; inside the
@@ -33,8 +32,9 @@ the two alone, the rows get that effect alone: ``rotation`` eq. 25/26 on the row
 branch (where the table gives none: the wave of eq. 25/26 nearer the measured
 frequency, stated), ``ground_contact`` the standing loaded modes on the row's tag
 (where it gives none: the cos/sin-type loaded mode nearer the measured frequency,
-stated). With neither, the baseline is eq. 18 of the row's n (the matched n where the
-table gives none).
+stated). With neither, the baseline is eq. 18 of the row's n. A row without n takes, for the
+baseline and the single-effect predictions, the n (and wave) of the nearest eq. 25/26 wave — each
+model its own assignment: the joint one keeps the branch it was matched to, whatever its n.
 
 The mode index is fixed at the computed condition; a fitted patch scale or speed gain
 far from 1 may reorder modes, and the row then follows the index, not the shape (a
@@ -133,9 +133,6 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
                     continue
                 r.update(joint=1.0, mode_index=int(a["mode_index"]), line_k=float(a["k"]))
                 said = []
-                if r["n"] < 0 and rec["model_n"] is not None and rec["model_n"] >= 1:
-                    r["n"] = int(rec["model_n"])
-                    said.append(f"n matched to {r['n']} by the rolling model")
                 records[j] = {"model_branch": rec["model_branch"], "model_n": rec["model_n"],
                               "model_direction": rec["model_direction"], "model_tag": rec["model_tag"],
                               "model_k": rec["model_k"], "frame": rec["frame"], "model_hz": _num(rec["model_hz"]),
@@ -164,8 +161,8 @@ def _single_effect_labels(rows, ring, geometry, patches, notes, sel):
             continue
         said = []
         if r["n"] < 1 and r["spin"] > 0:
-            # no n from the table nor a flexural branch of the rolling model (e.g. matched to its n = 0
-            # mode): the nearest wave of eq. 25/26 over n = 1 … ROLLING_N_MAX gives n and the wave
+            # no n in the table: the nearest wave of eq. 25/26 over n = 1 … ROLLING_N_MAX gives the n of
+            # the baseline and the single-effect predictions (the joint model keeps its own match)
             fn = fixed_frame_frequencies if r["fixed"] else rotating_natural_frequencies
             w = np.abs(np.asarray(fn(ring, geometry, n_all, r["spin"])))  # [Hz], (n, 2)
             k, b = np.unravel_index(int(np.argmin(np.abs(w - r["freq"]))), w.shape)
