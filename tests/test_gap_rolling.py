@@ -51,7 +51,11 @@ def test_rolling_tables_are_rotation_plus_ground_contact(contact_case):
     folder, label, c, _ = contact_case
     v = c["verdict"]
     assert sorted(v["effects"]) == ["ground_contact", "rotation"], v
-    assert set(v["variants"]) <= {"computed", "fitted"}
+    # the truth is the computed condition (patch from load_n, Ω from speed_kmh): the greedy chain may pick
+    # the fitted variants (a speed gain standing in for the missing contact in round 1), and the end-of-chain
+    # rule then replaces them by the computed ones, which predict the held-out rows as well
+    assert v["variants"] == ["computed", "computed"], v
+    assert "computed variant" in v["simplified"]
     ideal = _ideal_shrink(c, label)
     assert abs(v["heldout_shrink_pct"] - ideal) < 10, (v["heldout_shrink_pct"], ideal)
     # the second effect's computed variant (no free parameter: the patch from load_n, Ω from speed_kmh)

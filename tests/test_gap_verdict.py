@@ -138,3 +138,39 @@ def test_thresholds_are_the_rms_thresholds_on_the_sum_of_squares(shrink_rms, shr
     """1 − SS_after/SS_before = 1 − (RMS_after/RMS_before)²: the stated equivalence of the constants."""
     assert 100 * (1 - (1 - shrink_rms / 100) ** 2) == pytest.approx(shrink_ss)
     assert shrink_ss in (V.MIN_HELDOUT_SHRINK_PCT, V.MIN_HELDOUT_SHRINK_LO_PCT)
+
+
+def test_a_computed_variant_replaces_the_fitted_one_only_when_the_heldout_data_cannot_tell():
+    """End of the greedy chain (gap.diagnosis._prefer_computed): the swap costs at most
+    PREFER_COMPUTED_PTS points of held-out shrink; a computed variant that predicts worse is not taken."""
+    from types import SimpleNamespace
+
+    from ringfit.gap.diagnosis import _prefer_computed
+    from ringfit.gap.verdict import PREFER_COMPUTED_PTS
+
+    m = 40
+    y = np.zeros(m)
+    problem = SimpleNamespace(y=y, standardised=lambda r, heldout=False: np.asarray(r),
+                              sigma=np.ones(m), meta={})
+    ss_b = 1000.0
+
+    def fit_with(ss):  # a converged fit whose held-out residual has sum of squares ss
+        return SimpleNamespace(converged=True, theta=np.zeros(1),
+                               extra={"heldout_pred": np.full(m, -np.sqrt(ss / m))})
+
+    import ringfit.gap.diagnosis as dg
+
+    current = fit_with(20.0)
+    for ss_alt, swapped in ((20.0 + 0.9 * PREFER_COMPUTED_PTS * ss_b / 100, True),
+                            (20.0 + 1.1 * PREFER_COMPUTED_PTS * ss_b / 100, False)):
+        part = SimpleNamespace(fits={("rotation@computed",): fit_with(ss_alt)})
+        orig = dg._structure
+        dg._structure = lambda problem, ho: {"structured": False}
+        try:
+            chain, fit, ho, note = _prefer_computed(problem, part, ("rotation",), current,
+                                                    current.extra["heldout_pred"], ["rotation", "rotation@computed"],
+                                                    ss_b)
+        finally:
+            dg._structure = orig
+        assert (chain == ("rotation@computed",)) is swapped, (ss_alt, chain)
+        assert (note is not None) is swapped

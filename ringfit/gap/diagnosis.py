@@ -36,7 +36,7 @@ from ringfit.gap.modal import OUTLIER_Z
 from ringfit.gap.ranking import (COMPUTED, chain_start, drift, effect_of, fit_chain, heldout, prior_distance,
                                  reference_drift, rms, shrink, shrink_interval, theta_names)
 from ringfit.gap.screening import SCREEN_MIN_SCORE, screen
-from ringfit.gap.verdict import P_NOISE, P_TRY_DAMPING, RULES, acceptance, residual_test
+from ringfit.gap.verdict import P_NOISE, P_TRY_DAMPING, PREFER_COMPUTED_PTS, RULES, acceptance, residual_test
 
 
 @dataclass
@@ -258,6 +258,43 @@ def _rows_table(problem: GapProblem, base_ho: np.ndarray, final_ho: np.ndarray) 
     return out
 
 
+def _prefer_computed(problem, part, chain, current, current_ho, elements, ss_b):
+    """Replace fitted elements of the final chain by their computed variants where the held-out data cannot
+    tell them apart (:data:`ringfit.gap.verdict.PREFER_COMPUTED_PTS`); all at once first, then one at a time.
+
+    **Returns:** ``(chain, fit, held-out prediction, note or None)``.
+    """
+    effects = tuple(c for c in chain if c != "unexplained")
+    swappable = [i for i, c in enumerate(effects) if not c.endswith(COMPUTED) and c + COMPUTED in elements]
+    if not swappable or ss_b <= 0:
+        return chain, current, current_ho, None
+    y = problem.y
+    ss_cur = float(np.sum(problem.standardised(y - current_ho, heldout=True) ** 2))
+    structured = _structure(problem, current_ho)["structured"]
+    trials = [tuple(c + COMPUTED if i in swappable else c for i, c in enumerate(effects))]
+    if len(swappable) > 1:
+        trials += [tuple(c + COMPUTED if i == j else c for i, c in enumerate(effects)) for j in swappable]
+    for alt in trials:
+        fit = part.fits.get(alt)
+        if fit is None:
+            fit = fit_chain(problem, alt, start=chain_start(problem, alt, current.theta))
+            heldout(problem, fit)
+            part.fits[alt] = fit
+        if not fit.converged:
+            continue
+        ho = fit.extra["heldout_pred"]
+        ss_alt = float(np.sum(problem.standardised(y - ho, heldout=True) ** 2))
+        lost = 100.0 * (ss_alt - ss_cur) / ss_b
+        if lost <= PREFER_COMPUTED_PTS and (structured or not _structure(problem, ho)["structured"]):
+            tail = ("unexplained",) if chain[-1:] == ("unexplained",) else ()
+            swapped = [effect_of(c) for c, a in zip(effects, alt) if c != a]
+            note = (f"{', '.join(swapped)}: the computed variant (no free parameter) replaces the fitted one; "
+                    f"held-out shrink {100 * (1 - ss_alt / ss_b):.2f} % against {100 * (1 - ss_cur / ss_b):.2f} % "
+                    f"(the rule allows {PREFER_COMPUTED_PTS:g} points)")
+            return alt + tail, fit, ho, note
+    return chain, current, current_ho, None
+
+
 def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
     """Run baseline, where, screen, candidates and the greedy chain on one problem."""
     t0 = time.perf_counter()
@@ -328,6 +365,10 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
             break
     if bar is not None:
         bar.close()
+    chain, current, current_ho, simplified = _prefer_computed(problem, part, chain, current, current_ho, elements,
+                                                              ss_b)
+    if simplified:
+        cur = _structure(problem, current_ho)
     part.chain_fit = current
     effects_list = [effect_of(c) for c in chain] or ["none"]
     ss_f = float(np.sum(problem.standardised(y - current_ho, heldout=True) ** 2))
@@ -339,6 +380,7 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
     outliers = [names[i] for i in range(len(names)) if abs(raw[i]) > OUTLIER_Z]
     verdict = {"effect": effects_list[0], "effects": effects_list,
                "variants": [_variant(c) for c in chain if c != "unexplained"],
+               **({"simplified": simplified} if simplified else {}),
                "heldout_shrink_pct": _r(100.0 * (1.0 - ss_f / ss_b), 2) if effects_list[0] not in
                ("none", "unexplained") and ss_b > 0 else 0.0,
                **({"explains": explains, "leaves": leaves, "outliers": outliers} if names else {}),

@@ -96,6 +96,11 @@ P_TRY_DAMPING = 0.05
 #: Probability content of the prior ellipsoid the guarded baseline parameters must stay in.
 PRIOR_REGION = 0.999
 
+#: At the end of the greedy chain a fitted element is replaced by its computed variant (its parameter
+#: fixed by the measured condition: no free parameter) when that loses at most this many points of
+#: held-out shrink and leaves the residual no more structured (Occam: the data cannot tell them apart).
+PREFER_COMPUTED_PTS = 2.0
+
 RULES = {
     "structured": (f"held-out residual / noise: in some row group reduced chi2 >= {CHI2_RED_STRUCTURED} and chi2 "
                    f"test p < {P_NOISE}/groups (effective dof of coloured noise), the group's largest row left out "
@@ -108,8 +113,9 @@ RULES = {
                f"mode tables - reference-state predictions move <= {MAX_REFERENCE_DRIFT_SIGMA:g} sigma RMS; "
                f"profiles - <= {100 * MAX_DRIFT_RELATIVE:.0f}% relative (parameters with an independent prior: "
                f"Mahalanobis D^2 <= chi2_k({PRIOR_REGION}) or <= that of the baseline fit)"),
-    "best": "largest heldout shrink among accepted (a computed variant first on a tie); greedy chain while the "
-            "residual stays structured",
+    "best": ("largest heldout shrink among accepted (a computed variant first on a tie); greedy chain while the "
+             f"residual stays structured; then each fitted element of the chain is replaced by its computed variant "
+             f"when the chain's held-out shrink drops by <= {PREFER_COMPUTED_PTS:g} points (all at once first)"),
     "damping": (f"damping rows (ln of the damping ratio) form their own problem: candidates are refitted from "
                 f"p < {P_TRY_DAMPING} (few rows), only damping effects are tried, and an unexplained damping "
                 "residual is reported under verdict.damping, never as a structural 'unexplained'"),
