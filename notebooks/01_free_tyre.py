@@ -3,7 +3,7 @@
 #
 # A newcomer's walk through ringfit on the source study's own data: the natural
 # frequencies of a 205/55R16 tyre fixed at the rim, identified by covariance SSI
-# (Table 2 of the thesis), and Gong's flexible ring, eq. 18 (PHYSICS.md §2.1).
+# (Table 2 of the thesis), and Gong's flexible ring, eq. 18 (docs/physics.md §2.1).
 #
 # Importing `ringfit` switches JAX to float64 for the whole process.
 

@@ -1,7 +1,7 @@
 # %% [markdown]
 # # 03 — The rolling tyre: contact patch, sensor profiles and the tread stiffness
 #
-# Gong's flexible ring rolling steadily on a drum under 4 kN (PHYSICS.md §4): we solve the
+# Gong's flexible ring rolling steadily on a drum under 4 kN (docs/physics.md §4): we solve the
 # contact with the tread springs, look at the deformed ring and the contact pressure, read the
 # co-rotating accelerometer at several speeds (§4.6, §5), and fit the tread stiffness to
 # synthetic "measured" profiles with a known truth — least squares and an emcee posterior.
@@ -44,7 +44,7 @@ contact_pressure_figure(sol).savefig(OUT / "03_contact_pressure.png")
 # %% [markdown]
 # ## The sensor at several speeds
 # With χ = 1 and an inextensible ring the deformation does not depend on speed, so the
-# baseline accelerations scale exactly with Ω² (PHYSICS.md §4.1).
+# baseline accelerations scale exactly with Ω² (docs/physics.md §4.1).
 
 # %%
 speeds = (10.0, 30.0, 50.0, 60.0)

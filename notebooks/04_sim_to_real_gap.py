@@ -52,7 +52,7 @@ diag.write(out / "case.diagnosis.json", overwrite=True)
 # ## Rolling profiles: the sensor on the liner at four speeds
 #
 # The same questions on what a co-rotating accelerometer recorded at about 20, 30, 40 and 60 km/h
-# (one averaged revolution per speed). The baseline `gong-rolling` (PHYSICS.md §6: inextensible ring,
+# (one averaged revolution per speed). The baseline `gong-rolling` (docs/physics.md §6: inextensible ring,
 # radial tread springs, the sensor as a point on the belt) takes the ring from the free-tyre table and
 # refits the tread stiffness, the angle offset and — within the free-table fit's uncertainty — EI, k_w,
 # k_v and ζ. Held-out means *leave one speed out*: a candidate must predict a speed it never saw.

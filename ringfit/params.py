@@ -7,7 +7,7 @@ Two frozen PyTrees (``eqx.Module``) carry everything the physics needs:
 * :class:`RingParams` — what is fitted (mass per length, stiffnesses, damping,
   tread stiffness, and the optional membrane stiffness and centrifugal share).
 
-The symbols and units follow ``PHYSICS.md`` §1. Values are stored in natural
+The symbols and units follow ``docs/physics.md`` §1. Values are stored in natural
 (physical) units; the fitters work on their logarithms (``ringfit.fit``).
 """
 
@@ -35,7 +35,7 @@ RING_PARAMETERS: dict[str, tuple[str, str]] = {
 
 
 class TyreGeometry(eqx.Module):
-    """Geometry and operating condition of the tyre (PHYSICS.md §1).
+    """Geometry and operating condition of the tyre (docs/physics.md §1).
 
     **Fields** (scalars, SI):
 
@@ -60,7 +60,7 @@ class TyreGeometry(eqx.Module):
 
     @property
     def pretension(self):
-        """Hoop pretension T0 = p0·b·R [N] (PHYSICS.md §1)."""
+        """Hoop pretension T0 = p0·b·R [N] (docs/physics.md §1)."""
         return self.pressure * self.width * self.radius
 
     @property
@@ -70,7 +70,7 @@ class TyreGeometry(eqx.Module):
 
 
 class RingParams(eqx.Module):
-    """Fitted parameters of the flexible ring (PHYSICS.md §1).
+    """Fitted parameters of the flexible ring (docs/physics.md §1).
 
     **Fields** (scalars or arrays of one shape, SI):
 

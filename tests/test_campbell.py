@@ -80,7 +80,7 @@ def test_loaded_diagram(diagram):
     assert np.all((d.symmetry[0] < 0.01) | (d.symmetry[0] > 0.99) | ~np.isfinite(d.symmetry[0]))
     # rolling: rotation turns them into travelling waves; backward waves drop in the fixed frame (Doppler)
     assert np.mean(d.direction()[-1] != "standing") > 0.7
-    # drum patch shorter than the flat road's ±11.7° (PHYSICS.md §7: 106 vs 129 mm)
+    # drum patch shorter than the flat road's ±11.7° (docs/physics.md §7: 106 vs 129 mm)
     assert 8.0 < -d.leading_deg[0] < 11.0 and 8.0 < d.trailing_deg[0] < 11.0
     rows = d.rows("sensor")
     assert len(rows) == d.branches * len(SPEEDS) and all(r["frame"] == "rotating" for r in rows)

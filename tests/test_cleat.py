@@ -46,7 +46,7 @@ def field(record, arrivals):
 
 
 def test_generating_modes_follow_eq26_verification_values():
-    # PHYSICS.md §7: eq. 26 at Ω = 43.95 rad/s, backward wave: n=2 111.74, n=5 162.71, n=8 237.06 Hz
+    # docs/physics.md §7: eq. 26 at Ω = 43.95 rad/s, backward wave: n=2 111.74, n=5 162.71, n=8 237.06 Hz
     b = CleatBench(steady="analytic", rolling_radius_m=0.316, speed_kmh=43.95 * 0.316 * 3.6)
     m = b.generating_modes()
     for n, f in ((2, 111.74), (5, 162.71), (8, 237.06)):

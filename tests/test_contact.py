@@ -1,4 +1,4 @@
-"""Contact solve (PHYSICS.md §4.3–4.4): §7 numbers, an independent finite-difference discretisation, gradients."""
+"""Contact solve (docs/physics.md §4.3–4.4): §7 numbers, an independent finite-difference discretisation, gradients."""
 
 import math
 
@@ -22,7 +22,7 @@ from ringfit.physics.rolling import NoDamping, RingModel, Viscous
 from ringfit.physics.sensor import sensor_signals
 
 GEOMETRY, RING = table9()
-OMEGA_30 = 26.88  # 30 km/h at R_e = 0.31 m (PHYSICS.md §7)
+OMEGA_30 = 26.88  # 30 km/h at R_e = 0.31 m (docs/physics.md §7)
 FZ = 4000.0
 M_REF = 2048  # the §7 prototype's grid
 
@@ -80,7 +80,7 @@ def test_drum_matches_physics_section_7():
 
 @pytest.mark.parametrize("damping", ["hysteretic", "viscous"])
 def test_damping_shifts_pressure_forward_and_resists_rolling(damping):
-    """PHYSICS.md §4.2: either damping form gives a forward-shifted pressure and a rearward Fx."""
+    """docs/physics.md §4.2: either damping form gives a forward-shifted pressure and a rearward Fx."""
     model = RingModel() if damping == "hysteretic" else RingModel(damping=Viscous(c_w=3000.0, c_v=3000.0))
     sol = solve_rolling_jit(RING, GEOMETRY, OperatingPoint(OMEGA_30, FZ), model=model)
     p, phi = np.asarray(sol.pressure), np.asarray(sol.phi)

@@ -1,4 +1,4 @@
-"""Case folders, the DATA.md §5 JSON contract, the CLI, and a fast subset of blind cases that must all be right."""
+"""Case folders, the docs/formats.md §5 JSON contract, the CLI, and a fast subset of blind cases that must all be right."""
 
 import json
 import shutil

@@ -67,7 +67,7 @@ def test_rotation_matches_eq25_eq26():
     ref = np.asarray(rotating_natural_frequencies(r, g, jnp.asarray([2.0, 4.0]), 40.0))
     assert f[8] == pytest.approx(ref[0, 0], rel=1e-12)  # co-rotating backward n=2
     assert f[9] == pytest.approx(-ref[1, 1], rel=1e-12)  # co-rotating forward n=4
-    # PHYSICS.md §7: Ω = 43.95, n = 2, fixed frame backward 111.74 Hz
+    # docs/physics.md §7: Ω = 43.95, n = 2, fixed frame backward 111.74 Hz
     rows2 = _modal_rows([2.0, 5.0], spin=jnp.full(2, 43.95), branch=jnp.ones(2), fixed_frame=jnp.ones(2))
     o3, _ = e.modal(jnp.asarray([1.0]), natural_angular_frequencies(r, g, rows2.n), jnp.zeros(2), rows2, r, g)
     np.testing.assert_allclose(np.asarray(o3) / (2 * math.pi), [111.74, 162.71], atol=0.01)
@@ -90,7 +90,7 @@ def test_sensor_mass_rayleigh_and_cavity_veering():
     omega = natural_angular_frequencies(r, g, rows.n)
     o2, _ = lib.get("sensor_mass").modal(jnp.asarray([0.003]), omega, jnp.zeros_like(omega), rows, r, g)
     rel = np.asarray(o2)[3] / np.asarray(omega)[3] - 1.0  # n = 3
-    expect = -0.003 / (2 * math.pi * g.radius * r.rho_a * (1 + 1 / 9))  # PHYSICS.md §6, first order
+    expect = -0.003 / (2 * math.pi * g.radius * r.rho_a * (1 + 1 / 9))  # docs/physics.md §6, first order
     assert rel == pytest.approx(expect, rel=0.01)
     # cavity: 2-dof pencil solved with numpy.roots (independent form) for n = 1
     o3, _ = lib.get("cavity_mode").modal(jnp.asarray([1 / 0.015]), omega, jnp.zeros_like(omega), rows, r, g)

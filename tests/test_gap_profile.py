@@ -60,7 +60,7 @@ def _with(name, values, data):
 
 
 def test_profile_effect_set():
-    # PHYSICS.md §6: these speak to rolling profiles; ground contact and the cavity do not
+    # docs/physics.md §6: these speak to rolling profiles; ground contact and the cavity do not
     assert set(PROFILE_EFFECTS) == {"sensor_tilt", "gravity", "iepe_highpass", "wave_damping", "tread_shear",
                                     "rotation", "sensor_mass", "ring_extensibility"}
 
@@ -85,7 +85,7 @@ def test_null_is_baseline_profiles(name):
     e = lib.get(name)
     base = _predict((), [], data)
     null = _with(name, [p.null for p in e.params_for("profiles")], data)
-    if name == "ring_extensibility":  # extensible form with EA = 1e12 N at the null (PHYSICS.md §4.2 test: ~1e-6)
+    if name == "ring_extensibility":  # extensible form with EA = 1e12 N at the null (docs/physics.md §4.2 test: ~1e-6)
         np.testing.assert_allclose(null, base, atol=1e-6 * np.abs(base).max())
     elif name == "tread_shear":  # zero load through the two-pass scan: another compiled graph, equal to rounding
         np.testing.assert_allclose(null, base, rtol=0, atol=1e-12 * np.abs(base).max())
@@ -96,7 +96,7 @@ def test_null_is_baseline_profiles(name):
 
 
 def test_gravity_adds_the_1g_field():
-    """PHYSICS.md §5 layer 3: radial (inward +) gains +g cos φ, tangential +g sin φ (both zero-mean)."""
+    """docs/physics.md §5 layer 3: radial (inward +) gains +g cos φ, tangential +g sin φ (both zero-mean)."""
     data, _, _ = _data()
     d = _with("gravity", [1.0], data) - _with("gravity", [0.0], data)
     phi = -np.pi + 2 * np.pi * np.arange(M) / M
@@ -105,7 +105,7 @@ def test_gravity_adds_the_1g_field():
 
 
 def test_highpass_gain_and_lead():
-    """PHYSICS.md §5 layer 5: revolution harmonic k gets gain 1/√(1+(f_c/kf_rot)²) and lead atan(f_c/kf_rot).
+    """docs/physics.md §5 layer 5: revolution harmonic k gets gain 1/√(1+(f_c/kf_rot)²) and lead atan(f_c/kf_rot).
 
     (k = 1 carries no acceleration for the inextensible ring — rigid translation, §4.6 — so k = 2, 3.)
     """
@@ -120,7 +120,7 @@ def test_highpass_gain_and_lead():
 
 
 def test_sensor_mass_is_the_belt_impedance_lowpass():
-    """PHYSICS.md §6: Z/(Z + iωm_s), Z = 2√(T0 ρA), ω = kΩ.
+    """docs/physics.md §6: Z/(Z + iωm_s), Z = 2√(T0 ρA), ω = kΩ.
 
     (k ≥ 2: harmonic 1 carries no acceleration for the inextensible ring — rigid translation, §4.6 —
     so its ratio is 0/0.)
@@ -136,7 +136,7 @@ def test_sensor_mass_is_the_belt_impedance_lowpass():
 
 
 def test_rotation_speed_independence_only_at_chi_one():
-    """PHYSICS.md §4.1: with χ = 1 (inextensible) the profiles scale exactly with Ω²; χ < 1 breaks it."""
+    """docs/physics.md §4.1: with χ = 1 (inextensible) the profiles scale exactly with Ω²; χ < 1 breaks it."""
     data, _, _ = _data()
     base = _with("rotation", [0.0], data)
     w2 = (np.asarray(data.omega) ** 2)[:, None, None]
@@ -165,7 +165,7 @@ def test_noise_estimate_recovers_known_sigma(colour):
 
 
 def test_wave_damping_viscous_form_in_the_reduced_operator():
-    """PHYSICS.md §4.2: viscous c_w = c_v = c adds diag(i nΩc, i nΩc) to D_n, i.e. i nΩ c (1 + 1/n²) to the
+    """docs/physics.md §4.2: viscous c_w = c_v = c adds diag(i nΩc, i nΩc) to D_n, i.e. i nΩ c (1 + 1/n²) to the
     inextensible d_n = uᴴD_n u (u = [1, i/n])."""
     from ringfit.physics.profile import ProfileModel
     from ringfit.physics.rolling import reduced_operator, ring_operator
@@ -182,7 +182,7 @@ def test_wave_damping_viscous_form_in_the_reduced_operator():
 
 
 def test_wave_damping_sign_and_speed_growth():
-    """PHYSICS.md §4.2: extra loss shifts the contact pressure forward and raises the rearward Fx; the viscous
+    """docs/physics.md §4.2: extra loss shifts the contact pressure forward and raises the rearward Fx; the viscous
     form's extra Fx grows with speed (the material sees harmonic n at nΩ)."""
     from ringfit.physics.profile import ProfileModel
     from ringfit.physics.contact import solve_rolling_jit
@@ -292,7 +292,7 @@ def test_incomplete_profile_folders(tmp_path, blind):
 
 @pytest.mark.slow
 def test_blind_profile_subset_json_and_cli(tmp_path, blind):
-    """A fast blind subset that must all be right, the DATA.md §5 contract, the report and the CLI."""
+    """A fast blind subset that must all be right, the docs/formats.md §5 contract, the report and the CLI."""
     for effect, (folder, label) in blind.items():
         d = diagnose(folder, progress=False)
         assert d.verdict["effect"] == label.expected_verdict, (effect, d.verdict)

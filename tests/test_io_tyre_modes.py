@@ -1,4 +1,4 @@
-"""Tyre TOML and mode-table I/O (DATA.md §1–2): read, validate, write, round-trip."""
+"""Tyre TOML and mode-table I/O (docs/formats.md §1–2): read, validate, write, round-trip."""
 
 import json
 
@@ -16,7 +16,7 @@ def test_bundled_tyre_matches_table9():
     assert t.geometry.radius == 0.296 and t.geometry.width == 0.152
     assert t.geometry.pressure == pytest.approx(2.2e5)
     assert t.ring.ei == 0.9426 and t.ring.kw == 1.294e6 and t.ring.k_tread == 19e6
-    # derived quantities of PHYSICS.md §1
+    # derived quantities of docs/physics.md §1
     assert float(t.geometry.pretension) == pytest.approx(9898, abs=1)
     assert float(t.geometry.hoop_pressure_stiffness) == pytest.approx(1.1297e5, rel=1e-4)
 

@@ -1,4 +1,4 @@
-"""Loaded-tyre modes (PHYSICS.md §6 ground_contact) against the §7 verification values."""
+"""Loaded-tyre modes (docs/physics.md §6 ground_contact) against the §7 verification values."""
 
 import math
 
@@ -8,7 +8,7 @@ from ringfit.params import table9
 from ringfit.physics.loaded import loaded_natural_frequencies, patch_overlap
 from ringfit.physics.natural import natural_frequencies
 
-COS_7 = [110.8, 128.9, 153.2, 181.3, 211.6, 243.7, 277.1]  # PHYSICS.md §7
+COS_7 = [110.8, 128.9, 153.2, 181.3, 211.6, 243.7, 277.1]  # docs/physics.md §7
 SIN_7 = [107.2, 121.1, 142.8, 169.0, 198.3, 229.6, 262.5]
 
 

@@ -1,4 +1,4 @@
-"""Natural-frequency models against PHYSICS.md §7 and the source study's tables."""
+"""Natural-frequency models against docs/physics.md §7 and the source study's tables."""
 
 import jax
 import jax.numpy as jnp
@@ -30,7 +30,7 @@ def test_n0_is_rigid_rotation_and_n1_rigid_translation():
     f1 = np.sqrt((RING.kw + RING.kv) / (2 * RING.rho_a)) / (2 * np.pi)
     assert float(N.natural_frequencies(RING, GEO, 0)) == pytest.approx(f0, rel=1e-12)
     assert float(N.natural_frequencies(RING.replace(ei=123.0), GEO, 1)) == pytest.approx(f1, rel=1e-12)
-    # translation stiffness πR(kw + kv) = 2.283e6 N/m (PHYSICS.md §7)
+    # translation stiffness πR(kw + kv) = 2.283e6 N/m (docs/physics.md §7)
     assert np.pi * GEO.radius * (RING.kw + RING.kv) == pytest.approx(2.283e6, rel=1e-3)
 
 
@@ -44,7 +44,7 @@ def test_extensible_tends_to_inextensible():
         assert gap < prev
         prev = gap
     assert prev < 1e-6
-    # PHYSICS.md §2.2 sensitivity: within 0.3 Hz at EA = 1e5 N, 0.03 Hz at 1e6 N
+    # docs/physics.md §2.2 sensitivity: within 0.3 Hz at EA = 1e5 N, 0.03 Hz at 1e6 N
     for ea, tol in ((1e5, 0.32), (1e6, 0.03)):  # "≈0.3 Hz" at 1e5 N
         flex = np.asarray(N.extensible_natural_frequencies(RING.replace(ea=ea), GEO, n))[:, 0]
         assert np.max(np.abs(flex - inext)) < tol
@@ -115,7 +115,7 @@ def test_omega_zero_limits():
 
 
 def test_chi1_backward_wave_fixed_frame_stays_positive():
-    # PHYSICS.md §3.3: no standing wave for χ = 1 at any speed
+    # docs/physics.md §3.3: no standing wave for χ = 1 at any speed
     omega = np.linspace(0, 600, 61)
     f = np.asarray(N.fixed_frame_frequencies(RING, GEO, np.arange(2, 30)[:, None], omega[None, :]))[..., 0]
     assert np.all(f > 0)

@@ -1,4 +1,4 @@
-"""Rolling profile files (DATA.md §3): round trip, validation errors, resampling onto the model grid."""
+"""Rolling profile files (docs/formats.md §3): round trip, validation errors, resampling onto the model grid."""
 
 import json
 

@@ -1,4 +1,4 @@
-"""Records I/O: npz and UFF58 round trips, clear errors (DATA.md §4)."""
+"""Records I/O: npz and UFF58 round trips, clear errors (docs/formats.md §4)."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Per-harmonic ring operator of the rolling ring (PHYSICS.md §4.1–4.2)."""
+"""Per-harmonic ring operator of the rolling ring (docs/physics.md §4.1–4.2)."""
 
 import jax.numpy as jnp
 import numpy as np
@@ -21,7 +21,7 @@ N = jnp.arange(1, 256, dtype=jnp.float64)
 
 
 def d_closed_form(n, omega, chi, eta):
-    """§4.2 inextensible d_n written out from PHYSICS.md (Table 9 numbers typed in)."""
+    """§4.2 inextensible d_n written out from docs/physics.md (Table 9 numbers typed in)."""
     R, P = 0.296, 2.2e5 * 0.152 / 0.296
     ei, kw, kv, rho_a = 0.9426, 1.294e6, 1.161e6, 2.715
     n2 = n**2
@@ -37,7 +37,7 @@ def test_inextensible_operator_matches_closed_form(omega, chi):
 
 
 def test_static_undamped_operator_gives_eq18():
-    """ω_n² = n² d_n / (ρA(n²+1)) at Ω = 0, η = 0 (PHYSICS.md §2.1)."""
+    """ω_n² = n² d_n / (ρA(n²+1)) at Ω = 0, η = 0 (docs/physics.md §2.1)."""
     d = reduced_operator(ring_operator(RING, GEOMETRY, N, 0.0, RingModel(damping=NoDamping())), N)
     omega_n = np.sqrt(np.asarray(N) ** 2 * np.real(np.asarray(d)) / (RING.rho_a * (np.asarray(N) ** 2 + 1)))
     np.testing.assert_allclose(omega_n / (2 * np.pi), np.asarray(natural_frequencies(RING, GEOMETRY, N)), rtol=1e-12)
@@ -79,7 +79,7 @@ def test_viscous_term_projects_as_expected():
 
 
 def test_hysteretic_loss_factor_gives_damping_ratio():
-    """η = 2ζ: every flexural mode has Im(d_n)/Re(d_n) = 2ζ at Ω = 0 (PHYSICS.md §7)."""
+    """η = 2ζ: every flexural mode has Im(d_n)/Re(d_n) = 2ζ at Ω = 0 (docs/physics.md §7)."""
     d = np.asarray(reduced_operator(ring_operator(RING, GEOMETRY, N, 0.0), N))
     np.testing.assert_allclose(np.imag(d) / np.real(d) / 2, 0.025, rtol=1e-12)
     d2 = np.asarray(reduced_operator(ring_operator(RING, GEOMETRY, N, 0.0, RingModel(damping=Hysteretic(0.1))), N))

@@ -24,8 +24,8 @@ from ringfit.physics.rolling_modes import (
     sensor_lines,
 )
 
-OMEGA_50 = 43.95  # rad/s, 50 km/h at R_out (PHYSICS.md §7)
-HALF_ANGLE = math.radians(11.69)  # PHYSICS.md §7 ground-contact extension
+OMEGA_50 = 43.95  # rad/s, 50 km/h at R_out (docs/physics.md §7)
+HALF_ANGLE = math.radians(11.69)  # docs/physics.md §7 ground-contact extension
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +43,7 @@ def test_no_contact_is_eq26_and_eq25(tyre):
     rot = np.asarray(rotating_natural_frequencies(r, g, n, OMEGA_50))  # eq. 25
     expected = np.sort(np.concatenate([np.abs(fixed[1:]).ravel(), [abs(fixed[0, 0])]]))
     np.testing.assert_allclose(f, expected, rtol=1e-11)
-    # PHYSICS.md §7 backward waves at 50 km/h: n=2 111.74, n=5 162.71, n=8 237.06 Hz
+    # docs/physics.md §7 backward waves at 50 km/h: n=2 111.74, n=5 162.71, n=8 237.06 Hz
     order, travel = np.asarray(m.order), np.asarray(m.travel)
     for nn, val in ((2, 111.74), (5, 162.71), (8, 237.06)):
         i = np.flatnonzero((order == nn) & (travel > 1e6))

@@ -1,4 +1,4 @@
-"""Rolling profiles from continuous recordings vs the synthetic truth (PHYSICS.md §5 layer 5 for the high-pass)."""
+"""Rolling profiles from continuous recordings vs the synthetic truth (docs/physics.md §5 layer 5 for the high-pass)."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Rolling sensor signals against PHYSICS.md §7, χ = 1 speed independence, Ω² scaling, convergence in harmonics."""
+"""Rolling sensor signals against docs/physics.md §7, χ = 1 speed independence, Ω² scaling, convergence in harmonics."""
 
 import numpy as np
 import pytest

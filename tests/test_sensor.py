@@ -1,4 +1,4 @@
-"""Sensor layers (PHYSICS.md §4.6, §5): identities, gravity, tilt, offset, high-pass, angle shift."""
+"""Sensor layers (docs/physics.md §4.6, §5): identities, gravity, tilt, offset, high-pass, angle shift."""
 
 import math
 

@@ -21,7 +21,7 @@ def register(sub) -> None:
                     "and as the co-rotating sensor sees them (lines ω + kΩ). With --modes each measured row is "
                     "matched to a branch (n, direction, frame) with its error and σ; rows no branch explains, and "
                     "rows whose speed trend or n label contradicts every branch, are named with one sentence each.")
-    p.add_argument("--tyre", required=True, type=Path, help="tyre TOML (DATA.md §1) with fitted [ring] values")
+    p.add_argument("--tyre", required=True, type=Path, help="tyre TOML (docs/formats.md §1) with fitted [ring] values")
     p.add_argument("--load", type=float, default=4000.0,
                    help="vertical load Fz [N] (default 4000; tables with load_n in their sidecar use their own)")
     p.add_argument("--speeds", default="0:80:5",
@@ -34,7 +34,7 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, type=Path, help="output NAME.campbell.csv")
     p.add_argument("--plot", type=Path, default=None, help="optional PNG: branches vs speed, measured rows overlaid")
     p.add_argument("--modes", nargs="+", type=Path, default=(), metavar="T.modes.csv",
-                   help="measured mode tables (DATA.md §2, with their .json sidecars) to match; writes "
+                   help="measured mode tables (docs/formats.md §2, with their .json sidecars) to match; writes "
                         "NAME.matched.csv beside --out")
     p.add_argument("--n-max", type=int, default=15, help="highest dominant order n of the branches (default 15)")
     p.add_argument("--tolerance", type=float, default=0.02,

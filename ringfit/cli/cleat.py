@@ -15,7 +15,7 @@ from ringfit.cli._args import force_flag, integer, number, quiet_flag
 
 
 def register(sub) -> None:
-    p = sub.add_parser("profile", help="rolling profile (DATA.md §3) from a continuous recording",
+    p = sub.add_parser("profile", help="rolling profile (docs/formats.md §3) from a continuous recording",
                        description="Average a continuous recording by sensor angle over revolutions and write "
                                    "a *.profile.csv (+ .json sidecar); the revolution-to-revolution spread goes "
                                    "into extra columns.")

@@ -1,6 +1,6 @@
 """Weighted least-squares fit of ring parameters to measured natural frequencies.
 
-Model: static inextensible ring, eq. 18 (PHYSICS.md §2.1), via
+Model: static inextensible ring, eq. 18 (docs/physics.md §2.1), via
 :func:`ringfit.physics.natural.natural_frequencies`. Residual of mode i:
 ``(f_model(n_i) − f_i) / σ_i`` with σ_i from ``freq_std_hz`` or, where that is
 empty, :data:`DEFAULT_RELATIVE_STD` × f_i. Optional log-normal priors enter as
@@ -162,7 +162,7 @@ def fit_natural_frequencies(
     rtol: float = 1e-10,
     atol: float = 1e-10,
 ) -> FitResult:
-    """Fit ring parameters to measured natural frequencies (eq. 18, PHYSICS.md §2.1).
+    """Fit ring parameters to measured natural frequencies (eq. 18, docs/physics.md §2.1).
 
     **Arguments:**
 

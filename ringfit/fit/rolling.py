@@ -1,6 +1,6 @@
 """Fit the tread stiffness (and optionally damping, angle offset) to rolling acceleration profiles.
 
-Model: steady rolling ring with tread-spring contact (PHYSICS.md §4,
+Model: steady rolling ring with tread-spring contact (docs/physics.md §4,
 :func:`ringfit.physics.contact.solve_rolling`) read by the sensor layers
 (:func:`ringfit.physics.sensor.sensor_signals`; default the §6 baseline: plain
 channels, per-revolution mean removed). The stiffness and density of the ring
@@ -44,7 +44,7 @@ from ringfit.physics.profile import (FlatOrDrum, ProfileModel, effective_rolling
 from ringfit.physics.rolling import RingModel
 from ringfit.physics.sensor import SensorModel
 
-#: Name of the angle-offset nuisance parameter [rad] (PHYSICS.md §5 layer 6).
+#: Name of the angle-offset nuisance parameter [rad] (docs/physics.md §5 layer 6).
 ANGLE_OFFSET = "angle_offset"
 #: Parameters a rolling fit may free: positive ring parameters (log) and the angle offset (linear).
 ROLLING_FREE = ("k_tread", "damping_ratio", "ei", "kw", "kv", "rho_a", ANGLE_OFFSET)
@@ -75,7 +75,7 @@ def rolling_data(
     solver: ContactSolver = ContactSolver(), sensor: SensorModel = SensorModel(), model: RingModel = RingModel(),
     rolling_radius_m: float | None = None,
 ) -> RollingData:
-    """Put profiles on the model grid and work out Ω for each (DATA.md §3).
+    """Put profiles on the model grid and work out Ω for each (docs/formats.md §3).
 
     Ω is ``2π·rotation_hz`` when the sidecar has it, else ``V / R_e`` with
     ``rolling_radius_m`` or, by default, ``R_e = R_out − δ/3`` where δ is the

@@ -37,7 +37,7 @@ class SourceStudyFit:
 
 
 def stiffness_from_three_modes(geometry: TyreGeometry, rho_a, n3, f3) -> np.ndarray:
-    """Solve eq. 18 (PHYSICS.md §2.1) for (EI, k_w, k_v) from three modes at given ρA.
+    """Solve eq. 18 (docs/physics.md §2.1) for (EI, k_w, k_v) from three modes at given ρA.
 
     **Arguments:** ``rho_a`` — scalar or ``(g,)`` [kg/m]; ``n3``, ``f3`` — ``(3,)`` indices and Hz.
     **Returns:** ``(g, 3)`` array of (EI [N m²], k_w [N/m²], k_v [N/m²]).

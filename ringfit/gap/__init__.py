@@ -1,7 +1,7 @@
 """Sim-to-real gap diagnosis: where model and measurement disagree, which missing effect explains it, how far it shrinks.
 
 Public entry points: :func:`diagnose` (a case folder → :class:`Diagnosis`,
-JSON of DATA.md §5), :func:`read_case` (DATA.md §6), the effect registry
+JSON of docs/formats.md §5), :func:`read_case` (docs/formats.md §6), the effect registry
 :mod:`ringfit.gap.effects`.
 """
 

@@ -60,12 +60,12 @@ MIN_LINE_WEIGHT = 0.05
 TRAVELLING_RATIO = 3.0
 #: Speeds of one diagram are padded to a multiple of this, so that tables at a few speeds share a compilation.
 SPEED_BUCKET = 8
-#: Frames of DATA.md §2 (``rotating`` = the co-rotating sensor; the CLI calls it ``sensor``).
+#: Frames of docs/formats.md §2 (``rotating`` = the co-rotating sensor; the CLI calls it ``sensor``).
 FRAMES = ("rotating", "fixed")
 
 
 def frame_name(frame: str) -> str:
-    """``sensor``/``rotating`` → ``rotating``; ``fixed`` → ``fixed`` (DATA.md §2 names)."""
+    """``sensor``/``rotating`` → ``rotating``; ``fixed`` → ``fixed`` (docs/formats.md §2 names)."""
     f = {"sensor": "rotating", "rotating": "rotating", "fixed": "fixed"}.get(frame)
     if f is None:
         raise InputError(f"frame {frame!r}; expected 'sensor' (= 'rotating') or 'fixed'")

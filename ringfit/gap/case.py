@@ -1,4 +1,4 @@
-"""A case folder (DATA.md §6): one tyre and everything measured on it.
+"""A case folder (docs/formats.md §6): one tyre and everything measured on it.
 
 ``tyre.toml`` and ``free.modes.csv`` are fixed names; every other
 ``*.modes.csv`` is test data (its sidecar says its state), every
@@ -45,18 +45,18 @@ class Case:
 
 
 def read_case(folder: str | os.PathLike) -> Case:
-    """Read and check a case folder (DATA.md §6); raises :class:`InputError` for an incomplete one."""
+    """Read and check a case folder (docs/formats.md §6); raises :class:`InputError` for an incomplete one."""
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError("is not a folder; expected a case folder with tyre.toml and free.modes.csv", source=folder)
     tyre_path = folder / "tyre.toml"
     if not tyre_path.exists():
-        raise InputError("missing tyre.toml (DATA.md §1: [tyre] radius_m, width_m, pressure_bar)", source=folder)
+        raise InputError("missing tyre.toml (docs/formats.md §1: [tyre] radius_m, width_m, pressure_bar)", source=folder)
     tyre = read_tyre(tyre_path)
     free_path = folder / "free.modes.csv"
     if not free_path.exists():
         raise InputError("missing free.modes.csv: the free, static tyre's modes the ring is fitted to "
-                         "(DATA.md §6)", source=folder)
+                         "(docs/formats.md §6)", source=folder)
     free = read_mode_table(free_path)
     if free.state != "free" or float(free.condition.get("speed_kmh") or 0) > 0 or \
             float(free.condition.get("rotation_hz") or 0) > 0:
@@ -71,7 +71,7 @@ def read_case(folder: str | os.PathLike) -> Case:
             continue
         if not p.with_suffix(".json").exists():
             raise InputError(f"missing sidecar {p.with_suffix('.json').name}: a test mode table needs its "
-                             "condition (state, load_n, speed_kmh/rotation_hz, frame; DATA.md §2)", source=p)
+                             "condition (state, load_n, speed_kmh/rotation_hz, frame; docs/formats.md §2)", source=p)
         tests.append(read_mode_table(p))
     profiles = []
     profile_paths = sorted(folder.glob("*.profile.csv"))
@@ -83,7 +83,7 @@ def read_case(folder: str | os.PathLike) -> Case:
         for p in profile_paths:
             if not p.with_suffix(".json").exists():
                 raise InputError(f"missing sidecar {p.with_suffix('.json').name} (speed_kmh, load_n, ...; "
-                                 "DATA.md §3)", source=p)
+                                 "docs/formats.md §3)", source=p)
             profiles.append(read_profile(p))
         profiles.sort(key=lambda pr: float(_condition(pr).get("speed_kmh", 0.0)))
     records = sorted(folder.glob("*.records.npz"))

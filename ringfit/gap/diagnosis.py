@@ -1,4 +1,4 @@
-"""Top level of the gap diagnosis: :func:`diagnose` a case folder, write the JSON of DATA.md §5.
+"""Top level of the gap diagnosis: :func:`diagnose` a case folder, write the JSON of docs/formats.md §5.
 
 Flow for each kind of data in the folder (mode tables, rolling profiles):
 baseline fit → held-out baseline → where (:mod:`~ringfit.gap.localisation`)
@@ -53,7 +53,7 @@ class PartResult:
 
 @dataclass
 class Diagnosis:
-    """Result of :func:`diagnose`: ``content`` is the DATA.md §5 dict, ``parts`` the internals."""
+    """Result of :func:`diagnose`: ``content`` is the docs/formats.md §5 dict, ``parts`` the internals."""
 
     content: dict
     parts: list[PartResult]
@@ -88,7 +88,7 @@ def _r(x, nd=4):
 
 
 def read_diagnosis(path: str | os.PathLike) -> dict:
-    """Load a ``*.diagnosis.json`` and check the DATA.md §5 keys; returns the dict."""
+    """Load a ``*.diagnosis.json`` and check the docs/formats.md §5 keys; returns the dict."""
     from ringfit.errors import InputError
 
     try:
@@ -97,9 +97,9 @@ def read_diagnosis(path: str | os.PathLike) -> dict:
         raise InputError(f"not readable JSON ({exc})", source=path) from None
     for key in ("data", "baseline", "where", "candidates", "verdict"):
         if key not in d:
-            raise InputError(f"missing key {key!r} (DATA.md §5)", source=path)
+            raise InputError(f"missing key {key!r} (docs/formats.md §5)", source=path)
     if "effect" not in d["verdict"] or "effects" not in d["verdict"]:
-        raise InputError("verdict needs 'effect' and 'effects' (DATA.md §5)", source=path)
+        raise InputError("verdict needs 'effect' and 'effects' (docs/formats.md §5)", source=path)
     return d
 
 
@@ -498,7 +498,7 @@ def resolve_effects(effects=None):
 
 
 def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = None) -> Diagnosis:
-    """Diagnose the sim-to-real gap of a case folder (DATA.md §6) against the baselines of PHYSICS.md §6.
+    """Diagnose the sim-to-real gap of a case folder (docs/formats.md §6) against the baselines of docs/physics.md §6.
 
     **Arguments:**
 
@@ -508,7 +508,7 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
     - ``noise``: optional user noise levels, ``{"freq_hz": σ, "damping": σ, "profile_ms2": σ}``;
       default: estimated from the data (see :mod:`ringfit.gap.modal`, :mod:`ringfit.gap.profile`).
 
-    **Returns:** :class:`Diagnosis` (``.content`` is the DATA.md §5 dict, ``.write(path)``).
+    **Returns:** :class:`Diagnosis` (``.content`` is the docs/formats.md §5 dict, ``.write(path)``).
     """
     from ringfit.gap.case import Case, read_case
 
@@ -542,7 +542,7 @@ def _blas_for(problems):
 
 
 def _combine(parts: list[PartResult]) -> dict:
-    """One DATA.md §5 dict from the parts: the structural parts (frequencies, profiles) decide the verdict;
+    """One docs/formats.md §5 dict from the parts: the structural parts (frequencies, profiles) decide the verdict;
     the damping part adds only the damping effects it accepts — its own unexplained residual is reported
     under ``verdict.damping``, never as a structural ``unexplained``."""
     structural = [p for p in parts if p.problem.domain != "damping"] or parts

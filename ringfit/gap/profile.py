@@ -1,6 +1,6 @@
-"""The rolling-profile side of the gap diagnosis: baseline ``gong-rolling`` fitted to ``*.profile.csv`` (PHYSICS.md §4–6).
+"""The rolling-profile side of the gap diagnosis: baseline ``gong-rolling`` fitted to ``*.profile.csv`` (docs/physics.md §4–6).
 
-**Baseline** (PHYSICS.md §6): the inextensible ring with χ = 1, hysteretic
+**Baseline** (docs/physics.md §6): the inextensible ring with χ = 1, hysteretic
 damping and radial frictionless tread springs (§4), read through sensor
 layer 2 only (γ = 0, e = 0, no g, no high-pass), each channel's
 per-revolution mean removed. The ring's ρA, EI, k_w, k_v come from the eq. 18
@@ -8,19 +8,19 @@ fit to ``free.modes.csv`` (:mod:`ringfit.gap.modal`), its damping ratio from
 that table's damping column (else ``tyre.toml``). Fitted to the profiles:
 the tread stiffness k_trd (starting at ``tyre.toml``'s value or 19e6 N/m²,
 weak log-normal prior σ = 1), one recorded-angle offset for all profiles (a
-nuisance, linear within ±10°, PHYSICS.md §5 layer 6), and EI, k_w, k_v, ζ
+nuisance, linear within ±10°, docs/physics.md §5 layer 6), and EI, k_w, k_v, ζ
 with the free-table fit's Laplace posterior (correlated, log units) as their
 prior. Why: eq. 18 pins the stiffnesses only relative to the pressure term
 P(n²−1), which dominates the free modes for n ≥ 3, so a free table leaves EI
 uncertain by 10–30 %, while the bending length sets the profile's edge
 features; a baseline that could not move EI within that uncertainty would
 leave a structured residual that no effect explains (and let effects absorb
-it). For χ = 1 the steady shape does not depend on ρA (PHYSICS.md §4.1), so ρA
+it). For χ = 1 the steady shape does not depend on ρA (docs/physics.md §4.1), so ρA
 stays at the free-table value. The JSON says which source each value came
 from (``baseline.sources``).
 
 **Rows**: every profile (one per speed), both channels, band-limited
-resampled onto the model grid φ_j (M = 512, PHYSICS.md §4.5) with its mean
+resampled onto the model grid φ_j (M = 512, docs/physics.md §4.5) with its mean
 removed (:func:`ringfit.fit.rolling.rolling_data`); the model is band-limited
 to the harmonics each measurement holds. Ω from the sidecar's
 ``rotation_hz``, else V/R_e with R_e = R_out − δ/3 of the fitted baseline
@@ -30,7 +30,7 @@ to the harmonics each measurement holds. Ω from the sidecar's
 per profile and channel, or the user's ``noise={"profile_ms2": σ}``; a
 model-resolution floor of :data:`MODEL_PRECISION` × the channel's RMS is added
 in quadrature (what the M = 512 grid misses against M = 4096, measured for the
-baseline sensor and the strongest sensor tilt; PHYSICS.md §4.5). The fitted noise spectrum also gives each
+baseline sensor and the strongest sensor tilt; docs/physics.md §4.5). The fitted noise spectrum also gives each
 profile and channel its effective degrees of freedom (``meta["series_dof"]``)
 for the χ² test of :mod:`ringfit.gap.verdict`.
 
@@ -64,7 +64,7 @@ from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced
 from ringfit.physics.profile import ProfileModel, flat_or_drum, profile_channels
 
-#: Model grid of the diagnosis (PHYSICS.md §4.5: within 0.1 % of M = 8192 for the sensor signals).
+#: Model grid of the diagnosis (docs/physics.md §4.5: within 0.1 % of M = 8192 for the sensor signals).
 GRID = 512
 #: Baseline parameters always fitted to the profiles: tread stiffness (log) and the angle offset [rad] (linear).
 BASE = ("k_tread", "angle_offset")
@@ -145,7 +145,7 @@ def profile_predict(theta, data: ProfileData, *, effects: tuple, sizes: tuple, s
 def _band(profiles, M: int) -> tuple[np.ndarray, np.ndarray]:
     k = np.arange(M // 2 + 1)
     kmax = np.array([(min(len(p), M) - 1) // 2 for p in profiles])
-    kmax = np.minimum(kmax, M // 2 - 1)  # Nyquist zeroed (PHYSICS.md §4.5)
+    kmax = np.minimum(kmax, M // 2 - 1)  # Nyquist zeroed (docs/physics.md §4.5)
     return (k[None, :] <= kmax[:, None]).astype(np.float64), kmax
 
 
@@ -249,7 +249,7 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
         else:
             sigma, slope = profile_noise(resid, phi, kmax)
             # model-resolution floor: the M = 512 grid reproduces the sensor signals to ~0.1 % of their
-            # peaks (PHYSICS.md §4.5); below that a residual is discretisation, not physics
+            # peaks (docs/physics.md §4.5); below that a residual is discretisation, not physics
             floor = MODEL_PRECISION[None, :] * np.sqrt(np.mean(rdata.measured**2, axis=-1))
             sigma = np.sqrt(sigma**2 + floor**2)
             problem.noise_method = (

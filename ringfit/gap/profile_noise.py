@@ -1,4 +1,4 @@
-"""Noise level of averaged rolling profiles, estimated from the data itself (gap diagnosis, DATA.md §3).
+"""Noise level of averaged rolling profiles, estimated from the data itself (gap diagnosis, docs/formats.md §3).
 
 A profile is deterministic physics plus noise (what is left of random
 vibration after averaging revolutions, DAQ noise). Far from the contact patch

@@ -1,4 +1,4 @@
-"""Continuous recordings — ``*.records.npz`` with ``kind = "continuous"`` (DATA.md §4, extended).
+"""Continuous recordings — ``*.records.npz`` with ``kind = "continuous"`` (docs/formats.md §4, extended).
 
 A long recording of a rolling tyre: the co-rotating accelerometer's channels,
 the rim encoder (absolute angle or incremental pulses) and, for cleat tests,
@@ -13,7 +13,7 @@ compression (what :func:`write_continuous` and :class:`ContinuousWriter`
 write) are read in place by offset, compressed members are decompressed as a stream.
 :meth:`ContinuousRecord.chunks` walks the recording in bounded pieces and
 turns the encoder into the unwrapped sensor angle φ (degrees from the centre
-of the contact patch, PHYSICS.md §0) on the way.
+of the contact patch, docs/physics.md §0) on the way.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from ringfit.io.files import atomic_write, check_output_path, existing_file
 
 KIND = "continuous"
 AXES = ("radial", "tangential", "lateral")
-#: Optional scalar keys describing the test condition (same names as the profile sidecar, DATA.md §3).
+#: Optional scalar keys describing the test condition (same names as the profile sidecar, docs/formats.md §3).
 CONDITION_KEYS = ("speed_kmh", "load_n", "pressure_bar", "drum_diameter_m", "rotation_hz")
 #: Samples per chunk when walking a recording (8 MB per float64 channel).
 DEFAULT_CHUNK = 1 << 20
@@ -170,7 +170,7 @@ class ContinuousChunk:
     - ``acc``: (axes, n) acceleration [m/s²], float64; None when the walk
       skipped it (``chunks(acc=False)``).
     - ``angle_deg``: (n,) unwrapped sensor angle φ [deg] (φ mod 360 from the
-      patch centre, PHYSICS.md §0), or None without an encoder.
+      patch centre, docs/physics.md §0), or None without an encoder.
     - ``hall``: (n,) hall sensor level (any unit), or None.
     """
 

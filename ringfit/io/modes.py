@@ -1,4 +1,4 @@
-"""Mode tables — ``*.modes.csv`` with an optional ``*.modes.json`` sidecar (DATA.md §2).
+"""Mode tables — ``*.modes.csv`` with an optional ``*.modes.json`` sidecar (docs/formats.md §2).
 
 A :class:`ModeTable` holds one row per identified mode as NumPy columns.
 Reading validates every cell and names file, row and column on error;
@@ -26,7 +26,7 @@ TAGS = ("", "extr", "0", "vert", "hort")
 BRANCHES = ("", "backward", "forward")
 STATES = ("free", "loaded", "rolling")
 FRAMES = ("rotating", "fixed")
-#: Columns of DATA.md §2, in the order ringfit writes them.
+#: Columns of docs/formats.md §2, in the order ringfit writes them.
 COLUMNS = ("n", "a", "tag", "kind", "freq_hz", "freq_std_hz", "damping_pct", "branch")
 #: Largest plausible natural frequency [Hz] in a mode table (a tyre's modes lie below a few kHz).
 MAX_FREQ_HZ = 1.0e5
@@ -38,7 +38,7 @@ MAX_DAMPING_PCT = 100.0
 
 @dataclass
 class ModeTable:
-    """Identified modes, one entry per row (DATA.md §2).
+    """Identified modes, one entry per row (docs/formats.md §2).
 
     **Fields** (arrays of shape ``(modes,)``):
 
@@ -111,7 +111,7 @@ class ModeTable:
         return (self.kind == "structural") & (self.n >= 0)
 
     def to_rows(self) -> list[dict]:
-        """One dict per row, DATA.md column names, None for empty cells."""
+        """One dict per row, docs/formats.md column names, None for empty cells."""
         rows = []
         for i in range(len(self)):
             row = {
@@ -139,7 +139,7 @@ def sidecar_path(path: str | os.PathLike) -> Path:
 
 
 def read_mode_table(path: str | os.PathLike, *, sidecar: bool = True) -> ModeTable:
-    """Read and validate a mode table and its sidecar, if present (DATA.md §2).
+    """Read and validate a mode table and its sidecar, if present (docs/formats.md §2).
 
     **Raises** :class:`~ringfit.errors.InputError` naming file, row and
     column for: unreadable file, missing ``freq_hz`` column, non-numeric,
@@ -228,7 +228,7 @@ def parse_mode_table(text: str, *, source: str = "<text>") -> ModeTable:
 
 
 def read_condition(path: str | os.PathLike) -> dict:
-    """Read and validate a ``*.modes.json`` sidecar (DATA.md §2)."""
+    """Read and validate a ``*.modes.json`` sidecar (docs/formats.md §2)."""
     path = Path(path)
     return validate_condition(read_json_object(path), source=str(path))
 

@@ -1,4 +1,4 @@
-"""Rolling acceleration profiles — ``*.profile.csv`` with a ``*.profile.json`` sidecar (DATA.md §3).
+"""Rolling acceleration profiles — ``*.profile.csv`` with a ``*.profile.json`` sidecar (docs/formats.md §3).
 
 A :class:`Profile` is what the co-rotating accelerometer read over one
 revolution (averaged over many): angle from the patch centre along the sensor
@@ -33,9 +33,9 @@ from ringfit.errors import InputError
 from ringfit.io.checks import check_condition_field, csv_columns, number_in_range, read_json_object, short_repr
 from ringfit.io.files import atomic_write, check_output_path, read_text_file
 
-#: Columns of DATA.md §3, in the order ringfit writes them.
+#: Columns of docs/formats.md §3, in the order ringfit writes them.
 COLUMNS = ("angle_deg", "acc_radial_ms2", "acc_tangential_ms2")
-#: Sidecar fields every profile must have, and the optional ones (DATA.md §3).
+#: Sidecar fields every profile must have, and the optional ones (docs/formats.md §3).
 REQUIRED_FIELDS = ("speed_kmh", "pressure_bar")
 #: load_n is needed by every command but ``ringfit estimate`` (which estimates it): :attr:`Profile.load_n`
 #: raises then. revolutions and sample_rate_hz describe the averaging; ringfit uses them only when present.
@@ -50,7 +50,7 @@ MAX_ACC_MS2 = 1.0e8
 
 @dataclass
 class Profile:
-    """One rolling acceleration profile (DATA.md §3).
+    """One rolling acceleration profile (docs/formats.md §3).
 
     **Fields** (arrays of shape ``(N,)``): ``angle_deg`` (increasing, in
     [−180, 180)), ``acc_radial_ms2``, ``acc_tangential_ms2`` [m/s²];
@@ -101,7 +101,7 @@ class Profile:
         return None if value is None else float(value)
 
     def omega(self, rolling_radius: float | None = None) -> tuple[float, str]:
-        """Wheel speed Ω [rad/s] and where it came from (DATA.md §3).
+        """Wheel speed Ω [rad/s] and where it came from (docs/formats.md §3).
 
         ``2π·rotation_hz`` when the sidecar has it; else ``V / R_e`` with the
         given effective rolling radius R_e [m] (required then).
@@ -125,7 +125,7 @@ def sidecar_path(path: str | os.PathLike) -> Path:
 
 
 def read_profile(path: str | os.PathLike) -> Profile:
-    """Read and validate a profile CSV and its (required) JSON sidecar (DATA.md §3).
+    """Read and validate a profile CSV and its (required) JSON sidecar (docs/formats.md §3).
 
     **Raises** :class:`~ringfit.errors.InputError` with one line naming the
     file, row and column or sidecar field.
@@ -197,7 +197,7 @@ def check_angles(angle_deg: np.ndarray, lines=None, source: str = "<profile>") -
 
 
 def read_condition(path: str | os.PathLike) -> dict:
-    """Read and validate a profile sidecar (DATA.md §3)."""
+    """Read and validate a profile sidecar (docs/formats.md §3)."""
     path = Path(path)
     return validate_condition(read_json_object(path), source=str(path))
 
@@ -224,7 +224,7 @@ def validate_condition(doc, *, source: str = "<sidecar>") -> dict:
 
 
 def write_profile(profile: Profile, path: str | os.PathLike, *, overwrite: bool = False, inputs=()) -> Path:
-    """Write ``profile`` to ``path`` (CSV) and its sidecar (JSON) atomically (DATA.md §3).
+    """Write ``profile`` to ``path`` (CSV) and its sidecar (JSON) atomically (docs/formats.md §3).
 
     Validates the profile first (same rules as reading), refuses to overwrite an
     existing file unless ``overwrite`` and never overwrites one of ``inputs``.
@@ -272,7 +272,7 @@ def band_limited_resample(signal: np.ndarray, n_points: int) -> np.ndarray:
 
 
 def resample_profile(profile: Profile, n_grid: int, offset_deg: float = 0.0) -> np.ndarray:
-    """Band-limited resampling onto the model grid (DATA.md §3 → PHYSICS.md §4.4 grid).
+    """Band-limited resampling onto the model grid (docs/formats.md §3 → docs/physics.md §4.4 grid).
 
     Fourier coefficients of each channel by the trapezoidal rule over the
     recorded angles α_i (periodic), truncated below the grid's Nyquist

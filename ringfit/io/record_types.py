@@ -1,4 +1,4 @@
-"""The in-memory forms of DATA.md §4: impact :class:`Records` and measured :class:`MeasuredFRF`.
+"""The in-memory forms of docs/formats.md §4: impact :class:`Records` and measured :class:`MeasuredFRF`.
 
 Both validate on construction (one-line :class:`~ringfit.errors.InputError`
 naming the source and key). File formats live beside them:
@@ -16,7 +16,7 @@ import numpy as np
 
 from ringfit.errors import InputError
 
-#: Allowed sensor axes (DATA.md §4). Sign convention of ``radial``: positive toward the wheel centre.
+#: Allowed sensor axes (docs/formats.md §4). Sign convention of ``radial``: positive toward the wheel centre.
 AXES = ("radial", "tangential", "lateral")
 #: Highest sample rate accepted [Hz]; a value above is a unit slip or a corrupted file.
 MAX_FS_HZ = 1.0e7
@@ -30,7 +30,7 @@ MAX_ACCELERANCE = 1.0e8
 
 @dataclass
 class Records:
-    """Impact records of one roving sensor (DATA.md §4).
+    """Impact records of one roving sensor (docs/formats.md §4).
 
     **Fields:**
 

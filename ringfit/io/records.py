@@ -1,7 +1,7 @@
-"""Time records — ``*.records.npz`` (DATA.md §4), and the dispatch to UFF58 by suffix.
+"""Time records — ``*.records.npz`` (docs/formats.md §4), and the dispatch to UFF58 by suffix.
 
 Impact (hammer) or cleat tests with one roving or co-rotating sensor. A
-:class:`Records` holds the arrays of DATA.md §4 with validated shapes and
+:class:`Records` holds the arrays of docs/formats.md §4 with validated shapes and
 units; :func:`read_records` / :func:`write_records` read and write the npz
 form and hand ``.uff``/``.unv`` files to :mod:`ringfit.io.uff` (which may also
 return measured FRFs, :class:`MeasuredFRF`). The classes live in
@@ -33,7 +33,7 @@ __all__ = ["AXES", "MeasuredFRF", "Records", "read_records", "read_measurement",
 
 def read_measurement(path: str | os.PathLike, *, angles: dict | None = None,
                      axes: dict | None = None) -> Records | MeasuredFRF:
-    """Time records or measured FRFs from ``*.records.npz`` (DATA.md §4) or UFF58 (``.uff``/``.unv``).
+    """Time records or measured FRFs from ``*.records.npz`` (docs/formats.md §4) or UFF58 (``.uff``/``.unv``).
 
     **Arguments:** ``angles`` — node number -> sensor angle [deg] and ``axes`` —
     UFF direction code -> axis name, for UFF files that do not say it
@@ -64,7 +64,7 @@ def read_measurement(path: str | os.PathLike, *, angles: dict | None = None,
 
 
 def read_records(path: str | os.PathLike, *, angles: dict | None = None, axes: dict | None = None) -> Records:
-    """Read time records: ``*.records.npz`` (DATA.md §4), or a UFF type-58 file (``.uff``/``.unv``).
+    """Read time records: ``*.records.npz`` (docs/formats.md §4), or a UFF type-58 file (``.uff``/``.unv``).
 
     **Raises** :class:`InputError` for a missing, truncated or corrupted file,
     a missing key, bad shape, unknown axis, non-finite or implausible value, a
@@ -79,7 +79,7 @@ def read_records(path: str | os.PathLike, *, angles: dict | None = None, axes: d
 
 
 def write_records(records: Records, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write ``records`` as ``.npz`` (DATA.md §4) or, for ``.uff``/``.unv``, as UFF type 58.
+    """Write ``records`` as ``.npz`` (docs/formats.md §4) or, for ``.uff``/``.unv``, as UFF type 58.
 
     Refuses to overwrite an existing file unless ``overwrite``; writes atomically.
     """

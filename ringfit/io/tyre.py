@@ -1,4 +1,4 @@
-"""Tyre description files — ``*.toml`` (DATA.md §1).
+"""Tyre description files — ``*.toml`` (docs/formats.md §1).
 
 ``[tyre]`` holds geometry and pressure (required); ``[ring]`` holds ring
 parameters, fitted or starting guesses (optional, any subset); ``[meta]``
@@ -111,7 +111,7 @@ def _unknown(key: str, known, where: str) -> InputError:
 
 
 def read_tyre(path: str | os.PathLike) -> Tyre:
-    """Read and validate a tyre TOML file (DATA.md §1).
+    """Read and validate a tyre TOML file (docs/formats.md §1).
 
     Raises :class:`~ringfit.errors.InputError` with one line naming the file
     and field for anything missing, non-numeric, non-positive, outside its
@@ -187,7 +187,7 @@ def _parse(doc: dict, source: str) -> Tyre:
 
 
 def write_tyre(tyre: Tyre, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write a tyre TOML file (DATA.md §1). Refuses to overwrite unless asked."""
+    """Write a tyre TOML file (docs/formats.md §1). Refuses to overwrite unless asked."""
     import tomli_w
 
     path = check_output_path(path, overwrite=overwrite)

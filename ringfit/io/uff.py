@@ -1,4 +1,4 @@
-"""Universal File Format dataset 58 (UFF/UNV): time records and measured FRFs, via ``pyuff`` (DATA.md §4).
+"""Universal File Format dataset 58 (UFF/UNV): time records and measured FRFs, via ``pyuff`` (docs/formats.md §4).
 
 Commercial modal-test systems exchange measurements as dataset-58 "function
 at nodal DOF" blocks. ringfit reads two function types:

@@ -1,4 +1,4 @@
-"""Contact of the rolling ring with a flat road or a drum through radial tread springs (PHYSICS.md §4.3–4.4).
+"""Contact of the rolling ring with a flat road or a drum through radial tread springs (docs/physics.md §4.3–4.4).
 
 Radial, frictionless, unilateral tread springs between ring and road:
 ``δ(φ) = R + τ + w(φ) − s(φ)``, ``p(φ) = k_trd·max(δ, 0)``, ``q_w = −p``; the
@@ -49,7 +49,7 @@ INITIAL_DEFLECTION = 0.01
 
 
 class ContactSolver(eqx.Module):
-    """Static settings of the contact solve (PHYSICS.md §4.4–4.5).
+    """Static settings of the contact solve (docs/physics.md §4.4–4.5).
 
     - ``n_grid``: M grid points over the revolution (harmonics |n| < M/2);
       default 512 (§4.5: sensor signals within 0.1 % of M = 8192).
@@ -74,7 +74,7 @@ class ContactSolver(eqx.Module):
 
 
 class RollingSolution(eqx.Module):
-    """Steady rolling state on the grid φ_j (PHYSICS.md §4).
+    """Steady rolling state on the grid φ_j (docs/physics.md §4).
 
     **Fields** (SI; ``(M,)`` grid arrays, ``(M//2+1,)`` rfft spectra):
 
@@ -118,7 +118,7 @@ class RollingSolution(eqx.Module):
 
 
 def tread_pressure(penetration, k_tread):
-    """Unilateral tread-spring law ``p = k_trd·max(δ, 0)`` [N/m] (PHYSICS.md §4.3)."""
+    """Unilateral tread-spring law ``p = k_trd·max(δ, 0)`` [N/m] (docs/physics.md §4.3)."""
     return k_tread * jnp.maximum(penetration, 0.0)
 
 
@@ -157,7 +157,7 @@ def solve_rolling(
     solver: ContactSolver = ContactSolver(),
     extra_load=None,
 ) -> RollingSolution:
-    """Steady rolling with tread-spring contact at imposed load (PHYSICS.md §4.3–4.4).
+    """Steady rolling with tread-spring contact at imposed load (docs/physics.md §4.3–4.4).
 
     **Arguments:**
 
@@ -303,7 +303,7 @@ def solve_rolling_jit(ring, geometry, operating, *, model=RingModel(), solver=Co
 def patch_edges(solution: RollingSolution):
     """Leading and trailing contact-patch edges [rad], linearly interpolated zero crossings of δ.
 
-    **Returns:** ``(phi_leading, phi_trailing)`` (φ < 0 leading, φ > 0 trailing, PHYSICS.md §0).
+    **Returns:** ``(phi_leading, phi_trailing)`` (φ < 0 leading, φ > 0 trailing, docs/physics.md §0).
     """
     phi, delta = solution.phi, solution.penetration
     active = solution.pressure > 0.0

@@ -1,4 +1,4 @@
-"""Modes of the loaded, standing tyre: tread springs in the patch as a local foundation (PHYSICS.md §6 ``ground_contact``).
+"""Modes of the loaded, standing tyre: tread springs in the patch as a local foundation (docs/physics.md §6 ``ground_contact``).
 
 Linearised about the loaded static state, the radial tread springs inside
 the contact patch ``|φ| < a`` act as an extra radial foundation ``k_trd`` on
@@ -9,7 +9,7 @@ that arc only. In the real basis of inextensible shapes (radial amplitude
     M = diag(π R ρA (1 + 1/n²))
     K = diag(π R d_n) + k_trd R ∫_{−a}^{a} Φ_i Φ_j dφ
 
-with d_n of eq. 18 in per-harmonic form (PHYSICS.md §2.1) and
+with d_n of eq. 18 in per-harmonic form (docs/physics.md §2.1) and
 ``∫ cos iφ cos jφ = ½[S(i−j) + S(i+j)]``, ``∫ sin iφ sin jφ = ½[S(i−j) − S(i+j)]``,
 ``S(k) = ∫_{−a}^{a} cos kφ dφ = 2 a sinc(k a / π)``. The patch is symmetric
 about φ = 0, so cosine and sine shapes do not couple: cosine-type modes are
@@ -28,7 +28,7 @@ import jax.numpy as jnp
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.natural import modal_stiffness, ring_modal_mass
 
-#: Harmonics kept in the loaded-mode basis: N = 40 reproduces the PHYSICS.md §7
+#: Harmonics kept in the loaded-mode basis: N = 40 reproduces the docs/physics.md §7
 #: values to 0.05 Hz (N = 20 is within 0.2 Hz; checked in tests/test_loaded.py).
 DEFAULT_HARMONICS = 40
 
@@ -55,7 +55,7 @@ def patch_overlap(half_angle, n_max: int = DEFAULT_HARMONICS):
 def loaded_angular_frequencies(
     ring: RingParams, geometry: TyreGeometry, half_angle, n_max: int = DEFAULT_HARMONICS, k_tread=None
 ):
-    """Natural angular frequencies of the loaded standing tyre [rad/s] (PHYSICS.md §6 ``ground_contact``).
+    """Natural angular frequencies of the loaded standing tyre [rad/s] (docs/physics.md §6 ``ground_contact``).
 
     **Arguments:**
 

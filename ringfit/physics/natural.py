@@ -1,4 +1,4 @@
-"""Natural frequencies of Gong's flexible ring (PHYSICS.md §2–3).
+"""Natural frequencies of Gong's flexible ring (docs/physics.md §2–3).
 
 Pure JAX functions of (:class:`~ringfit.params.RingParams`,
 :class:`~ringfit.params.TyreGeometry`, n, ...). ``n`` may be a scalar or an
@@ -20,7 +20,7 @@ TWO_PI = 2.0 * jnp.pi
 def modal_stiffness(ring: RingParams, geometry: TyreGeometry, n):
     """Numerator of eq. 18 [N/m²]: ``EI/R⁴ n²(n²−1)² + (p0b/R) n²(n²−1) + k_w n² + k_v``.
 
-    PHYSICS.md §2.1 (seed eq. 18). Equals ``n² d_n`` with d_n of §2.1.
+    docs/physics.md §2.1 (seed eq. 18). Equals ``n² d_n`` with d_n of §2.1.
     """
     n2 = jnp.asarray(n, dtype=jnp.float64) ** 2
     R = geometry.radius
@@ -63,12 +63,12 @@ def ring_modal_mass(ring: RingParams, geometry: TyreGeometry, n):
 
 
 def natural_angular_frequencies(ring: RingParams, geometry: TyreGeometry, n):
-    """Static inextensible ring, ω_n [rad/s] (PHYSICS.md §2.1, seed eq. 18)."""
+    """Static inextensible ring, ω_n [rad/s] (docs/physics.md §2.1, seed eq. 18)."""
     return jnp.sqrt(modal_stiffness(ring, geometry, n) / modal_mass(ring, n))
 
 
 def natural_frequencies(ring: RingParams, geometry: TyreGeometry, n):
-    """Static inextensible ring, f_n = ω_n / 2π [Hz] (PHYSICS.md §2.1, seed eq. 18).
+    """Static inextensible ring, f_n = ω_n / 2π [Hz] (docs/physics.md §2.1, seed eq. 18).
 
     **Arguments:** ``n`` — circumferential index, scalar or array (n = 0 is
     rigid rotation, n = 1 rigid translation).
@@ -79,7 +79,7 @@ def natural_frequencies(ring: RingParams, geometry: TyreGeometry, n):
 
 
 def extensible_stiffness_matrix(ring: RingParams, geometry: TyreGeometry, n):
-    """K_n of the extensible ring [N/m²], shape ``n.shape + (2, 2)`` (PHYSICS.md §2.2).
+    """K_n of the extensible ring [N/m²], shape ``n.shape + (2, 2)`` (docs/physics.md §2.2).
 
     Real basis ``w = W cos nθ``, ``v = V sin nθ``; rows/cols (radial, tangential).
     """
@@ -95,7 +95,7 @@ def extensible_stiffness_matrix(ring: RingParams, geometry: TyreGeometry, n):
 
 
 def extensible_natural_frequencies(ring: RingParams, geometry: TyreGeometry, n):
-    """Extensible ring, both branches per n [Hz], shape ``n.shape + (2,)`` (PHYSICS.md §2.2).
+    """Extensible ring, both branches per n [Hz], shape ``n.shape + (2,)`` (docs/physics.md §2.2).
 
     Solves ``det(K_n − ρA ω² I) = 0``. Branches are sorted ascending: for
     EA ≳ 1e5 N index 0 is the flexural (radial-dominant) branch, which tends to
@@ -143,7 +143,7 @@ def extensible_flexural_shift(ring: RingParams, geometry: TyreGeometry, n, compl
 
 
 def rotating_from_static(omega_static, n, omega):
-    """Eq. 25 given the static ω_fn [rad/s]: co-rotating ω_n1, ω_n2 [rad/s], shape ``+ (2,)`` (PHYSICS.md §3.2).
+    """Eq. 25 given the static ω_fn [rad/s]: co-rotating ω_n1, ω_n2 [rad/s], shape ``+ (2,)`` (docs/physics.md §3.2).
 
     ``ω_n1,2 = 2nΩ/(n²+1) ± √(ω_fn² + n²(n²−1)²Ω²/(n²+1)²)``; index 0 is
     ω_n1 > 0 (backward wave), index 1 is ω_n2 < 0 (forward wave), convention
@@ -159,7 +159,7 @@ def rotating_from_static(omega_static, n, omega):
 
 
 def rotating_natural_frequencies(ring: RingParams, geometry: TyreGeometry, n, omega):
-    """Rotating ring seen by a co-rotating observer [Hz], shape ``n.shape + (2,)`` (PHYSICS.md §3.2, seed eq. 25).
+    """Rotating ring seen by a co-rotating observer [Hz], shape ``n.shape + (2,)`` (docs/physics.md §3.2, seed eq. 25).
 
     Eq. 25 (:func:`rotating_from_static`) on the static ω_fn of eq. 18: index 0
     is ω_n1 > 0 (backward wave), index 1 is ω_n2 < 0 (forward wave). Exact for
@@ -172,7 +172,7 @@ def rotating_natural_frequencies(ring: RingParams, geometry: TyreGeometry, n, om
 
 
 def fixed_frame_frequencies(ring: RingParams, geometry: TyreGeometry, n, omega):
-    """Rotating ring seen by a fixed observer (Doppler) [Hz], shape ``n.shape + (2,)`` (PHYSICS.md §3.3, seed eq. 26).
+    """Rotating ring seen by a fixed observer (Doppler) [Hz], shape ``n.shape + (2,)`` (docs/physics.md §3.3, seed eq. 26).
 
     ``ω_fixed = ω_nk − nΩ`` applied to both waves of
     :func:`rotating_natural_frequencies` (signed; index 0 backward, 1 forward).
@@ -229,7 +229,7 @@ def cavity_coupled_shift(omega_structural, omega_acoustic, coupling):
 
 
 def critical_speed(ring: RingParams, geometry: TyreGeometry, n_max: int = 60):
-    """Critical speed ``Ω_c = min_n ω_n / n`` over n = 1…n_max (PHYSICS.md §3.4, seed eq. 29).
+    """Critical speed ``Ω_c = min_n ω_n / n`` over n = 1…n_max (docs/physics.md §3.4, seed eq. 29).
 
     **Returns:** ``(omega_c, n_c)`` — Ω_c [rad/s] and the minimising n (int array).
     The simple resonance condition: χ = 0, no Coriolis (see §3.4).

@@ -1,4 +1,4 @@
-"""Operating point of a rolling tyre: wheel speed, load and the road (PHYSICS.md §4.3).
+"""Operating point of a rolling tyre: wheel speed, load and the road (docs/physics.md §4.3).
 
 The road is a small :class:`AbstractRoad` module that gives the distance from
 the axle to the road surface along the ray at fixed-frame angle φ when the
@@ -19,7 +19,7 @@ KMH = 1.0 / 3.6  # m/s per km/h
 
 
 class AbstractRoad(eqx.Module):
-    """A road surface seen from the axle (PHYSICS.md §4.3)."""
+    """A road surface seen from the axle (docs/physics.md §4.3)."""
 
     @abc.abstractmethod
     def distance(self, phi, height):
@@ -32,7 +32,7 @@ class AbstractRoad(eqx.Module):
 
 
 class FlatRoad(AbstractRoad):
-    """Flat road: ``s(φ) = H / cos φ`` for |φ| < π/2 (PHYSICS.md §4.3)."""
+    """Flat road: ``s(φ) = H / cos φ`` for |φ| < π/2 (docs/physics.md §4.3)."""
 
     def distance(self, phi, height):
         c = jnp.cos(phi)
@@ -40,7 +40,7 @@ class FlatRoad(AbstractRoad):
 
 
 class Drum(AbstractRoad):
-    """Drum of diameter ``diameter`` [m] under the tyre (PHYSICS.md §4.3).
+    """Drum of diameter ``diameter`` [m] under the tyre (docs/physics.md §4.3).
 
     With D = H + R_d (axle to drum centre): ``s(φ) = D cos φ − √(R_d² − D² sin²φ)``,
     ``+inf`` where the root is imaginary or the ray points away from the drum.
@@ -73,14 +73,14 @@ class OperatingPoint(eqx.Module):
 
     @classmethod
     def from_speed(cls, speed_kmh: float, load: float, rolling_radius: float, road: AbstractRoad | None = None):
-        """Ω = V / R_e from a speed [km/h] and an effective rolling radius R_e [m] (DATA.md §3)."""
+        """Ω = V / R_e from a speed [km/h] and an effective rolling radius R_e [m] (docs/formats.md §3)."""
         if not rolling_radius > 0:
             raise ValueError(f"rolling_radius = {rolling_radius}: expected a positive radius in metres")
         return cls(omega=speed_kmh * KMH / rolling_radius, load=load, road=road or FlatRoad())
 
 
 def road_from_drum_diameter(drum_diameter_m: float | None) -> AbstractRoad:
-    """:class:`Drum` for a finite positive diameter, else :class:`FlatRoad` (DATA.md §3 ``drum_diameter_m``)."""
+    """:class:`Drum` for a finite positive diameter, else :class:`FlatRoad` (docs/formats.md §3 ``drum_diameter_m``)."""
     if drum_diameter_m is None or not math.isfinite(drum_diameter_m) or drum_diameter_m <= 0:
         return FlatRoad()
     return Drum(diameter=float(drum_diameter_m))
@@ -91,7 +91,7 @@ def rolling_radius(outer_radius, deflection):
 
     The classical approximation for a radial tyre (between the loaded radius
     R_out − δ and the free radius R_out). ringfit uses it to turn a speed into Ω
-    when a profile has no ``rotation_hz`` (DATA.md §3); the rotation rate is
+    when a profile has no ``rotation_hz`` (docs/formats.md §3); the rotation rate is
     written alongside every simulated profile so that the choice is explicit.
     """
     return outer_radius - deflection / 3.0

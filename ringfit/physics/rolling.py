@@ -1,4 +1,4 @@
-"""Per-harmonic response of the steadily rolling ring (PHYSICS.md §4.1–4.2).
+"""Per-harmonic response of the steadily rolling ring (docs/physics.md §4.1–4.2).
 
 In the axle frame the rolling ring's deformation is stationary. With
 ``w = Σ W_n e^{inφ}``, ``v = Σ V_n e^{inφ}`` and loads ``q_w = Σ Q_n e^{inφ}``,
@@ -37,7 +37,7 @@ from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.natural import extensible_stiffness_matrix
 
 #: Number of grid points / 2 × harmonics used by default: M = 512 (|n| ≤ 255, Nyquist zeroed)
-#: is within 0.1 % of M = 8192 for the sensor signals (PHYSICS.md §4.5; checked in
+#: is within 0.1 % of M = 8192 for the sensor signals (docs/physics.md §4.5; checked in
 #: tests/test_rolling_verification.py).
 DEFAULT_GRID = 512
 
@@ -51,13 +51,13 @@ def harmonic_numbers(n_grid: int):
 
 
 def nyquist_mask(n_grid: int):
-    """1.0 for every rfft harmonic except the Nyquist one (zeroed, PHYSICS.md §4.5), shape ``(M//2+1,)``."""
+    """1.0 for every rfft harmonic except the Nyquist one (zeroed, docs/physics.md §4.5), shape ``(M//2+1,)``."""
     m = jnp.ones(n_grid // 2 + 1)
     return m.at[-1].set(0.0) if n_grid % 2 == 0 else m
 
 
 def elastic_stiffness(ring: RingParams, geometry: TyreGeometry, n):
-    """K_n^c without the membrane term [N/m²], complex, shape ``n.shape + (2, 2)`` (PHYSICS.md §4.2).
+    """K_n^c without the membrane term [N/m²], complex, shape ``n.shape + (2, 2)`` (docs/physics.md §4.2).
 
     Bending, pressure (follower) and foundation terms of the §2.2 matrix in
     the complex basis ``e^{inφ}``; undamped (damping is a separate term).
@@ -67,7 +67,7 @@ def elastic_stiffness(ring: RingParams, geometry: TyreGeometry, n):
 
 
 def membrane_matrix(n):
-    """E_n = [[1, in], [−in, n²]] (dimensionless), shape ``n.shape + (2, 2)`` (PHYSICS.md §4.2).
+    """E_n = [[1, in], [−in, n²]] (dimensionless), shape ``n.shape + (2, 2)`` (docs/physics.md §4.2).
 
     Multiplies EA/R² (membrane stiffness) and −ρAΩ² (transport inertia).
     """
@@ -79,7 +79,7 @@ def membrane_matrix(n):
 
 
 def centrifugal_matrix(n):
-    """F_n = [[−n², −in], [in, −1]] (dimensionless), shape ``n.shape + (2, 2)`` (PHYSICS.md §4.2).
+    """F_n = [[−n², −in], [in, −1]] (dimensionless), shape ``n.shape + (2, 2)`` (docs/physics.md §4.2).
 
     Multiplies (1 − χ) ρAΩ², the centrifugal load not carried as belt tension.
     """
@@ -99,7 +99,7 @@ class AbstractOperatorTerm(eqx.Module):
 
 
 class Hysteretic(AbstractOperatorTerm):
-    """Hysteretic (structural) damping: ``iη s_n K_n^c`` with s_n = sign(n) (PHYSICS.md §4.2).
+    """Hysteretic (structural) damping: ``iη s_n K_n^c`` with s_n = sign(n) (docs/physics.md §4.2).
 
     Multiplies EI, k_w, k_v and P by (1 + iη s_n); EA stays real. ``loss_factor``
     η defaults (``None``) to ``2 ζ`` from ``ring.damping_ratio``, which gives every
@@ -114,7 +114,7 @@ class Hysteretic(AbstractOperatorTerm):
 
 
 class Viscous(AbstractOperatorTerm):
-    """Viscous damping in the material frame: ``diag(i nΩ c_w, i nΩ c_v)`` (PHYSICS.md §4.2).
+    """Viscous damping in the material frame: ``diag(i nΩ c_w, i nΩ c_v)`` (docs/physics.md §4.2).
 
     The material sees harmonic n at frequency nΩ, so the loss grows with speed
     (unlike :class:`Hysteretic`). ``c_w``, ``c_v`` [N s/m²] per unit length.
@@ -139,7 +139,7 @@ class NoDamping(AbstractOperatorTerm):
 
 
 class RingModel(eqx.Module):
-    """Which ring form and which operator terms (PHYSICS.md §4.2).
+    """Which ring form and which operator terms (docs/physics.md §4.2).
 
     **Fields:**
 
@@ -155,7 +155,7 @@ class RingModel(eqx.Module):
 
 
 def ring_operator(ring: RingParams, geometry: TyreGeometry, n, omega, model: RingModel = RingModel()):
-    """D_n of the steadily rolling ring [N/m²], complex, shape ``n.shape + (2, 2)`` (PHYSICS.md §4.2).
+    """D_n of the steadily rolling ring [N/m²], complex, shape ``n.shape + (2, 2)`` (docs/physics.md §4.2).
 
     ``D_n = K_n^c + (EA/R² − ρAΩ²)E_n + (1−χ)ρAΩ²F_n + damping + terms``; the EA
     part is included only for ``model.extensible``. ``D_{−n} = conj(D_n)``.
@@ -178,7 +178,7 @@ def ring_operator(ring: RingParams, geometry: TyreGeometry, n, omega, model: Rin
 
 
 def inextensible_vector(n):
-    """u_n = [1, i/n] with V_n = (i/n) W_n, shape ``n.shape + (2,)`` (PHYSICS.md §4.2); n = 0 gives [0, 0]."""
+    """u_n = [1, i/n] with V_n = (i/n) W_n, shape ``n.shape + (2,)`` (docs/physics.md §4.2); n = 0 gives [0, 0]."""
     n = jnp.asarray(n, dtype=jnp.float64)
     nz = n != 0
     inv = jnp.where(nz, 1.0 / jnp.where(nz, n, 1.0), 0.0)
@@ -186,7 +186,7 @@ def inextensible_vector(n):
 
 
 def reduced_operator(D, n):
-    """Inextensible operator ``d_n = uᴴ D_n u`` [N/m²], complex, shape ``n.shape`` (PHYSICS.md §4.2).
+    """Inextensible operator ``d_n = uᴴ D_n u`` [N/m²], complex, shape ``n.shape`` (docs/physics.md §4.2).
 
     For the Table 9 ring with hysteretic damping this is
     ``[EI(n²−1)²/R⁴ + P(n²−1) + k_w + k_v/n²](1+iη s_n) − (1−χ)ρAΩ²(n²−1)²/n²``.
@@ -199,7 +199,7 @@ def reduced_operator(D, n):
 def receptance(ring: RingParams, geometry: TyreGeometry, n, omega, model: RingModel = RingModel()):
     """Per-harmonic receptance G_n with ``[W_n, V_n] = G_n [Q_n, S_n]`` [m²/N], shape ``n.shape + (2, 2)``.
 
-    Extensible: ``G_n = D_n⁻¹``. Inextensible (PHYSICS.md §4.2):
+    Extensible: ``G_n = D_n⁻¹``. Inextensible (docs/physics.md §4.2):
     ``G_n = u uᴴ / d_n`` for n ≠ 0 and ``G_0 = diag(0, 1/D_0[1,1])``
     (W_0 = 0, V_0 = S_0/(k_v − (1−χ)ρAΩ²)). The radial receptance of §4.4 is
     ``C_n = G_n[0, 0]``.

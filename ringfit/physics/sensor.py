@@ -1,4 +1,4 @@
-"""The co-rotating accelerometer on the inner liner, as composable layers (PHYSICS.md §4.6, §5).
+"""The co-rotating accelerometer on the inner liner, as composable layers (docs/physics.md §4.6, §5).
 
 A material point passes the fixed-frame angle φ at time t = (φ − φ₀)/Ω; its
 readings are functions of φ over one revolution. Each layer of §5 is one small
@@ -21,7 +21,7 @@ never by copying the chain.
 
 Spectra are grid spectra (``rfft`` of an ``(M,)`` grid signal over φ_j =
 −π + 2πj/M, harmonic k ↔ revolution harmonic k); accelerations in m/s².
-Channels follow DATA.md §3: radial positive toward the wheel centre,
+Channels follow docs/formats.md §3: radial positive toward the wheel centre,
 tangential positive along the sensor's direction of travel.
 """
 
@@ -39,13 +39,13 @@ STANDARD_GRAVITY = 9.81
 
 
 def belt_slope(w_spectrum, v_spectrum, radius):
-    """Belt slope ψ = (w′ − v)/R [rad] as a grid spectrum, shape of the inputs (PHYSICS.md §5 layer 1)."""
+    """Belt slope ψ = (w′ − v)/R [rad] as a grid spectrum, shape of the inputs (docs/physics.md §5 layer 1)."""
     n = harmonic_numbers(2 * (w_spectrum.shape[-1] - 1))
     return (1j * n * w_spectrum - v_spectrum) / radius
 
 
 def liner_point(w_spectrum, v_spectrum, radius, offset):
-    """Point on the liner, offset e [m] inward (PHYSICS.md §5 layer 1).
+    """Point on the liner, offset e [m] inward (docs/physics.md §5 layer 1).
 
     **Returns:** ``(v_s spectrum, R_s)`` with v_s = v + eψ and R_s = R − e.
     """
@@ -54,7 +54,7 @@ def liner_point(w_spectrum, v_spectrum, radius, offset):
 
 
 def inertial_acceleration(w_spectrum, vs_spectrum, omega, sensor_radius):
-    """Inertial acceleration of the material point, grid spectra [m/s²] (PHYSICS.md §4.6, §5 layer 2).
+    """Inertial acceleration of the material point, grid spectra [m/s²] (docs/physics.md §4.6, §5 layer 2).
 
     ``a_r = Ω²(w″ − 2v_s′ − w) − Ω²R_s``, ``a_θ = Ω²(v_s″ + 2w′ − v_s)``;
     the centripetal −Ω²R_s sits in the mean (k = 0) harmonic.
@@ -73,7 +73,7 @@ def inertial_acceleration(w_spectrum, vs_spectrum, omega, sensor_radius):
 
 
 def specific_force(a_r, a_t, phi, gravity):
-    """What an accelerometer measures, f = a − g⃗ with g⃗ = −g ẑ (PHYSICS.md §5 layer 3).
+    """What an accelerometer measures, f = a − g⃗ with g⃗ = −g ẑ (docs/physics.md §5 layer 3).
 
     ``f_r = a_r − g cos φ``, ``f_θ = a_θ + g sin φ`` on the grid; ``gravity`` g [m/s²] (0 = off).
     """
@@ -81,7 +81,7 @@ def specific_force(a_r, a_t, phi, gravity):
 
 
 def tilt_axes(f_r, f_t, psi, tilt_gain, omega, sensor_radius, phi, gravity):
-    """Sensor channels with axes turned by γψ, first order (PHYSICS.md §5 layer 4).
+    """Sensor channels with axes turned by γψ, first order (docs/physics.md §5 layer 4).
 
     ``s_rad = −f_r + γψ f_θ⁰``, ``s_tan = f_θ + γψ f_r⁰`` with the zeroth-order
     specific force ``f_r⁰ = −Ω²R_s − g cos φ``, ``f_θ⁰ = g sin φ``. γ = 0 gives
@@ -107,7 +107,7 @@ def highpass_response(omega, corner_hz, n_harmonics: int, order: int = 1):
 
 
 def iepe_highpass(signal, omega, corner_hz, order: int = 1):
-    """Apply the IEPE/DAQ AC coupling to a periodic grid signal (PHYSICS.md §5 layer 5).
+    """Apply the IEPE/DAQ AC coupling to a periodic grid signal (docs/physics.md §5 layer 5).
 
     The steady signal has period 2π/Ω, so revolution harmonic k is multiplied
     by ``H(ikΩ)`` (:func:`highpass_response`). ``signal`` shape ``(..., M)``.
@@ -123,7 +123,7 @@ def remove_revolution_mean(signal):
 
 
 def shift_angle(signal, offset):
-    """Band-limited shift: ``y(φ_j) = signal(φ_j + offset)`` [rad] (PHYSICS.md §5 layer 6).
+    """Band-limited shift: ``y(φ_j) = signal(φ_j + offset)`` [rad] (docs/physics.md §5 layer 6).
 
     If a recorded angle α maps to the model angle as φ = α + offset, the model
     sampled at the recorded angles (on the same grid) is ``shift_angle(model, offset)``.
@@ -159,13 +159,13 @@ class SensorModel(eqx.Module):
 
 
 def sensor_signals(solution: RollingSolution, geometry: TyreGeometry, sensor: SensorModel = SensorModel()):
-    """Radial and tangential readings of the co-rotating sensor over one revolution (PHYSICS.md §4.6, §5).
+    """Radial and tangential readings of the co-rotating sensor over one revolution (docs/physics.md §4.6, §5).
 
     **Arguments:** a :class:`~ringfit.physics.contact.RollingSolution` (grid φ_j,
     Ω), the geometry (R) and the :class:`SensorModel`.
 
     **Returns:** ``(radial, tangential)`` [m/s²], each shape ``(M,)`` on φ_j,
-    DATA.md §3 signs (radial toward the wheel centre +, tangential along travel +).
+    docs/formats.md §3 signs (radial toward the wheel centre +, tangential along travel +).
     """
     R = geometry.radius
     omega = solution.omega

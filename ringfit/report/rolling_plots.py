@@ -2,7 +2,7 @@
 
 Each function returns a matplotlib Figure (Agg backend via
 :func:`ringfit.report.figures.new_figure`); save it with ``fig.savefig(path)``.
-Angles in degrees from the patch centre (DATA.md §3), accelerations in g.
+Angles in degrees from the patch centre (docs/formats.md §3), accelerations in g.
 """
 
 from __future__ import annotations

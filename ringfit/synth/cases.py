@@ -1,4 +1,4 @@
-"""Blind-validation case folders (DATA.md §6) with one hidden effect, none, or an effect outside the library.
+"""Blind-validation case folders (docs/formats.md §6) with one hidden effect, none, or an effect outside the library.
 
 :func:`make_case` writes ``tyre.toml``, ``free.modes.csv/.json`` and test
 mode tables (a loaded table with ``extr``/``0`` tags, a spinning table with
@@ -17,13 +17,13 @@ Injected (mode tables): ``ground_contact``, ``rotation``, ``cavity_mode``,
 ``tread_pitch`` (a construction non-uniformity that shifts a few neighbouring
 harmonics and splits the loaded/spinning pairs), whose expected verdict is ``unexplained``.
 ``sensor_mass`` is not injected: on mode tables it is almost a uniform
-relative shift that a refit of ρA absorbs (PHYSICS.md §6: negligible).
+relative shift that a refit of ρA absorbs (docs/physics.md §6: negligible).
 ``cavity_mode`` can be injected but is left out of the benchmark: its mark on
 the structural modes is a near-uniform shift of n = 1 that the baseline's
 k_w + k_v absorbs, so only an acoustic row could show it (not modelled yet).
 ``ring_extensibility`` likewise: for a plausible EA (≥ 1e5 N) the flexural
-modes move by < 0.3 Hz (PHYSICS.md §2.2), below the noise; the tangential
-branch that would show it has no label in a DATA.md §2 table.
+modes move by < 0.3 Hz (docs/physics.md §2.2), below the noise; the tangential
+branch that would show it has no label in a docs/formats.md §2 table.
 """
 
 from __future__ import annotations
@@ -344,7 +344,7 @@ def write_label(label: CaseLabel, path: str | os.PathLike) -> None:
 PROFILE_INJECTIONS = ("none", "sensor_tilt", "gravity", "iepe_highpass", "wave_damping", "rotation", "tread_pitch")
 #: Injectable in profiles but not in the blind benchmark: with the baseline sensor (e = 0, γ = 0) and an
 #: inextensible belt the brush tread shear moves the readings by < 0.1 m/s² even at k_x = 40 MN/m²
-#: (PHYSICS.md §6: it needs finite EA or an offset e to show) — below any realistic noise.
+#: (docs/physics.md §6: it needs finite EA or an offset e to show) — below any realistic noise.
 PROFILE_EXTRA_INJECTIONS = ("tread_shear",)
 #: Speeds of a profile case [km/h] (each jittered by up to ±2 km/h).
 PROFILE_SPEEDS = (20.0, 30.0, 40.0, 60.0)
@@ -399,7 +399,7 @@ class PitchModulation(eqx.Module):
 
 
 def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 0) -> CaseLabel:
-    """Write a blind rolling-profile case (DATA.md §6) into ``folder`` (created; must be empty or absent).
+    """Write a blind rolling-profile case (docs/formats.md §6) into ``folder`` (created; must be empty or absent).
 
     ``tyre.toml`` (bundled Table 9 values, not the truth), ``free.modes.csv`` (eq. 18 of the true
     ring, noisy, with damping) and one ``*.profile.csv`` + ``.json`` per speed (about 20/30/40/60
@@ -407,7 +407,7 @@ def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed
     2048) and written at 360 … 2048 angles; the angle origin is offset by up to ±1.5°; Ω is in the
     sidecar only sometimes; the road is sometimes the 1.2192 m drum; noise is white, pink, red or
     band-coloured with a level (0.05 … 3 m/s² at 40 km/h) that varies with speed and channel. ``wave_damping`` is injected as
-    *viscous* material damping (PHYSICS.md §4.2), not the diagnosis's growing hysteretic loss; the
+    *viscous* material damping (docs/physics.md §4.2), not the diagnosis's growing hysteretic loss; the
     out-of-library ``tread_pitch`` modulates the contact pressure with the tread pitch (a ripple of
     40–70 pitches per revolution): expected verdict ``unexplained``.
 

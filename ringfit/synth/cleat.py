@@ -13,7 +13,7 @@ field → rolling-tyre modes can be tested:
   ring is hit by a radial impulse at the leading edge of the patch. Each
   circumferential order n responds with its backward and forward travelling
   waves at the co-rotating frequencies of seed eq. 25
-  (:func:`ringfit.physics.natural.rotating_natural_frequencies`, PHYSICS.md
+  (:func:`ringfit.physics.natural.rotating_natural_frequencies`, docs/physics.md
   §3.2), decaying with the ring's damping ratio; a fixed observer sees them
   Doppler-shifted by −nΩ (eq. 26, §3.3). With ``modes="loaded"`` the waves
   are instead the modes of the rolling ring **with** the tread springs of the
@@ -24,7 +24,7 @@ field → rolling-tyre modes can be tested:
   φ = φ_L + Ωτ (the enveloping phase);
 * **the measurement chain** — absolute encoder (quantised) or incremental
   pulses, hall pulses ahead of each arrival by ``hall_delay_s``, white
-  noise, the IEPE high-pass of PHYSICS.md §5 layer 5 applied to the time
+  noise, the IEPE high-pass of docs/physics.md §5 layer 5 applied to the time
   history (first order, bilinear, started in its periodic steady state).
 
 The drum circumference is not a multiple of the tyre's rolling circumference,
@@ -51,7 +51,7 @@ from ringfit.io.profiles import band_limited_resample, grid_angles_deg
 
 KMH = 1.0 / 3.6
 G = 9.81
-#: Deflection of the Table 9 tyre at 4 kN on the 1.2192 m drum (PHYSICS.md §7), for R_e.
+#: Deflection of the Table 9 tyre at 4 kN on the 1.2192 m drum (docs/physics.md §7), for R_e.
 TABLE9_DRUM_DEFLECTION = 0.01386
 
 
@@ -61,7 +61,7 @@ class CleatBench:
 
     **Fields** (SI unless the name says otherwise):
 
-    - ``geometry``, ``ring``: the tyre (default Table 9, PHYSICS.md §1).
+    - ``geometry``, ``ring``: the tyre (default Table 9, docs/physics.md §1).
     - ``speed_kmh``, ``load_n``, ``drum_diameter_m``: operating condition.
     - ``load_steps``: ``((t_s, load_n), ...)``: the load changes to ``load_n`` at ``t_s`` (the steady
       reading switches to that load's; ``load_n`` before the first step). Empty: ``load_n`` throughout.
@@ -400,10 +400,10 @@ class CleatBench:
         return out
 
     def profile_truth(self, angle_deg, axis: str = "radial") -> np.ndarray:
-        """The rolling profile the sensor reports at ``angle_deg`` [m/s²] (DATA.md §3: high-pass included).
+        """The rolling profile the sensor reports at ``angle_deg`` [m/s²] (docs/formats.md §3: high-pass included).
 
         The steady reading is periodic with period 2π/Ω, so the IEPE high-pass
-        multiplies revolution harmonic k by H(ikΩ) (PHYSICS.md §5 layer 5).
+        multiplies revolution harmonic k by H(ikΩ) (docs/physics.md §5 layer 5).
         """
         table = self._steady_table()[_axis_index(axis)]
         if self.highpass_hz > 0:

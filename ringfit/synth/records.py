@@ -1,14 +1,14 @@
 """Synthetic roving-sensor impact records from a damped ring modal model.
 
 A free, static tyre struck radially with a hammer at θ = 0 and read by one
-sensor moved around the tread band (DATA.md §4). Each circumferential index
+sensor moved around the tread band (docs/formats.md §4). Each circumferential index
 n gives a DOUBLE pole (the ring is axisymmetric): two modes at
 ``f_n (1 ∓ split/2)`` whose symmetry axes sit at a random angle α_n (small
 imperfections), so the hammer excites both and their shapes turn freely
 inside the pair. ``travelling`` mixes the pair into counter-rotating waves
 (0 = standing cos/sin nθ, 1 = pure e^{±inθ}).
 
-Model (PHYSICS.md §2.1 for the frequencies, taken from
+Model (docs/physics.md §2.1 for the frequencies, taken from
 :func:`ringfit.physics.natural.natural_frequencies`): inextensible ring,
 radial ``w = cos n(θ−α)`` with tangential ``v = −sin n(θ−α)/n`` (w + v′ = 0);
 modal mass ``πRρA(1 + 1/n²)``; sensor radial positive toward the wheel centre
@@ -19,7 +19,7 @@ the frequency domain from the sampled hammer pulse (half sine), so the
 records are exact samples of the periodic response (record lengths are chosen
 long against the decay time).
 
-An optional cavity mode (PHYSICS.md §3.6, seed eq. 22: 343/1.568 Hz,
+An optional cavity mode (docs/physics.md §3.6, seed eq. 22: 343/1.568 Hz,
 ζ ≈ 0.7 %) is seen by the tread sensor as the ring's rigid n = 1 motion it
 drives: an n = 1 pattern far above the ring's own n = 1 frequency.
 """
@@ -160,7 +160,7 @@ def impact_records(
     with_force: bool = True,
     seed: int = 0,
 ) -> Records:
-    """Roving-sensor hammer records of the modal model ``modes`` (DATA.md §4 layout).
+    """Roving-sensor hammer records of the modal model ``modes`` (docs/formats.md §4 layout).
 
     **Arguments:**
 

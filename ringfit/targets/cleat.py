@@ -14,7 +14,7 @@ source's §4.2, figure 23):
    centred on −180 + 360 (j + ½)/S) and by τ (``time_step``, default the
    sample interval); the no-cleat reading at the same angle is subtracted
    sample by sample (a :class:`~ringfit.targets.rolling_profile.RollingProfile`
-   or DATA.md §3 profile, or by default the record's own samples long after
+   or docs/formats.md §3 profile, or by default the record's own samples long after
    each hit), and the samples sharing a bin are averaged. One pass over the
    recording in chunks with ``np.add.at``: memory is bounded by the field,
    not by the recording.
@@ -23,7 +23,7 @@ source's §4.2, figure 23):
 
 The field lives in the fixed (axle) frame: sector j is a place around the
 wheel measured from the patch centre, so its time series show the waves at
-their fixed-frame (Doppler-shifted) frequencies (PHYSICS.md §3.3).
+their fixed-frame (Doppler-shifted) frequencies (docs/physics.md §3.3).
 """
 
 from __future__ import annotations
@@ -289,7 +289,7 @@ def load_field(path) -> AngleTimeField:
 
 
 def _baseline_functions(baseline, axes):
-    """Per-axis functions φ [deg] → no-cleat reading, from a RollingProfile or a DATA.md §3 Profile."""
+    """Per-axis functions φ [deg] → no-cleat reading, from a RollingProfile or a docs/formats.md §3 Profile."""
     from ringfit.targets.rolling_profile import RollingProfile, periodic_interpolator
 
     funcs = []
@@ -405,7 +405,7 @@ def angle_time_field(
     - ``baseline``: the no-cleat reading subtracted at the same angle:
       ``"auto"`` — a profile from this record's samples at least
       ``quiet_after_s`` (default 70 % of the drum period) after each arrival;
-      a :class:`~ringfit.targets.rolling_profile.RollingProfile` or DATA.md §3
+      a :class:`~ringfit.targets.rolling_profile.RollingProfile` or docs/formats.md §3
       :class:`~ringfit.io.profiles.Profile` (e.g. from a no-cleat recording);
       or ``None`` (nothing subtracted).
     - ``arrivals``: reuse detected arrivals (default: detect them).

@@ -152,7 +152,7 @@ def prepare_decays(records: Records, **kwargs) -> tuple[np.ndarray, np.ndarray, 
 def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.ndarray, method: str,
                *, min_confidence: float = 0.5, poles: PoleSet | None = None,
                spurious_damping_factor: float = 1.5) -> tuple[ModeTable, list]:
-    """A :class:`ModeTable` (DATA.md §2) from physical modes: n from the shapes, acoustic flag, extras.
+    """A :class:`ModeTable` (docs/formats.md §2) from physical modes: n from the shapes, acoustic flag, extras.
 
     With ``poles`` (SSI), modes with the same n within 1 % are first merged
     as the two halves of a double pole (:func:`~ringfit.targets.clustering.merge_pairs`).

@@ -126,7 +126,7 @@ def round_trip_time(signal: np.ndarray, fs_hz: float, t_min: float = 2e-3, t_max
 
 
 def group_velocity(radius_m: float, t_cycle_s: float) -> float:
-    """``v_g = 2πR / t_cycle`` [m/s] (seed eq. 21, PHYSICS.md §3.5)."""
+    """``v_g = 2πR / t_cycle`` [m/s] (seed eq. 21, docs/physics.md §3.5)."""
     return 2 * np.pi * radius_m / t_cycle_s
 
 

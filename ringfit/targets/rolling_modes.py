@@ -3,7 +3,7 @@
 The angle–time field (:mod:`ringfit.targets.cleat`) after the cleat has left
 the patch is a free decay observed at fixed places around the wheel, so its
 poles are the rolling tyre's modes in the **fixed frame**: a wave of order n
-appears at the Doppler-shifted frequency |ω_nk − nΩ| (PHYSICS.md §3.3, eq. 26).
+appears at the Doppler-shifted frequency |ω_nk − nΩ| (docs/physics.md §3.3, eq. 26).
 
 Steps:
 
@@ -24,7 +24,7 @@ Steps:
    ``forward``) and the travelling ratio |c_m|/|c_−m|. Poles are grouped by
    (m, frequency) — not by the double-pole clustering of the static tyre,
    because on a rolling tyre the two waves of one n are distinct modes;
-6. the mode table (DATA.md §2, state ``rolling``, frame ``fixed``): a
+6. the mode table (docs/formats.md §2, state ``rolling``, frame ``fixed``): a
    travelling wave gets its ``branch``; a standing wave (ratio < 3, e.g. the
    n = 1 pair whose two waves share one fixed-frame frequency) gets the
    loaded-tyre ``tag``: ``extr``/``0`` (n ≥ 2) or ``vert``/``hort`` (n = 1)

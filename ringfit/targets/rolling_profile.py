@@ -6,13 +6,13 @@ sensor angle φ, and the revolution-to-revolution spread is the noise estimate
 that the rolling fit and the gap diagnosis weight by.
 
 The recording is walked in chunks (bounded memory). For every revolution r
-and angle bin j (``points`` bins centred on φ_j = −180 + 360 j/M, DATA.md §3)
+and angle bin j (``points`` bins centred on φ_j = −180 + 360 j/M, docs/formats.md §3)
 the samples are averaged into x̄_rj; the profile is the mean of x̄_rj over
 the revolutions that have samples in bin j, the spread their standard
 deviation (ddof = 1). Samples within ``quiet_after_s`` of a cleat arrival
 can be left out, so that a cleat recording yields its own no-cleat profile.
 
-Result: :class:`RollingProfile`, written as ``*.profile.csv`` (DATA.md §3)
+Result: :class:`RollingProfile`, written as ``*.profile.csv`` (docs/formats.md §3)
 with :func:`ringfit.io.profiles.write_profile` after :meth:`RollingProfile.to_profile`.
 """
 
@@ -75,7 +75,7 @@ class RollingProfile:
         return periodic_interpolator(self.channel(axis), refine)
 
     def to_profile(self):
-        """The DATA.md §3 :class:`~ringfit.io.profiles.Profile` (radial and tangential; the spread as extra columns).
+        """The docs/formats.md §3 :class:`~ringfit.io.profiles.Profile` (radial and tangential; the spread as extra columns).
 
         A missing axis is written as zeros and said so in the sidecar
         (``missing_axes``); ``revolutions`` is the count that reached every bin.

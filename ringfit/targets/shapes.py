@@ -20,7 +20,7 @@ A shape vector has one entry per channel; each channel has a sensor angle θ
   from its two counter-rotating waves;
 - :func:`acoustic_candidates` flags modes that are not ring-like: a weak
   dominant harmonic, or an n out of the ring's monotone order (a ring's
-  flexural frequencies rise with n for n ≥ 1, PHYSICS.md §2.1; the cavity
+  flexural frequencies rise with n for n ≥ 1, docs/physics.md §2.1; the cavity
   mode seen by a tread sensor shows an n = 1 pattern far above the ring's n = 1).
 """
 

@@ -1,6 +1,6 @@
 """The library of candidate effects, and the registry a user adds to.
 
-Built-in effects (PHYSICS.md §6, DATA.md §5 names): one module each,
+Built-in effects (docs/physics.md §6, docs/formats.md §5 names): one module each,
 imported on first use. A user effect is one module that subclasses
 :class:`~ringfit.gap.effects.base.Effect` and calls :func:`register`; load it
 with :func:`load_effect_module` (the CLI's ``--effect-module``), see
@@ -13,7 +13,7 @@ import importlib
 
 from ringfit.gap.effects.base import Effect, Parameter
 
-#: Built-in effect modules, in the order of DATA.md §5.
+#: Built-in effect modules, in the order of docs/formats.md §5.
 BUILTIN = (
     "sensor_tilt", "gravity", "iepe_highpass", "wave_damping", "tread_shear",
     "ground_contact", "rotation", "cavity_mode", "sensor_mass", "ring_extensibility",

@@ -58,7 +58,7 @@ class Parameter:
 
 
 class Effect:
-    """Base class of a candidate unmodelled effect (PHYSICS.md §6).
+    """Base class of a candidate unmodelled effect (docs/physics.md §6).
 
     Subclasses set ``name``, ``summary``, ``parameters`` and implement the
     hooks for the kinds of data they speak to:

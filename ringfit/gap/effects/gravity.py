@@ -1,4 +1,4 @@
-"""``gravity`` — the 1 g field seen by a sensor that turns with the wheel (PHYSICS.md §5 layer 3, §6).
+"""``gravity`` — the 1 g field seen by a sensor that turns with the wheel (docs/physics.md §5 layer 3, §6).
 
 Rolling profiles only: the specific force ``f = a + g ẑ`` with g = gain ×
 9.81 m/s² (``gravity_gain``, null 0 = the baseline's inertial acceleration

@@ -1,4 +1,4 @@
-"""``iepe_highpass`` — AC coupling of an IEPE sensor and its DAQ (PHYSICS.md §5 layer 5, §6).
+"""``iepe_highpass`` — AC coupling of an IEPE sensor and its DAQ (docs/physics.md §5 layer 5, §6).
 
 Rolling profiles only: first-order high-pass ``s/(s + 2πf_c)`` on every
 revolution harmonic; ``corner_hz`` null 0 = no filter (the baseline).

@@ -1,4 +1,4 @@
-"""``rotation`` — centrifugal stiffening and Coriolis splitting of a spinning ring (PHYSICS.md §3.2–3.3, §6).
+"""``rotation`` — centrifugal stiffening and Coriolis splitting of a spinning ring (docs/physics.md §3.2–3.3, §6).
 
 Modal data: rows of a spinning table (``rotation_hz`` or ``speed_kmh`` > 0)
 with a ``branch`` (backward / forward) follow eq. 25 (co-rotating frame) or
@@ -10,7 +10,7 @@ current ω of each row, so the effect composes with others.
 
 Rolling profiles: the centrifugal share not carried as belt tension,
 ``1 − χ`` (null 0 = χ = 1, the baseline), through the (1−χ)ρAΩ² F_n term of
-the per-harmonic operator (PHYSICS.md §4.2): profiles divided by Ω² then stop
+the per-harmonic operator (docs/physics.md §4.2): profiles divided by Ω² then stop
 collapsing across speeds.
 """
 
@@ -25,7 +25,7 @@ from ringfit.gap.effects.base import Effect, Parameter
 def rotating_from_static(omega_static, n, spin, backward, fixed_frame):
     """|ω| [rad/s] of each row from its static ω_fn: eq. 25, plus the Doppler shift of eq. 26 in the fixed frame.
 
-    Uses :func:`ringfit.physics.natural.rotating_from_static` (PHYSICS.md §3.2–3.3);
+    Uses :func:`ringfit.physics.natural.rotating_from_static` (docs/physics.md §3.2–3.3);
     ``spin`` Ω [rad/s]; ``backward`` bool selects ω_n1 (else ω_n2); ``fixed_frame`` bool.
     """
     waves = natural.rotating_from_static(omega_static, n, spin)

@@ -24,7 +24,7 @@ from ringfit.physics.natural import ring_modal_mass
 
 
 class MassLoading(eqx.Module):
-    """Gain ``Z/(Z + i kΩ m_s)`` of revolution harmonic k [-], ``Z = 2√(T0 ρA)`` (PHYSICS.md §6 sensor_mass)."""
+    """Gain ``Z/(Z + i kΩ m_s)`` of revolution harmonic k [-], ``Z = 2√(T0 ρA)`` (docs/physics.md §6 sensor_mass)."""
 
     mass: float
 

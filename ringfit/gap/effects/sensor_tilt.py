@@ -1,4 +1,4 @@
-"""``sensor_tilt`` — the glued sensor turns with the belt slope ψ, mixing the channels (PHYSICS.md §5 layers 1 and 4, §6).
+"""``sensor_tilt`` — the glued sensor turns with the belt slope ψ, mixing the channels (docs/physics.md §5 layers 1 and 4, §6).
 
 Rolling profiles only: sets the tilt gain γ (null 0: fixed radial/tangential
 axes, the baseline) and the liner offset e (null 0) of

@@ -1,4 +1,4 @@
-"""``tread_shear`` — tread tips stick to the road and shear in the patch (PHYSICS.md §6).
+"""``tread_shear`` — tread tips stick to the road and shear in the patch (docs/physics.md §6).
 
 The minimal brush model of :class:`ringfit.physics.contact.BrushShearLoad` on top
 of the radial contact solution, applied as one fixed-point step: the radial

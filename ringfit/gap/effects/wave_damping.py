@@ -1,12 +1,12 @@
-"""``wave_damping`` — loss that grows with frequency, so deformation waves decay away from the patch (PHYSICS.md §4.2, §6).
+"""``wave_damping`` — loss that grows with frequency, so deformation waves decay away from the patch (docs/physics.md §4.2, §6).
 
-PHYSICS.md §6 names two forms; the effect carries both, each with its own
+docs/physics.md §6 names two forms; the effect carries both, each with its own
 parameter (null 0 = the baseline's constant hysteretic loss η0 = 2ζ):
 
 1. **Growing hysteretic loss** ``η(ω) = η0 + η1·ω/ω_ref``, ω_ref = 2π·100 Hz
    (``eta_slope`` = η1). The material sees harmonic n at ω = |n|Ω, so the
    extra term ``i η1 (|n|Ω/ω_ref) s_n K_n^c`` is added to D_n (:class:`GrowingLoss`).
-2. **Viscous material damping** (PHYSICS.md §4.2 "alternative damping"):
+2. **Viscous material damping** (docs/physics.md §4.2 "alternative damping"):
    ``i nΩ c_w`` on D_n[0,0] and ``i nΩ c_v`` on D_n[1,1], added on top of the
    baseline's hysteretic loss through :class:`ringfit.physics.rolling.Viscous`
    with one coefficient ``c = c_w = c_v`` [N s/m²] (``viscous_c``; isotropic
@@ -20,7 +20,7 @@ patch edges), the viscous one like n (the long waves). The refit frees both and
 the JSON reports both; at least one interval must exclude 0 for acceptance.
 
 - **Modal data**: only the hysteretic form, whose modal signature is the one
-  PHYSICS.md §6 names — ``ζ = ζ0 + η1 ω/(2 ω_ref)`` on damping rows, ζ rising
+  docs/physics.md §6 names — ``ζ = ζ0 + η1 ω/(2 ω_ref)`` on damping rows, ζ rising
   with n. (Viscous c_w = c_v gives ``ζ = c/(2ρAω)``, falling with n — not a
   wave-damping signature on a free tyre, and collinear with ζ0 over the few
   measured modes.)
