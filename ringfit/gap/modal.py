@@ -44,7 +44,8 @@ reference state, first; then the test tables: loaded, rolling, spinning).
   folder holds a second table of the reference state (e.g. SSI and FRF of the same
   free tyre). A test row's σ adds, in quadrature, the reference fit's prediction
   uncertainty at that row (its covariance propagated through eq. 18) and the test
-  table's own measurement σ (``freq_std_hz`` where given, else the free table's).
+  table's own measurement σ (``freq_std_hz`` where given, else the free table's, at least
+  :data:`TEST_SIGMA_FLOOR_REL` of the frequency).
 - *Heavy tails*: test rows enter refits and statistics through the Huber function
   (``ψ(z) = z`` for ``|z| ≤`` :data:`HUBER`, ``sign(z)·√(2c|z| − c²)`` beyond), so
   one outlying row counts linearly, not quadratically; rows with held-out
@@ -82,6 +83,11 @@ from ringfit.physics.natural import cavity_frequency, natural_angular_frequencie
 FREQ_SIGMA_FLOOR_HZ = 0.02
 #: Relative floor: a frequency is rarely identified better than this.
 FREQ_SIGMA_FLOOR_REL = 2e-4
+#: Relative floor of the measurement σ of a test-table row without ``freq_std_hz``: a table identified
+#: on a loaded or rolling tyre (contact, rotation, a drifting operating point) is not measured better
+#: than this, even when the free table it borrows its σ from was (a few free modes give a small and
+#: uncertain scale).
+TEST_SIGMA_FLOOR_REL = 1e-3
 #: Floor of the damping noise (ln ζ): modal damping is rarely identified better than 10 %.
 DAMPING_SIGMA_FLOOR = 0.10
 #: Huber threshold on standardised residuals of test rows (refits and statistics).
@@ -588,6 +594,8 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
     user = noise.get("freq_hz")
     meas = np.where(np.isfinite(std) & (std > 0), std,
                     float(user) if user is not None else (rel if math.isfinite(rel) else 0.0) * y)
+    own = np.isfinite(std) & (std > 0)
+    meas = np.where(ref | own | (user is not None), meas, np.maximum(meas, TEST_SIGMA_FLOOR_REL * y))
     meas = np.where(ref, ref_sigma, meas)
     # prediction uncertainty of the reference fit at each test row (eq. 18, its covariance)
     J = np.asarray(jax.jacfwd(lambda u: natural_frequencies(
@@ -599,7 +607,8 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
     sigma = np.maximum(np.maximum(sigma, FREQ_SIGMA_FLOOR_HZ), FREQ_SIGMA_FLOOR_REL * y)
     if any(not r["reference"] for r in rows):
         notes.append("test rows: sqrt(measurement σ^2 + the reference fit's prediction σ^2), measurement σ from "
-                     "freq_std_hz where given, else the free table's")
+                     f"freq_std_hz where given, else the free table's (at least {TEST_SIGMA_FLOOR_REL:.1%} of the "
+                     "frequency)")
     notes.append(f"Huber weighting of test rows beyond |z| = {HUBER:g}; outliers named at |z| > {OUTLIER_Z:g}")
     # --- problem
     labels = _labels(rows)
