@@ -42,6 +42,13 @@ from ringfit.gap import diagnose
 from ringfit.synth.cases import MODAL_INJECTIONS, PROFILE_INJECTIONS, make_case, make_profile_case
 
 
+def _ideal(part, ss_noise: float) -> float:
+    """100 (1 − SS_noise/SS_before), SS_before of the baseline's held-out residual as the diagnosis weighs it."""
+    prob = part.problem
+    ss_before = float(np.sum(prob.standardised(prob.y - part.baseline.extra["heldout_pred"], heldout=True) ** 2))
+    return 100.0 * (1.0 - ss_noise / ss_before)
+
+
 def modal_ideal(d, label) -> float:
     """Ideal held-out shrink [%] of a mode-table case: 100 (1 − SS_noise/SS_before) over the rows of the part
     the effect acts on (frequency rows; damping rows in ln ζ for wave_damping), SS_noise from the realised
@@ -54,8 +61,7 @@ def modal_ideal(d, label) -> float:
     if e.size != prob.m:  # row order not reproduced: fall back on the diagnosis's own estimate
         return part.summary["baseline"]["ideal_shrink_pct"]
     ss_noise = float(np.sum(prob.standardised(e, heldout=True) ** 2))
-    ss_before = float(np.sum(prob.standardised(prob.y - part.baseline.extra["heldout_pred"], heldout=True) ** 2))
-    return 100.0 * (1.0 - ss_noise / ss_before)
+    return _ideal(part, ss_noise)
 
 
 def profile_ideal(d, label) -> float:
@@ -70,10 +76,8 @@ def profile_ideal(d, label) -> float:
     true = np.repeat(by_run.reshape(-1), M)  # rows: run-major, radial then tangential (docs/formats.md §5)
     if true.size != prob.m:
         return part.summary["baseline"]["ideal_shrink_pct"]
-    ss_noise = float(np.sum((true * prob.scale / sigma) ** 2)) if prob.scale is not None else \
-        float(np.sum((true / sigma) ** 2))
-    ss_before = float(np.sum(prob.standardised(prob.y - part.baseline.extra["heldout_pred"], heldout=True) ** 2))
-    return 100.0 * (1.0 - ss_noise / ss_before)
+    ss_noise = float(np.sum((true / sigma) ** 2))
+    return _ideal(part, ss_noise)
 
 
 def run(kind: str, n: int, offset: int, tmp: Path, confusion: Counter, errors: list, times: list) -> None:

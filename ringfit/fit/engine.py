@@ -85,11 +85,13 @@ class Coordinate:
         if not self.lo < self.hi:
             raise ValueError(f"coordinate {self.name}: need lo < hi")
 
-    def to_u(self, theta: float) -> float:
-        return math.log(theta) if self.kind == LOG else (theta - self.center) / self.scale
+    def to_u(self, theta):
+        """Solver coordinate of ``theta`` (a float or an array)."""
+        return np.log(theta) if self.kind == LOG else (theta - self.center) / self.scale
 
-    def from_u(self, u: float) -> float:
-        return math.exp(u) if self.kind == LOG else self.center + self.scale * u
+    def from_u(self, u):
+        """Natural value of the solver coordinate ``u`` (a float or an array)."""
+        return np.exp(u) if self.kind == LOG else self.center + self.scale * u
 
     @property
     def u_bounds(self) -> tuple[float, float]:
@@ -400,8 +402,7 @@ def _start(problem: Problem, index, K, free_arrays, theta0) -> np.ndarray:
     _, is_log, center, scale, bounded, mid, half = free_arrays
     start = np.zeros((theta0.shape[0], K))
     for j, i in enumerate(index):
-        t = theta0[:, i]
-        start[:, j] = np.log(t) if coords[i].kind == LOG else (t - coords[i].center) / coords[i].scale
+        start[:, j] = coords[i].to_u(theta0[:, i])
     return np.where(bounded, np.arcsin(np.clip((start - mid) / half, -1.0, 1.0)), start)
 
 
@@ -569,7 +570,7 @@ def least_squares_batch(
     coords = problem.coords
     theta = theta0.copy()
     for j, i in enumerate(index):
-        theta[:, i] = np.exp(u[:, j]) if coords[i].kind == LOG else coords[i].center + coords[i].scale * u[:, j]
+        theta[:, i] = coords[i].from_u(u[:, j])
     m = res.shape[1] - K
     chi2 = np.sum(res[:, :m] ** 2, axis=1)
     rows = int(m if n_data is None else n_data)

@@ -518,7 +518,11 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
     problems = build_problems(case, chosen, noise)
     # the mode-table parts are only a test when the folder holds test tables or nothing else
     parts = []
-    with _blas_for(problems):
+    # one BLAS thread: every solve here is small (eigen-solves of ≤ 100 × 100, least squares of ≤ a few
+    # thousand rows × ≤ 12 columns), where threaded BLAS only synchronises (50× slower on a busy machine)
+    from ringfit.targets.ssi import small_matrix_threads
+
+    with small_matrix_threads():
         for prob in problems:
             if prob.domain in ("modes", "damping") and case.profiles and not case.tests:
                 continue
@@ -527,18 +531,6 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
     content["data"] = case.data_files
     content["elapsed_s"] = round(time.perf_counter() - t0, 2)
     return Diagnosis(content, parts, getattr(case, "folder", None))
-
-
-def _blas_for(problems):
-    """One BLAS thread while refits run the rolling model's eigen-solves (``ringfit.gap.rolling_rows``):
-    multi-threaded BLAS on its ~100 × 100 matrices only synchronises, 50× slower on a busy machine."""
-    import contextlib
-
-    if any(getattr(p.predictor, "joint", None) is not None for p in problems):
-        from ringfit.targets.ssi import small_matrix_threads
-
-        return small_matrix_threads()
-    return contextlib.nullcontext()
 
 
 def _combine(parts: list[PartResult]) -> dict:

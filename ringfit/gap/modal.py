@@ -298,6 +298,7 @@ def _table_rows(tables, geometry, patches, spins):
     """Per structural row: dict of its attributes (before n-matching)."""
     cavity = [float(f) for t in tables for f, k in zip(t.freq_hz, t.kind) if k == "acoustic"]
     rows = []
+    damping_std = [t.extra_floats("damping_std_pct") for t in tables]
     for ti, t in enumerate(tables):
         fixed = t.condition.get("frame", "rotating" if spins[ti] > 0 else "fixed") == "fixed"
         tl = table_label(t, ti)
@@ -312,21 +313,10 @@ def _table_rows(tables, geometry, patches, spins):
                 table=ti, i=i, tlabel=tl, n=int(t.n[i]), tag=tag, branch=branch, contact=contact,
                 spin=spins[ti], fixed=fixed, patch=patches[ti][0] if contact else 0.0,
                 freq=float(t.freq_hz[i]), std=float(t.freq_std_hz[i]), damping=float(t.damping_pct[i]),
-                damping_std=_optional_float(t.extra.get("damping_std_pct"), i),
+                damping_std=damping_std[ti][i],
                 reference=ti == 0, a=int(t.a[i]), joint=0.0, mode_index=0, line_k=0.0, wave="",
             ))
     return rows, (cavity[0] if cavity else float(cavity_frequency(1)))
-
-
-def _optional_float(column, i: int) -> float:
-    """Value of an optional extra column (strings; empty or unparsable → NaN)."""
-    if column is None:
-        return math.nan
-    try:
-        x = float(column[i])
-    except (TypeError, ValueError):
-        return math.nan
-    return x if math.isfinite(x) and x >= 0 else math.nan
 
 
 def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=None) -> ModalRows:

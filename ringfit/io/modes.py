@@ -97,6 +97,19 @@ class ModeTable:
         """``free`` (default when there is no sidecar), ``loaded`` or ``rolling``."""
         return self.condition.get("state", "free")
 
+    def extra_floats(self, name: str) -> np.ndarray:
+        """An optional numeric extra column (e.g. ``damping_std_pct`` of ``ringfit ssi``) as ``(m,)`` floats:
+        NaN where it is absent, empty, unparsable, negative or not finite."""
+        out = np.full(len(self), np.nan)
+        for i, text in enumerate(self.extra.get(name, ())):
+            try:
+                x = float(text)
+            except (TypeError, ValueError):
+                continue
+            if math.isfinite(x) and x >= 0:
+                out[i] = x
+        return out
+
     def select(self, mask) -> "ModeTable":
         """Rows where ``mask`` (bool array or index array) holds."""
         idx = np.asarray(mask)

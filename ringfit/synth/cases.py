@@ -57,6 +57,15 @@ class CaseLabel:
     seed: int
 
 
+def _new_case_folder(folder) -> Path:
+    """``folder`` created if absent; it must be empty (a generator never mixes two cases)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    if any(folder.iterdir()):
+        raise FileExistsError(f"{folder} is not empty")
+    return folder
+
+
 def _ring(rng):
     from ringfit.params import table9
 
@@ -111,10 +120,7 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
 
     rng = np.random.default_rng(seed)
     effect = effect or str(rng.choice(MODAL_INJECTIONS))
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    if any(folder.iterdir()):
-        raise FileExistsError(f"{folder} is not empty")
+    folder = _new_case_folder(folder)
     geometry, ring = _ring(rng)
     sigma_rel = float(rng.uniform(0.0005, 0.002))
     colour = str(rng.choice(["white", "coloured"]))
@@ -284,10 +290,7 @@ def make_rolling_case(folder: str | os.PathLike, contact: bool = True, seed: int
     from ringfit.physics.natural import natural_frequencies
 
     rng = np.random.default_rng(seed)
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    if any(folder.iterdir()):
-        raise FileExistsError(f"{folder} is not empty")
+    folder = _new_case_folder(folder)
     geometry, ring = _ring(rng)
     sigma_rel = float(rng.uniform(0.0005, 0.002))
     sigma_roll = sigma_rel * float(rng.uniform(1.0, 1.3))
@@ -429,10 +432,7 @@ def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed
     if effect not in PROFILE_INJECTIONS + PROFILE_EXTRA_INJECTIONS:
         raise ValueError(f"effect {effect!r} not injectable in profiles; "
                          f"choose from {PROFILE_INJECTIONS + PROFILE_EXTRA_INJECTIONS}")
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    if any(folder.iterdir()):
-        raise FileExistsError(f"{folder} is not empty")
+    folder = _new_case_folder(folder)
     geometry, ring = _ring(rng)
     zeta0 = float(rng.uniform(0.015, 0.035))
     ring = ring.replace(damping_ratio=zeta0, k_tread=float(ring.k_tread * np.exp(rng.normal(0.0, 0.15))))

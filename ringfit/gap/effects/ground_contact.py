@@ -37,7 +37,7 @@ class GroundContact(Effect):
         # differentiation are avoided on purpose), each row picks its mode
         k = jnp.clip(rows.n, 1, DEFAULT_HARMONICS).astype(jnp.int32) - 1
         loaded = jnp.zeros_like(omega)
-        tables = getattr(rows, "contact_tables", None)
+        tables = rows.contact_tables
         for t in range(rows.table_patch.shape[0]) if tables is None else tables:  # tables with a patch only
             cos_t, sin_t = loaded_angular_frequencies(ring, geometry, values[0] * rows.table_patch[t],
                                                       DEFAULT_HARMONICS)
