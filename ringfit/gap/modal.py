@@ -557,10 +557,20 @@ def _usable(effects, mrows, domain_note):
     return tuple(usable), dropped
 
 
+@jax.jit
+def _eq18_log_jacobian(log_base, ring, geometry, n):
+    """∂f_n/∂log θ [Hz] of eq. 18 (docs/physics.md §2.1) w.r.t. the base ring parameters, rows ``n``."""
+    from ringfit.physics.natural import natural_frequencies
+
+    def f(u):
+        return natural_frequencies(ring.replace(**{k: jnp.exp(u[i]) for i, k in enumerate(BASE)}), geometry, n)
+
+    return jax.jacfwd(f)(log_base)
+
+
 def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_rel, sigma_method, match_notes,
                        patches, conditions, effects, noise, rolling=None, rolling_records=None) -> GapProblem:
     from ringfit.fit.priors import PHYSICAL_PRIORS
-    from ringfit.physics.natural import natural_frequencies
 
     m = len(rows)
     mrows = _rows_module(rows, 1.0, cavity_hz, [p[0] for p in patches], rolling)
@@ -588,9 +598,8 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
     meas = np.where(ref | own | (user is not None), meas, np.maximum(meas, TEST_SIGMA_FLOOR_REL * y))
     meas = np.where(ref, ref_sigma, meas)
     # prediction uncertainty of the reference fit at each test row (eq. 18, its covariance)
-    J = np.asarray(jax.jacfwd(lambda u: natural_frequencies(
-        ring_ref.replace(**{k: jnp.exp(u[i]) for i, k in enumerate(BASE)}), geometry, jnp.asarray(n)))(
-        jnp.log(jnp.asarray([fit.values[k] for k in BASE]))))
+    n_pad = np.concatenate([n, np.ones((-m) % ROW_BUCKET)])  # one compilation per row bucket
+    J = np.asarray(_eq18_log_jacobian(np.log([fit.values[k] for k in BASE]), ring_ref, geometry, n_pad))[:m]
     cov = fit.covariance_log * max(1.0, fit.chi2 / max(fit.dof, 1))
     pred_sd = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", J, cov, J), 0.0, None))
     sigma = np.where(ref, meas, np.sqrt(meas**2 + pred_sd**2))
