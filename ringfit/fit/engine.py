@@ -479,7 +479,7 @@ def _result(problem, free, index, theta0, u_free, status, message, steps, res, j
         J[:m] = J[:m] / s
     cov = covariance_from_jacobian(J)
     infl = max(1.0, s) if sigma == "inflate" else 1.0
-    stderr, flags = {}, solver_flags(status, message)
+    stderr, flags, at_bound = {}, solver_flags(status, message), []
     values = {c.name: float(t) for c, t in zip(coords, theta)}
     for j, name in enumerate(free):
         c = coords[index[j]]
@@ -488,6 +488,7 @@ def _result(problem, free, index, theta0, u_free, status, message, steps, res, j
         lo, hi = lo_u[j], hi_u[j]
         span = hi - lo if math.isfinite(hi - lo) else 1.0
         if (math.isfinite(lo) and u_free[j] <= lo + 1e-6 * span) or (math.isfinite(hi) and u_free[j] >= hi - 1e-6 * span):
+            at_bound.append(name)
             flags.append(f"{name} = {values[name]:.4g} is at the bound of its range "
                          f"[{c.from_u(lo) if math.isfinite(lo) else -math.inf:.4g}, "
                          f"{c.from_u(hi) if math.isfinite(hi) else math.inf:.4g}]: the data do not bound it")
@@ -500,7 +501,8 @@ def _result(problem, free, index, theta0, u_free, status, message, steps, res, j
         status=status, message=message or "converged", names=free, values=values, stderr=stderr,
         covariance_log=cov * infl**2, residuals=res[:m] / (s if sigma == "estimate" else 1.0),
         jacobian=J, n_data=data_rows, iterations=steps, flags=flags,
-        extra={"aux": aux, "sigma_scale": s if sigma == "estimate" else 1.0, "chi2_raw": chi2},
+        extra={"aux": aux, "sigma_scale": s if sigma == "estimate" else 1.0, "chi2_raw": chi2,
+               "at_bound": tuple(at_bound)},
         theta=theta, coords=tuple(coords),
     )
 
@@ -601,22 +603,29 @@ def _batched_sum_of_squares(thetas, leaves, *, model, treedef):
     return jax.vmap(lambda th: jnp.sum(model(th, data)[0] ** 2))(thetas)
 
 
+def in_fixed_chunks(batched_fn, rows, size: int) -> np.ndarray:
+    """``batched_fn`` over the rows of ``rows`` ``(G, …)`` in chunks of exactly ``size`` rows.
+
+    The last chunk is padded with copies of its last row (results dropped), so a jitted
+    ``batched_fn`` compiles once per chunk size, not once per remainder.
+    """
+    rows = np.asarray(rows, dtype=np.float64)
+    n, size = rows.shape[0], max(1, int(size))
+    pad = -n % size
+    if pad:
+        rows = np.concatenate([rows, np.repeat(rows[-1:], pad, axis=0)])
+    return np.concatenate([np.asarray(batched_fn(rows[i : i + size])) for i in range(0, rows.shape[0], size)])[:n]
+
+
 def sum_of_squares_batch(problem: Problem, thetas, chunk: int = 64) -> np.ndarray:
     """Σ r² of the data rows for each parameter vector of ``thetas`` ``(G, p)`` (natural units).
 
     Evaluated in chunks of exactly ``min(chunk, G)`` rows (the last padded), so one
     compilation serves every grid size.
     """
-    thetas = np.asarray(thetas, dtype=np.float64)
-    n = thetas.shape[0]
-    size = max(1, min(int(chunk), n))
-    pad = -n % size
-    if pad:
-        thetas = np.concatenate([thetas, np.repeat(thetas[-1:], pad, axis=0)])
     leaves, treedef = jax.tree.flatten(problem.data)
-    out = [np.asarray(_batched_sum_of_squares(thetas[i : i + size], leaves, model=problem.model, treedef=treedef))
-           for i in range(0, thetas.shape[0], size)]
-    return np.concatenate(out)[:n]
+    return in_fixed_chunks(lambda th: _batched_sum_of_squares(th, leaves, model=problem.model, treedef=treedef),
+                           thetas, min(int(chunk), len(thetas)))
 
 
 def evaluate(problem: Problem, theta, free: tuple[str, ...], **kwargs) -> FitResult:

@@ -80,6 +80,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ringfit.errors import InputError
+from ringfit.io.profiles import grid_angles_deg
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
                                 least_squares_batch)
 from ringfit.fit.result import FitResult
@@ -509,7 +510,7 @@ def rotation_from_profile(profile, geometry: TyreGeometry, ring: RingParams, loa
     if speed is None or not speed > 0:
         raise InputError("no rotation_hz and no positive speed_kmh in the sidecar: Ω unknown", source=profile.source)
     r_e = effective_rolling_radius(ring, geometry, load_guess, profile.drum_diameter_m,
-                                   solver=ContactSolver(n_grid=settings.n_grid, window_deg=settings.window_deg))
+                                   solver=settings.solver)
     omega = speed * KMH / r_e
     msg = (f"WARNING: no rotation_hz in {profile.source or 'the sidecar'}: Ω = speed_kmh/R_e = {omega:.4g} rad/s from "
            f"the nominal speed {speed:g} km/h (R_e = {r_e:.4f} m at {load_guess:.0f} N). The load does not rest on it "
@@ -624,8 +625,7 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
     resid_rows = np.asarray(first.extra["aux"])[0] - measured[0]
     weight = 1.0 / smoothed_noise(resid_rows)
     weight = weight / np.mean(weight)
-    arrays = EstimateArrays(geometry=geometry, ring=ring, omega=np.array([omega]), roads=flat_or_drum(drum, 1),
-                            response=resp[None], measured=measured, weight=weight[None])
+    arrays = eqx.tree_at(lambda a: a.weight, arrays, weight[None])
     problem = estimate_problem(arrays, settings, k_max, prior)
     fit = least_squares(problem, first.theta, tuple(free), max_steps=settings.max_steps, rtol=settings.rtol,
                         atol=settings.atol)
@@ -658,7 +658,7 @@ def _finish(fit, profile, curves, feature, amp, omega, omega_source, flags, k_ma
         noise = float(np.sqrt(np.mean(resid[far] ** 2))) if far.any() else rms
         noise_source = "residual RMS away from the patch (|φ| > 60°)"
     sol_ok = bool(np.all(curves.ok[(curves.load_n >= 0.8 * lo) & (curves.load_n <= 1.25 * hi)]))
-    at_bound = any("at the bound" in f and LOAD in f for f in fit.flags) or not (
+    at_bound = LOAD in fit.extra["at_bound"] or not (
         LOAD_RANGE[0] * 1.001 < load < LOAD_RANGE[1] * 0.999)
     converged = fit.converged and not at_bound and sol_ok
     flags = list(flags)
@@ -856,7 +856,7 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
             if record.condition.get(k) is not None}
     cond.update(revolutions=R, sample_rate_hz=float(record.fs_hz), rotation_hz=float(np.mean(rate)),
                 missing_axes=["tangential"])
-    angle = -180.0 + 360.0 * np.arange(points) / points
+    angle = grid_angles_deg(points)
     profile = Profile(angle, mean, np.zeros(points), condition=cond, source=str(record.source),
                       extra={"acc_radial_spread_ms2": np.array([repr(float(x)) for x in spread], dtype=object)})
     k = np.arange(2, k_max + 1)
@@ -911,7 +911,7 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
     response = np.asarray(data.response, dtype=np.float64)
     template = EstimateArrays(geometry=geometry, ring=ring, omega=np.ones(1), roads=flat_or_drum(drum, 1),
                               response=response[None], measured=np.zeros((1, 2 * K)), weight=np.ones((1, 2 * K)))
-    problems = {window: estimate_problem(template, EstimateSettings(**{**settings.__dict__, "window_deg": window}),
+    problems = {window: estimate_problem(template, dataclasses.replace(settings, window_deg=window),
                                          k_max),
                 settings.window_deg: estimate_problem(template, settings, k_max)}
     free = (LOAD, GAIN, ANGLE_OFFSET)
@@ -952,7 +952,7 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
             res.covariance_log[b], res.stderr[b] = one.covariance_log, [one.stderr[k] for k in free]
             res.residuals[b], res.chi2_raw[b] = one.residuals, one.extra["chi2_raw"]
             res.sigma_scale[b], res.aux[b] = one.extra["sigma_scale"], np.asarray(one.extra["aux"])
-            res.at_bound[b] = [any(f.startswith(k) and "at the bound" in f for f in one.flags) for k in free]
+            res.at_bound[b] = [k in one.extra["at_bound"] for k in free]
         return res, take
 
     # weights from the first batch's residual spectrum

@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ringfit.fit.engine import LOG, _Free, _weighted
+from ringfit.fit.engine import LOG, _Free, _setup, _weighted, in_fixed_chunks
 from ringfit.params import RingParams
 
 #: Stop when the chain is longer than this many integrated autocorrelation times.
@@ -310,21 +310,15 @@ def log_probability_function(result, bounds: dict | None = None, chunk: int | No
     problem = result.problem
     free = tuple(result.names)
     k = len(free)
-    index = [problem.names.index(n) for n in free]
+    index, _, setup_arrays, W, mean, lo, hi = _setup(problem, free, None)
+    lo, hi = lo.copy(), hi.copy()
     coords = [problem.coords[i] for i in index]
-    lo, hi = np.array([c.u_bounds[0] for c in coords]), np.array([c.u_bounds[1] for c in coords])
     for j, c in enumerate(coords):
         rng = (bounds or {}).get(c.name) or (problem.plausible or {}).get(c.name)
         if rng is not None:
             lo[j], hi[j] = c.to_u(rng[0]) if c.kind != LOG or rng[0] > 0 else -np.inf, c.to_u(rng[1])
-    if problem.prior is not None:
-        W, mean = problem.prior.rows(free, k)
-    else:
-        W, mean = np.zeros((k, k)), np.zeros(k)
-    free_arrays = tuple(jnp.asarray(a) for a in (
-        np.array(index, dtype=np.int32), np.array([c.kind == LOG for c in coords]),
-        np.array([c.center for c in coords]), np.array([c.scale for c in coords]),
-        np.zeros(k, dtype=bool), np.zeros(k), np.ones(k)))
+    # the sampler moves in u itself: no sine transform of bounded coordinates
+    free_arrays = tuple(jnp.asarray(a) for a in setup_arrays[:4] + (np.zeros(k, dtype=bool), np.zeros(k), np.ones(k)))
     leaves, treedef = jax.tree.flatten(problem.data)
     s = float(result.extra.get("sigma_scale", 1.0))
     consts = (tuple(jnp.asarray(x) for x in leaves), jnp.asarray(np.append(result.theta, 0.0)), free_arrays,
@@ -336,13 +330,7 @@ def log_probability_function(result, bounds: dict | None = None, chunk: int | No
 
     def log_prob(u):
         u = np.asarray(u, dtype=np.float64)
-        if chunk is None:
-            return evaluate(u)
-        n, size = u.shape[0], int(chunk)
-        pad = -n % size
-        if pad:
-            u = np.concatenate([u, np.repeat(u[-1:], pad, axis=0)])
-        return np.concatenate([evaluate(u[i : i + size]) for i in range(0, u.shape[0], size)])[:n]
+        return evaluate(u) if chunk is None else in_fixed_chunks(evaluate, u, chunk)
 
     return log_prob, lo, hi
 

@@ -160,7 +160,6 @@ def check_rolling_free(free) -> tuple[str, ...]:
 
 
 def _problem(data: RollingData, geometry, free, model, sensor, solver) -> Problem:
-    check_rolling_free(free)
     P, _, M = data.measured.shape
     arrays = RollingArrays(geometry=geometry, omega=data.omega, load=data.load,
                            roads=flat_or_drum(data.drum_diameter, P), band=full_band(P, M), measured=data.measured)

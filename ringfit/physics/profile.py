@@ -43,7 +43,7 @@ import numpy as np
 
 from ringfit.params import BAR, RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, RollingSolution, as_traced, solve_rolling
-from ringfit.physics.operating import KMH, AbstractRoad, Drum, FlatRoad, OperatingPoint, rolling_radius
+from ringfit.physics.operating import KMH, AbstractRoad, Drum, FlatRoad, OperatingPoint, road_from_drum_diameter, rolling_radius
 from ringfit.physics.rolling import RingModel
 from ringfit.physics.sensor import SensorModel, sensor_signals, shift_angle
 
@@ -220,7 +220,7 @@ def effective_rolling_radius(ring: RingParams, geometry: TyreGeometry, load_n: f
 
     What Ω = V/R_e uses when a profile has no encoder rate (docs/formats.md §3).
     """
-    road = Drum(float(drum_diameter_m)) if drum_diameter_m else FlatRoad()
+    road = road_from_drum_diameter(drum_diameter_m)
     return float(_effective_rolling_radius(*as_traced((model, ring, geometry)), np.float64(load_n),
                                            as_traced(road), solver))
 
@@ -262,7 +262,7 @@ def simulate_profile(
     """
     from ringfit.io.profiles import Profile, band_limited_resample, grid_angles_deg
 
-    road = Drum(float(drum_diameter_m)) if drum_diameter_m else FlatRoad()
+    road = road_from_drum_diameter(drum_diameter_m)
     traced = as_traced((model, ring, geometry))
     from_speed = rotation_hz is None  # Ω = V/R_e, R_e from the standing deflection (same model and load)
     speed_or_omega = speed_kmh * KMH if from_speed else 2.0 * np.pi * float(rotation_hz)

@@ -253,7 +253,7 @@ class CleatBench:
         symmetry = np.asarray(lab["symmetry"])[mi][keep]
         # spatial patterns on a fine grid φ_j = −π + 2πj/L for fast interpolation (2 Re: the conjugate poles)
         L = 4096
-        phi = -np.pi + 2 * np.pi * np.arange(L) / L
+        phi = np.radians(grid_angles_deg(L))
         basis = np.exp(1j * np.outer(k, phi))  # (H, L)
         tables = {"radial": 2.0 * (acc_r[:, keep].T @ basis), "tangential": 2.0 * (acc_t[:, keep].T @ basis)}
         return {"n": order[keep], "travel": travel, "symmetry": symmetry, "rate": rate[keep], "tables": tables}
