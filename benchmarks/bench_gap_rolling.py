@@ -26,11 +26,14 @@ from pathlib import Path
 
 import ringfit  # noqa: F401
 from ringfit.gap import diagnose
+from ringfit.gap.modal import HUBER
 from ringfit.synth.cases import make_rolling_case
 
 
 def _psi2(z):
-    return z * z if abs(z) <= 2 else 4 * abs(z) - 4
+    """ψ(z)² of the diagnosis's Huber function (c = ringfit.gap.modal.HUBER)."""
+    c = HUBER
+    return z * z if abs(z) <= c else 2 * c * abs(z) - c * c
 
 
 def ideal_shrink(content, label) -> float:

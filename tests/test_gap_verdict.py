@@ -174,3 +174,34 @@ def test_a_computed_variant_replaces_the_fitted_one_only_when_the_heldout_data_c
             dg._structure = orig
         assert (chain == ("rotation@computed",)) is swapped, (ss_alt, chain)
         assert (note is not None) is swapped
+
+
+def test_prediction_jacobian_is_the_model_derivative_on_huber_rows(tmp_path):
+    """predict_and_jacobian returns ∂pred/∂θ, not the Huber-weighted residual's derivative: checked against a
+    central finite difference of predict on a damping problem whose rows are all robust, one far beyond c."""
+    import shutil
+
+    from ringfit.data import path as data_path
+    from ringfit.gap.case import read_case
+    from ringfit.gap.diagnosis import build_problems
+    from ringfit.gap.effects import get
+    from ringfit.gap.ranking import predict, predict_and_jacobian
+
+    folder = tmp_path / "c"
+    folder.mkdir()
+    shutil.copy(data_path("table9.tyre.toml"), folder / "tyre.toml")
+    for ext in ("csv", "json"):
+        shutil.copy(data_path(f"free-ssi.modes.{ext}"), folder / f"free.modes.{ext}")
+    damp = next(p for p in build_problems(read_case(folder), (get("wave_damping"),)) if p.domain == "damping")
+    assert damp.robust.all() and damp.huber
+    theta = damp.null_theta()
+    j = 0  # the free table's damping level
+    pred, J = predict_and_jacobian(damp, theta, [j])
+    z = np.abs(pred - damp.y) / damp.sigma
+    assert z.max() > 2 * damp.huber  # the n = 1 row's damping is far off the level
+    h = 1e-6 * theta[j]
+    up, down = theta.copy(), theta.copy()
+    up[j] += h
+    down[j] -= h
+    fd = (predict(damp, up) - predict(damp, down)) / (2 * h)
+    np.testing.assert_allclose(J[:, 0], fd, rtol=1e-5, atol=1e-8)

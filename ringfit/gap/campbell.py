@@ -37,7 +37,7 @@ one-to-one (Hungarian). A row is *explained* when ``|z| ≤`` :data:`EXPLAINED_Z
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

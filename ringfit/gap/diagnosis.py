@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import scipy.linalg
 
 from ringfit.gap import effects as effect_library
 from ringfit.gap.localisation import localise
@@ -341,7 +342,6 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
                                                 chain, cur["group"]))
             if bar is not None:
                 bar.update(1)
-        order = {e: i for i, e in enumerate(remaining)}
         entries.sort(key=lambda c: (-(c["heldout_shrink_pct"] if c["heldout_shrink_pct"] is not None else -1e9),
                                     c.get("variant") != "computed"))
         rounds.append(entries)
@@ -357,7 +357,6 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
         current = part.fits[chain]
         current_ho = current.extra["heldout_pred"]
         remaining = [e for e in remaining if effect_of(e) != effect_of(best)]
-        del order
         cur = _structure(problem, current_ho)
         if not remaining or not cur["excess"]:
             if cur["structured"]:
@@ -477,14 +476,9 @@ def _ring_from_free(modal_problems: list[GapProblem], tyre):
         sources["damping_ratio"] = "tyre.toml [ring]" if "damping_ratio" in tyre.ring_values else "Table 9 default"
     sources["k_tread"] = ("tyre.toml [ring]" if "k_tread" in tyre.ring_values else "Table 9 default") + \
         " (start of the fit)"
-    k = sum(b.shape[0] for b in blocks)
-    cov = np.zeros((k, k))
-    i = 0
-    for blk in blocks:
-        cov[i : i + blk.shape[0], i : i + blk.shape[0]] = blk
-        i += blk.shape[0]
+    cov = scipy.linalg.block_diag(*blocks)
     if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
-        cov = np.eye(k) * RING_PRIOR_SD_FALLBACK**2
+        cov = np.eye(cov.shape[0]) * RING_PRIOR_SD_FALLBACK**2
     return tyre.ring.replace(**fitted), sources, {"names": tuple(names), "cov": cov}
 
 
@@ -515,15 +509,15 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
     case = folder if isinstance(folder, Case) else read_case(folder)
     chosen = resolve_effects(effects)
     t0 = time.perf_counter()
-    problems = build_problems(case, chosen, noise)
-    # the mode-table parts are only a test when the folder holds test tables or nothing else
-    parts = []
     # one BLAS thread: every solve here is small (eigen-solves of ≤ 100 × 100, least squares of ≤ a few
     # thousand rows × ≤ 12 columns), where threaded BLAS only synchronises (50× slower on a busy machine)
     from ringfit.targets.ssi import small_matrix_threads
 
+    parts = []
     with small_matrix_threads():
+        problems = build_problems(case, chosen, noise)
         for prob in problems:
+            # the mode-table parts are only a test when the folder holds test tables or nothing else
             if prob.domain in ("modes", "damping") and case.profiles and not case.tests:
                 continue
             parts.append(diagnose_problem(prob, progress))

@@ -74,7 +74,6 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.gap.effects.base import Effect
 from ringfit.gap.problem import GapProblem
-from ringfit.gap.ranking import predict
 from ringfit.gap.rolling_rows import JOINT, assign_rolling_rows, joint_for
 from ringfit.io.modes import ModeTable
 from ringfit.params import RingParams, TyreGeometry
@@ -109,8 +108,6 @@ MAX_CHAIN_PARAMETERS = 4
 ROW_BUCKET = 32
 #: Largest n a row without n is matched to.
 MATCH_N_MAX = 15
-#: Harmonics of the loaded-mode basis used for predictions (docs/physics.md §6 ground_contact).
-LOADED_HARMONICS = 40
 
 
 class ModalRows(eqx.Module):

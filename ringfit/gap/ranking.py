@@ -119,7 +119,14 @@ def predict_and_jacobian(problem: GapProblem, theta: np.ndarray, free) -> tuple[
         pred = np.asarray(out.extra["aux"])[:m] if pred is None else pred
         dtheta_du = np.array([theta[i] if coords[i].kind == LOG else coords[i].scale for i in chunk])
         cols.append(out.jacobian[:m] / w[:, None] / dtheta_du[None, :])
-    return pred, np.concatenate(cols, axis=1)
+    J = np.concatenate(cols, axis=1)
+    if problem.huber and problem.robust is not None:
+        # the engine's rows are ψ(z): undo ψ'(z) = c/|ψ(z)| on robust rows beyond c, so J is ∂pred/∂θ
+        c = float(problem.huber)
+        a = np.abs((pred - problem.y) * w)
+        beyond = np.asarray(problem.robust, dtype=bool) & (a > c)
+        J = J * np.where(beyond, np.sqrt(np.maximum(2 * c * a - c * c, 0.0)) / c, 1.0)[:, None]
+    return pred, J
 
 
 def theta_names(problem: GapProblem) -> tuple[str, ...]:
@@ -282,8 +289,8 @@ def reference_drift(problem: GapProblem, fit: FitResult, reference: FitResult) -
         return None
     nb = len(problem.base)
     a = problem.null_theta(fit.theta[:nb])
-    b = problem.null_theta(reference.theta[:nb])
-    d = (predict(problem, a) - predict(problem, b))[mask] / problem.sigma[mask]
+    # the reference is a baseline fit (every effect at its null): its own prediction is the "before"
+    d = (predict(problem, a) - reference.extra["pred"])[mask] / problem.sigma[mask]
     return float(np.sqrt(np.mean(d**2)))
 
 
@@ -299,11 +306,6 @@ def drift(problem: GapProblem, fit: FitResult, reference: FitResult) -> dict[str
             d = (math.log(fit.theta[j]) - math.log(reference.theta[j])) / se_u
         out[problem.base[j]] = float(d)
     return out
-
-
-def fit_baseline(problem: GapProblem, mask) -> np.ndarray:
-    """Baseline-only fit on the rows in ``mask``; returns the full theta (effects at null)."""
-    return fit_chain(problem, (), train=mask).theta
 
 
 def prior_distance(problem: GapProblem, theta: np.ndarray, exclude=()) -> tuple[float, int]:

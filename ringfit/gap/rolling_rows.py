@@ -132,12 +132,11 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
                     notes[j] = "rolling model: no branch to match (the row keeps the single-effect predictions)"
                     continue
                 r.update(joint=1.0, mode_index=int(a["mode_index"]), line_k=float(a["k"]))
-                said = []
                 records[j] = {"model_branch": rec["model_branch"], "model_n": rec["model_n"],
                               "model_direction": rec["model_direction"], "model_tag": rec["model_tag"],
                               "model_k": rec["model_k"], "frame": rec["frame"], "model_hz": _num(rec["model_hz"]),
                               "z": _num(rec["z"]), "status": rec["status"]}
-                notes[j] = "; ".join(said + [f"rolling model: {rec['note']}".rstrip(".")])
+                notes[j] = f"rolling model: {rec['note']}".rstrip(".")
             offset += len(t)
     _single_effect_labels(rows, ring, geometry, patches, notes, sel)
     return RollingConditions(omega, lead, trail, table_notes), notes, records

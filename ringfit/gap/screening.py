@@ -26,7 +26,7 @@ import numpy as np
 
 from ringfit.gap.problem import GapProblem
 from ringfit.fit.result import FitResult
-from ringfit.gap.ranking import COMPUTED, effect_of, predict, predict_and_jacobian
+from ringfit.gap.ranking import COMPUTED, chain_start, effect_of, predict, predict_and_jacobian
 
 SCREEN_MIN_SCORE = 1.0
 STEP = 0.05
@@ -57,8 +57,7 @@ def screen(problem: GapProblem, baseline: FitResult, elements=None) -> dict[str,
     for element in elements:
         e = next(x for x in problem.effects if x.name == effect_of(element))
         if element.endswith(COMPUTED):
-            th = th0.copy()
-            th[sl[e.name]] = [p.condition for p in problem.effect_params(e)]
+            th = chain_start(problem, (element,), th0)
             delta = (predict(problem, th) - p0) / sig
             delta = delta - Q @ (Q.T @ delta)
             score = float(2.0 * r @ delta - delta @ delta)

@@ -301,7 +301,7 @@ def make_rolling_case(folder: str | os.PathLike, contact: bool = True, seed: int
     damp = 100.0 * zeta0 * np.exp(rng.normal(0.0, 0.1, free.size))
     row_noise = []
     for f, ft, d in zip(free_noisy, free, damp):
-        row_noise += [("freq", float(f - ft)), ("damping", float(d / 100.0 - zeta0))]
+        row_noise += [("freq", float(f - ft)), ("ln_damping", float(np.log(d / 100.0 / zeta0)))]
     write_tyre(Tyre(geometry, {"rho_a": 2.715, "ei": 0.9426, "kw": 1.294e6, "kv": 1.161e6,
                                "k_tread": 19e6, "damping_ratio": 0.025}), folder / "tyre.toml")
     _write_table(folder, "free.modes.csv",
@@ -501,8 +501,9 @@ def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed
         data = values + noise
         write_profile(Profile(angle, data[0], data[1], condition=condition), folder / f"run{i + 1}.profile.csv")
         on_grid = resample_profile(Profile(angle, noise[0], noise[1]), 512)
-        grid_noise.append(np.mean((on_grid - on_grid.mean(-1, keepdims=True)) ** 2))
-        grid_by_run.append([float(np.sqrt(x)) for x in np.mean((on_grid - on_grid.mean(-1, keepdims=True)) ** 2, -1)])
+        ms = np.mean((on_grid - on_grid.mean(-1, keepdims=True)) ** 2, -1)  # per channel
+        grid_noise.append(float(ms.mean()))
+        grid_by_run.append(np.sqrt(ms).tolist())
     return CaseLabel(
         effect=effect, expected_verdict=EXPECTED.get(effect, effect), magnitude=magnitude,
         noise={"colour": colour, "sigma40_ms2": sigma40, "speed_power": speed_power,

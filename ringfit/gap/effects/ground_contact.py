@@ -12,6 +12,7 @@ free in the *fitted* candidate (a patch the load does not explain is a finding
 too). Changes made by earlier effects in a chain are carried over additively.
 """
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -36,13 +37,19 @@ class GroundContact(Effect):
         # one eigen-solve per table (a static loop: batched LAPACK eigen-solves under forward-mode
         # differentiation are avoided on purpose), each row picks its mode
         k = jnp.clip(rows.n, 1, DEFAULT_HARMONICS).astype(jnp.int32) - 1
-        loaded = jnp.zeros_like(omega)
         tables = rows.contact_tables
-        for t in range(rows.table_patch.shape[0]) if tables is None else tables:  # tables with a patch only
-            cos_t, sin_t = loaded_angular_frequencies(ring, geometry, values[0] * rows.table_patch[t],
-                                                      DEFAULT_HARMONICS)
-            pick = jnp.where(rows.contact == 1, cos_t[k], sin_t[k])
-            loaded = jnp.where(rows.table == t, pick, loaded)
+
+        def solve(_):
+            loaded = jnp.zeros_like(omega)
+            for t in range(rows.table_patch.shape[0]) if tables is None else tables:  # tables with a patch only
+                cos_t, sin_t = loaded_angular_frequencies(ring, geometry, values[0] * rows.table_patch[t],
+                                                          DEFAULT_HARMONICS)
+                pick = jnp.where(rows.contact == 1, cos_t[k], sin_t[k])
+                loaded = jnp.where(rows.table == t, pick, loaded)
+            return loaded
+
+        # at the null (patch_scale 0: every refit without this effect) no eigen-solve is run
+        loaded = jax.lax.cond(values[0] > 0, solve, lambda _: jnp.zeros_like(omega), None)
         free = natural_angular_frequencies(ring, geometry, rows.n)
         use = (rows.contact != 0) & (rows.n >= 1) & (rows.patch > 0) & (values[0] > 0)
         return jnp.where(use, omega + (loaded - free), omega), zeta
