@@ -19,7 +19,7 @@ import cloudpickle  # noqa: E402  (comes with distributed)
 
 from ringfit.batch import Task, TaskFailed, execute, local_cluster, open_client, run_tasks  # noqa: E402
 from ringfit.cli import main  # noqa: E402
-from ringfit.cli.batch import command_available, output_stems, plan_batch, OUTPUT_RULES  # noqa: E402
+from ringfit.cli.batch import output_stems, plan_batch, OUTPUT_RULES  # noqa: E402
 from ringfit.data import path as data_path  # noqa: E402
 from ringfit.errors import InputError  # noqa: E402
 
@@ -108,11 +108,6 @@ def test_bad_batch_arguments_exit_2_before_any_work(tmp_path, capsys):
     assert main(["batch", "fit", str(MODES), "--out", str(out), "--workers", "2", "--scheduler", "tcp://x:1"]) == 2
     assert main(["batch", "fit", str(MODES), "--out", str(out), "--memory-limit", "lots"]) == 2
     assert not out.exists()
-    if not command_available("estimate"):
-        capsys.readouterr()
-        assert main(["batch", "estimate", "run.profile.csv", "--out", str(out)]) == 2
-        err = capsys.readouterr().err.strip()
-        assert "no `ringfit estimate` command" in err and "\n" not in err
     assert main(["campaign", str(tmp_path), "--out", str(out)]) == 2  # no case folder in it
     assert main(["batch", "fit", str(MODES), "--out", str(out), "--dry-run", "--", "--tyre", str(TYRE)]) == 0
     assert capsys.readouterr().out.startswith(f"ringfit fit {MODES} --out {out / 'free-ssi.fitted.tyre.toml'}")

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ringfit.cli._args import force_flag, integer, number
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -22,24 +24,25 @@ def register(sub) -> None:
                     "matched to a branch (n, direction, frame) with its error and σ; rows no branch explains, and "
                     "rows whose speed trend or n label contradicts every branch, are named with one sentence each.")
     p.add_argument("--tyre", required=True, type=Path, help="tyre TOML (docs/formats.md §1) with fitted [ring] values")
-    p.add_argument("--load", type=float, default=4000.0,
+    p.add_argument("--load", type=number("a positive load in N", lo=0.0, lo_open=True), default=4000.0,
                    help="vertical load Fz [N] (default 4000; tables with load_n in their sidecar use their own)")
     p.add_argument("--speeds", default="0:80:5",
                    help="speeds [km/h]: START:STOP:STEP (STOP included) or a comma list (default 0:80:5)")
     p.add_argument("--frame", choices=("sensor", "fixed"), default="fixed",
                    help="frame of the freq_hz column and of the plot: the co-rotating sensor or a fixed observer "
                         "(default fixed); measured tables use the frame in their sidecar")
-    p.add_argument("--drum", type=float, default=None, metavar="DIAMETER_M",
+    p.add_argument("--drum", type=number("a positive diameter in metres", lo=0.0, lo_open=True), default=None,
+                   metavar="DIAMETER_M",
                    help="drum diameter [m]; omit for a flat road")
     p.add_argument("--out", required=True, type=Path, help="output NAME.campbell.csv")
     p.add_argument("--plot", type=Path, default=None, help="optional PNG: branches vs speed, measured rows overlaid")
     p.add_argument("--modes", nargs="+", type=Path, default=(), metavar="T.modes.csv",
                    help="measured mode tables (docs/formats.md §2, with their .json sidecars) to match; writes "
                         "NAME.matched.csv beside --out")
-    p.add_argument("--n-max", type=int, default=15, help="highest dominant order n of the branches (default 15)")
-    p.add_argument("--tolerance", type=float, default=0.02,
+    p.add_argument("--n-max", type=integer("a whole number >= 1", lo=1), default=15, help="highest dominant order n of the branches (default 15)")
+    p.add_argument("--tolerance", type=number("a positive relative σ", lo=0.0, lo_open=True), default=0.02,
                    help="relative σ of the model used in the matching (default 0.02 = 2 %%)")
-    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    force_flag(p)
     p.set_defaults(run=run_campbell)
 
 
@@ -71,51 +74,18 @@ def matched_path(out: Path) -> Path:
     return out.with_name(stem + ".matched.csv")
 
 
-def _csv_text(header, rows) -> str:
-    import csv
-    import io
-    import math
-
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(header)
-    for r in rows:
-        cells = []
-        for v in r:
-            if v is None or (isinstance(v, float) and not math.isfinite(v)):
-                cells.append("")
-            elif isinstance(v, bool):
-                cells.append("true" if v else "false")
-            elif isinstance(v, float):
-                cells.append(f"{v:.10g}")
-            else:
-                cells.append(str(v))
-        w.writerow(cells)
-    return buf.getvalue()
-
-
 def run_campbell(args) -> int:
     from ringfit._cache import enable_compilation_cache
 
     enable_compilation_cache()
     from ringfit.cli import CommandFailed
-    from ringfit.errors import InputError
-    from ringfit.io.files import atomic_write_text, check_output_path
+    from ringfit.io.files import atomic_write_text, check_output_paths, csv_text
     from ringfit.io.modes import sidecar_path
 
     speeds = parse_speeds(args.speeds)
-    if not args.load > 0:
-        raise InputError(f"--load {args.load}: expected a positive load in N")
-    if args.drum is not None and not args.drum > 0:
-        raise InputError(f"--drum {args.drum}: expected a positive diameter in metres")
-    if not args.tolerance > 0:
-        raise InputError(f"--tolerance {args.tolerance}: expected a positive relative σ")
     inputs = [args.tyre, *args.modes, *(sidecar_path(m) for m in args.modes)]
     outputs = [args.out] + ([matched_path(args.out)] if args.modes else []) + ([args.plot] if args.plot else [])
-    if len({Path(o).resolve() for o in outputs}) < len(outputs):
-        raise InputError(f"output paths {', '.join(map(str, outputs))} must differ")
-    for o in outputs:
-        check_output_path(o, overwrite=args.force, inputs=inputs)
+    check_output_paths(outputs, overwrite=args.force, inputs=inputs)
 
     from ringfit.gap.campbell import CAMPBELL_COLUMNS, MATCH_COLUMNS, campbell_diagram, match_rows_table, match_tables
     from ringfit.io.modes import read_mode_table
@@ -134,14 +104,14 @@ def run_campbell(args) -> int:
         match = match_tables(tables, ring, geometry, load_n=args.load, drum_diameter_m=args.drum,
                              model_tolerance=args.tolerance, n_max=args.n_max, speeds_kmh=speeds)
     rows = diagram.rows(args.frame)
-    atomic_write_text(args.out, _csv_text(CAMPBELL_COLUMNS, [[r[c] for c in CAMPBELL_COLUMNS] for r in rows]))
+    atomic_write_text(args.out, csv_text(CAMPBELL_COLUMNS, [[r[c] for c in CAMPBELL_COLUMNS] for r in rows]))
     road = "flat road" if args.drum is None else f"drum {args.drum:g} m"
     print(f"{args.out}: {diagram.branches} branches (n ≤ {args.n_max}) × {len(speeds)} speeds "
           f"{speeds[0]:g}–{speeds[-1]:g} km/h, {args.load:g} N on a {road}; R_e = {diagram.rolling_radius_m:.4f} m, "
           f"patch {diagram.leading_deg[0]:+.2f}° … {diagram.trailing_deg[0]:+.2f}° at {speeds[0]:g} km/h")
     if match is not None:
         path = matched_path(args.out)
-        atomic_write_text(path, _csv_text(MATCH_COLUMNS, match_rows_table(match)))
+        atomic_write_text(path, csv_text(MATCH_COLUMNS, match_rows_table(match)))
         print(f"{path}: {match.summary()}")
         for r in match.rows:
             name = Path(r["source"]).name

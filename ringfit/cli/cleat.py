@@ -146,9 +146,9 @@ def run_cleat(args: argparse.Namespace) -> int:
     print(f"{args.out}: field {field.mean.shape[1]} sectors × {field.mean.shape[2]} time bins "
           f"of {1e3 * field.time_step_s:.4g} ms; baseline: {field.baseline}")
     if args.snapshots or args.animate:
-        from ringfit.report.cleat_plots import animate_field, field_scale, plot_polar_snapshots
+        from ringfit.report.cleat_plots import SCALE_WINDOW_S, animate_field, field_scale, plot_polar_snapshots
 
-        window = min(field.tau_s[-1], 0.1)
+        window = min(field.tau_s[-1], SCALE_WINDOW_S)
         scale = field_scale(field, "radial", window)  # one scale for snapshots and animation
         if args.snapshots:
             t_end = min(field.tau_s[-1], 0.06)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ringfit.cli._args import integer, number
+from ringfit.cli._args import force_flag, integer, number
 
 
 def register(sub) -> None:
@@ -38,7 +38,7 @@ def register(sub) -> None:
     p.add_argument("--harmonics", type=integer("a number of harmonics >= 8", lo=8), default=40, metavar="K",
                    help="highest revolution harmonic fitted (default 40)")
     p.add_argument("--grid", type=integer("an even grid size >= 128", lo=128, hi=1 << 16), default=512, help="model grid M of the contact solve (default 512)")
-    p.add_argument("--force", action="store_true", help="replace existing outputs")
+    force_flag(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar, no warnings on stderr")
     p.set_defaults(run=run_estimate)
 
@@ -51,25 +51,19 @@ def run_estimate(args) -> int:
 
     from ringfit.cli import CommandFailed
     from ringfit.errors import InputError
-    from ringfit.io.files import check_output_path
+    from ringfit.io.files import check_output_paths
     from ringfit.io.profiles import sidecar_path
 
     kind = _input_kind(args.input)
-    if args.grid < 128 or args.grid % 2:
+    if args.grid % 2:
         raise InputError(f"--grid {args.grid}: expected an even number >= 128")
     if not 8 <= args.harmonics < args.grid // 2 - 1:
         raise InputError(f"--harmonics {args.harmonics}: expected 8 … {args.grid // 2 - 2}")
-    if args.k_tread_sd is not None and not args.k_tread_sd >= 0:
-        raise InputError(f"--k-tread-sd {args.k_tread_sd}: expected a number >= 0")
     if args.per_revolution is not None and kind != "recording":
         raise InputError("--per-revolution needs a continuous recording (*.records.npz), not a profile",
                          source=args.input)
     inputs = [args.input, args.tyre] + ([sidecar_path(args.input)] if kind == "profile" else [])
-    outputs = [p for p in (args.out, args.per_revolution, args.plot) if p is not None]
-    if len(set(map(str, outputs))) != len(outputs):
-        raise InputError("--out, --per-revolution and --plot must be different files")
-    for p in outputs:
-        check_output_path(p, overwrite=args.force, inputs=inputs)
+    check_output_paths([args.out, args.per_revolution, args.plot], overwrite=args.force, inputs=inputs)
 
     import json
 
@@ -117,8 +111,9 @@ def run_estimate(args) -> int:
         print(f"wrote {args.per_revolution} ({len(revs)} rows)")
     if args.plot is not None:
         from ringfit.report.estimate_plots import estimate_figure
+        from ringfit.report.figures import save_figure
 
-        estimate_figure(est, revs, title=args.input.name).savefig(args.plot, dpi=110)
+        save_figure(estimate_figure(est, revs, title=args.input.name), args.plot)
         print(f"wrote {args.plot}")
     return 0
 

@@ -174,3 +174,33 @@ def load_npz(path: str | os.PathLike) -> dict:
         text = str(exc).splitlines()[0] if str(exc) else ""
         why = "empty file" if path.stat().st_size == 0 else f"{exc.__class__.__name__}: {text}"
         raise InputError(f"not a readable .npz file ({why}); truncated or corrupted?", source=path) from None
+
+
+def csv_cell(x) -> str:
+    """One CSV cell as ringfit writes tables: empty for None or a non-finite number, ``true``/``false``,
+    floats to 10 significant digits, anything else ``str``."""
+    import math
+
+    import numpy as np
+
+    if x is None:
+        return ""
+    if isinstance(x, (bool, np.bool_)):
+        return "true" if x else "false"
+    if isinstance(x, (float, np.floating)):
+        return format(float(x), ".10g") if math.isfinite(x) else ""
+    return str(x)
+
+
+def csv_text(header, rows) -> str:
+    """CSV text (``\n`` line ends) of ``header`` and ``rows`` (iterables of cells, :func:`csv_cell`)."""
+    import csv
+    import io
+
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(header)
+    for row in rows:
+        writer.writerow([csv_cell(x) for x in row])
+    return buf.getvalue()
+

@@ -19,8 +19,6 @@ at most a 5 % chance of any flag). It needs n ≥ k + 2 other tyres.
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import os
 from dataclasses import dataclass, field
@@ -28,16 +26,15 @@ from pathlib import Path
 
 import numpy as np
 
+from ringfit.io.files import csv_text
 from ringfit.report.figures import new_figure
+from ringfit.report.free_plots import LABELS
 from ringfit.report.html import esc, figure_html, fmt, html_document, table_html
 
 #: Family-wise false-flag rate of the outlier test (Bonferroni over the tyres).
 OUTLIER_ALPHA = 0.05
 #: Steps of a campaign in order (a tyre's first failed step is reported).
 STEPS = ("ssi", "fit", "sample", "diagnose")
-#: Axis labels of the ring parameters.
-LABELS = {"rho_a": "ρA [kg/m]", "ei": "EI [N m²]", "kw": "k_w [N/m²]", "kv": "k_v [N/m²]",
-          "k_tread": "k_tread [N/m²]", "damping_ratio": "ζ [-]", "ea": "EA [N]", "chi": "χ [-]"}
 
 
 @dataclass
@@ -223,25 +220,10 @@ def collect_campaign(layout: dict[str, dict], results=()) -> Campaign:
 
 
 # ============================================================================ CSV
-def _cell(x) -> str:
-    if x is None:
-        return ""
-    if isinstance(x, bool) or isinstance(x, np.bool_):
-        return "true" if x else "false"
-    if isinstance(x, (float, np.floating)):
-        return "" if not math.isfinite(x) else format(float(x), ".10g")
-    return str(x)
-
-
 def campaign_csv(campaign: Campaign) -> str:
     """The campaign table as CSV text (docs/formats.md §13)."""
-    buf = io.StringIO()
-    writer = csv.writer(buf, lineterminator="\n")
     cols = campaign.columns
-    writer.writerow(cols)
-    for row in campaign.rows:
-        writer.writerow([_cell(row.get(c)) for c in cols])
-    return buf.getvalue()
+    return csv_text(cols, ([row.get(c) for c in cols] for row in campaign.rows))
 
 
 def write_campaign_csv(campaign: Campaign, path: str | os.PathLike, *, overwrite: bool = False) -> Path:

@@ -9,8 +9,12 @@ import numpy as np
 
 from ringfit.report.figures import blank_figure, new_figure
 
-LABELS = {"rho_a": "ρA [kg/m]", "ei": "EI [N m²]", "kw": "k_w [N/m²]", "kv": "k_v [N/m²]",
-          "damping_ratio": "ζ [-]", "k_tread": "k_tread [N/m²]", "ea": "EA [N]"}
+SYMBOLS = {"rho_a": "ρA", "ei": "EI", "kw": "k_w", "kv": "k_v", "damping_ratio": "ζ", "k_tread": "k_tread",
+           "ea": "EA", "chi": "χ"}
+UNITS = {"rho_a": "kg/m", "ei": "N m²", "kw": "N/m²", "kv": "N/m²", "damping_ratio": "-", "k_tread": "N/m²",
+         "ea": "N", "chi": "-"}
+#: Axis label of each ring parameter: symbol and unit.
+LABELS = {k: f"{SYMBOLS[k]} [{UNITS[k]}]" for k in SYMBOLS}
 
 
 def modes_figure(n, freq_hz, sigma_hz, lsq_hz=None, predictive=None, credible=None, other=None):
@@ -52,10 +56,6 @@ def modes_figure(n, freq_hz, sigma_hz, lsq_hz=None, predictive=None, credible=No
     return fig
 
 
-SYMBOLS = {"rho_a": "ρA", "ei": "EI", "kw": "k_w", "kv": "k_v", "damping_ratio": "ζ", "k_tread": "k_tread",
-           "ea": "EA"}
-UNITS = {"rho_a": "kg/m", "ei": "N m²", "kw": "N/m²", "kv": "N/m²", "damping_ratio": "-", "k_tread": "N/m²",
-         "ea": "N"}
 #: Parameters drawn on a log axis in the corner plot (their posterior spans decades when the data barely fix them).
 LOG_AXES = ("ei", "ea")
 
