@@ -35,6 +35,8 @@ def register(sub) -> None:
     p.add_argument("--max-steps", type=integer("a whole number of steps >= 100", lo=100), default=20000,
                    help="chain steps at most, converged or not (default 20000)")
     p.add_argument("--seed", type=integer("a whole number >= 0", lo=0), default=0, help="random seed (default 0)")
+    p.add_argument("--netcdf", type=Path, default=None, metavar="FILE.nc",
+                   help="also write the draws as an arviz InferenceData NetCDF file (arviz.from_netcdf reads it)")
     quiet_flag(p)
     p.set_defaults(run=run_sample)
 
@@ -161,11 +163,13 @@ def run_sample(args) -> int:
     import warnings
 
     from ringfit.fit.posterior import sample_posterior
-    from ringfit.io.files import check_output_path
+    from ringfit.io.files import check_output_paths
 
     from ringfit.errors import InputError
 
-    check_output_path(args.out, overwrite=args.force, inputs=[args.modes, args.tyre])
+    if args.netcdf is not None and args.netcdf.suffix.lower() != ".nc":
+        raise InputError(f"--netcdf {args.netcdf}: expected a file name ending in .nc")
+    check_output_paths([args.out, args.netcdf], overwrite=args.force, inputs=[args.modes, args.tyre])
     if args.max_steps < args.min_steps:
         raise InputError(f"--max-steps {args.max_steps} is below --min-steps {args.min_steps}")
     table, tyre, free, modes, rel = _inputs(args)
@@ -182,6 +186,9 @@ def run_sample(args) -> int:
     _print_posterior(post)
     post.save(args.out, overwrite=args.force)
     print(f"wrote {args.out}")
+    if args.netcdf is not None:
+        post.save_netcdf(args.netcdf, overwrite=args.force, inputs=[args.modes, args.tyre])
+        print(f"wrote {args.netcdf}")
     return 0
 
 

@@ -145,6 +145,80 @@ class Posterior:
                     acceptance_mean=float(self.acceptance.mean()), rhat=self.rhat(), ess=self.ess(),
                     converged=self.converged, verdict=verdict)
 
+    def to_inference_data(self):
+        """The draws as an arviz ``InferenceData``, for your own diagnostics and plots.
+
+        Walkers are arviz's chains (as in :meth:`rhat`), after burn-in and thinning.
+
+        Returns
+        -------
+        arviz.InferenceData
+            ``posterior``: one variable per free parameter, natural (SI) units, dims
+            ``(chain, draw)``; ``sample_stats``: ``lp`` (log posterior density up to a
+            constant); ``observed_data``: the fitted frequencies ``freq_hz`` (dim ``mode``,
+            coordinate ``n``) when the posterior is a free-tyre one; attributes: ``burn``,
+            ``thin``, ``tau`` (per parameter, in steps), ``converged``, ``acceptance_mean``,
+            ``source`` (``ringfit``) and the file format.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from ringfit.fit.posterior import Posterior
+        >>> rng = np.random.default_rng(0)
+        >>> post = Posterior(names=("ei",), kinds=("log",), values0={"ei": 0.5},
+        ...                  chain=np.log(0.5) + 0.01 * rng.standard_normal((200, 8, 1)),
+        ...                  log_prob=np.zeros((200, 8)), acceptance=np.full(8, 0.4),
+        ...                  tau=np.array([3.0]), burn=10, thin=2)
+        >>> idata = post.to_inference_data()
+        >>> idata.posterior["ei"].shape  # (walkers, draws kept)
+        (8, 95)
+        >>> round(float(idata.posterior["ei"].median()), 2)
+        0.5
+        """
+        az = _arviz()
+        kept = slice(self.burn, None, self.thin)
+        u = self.chain[kept]  # (draws, walkers, k)
+        s = self.samples.reshape(u.shape)  # natural units, same order as log_samples
+        posterior = {name: np.ascontiguousarray(s[:, :, i].T) for i, name in enumerate(self.names)}
+        sample_stats = {"lp": np.ascontiguousarray(self.log_prob[kept].T)}
+        observed, coords, dims = None, None, None
+        data = self.meta.get("data") or {}
+        if "freq_hz" in data and "n" in data:
+            observed = {"freq_hz": np.asarray(data["freq_hz"], dtype=np.float64)}
+            coords = {"mode": np.arange(observed["freq_hz"].size), "n": ("mode", np.asarray(data["n"]))}
+            dims = {"freq_hz": ["mode"]}
+        attrs = dict(source="ringfit", format=FORMAT, burn=int(self.burn), thin=int(self.thin),
+                     tau=np.asarray(self.tau, dtype=np.float64), converged=int(self.converged),
+                     acceptance_mean=float(np.mean(self.acceptance)))
+        idata = az.from_dict(posterior=posterior, sample_stats=sample_stats, observed_data=observed,
+                             coords={"mode": coords["mode"]} if coords else None, dims=dims, attrs=attrs)
+        if coords:
+            idata.observed_data = idata.observed_data.assign_coords(n=coords["n"])
+        return idata
+
+    def save_netcdf(self, path, *, overwrite: bool = False, inputs=()) -> Path:
+        """Write :meth:`to_inference_data` to a NetCDF file (``InferenceData.to_netcdf``; atomic, as :meth:`save`).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The ``.nc`` file; refused if it exists (unless ``overwrite``), is a folder or one of ``inputs``.
+        overwrite : bool
+            Replace an existing file.
+        inputs : iterable of paths
+            Files the caller read, never written.
+
+        Returns
+        -------
+        pathlib.Path
+            The file written; ``arviz.from_netcdf`` reads it back.
+        """
+        from ringfit.io.files import atomic_write, check_output_path
+
+        path = check_output_path(path, overwrite=overwrite, inputs=inputs)
+        idata = self.to_inference_data()
+        return atomic_write(path, lambda tmp: idata.to_netcdf(str(tmp)))
+
     def save(self, path, *, overwrite: bool = False, inputs=()) -> Path:
         """Write to HDF5 (atomic; refuses to overwrite unless asked, and never an input)."""
         import h5py
