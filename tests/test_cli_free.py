@@ -67,7 +67,8 @@ def _check_netcdf_matches_posterior(nc, h5):
     assert idata.attrs["burn"] == post.burn and idata.attrs["thin"] == post.thin
     # arviz's own diagnostics run on it and agree with the posterior's (computed on log θ there)
     rhat = az.rhat(np.log(idata.posterior))
-    np.testing.assert_allclose([float(rhat[n].values) for n in post.names], post.rhat(), rtol=1e-10)
+    # (not bit-equal: log(exp(u)) moves u by 1 ulp, which breaks the tie of the two middle draws in folded R̂)
+    np.testing.assert_allclose([float(rhat[n].values) for n in post.names], post.rhat(), rtol=1e-3)
 
 
 def test_sample_netcdf_option_refuses_bad_names(tmp_path, capsys):
