@@ -15,6 +15,7 @@ import numpy as np
 
 import ringfit
 from ringfit.data import path
+from ringfit.fit.source_procedure import source_study_fit
 
 out = Path(os.environ.get("RINGFIT_NOTEBOOK_OUT", "."))
 
@@ -62,7 +63,7 @@ assert fit.converged
 # The thesis's own procedure (three modes solved exactly, ρA stepped) returns its Table 9:
 
 # %%
-src = ringfit.source_study_fit(table, tyre.geometry)
+src = source_study_fit(table, tyre.geometry)
 print(src.ring)
 
 # %% [markdown]
