@@ -321,6 +321,7 @@ class WorkerSetup(_WorkerPlugin):
         self.warmup = warmup
 
     def setup(self, worker=None):
+        """Run on each worker as it starts: one thread for BLAS and XLA, compile counting, warm-up."""
         limit_threads()
         _JaxCompiles.install()
         if self.warmup is not None:

@@ -184,6 +184,7 @@ class Problem:
         return tuple(c.name for c in self.coords)
 
     def coordinate(self, name: str) -> Coordinate:
+        """The :class:`Coordinate` of parameter ``name``."""
         return self.coords[self.names.index(name)]
 
 

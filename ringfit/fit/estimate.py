@@ -419,6 +419,7 @@ class FeatureEstimate:
     spacing_mm: float
 
     def to_record(self) -> dict:
+        """The feature estimate as a JSON-ready dict (docs/formats.md §7)."""
         return {"load_n": _num(self.load_n), "peak_leading_deg": _num(self.leading_deg),
                 "peak_trailing_deg": _num(self.trailing_deg), "peak_spacing_mm": _num(self.spacing_mm),
                 "method": "edge peaks of the radial reading (harmonics 2…k_max) → load through the model's "

@@ -34,6 +34,7 @@ class LogNormalPrior:
         return math.log(self.median)
 
     def interval(self, level: float = 0.95) -> tuple[float, float]:
+        """Central ``level`` interval ``(lo, hi)`` of the log-normal, natural units."""
         from scipy.stats import norm
 
         z = norm.ppf(0.5 + level / 2)

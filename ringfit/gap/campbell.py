@@ -510,6 +510,7 @@ class CampbellMatch:
         return [r for r in self.rows if r["status"] == "unexplained"]
 
     def summary(self) -> str:
+        """One line: how many rows matched, conflict in label or trend, or stay unexplained."""
         st = [r["status"] for r in self.rows]
         parts = [f"{st.count(s)} {s}" for s in ("matched", "label_conflict", "trend_conflict", "unexplained") if s in st]
         return f"{len(self.rows)} rows: " + ", ".join(parts)

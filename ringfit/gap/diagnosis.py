@@ -65,6 +65,7 @@ class Diagnosis:
         return self.content["verdict"]
 
     def to_json(self) -> str:
+        """The diagnosis as JSON text (what :meth:`write` saves, docs/formats.md §5)."""
         return json.dumps(self.content, indent=1, default=_json_default)
 
     def write(self, path: str | os.PathLike, *, overwrite: bool = False, inputs=()) -> Path:

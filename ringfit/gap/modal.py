@@ -156,6 +156,8 @@ class ModalRows(eqx.Module):
 
 
 class ModalData(eqx.Module):
+    """What a modal gap problem's model reads: the test rows, the reference ring and the geometry."""
+
     rows: ModalRows
     ring: RingParams
     geometry: TyreGeometry

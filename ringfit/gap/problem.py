@@ -122,6 +122,7 @@ class GapProblem:
         return int(self.y.shape[0])
 
     def effect_params(self, effect: Effect) -> tuple[Parameter, ...]:
+        """The parameters ``effect`` adds in this problem's domain (modal or profile)."""
         return effect.params_for(self.domain)
 
     def slices(self) -> dict[str, slice]:

@@ -69,6 +69,7 @@ class Campaign:
         return cols + ["sampler_converged", "verdict", "heldout_shrink_pct", "distance", "p_value", "outlier"]
 
     def verdict_counts(self) -> dict[str, int]:
+        """How many tyres got each gap verdict, most frequent first."""
         counts: dict[str, int] = {}
         for r in self.rows:
             v = r.get("verdict") or "(no diagnosis)"
@@ -76,6 +77,7 @@ class Campaign:
         return dict(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))
 
     def summary_line(self) -> str:
+        """One line: tyres complete, tyres with a failed step, and the outliers."""
         ok = sum(r["status"] == "ok" for r in self.rows)
         flagged = [r["tyre"] for r in self.rows if r.get("outlier") is True]
         return (f"{ok} complete, {len(self.rows) - ok} with a failed step; "

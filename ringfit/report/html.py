@@ -27,6 +27,7 @@ text-align:right}th{background:#eef1f7}td.l,th.l{text-align:left}
 
 
 def esc(x) -> str:
+    """``x`` as text escaped for HTML."""
     return html.escape(str(x))
 
 
@@ -41,6 +42,7 @@ def table_html(header, rows, left_cols=1) -> str:
 
 
 def figure_html(fig, alt: str) -> str:
+    """A matplotlib figure as an HTML ``<figure>`` with an embedded PNG and ``alt`` text."""
     from ringfit.report.figures import png_data_uri
 
     return f'<figure><img src="{png_data_uri(fig)}" alt="{esc(alt)}"></figure>'
@@ -60,6 +62,7 @@ def html_document(title: str, sections: list[tuple[str, str]], subtitle: str = "
 
 
 def fmt(x, digits=4) -> str:
+    """``x`` with ``digits`` significant digits; ``—`` for None, ``nan``/``inf`` as such."""
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "—" if x is None else str(x)
     return f"{x:.{digits}g}"

@@ -53,6 +53,7 @@ class SyntheticModes:
     amplitude: np.ndarray
 
     def structural(self) -> np.ndarray:
+        """``(modes,)`` True where the mode is a structural (ring) mode."""
         return self.kind == "structural"
 
 

@@ -22,6 +22,11 @@ from ringfit.physics.natural import cavity_coupled_shift, cavity_coupling
 
 
 class CavityMode(Effect):
+    """The ``cavity_mode`` effect: the air cavity's acoustic resonance pulls on the ring modes near it.
+
+    This module's docstring has its model and parameters.
+    """
+
     name = "cavity_mode"
     summary = "the air cavity's acoustic resonance pulls on the ring modes near it"
     parameters = (

@@ -13,6 +13,11 @@ from ringfit.physics.sensor import STANDARD_GRAVITY
 
 
 class Gravity(Effect):
+    """The ``gravity`` effect: the 1 g field turning with the wheel adds a once-per-revolution sine to both channels.
+
+    This module's docstring has its model and parameters.
+    """
+
     name = "gravity"
     summary = "the 1 g field turning with the wheel adds a once-per-revolution sine to both channels"
     parameters = (

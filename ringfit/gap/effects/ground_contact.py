@@ -23,6 +23,11 @@ from ringfit.physics.natural import natural_angular_frequencies
 
 
 class GroundContact(Effect):
+    """The ``ground_contact`` effect: tread springs in the contact patch stiffen the cos-type (extr) modes of the loaded tyre.
+
+    This module's docstring has its model and parameters.
+    """
+
     name = "ground_contact"
     summary = "tread springs in the contact patch stiffen the cos-type (extr) modes of the loaded tyre"
     parameters = (

@@ -11,6 +11,11 @@ from ringfit.gap.effects.base import Effect, Parameter
 
 
 class IEPEHighpass(Effect):
+    """The ``iepe_highpass`` effect: the sensor's AC coupling filters the slow once-per-revolution content.
+
+    This module's docstring has its model and parameters.
+    """
+
     name = "iepe_highpass"
     summary = "the sensor's AC coupling filters the slow once-per-revolution content"
     parameters = (

@@ -23,6 +23,11 @@ from ringfit.physics.natural import extensible_flexural_shift
 
 
 class RingExtensibility(Effect):
+    """The ``ring_extensibility`` effect: a finite membrane stiffness EA of the belt lowers the flexural modes.
+
+    This module's docstring has its model and parameters.
+    """
+
     name = "ring_extensibility"
     summary = "a finite membrane stiffness EA of the belt lowers the flexural modes"
     parameters = (

@@ -34,6 +34,11 @@ def rotating_from_static(omega_static, n, spin, backward, fixed_frame):
 
 
 class Rotation(Effect):
+    """The ``rotation`` effect: a spinning ring: Coriolis splitting of backward/forward waves and centrifugal tension.
+
+    This module's docstring has its model and parameters.
+    """
+
     name = "rotation"
     summary = "a spinning ring: Coriolis splitting of backward/forward waves and centrifugal tension"
     parameters = (

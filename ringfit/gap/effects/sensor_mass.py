@@ -34,6 +34,11 @@ class MassLoading(eqx.Module):
 
 
 class SensorMass(Effect):
+    """The ``sensor_mass`` effect: the added mass of the accelerometer and its mount lowers the modes it sits on.
+
+    This module's docstring has its model and parameters.
+    """
+
     name = "sensor_mass"
     summary = "the added mass of the accelerometer and its mount lowers the modes it sits on"
     parameters = (

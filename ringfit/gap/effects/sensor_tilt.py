@@ -12,6 +12,11 @@ from ringfit.gap.effects.base import Effect, Parameter
 
 
 class SensorTilt(Effect):
+    """The ``sensor_tilt`` effect: the sensor axes turn with the belt slope, so radial and tangential readings mix at the patch.
+
+    This module's docstring has its model and parameters.
+    """
+
     name = "sensor_tilt"
     summary = "the sensor axes turn with the belt slope, so radial and tangential readings mix at the patch"
     parameters = (

@@ -12,6 +12,11 @@ from ringfit.gap.effects.base import Effect, Parameter
 from ringfit.physics.contact import BrushShearLoad
 
 class TreadShear(Effect):
+    """The ``tread_shear`` effect: the tread sticks to the road and shears in the patch, pulling the belt tangentially.
+
+    This module's docstring has its model and parameters.
+    """
+
     name = "tread_shear"
     summary = "the tread sticks to the road and shears in the patch, pulling the belt tangentially"
     parameters = (

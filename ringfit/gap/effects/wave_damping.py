@@ -56,6 +56,11 @@ VISCOUS_C = Parameter("viscous_c", "N s/m^2", null=0.0, lo=0.0, hi=5000.0, start
 
 
 class WaveDamping(Effect):
+    """The ``wave_damping`` effect: damping that grows with frequency: waves decay away from the patch, front and rear differ.
+
+    This module's docstring has its model and parameters.
+    """
+
     name = "wave_damping"
     baseline_partners = ("damping_ratio",)
     summary = "damping that grows with frequency: waves decay away from the patch, front and rear differ"
