@@ -1,0 +1,129 @@
+"""The documentation site (issue 24 item 4): it builds with ``mkdocs build --strict`` — a broken
+link, a section reference to no section or an undocumented public function or class fails —
+the CLI reference covers every command and option, and every notebook becomes a tutorial."""
+
+import argparse
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SITE_PACKAGES = ("mkdocs", "material", "mkdocstrings", "mkdocstrings_handlers.python", "mkdocs_gen_files",
+                 "mkdocs_literate_nav", "jupytext")
+MISSING = [m for m in SITE_PACKAGES if importlib.util.find_spec(m.split(".")[0]) is None
+           or (m == "mkdocstrings_handlers.python" and importlib.util.find_spec(m) is None)]
+needs_site = pytest.mark.skipif(bool(MISSING), reason=f"documentation packages not installed ({', '.join(MISSING)}): "
+                                                       "pip install -e '.[docs]'")
+
+
+def _gen_pages():
+    spec = importlib.util.spec_from_file_location("gen_pages", ROOT / "docs" / "_gen" / "gen_pages.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)  # defines the functions; generates nothing outside mkdocs
+    return module
+
+
+@needs_site
+def test_site_builds_strict(tmp_path):
+    env = dict(os.environ, DISABLE_MKDOCS_2_WARNING="true", NO_MKDOCS_2_WARNING="1",
+               PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
+    warnings = [line for line in proc.stderr.splitlines() if "WARNING" in line and "MkDocs may break" not in line]
+    assert proc.returncode == 0, "mkdocs build --strict failed:\n" + "\n".join(warnings or [proc.stderr[-4000:]])
+    site = tmp_path / "site"
+    for page in ("index.html", "getting-started.html", "cli.html", "physics.html", "formats.html",
+                 "api/index.html", "api/fit.html", "api/gap.html", "tutorials/01_free_tyre.html"):
+        assert (site / page).stat().st_size > 2000, page
+    api = (site / "api" / "fit.html").read_text()
+    assert 'id="ringfit.fit.posterior.Posterior.to_inference_data"' in api  # rendered from its docstring
+    assert "Examples" in api and "&gt;&gt;&gt;" in api
+    tutorial = (site / "tutorials" / "01_free_tyre.html").read_text()
+    assert 'href="../physics.html#21-inextensible-ring-eq-18-s"' in tutorial  # "docs/physics.md §2.1" linked
+    index = (site / "api" / "index.html").read_text()
+    import ringfit
+
+    for name in ringfit.__all__:  # every top-level name links to where it is documented
+        assert f"ringfit.{name}</code></a>" in index, name
+
+
+@needs_site
+def test_undocumented_public_names_are_found(tmp_path):
+    gen = _gen_pages()
+    pkg = tmp_path / "toypkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text('"""A toy package."""\n')
+    (pkg / "mod.py").write_text(
+        '"""A module."""\n\n'
+        "class Base:\n"
+        '    """A base."""\n\n'
+        "    def run(self):\n"
+        '        """Run it."""\n\n'
+        "class Child(Base):\n"
+        '    """A child."""\n\n'
+        "    def run(self):  # inherits Base.run's docstring\n"
+        "        return 1\n\n"
+        "    def extra(self):\n"
+        "        return 2\n\n"
+        "def documented():\n"
+        '    """Yes."""\n\n'
+        "def bare():\n"
+        "    return 0\n\n"
+        "def _private():\n"
+        "    return 0\n\n"
+        "class Bare:\n"
+        "    pass\n"
+    )
+    missing = gen.check_documented(["toypkg", "toypkg.mod"], package="toypkg", root=tmp_path)
+    assert sorted(missing) == ["toypkg.mod.Bare", "toypkg.mod.Child.extra", "toypkg.mod.bare"]
+
+
+@needs_site
+def test_api_reference_has_a_page_for_every_part_of_the_package():
+    gen = _gen_pages()
+    sections = dict(gen.api_sections())
+    parts = {p.stem if p.suffix == ".py" else p.name for p in (ROOT / "ringfit").iterdir()
+             if not p.name.startswith(("_", ".")) and (p.suffix == ".py" or (p / "__init__.py").exists())}
+    assert set(sections) == parts - {"cli"}  # the CLI has its own page
+    modules = {m for ms in sections.values() for m in ms}
+    for path in (ROOT / "ringfit").rglob("*.py"):
+        rel = path.relative_to(ROOT).with_suffix("")
+        dotted = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        if dotted != "ringfit" and not any(p.startswith("_") for p in dotted.split(".")) \
+                and not dotted.startswith("ringfit.cli"):
+            assert dotted in modules, dotted  # a new module appears without configuration
+
+
+@needs_site
+def test_cli_reference_lists_every_command_and_option():
+    gen = _gen_pages()
+    text = gen.cli_markdown()
+    from ringfit.cli import build_parser
+
+    parser = build_parser()
+    subs = gen._subcommands(parser)
+    assert len(subs) >= 16
+    for name, sub in subs.items():
+        assert f"\n## ringfit {name}\n" in text, name
+        for action in sub._actions:
+            if action.help != argparse.SUPPRESS and action.option_strings:
+                assert f"`{action.option_strings[0]}" in text, (name, action.option_strings)
+    assert "`--netcdf FILE.nc`" in text
+
+
+@needs_site
+def test_every_notebook_becomes_a_tutorial_page():
+    gen = _gen_pages()
+    for path in sorted((ROOT / "notebooks").glob("*.py")):
+        md = gen.notebook_markdown(path)
+        assert md.startswith("# "), path.name
+        code = [line for line in path.read_text().splitlines() if line and not line.startswith("#")]
+        # every line of code is on the page, inside a python fence
+        for line in code:
+            assert line in md, (path.name, line)
+        assert md.count("```python") == sum(1 for line in path.read_text().splitlines() if line == "# %%")
