@@ -15,6 +15,17 @@ def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path
       ``$RINGFIT_CACHE_DIR`` or ``~/.cache/ringfit/jax``.
 
     **Returns:** the directory used.
+
+    Examples
+    --------
+    >>> import tempfile, jax
+    >>> from ringfit._cache import enable_compilation_cache
+    >>> before = jax.config.jax_compilation_cache_dir
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     used = enable_compilation_cache(tmp)
+    ...     print(used == Path(tmp), jax.config.jax_compilation_cache_dir == tmp)
+    ...     jax.config.update("jax_compilation_cache_dir", before)  # as it was
+    True True
     """
     import jax
 

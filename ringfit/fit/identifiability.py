@@ -92,6 +92,25 @@ def identifiability(result: FitResult, *, profile: tuple[str, ...] = (), fit_aga
       :func:`profile_natural_frequencies`).
     - ``grid_points``: profile grid size; the grid spans the parameter's
       plausible range (:data:`ringfit.fit.priors.BOUNDS`).
+
+    Examples
+    --------
+    Without a prior, the free tyre's modes leave EI almost undetermined, and the
+    analysis says so:
+
+    >>> from ringfit.data import path
+    >>> from ringfit.fit.identifiability import identifiability
+    >>> from ringfit.fit.least_squares import fit_natural_frequencies
+    >>> from ringfit.io.modes import read_mode_table
+    >>> from ringfit.io.tyre import read_tyre
+    >>> tyre = read_tyre(path("table9.tyre.toml"))
+    >>> table = read_mode_table(path("free-ssi.modes.csv"))
+    >>> fit = fit_natural_frequencies(table, tyre.geometry, tyre.ring, prior="physical")
+    >>> ident = identifiability(fit)
+    >>> ident.well_posed
+    False
+    >>> any("ei" in flag for flag in ident.flags)
+    True
     """
     from ringfit.fit.priors import BOUNDS
 

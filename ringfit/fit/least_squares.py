@@ -180,6 +180,20 @@ def fit_natural_frequencies(
     ``n``, ``freq_hz``, ``model_hz``, ``sigma_hz`` (shape ``(m,)``),
     ``sigma_source``, ``priors`` and the data-only Fisher information.
     Never raises on non-convergence: check ``result.converged``.
+
+    Examples
+    --------
+    >>> from ringfit.data import path
+    >>> from ringfit.fit.least_squares import fit_natural_frequencies
+    >>> from ringfit.io.modes import read_mode_table
+    >>> from ringfit.io.tyre import read_tyre
+    >>> tyre = read_tyre(path("table9.tyre.toml"))
+    >>> table = read_mode_table(path("free-ssi.modes.csv"))
+    >>> fit = fit_natural_frequencies(table, tyre.geometry, tyre.ring, prior="physical")
+    >>> fit.converged, fit.names
+    (True, ('rho_a', 'ei', 'kw', 'kv'))
+    >>> round(fit.values["rho_a"], 2), round(fit.values["kw"] / 1e6, 2)  # kg/m, MN/m²
+    (2.54, 1.11)
     """
     free = check_free(free)
     if geometry.pressure <= 0 or geometry.radius <= 0 or geometry.width <= 0:

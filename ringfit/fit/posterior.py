@@ -255,6 +255,21 @@ def load_posterior(path) -> Posterior:
 
     Anything else — not HDF5, another format, missing or malformed metadata,
     arrays of inconsistent shapes — is an :class:`InputError` naming the file.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> from ringfit.fit.posterior import Posterior, load_posterior
+    >>> post = Posterior(names=("ei",), kinds=("log",), values0={"ei": 0.5},
+    ...                  chain=np.log(0.5) + 0.01 * np.random.default_rng(0).standard_normal((100, 4, 1)),
+    ...                  log_prob=np.zeros((100, 4)), acceptance=np.full(4, 0.4), tau=np.array([2.0]),
+    ...                  burn=4, thin=1)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     back = load_posterior(post.save(Path(tmp) / "post.h5"))
+    >>> back.names, back.samples.shape, bool(np.array_equal(back.chain, post.chain))
+    (('ei',), (384, 1), True)
     """
     import h5py
 

@@ -158,6 +158,16 @@ def read_mode_table(path: str | os.PathLike, *, sidecar: bool = True) -> ModeTab
     column for: unreadable file, missing ``freq_hz`` column, non-numeric,
     NaN, non-positive or negative values, unknown ``kind``/``tag``/``branch``,
     a bad sidecar.
+
+    Examples
+    --------
+    >>> from ringfit.data import path
+    >>> from ringfit.io.modes import read_mode_table
+    >>> table = read_mode_table(path("free-ssi.modes.csv"))
+    >>> table.n.tolist()  # n = -1: the acoustic cavity mode
+    [1, 2, 3, 4, 5, 6, 7, 8, 9, -1]
+    >>> table.freq_hz[:3].tolist(), table.condition["state"]
+    ([107.0, 116.3, 140.0], 'free')
     """
     path = Path(path)
     text = read_text_file(path)

@@ -117,6 +117,16 @@ def read_tyre(path: str | os.PathLike) -> Tyre:
     and field for anything missing, non-numeric, non-positive, outside its
     plausible range (:data:`RANGES`; a ``pressure_bar`` that looks like Pa),
     or an unknown key or table (with the nearest valid name).
+
+    Examples
+    --------
+    The source study's tyre, bundled with ringfit:
+
+    >>> from ringfit.data import path
+    >>> from ringfit.io.tyre import read_tyre
+    >>> tyre = read_tyre(path("table9.tyre.toml"))
+    >>> tyre.geometry.name, round(float(tyre.geometry.radius), 3), round(float(tyre.ring.kw))
+    ('205/55R16 94H XL', 0.296, 1294000)
     """
     path = Path(path)
     try:

@@ -74,6 +74,17 @@ def natural_frequencies(ring: RingParams, geometry: TyreGeometry, n):
     rigid rotation, n = 1 rigid translation).
 
     **Returns:** frequencies [Hz], shape of ``n``.
+
+    Examples
+    --------
+    The source study's Table 9 ring reproduces its Table 10 (107.0, 119.8, 140.0 Hz):
+
+    >>> import numpy as np
+    >>> from ringfit.params import table9
+    >>> from ringfit.physics.natural import natural_frequencies
+    >>> geometry, ring = table9()
+    >>> np.round(natural_frequencies(ring, geometry, np.array([1, 2, 3])), 2).tolist()
+    [107.02, 119.84, 140.01]
     """
     return natural_angular_frequencies(ring, geometry, n) / TWO_PI
 
