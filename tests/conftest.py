@@ -1,8 +1,22 @@
-"""Test configuration: float64 everywhere, strict promotion, headless plots."""
+"""Test configuration: float64 everywhere, strict promotion, headless plots; parallel runs.
+
+The default run is parallel (``-n auto --maxprocesses 4`` in pyproject's addopts; pytest-xdist,
+in the ``test`` extra): each file's tests stay together on one worker (an ``xdist_group`` per
+file, so a module-scoped fixture is computed once), except the files in :data:`SPLIT`, whose
+tests are independent and long. Each worker gets its own JAX compilation cache folder (JAX
+writes cache entries in place, so two processes must not share one). ``-n 0`` runs serially.
+"""
 
 import os
 
+import pytest
+
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+_WORKER = os.environ.get("PYTEST_XDIST_WORKER")
+if _WORKER:  # before anything imports ringfit's cache helper; subprocesses inherit it
+    _base = os.environ.get("RINGFIT_CACHE_DIR") or os.path.join(os.path.expanduser("~"), ".cache", "ringfit", "jax")
+    os.environ["RINGFIT_CACHE_DIR"] = os.path.join(_base, f"xdist-{_WORKER}")
 
 import jax  # noqa: E402
 
@@ -10,3 +24,12 @@ import ringfit  # noqa: E402,F401  (enables jax_enable_x64)
 
 jax.config.update("jax_numpy_dtype_promotion", "standard")
 assert jax.config.jax_enable_x64, "importing ringfit must enable float64"
+
+#: Test files whose tests are spread over the workers one by one (independent, long, no shared fixture).
+SPLIT = {"test_notebooks.py"}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.name not in SPLIT:
+            item.add_marker(pytest.mark.xdist_group(item.path.name))
