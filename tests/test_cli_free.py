@@ -74,16 +74,15 @@ def _check_netcdf_matches_posterior(nc, h5):
 def test_sample_netcdf_option_refuses_bad_names(tmp_path, capsys):
     fitted = tmp_path / "fitted.toml"
     assert run("fit", MODES, "--tyre", TYRE, "--out", fitted) == 0
-    post = tmp_path / "post.h5"
-    common = ("sample", MODES, "--tyre", fitted, "--out", post, "--walkers", "8", "--min-steps", "100",
-              "--max-steps", "100", "--no-progress")
+    common = ("sample", MODES, "--tyre", fitted, "--walkers", "8", "--min-steps", "100", "--max-steps", "100",
+              "--no-progress")
     capsys.readouterr()
-    assert run(*common, "--netcdf", tmp_path / "post.h5") == 2  # the same file as --out
-    assert run(*common, "--netcdf", tmp_path / "draws.h5") == 2  # not .nc
+    assert run(*common, "--out", tmp_path / "x.nc", "--netcdf", tmp_path / "x.nc") == 2  # the same file as --out
+    assert run(*common, "--out", tmp_path / "post.h5", "--netcdf", tmp_path / "draws.h5") == 2  # not .nc
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and "--netcdf" in err[1] and ".nc" in err[1], err
     assert "two outputs" in err[0], err
-    assert run(*common, "--netcdf", fitted.with_suffix(".nc").parent / "nope" / "x.nc") == 2  # no such folder
+    assert run(*common, "--out", tmp_path / "post.h5", "--netcdf", tmp_path / "nope" / "x.nc") == 2  # no folder
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fitted.toml"]  # nothing written
 
 
