@@ -139,7 +139,6 @@ def test_help(cmd, capsys):
     assert "usage: ringfit" in capsys.readouterr().out
 
 
-@pytest.mark.slow
 def test_demo_end_to_end(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "ringfit", "demo", "--out", str(tmp_path / "d")],
                           capture_output=True, text=True, timeout=300)

@@ -170,7 +170,6 @@ def fd_contact(n, omega, c_w, ea=1.0e8, window_deg=35.0):
                 extent=(np.degrees(phik[active].min()), np.degrees(phik[active].max())), phi=phi, w=w)
 
 
-@pytest.mark.slow
 def test_independent_finite_difference_discretisation_agrees():
     """4th-order FD in angle of the §4.1 equations with the same contact law, to 1 %."""
     n = 4096
@@ -201,7 +200,6 @@ def scalar_output(theta):
             + 1e-3 * jnp.max(sol.pressure))
 
 
-@pytest.mark.slow
 def test_gradient_matches_finite_differences():
     theta = jnp.array([19e6, 0.9426, 1.294e6, 0.025, 4000.0, 26.88, 1.2192])
     value_and_grad = jax.jit(jax.value_and_grad(scalar_output))  # one compilation serves the FD values too

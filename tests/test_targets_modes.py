@@ -31,7 +31,6 @@ def _check_table(table, modes, damping_tol=0.15):
     assert set(table.n[table.kind == "structural"]) == set(modes.n[struct])
 
 
-@pytest.mark.slow
 def test_ssi_recovers_modes_and_flags_cavity(truth, records):
     from ringfit.targets.identify import ssi_modes
 
@@ -46,7 +45,6 @@ def test_ssi_recovers_modes_and_flags_cavity(truth, records):
     assert np.sum(st.label == 2) >= np.sum((st.source_label == 2) & (st.plain_mac >= 0.9))
 
 
-@pytest.mark.slow
 def test_frf_recovers_modes_and_rejects_bad_impact(truth, records):
     from ringfit.targets.frf import frf_modes
 
@@ -157,7 +155,6 @@ def test_half_power_damping_on_sdof():
     assert half_power_damping(f, power, fn) == pytest.approx(z, rel=0.01)
 
 
-@pytest.mark.slow
 def test_cli_ssi_chain_feeds_the_fit(tmp_path, truth):
     """records.npz -> `ringfit ssi` -> mode table -> fit_natural_frequencies recovers the ring."""
     from ringfit.cli import main
