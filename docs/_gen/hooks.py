@@ -1,4 +1,4 @@
-"""mkdocs hook: the code's and the docs' section references become links.
+"""mkdocs hook: the code's and the docs' section references become links; Sphinx roles read as code.
 
 ringfit cites its reference pages as ``docs/physics.md §4.3`` or ``formats.md §13.1``
 (in docstrings, the notebooks and the pages themselves). On the site each such
@@ -6,6 +6,9 @@ reference links to the section: the section numbers are read from the headings o
 ``physics.md`` and ``formats.md`` (``## 4.`` / ``### 4.3``) and the anchors are the
 ones the ``toc`` extension gives those headings. A reference to a section that does
 not exist is a warning (a failure under ``mkdocs build --strict``).
+
+Docstrings written before the site name objects with Sphinx roles (``:func:`~ringfit.x.f```);
+on the site the role is dropped and the name stays code (``~`` keeps its last part).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ _REF = re.compile(
     r"(?:(?P<sp>\s|&nbsp;)(?P<open2><code>)?§(?P<sec>\d+(?:\.\d+)*)(?P<close2></code>)?)?"
     r"(?P<close3></code>)?"
 )
+_ROLE = re.compile(r":(?:func|class|meth|data|mod|attr|exc|obj):<code>(~?)([^<]+)</code>")
 _sections: dict[str, dict[str, str]] = {}
 
 
@@ -73,6 +77,7 @@ def _outside_tags_and_links(html: str):
 
 def on_page_content(html, page, config, files):
     """Turn every section reference in a page's HTML (outside links and code blocks) into a link."""
+    html = _ROLE.sub(lambda m: f"<code>{m.group(2).rsplit('.', 1)[-1] if m.group(1) else m.group(2)}</code>", html)
     if not _sections:
         return html
     # join text and inline <code> tags so that `<code>docs/physics.md §4.3</code>` is one unit
