@@ -127,3 +127,27 @@ def test_every_notebook_becomes_a_tutorial_page():
         for line in code:
             assert line in md, (path.name, line)
         assert md.count("```python") == sum(1 for line in path.read_text().splitlines() if line == "# %%")
+
+
+@needs_site
+def test_section_references_become_links_and_a_missing_section_is_a_warning(caplog):
+    from types import SimpleNamespace
+
+    spec = importlib.util.spec_from_file_location("docs_hooks", ROOT / "docs" / "_gen" / "hooks.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    physics = (ROOT / "docs" / "physics.md").read_text()
+    files = SimpleNamespace(get_file_from_path=lambda p: SimpleNamespace(
+        content_string=physics if p == "physics.md" else "# formats\n\n## 5. Gap diagnosis — x\n"))
+    hooks.on_files(files, None)
+    page = SimpleNamespace(url="api/fit.html", file=SimpleNamespace(src_uri="api/fit.md"))
+    html = ("<p>eq. 18 (<code>docs/physics.md §2.1</code>), see formats.md §5 and :func:<code>~ringfit.fit.x</code>"
+            "</p><pre>docs/physics.md §2.1 stays in code blocks</pre><a href='x'>physics.md §2.1</a>")
+    out = hooks.on_page_content(html, page, None, None)
+    assert '<a href="../physics.html#21-inextensible-ring-eq-18-s"><code>physics.md §2.1</code></a>' in out
+    assert '<a href="../formats.html#5-gap-diagnosis-x"><code>formats.md §5</code></a>' in out
+    assert "<pre>docs/physics.md §2.1 stays in code blocks</pre>" in out and "<a href='x'>physics.md §2.1</a>" in out
+    assert ":func:" not in out and "<code>x</code>" in out
+    with caplog.at_level("WARNING", logger="mkdocs.plugins.ringfit_links"):
+        hooks.on_page_content("<p>see docs/physics.md §99.9</p>", page, None, None)
+    assert any("§99.9" in r.getMessage() and "no such section" in r.getMessage() for r in caplog.records)

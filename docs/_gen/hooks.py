@@ -53,11 +53,10 @@ def _link(match: re.Match, page_url: str, where: str) -> str:
     target = f"{page}.html" if not sec else None
     if sec:
         anchors = _sections.get(page, {})
-        key = sec if sec in anchors else sec.split(".")[0] if sec.split(".")[0] in anchors and "." not in sec else sec
-        if key not in anchors:
+        if sec not in anchors:
             log.warning("cross-links: %s cites %s.md §%s, which has no such section", where, page, sec)
             return match.group(0)
-        target = f"{page}.html#{anchors[key]}"
+        target = f"{page}.html#{anchors[sec]}"
     href = get_relative_url(target, page_url)
     text = f"{page}.md" + (f" §{sec}" if sec else "")
     return f'<a href="{href}"><code>{text}</code></a>'
