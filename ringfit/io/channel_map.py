@@ -14,6 +14,8 @@ a CSV column header without its ``[unit]``)::
     unit = "g"
     sensitivity = 0.1         # file value per unit (e.g. V per g); value = file value / sensitivity
 
+A map without ``[channels.*]`` tables only adds the top-level values and
+``[condition]`` to a file whose channels are named as ringfit names them.
 Parsing and checking only; :mod:`ringfit.io.rig` applies the map.
 """
 
@@ -108,8 +110,8 @@ def parse_channel_map(data: dict, *, source: str = "<channel map>") -> ChannelMa
     for k in CONDITION_KEYS:
         if k in condition and condition[k] < 0:
             raise InputError(f"condition.{k} = {condition[k]!r}; expected a value >= 0", source=source)
-    table = data.get("channels")
-    if not isinstance(table, dict) or not table:
+    table = data.get("channels", {})
+    if not isinstance(table, dict) or not (table or top or condition):
         raise InputError("missing [channels.NAME] tables (one per channel of the file)", source=source)
     channels = {}
     for name, entry in table.items():

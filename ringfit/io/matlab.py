@@ -153,7 +153,7 @@ def _v73_value(f, ds):
     a = np.asarray(data)
     if a.dtype.kind not in "fiub" or a.dtype.names:  # complex is a compound (real, imag)
         return None
-    return a.T
+    return np.ascontiguousarray(a.T)  # C order, as the other readers give
 
 
 # --------------------------------------------------------------------------- to a RigFile

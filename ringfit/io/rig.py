@@ -162,6 +162,8 @@ def _scale(raw: RawChannel, role: str, unit: str | None, sensitivity: float, rig
 def _settle(rig: RigFile, cmap: ChannelMap | None) -> list[_Channel]:
     """Each channel's role, axis, angle, record and SI data, from the map or the file's own metadata."""
     out = []
+    if cmap is not None and not cmap.channels:  # the map adds values only; channels named as ringfit names them
+        cmap = None
     if cmap is not None:
         names = {c.name for c in rig.channels} | {c.short for c in rig.channels if c.short}
         missing = [k for k in cmap.channels if k not in names]
@@ -180,10 +182,10 @@ def _settle(rig: RigFile, cmap: ChannelMap | None) -> list[_Channel]:
             role, axis, angle, record = spec.role, spec.axis, spec.angle_deg, spec.record
             unit = spec.unit if spec.unit is not None else raw.unit
             sens = spec.sensitivity
+            if record is None and angle is None:  # the map places it by angle, else the file's group does
+                record = raw.group
             if angle is None:
                 angle = raw.angle_deg
-            if record is None:
-                record = raw.group
         else:
             hint = ""
             role = raw.role or NAMED_ROLES.get(raw.short.lower(), "acc" if raw.short.lower() in AXES else None)
@@ -235,8 +237,8 @@ def _same_length(rig: RigFile, chans: list[_Channel]) -> int:
 def records_from_rig(rig: RigFile, channels=None) -> Records:
     """Impact :class:`Records` from a rig file (and a channel map path or :class:`ChannelMap`).
 
-    Channels are grouped into records by the map's ``record``, else the TDMS
-    group, else the sensor angle; each record has one channel per axis (every
+    Channels are grouped into records by the map's ``record``, else by the
+    map's ``angle_deg``, else by the TDMS group, else by the file's sensor angle; each record has one channel per axis (every
     record the same axes) and at most one force (every record or none).
     """
     cmap = _load_map(channels)
@@ -260,6 +262,9 @@ def records_from_rig(rig: RigFile, channels=None) -> Records:
         if ch.role not in ("acc", "force"):
             raise InputError(f"channel {ch.raw.name!r} is a {ch.role} channel; impact records hold acceleration "
                              "and force (mark it role = \"ignore\" in the channel map)", source=rig.source)
+        if ch.role == "acc" and ch.angle_deg is None:
+            raise InputError(f"channel {ch.raw.name!r} has no sensor angle; give angle_deg in --channels MAP.toml (or "
+                             "a sensor_angle_deg property)", source=rig.source)
         key = ch.record if ch.record is not None else (None if ch.angle_deg is None else f"{ch.angle_deg:.12g} deg")
         if key is None:
             raise InputError(f"channel {ch.raw.name!r}: no record and no sensor angle; give angle_deg (and record "
@@ -286,10 +291,6 @@ def records_from_rig(rig: RigFile, channels=None) -> Records:
         if missing:
             raise InputError(f"record {k!r}: no {missing[0]} channel while other records have one", source=rig.source)
         got = {acc[k][a].angle_deg for a in used}
-        if None in got:
-            name = next(acc[k][a].raw.name for a in used if acc[k][a].angle_deg is None)
-            raise InputError(f"channel {name!r} has no sensor angle; give angle_deg in --channels MAP.toml (or a "
-                             "sensor_angle_deg property)", source=rig.source)
         if len(got) > 1:
             raise InputError(f"record {k!r}: its channels give different sensor angles {sorted(got)}",
                              source=rig.source)

@@ -15,6 +15,7 @@ each with ``wf_increment`` and ``unit_string`` — readable without a channel ma
 
 from __future__ import annotations
 
+import logging
 import os
 import warnings
 from pathlib import Path
@@ -35,6 +36,17 @@ def _nptdms():
     return nptdms
 
 
+class _Capture(logging.Handler):
+    """Collects npTDMS's log messages (its only word on a truncated file)."""
+
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record):
+        self.messages.append(record.getMessage())
+
+
 def _float(value, where, source):
     try:
         x = float(value)
@@ -49,6 +61,11 @@ def read_tdms_channels(path: str | os.PathLike) -> RigFile:
     """The channels of a TDMS file (module docstring); InputError for an unreadable or truncated file."""
     nptdms = _nptdms()
     path = existing_file(Path(path), "a TDMS file")
+    logged = _Capture()
+    logger = logging.getLogger("nptdms")
+    propagate = logger.propagate
+    logger.addHandler(logged)
+    logger.propagate = False  # npTDMS's log lines would break the one-line error
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -59,6 +76,13 @@ def read_tdms_channels(path: str | os.PathLike) -> RigFile:
         text = str(exc).splitlines()[0][:120] if str(exc) else ""
         raise InputError(f"not a readable TDMS file ({exc.__class__.__name__}: {text}); truncated or corrupted?",
                          source=path) from None
+    finally:
+        logger.removeHandler(logged)
+        logger.propagate = propagate
+    cut = [m for m in logged.messages if "less data than expected" in m or "not a multiple of the chunk" in m]
+    if cut:  # npTDMS reads up to the cut; ringfit refuses it (as it refuses a truncated UFF file)
+        raise InputError(f"the TDMS file is truncated ({cut[0].rstrip('.')}); refusing to read up to the cut",
+                         source=path)
     rig = RigFile(source=str(path), format="tdms")
     for key, value in f.properties.items():
         if key in ("fs_hz", "pulses_per_rev", "encoder_offset_deg", "hall_delay_s", "speed_kmh", "load_n",
