@@ -462,7 +462,7 @@ def read_continuous(path: str | os.PathLike, *, verify: bool = True,
     """Open a continuous ``*.records.npz`` without loading its big channels, or read a rig file.
 
     A ``.tdms``, ``.mat`` or ``.csv`` file (docs/formats.md §17) is read into
-    memory by :func:`ringfit.io.rig.read_rig_continuous`, ``channels`` naming
+    memory by :mod:`ringfit.io.rig`, ``channels`` naming
     its channel map when the file lacks channel metadata.
 
     ``verify`` (default) checks every member against its CRC first
@@ -473,10 +473,12 @@ def read_continuous(path: str | os.PathLike, *, verify: bool = True,
     missing or misshapen keys, an unknown axis, two encoders, channels of
     unequal length.
     """
-    from ringfit.io.rig import read_rig_continuous, rig_format
+    from ringfit.io.rig import continuous_fields, load_channel_map, read_rig, rig_format
 
     if rig_format(path) is not None:
-        return read_rig_continuous(path, channels)
+        cmap = load_channel_map(channels)  # the map's own errors before the (possibly long) read
+        rig = read_rig(path)
+        return ContinuousRecord(**continuous_fields(rig, cmap))
     if channels is not None:
         raise InputError("--channels applies to TDMS, .mat and CSV files; an .npz names its own channels", source=path)
     path = existing_file(path, "a continuous .npz record")

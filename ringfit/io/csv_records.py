@@ -28,7 +28,7 @@ from ringfit.errors import InputError
 from ringfit.io.channel_map import ChannelMap, ChannelSpec
 from ringfit.io.files import atomic_write, check_output_path, existing_file
 from ringfit.io.record_types import Records
-from ringfit.io.rig import RawChannel, RigFile
+from ringfit.io.rig_types import RawChannel, RigFile
 
 TIME_NAMES = ("time", "time_s", "t")
 _TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3}

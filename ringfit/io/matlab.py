@@ -31,7 +31,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.files import atomic_write, check_output_path, existing_file
 from ringfit.io.record_types import Records
-from ringfit.io.rig import RawChannel, RigFile
+from ringfit.io.rig_types import RawChannel, RigFile
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 #: Keys of ringfit's own layout (docs/formats.md §4, §9) and which are scalars.

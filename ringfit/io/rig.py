@@ -9,8 +9,11 @@ and UFF readers return:
 
 - :func:`records_from_rig` → :class:`~ringfit.io.record_types.Records`
   (impact records: ``ssi``, ``frf``);
-- :func:`continuous_from_rig` → :class:`~ringfit.io.continuous.ContinuousRecord`
-  (drum and cleat recordings: ``profile``, ``cleat``, ``estimate``).
+- :func:`continuous_fields` → the fields of a
+  :class:`~ringfit.io.continuous.ContinuousRecord`, which
+  :func:`ringfit.io.continuous.read_continuous` builds (drum and cleat
+  recordings: ``profile``, ``cleat``, ``estimate``; this module does not
+  import that one, so the two never import each other).
 
 A file may instead hold ringfit's own key layout (the keys of docs/formats.md
 §4 / §9 as arrays, as a MATLAB user saves them); the readers return that as
@@ -26,7 +29,7 @@ from __future__ import annotations
 import math
 import os
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +37,11 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.channel_map import CONDITION_KEYS, ChannelMap, ChannelSpec, read_channel_map
 from ringfit.io.record_types import AXES, Records
+from ringfit.io.rig_types import RawChannel, RigFile
 from ringfit.io.uff import _unit
+
+__all__ = ["RawChannel", "RigFile", "RIG_SUFFIXES", "rig_format", "read_rig", "records_from_rig",
+           "continuous_fields", "read_rig_records", "load_channel_map"]
 
 #: Suffixes of the rig formats, and the reader module of each.
 RIG_SUFFIXES = {".tdms": "tdms", ".mat": "matlab", ".csv": "csv"}
@@ -43,37 +50,6 @@ NAMED_ROLES = {"force": "force", "encoder_angle_deg": "encoder", "encoder": "enc
                "encoder_pulses": "pulses", "hall": "trigger", "trigger": "trigger"}
 #: Angle units of an absolute encoder channel.
 ANGLE_UNITS = {"deg": 1.0, "degree": 1.0, "degrees": 1.0, "°": 1.0, "rad": 180.0 / math.pi, "radian": 180.0 / math.pi}
-
-
-@dataclass
-class RawChannel:
-    """One channel of a rig file as read: ``data`` 1-D numbers, metadata where the file has it.
-
-    ``name`` is the key a channel map uses; ``short`` the channel's own name
-    (TDMS channel without its group); ``group`` the TDMS group (a record).
-    """
-
-    name: str
-    data: np.ndarray
-    short: str = ""
-    group: str | None = None
-    unit: str | None = None
-    fs_hz: float | None = None
-    axis: str | None = None
-    angle_deg: float | None = None
-    role: str | None = None
-
-
-@dataclass
-class RigFile:
-    """What a rig reader found: channels plus file-level scalars (``fs_hz``, condition keys, …)."""
-
-    source: str
-    format: str
-    channels: list[RawChannel] = field(default_factory=list)
-    props: dict = field(default_factory=dict)
-    #: ringfit's own key layout (docs/formats.md §4 / §9 keys), when the file holds it instead of channels.
-    arrays: dict | None = None
 
 
 def rig_format(path: str | os.PathLike) -> str | None:
@@ -97,6 +73,11 @@ def read_rig(path: str | os.PathLike) -> RigFile:
 
         return read_csv_channels(path)
     raise InputError(f"not a rig file; expected one of {', '.join(RIG_SUFFIXES)}", source=path)
+
+
+def load_channel_map(channels) -> ChannelMap | None:
+    """A :class:`ChannelMap` from a path (read and checked), or ``channels`` itself (None or a map)."""
+    return _load_map(channels)
 
 
 def _load_map(channels) -> ChannelMap | None:
@@ -309,16 +290,15 @@ def records_from_rig(rig: RigFile, channels=None) -> Records:
     )
 
 
-def continuous_from_rig(rig: RigFile, channels=None):
-    """A :class:`~ringfit.io.continuous.ContinuousRecord` (in memory) from a rig file and an optional channel map.
+def continuous_fields(rig: RigFile, channels=None) -> dict:
+    """The keyword arguments of a :class:`~ringfit.io.continuous.ContinuousRecord` (in memory) from a rig file
+    and an optional channel map.
 
     One acceleration channel per axis, at most one encoder (``encoder`` in
     degrees, or ``pulses`` with ``pulses_per_rev``), at most one ``trigger``
     (the hall sensor); condition keys from the file and the map's
     ``[condition]`` (the map wins).
     """
-    from ringfit.io.continuous import ContinuousRecord
-
     cmap = _load_map(channels)
     props = dict(rig.props)
     if rig.arrays is not None:
@@ -337,7 +317,7 @@ def continuous_from_rig(rig: RigFile, channels=None):
         for k, v in extra.items():
             if np.asarray(v).ndim != 1:
                 raise InputError(f"key {k!r} has shape {np.asarray(v).shape}; expected (samples,)", source=rig.source)
-        return ContinuousRecord(
+        return dict(
             acc=acc[0], axes=tuple(a["axes"]), fs_hz=a["fs_hz"], pulses_per_rev=a.get("pulses_per_rev"),
             encoder_offset_deg=a.get("encoder_offset_deg", 0.0), hall_delay_s=a.get("hall_delay_s", 0.0),
             condition={k: a[k] for k in CONDITION_KEYS if k in a}, source=rig.source, **extra)
@@ -370,7 +350,7 @@ def continuous_from_rig(rig: RigFile, channels=None):
     condition = {k: props[k] for k in CONDITION_KEYS if k in props}
     if cmap is not None:
         condition.update(cmap.condition)
-    return ContinuousRecord(
+    return dict(
         acc=np.stack([acc[a].data for a in axes]), axes=axes, fs_hz=fs,
         encoder_angle_deg=enc.data if enc is not None and enc.role == "encoder" else None,
         encoder_pulses=enc.data if enc is not None and enc.role == "pulses" else None,
@@ -385,9 +365,3 @@ def read_rig_records(path: str | os.PathLike, channels=None) -> Records:
     """Impact records from a TDMS, .mat or CSV file (``channels``: a channel map path, or None)."""
     cmap = _load_map(channels)  # the map's own errors before the (possibly long) read
     return records_from_rig(read_rig(path), cmap)
-
-
-def read_rig_continuous(path: str | os.PathLike, channels=None):
-    """A continuous recording from a TDMS, .mat or CSV file (``channels``: a channel map path, or None)."""
-    cmap = _load_map(channels)
-    return continuous_from_rig(read_rig(path), cmap)

@@ -25,7 +25,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.files import atomic_write, check_output_path, existing_file
 from ringfit.io.record_types import Records
-from ringfit.io.rig import RawChannel, RigFile
+from ringfit.io.rig_types import RawChannel, RigFile
 
 
 def _nptdms():
