@@ -392,3 +392,27 @@ def test_short_name_ambiguous_across_groups(rec, tmp_path):
     cmap = _map(tmp_path / "m.toml", '[channels.radial]\naxis = "radial"\nunit = "g"\nangle_deg = 0.0\n')
     with pytest.raises(InputError, match="GROUP/CHANNEL"):
         read_records(path, channels=cmap)
+
+
+def test_estimate_tells_a_profile_from_a_csv_recording(tmp_path):
+    from ringfit.cli.estimate import _input_kind
+
+    (tmp_path / "side.csv").write_text("x\n")
+    (tmp_path / "side.json").write_text("{}\n")
+    assert _input_kind(tmp_path / "run.profile.csv") == "profile"
+    assert _input_kind(tmp_path / "side.csv") == "profile"  # a CSV with its JSON sidecar is a profile (§3)
+    assert _input_kind(tmp_path / "drum.csv") == "recording"
+    for name in ("d.records.npz", "d.tdms", "d.MAT"):
+        assert _input_kind(tmp_path / name) == "recording"
+    with pytest.raises(InputError, match="expected a"):
+        _input_kind(tmp_path / "d.uff")
+
+
+def test_example_format_only_for_records(tmp_path, capsys):
+    out = tmp_path / "ex"
+    assert main(["example", "profiles", "--out", str(out), "--format", "csv"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--format csv applies to `ringfit example records` only" in err[0]
+    assert not out.exists()
+    assert main(["example", "records", "--out", str(out), "--format", "xlsx"]) == 2
+    assert not out.exists()
