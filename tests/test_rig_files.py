@@ -416,3 +416,10 @@ def test_example_format_only_for_records(tmp_path, capsys):
     assert not out.exists()
     assert main(["example", "records", "--out", str(out), "--format", "xlsx"]) == 2
     assert not out.exists()
+
+
+def test_map_rate_overriding_the_file_is_warned(rec, tmp_path):
+    path = write_records(rec, tmp_path / "r.tdms")
+    cmap = _map(tmp_path / "m.toml", "fs_hz = 6000.0\n")
+    with pytest.warns(UserWarning, match="fs_hz = 6000 Hz overrides the file's 6400 Hz"):
+        assert read_records(path, channels=cmap).fs_hz == 6000.0

@@ -189,7 +189,13 @@ def _settle(rig: RigFile, cmap: ChannelMap | None) -> list[_Channel]:
 
 def _sample_rate(rig: RigFile, cmap: ChannelMap | None, chans: list[_Channel]) -> float:
     if cmap is not None and "fs_hz" in cmap.top:
-        return float(cmap.top["fs_hz"])
+        fs = float(cmap.top["fs_hz"])
+        told = [rig.props.get("fs_hz")] + [ch.raw.fs_hz for ch in chans]
+        off = [f for f in told if f is not None and not math.isclose(f, fs, rel_tol=1e-6)]
+        if off:
+            warnings.warn(f"{rig.source}: the channel map's fs_hz = {fs:.9g} Hz overrides the file's {off[0]:.9g} Hz",
+                          stacklevel=4)
+        return fs
     fs = rig.props.get("fs_hz")
     for ch in chans:
         f = ch.raw.fs_hz

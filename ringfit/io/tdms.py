@@ -95,8 +95,7 @@ def read_tdms_channels(path: str | os.PathLike) -> RigFile:
             name = f"{g.name}/{c.name}"
             x = np.asarray(data[(g.name, c.name)])
             if x.dtype.kind not in "fiub":
-                skipped.append(name)
-                x = np.zeros(0)  # kept so a channel map naming it gets a clear error
+                skipped.append(name)  # timestamps, text: dropped below (a map naming one is refused)
             p = c.properties
             inc = p.get("wf_increment")
             fs = None
