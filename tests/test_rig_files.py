@@ -144,6 +144,12 @@ def test_tdms_written_by_ringfit_needs_no_map(rec, tmp_path, npz_table):
     out = tmp_path / "t.modes.csv"
     assert main(["ssi", str(path), "--out", str(out), *SSI_OPTS]) == 0
     assert _table(out) == npz_table  # bit for bit
+    # frf reads it through the same dispatcher
+    frf = {}
+    for name, p in (("npz", write_records(rec, tmp_path / "r.records.npz")), ("tdms", path)):
+        frf[name] = tmp_path / f"{name}.frf.modes.csv"
+        assert main(["frf", str(p), "--out", str(frf[name]), "--delay", "0.0004", "--band", "60:400"]) == 0
+    assert _table(frf["tdms"]) == _table(frf["npz"])
 
 
 def test_mat_v5_own_keys_and_channel_vectors(rec, tmp_path, npz_table):
@@ -270,6 +276,15 @@ def test_profile_from_tdms_and_csv_equals_npz(drum, tmp_path):
     for name in ("tdms", "csv"):
         got = np.loadtxt(outs[name], delimiter=",", skiprows=1, comments="#")
         np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-6 * np.abs(ref).max())
+    # cleat reads the TDMS recording with --channel-map (its --channels is the SSI channel count)
+    fields = {}
+    for name, path, extra in (("npz", d / "d.records.npz", []), ("tdms", tdms, ["--channel-map", str(cmap)])):
+        fields[name] = tmp_path / f"{name}.field.npz"
+        assert main(["cleat", str(path), "--out", str(fields[name]), "--sectors", "16", "--duration", "0.05",
+                     "--no-baseline", "--quiet", *extra]) == 0
+    with np.load(fields["npz"]) as a, np.load(fields["tdms"]) as b:
+        np.testing.assert_allclose(b["mean"], a["mean"], rtol=1e-9, atol=1e-9 * np.nanmax(np.abs(a["mean"])),
+                                   equal_nan=True)
 
 
 # ----------------------------------------------------------------------------- bad input
@@ -423,3 +438,73 @@ def test_map_rate_overriding_the_file_is_warned(rec, tmp_path):
     cmap = _map(tmp_path / "m.toml", "fs_hz = 6000.0\n")
     with pytest.warns(UserWarning, match="fs_hz = 6000 Hz overrides the file's 6400 Hz"):
         assert read_records(path, channels=cmap).fs_hz == 6000.0
+
+
+# ----------------------------------------------------------------------------- fuzz: InputError or a valid read
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+FUZZ = settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                       HealthCheck.function_scoped_fixture],
+                derandomize=True)
+CELLS = st.one_of(st.sampled_from(["", "nan", "inf", "1e400", "-0", "x", "1,2", '"', "1e-320", "0x1"]),
+                  st.floats(allow_nan=True, allow_infinity=True).map(repr), st.text(max_size=6))
+
+
+def _read_or_input_error(path, channels=None, continuous=False):
+    try:
+        if continuous:
+            read_continuous(path, channels=channels)
+        else:
+            read_records(path, channels=channels)
+    except InputError as exc:
+        assert "\n" not in str(exc)
+
+
+@FUZZ
+@given(header=st.lists(st.sampled_from(["time_s", "t [ms]", "radial [g]", "force (N)", "hall", "radial",
+                                        "encoder_angle_deg [rad]", "x [V]", "", "radial [furlong]"]),
+                       min_size=1, max_size=4),
+       rows=st.lists(st.lists(CELLS, min_size=0, max_size=5), min_size=0, max_size=6))
+def test_fuzz_csv(tmp_path_factory, header, rows):
+    d = tmp_path_factory.mktemp("fz")
+    path = d / "f.csv"
+    path.write_text(",".join(header) + "\n" + "\n".join(",".join(r) for r in rows) + "\n",
+                    encoding="utf-8", errors="surrogatepass")
+    cmap = _map(d / "m.toml", "fs_hz = 100.0\n")
+    for continuous in (False, True):
+        _read_or_input_error(path, cmap, continuous)
+
+
+@pytest.fixture(scope="module")
+def binaries(rec, tmp_path_factory):
+    d = tmp_path_factory.mktemp("bin")
+    small = type(rec)(acc=rec.acc[:2, :, :64], axes=rec.axes, sensor_angle_deg=rec.sensor_angle_deg[:2],
+                      fs_hz=rec.fs_hz, force=rec.force[:2, :64])
+    return {s: write_records(small, d / f"v{s}").read_bytes() for s in (".tdms", ".mat")}
+
+
+@FUZZ
+@given(suffix=st.sampled_from([".tdms", ".mat"]), cut=st.floats(0.0, 1.0), flips=st.lists(
+    st.tuples(st.floats(0.0, 1.0), st.integers(1, 255)), max_size=4))
+def test_fuzz_binary_files(binaries, tmp_path_factory, suffix, cut, flips):
+    data = bytearray(binaries[suffix])
+    for where, xor in flips:
+        data[int(where * (len(data) - 1))] ^= xor
+    data = bytes(data[: max(0, int(cut * len(data)))] if cut < 0.999 else data)
+    path = tmp_path_factory.mktemp("fb") / f"f{suffix}"
+    path.write_bytes(data)
+    _read_or_input_error(path)
+
+
+@FUZZ
+@given(key=st.sampled_from(["role", "axis", "angle_deg", "unit", "sensitivity", "record", "bogus"]),
+       value=st.one_of(st.sampled_from(['"acc"', '"force"', '"radial"', '"g"', '"N"', "0", "-1", "nan", "inf",
+                                        "1e400", "true", "[1]", "{a = 1}", '""']),
+                       st.floats(allow_nan=False).map(repr)))
+def test_fuzz_channel_map(small_tdms, tmp_path_factory, key, value):
+    path, text = small_tdms
+    d = tmp_path_factory.mktemp("fm")
+    cmap = _map(d / "m.toml", text.replace('[channels."Acc R 00"]\n', f'[channels."Acc R 00"]\n{key} = {value}\n', 1))
+    _read_or_input_error(path, cmap)
