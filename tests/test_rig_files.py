@@ -508,3 +508,42 @@ def test_fuzz_channel_map(small_tdms, tmp_path_factory, key, value):
     d = tmp_path_factory.mktemp("fm")
     cmap = _map(d / "m.toml", text.replace('[channels."Acc R 00"]\n', f'[channels."Acc R 00"]\n{key} = {value}\n', 1))
     _read_or_input_error(path, cmap)
+
+
+def test_tdms_recording_is_read_chunk_by_chunk(drum, tmp_path, monkeypatch):
+    """A continuous TDMS recording is never held whole: every read is one chunk, and the walk equals the arrays."""
+    import nptdms
+
+    from ringfit.io.rig_types import ScaledChannel
+
+    rec, _ = drum
+    acc = [rec.read(f"acc:{a}") for a in rec.axes]
+    enc = rec.read("encoder_angle_deg")
+    path = tmp_path / "long.tdms"
+    inc = {"wf_increment": 1.0 / FS}
+    with TdmsWriter(str(path)) as w:
+        for part in np.array_split(np.arange(enc.size), 5):  # several segments, as LabVIEW appends them
+            w.write_segment([ChannelObject("Drum", a, x[part], properties={**inc, "unit_string": "m/s^2"})
+                             for a, x in zip(rec.axes, acc)]
+                            + [ChannelObject("Drum", "encoder_angle_deg", enc[part], properties=inc)])
+    asked = []
+    real = nptdms.tdms.TdmsChannel.read_data
+
+    def spy(self, offset=0, length=None, scaled=True):
+        asked.append(length)
+        return real(self, offset=offset, length=length, scaled=scaled)
+
+    monkeypatch.setattr(nptdms.tdms.TdmsChannel, "read_data", spy)
+    with read_continuous(path) as back:
+        assert isinstance(back._channels["acc:radial"], ScaledChannel)
+        parts = list(back.chunks(1000))
+    assert asked and max(asked) <= 1000
+    np.testing.assert_array_equal(np.concatenate([p.acc for p in parts], axis=1), np.stack(acc))
+    # the decoded angle is the npz record's, less its encoder offset (not given here)
+    want = np.concatenate([p.angle_deg for p in rec.chunks(1000, acc=False)]) - rec.encoder_offset_deg
+    np.testing.assert_allclose(np.concatenate([p.angle_deg for p in parts]), want, atol=1e-9)
+    # a recording cut short is refused up front, not walked up to the cut
+    cut = tmp_path / "cut.tdms"
+    cut.write_bytes(path.read_bytes()[: path.stat().st_size - 5000])
+    with pytest.raises(InputError, match="truncated"):
+        read_continuous(cut)

@@ -477,8 +477,12 @@ def read_continuous(path: str | os.PathLike, *, verify: bool = True,
 
     if rig_format(path) is not None:
         cmap = load_channel_map(channels)  # the map's own errors before the (possibly long) read
-        rig = read_rig(path)
-        return ContinuousRecord(**continuous_fields(rig, cmap))
+        rig = read_rig(path, lazy=True)  # TDMS: channels read chunk by chunk; .mat and CSV whole
+        try:
+            return ContinuousRecord(**continuous_fields(rig, cmap))
+        except BaseException:
+            rig.close()
+            raise
     if channels is not None:
         raise InputError("--channels applies to TDMS, .mat and CSV files; an .npz names its own channels", source=path)
     path = existing_file(path, "a continuous .npz record")

@@ -37,7 +37,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.channel_map import CONDITION_KEYS, ChannelMap, ChannelSpec, read_channel_map
 from ringfit.io.record_types import AXES, Records
-from ringfit.io.rig_types import RawChannel, RigFile
+from ringfit.io.rig_types import LazyData, RawChannel, RigFile, ScaledChannel
 from ringfit.io.uff import _unit
 
 __all__ = ["RawChannel", "RigFile", "RIG_SUFFIXES", "rig_format", "read_rig", "records_from_rig",
@@ -57,13 +57,18 @@ def rig_format(path: str | os.PathLike) -> str | None:
     return RIG_SUFFIXES.get(Path(path).suffix.lower())
 
 
-def read_rig(path: str | os.PathLike) -> RigFile:
-    """Read a rig file with the reader its suffix names (no channel map applied yet)."""
+def read_rig(path: str | os.PathLike, *, lazy: bool = False) -> RigFile:
+    """Read a rig file with the reader its suffix names (no channel map applied yet).
+
+    ``lazy``: TDMS channels are read on demand (:class:`~ringfit.io.rig_types.LazyData`;
+    a long recording is walked chunk by chunk, never held whole); close them
+    with :meth:`RigFile.close`. The other formats are read whole.
+    """
     fmt = rig_format(path)
     if fmt == "tdms":
         from ringfit.io.tdms import read_tdms_channels
 
-        return read_tdms_channels(path)
+        return read_tdms_channels(path, lazy=lazy)
     if fmt == "matlab":
         from ringfit.io.matlab import read_mat_channels
 
@@ -114,21 +119,21 @@ def _spec_for(raw: RawChannel, cmap: ChannelMap, rig: RigFile) -> ChannelSpec | 
     return None
 
 
-def _scale(raw: RawChannel, role: str, unit: str | None, sensitivity: float, rig: RigFile, hint: str) -> np.ndarray:
-    """The channel in SI (acc m/s², force N, encoder deg); ``unit`` from the map or the file."""
+def _factor(raw: RawChannel, role: str, unit: str | None, sensitivity: float, rig: RigFile, hint: str) -> float:
+    """SI value per file value (acc m/s², force N, encoder deg): unit scale / sensitivity; ``unit`` from the map
+    or the file."""
     where = f"channel {raw.name!r}"
-    data = np.asarray(raw.data)
-    if data.dtype.kind not in "fiub" or data.ndim != 1:
-        raise InputError(f"{where}: {data.dtype} data of shape {data.shape}; expected a 1-D numeric channel",
+    data = raw.data
+    if np.dtype(data.dtype).kind not in "fiub" or data.ndim != 1:
+        raise InputError(f"{where}: {data.dtype} data of {data.ndim} dimensions; expected a 1-D numeric channel",
                          source=rig.source)
-    data = data.astype(np.float64) / sensitivity
     if role in ("pulses", "trigger"):
-        return data
+        return 1.0 / sensitivity
     if role == "encoder":
         text = (unit or "deg").strip().lower().strip("[]()")
         if text not in ANGLE_UNITS:
             raise InputError(f"{where}: encoder unit {unit!r}; expected deg or rad{hint}", source=rig.source)
-        return data * ANGLE_UNITS[text]
+        return ANGLE_UNITS[text] / sensitivity
     if unit is None or not unit.strip():
         raise InputError(f"{where}: no unit in the file; give it{hint or ' in --channels MAP.toml'} "
                          f"(e.g. unit = \"{'m/s^2' if role == 'acc' else 'N'}\")", source=rig.source)
@@ -137,7 +142,15 @@ def _scale(raw: RawChannel, role: str, unit: str | None, sensitivity: float, rig
     if parsed is None or parsed[0] != want:
         what = "an acceleration (m/s^2, mm/s^2, g)" if want == "acc" else "a force (N, kN, lbf)"
         raise InputError(f"{where}: unit {unit!r} is not {what}{hint}", source=rig.source)
-    return data * parsed[1]
+    return parsed[1] / sensitivity
+
+
+def _scaled(raw: RawChannel, factor: float):
+    """The channel in SI: an array, or for a lazy channel a :class:`ScaledChannel` read on demand."""
+    if isinstance(raw.data, LazyData):
+        return ScaledChannel(raw.data, factor)
+    data = np.asarray(raw.data).astype(np.float64)
+    return data * factor if factor != 1.0 else data
 
 
 def _settle(rig: RigFile, cmap: ChannelMap | None) -> list[_Channel]:
@@ -178,7 +191,7 @@ def _settle(rig: RigFile, cmap: ChannelMap | None) -> list[_Channel]:
             angle, record, unit, sens = raw.angle_deg, raw.group, raw.unit, 1.0
         if role == "ignore":
             continue
-        out.append(_Channel(raw, role, axis, angle, record, _scale(raw, role, unit, sens, rig, hint)))
+        out.append(_Channel(raw, role, axis, angle, record, _scaled(raw, _factor(raw, role, unit, sens, rig, hint))))
     if unused:
         warnings.warn(f"{rig.source}: {len(unused)} channel(s) not in the channel map, not used: "
                       f"{', '.join(unused[:5])}{', …' if len(unused) > 5 else ''}", stacklevel=3)
@@ -213,10 +226,10 @@ def _sample_rate(rig: RigFile, cmap: ChannelMap | None, chans: list[_Channel]) -
 
 
 def _same_length(rig: RigFile, chans: list[_Channel]) -> int:
-    n = chans[0].data.size
+    n = chans[0].raw.data.size
     for ch in chans[1:]:
-        if ch.data.size != n:
-            raise InputError(f"channel {ch.raw.name!r} has {ch.data.size} samples; {chans[0].raw.name!r} has {n}",
+        if ch.raw.data.size != n:
+            raise InputError(f"channel {ch.raw.name!r} has {ch.raw.data.size} samples; {chans[0].raw.name!r} has {n}",
                              source=rig.source)
     return n
 
@@ -356,15 +369,18 @@ def continuous_fields(rig: RigFile, channels=None) -> dict:
     condition = {k: props[k] for k in CONDITION_KEYS if k in props}
     if cmap is not None:
         condition.update(cmap.condition)
-    return dict(
-        acc=np.stack([acc[a].data for a in axes]), axes=axes, fs_hz=fs,
+    fields = dict(
         encoder_angle_deg=enc.data if enc is not None and enc.role == "encoder" else None,
         encoder_pulses=enc.data if enc is not None and enc.role == "pulses" else None,
-        pulses_per_rev=top.get("pulses_per_rev"),
-        encoder_offset_deg=top.get("encoder_offset_deg", 0.0),
-        hall=one["trigger"].data if "trigger" in one else None,
-        hall_delay_s=top.get("hall_delay_s", 0.0),
-        condition=condition, source=rig.source)
+        hall=one["trigger"].data if "trigger" in one else None)
+    common = dict(axes=axes, fs_hz=fs, pulses_per_rev=top.get("pulses_per_rev"),
+                  encoder_offset_deg=top.get("encoder_offset_deg", 0.0), hall_delay_s=top.get("hall_delay_s", 0.0),
+                  condition=condition, source=rig.source)
+    if any(isinstance(ch.data, ScaledChannel) for ch in chans):  # read on demand, chunk by chunk
+        channels = {f"acc:{a}": acc[a].data for a in axes}
+        channels.update({k: v for k, v in fields.items() if v is not None})
+        return dict(acc=channels[f"acc:{axes[0]}"], _channels=channels, **fields, **common)
+    return dict(acc=np.stack([acc[a].data for a in axes]), **fields, **common)
 
 
 def read_rig_records(path: str | os.PathLike, channels=None) -> Records:

@@ -42,3 +42,45 @@ class RigFile:
     props: dict = field(default_factory=dict)
     #: ringfit's own key layout (docs/formats.md §4 / §9 keys), when the file holds it instead of channels.
     arrays: dict | None = None
+
+    def close(self) -> None:
+        """Close the file behind lazy channels (nothing to do for channels read whole)."""
+        for ch in self.channels:
+            if isinstance(ch.data, LazyData):
+                ch.data.close()
+
+
+class LazyData:
+    """A channel read on demand (a long TDMS recording): ``size``, ``dtype``, ``read(start, stop)``, ``close()``.
+
+    The readers return one in :attr:`RawChannel.data` when asked for lazy
+    channels; ``read`` gives the file's (scaled) values as float64.
+    """
+
+    size: int
+    dtype: np.dtype
+    ndim = 1
+
+    def read(self, start: int, stop: int) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def close(self) -> None:
+        pass
+
+
+class ScaledChannel:
+    """A :class:`LazyData` times a factor, in the form :class:`~ringfit.io.continuous.ContinuousRecord` reads
+    channels (``length``, ``read(start, stop)``, ``close()``)."""
+
+    def __init__(self, data: LazyData, factor: float):
+        self.data, self.factor, self.length = data, float(factor), int(data.size)
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        stop = min(stop, self.length)
+        if stop <= start:
+            return np.zeros(0)
+        return np.asarray(self.data.read(start, stop), dtype=np.float64) * self.factor
+
+    def close(self) -> None:
+        self.data.close()
+

@@ -8,6 +8,10 @@ and ``role`` (channel) are used when present. Channels that are not numbers
 (timestamps, text) are skipped with a warning unless the channel map names
 them. A group is one impact record.
 
+``lazy=True`` (continuous recordings, :func:`ringfit.io.continuous.read_continuous`):
+the file stays open and each channel is read on demand, chunk by chunk
+(``TdmsChannel.read_data``), so a long recording is never held whole.
+
 Write (:func:`write_tdms_records`): one group per record (``record 000`` …)
 with properties ``sensor_angle_deg``, channels named by axis and ``force``,
 each with ``wf_increment`` and ``unit_string`` — readable without a channel map.
@@ -25,7 +29,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.files import atomic_write, check_output_path, existing_file
 from ringfit.io.record_types import Records
-from ringfit.io.rig_types import RawChannel, RigFile
+from ringfit.io.rig_types import LazyData, RawChannel, RigFile
 
 
 def _nptdms():
@@ -57,10 +61,41 @@ def _float(value, where, source):
     return x
 
 
-def read_tdms_channels(path: str | os.PathLike) -> RigFile:
-    """The channels of a TDMS file (module docstring); InputError for an unreadable or truncated file."""
-    nptdms = _nptdms()
-    path = existing_file(Path(path), "a TDMS file")
+class _Handle:
+    """The open file behind lazy channels; closing any of its channels closes it (a record closes all at once)."""
+
+    def __init__(self, f):
+        self.f = f
+
+    def close(self):
+        if self.f is not None:
+            self.f.close()
+            self.f = None
+
+
+class _TdmsData(LazyData):
+    """One TDMS channel read on demand with ``TdmsChannel.read_data`` (scaled values)."""
+
+    def __init__(self, handle: _Handle, channel, name: str, source):
+        self.handle, self.channel, self.name, self.source = handle, channel, name, source
+        self.size = len(channel)
+        self.dtype = np.dtype(channel.dtype) if channel.dtype is not None else np.dtype(object)
+
+    def read(self, start, stop):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return np.asarray(self.channel.read_data(offset=start, length=stop - start), dtype=np.float64)
+        except Exception as exc:  # noqa: BLE001 - npTDMS raises assorted errors on bad data
+            raise InputError(f"channel {self.name!r}: samples {start}…{stop - 1} unreadable "
+                             f"({exc.__class__.__name__}); corrupted file?", source=self.source) from None
+
+    def close(self):
+        self.handle.close()
+
+
+def _quiet_nptdms(fn):
+    """``fn()`` with npTDMS's log lines caught: InputError for a truncated file, not a partial read."""
     logged = _Capture()
     logger = logging.getLogger("nptdms")
     propagate = logger.propagate
@@ -69,20 +104,55 @@ def read_tdms_channels(path: str | os.PathLike) -> RigFile:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            f = nptdms.TdmsFile.read(str(path))
-            groups = [(g, list(g.channels())) for g in f.groups()]
-            data = {(g.name, c.name): c[:] for g, chans in groups for c in chans}
-    except Exception as exc:  # noqa: BLE001 - npTDMS raises assorted errors on bad files
-        text = str(exc).splitlines()[0][:120] if str(exc) else ""
-        raise InputError(f"not a readable TDMS file ({exc.__class__.__name__}: {text}); truncated or corrupted?",
-                         source=path) from None
+            out = fn()
     finally:
         logger.removeHandler(logged)
         logger.propagate = propagate
     cut = [m for m in logged.messages if "less data than expected" in m or "not a multiple of the chunk" in m]
+    return out, cut
+
+
+def read_tdms_channels(path: str | os.PathLike, *, lazy: bool = False) -> RigFile:
+    """The channels of a TDMS file (module docstring); InputError for an unreadable or truncated file.
+
+    ``lazy``: open the file and read each channel on demand (:class:`_TdmsData`)
+    instead of reading it whole; the caller closes it (:meth:`RigFile.close`).
+    """
+    nptdms = _nptdms()
+    path = existing_file(Path(path), "a TDMS file")
+    handle = None
+
+    def load():
+        if lazy:
+            f = nptdms.TdmsFile.open(str(path))
+            groups = [(g, list(g.channels())) for g in f.groups()]
+            return f, groups, None
+        f = nptdms.TdmsFile.read(str(path))
+        groups = [(g, list(g.channels())) for g in f.groups()]
+        return f, groups, {(g.name, c.name): c[:] for g, chans in groups for c in chans}
+
+    try:
+        (f, groups, data), cut = _quiet_nptdms(load)
+    except Exception as exc:  # noqa: BLE001 - npTDMS raises assorted errors on bad files
+        text = str(exc).splitlines()[0][:120] if str(exc) else ""
+        raise InputError(f"not a readable TDMS file ({exc.__class__.__name__}: {text}); truncated or corrupted?",
+                         source=path) from None
+    if lazy:
+        handle = _Handle(f)
     if cut:  # npTDMS reads up to the cut; ringfit refuses it (as it refuses a truncated UFF file)
+        if handle is not None:
+            handle.close()
         raise InputError(f"the TDMS file is truncated ({cut[0].rstrip('.')}); refusing to read up to the cut",
                          source=path)
+    try:
+        return _channels(path, f, groups, data, handle)
+    except BaseException:
+        if handle is not None:
+            handle.close()
+        raise
+
+
+def _channels(path, f, groups, data, handle) -> RigFile:
     rig = RigFile(source=str(path), format="tdms")
     for key, value in f.properties.items():
         if key in ("fs_hz", "pulses_per_rev", "encoder_offset_deg", "hall_delay_s", "speed_kmh", "load_n",
@@ -93,7 +163,7 @@ def read_tdms_channels(path: str | os.PathLike) -> RigFile:
         g_angle = g.properties.get("sensor_angle_deg")
         for c in chans:
             name = f"{g.name}/{c.name}"
-            x = np.asarray(data[(g.name, c.name)])
+            x = _TdmsData(handle, c, name, path) if handle is not None else np.asarray(data[(g.name, c.name)])
             if x.dtype.kind not in "fiub":
                 skipped.append(name)  # timestamps, text: dropped below (a map naming one is refused)
             p = c.properties
