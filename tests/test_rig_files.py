@@ -547,3 +547,24 @@ def test_tdms_recording_is_read_chunk_by_chunk(drum, tmp_path, monkeypatch):
     cut.write_bytes(path.read_bytes()[: path.stat().st_size - 5000])
     with pytest.raises(InputError, match="truncated"):
         read_continuous(cut)
+
+
+def test_mat_v73_cell_array_of_axis_names_and_skipped_struct(rec, tmp_path):
+    """axes = {'radial','tangential'} as MATLAB -v7.3 stores a cell: object references into '#refs#'."""
+    path = tmp_path / "cell73.mat"
+    _mat73(path, {"acc": rec.acc, "sensor_angle_deg": rec.sensor_angle_deg, "fs_hz": rec.fs_hz})
+    with h5py.File(path, "a") as f:
+        refs = f.create_group("#refs#")
+        cells = []
+        for i, name in enumerate(rec.axes):
+            ds = refs.create_dataset(f"a{i}", data=np.array([[ord(c)] for c in name], dtype=np.uint16))
+            ds.attrs["MATLAB_class"] = np.bytes_("char")
+            cells.append(ds.ref)
+        cell = f.create_dataset("axes", data=np.array([[r] for r in cells], dtype=h5py.ref_dtype))
+        cell.attrs["MATLAB_class"] = np.bytes_("cell")
+        grp = f.create_group("bench")  # a struct: skipped with a warning
+        grp.attrs["MATLAB_class"] = np.bytes_("struct")
+    with pytest.warns(UserWarning, match="bench"):
+        back = read_records(path)
+    assert back.axes == rec.axes
+    np.testing.assert_array_equal(back.acc, rec.acc)
