@@ -568,3 +568,33 @@ def test_mat_v73_cell_array_of_axis_names_and_skipped_struct(rec, tmp_path):
         back = read_records(path)
     assert back.axes == rec.axes
     np.testing.assert_array_equal(back.acc, rec.acc)
+
+
+@pytest.mark.slow
+def test_estimate_on_a_mat_recording_equals_the_npz(tmp_path):
+    """`ringfit estimate` on the same drum recording as npz and as MATLAB v5 channel vectors (+ map): same JSON."""
+    import json
+
+    from ringfit.data import path as data_path
+    from ringfit.synth.cleat import CleatBench
+
+    bench = CleatBench(speed_kmh=60.0, load_n=4000.0, fs_hz=8192.0, noise_ms2=4.0, highpass_hz=0.5, seed=4)
+    npz = bench.write(tmp_path / "run.records.npz", 1.0, cleat=False)
+    rec = read_continuous(npz)
+    variables = {"fs_hz": rec.fs_hz, "enc": rec.read("encoder_angle_deg")}
+    variables.update({f"acc_{a}": rec.read(f"acc:{a}") / G for a in rec.axes})
+    scipy.io.savemat(tmp_path / "run.mat", variables)
+    cond = "".join(f"{k} = {float(v)!r}\n" for k, v in rec.condition.items())
+    lines = [f'[channels.acc_{a}]\naxis = "{a}"\nunit = "g"\n' for a in rec.axes]
+    cmap = _map(tmp_path / "run.toml", f"encoder_offset_deg = {float(rec.encoder_offset_deg)!r}\n[condition]\n{cond}\n"
+                + "\n".join(lines) + '\n[channels.enc]\nrole = "encoder"\n')
+    rec.close()
+    docs = {}
+    for name, path, extra in (("npz", npz, []), ("mat", tmp_path / "run.mat", ["--channels", str(cmap)])):
+        out = tmp_path / f"{name}.estimate.json"
+        assert main(["estimate", str(path), "--tyre", str(data_path("table9.tyre.toml")), "--out", str(out),
+                     "--quiet", *extra]) == 0
+        docs[name] = json.loads(out.read_text())
+    a, b = docs["npz"], docs["mat"]
+    assert a["load_n"]["value"] == pytest.approx(b["load_n"]["value"], rel=1e-6)
+    assert abs(a["load_n"]["value"] / 4000.0 - 1) < 0.02
