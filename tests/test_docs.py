@@ -148,6 +148,9 @@ def test_section_references_become_links_and_a_missing_section_is_a_warning(capl
     assert '<a href="../formats.html#5-gap-diagnosis-x"><code>formats.md §5</code></a>' in out
     assert "<pre>docs/physics.md §2.1 stays in code blocks</pre>" in out and "<a href='x'>physics.md §2.1</a>" in out
     assert ":func:" not in out and "<code>x</code>" in out
-    with caplog.at_level("WARNING", logger="mkdocs.plugins.ringfit_links"):
-        hooks.on_page_content("<p>see docs/physics.md §99.9</p>", page, None, None)
-    assert any("§99.9" in r.getMessage() and "no such section" in r.getMessage() for r in caplog.records)
+    with caplog.at_level("INFO", logger="mkdocs.plugins.ringfit_links"):
+        out = hooks.on_page_content("<p>see docs/physics.md §99.9 and formats.md §5.7</p>", page, None, None)
+    assert any("§99.9" in r.getMessage() and "no such section" in r.getMessage() and r.levelname == "WARNING"
+               for r in caplog.records)
+    assert '<a href="../formats.html#5-gap-diagnosis-x"><code>formats.md §5.7</code></a>' in out  # its section
+    assert not any("§5.7" in r.getMessage() and r.levelname == "WARNING" for r in caplog.records)

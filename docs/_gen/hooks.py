@@ -5,7 +5,8 @@ ringfit cites its reference pages as ``docs/physics.md §4.3`` or ``formats.md �
 reference links to the section: the section numbers are read from the headings of
 ``physics.md`` and ``formats.md`` (``## 4.`` / ``### 4.3``) and the anchors are the
 ones the ``toc`` extension gives those headings. A reference to a section that does
-not exist is a warning (a failure under ``mkdocs build --strict``).
+not exist is a warning (a failure under ``mkdocs build --strict``); a subsection without a
+heading of its own (``§6.4`` where §6 has none) links to its section, said at INFO level.
 
 Docstrings written before the site name objects with Sphinx roles (``:func:`~ringfit.x.f```);
 on the site the role is dropped and the name stays code (``~`` keeps its last part).
@@ -53,10 +54,15 @@ def _link(match: re.Match, page_url: str, where: str) -> str:
     target = f"{page}.html" if not sec else None
     if sec:
         anchors = _sections.get(page, {})
-        if sec not in anchors:
+        key = sec
+        while key not in anchors and "." in key:  # §6.4 without a heading of its own: its section, §6
+            key = key.rsplit(".", 1)[0]
+        if key not in anchors:
             log.warning("cross-links: %s cites %s.md §%s, which has no such section", where, page, sec)
             return match.group(0)
-        target = f"{page}.html#{anchors[sec]}"
+        if key != sec:
+            log.info("cross-links: %s cites %s.md §%s, which has no heading; linked to §%s", where, page, sec, key)
+        target = f"{page}.html#{anchors[key]}"
     href = get_relative_url(target, page_url)
     text = f"{page}.md" + (f" §{sec}" if sec else "")
     return f'<a href="{href}"><code>{text}</code></a>'

@@ -144,6 +144,7 @@ class NullResult:
         return int(self.t_null.size)
 
     def summary(self, element: str) -> dict:
+        """This null for one candidate ``element``: kind, draws, the statistic's quantiles and the p-value."""
         p = self.p[element]
         return {"kind": self.kind, "draws": self.draws, "statistic": self.note,
                 "median_pct": round(100 * float(np.median(self.t_null)), 2),

@@ -62,10 +62,11 @@ class LazyData:
     ndim = 1
 
     def read(self, start: int, stop: int) -> np.ndarray:  # pragma: no cover - interface
+        """Samples ``start:stop`` of the channel, float64."""
         raise NotImplementedError
 
     def close(self) -> None:
-        pass
+        """Release the file (nothing to do by default)."""
 
 
 class ScaledChannel:
@@ -76,11 +77,13 @@ class ScaledChannel:
         self.data, self.factor, self.length = data, float(factor), int(data.size)
 
     def read(self, start: int, stop: int) -> np.ndarray:
+        """Samples ``start:stop`` (clipped to the channel's length) times the factor, float64."""
         stop = min(stop, self.length)
         if stop <= start:
             return np.zeros(0)
         return np.asarray(self.data.read(start, stop), dtype=np.float64) * self.factor
 
     def close(self) -> None:
+        """Close the underlying channel."""
         self.data.close()
 
