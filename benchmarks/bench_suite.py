@@ -35,7 +35,7 @@ def main() -> int:
     args = ap.parse_args()
     if args.top < 0:
         ap.error(f"--top {args.top}: expected a whole number >= 0")
-    cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", f"--durations={args.top}"]
+    cmd = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", f"--durations={args.top}"]
     if args.slow_only:
         cmd += ["-m", "slow"]
     cmd += args.pytest_args
@@ -53,7 +53,7 @@ def main() -> int:
         print(proc.stdout[-6000:], proc.stderr[-3000:], sep="\n")
         print(f"bench_suite: pytest exited {proc.returncode} ({summary}); no figures printed", file=sys.stderr)
         return 1
-    workers = re.search(r"created: (\d+)/\d+ workers", proc.stdout)
+    workers = re.search(r"created: (\d+)/\d+ workers", proc.stdout) or re.search(r"^(\d+) workers \[", proc.stdout, re.M)
     print(" ".join(cmd[1:]))
     print(f"load average at start {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}; "
           f"at end {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}; {os.cpu_count()} CPUs here")
