@@ -210,7 +210,8 @@ def api_page(name: str, modules: list[str]) -> str:
     for i, dotted in enumerate(modules):
         if i:
             lines += ["", f"## `{dotted}`", ""]
-        lines += [f"::: {dotted}", "    options:", f"      show_root_heading: {'false' if i == 0 else 'false'}",
+        # the package's own docstring under the page title; each module under its own heading
+        lines += [f"::: {dotted}", "    options:", "      show_root_heading: false",
                   f"      heading_level: {2 if i == 0 else 3}", ""]
     return "\n".join(lines) + "\n"
 
