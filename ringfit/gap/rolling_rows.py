@@ -172,10 +172,10 @@ def _shared_assignment(r: dict, rec: dict, patch: float) -> str:
     """Fill the labels a row lacks (n, wave, loaded-mode type) from the line it was matched to
     (:func:`line_fields`), so that the baseline and every candidate see the same assignment
     (never each model its own nearest line). **Returns** the sentence that says so ('' if nothing was missing)."""
-    cand = rec.get("_cand")
-    if cand is None:
+    if rec.get("model_n") is None:
         return ""
-    f = line_fields(cand.n, cand.direction, cand.tag, r["mode_index"], r["line_k"], patch)
+    f = line_fields(int(rec["model_n"]), rec.get("model_direction", ""), rec.get("model_tag", ""), r["mode_index"],
+                    r["line_k"], patch)
     said = []
     if r["n"] < 1:
         r["n"] = f["n"]
