@@ -47,6 +47,17 @@ def integer(what: str = "a whole number", *, lo: int | None = None, hi: int | No
     return convert
 
 
+#: Drum diameters a rolling command accepts [m]: test rigs' drums are 0.5–3 m; a larger drum is a flat road
+#: for the contact patch, and a smaller one leaves the contact solve's window.
+DRUM_DIAMETER_M = (0.5, 100.0)
+
+
+def drum_diameter():
+    """A drum diameter [m] in :data:`DRUM_DIAMETER_M` (``--drum``)."""
+    lo, hi = DRUM_DIAMETER_M
+    return number(f"a drum diameter in metres in [{lo:g}, {hi:g}] (omit --drum for a flat road)", lo=lo, hi=hi)
+
+
 def quiet_flag(p: argparse.ArgumentParser) -> None:
     """The one switch that silences progress bars: ``--quiet`` (``--no-progress`` kept as a hidden alias)."""
     p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
