@@ -148,11 +148,12 @@ def register(sub) -> None:
     c.add_argument("campaign", type=Path, help="folder holding one case folder per tyre (each with tyre.toml)")
     c.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created if absent)")
     _cluster_options(c)
-    c.add_argument("--walkers", type=integer("a whole number of walkers >= 1", lo=1), default=32, help="emcee walkers of `ringfit sample` (default 32)")
-    steps = integer("a whole number of steps >= 1", lo=1)
+    # the same limits as `ringfit sample`'s options: a campaign refuses before any work what its samples would
+    c.add_argument("--walkers", type=integer("a whole number of walkers >= 2", lo=2), default=32, help="emcee walkers of `ringfit sample` (default 32)")
+    steps = integer("a whole number of steps >= 100", lo=100)
     c.add_argument("--min-steps", type=steps, default=2000, help="`ringfit sample --min-steps` (default 2000)")
     c.add_argument("--max-steps", type=steps, default=20000, help="`ringfit sample --max-steps` (default 20000)")
-    c.add_argument("--seed", type=int, default=0, help="`ringfit sample --seed` (default 0)")
+    c.add_argument("--seed", type=integer("a whole number >= 0", lo=0), default=0, help="`ringfit sample --seed` (default 0)")
     c.add_argument("--prior", default="physical", choices=("physical", "none"),
                    help="prior of `ringfit fit` and `ringfit sample` (default physical)")
     c.add_argument("--effects", default=None, help="`ringfit diagnose --effects` (default: all registered)")
@@ -514,11 +515,27 @@ def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
     return tasks, layout
 
 
+def _check_campaign_options(args) -> None:
+    """What every tyre's sample and diagnosis would refuse, refused before any work (one line naming the option)."""
+    from ringfit.cli.gap import parse_effects
+    from ringfit.errors import InputError
+    from ringfit.cli.free import DEFAULT_FREE
+
+    if args.max_steps < args.min_steps:
+        raise InputError(f"--max-steps {args.max_steps} is below --min-steps {args.min_steps}")
+    k = len(DEFAULT_FREE.split(","))
+    if args.walkers % 2 or args.walkers < 2 * k:
+        raise InputError(f"--walkers {args.walkers}: emcee needs an even number of at least {2 * k} "
+                         f"(2 × {k} free parameters of the campaign's fits)")
+    parse_effects(args.effects)
+
+
 def run_campaign(args) -> int:
     from ringfit.errors import InputError
     from ringfit.io.files import check_output_path
 
     _check_cluster_options(args)
+    _check_campaign_options(args)
     tyres = campaign_tyres(args.campaign)
     if args.out.exists() and not args.out.is_dir():
         raise InputError("exists and is not a folder", source=args.out)
