@@ -15,6 +15,7 @@ submission, progress, failures, time and memory per task) is
 from __future__ import annotations
 
 import argparse
+import contextlib
 import re
 import sys
 from dataclasses import dataclass, field
@@ -186,6 +187,10 @@ def output_stems(inputs: list[str], rule: OutputRule) -> list[str]:
 
     paths = [Path(x) for x in inputs]
     stems = [stem(p) for p in paths]
+    for x, s in zip(inputs, stems):
+        if not s or s in (".", "..") or "/" in s or "\\" in s:
+            raise InputError(f"has no name to derive an output name from (the root folder?); expected input "
+                             "files or case folders with a name", source=x)
     counts = {s: stems.count(s) for s in stems}
     stems = [f"{p.resolve().parent.name}-{s}" if counts[s] > 1 else s for p, s in zip(paths, stems)]
     seen: dict[str, str] = {}
@@ -241,7 +246,10 @@ def plan_batch(command: str, inputs: list[str], out_dir, extra: list[str] = (), 
             return a
 
         primary = str(out) + rule.suffix
-        argv = [command, str(x), "--out", primary, *map(fill, extra)]
+        if Path(primary).parent != out_dir:
+            raise InputError(f"would write {primary}, outside --out {out_dir}", source=x)
+        arg = str(x) if not str(x).startswith("-") else "./" + str(x)  # -x... would read as an option
+        argv = [command, arg, "--out", primary, *map(fill, extra)]
         plans.append(PlannedRun(str(x), stem, argv, [primary] + [str(out) + s for s in rule.sidecars]))
     return plans
 
@@ -340,6 +348,10 @@ def _check_cluster_options(opts) -> None:
     if opts.scheduler and opts.workers:
         raise InputError("--workers starts a LocalCluster; with --scheduler the cluster's own workers run the "
                          "tasks (start them with `dask worker`)")
+    if opts.scheduler:
+        from ringfit.batch import check_scheduler_address
+
+        check_scheduler_address(opts.scheduler)
     opts.memory_limit = _memory_limit(opts.memory_limit)
 
 
@@ -350,6 +362,17 @@ def _split_rest(rest: list[str]) -> tuple[list[str], list[str]]:
     return rest, []
 
 
+def _refuse_inputs_like_options(parser: argparse.ArgumentParser, head: list[str]) -> None:
+    """An input file whose name starts with ``-`` would be read as an option: say so, and how to name it."""
+    from ringfit.errors import InputError
+
+    known = set(parser._option_string_actions)
+    for token in head:
+        if token.startswith("-") and token.split("=", 1)[0] not in known and Path(token).exists():
+            raise InputError(f"an input whose name starts with '-' reads as an option; name it ./{token}",
+                             source=token)
+
+
 def run_batch(args) -> int:
     import os
     import shlex
@@ -357,7 +380,9 @@ def run_batch(args) -> int:
     from ringfit.errors import InputError
 
     head, extra = _split_rest(list(args.rest))
-    opts = _inner_parser(args.batch_command).parse_args(head, namespace=argparse.Namespace(**vars(args)))
+    parser = _inner_parser(args.batch_command)
+    _refuse_inputs_like_options(parser, head)
+    opts = parser.parse_args(head, namespace=argparse.Namespace(**vars(args)))
     _check_cluster_options(opts)
     plans = plan_batch(args.batch_command, opts.inputs, opts.out, extra, force=opts.force)
     check_command_line(plans[0].argv)
@@ -367,14 +392,25 @@ def run_batch(args) -> int:
         return 0
     if opts.out.exists() and not opts.out.is_dir():
         raise InputError("exists and is not a folder", source=opts.out)
-    opts.out.mkdir(parents=True, exist_ok=True)
+    created = not opts.out.exists()
+    try:
+        opts.out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out: cannot create the folder ({exc.strerror or exc.__class__.__name__})",
+                         source=opts.out) from None
 
     from ringfit.batch import Task
 
     cwd = os.getcwd()
     tasks = [Task(plan.input, run_command, (plan.argv, cwd), outputs=tuple(plan.outputs), kind=args.batch_command)
              for plan in plans]
-    results, timing = _run(opts, tasks, (args.batch_command,), f"ringfit {args.batch_command}")
+    try:
+        results, timing = _run(opts, tasks, (args.batch_command,), f"ringfit {args.batch_command}")
+    except BaseException:
+        if created:  # a scheduler that cannot be reached leaves no empty folder behind
+            with contextlib.suppress(OSError):
+                opts.out.rmdir()
+        raise
     return _report(opts, results, timing)
 
 
