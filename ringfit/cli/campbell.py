@@ -110,11 +110,13 @@ def run_campbell(args) -> int:
     check_output_paths(outputs, overwrite=args.force, inputs=inputs)
 
     from ringfit.gap.campbell import CAMPBELL_COLUMNS, MATCH_COLUMNS, campbell_diagram, match_rows_table, match_tables
-    from ringfit.io.modes import read_mode_table
+    from ringfit.io.modes import check_test_condition, read_mode_table
     from ringfit.io.tyre import read_tyre
 
     tyre = read_tyre(args.tyre)
     tables = [read_mode_table(m) for m in args.modes]
+    for m, t in zip(args.modes, tables):  # before the diagram's work: a sidecar whose condition cannot be modelled
+        check_test_condition(t.condition, source=sidecar_path(m))
     ring, geometry = tyre.ring, tyre.geometry
     diagram = campbell_diagram(ring, geometry, args.load, speeds, drum_diameter_m=args.drum, n_max=args.n_max)
     if not diagram.ok.all():

@@ -42,7 +42,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.io.modes import ModeTable
+from ringfit.io.files import sidecar_of
+from ringfit.io.modes import ModeTable, check_test_condition
 from ringfit.physics.operating import KMH, road_from_drum_diameter
 
 #: Highest dominant order kept in a diagram (the issue's n ≤ 15).
@@ -347,6 +348,7 @@ def table_conditions(tables, ring, geometry, *, load_n: float | None = None, dru
     for t in tables:
         c = t.condition
         src = t.source or "<table>"
+        check_test_condition(c, source=sidecar_of(t.source) if t.source else src)
         state = t.state
         contact = state in ("loaded", "rolling")
         load = c.get("load_n") if c.get("load_n") else load_n
