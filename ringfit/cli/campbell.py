@@ -40,8 +40,9 @@ def register(sub) -> None:
                    help="measured mode tables (docs/formats.md §2, with their .json sidecars) to match; writes "
                         "NAME.matched.csv beside --out")
     p.add_argument("--n-max", type=integer("a whole number >= 1", lo=1), default=15, help="highest dominant order n of the branches (default 15)")
-    p.add_argument("--tolerance", type=number("a positive relative σ", lo=0.0, lo_open=True), default=0.02,
-                   help="relative σ of the model used in the matching (default 0.02 = 2 %%)")
+    p.add_argument("--tolerance", type=number("a relative σ in (0, 1]", lo=0.0, hi=1.0, lo_open=True), default=None,
+                   help="relative σ of the model used in the matching (default: from the data, the robust scale "
+                        "of the matched rows' residuals beyond their freq_std_hz; 2 %% where fewer than 4 rows match)")
     force_flag(p)
     p.set_defaults(run=run_campbell)
 
@@ -136,7 +137,7 @@ def run_campbell(args) -> int:
     if match is not None:
         path = matched_path(args.out)
         atomic_write_text(path, csv_text(MATCH_COLUMNS, match_rows_table(match)))
-        print(f"{path}: {match.summary()}")
+        print(f"{path}: {match.summary()}; {match.tolerance_note}")
         for r in match.rows:
             name = Path(r["source"]).name
             print(f"  {name} row {r['row']}: {r['freq_hz']:.2f} Hz at {r['speed_kmh']:g} km/h [{r['status']}] "

@@ -94,7 +94,7 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
     without rolling tables), ``{row position: match sentence}`` and ``{row position:
     structured match}`` (n, direction, tag, line k, frame, model frequency, z, status).
     """
-    from ringfit.gap.campbell import _group_key, match_tables
+    from ringfit.gap.campbell import MODEL_TOLERANCE, _group_key, match_tables
 
     T = len(tables)
     sel = [ti for ti, t in enumerate(tables) if is_rolling(t)]
@@ -107,8 +107,9 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
         by_drum.setdefault(tables[ti].condition.get("drum_diameter_m"), []).append(ti)
     position = {(r["table"], r["i"]): j for j, r in enumerate(rows)}
     for drum, idx in by_drum.items():
+        # the assignment only: the diagnosis weighs the rows with its own noise model (docs/formats.md §5)
         match = match_tables([tables[ti] for ti in idx], ring, geometry, drum_diameter_m=drum,
-                             n_max=ROLLING_N_MAX, harmonics=ROLLING_HARMONICS)
+                             model_tolerance=MODEL_TOLERANCE, n_max=ROLLING_N_MAX, harmonics=ROLLING_HARMONICS)
         offset = 0
         for ti, cond in zip(idx, match.conditions):
             t = tables[ti]
