@@ -708,6 +708,10 @@ for tag, edit, key in (("no-state", _drop("state"), "'state'"), ("free-with-load
     issue23(f"campbell-modes-sidecar-{tag}", CAMPBELL + ["--modes", "{d}/roll40.modes.csv"], setup=_rolling_case(edit),
             names=(key,))
     issue23(f"diagnose-rolling-sidecar-{tag}", DIAG, setup=_rolling_case(edit), names=(key,))
+issue23("diagnose-rolling-sidecar-drum-1e300", DIAG, setup=_rolling_case(_set("drum_diameter_m", 1e300)),
+        names=("'drum_diameter_m'",))
+issue23("campbell-modes-sidecar-drum-0.001", CAMPBELL + ["--modes", "{d}/roll40.modes.csv"],
+        setup=_rolling_case(_set("drum_diameter_m", 0.001)), names=("'drum_diameter_m'",))
 # campaign arguments checked before any work
 issue23("campaign-min-steps-50", CAMPAIGN + ["--min-steps", "50"], setup=_campaign_folder, names=("--min-steps",))
 issue23("campaign-effects-bogus", CAMPAIGN + ["--effects", "bogus"], setup=_campaign_folder, names=("--effects",))

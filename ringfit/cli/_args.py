@@ -47,15 +47,18 @@ def integer(what: str = "a whole number", *, lo: int | None = None, hi: int | No
     return convert
 
 
-#: Drum diameters a rolling command accepts [m]: test rigs' drums are 0.5–3 m; a larger drum is a flat road
-#: for the contact patch, and a smaller one leaves the contact solve's window.
-DRUM_DIAMETER_M = (0.5, 100.0)
-
-
 def drum_diameter():
-    """A drum diameter [m] in :data:`DRUM_DIAMETER_M` (``--drum``)."""
-    lo, hi = DRUM_DIAMETER_M
-    return number(f"a drum diameter in metres in [{lo:g}, {hi:g}] (omit --drum for a flat road)", lo=lo, hi=hi)
+    """A drum diameter [m] in :data:`ringfit.io.modes.DRUM_DIAMETER_RANGE_M` (``--drum``; the range is imported
+    when the option is given, so that ``--help`` stays free of NumPy)."""
+
+    def convert(text: str) -> float:
+        from ringfit.io.modes import DRUM_DIAMETER_RANGE_M
+
+        lo, hi = DRUM_DIAMETER_RANGE_M
+        return number(f"a drum diameter in metres in [{lo:g}, {hi:g}] (omit --drum for a flat road)",
+                      lo=lo, hi=hi)(text)
+
+    return convert
 
 
 def quiet_flag(p: argparse.ArgumentParser) -> None:
