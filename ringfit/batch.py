@@ -377,6 +377,16 @@ def local_cluster(workers: int | None = None, *, memory_limit: str | float | Non
 _HOST = re.compile(r"^(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9]([A-Za-z0-9.\-_]*[A-Za-z0-9])?)$")
 
 
+def _is_ip(host) -> bool:
+    import ipaddress
+
+    try:
+        ipaddress.ip_address(str(host).strip("[]"))
+    except ValueError:
+        return False
+    return True
+
+
 def check_scheduler_address(address: str) -> None:
     """``address`` is a scheduler address Dask can dial (``tcp://HOST:PORT``, ``tls://…``, ``inproc://…``; the
     scheme defaults to tcp): :class:`~ringfit.errors.InputError` naming ``--scheduler`` otherwise, before any
@@ -401,7 +411,7 @@ def check_scheduler_address(address: str) -> None:
             host, port = parse_host_port(loc, 8786)
         except (ValueError, TypeError) as exc:
             raise bad(_one_line(exc)) from None
-        if not _HOST.match(host or ""):
+        if not (_HOST.match(host or "") or _is_ip(host)):
             raise bad(f"{host!r} is not a host name or IP address")
         if not 0 < int(port) < 65536:
             raise bad(f"port {port} outside 1..65535")

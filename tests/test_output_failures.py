@@ -161,3 +161,41 @@ def test_write_failure_names_the_file(tmp_path):
     with pytest.raises(InputError, match=r"x\.txt: could not be written \(no space left on the device\)"):
         atomic_write(tmp_path / "x.txt", failing)
     assert list(tmp_path.iterdir()) == []
+
+
+# ----------------------------------------------------------------------------- arguments checked before any work
+
+
+@pytest.mark.parametrize("address", ["tcp://10.0.0.5:8786", "tls://host.example.com:8786", "localhost:8786",
+                                     "tcp://[::1]:8786", "inproc://10.0.0.1/1/2", "ws://h:1", "tcp://h"])
+def test_scheduler_addresses_dask_dials_pass(address):
+    pytest.importorskip("distributed")
+    from ringfit.batch import check_scheduler_address
+
+    check_scheduler_address(address)  # no exception: the address reaches distributed.Client
+
+
+@pytest.mark.parametrize("address, why", [("not a url", "not a host name"), ("http://h:80", "unknown protocol"),
+                                          ("tcp://h:99999", "port 99999"), ("tcp://:8786", "not a host name")])
+def test_scheduler_addresses_refused_with_one_line(address, why):
+    pytest.importorskip("distributed")
+    from ringfit.batch import check_scheduler_address
+
+    with pytest.raises(InputError, match="--scheduler") as e:
+        check_scheduler_address(address)
+    assert why in str(e.value) and "\n" not in str(e.value)
+
+
+def test_group_velocity_sync_refuses_a_record_too_coarse_for_the_round_trip():
+    """100 Hz records (pyuff's binary8byte.uff): the 2 ms lower bound of the round-trip search was sample 0."""
+    import numpy as np
+
+    from ringfit.targets.preprocessing import group_velocity, round_trip_time
+
+    x = np.random.default_rng(0).standard_normal(250)
+    t = round_trip_time(x, 100.0)  # searched from the first sample after 0, never 0
+    assert t >= 1 / 100.0
+    with pytest.raises(InputError, match="round-trip time"):
+        round_trip_time(x[:5], 100.0)
+    with pytest.raises(InputError, match="positive time"):
+        group_velocity(0.3, 0.0)
