@@ -1,4 +1,4 @@
-"""How many of issue 14's bad inputs get the promised answer.
+"""How many of the bad inputs of issues 14 and 23 get the promised answer.
 
 Replays every case of ``tests/bad_input_cases.py`` through ``ringfit.cli.main``
 (each in a fresh copy of small valid fixtures) and prints the count: exit
@@ -10,7 +10,10 @@ a case that hangs (XLA loops do not see Python signals) is killed after
 
     .venv/bin/python benchmarks/bench_bad_input.py [--quick] [--only SUBSTRING] [-v] [--timeout S]
 
-``--quick`` leaves out the cases that run a real fit.
+``--quick`` leaves out the cases that run a real fit. The count is printed per
+issue and item (issue 23 item 3: the crashes, hangs and silent answers a new
+user found), with the wall time, the CPU time of this process and its workers,
+and the load average at the start and the end.
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ def _worker(tasks, results, fixtures, workdir):
         o = replay(CASES[i], d)
         os.chdir(workdir)
         shutil.rmtree(d, ignore_errors=True)
-        results.put((i, o.ok, str(o.status), o.why))
+        results.put((i, o.ok, str(o.status), o.why, time.process_time()))
 
 
 def main() -> int:
@@ -59,7 +62,9 @@ def main() -> int:
     args = ap.parse_args()
     todo = [i for i, c in enumerate(CASES) if not (args.quick and c.slow) and (args.only is None or args.only in c.id)]
     ctx = mp.get_context("spawn")
-    t0 = time.perf_counter()
+    load0 = os.getloadavg()
+    t0, c0 = time.perf_counter(), time.process_time()
+    worker_cpu = {}  # the CPU time each worker process had used at its last answer
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         fixtures = build_fixtures(Path(tmp) / "_fixtures")
@@ -74,7 +79,7 @@ def main() -> int:
             tasks.put(i)
             # the first case of a fresh worker also pays the imports
             try:
-                _, ok, status, why = res.get(timeout=args.timeout + 30)
+                _, ok, status, why, worker_cpu[proc.pid] = res.get(timeout=args.timeout + 30)
             except queue.Empty:
                 proc.kill()
                 proc.join()
@@ -87,12 +92,14 @@ def main() -> int:
             worker[1].put(None)
             worker[0].join(timeout=10)
     wall = time.perf_counter() - t0
+    cpu = time.process_time() - c0 + sum(worker_cpu.values())
     good = sum(r[0] for r in results.values())
-    by_item = Counter(CASES[i].item for i in results)
-    good_item = Counter(CASES[i].item for i, r in results.items() if r[0])
-    print(f"\n{good} of {len(results)} cases got the promised answer ({wall:.1f} s)")
-    for item in sorted(by_item):
-        print(f"  issue item {item}: {good_item[item]} of {by_item[item]}")
+    by_item = Counter((CASES[i].issue, CASES[i].item) for i in results)
+    good_item = Counter((CASES[i].issue, CASES[i].item) for i, r in results.items() if r[0])
+    print(f"\n{good} of {len(results)} cases got the promised answer ({wall:.1f} s wall, {cpu:.1f} s CPU; "
+          f"load average {load0[0]:.2f} at the start, {os.getloadavg()[0]:.2f} at the end, {os.cpu_count()} cores)")
+    for issue, item in sorted(by_item):
+        print(f"  issue {issue} item {item}: {good_item[issue, item]} of {by_item[issue, item]}")
     bad = [(CASES[i], r) for i, r in results.items() if not r[0]]
     if bad:
         print("not yet:")

@@ -49,6 +49,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import re
 import socket
 import sys
 import threading
@@ -450,6 +451,49 @@ def local_cluster(workers: int | None = None, *, memory_limit: str | float | Non
         )
 
 
+_HOST = re.compile(r"^(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9]([A-Za-z0-9.\-_]*[A-Za-z0-9])?)$")
+
+
+def _is_ip(host) -> bool:
+    import ipaddress
+
+    try:
+        ipaddress.ip_address(str(host).strip("[]"))
+    except ValueError:
+        return False
+    return True
+
+
+def check_scheduler_address(address: str) -> None:
+    """``address`` is a scheduler address Dask can dial (``tcp://HOST:PORT``, ``tls://…``, ``inproc://…``; the
+    scheme defaults to tcp): :class:`~ringfit.errors.InputError` naming ``--scheduler`` otherwise, before any
+    connection is tried."""
+    from distributed.comm import parse_address
+    from distributed.comm.addressing import parse_host_port
+    from distributed.comm.registry import backends
+
+    from ringfit.errors import InputError
+
+    def bad(why):
+        return InputError(f"--scheduler {address!r}: {why}; expected an address such as tcp://10.0.0.5:8786")
+
+    try:
+        scheme, loc = parse_address(address)
+    except (ValueError, TypeError) as exc:
+        raise bad(_one_line(exc)) from None
+    if scheme not in backends:
+        raise bad(f"unknown protocol {scheme!r} (known: {', '.join(sorted(backends))})")
+    if scheme in ("tcp", "tls"):
+        try:
+            host, port = parse_host_port(loc, 8786)
+        except (ValueError, TypeError) as exc:
+            raise bad(_one_line(exc)) from None
+        if not (_HOST.match(host or "") or _is_ip(host)):
+            raise bad(f"{host!r} is not a host name or IP address")
+        if not 0 < int(port) < 65536:
+            raise bad(f"port {port} outside 1..65535")
+
+
 @contextlib.contextmanager
 def open_client(scheduler: str | None = None, workers: int | None = None, *, memory_limit="auto",
                 warmup: Callable[[], Any] | None = None, timeout: float = 30.0, quiet: bool = True,
@@ -472,11 +516,12 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *, mem
     distributed = import_distributed()
     cluster = None
     if scheduler:
+        check_scheduler_address(scheduler)
         check_scheduler_security(scheduler, security)
         try:
             client = distributed.Client(scheduler, timeout=timeout,
                                         **({} if security is None else {"security": security}))
-        except (OSError, ValueError) as exc:  # unreachable, refused handshake, wrong certificate
+        except (OSError, ValueError, TypeError) as exc:  # unreachable, refused handshake, wrong certificate
             raise InputError(f"cannot reach the scheduler ({_one_line(exc)})", source=scheduler) from None
     else:
         cluster = local_cluster(workers, memory_limit=memory_limit, quiet=quiet, dashboard=dashboard,

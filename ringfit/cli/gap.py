@@ -54,14 +54,7 @@ def run(args) -> int:
             load_effect_module(mod)
         except Exception as exc:  # noqa: BLE001 - report any import failure as bad input
             raise InputError(f"cannot load effect module: {exc}", source=mod) from None
-    effects = None
-    if args.effects:
-        from ringfit.gap.effects import available
-
-        effects = [e.strip() for e in args.effects.split(",") if e.strip()]
-        unknown = [e for e in effects if e not in available()]
-        if unknown:
-            raise InputError(f"unknown effect(s) {unknown}; known: {', '.join(available())}", source="--effects")
+    effects = parse_effects(args.effects)
     noise = {}
     if args.noise_freq_hz is not None:
         noise["freq_hz"] = args.noise_freq_hz
@@ -79,3 +72,22 @@ def run(args) -> int:
           + (f" (held-out shrink {v['heldout_shrink_pct']:.0f} %)" if v["effect"] not in ("none", "unexplained") else ""))
     print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
     return 0
+
+
+def parse_effects(text: str | None) -> list[str] | None:
+    """``--effects a,b`` → the names (``None`` for all registered); :class:`InputError` naming ``--effects`` for
+    an unknown or empty list. Shared by ``diagnose`` and ``campaign`` (checked before any work)."""
+    from ringfit.errors import InputError
+
+    if text is None:
+        return None
+    from ringfit.gap.effects import available
+
+    effects = [e.strip() for e in text.split(",") if e.strip()]
+    if not effects:
+        raise InputError(f"{text!r}: expected comma-separated effect names; known: {', '.join(available())}",
+                         source="--effects")
+    unknown = [e for e in effects if e not in available()]
+    if unknown:
+        raise InputError(f"unknown effect(s) {unknown}; known: {', '.join(available())}", source="--effects")
+    return effects

@@ -110,8 +110,9 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
         by_drum.setdefault(tables[ti].condition.get("drum_diameter_m"), []).append(ti)
     position = {(r["table"], r["i"]): j for j, r in enumerate(rows)}
     for drum, idx in by_drum.items():
+        # the assignment only: the diagnosis weighs the rows with its own noise model (docs/formats.md §5)
         match = match_tables([tables[ti] for ti in idx], ring, geometry, drum_diameter_m=drum,
-                             n_max=ROLLING_N_MAX, harmonics=ROLLING_HARMONICS)
+                             model_tolerance=MODEL_TOLERANCE, n_max=ROLLING_N_MAX, harmonics=ROLLING_HARMONICS)
         offset = 0
         for ti, cond in zip(idx, match.conditions):
             t = tables[ti]

@@ -281,6 +281,11 @@ def harmonic_indicators(frf: FRFEstimate, n_max: int | None = None) -> np.ndarra
     return out
 
 
+#: A peak is resolved when the line spacing is at most this share of its frequency (the ±1 % window of the
+#: per-angle peaks holds a line, and a half-power width of ζ = 0.5 % spans a line).
+RESOLVE_SHARE = 0.01
+
+
 def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = (20.0, 400.0), delay_s: float = 0.0,
               threshold: float = 0.1, min_coherence: float = 0.9, prominence_db: float = 3.0,
               indicator: str = "harmonic"):
@@ -325,13 +330,22 @@ def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = 
         if all(abs(fp - q[0]) > 0.005 * fp for q in peaks):
             peaks.append((fp, i))
     peaks.sort()
+    df = float(f[1] - f[0])
+    coarse = [fp for fp, _ in peaks if df > RESOLVE_SHARE * fp]
+    if frf.measured and coarse:
+        # a peak narrower than the line spacing: neither its frequency (to 1 %) nor its half-power width is resolved
+        raise InputError(f"--band {f_range[0]:g}:{f_range[1]:g}: the measured lines are {df:g} Hz apart, coarser than "
+                         f"{RESOLVE_SHARE:.0%} of the peak at {coarse[0]:.4g} Hz; expected a band above "
+                         f"{df / RESOLVE_SHARE:g} Hz for these lines (or FRFs with finer lines)", source=records.source)
     angle = np.repeat(np.deg2rad(frf.angle_deg), len(frf.axes))
     axis = np.tile(np.array(frf.axes, dtype=object), frf.angle_deg.size)
     w2 = (2 * np.pi * f) ** 2
     per_angle = np.sum(np.abs(frf.h1 / np.where(w2 > 0, -w2, -np.inf)) ** 2, axis=1)
     modes = []
     for fp, i in peaks:
-        win = np.abs(f - fp) <= 0.01 * fp
+        # ±1 % of the peak, and never narrower than the nearest line and its neighbours (coarse lines at low f)
+        near = int(np.argmin(np.abs(f - fp)))
+        win = (np.abs(f - fp) <= 0.01 * fp) | (np.abs(np.arange(f.size) - near) <= 1)
         local = f[win][np.argmax(per_angle[:, win], axis=1)]
         shape = quadrature_shapes(frf, fp)
         nrm = np.linalg.norm(shape)
