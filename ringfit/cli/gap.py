@@ -6,7 +6,7 @@ JSON of docs/formats.md §5; progress goes to stderr while candidates are fitted
 
 from __future__ import annotations
 
-from ringfit.cli._args import force_flag, number, quiet_flag
+from ringfit.cli._args import force_flag, integer, number, quiet_flag
 
 
 def register(subparsers) -> None:
@@ -26,6 +26,10 @@ def register(subparsers) -> None:
                    help="frequency noise σ [Hz] instead of estimating it")
     p.add_argument("--noise-profile", type=number("a noise level in m/s² > 0", lo=0.0, hi=1e8, lo_open=True),
                    help="profile noise σ [m/s²] instead of estimating it")
+    p.add_argument("--alpha", type=number("a significance level in (0, 0.5]", lo=0.0, hi=0.5, lo_open=True),
+                   default=0.01, help="an accepted effect must beat chance (its null) at this level (default 0.01)")
+    p.add_argument("--null-draws", type=integer("a count of null draws, 20 … 20000", lo=20, hi=20000),
+                   default=200, help="draws per null distribution (default 200; p is resolved to 1/(draws + 1))")
     quiet_flag(p)
     force_flag(p)
     p.set_defaults(run=run)
@@ -61,7 +65,8 @@ def run(args) -> int:
     if args.noise_profile is not None:
         noise["profile_ms2"] = args.noise_profile
     print(f"ringfit diagnose: {folder}")
-    diag = diagnose(folder, effects=effects, progress=not args.quiet, noise=noise or None)
+    diag = diagnose(folder, effects=effects, progress=not args.quiet, noise=noise or None, alpha=args.alpha,
+                    null_draws=int(args.null_draws))
     diag.write(args.out, overwrite=args.force, inputs=inputs)
     if args.report:
         from ringfit.report.gap_report import write_gap_report
@@ -70,6 +75,8 @@ def run(args) -> int:
     v = diag.verdict
     print(f"verdict: {' + '.join(v['effects'])}"
           + (f" (held-out shrink {v['heldout_shrink_pct']:.0f} %)" if v["effect"] not in ("none", "unexplained") else ""))
+    for c in v.get("calibration", []):
+        print(f"  {c['sentence']}")
     print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
     return 0
 
