@@ -7,7 +7,8 @@ Each command family lives in its own module here and adds its subcommands in
 Exit codes: 0 success, 1 the job ran but did not succeed (e.g. a fit that did
 not converge), 2 bad input (one line on stderr naming file/row/field/option;
 argparse's own errors are one line too). Warnings raised by the library go to
-stderr as one ``WARNING:`` line each. ``ringfit --help`` imports no JAX.
+stderr as one ``WARNING:`` line each. ``ringfit --help`` imports no JAX. Every command
+runs with JAX's persistent compilation cache on (:mod:`ringfit._cache`).
 """
 
 from __future__ import annotations
@@ -60,8 +61,10 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version, or a one-line usage error (status 2)
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    from ringfit._cache import enable_compilation_cache
     from ringfit.errors import InputError
 
+    enable_compilation_cache()  # every command: a second run skips XLA compilation (imports no JAX)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
