@@ -238,7 +238,10 @@ def _dense(model, data, theta0, free, prior_w, prior_mean):
     lin = jax.jit(jax.jacfwd(both, has_aux=True))
 
     def linearise(z):
-        return lin(z, data, theta0, free, prior_w, prior_mean)
+        # one tracing context for every call (optimistix's own jit regions set the, empty, abstract mesh;
+        # the solve's outer region has none), so the second and third calls reuse the first trace
+        with jax.sharding.use_abstract_mesh(jax.sharding.get_abstract_mesh()):
+            return lin(z, data, theta0, free, prior_w, prior_mean)
 
     @jax.custom_jvp
     def fn(z):
