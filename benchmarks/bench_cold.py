@@ -48,10 +48,11 @@ import functools, json, time
 t0 = time.perf_counter()
 from ringfit.batch import open_client
 from ringfit.cli.batch import warm_up
-with open_client(workers=1, warmup=functools.partial(warm_up, ("fit",))) as client:
-    client.submit(sum, [1, 2]).result()
-    ready = time.perf_counter() - t0
-print(json.dumps({"ready_s": ready}))
+if __name__ == "__main__":  # worker processes are spawned: they must not run this again
+    with open_client(workers=1, warmup=functools.partial(warm_up, ("fit",))) as client:
+        client.submit(sum, [1, 2]).result()
+        ready = time.perf_counter() - t0
+    print(json.dumps({"ready_s": ready}))
 """
 
 #: The split of one diagnosis in-process: imports, tracing, lowering, compilation, the rest (CPU seconds).
