@@ -21,6 +21,7 @@ against the 0.13 % put into the rolling tables, so the remaining noise reads as 
 
 from __future__ import annotations
 
+import statistics
 import sys
 import tempfile
 from pathlib import Path
@@ -86,8 +87,8 @@ def main(argv) -> int:
     m = len(times)
     print(f"verdicts right: {right}/{m} (target: all)")
     print(f"held-out shrink − ideal: worst {max(errors, key=abs):+.1f} points (target within ±10)")
-    w, c = sorted(bc.walls(times)), sorted(bc.cpus(times))
-    print(f"time per case: median {w[m // 2]:.1f} s wall, {c[m // 2]:.1f} s CPU; first (with compilation) "
+    w, c = statistics.median(bc.walls(times)), statistics.median(bc.cpus(times))
+    print(f"time per case: median {w:.1f} s wall, {c:.1f} s CPU; first (with compilation) "
           f"{times[0].wall:.1f} s wall, {times[0].cpu:.1f} s CPU")
     bc.finish()
     return 0 if right == m else 1
