@@ -313,7 +313,7 @@ def _table_rows(tables, geometry, patches, spins):
                 damping_std=damping_std[ti][i],
                 reference=ti == 0, a=int(t.a[i]), joint=0.0, mode_index=0, line_k=0.0, wave="",
             ))
-    return rows, (cavity[0] if cavity else float(cavity_frequency(1)))
+    return rows, (cavity[0] if cavity else float(jax.jit(cavity_frequency)(1.0)))  # one program, not two eager ops
 
 
 def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=None) -> ModalRows:
@@ -363,8 +363,10 @@ def _match_missing_n(rows, ring, geometry):
     from ringfit.physics.natural import fixed_frame_frequencies, natural_frequencies, rotating_natural_frequencies
 
     notes = {}
+    if all(r["n"] >= 0 for r in rows):  # nothing to match: no model evaluated (a cold process compiles nothing)
+        return notes
     n_all = np.arange(1, MATCH_N_MAX + 1, dtype=float)
-    free = np.asarray(natural_frequencies(ring, geometry, n_all))
+    free = np.asarray(jax.jit(natural_frequencies)(ring, geometry, n_all))  # one program, not one per eager op
     for j, r in enumerate(rows):
         if r["n"] >= 0:
             continue
