@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import ringfit  # noqa: F401  (float64)
-from ringfit.fit.engine import AbstractResiduals, Coordinate, LINEAR, Problem, least_squares
+from ringfit.fit.engine import AbstractResiduals, Coordinate, LINEAR, Problem, least_squares, least_squares_batch
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -61,6 +61,21 @@ def test_the_model_is_traced_once_per_solve():
     # a second solve of the same structure traces nothing
     least_squares(problem, np.array([1.0, 0.0]), ("a", "b"))
     assert CALLS["n"] == 1
+
+
+@pytest.mark.parametrize("warm_start", [False, True])  # vmapped fits, and fits chained by lax.scan
+def test_batched_and_chained_solves_trace_the_model_once(warm_start):
+    x = np.linspace(0.0, 2.0, 11)
+    sigma = np.full(x.size, 0.01)
+    truth = np.array([[0.3, 1.7], [-1.0, 0.5], [2.0, -1.0]])
+    ys = truth[:, :1] + truth[:, 1:] * x  # exact lines: the fit must return them
+    problem = Problem(_CountingLine(), (x, ys[0], sigma), (Coordinate("a", LINEAR), Coordinate("b", LINEAR)))
+    CALLS["n"] = 0
+    batch = least_squares_batch(problem, np.array([0.0, 1.0]), ("a", "b"),
+                                (np.tile(x, (3, 1)), ys, np.tile(sigma, (3, 1))), warm_start=warm_start)
+    assert CALLS["n"] == 1
+    assert list(batch.status) == ["converged"] * 3
+    np.testing.assert_allclose(np.asarray(batch.theta), truth, rtol=1e-9, atol=1e-9)
 
 
 def _run(code: str, env: dict, cwd=None) -> subprocess.CompletedProcess:

@@ -224,11 +224,10 @@ def _dense(model, data, theta0, free, prior_w, prior_mean):
     forward-mode pass, and ``linearise(z) -> (jacobian, (residuals, aux))``, that pass.
 
     The model is traced once per solve: ``linearise`` is one inner ``jax.jit`` (primal, aux and k
-    tangents) that the primal of ``fn``, its JVP rule and the start's column norms all call (a
-    second call with the same shapes reuses the first trace, and the program holds one copy of it);
-    the solver's further Jacobian products are small matrix products. ``aux`` carries no tangent.
-    The primal calls the linearisation too, but it is only traced (for shapes) and never run: every
-    solver step linearises.
+    tangents) that the primal of ``fn``, its JVP rule and the start's column norms all call (the
+    second and third calls, with the same shapes, reuse the first trace); the solver's further
+    Jacobian products are small matrix products. ``aux`` carries no tangent. The primal calls the
+    linearisation too: optimistix traces it for shapes only, since every solver step linearises.
     """
 
     def both(z, data, theta0, free, prior_w, prior_mean):
