@@ -194,7 +194,9 @@ def main(argv=None) -> int:
                  "ringfit diagnose, empty cache": "diagnose_empty", "ringfit demo, empty cache": "demo"}
     for name, s in samples.items():
         key = target_of.get(name)
-        print(bc.row(name, s, f"(target < {TARGETS[key]:g} s)" if key else "(yardstick)"))
+        note = (f"(target < {TARGETS[key]:g} s)" if key else
+                "(to the cluster's close)" if name.startswith("batch") else "(yardstick)")
+        print(bc.row(name, s, note))
     if batch:
         ready = [getattr(s, "wall_ready", float("nan")) for s in samples["batch worker ready (1 worker, fit warm-up)"]]
         print(f"  {'  of which: start to first result':<44} wall {bc.span(ready):>20} s   "
