@@ -124,7 +124,8 @@ class TaskResult:
     - ``status``: exit status, 0 ok, 1 failed, 2 bad input.
     - ``error``: one line, empty when ok; ``log``: the task's stdout and stderr.
     - ``value``: what the callable returned.
-    - ``elapsed_s`` [s]: wall time of the callable on the worker;
+    - ``elapsed_s`` [s]: wall time of the callable on the worker; ``cpu_s`` [s]: the worker
+      process's CPU time meanwhile (``time.process_time``; on a shared machine the figure to compare);
       ``started_at`` [s]: when it started (``time.time()`` of the worker).
     - ``rss_start_mb``, ``peak_rss_mb``, ``peak_delta_mb`` [MiB]: resident
       memory of the worker process when the task started, its peak during the
@@ -143,6 +144,7 @@ class TaskResult:
     value: Any = None
     log: str = ""
     elapsed_s: float = 0.0
+    cpu_s: float = 0.0
     started_at: float = float("nan")
     rss_start_mb: float = float("nan")
     peak_rss_mb: float = float("nan")
@@ -283,7 +285,7 @@ def execute(name: str, fn: Callable, args: tuple = (), outputs: tuple = (), kind
         result = TaskResult(name, outputs=tuple(outputs), worker=f"{socket.gethostname()}:{os.getpid()}",
                             task_index=_TASKS_RUN, kind=kind, kind_index=_KINDS_RUN.get(kind, 0))
         result.started_at = time.time()
-        t0 = time.perf_counter()
+        t0, p0 = time.perf_counter(), time.process_time()
         with _PeakMemory() as mem, contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
             try:
                 result.value = fn(*args)
@@ -298,6 +300,7 @@ def execute(name: str, fn: Callable, args: tuple = (), outputs: tuple = (), kind
                 result.state, result.status = "failed", 1
                 result.error = _one_line(f"{type(exc).__name__}: {exc}")
         result.elapsed_s = time.perf_counter() - t0
+        result.cpu_s = time.process_time() - p0
         result.rss_start_mb, result.peak_rss_mb = mem.start, mem.peak
         result.peak_delta_mb = mem.peak - mem.start
         result.compiles = _JaxCompiles.count - c0
@@ -689,7 +692,7 @@ def summarize(results: Sequence[TaskResult], wall_s: float | None = None) -> dic
     """Figures over a run: counts by state, task time, memory, compilations on warm tasks, overhead.
 
     **Returns:** dict with ``tasks``, ``by_state`` (state → count), ``task_s``
-    (sum of task wall times) [s], ``median_task_s`` [s], ``max_peak_delta_mb`` and
+    (sum of task wall times) [s], ``cpu_s`` (sum of their CPU times) [s], ``median_task_s`` [s], ``max_peak_delta_mb`` and
     ``max_peak_rss_mb`` [MiB] over tasks, ``workers`` (distinct processes),
     ``warm_compiles`` (compilations in tasks that were not the first of their
     kind on their worker; a new input shape compiles again), ``gap_s`` [s]:
@@ -712,7 +715,7 @@ def summarize(results: Sequence[TaskResult], wall_s: float | None = None) -> dic
     for rs in per_worker.values():
         rs = sorted(rs, key=lambda r: r.started_at)
         gaps += [b.started_at - (a.started_at + a.elapsed_s) for a, b in zip(rs, rs[1:])]
-    out = dict(tasks=len(results), by_state=by_state, task_s=task_s,
+    out = dict(tasks=len(results), by_state=by_state, task_s=task_s, cpu_s=float(sum(r.cpu_s for r in ran)),
                median_task_s=float(np.median([r.elapsed_s for r in ran])) if ran else float("nan"),
                max_peak_delta_mb=max((r.peak_delta_mb for r in ran), default=float("nan")),
                max_peak_rss_mb=max((r.peak_rss_mb for r in ran), default=float("nan")),

@@ -8,7 +8,8 @@ Exit codes: 0 success, 1 the job ran but did not succeed (e.g. a fit that did
 not converge), 2 bad input (one line on stderr naming file/row/field/option;
 argparse's own errors are one line too). Warnings raised by the library go to
 stderr as one ``WARNING:`` line each. ``ringfit --help`` imports no JAX. A
-command's output files appear together when it succeeds, or none does.
+command's output files appear together when it succeeds, or none does. Every command
+runs with JAX's persistent compilation cache on (:mod:`ringfit._cache`).
 """
 
 from __future__ import annotations
@@ -68,9 +69,11 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version, or a one-line usage error (status 2)
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    from ringfit._cache import enable_compilation_cache
     from ringfit.errors import InputError
     from ringfit.io.files import outputs_committed_together
 
+    enable_compilation_cache()  # every command: a second run skips XLA compilation (imports no JAX)
     together = outputs_committed_together() if args.command not in WRITES_AS_IT_GOES else contextlib.nullcontext()
     try:
         with warnings.catch_warnings(record=True) as caught:

@@ -98,9 +98,6 @@ def matched_path(out: Path) -> Path:
 
 
 def run_campbell(args) -> int:
-    from ringfit._cache import enable_compilation_cache
-
-    enable_compilation_cache()
     from ringfit.cli import CommandFailed
     from ringfit.io.files import atomic_write_text, check_output_paths, csv_text
     from ringfit.io.modes import sidecar_path

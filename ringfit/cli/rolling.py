@@ -74,9 +74,6 @@ def register(sub) -> None:
 
 
 def run_roll(args) -> int:
-    from ringfit._cache import enable_compilation_cache
-
-    enable_compilation_cache()  # a second run skips XLA compilation
     from ringfit.errors import InputError
     from ringfit.io.files import check_output_paths
     from ringfit.io.profiles import sidecar_path
@@ -123,9 +120,6 @@ def run_roll(args) -> int:
 
 
 def run_fit_rolling(args) -> int:
-    from ringfit._cache import enable_compilation_cache
-
-    enable_compilation_cache()  # a second run skips XLA compilation
     from ringfit.cli import CommandFailed
     from ringfit.errors import InputError
     from ringfit.io.files import check_output_paths
