@@ -363,7 +363,7 @@ def _calibrate(problem, part, chain, current, remaining, entries, alpha, draws, 
         if not c["accepted"] or c["element"] not in elements:
             continue
         el = c["element"]
-        worst = max(nulls, key=lambda n: n.p[el])
+        worst = max(nulls, key=lambda n: (n.p[el], n.kind.startswith("random-line")))
         c["p_value"] = round(worst.p[el], 5)
         c["null"] = {("random_line" if n.kind.startswith("random-line") else "parametric"): n.summary(el)
                      for n in nulls}
