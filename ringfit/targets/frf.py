@@ -283,7 +283,7 @@ def harmonic_indicators(frf: FRFEstimate, n_max: int | None = None) -> np.ndarra
 
 def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = (20.0, 400.0), delay_s: float = 0.0,
               threshold: float = 0.1, min_coherence: float = 0.9, prominence_db: float = 3.0,
-              indicator: str = "harmonic"):
+              indicator: str = "harmonic", cavity_hz: float | None = None):
     """Peak picking on H1 (seed §2.2–2.3) → :class:`~ringfit.targets.identify.ModeIdentification`.
 
     ``indicator="sum"`` picks peaks on the summed receptance power (the
@@ -297,6 +297,7 @@ def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = 
 
     ``records`` may be time records (H1 is estimated here) or FRFs measured
     by other software (:class:`~ringfit.io.records.MeasuredFRF`, used as they are).
+    ``cavity_hz``: the cavity frequency of eq. 22 (see :func:`~ringfit.targets.identify.classify_rows`).
     """
     from ringfit.targets.clustering import PhysicalMode
     from ringfit.targets.identify import ModeIdentification, mode_table, note_quality
@@ -343,7 +344,7 @@ def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = 
             damping=zeta, damping_std=float("nan"), split_hz=0.0,
             basis=shape[:, None].astype(complex), shape=shape.astype(complex), pole_index=np.zeros(0, int), n_orders=0,
         ))
-    table, modes = mode_table(modes, angle, axis, f"frf-peak-picking-{indicator}")
+    table, modes = mode_table(modes, angle, axis, f"frf-peak-picking-{indicator}", cavity_hz=cavity_hz)
     limits = []
     if not (table.kind == "acoustic").any():
         limits.append("no acoustic (cavity) row: peak picking finds an acoustic mode only where its peak stands out "

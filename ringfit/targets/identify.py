@@ -149,20 +149,68 @@ def prepare_decays(records: Records, **kwargs) -> tuple[np.ndarray, np.ndarray, 
     return d.y, d.angle_rad, d.axis, d.fs_hz
 
 
+#: Relative tolerance around the cavity frequency of eq. 22 (docs/physics.md §3.6) within which a non-ring-like
+#: row may be the cavity: the speed of sound moves ±3.5 % over 0–40 °C and the effective cavity length of a
+#: tyre differs from the geometry's by a few percent (the thesis measured 227.0 Hz against 218.75 Hz, +3.8 %).
+CAVITY_TOL = 0.08
+#: Least share of the shape's power in harmonic n = 1 for a cavity row (the tread sensor sees the cavity's
+#: pressure drive the ring's rigid n = 1 motion).
+CAVITY_MIN_CONFIDENCE = 0.5
+
+
+def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, not_ring: np.ndarray,
+                  cavity_hz: float | None, tol: float = CAVITY_TOL) -> tuple[np.ndarray, np.ndarray]:
+    """``structural``, ``acoustic`` or ``unclassified`` for each row, and the reason of each unclassified one.
+
+    A row that is ring-like (``not_ring`` False) is ``structural``. A row that is not is ``acoustic`` only with
+    evidence: its frequency within ``tol`` of the cavity frequency ``cavity_hz`` (eq. 22, docs/physics.md §3.6)
+    AND an n = 1-like shape (dominant harmonic 1 holding at least :data:`CAVITY_MIN_CONFIDENCE` of the power);
+    otherwise it is ``unclassified`` and the reason says which evidence is missing.
+
+    **Returns:** ``(kind, reason)``, object arrays (rows,); reason ``""`` for classified rows.
+    """
+    kind = np.where(not_ring, "unclassified", "structural").astype(object)
+    reason = np.full(len(kind), "", dtype=object)
+    for i in np.flatnonzero(not_ring):
+        shape = (f"dominant harmonic n = {int(n[i])} with {100 * confidence[i]:.0f} % of the shape's power"
+                 if confidence[i] >= CAVITY_MIN_CONFIDENCE else
+                 f"no dominant harmonic (n = {int(n[i])} holds only {100 * confidence[i]:.0f} % of the power)")
+        why = ["not ring-like (" + (shape if confidence[i] < CAVITY_MIN_CONFIDENCE else
+                                    f"n = {int(n[i])} out of the ring's order of frequencies") + ")"]
+        if cavity_hz is None or not np.isfinite(cavity_hz):
+            why.append("no cavity frequency given to compare with")
+        else:
+            off = freq_hz[i] / cavity_hz - 1
+            near = abs(off) <= tol
+            one = int(n[i]) == 1 and confidence[i] >= CAVITY_MIN_CONFIDENCE
+            if near and one:
+                kind[i] = "acoustic"
+                continue
+            if not near:
+                why.append(f"not the cavity: {100 * off:+.0f} % from eq. 22's {cavity_hz:.2f} Hz "
+                           f"(tolerance ±{100 * tol:g} %)")
+            if not one:
+                why.append(f"not the cavity's n = 1 pattern ({shape})")
+        reason[i] = "; ".join(why)
+    return kind, reason
+
+
 def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.ndarray, method: str,
                *, min_confidence: float = 0.5, poles: PoleSet | None = None,
-               spurious_damping_factor: float = 1.5) -> tuple[ModeTable, list]:
-    """A :class:`ModeTable` (docs/formats.md §2) from physical modes: n from the shapes, acoustic flag, extras.
+               spurious_damping_factor: float = 1.5, cavity_hz: float | None = None) -> tuple[ModeTable, list]:
+    """A :class:`ModeTable` (docs/formats.md §2) from physical modes: n from the shapes, kind, extras.
 
     With ``poles`` (SSI), modes with the same n within 1 % are first merged
     as the two halves of a double pole (:func:`~ringfit.targets.clustering.merge_pairs`).
     Modes that are not ring-like (:func:`~ringfit.targets.shapes.acoustic_candidates`)
-    are acoustic candidates when they are lighter damped than
-    ``spurious_damping_factor`` × the median structural damping (air modes
-    are lighter damped than the rubber, seed §5.1); the others are dropped as
-    mathematical (spurious) modes.
+    are kept when they are lighter damped than ``spurious_damping_factor`` ×
+    the median structural damping (air modes are lighter damped than the
+    rubber, seed §5.1); the others are dropped as mathematical (spurious)
+    modes. A kept one is ``acoustic`` only with evidence, else
+    ``unclassified`` with the reason (:func:`classify_rows`; ``cavity_hz``
+    the cavity frequency of eq. 22 for the tyre, None: nothing is called acoustic).
 
-    Extra columns: ``n_confidence``, ``split_hz``, ``travelling``, ``damping_std_pct``.
+    Extra columns: ``n_confidence``, ``split_hz``, ``travelling``, ``damping_std_pct``, ``reason``.
 
     **Returns:** ``(table, modes)`` with ``modes`` in table order.
     """
@@ -187,16 +235,17 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     conf = np.array(conf)
     freq = np.array([m.freq_hz for m in modes])
     damping = np.array([m.damping for m in modes])
-    acoustic = acoustic_candidates(n, conf, freq, min_confidence)
-    ref = np.nanmedian(damping[~acoustic]) if (~acoustic).any() else np.inf
-    keep = ~acoustic | ~(damping > spurious_damping_factor * ref)
+    not_ring = acoustic_candidates(n, conf, freq, min_confidence)
+    ref = np.nanmedian(damping[~not_ring]) if (~not_ring).any() else np.inf
+    keep = ~not_ring | ~(damping > spurious_damping_factor * ref)
     idx = np.flatnonzero(keep)
     modes = [modes[i] for i in idx]
+    kind, reason = classify_rows(n[idx], conf[idx], freq[idx], not_ring[idx], cavity_hz)
     fmt = lambda x: f"{x:.6g}" if np.isfinite(x) else ""  # noqa: E731  (empty: unknown)
     table = ModeTable(
         freq_hz=freq[idx],
-        n=np.where(acoustic[idx], -1, n[idx]),
-        kind=np.where(acoustic[idx], "acoustic", "structural").astype(object),
+        n=np.where(not_ring[idx], -1, n[idx]),
+        kind=kind,
         freq_std_hz=np.array([m.freq_std_hz for m in modes]),
         damping_pct=100 * damping[idx],
         extra={
@@ -204,9 +253,12 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
             "split_hz": np.array([fmt(m.split_hz) for m in modes], dtype=object),
             "travelling": np.array([fmt(trav[i]) for i in idx], dtype=object),
             "damping_std_pct": np.array([fmt(100 * m.damping_std) for m in modes], dtype=object),
+            "reason": reason,
         },
         condition={"state": "free", "frame": "fixed", "method": method},
     )
+    if cavity_hz is not None and np.isfinite(cavity_hz):
+        table.condition["cavity_hz"] = float(cavity_hz)
     return table, modes
 
 
@@ -223,10 +275,11 @@ def ssi_modes(
     radius_m: float | None = None,
     refs: np.ndarray | None = None,
     pair_aware: bool = True,
-    min_share: float = 0.3,
+    min_share: float = 0.5,
     jackknife: bool = True,
     progress: bool = False,
     workers: int | None = None,
+    cavity_hz: float | None = None,
 ) -> ModeIdentification:
     """The source's SSI chain on impact records, with pair-aware stabilization and clustering.
 
@@ -238,7 +291,9 @@ def ssi_modes(
     ``False``: σ = the spread over the model orders, said so in the method;
     ``workers`` threads for the SVD products, the order sweep and the
     jackknife's replicates (default: the usable CPUs, see
-    :func:`ringfit.targets.ssi.default_workers`).
+    :func:`ringfit.targets.ssi.default_workers`); ``cavity_hz`` the cavity
+    frequency of eq. 22 for the tyre (a non-ring-like row is ``acoustic`` only
+    near it, :func:`classify_rows`; None: such rows are ``unclassified``).
 
     **Returns:** :class:`ModeIdentification` (``table`` is the mode table).
     """
@@ -250,7 +305,7 @@ def ssi_modes(
                                      progress=progress, workers=workers)
     stab = stabilization_diagram(poles, pair_aware=pair_aware)
     modes = cluster_modes(poles, stab, f_range=f_range, min_share=min_share)
-    table, modes = mode_table(modes, angle, axis, "ssi-cov", poles=poles)
+    table, modes = mode_table(modes, angle, axis, "ssi-cov", poles=poles, cavity_hz=cavity_hz)
     note_quality(table, d.notes, d.credible)
     unc = jackknife_modes(factors, poles, modes, angle_groups(angle)[0] if jackknife else np.zeros(0),
                           workers=default_workers() if workers is None else workers)
