@@ -35,7 +35,9 @@ def _check_table(table, modes, damping_tol=0.15):
 def test_ssi_recovers_modes_and_flags_cavity(truth, records):
     from ringfit.targets.identify import ssi_modes
 
-    res = ssi_modes(records, delay_s=0.4e-3)
+    from ringfit.physics.natural import cavity_frequency
+
+    res = ssi_modes(records, delay_s=0.4e-3, cavity_hz=float(cavity_frequency(1)))
     _check_table(res.table, truth[2])
     cav = truth[2].freq_hz[truth[2].kind == "acoustic"][0]
     ac = np.flatnonzero(res.table.kind == "acoustic")

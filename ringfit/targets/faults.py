@@ -12,9 +12,11 @@ one-line note for the sidecar's ``preprocessing`` list and a warning:
 - **clipped**: flat tops at the range — the channel's largest (or smallest)
   value held for :data:`CLIP_RUN` samples or more, or reached again in a
   second run of two or more (an unclipped decay touches its extreme once);
-- **spikes**: the robust z of the derivative, ``z = (Δx − med) / (1.4826 ·
-  MAD)`` with median and MAD over a running window of
-  :data:`SPIKE_WINDOW` samples, beyond :data:`SPIKE_Z` one way and then back
+- **spikes**: the robust z of the derivative, ``z = (Δx − med Δx) / (1.4826 ·
+  MAD Δ²x)`` with medians over a running window of :data:`SPIKE_WINDOW`
+  samples (the scale from the second difference: on a densely sampled decay
+  the derivative is a ramp over the window and its own MAD falls far below
+  its noise), beyond :data:`SPIKE_Z` one way and then back
   the other way within :data:`SPIKE_WIDTH` samples; the hammer impact
   itself (from :data:`IMPACT_GUARD_S` before to the SSI's skip after) is
   not searched;
@@ -22,7 +24,7 @@ one-line note for the sidecar's ``preprocessing`` list and a warning:
   :data:`HUM_RATIO` × above the local spectrum of the late half of the
   record (after the decay) and keeps its amplitude over that half (the
   ratio of its two quarters within 1/:data:`HUM_STEADY`…:data:`HUM_STEADY`;
-  a mode's tail decays). It is notched: the channel's steady tone, fitted
+  a mode's tail decays) and reaching :data:`HUM_SHARE` of that half's rms. It is notched: the channel's steady tone, fitted
   there (frequency refined, amplitude and phase by least squares), is
   subtracted from the whole record;
 - **sign-flipped**: a repeat whose response (from the impact on,
@@ -64,6 +66,8 @@ MAINS_TOL = 0.004
 HUM_RATIO = 50.0
 #: A hum line keeps its amplitude over the late half within this factor.
 HUM_STEADY = 1.6
+#: A hum line's amplitude is at least this share of the rms of the late half (weaker lines do not matter).
+HUM_SHARE = 0.2
 #: Correlation below which two repeats of one angle disagree in sign.
 FLIP_CORR = -0.5
 #: Window after the impact [s] over which repeats are compared.
@@ -129,7 +133,10 @@ def spike_segments(x: np.ndarray, exclude: tuple[int, int] = (0, 0)) -> list[tup
     if d.size < SPIKE_WINDOW:
         return []
     med = median_filter(d, size=SPIKE_WINDOW, mode="nearest")
-    dev = np.abs(d - med)
+    # the scale from the second difference: on a densely sampled decay the derivative is a ramp over the
+    # window, whose running median follows it so closely that the derivative's own MAD is far below its noise
+    dd = np.diff(d, prepend=d[0])
+    dev = np.abs(dd - median_filter(dd, size=SPIKE_WINDOW, mode="nearest"))
     scale = 1.4826 * median_filter(dev, size=SPIKE_WINDOW, mode="nearest")
     floor = 1.4826 * float(np.median(dev)) * 0.1 + np.finfo(float).tiny
     z = (d - med) / np.maximum(scale, floor)
@@ -189,13 +196,15 @@ def hum_lines(x: np.ndarray, fs_hz: float, start: int, f_top_hz: float) -> list[
             picked.append((float(f[k]), fh))
     if not picked:
         return []
-    fr = _refine(late, t, np.array([g for g, _ in picked]), fs_hz / n)
+    fr = np.array([_refine(late, t, g, fs_hz / nfft) for g, _ in picked])
     half = n // 2
     a1 = np.hypot(*_tones(late[:half], t[:half], fr)[:, :2].T)
     a2 = np.hypot(*_tones(late[half:], t[half:], fr)[:, :2].T)
+    late_rms = float(np.std(late))
     keep = [i for i, (g, fh) in enumerate(picked)
             if abs(fr[i] - fh) <= MAINS_TOL * fh + 0.5 * fs_hz / n  # else slid off: leakage of a stronger line
-            and 1 / HUM_STEADY <= a1[i] / max(a2[i], np.finfo(float).tiny) <= HUM_STEADY]  # a mode's tail decays
+            and 1 / HUM_STEADY <= a1[i] / max(a2[i], np.finfo(float).tiny) <= HUM_STEADY  # a mode's tail decays
+            and 0.5 * (a1[i] + a2[i]) >= HUM_SHARE * late_rms]  # a visible share of what the decay leaves
     if not keep:
         return []
     fr = fr[keep]
@@ -212,20 +221,16 @@ def _tones(x: np.ndarray, t: np.ndarray, f_hz: np.ndarray) -> np.ndarray:
     return np.stack([c[:k], c[k:2 * k]], axis=1)
 
 
-def _refine(x: np.ndarray, t: np.ndarray, f0: np.ndarray, df: float) -> np.ndarray:
-    """Tone frequencies [Hz] that minimise the least-squares residual of x(t) (variable projection), from ``f0``
-    within ±``df``."""
-    from scipy.optimize import least_squares
-
-    tc = t - t.mean()
-
-    def resid(f):
-        w = 2 * np.pi * f[None, :] * tc[:, None]
-        design = np.concatenate([np.cos(w), np.sin(w), np.ones((tc.size, 1))], axis=1)
-        return x - design @ np.linalg.lstsq(design, x, rcond=None)[0]
-
-    sol = least_squares(resid, f0, bounds=(f0 - df, f0 + df), x_scale=df * 0.1)
-    return sol.x
+def _refine(x: np.ndarray, t: np.ndarray, f0: float, df: float) -> float:
+    """The frequency [Hz] of a line near ``f0``: the peak of the Hann-windowed spectrum of x(t) on a grid of
+    ``df``/20 over ±``df``, refined by a parabola through the top three points of its log."""
+    grid = f0 + df * np.linspace(-1.0, 1.0, 41)
+    xw = (x - x.mean()) * np.hanning(x.size)
+    p = np.log(np.abs(np.exp(-2j * np.pi * grid[:, None] * t[None, :]) @ xw) ** 2 + np.finfo(float).tiny)
+    k = int(np.clip(np.argmax(p), 1, grid.size - 2))
+    a, b, c = p[k - 1], p[k], p[k + 1]
+    den = a - 2 * b + c
+    return float(grid[k] + (0.5 * (a - c) / den if den < 0 else 0.0) * (grid[1] - grid[0]))
 
 
 def _nominal(f_hz: float) -> float:
