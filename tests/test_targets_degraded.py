@@ -221,3 +221,39 @@ def test_cli_ssi_warns_of_a_dead_channel_and_records_it(tmp_path, capsys, clean)
     err = capsys.readouterr().err
     assert any(line.startswith("WARNING:") and "dead" in line for line in err.splitlines()), err
     assert any("dead" in note for note in read_mode_table(out).condition["preprocessing"])
+
+
+def _turning(fs_hz, rotation_hz, seconds=0.5, condition=None):
+    from ringfit.io.continuous import ContinuousRecord
+
+    t = np.arange(int(seconds * 6400.0)) / 6400.0  # really sampled at 6.4 kHz
+    rng = np.random.default_rng(0)
+    return ContinuousRecord(acc=rng.standard_normal((1, t.size)), axes=("radial",), fs_hz=fs_hz,
+                            encoder_angle_deg=360.0 * rotation_hz * t - 180.0, condition=condition or {})
+
+
+@pytest.mark.parametrize("fs_hz, condition, warned", [
+    (6400.0, {"rotation_hz": 10.0, "speed_kmh": 20.0}, False),
+    (12800.0, {"rotation_hz": 10.0}, True),  # a stated rate twice the true one doubles the encoder's rate
+    (6400.0, {"speed_kmh": 20.0}, False),  # 3 rev/s at 20 km/h: R = 5.56/(2π·3) = 0.295 m
+    (64000.0, {"speed_kmh": 20.0}, True),  # fs stated 10× too high: 30 rev/s, R = 0.029 m
+])
+def test_sample_rate_contradicting_the_encoder_is_warned(fs_hz, condition, warned):
+    from ringfit.targets.rolling_profile import rolling_profile
+
+    rec = _turning(fs_hz, 10.0 if "rotation_hz" in condition else 3.0, seconds=1.0, condition=condition)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rolling_profile(rec, points=16)
+    said = [str(w.message) for w in caught if "contradicts the encoder" in str(w.message)]
+    assert bool(said) == warned, said
+
+
+def test_sample_rate_note_against_speed():
+    from ringfit.targets.faults import sample_rate_note
+
+    # 3 rev/s at 20 km/h: R = (20/3.6)/(2π·3) = 0.295 m, a tyre; fs stated 10× too high: 30 rev/s, R = 0.029 m
+    assert sample_rate_note(3.0, 6400.0, {"speed_kmh": 20.0}) is None
+    note = sample_rate_note(30.0, 64000.0, {"speed_kmh": 20.0})
+    assert note and "rolling radius of 0.0295 m" in note
+    assert "they agree at 6400 Hz" in sample_rate_note(20.0, 12800.0, {"rotation_hz": 10.0})

@@ -400,3 +400,39 @@ def on_notched_line(freq_hz: float, lines_hz, duration_s: float) -> float | None
         if abs(freq_hz - line) <= max(0.005 * line, 1.0 / duration_s):
             return float(line)
     return None
+
+
+#: Rolling radii [m] a road tyre can have: an encoder rate that implies another contradicts the sampling rate.
+ROLLING_RADIUS_M = (0.15, 0.75)
+#: Relative disagreement between the encoder's rotation rate and the stated one that is called a contradiction.
+RATE_TOL = 0.02
+
+
+def sample_rate_note(rotation_hz: float, fs_hz: float, condition: dict) -> str | None:
+    """A one-line note when the sampling rate contradicts the encoder, else None.
+
+    ``rotation_hz`` is the encoder's revolutions divided by the recording's length at ``fs_hz``. With a stated
+    ``rotation_hz`` in ``condition`` (the rig's own tachometer) the two must agree within :data:`RATE_TOL`;
+    with only ``speed_kmh`` the rolling radius ``V / (2π·rotation_hz)`` they imply must lie in
+    :data:`ROLLING_RADIUS_M`. A wrong ``fs_hz`` scales the encoder's rate by the same factor as every
+    frequency found in the recording, so it is worth a warning before anything is identified.
+    """
+    if not (np.isfinite(rotation_hz) and rotation_hz > 0):
+        return None
+    stated = float(condition.get("rotation_hz") or 0.0)
+    if stated > 0:
+        ratio = rotation_hz / stated
+        if abs(ratio - 1) > RATE_TOL:
+            return (f"the encoder turns {rotation_hz:.4g} times a second at the stated sampling rate {fs_hz:g} Hz, "
+                    f"but the recording states rotation_hz = {stated:g}: the sampling rate contradicts the encoder "
+                    f"(they agree at {fs_hz / ratio:.6g} Hz); every frequency found is off by {ratio:.4g}×")
+        return None
+    speed = float(condition.get("speed_kmh") or 0.0)
+    if speed > 0:
+        radius = speed / 3.6 / (2 * np.pi * rotation_hz)
+        lo, hi = ROLLING_RADIUS_M
+        if not lo <= radius <= hi:
+            return (f"the encoder turns {rotation_hz:.4g} times a second at the stated sampling rate {fs_hz:g} Hz, "
+                    f"which at speed_kmh = {speed:g} means a rolling radius of {radius:.3g} m (a tyre has "
+                    f"{lo:g}–{hi:g} m): the sampling rate (or the speed) contradicts the encoder")
+    return None
