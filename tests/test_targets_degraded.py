@@ -43,7 +43,7 @@ def _identify(method, rec):
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res = (ssi_modes(rec, f_range=BAND, orders=range(2, 81, 2), workers=1, cavity_hz=CAVITY)
+        res = (ssi_modes(rec, f_range=BAND, orders=range(2, 61, 2), workers=1, cavity_hz=CAVITY)
                if method == "ssi" else frf_modes(rec, f_range=BAND, cavity_hz=CAVITY))
     return res.table, [str(w.message) for w in caught]
 
