@@ -257,3 +257,24 @@ def test_sample_rate_note_against_speed():
     note = sample_rate_note(30.0, 64000.0, {"speed_kmh": 20.0})
     assert note and "rolling radius of 0.0295 m" in note
     assert "they agree at 6400 Hz" in sample_rate_note(20.0, 12800.0, {"rotation_hz": 10.0})
+
+
+def test_clipping_within_the_skip_is_said_and_kept():
+    """Clipped only in the first milliseconds after the impact: SSI never reads those samples."""
+    from dataclasses import replace
+
+    _, rec = _records(n_values=range(1, 5))
+    acc = rec.acc.copy()
+    idx = impact_estimate(acc, rec.force)
+    i, j = 3, 0
+    seg = acc[i, j, idx[i]:idx[i] + 16]  # 5 ms at 3.2 kHz, well inside the 12.7 ms skip
+    lim = 0.7 * np.abs(seg).max()
+    acc[i, j, idx[i]:idx[i] + 16] = np.clip(seg, -lim, lim)
+    acc[i, j] = np.clip(acc[i, j], -np.abs(acc[i, j]).max(), np.abs(acc[i, j]).max())
+    rec = replace(rec, acc=acc)
+    base, _ = remove_offsets(rec.acc, idx)
+    ssi_like = find_faults(base, rec.sensor_angle_deg, rec.axes, rec.fs_hz, idx, used_from_s=0.0127)
+    frf_like = find_faults(base, rec.sensor_angle_deg, rec.axes, rec.fs_hz, idx, used_from_s=0.0)
+    if clip_runs(base[i, j])[0] >= 3:  # the clip made a flat top (it does unless the peak was a lone sample)
+        assert ssi_like.reason[i, j] == "" and any("before the samples used" in n for n in ssi_like.notes)
+        assert frf_like.reason[i, j] == "clipped"

@@ -12,6 +12,8 @@ one-line note for the sidecar's ``preprocessing`` list and a warning:
 - **clipped**: flat tops at the range — the channel's largest (or smallest)
   value held for :data:`CLIP_RUN` samples or more, or reached again in a
   second run of two or more (an unclipped decay touches its extreme once);
+  clipping that ends before the samples the method uses (SSI: within its
+  skip after the impact) is said and the channel kept;
 - **spikes**: the robust z of the derivative, ``z = (Δx − med Δx) / (1.4826 ·
   MAD Δ²x)`` with medians over a running window of :data:`SPIKE_WINDOW`
   samples (the scale from the second difference: on a densely sampled decay
@@ -106,10 +108,12 @@ def impact_estimate(acc: np.ndarray, force: np.ndarray | None, threshold: float 
     return np.argmax(env, axis=1)
 
 
-def clip_runs(x: np.ndarray) -> tuple[int, int]:
+def clip_runs(x: np.ndarray, at: np.ndarray | None = None) -> tuple[int, int]:
     """``(longest, runs)``: the longest run of samples at the channel's largest or smallest value and the number
-    of runs of two or more there (exact equality up to 1e-9 of the range)."""
-    lo, hi = float(x.min()), float(x.max())
+    of runs of two or more there (exact equality up to 1e-9 of the range); ``at``: take the extremes from this
+    (the whole channel) instead of ``x``."""
+    ref = x if at is None else at
+    lo, hi = float(ref.min()), float(ref.max())
     if hi <= lo:
         return 0, 0
     tol = 1e-9 * (hi - lo)
@@ -244,12 +248,14 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def find_faults(acc: np.ndarray, angle_deg: np.ndarray, axes, fs_hz: float, impact: np.ndarray, *,
-                f_max_hz: float = 400.0, skip_s: float = 0.0127) -> Faults:
+                f_max_hz: float = 400.0, skip_s: float = 0.0127, used_from_s: float = 0.0) -> Faults:
     """Run every check of the module docstring on offset-free records and repair or mark what is found.
 
     **Arguments:** ``acc`` (records, axes, samples) [m/s²], offsets removed; ``angle_deg`` (records,);
     ``axes`` names; ``impact`` (records,) sample of each impact; ``f_max_hz`` the top of the band (hum lines
-    are looked for up to twice it); ``skip_s`` the time after the impact left out of the spike search.
+    are looked for up to twice it); ``skip_s`` the time after the impact left out of the spike search;
+    ``used_from_s`` the time after the impact from which the samples are used (SSI: its skip): clipping
+    that ends before it is said but harmless.
     """
     acc = np.array(acc, dtype=np.float64)
     r, a, s = acc.shape
@@ -273,10 +279,27 @@ def find_faults(acc: np.ndarray, angle_deg: np.ndarray, axes, fs_hz: float, impa
     dead = (rms <= DEAD_REL * typical[None, :]) & (typical[None, :] > 0)
     reason[dead] = "dead"
     # clipped
+    used = impact + int(round(used_from_s * fs_hz))  # clipping before this sample is never read
+    clipped_early = []
     for i, j in zip(*np.nonzero(~dead)):
         longest, runs = clip_runs(acc[i, j])
         if longest >= CLIP_RUN or runs >= 2:
-            reason[i, j] = "clipped"
+            if clip_runs(acc[i, j, used[i]:], at=acc[i, j])[0] >= 2:  # flat tops among the samples used
+                reason[i, j] = "clipped"
+            else:
+                clipped_early.append((i, j))
+    # spikes
+    guard, skip = int(round(IMPACT_GUARD_S * fs_hz)), int(round(skip_s * fs_hz)) + 1
+    spikes = {}
+    for i in range(r):
+        for j in range(a):
+            if reason[i, j] in ("dead", "clipped"):
+                continue
+            segs = spike_segments(acc[i, j], (max(0, impact[i] - guard), impact[i] + skip))
+            if segs:
+                spikes[(i, j)] = segs
+                reason[i, j] = "spikes"
+                acc[i, j] = bridge(acc[i, j], segs)  # before the hum is fitted: a spike train has mains-like lines
     # mains hum: notched on every live channel where it stands out
     hum = [[[] for _ in range(a)] for _ in range(r)]
     t = np.arange(s) / fs_hz
@@ -290,17 +313,6 @@ def find_faults(acc: np.ndarray, angle_deg: np.ndarray, axes, fs_hz: float, impa
                 acc[i, j] -= ac * np.cos(2 * np.pi * fr * t) + as_ * np.sin(2 * np.pi * fr * t)
                 hum[i][j].append(fr)
                 peak_hum = max(peak_hum, float(np.hypot(ac, as_)))
-    # spikes
-    guard, skip = int(round(IMPACT_GUARD_S * fs_hz)), int(round(skip_s * fs_hz)) + 1
-    spikes = {}
-    for i in range(r):
-        for j in range(a):
-            if reason[i, j] in ("dead", "clipped"):
-                continue
-            segs = spike_segments(acc[i, j], (max(0, impact[i] - guard), impact[i] + skip))
-            if segs:
-                spikes[(i, j)] = segs
-                reason[i, j] = "spikes"
     # sign flips among the repeats of each angle
     n_win = int(min(FLIP_WINDOW_S * fs_hz, s - impact.max()))
     flipped, undecided = [], []
@@ -346,6 +358,7 @@ def find_faults(acc: np.ndarray, angle_deg: np.ndarray, axes, fs_hz: float, impa
         "left out of their record")
     say("clipped (flat tops at the range)", [tuple(c) for c in np.argwhere(reason == "clipped")],
         "left out of their record")
+    say("clipped only before the samples used (within the skip after the impact)", clipped_early, "kept")
     spiky = sorted(spikes)
     if spiky:
         n_seg = sum(len(v) for v in spikes.values())
@@ -361,7 +374,8 @@ def find_faults(acc: np.ndarray, angle_deg: np.ndarray, axes, fs_hz: float, impa
     return Faults(acc, use, reason, hum, notes)
 
 
-def repair_records(records, *, threshold: float = 0.1, f_max_hz: float = 400.0, skip_s: float = 0.0127):
+def repair_records(records, *, threshold: float = 0.1, f_max_hz: float = 400.0, skip_s: float = 0.0127,
+                   used_from_s: float = 0.0):
     """:func:`find_faults` on :class:`~ringfit.io.records.Records` whose offsets are removed
     (:func:`~ringfit.targets.quality.clean_records`).
 
@@ -373,7 +387,7 @@ def repair_records(records, *, threshold: float = 0.1, f_max_hz: float = 400.0, 
 
     impact = impact_estimate(records.acc, records.force, threshold)
     found = find_faults(records.acc, records.sensor_angle_deg, records.axes, records.fs_hz, impact,
-                        f_max_hz=f_max_hz, skip_s=skip_s)
+                        f_max_hz=f_max_hz, skip_s=skip_s, used_from_s=used_from_s)
     acc = found.acc
     if any(cell for row in found.hum for cell in row):  # the offsets were taken with the hum in: again without
         from ringfit.targets.quality import remove_offsets
@@ -382,14 +396,18 @@ def repair_records(records, *, threshold: float = 0.1, f_max_hz: float = 400.0, 
     return replace(records, acc=acc), found.use, found.notes, hum_frequencies(found.hum)
 
 
-def hum_frequencies(hum) -> list[float]:
-    """The notched lines [Hz] over all channels: per mains harmonic the median of the fitted frequencies."""
+def hum_frequencies(hum, min_share: float = 0.25) -> list[float]:
+    """The notched lines [Hz] that a mode table must beware of: per mains harmonic notched in at least
+    ``min_share`` of the channels (a line in a few channels does not make a stable pole), the median of the
+    fitted frequencies."""
     per = {}
+    cells = 0
     for row in hum:
         for cell in row:
+            cells += 1
             for fr in cell:
                 per.setdefault(_nominal(fr), []).append(fr)
-    return [float(np.median(v)) for _, v in sorted(per.items())]
+    return [float(np.median(v)) for _, v in sorted(per.items()) if len(v) >= min_share * cells]
 
 
 def on_notched_line(freq_hz: float, lines_hz, duration_s: float) -> float | None:

@@ -126,7 +126,8 @@ def free_decays(
 
     check_band(records, f_max_hz)
     records, notes = clean_records(records, threshold)
-    records, use, found, lines = repair_records(records, threshold=threshold, f_max_hz=f_max_hz, skip_s=skip_s)
+    records, use, found, lines = repair_records(records, threshold=threshold, f_max_hz=f_max_hz, skip_s=skip_s,
+                                                used_from_s=skip_s + delay_s)
     notes += found
     if records.force is not None:
         acc, _ = align_on_impact(records, threshold=threshold, delay_s=delay_s)
