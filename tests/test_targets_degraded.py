@@ -133,7 +133,8 @@ def test_faulty_channels_found_exactly_on_random_draws(how):
         idx = impact_estimate(rec.acc, rec.force)
         acc, _ = remove_offsets(rec.acc, idx)
         found = find_faults(acc, rec.sensor_angle_deg, rec.axes, rec.fs_hz, idx)
-        assert np.array_equal(found.reason == how, changed), (seed, np.argwhere(changed), np.argwhere(found.reason != ""))
+        assert np.array_equal(found.reason == how, changed), (seed, np.argwhere(changed),
+                                                              np.argwhere(found.reason != ""))
 
 
 def test_sign_flip_with_three_repeats_is_the_odd_one_out():
@@ -194,7 +195,7 @@ def test_acoustic_only_with_evidence():
 
 @pytest.mark.slow
 def test_example_records_ssi_lists_exactly_the_truth(tmp_path):
-    """`ringfit example records` → `ringfit ssi`: n = 1…9 and the cavity, and no 11th row (was acoustic 331.97 Hz)."""
+    """`ringfit example records` → `ringfit ssi`: n = 1…9 and the cavity, no 11th row (was acoustic 331.97 Hz)."""
     from ringfit.cli import main
     from ringfit.io.modes import read_mode_table
 

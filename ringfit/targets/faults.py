@@ -26,7 +26,8 @@ one-line note for the sidecar's ``preprocessing`` list and a warning:
   :data:`HUM_RATIO` × above the local spectrum of the late half of the
   record (after the decay) and keeps its amplitude over that half (the
   ratio of its two quarters within 1/:data:`HUM_STEADY`…:data:`HUM_STEADY`;
-  a mode's tail decays) and reaching :data:`HUM_SHARE` of that half's rms. It is notched: the channel's steady tone, fitted
+  a mode's tail decays) and reaching :data:`HUM_SHARE` of that half's rms.
+  It is notched: the channel's steady tone, fitted
   there (frequency refined, amplitude and phase by least squares), is
   subtracted from the whole record;
 - **sign-flipped**: a repeat whose response (from the impact on,
@@ -351,7 +352,8 @@ def find_faults(acc: np.ndarray, angle_deg: np.ndarray, axes, fs_hz: float, impa
     n_hum = sum(bool(hum[i][j]) for i in range(r) for j in range(a))
     if n_hum:
         nominal = sorted({_nominal(fr) for row in hum for cell in row for fr in cell})
-        notes.append(f"mains hum (lines at {', '.join(f'{x:g}' for x in nominal[:8])}{' …' if len(nominal) > 8 else ''}"
+        shown = ", ".join(f"{x:g}" for x in nominal[:8]) + (" …" if len(nominal) > 8 else "")
+        notes.append(f"mains hum (lines at {shown}"
                      f" Hz, narrow and not decaying, up to {peak_hum:.3g} m/s²) in {n_hum} of {r * a} channels: "
                      "notched (each channel's steady tone subtracted)")
     say("dead (rms below 1 % of the axis's median)", [tuple(c) for c in np.argwhere(reason == "dead")],
