@@ -241,10 +241,9 @@ def degrade(records: Records, how: str, *, seed: int = 0, channels: int = 3) -> 
     acc = records.acc.copy()
     r, a, s = acc.shape
     rms = float(np.sqrt(np.mean(acc**2)))
-    _, first = np.unique(np.round(records.sensor_angle_deg, 9), return_index=True)  # one repeat per angle
-    rows = rng.choice(first, size=min(channels, first.size), replace=False) + rng.integers(0, 1 + r // first.size,
-                                                                                          min(channels, first.size))
-    picks = [(int(min(i, r - 1)), int(rng.integers(a))) for i in rows]
+    _, group = np.unique(np.round(records.sensor_angle_deg, 9), return_inverse=True)  # one repeat per angle
+    chosen = rng.choice(group.max() + 1, size=min(channels, group.max() + 1), replace=False)
+    picks = [(int(rng.choice(np.flatnonzero(group == g))), int(rng.integers(a))) for g in chosen]
     t = np.arange(s) / records.fs_hz
     if how == "spikes":
         for i, j in picks:
