@@ -21,7 +21,7 @@ from ringfit.errors import InputError
 from ringfit.io.checks import check_condition_field, csv_columns, read_json_object, short_repr
 from ringfit.io.files import atomic_write, check_output_path, read_text_file
 
-KINDS = ("structural", "acoustic")
+KINDS = ("structural", "acoustic", "unclassified")
 TAGS = ("", "extr", "0", "vert", "hort")
 BRANCHES = ("", "backward", "forward")
 STATES = ("free", "loaded", "rolling")
@@ -45,7 +45,7 @@ class ModeTable:
     - ``n``: circumferential index, int; ``-1`` where not assigned.
     - ``a``: cross-sectional index, int.
     - ``tag``: loaded-tyre label (``""``, ``extr``, ``0``, ``vert``, ``hort``).
-    - ``kind``: ``structural`` or ``acoustic``.
+    - ``kind``: ``structural``, ``acoustic`` or ``unclassified`` (not ring-like, not shown to be the cavity).
     - ``freq_hz``: natural frequency [Hz].
     - ``freq_std_hz``: one standard deviation [Hz]; NaN where unknown.
     - ``damping_pct``: modal damping ratio [%]; NaN where unknown.
