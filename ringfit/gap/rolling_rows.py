@@ -180,14 +180,14 @@ def _shared_assignment(r: dict, rec: dict, patch: float) -> str:
     said = []
     if r["n"] < 1:
         r["n"] = f["n"]
-        said.append(f"n = {f['n']}")
+        said.append(f"n matched to {f['n']}")
     if not r["branch"] and not r["wave"] and f["wave"]:
         r["wave"] = f["wave"]
         said.append(f"{f['wave']} wave")
     if r["contact"] == 0 and f["contact"] and patch > 0:
         r["contact"], r["patch"] = f["contact"], patch
         said.append("cos-type (extr)" if f["contact"] == 1 else "sin-type (0)")
-    return ("shared assignment (baseline and every candidate): " + ", ".join(said) + " of the matched line"
+    return (", ".join(said) + " from the matched line (one assignment, shared by the baseline and every candidate)"
             if said else "")
 
 
