@@ -120,12 +120,7 @@ def heldout_linear(lin: Linearised, y, w2, folds, idx=None) -> np.ndarray:
 
 def sum_of_squares(problem: GapProblem, e, sigma) -> np.ndarray:
     """``(B,)`` Σ ψ(e/σ)² with the problem's Huber function on its robust rows."""
-    z = np.asarray(e) / sigma
-    if problem.robust is not None and problem.huber:
-        c = float(problem.huber)
-        a = np.abs(z)
-        z = np.where(np.asarray(problem.robust, dtype=bool) & (a > c), np.sqrt(np.maximum(2 * c * a - c * c, 0.0)), z)
-    return np.sum(z**2, axis=-1)
+    return np.sum(_psi2(problem, e, sigma), axis=-1)
 
 
 @dataclass
@@ -203,13 +198,38 @@ def parametric_null(problem: GapProblem, current, fits: dict, chain: tuple, elem
 
 def candidate_shrinks(problem: GapProblem, lin_cur: Linearised, lins: list, y) -> np.ndarray:
     """``(B, C)`` held-out shrink ``1 − SS_c/SS_current`` of each linearised candidate on data ``y`` ``(B, m)`` (or
-    ``(m,)``), the problem's σ and folds: the statistic of the parametric null and of the measured data alike."""
+    ``(m,)``), the problem's σ and folds: the statistic of the parametric null and of the measured data alike.
+
+    Where the problem has several row groups (profiles: the channels), a candidate may be accepted on the
+    shrink of one group (:func:`ringfit.gap.verdict.acceptance`), so its statistic is the largest of its
+    shrink over all rows and over each group — in the null as in the data."""
     sig = problem.sigma_heldout if problem.sigma_heldout is not None else problem.sigma
     w2 = 1.0 / problem.sigma**2
-    ss_cur = sum_of_squares(problem, heldout_linear(lin_cur, y, w2, problem.folds), sig)
-    cols = [1.0 - sum_of_squares(problem, heldout_linear(lin, y, w2, problem.folds), sig) / np.maximum(ss_cur, 1e-300)
-            for lin in lins]
+    groups = np.asarray(problem.labels.get("group", np.zeros(problem.m)))
+    masks = [np.ones(problem.m, dtype=bool)]
+    if len(set(groups.tolist())) > 1:
+        masks += [groups == g for g in dict.fromkeys(groups.tolist())]
+
+    def ss(e):
+        z2 = _psi2(problem, e, sig)
+        return [np.sum(np.where(mk, z2, 0.0), axis=-1) for mk in masks]
+
+    ss_cur = ss(heldout_linear(lin_cur, y, w2, problem.folds))
+    cols = []
+    for lin in lins:
+        ss_c = ss(heldout_linear(lin, y, w2, problem.folds))
+        cols.append(np.max([1.0 - a / np.maximum(b, 1e-300) for a, b in zip(ss_c, ss_cur)], axis=0))
     return np.stack(cols, axis=1) if cols else np.zeros((np.atleast_2d(y).shape[0], 0))
+
+
+def _psi2(problem: GapProblem, e, sigma) -> np.ndarray:
+    """ψ(e/σ)² per row (Huber on the problem's robust rows)."""
+    z = np.asarray(e) / sigma
+    if problem.robust is not None and problem.huber:
+        c = float(problem.huber)
+        a = np.abs(z)
+        z = np.where(np.asarray(problem.robust, dtype=bool) & (a > c), np.sqrt(np.maximum(2 * c * a - c * c, 0.0)), z)
+    return z**2
 
 
 def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, draws: int = DRAWS,
