@@ -10,25 +10,26 @@ a case that hangs (XLA loops do not see Python signals) is killed after
 
     .venv/bin/python benchmarks/bench_bad_input.py [--quick] [--only SUBSTRING] [-v] [--timeout S]
 
-``--quick`` leaves out the cases that run a real fit.
+``--quick`` leaves out the cases that run a real fit. The time is printed as wall and CPU (this
+process and its workers), with the load average at the start and the end.
 """
 
 from __future__ import annotations
 
-import argparse
 import multiprocessing as mp
 import os
 import queue
 import shutil
 import sys
 import tempfile
-import time
 from collections import Counter
 from pathlib import Path
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 TESTS = str(Path(__file__).resolve().parents[1] / "tests")
 sys.path.insert(0, TESTS)
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _common as bc  # noqa: E402
 
 
 def _worker(tasks, results, fixtures, workdir):
@@ -51,15 +52,18 @@ def _worker(tasks, results, fixtures, workdir):
 def main() -> int:
     from bad_input_cases import CASES, build_fixtures
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="leave out the cases that run a real fit")
+    ap = bc.parser(__doc__.splitlines()[0], quick_help="leave out the cases that run a real fit")
     ap.add_argument("--only", default=None, help="run only the cases whose id contains this text")
-    ap.add_argument("--timeout", type=float, default=90.0, help="seconds before a case counts as a hang (default 90)")
+    ap.add_argument("--timeout", type=bc.seconds(), default=90.0,
+                    help="seconds before a case counts as a hang (default 90)")
     ap.add_argument("-v", "--verbose", action="store_true", help="one line per case")
     args = ap.parse_args()
     todo = [i for i, c in enumerate(CASES) if not (args.quick and c.slow) and (args.only is None or args.only in c.id)]
+    if not todo:
+        bc.fail(f"--only {args.only!r}: no case id contains it")
+    bc.start(f"bench_bad_input: {len(todo)} case(s)" + (" [--quick]" if args.quick else ""))
     ctx = mp.get_context("spawn")
-    t0 = time.perf_counter()
+    clock = bc.Clock().__enter__()
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         fixtures = build_fixtures(Path(tmp) / "_fixtures")
@@ -86,11 +90,12 @@ def main() -> int:
         if worker is not None:
             worker[1].put(None)
             worker[0].join(timeout=10)
-    wall = time.perf_counter() - t0
+    clock.__exit__(None, None, None)
     good = sum(r[0] for r in results.values())
     by_item = Counter(CASES[i].item for i in results)
     good_item = Counter(CASES[i].item for i, r in results.items() if r[0])
-    print(f"\n{good} of {len(results)} cases got the promised answer ({wall:.1f} s)")
+    print(f"\n{good} of {len(results)} cases got the promised answer ({clock.wall:.1f} s wall, {clock.cpu:.1f} s CPU "
+          f"with the workers')")
     for item in sorted(by_item):
         print(f"  issue item {item}: {good_item[item]} of {by_item[item]}")
     bad = [(CASES[i], r) for i, r in results.items() if not r[0]]
@@ -98,6 +103,7 @@ def main() -> int:
         print("not yet:")
         for c, (_, status, why) in bad:
             print(f"  {c.id:<45} {status:<10} {why}")
+    bc.finish()
     return 0
 
 

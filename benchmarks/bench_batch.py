@@ -28,20 +28,29 @@ Printed against the issue's targets:
 - whether every output equals the serial one (bytes; diagnosis JSON and
   posterior draws).
 
-Run: ``python benchmarks/bench_batch.py [tyres=40] [steps=300] [--keep DIR]``.
+Every pass is printed with its wall time and the CPU time of its tasks (``cpu_s``, the
+worker's process time) beside it; the load average at the start and the end. A run in which
+any task failed prints no figures: it lists the failures and exits 1.
+
+Run: ``python benchmarks/bench_batch.py [tyres=40] [steps=300] [--keep DIR] [--quick]``
+(``--quick``: 2 tyres, 100 steps, the 2-worker cluster only: a smoke run).
 """
 
 from __future__ import annotations
 
 import argparse
 import filecmp
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-import ringfit  # noqa: F401
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _common as bc  # noqa: E402
+
+import ringfit  # noqa: F401,E402
 from ringfit.batch import execute, local_cluster, open_client, run_tasks, summarize
 from ringfit.cli.batch import plan_campaign, warm_up
 
@@ -77,9 +86,9 @@ def campaign_tasks(tyres, out: Path, steps: int):
 
 
 def serial_pass(tasks):
-    t0 = time.perf_counter()
-    results = [execute(t.name, t.fn, t.args, t.outputs, t.kind) for t in tasks]
-    return results, time.perf_counter() - t0
+    with bc.Clock() as c:
+        results = [execute(t.name, t.fn, t.args, t.outputs, t.kind) for t in tasks]
+    return results, c.wall
 
 
 def cluster_runs(workers: int, tyres, root: Path, steps: int) -> dict:
@@ -102,11 +111,17 @@ def cluster_runs(workers: int, tyres, root: Path, steps: int) -> dict:
 
             empty = [Task(f"empty{i}", _noop) for i in range(200)]
             t1 = time.perf_counter()
-            run_tasks(client, empty, progress=False)
+            passes["empty"] = (run_tasks(client, empty, progress=False), 0.0, {})
             empty_s = (time.perf_counter() - t1) / len(empty)
     finally:
         cluster.close()
     return dict(start=start, passes=passes, empty_s=empty_s)
+
+
+def check_results(failures, label: str, results) -> None:
+    """Record every task of a pass that did not succeed."""
+    for r in results:
+        failures.check(r.ok, f"{label}: {r.name}", f"{r.state}: {r.error}")
 
 
 def _row(label, results, wall, serial_wall=None):
@@ -117,7 +132,7 @@ def _row(label, results, wall, serial_wall=None):
     ok = s["by_state"].get("ok", 0)
     speed = f"{serial_wall / wall:9.2f}×" if serial_wall else f"{'':>10}"
     gap = f"{1e3 * s['gap_s']:10.1f}" if np.isfinite(s["gap_s"]) and s["workers"] and "serial" not in label else f"{'—':>10}"
-    return (f"{label:<18}{wall:8.1f}{speed}{s['task_s']:9.1f}{gap}{1e3 * s['overhead_per_task_s']:11.0f}"
+    return (f"{label:<18}{wall:8.1f}{speed}{s['task_s']:9.1f}{s['cpu_s']:9.1f}{gap}{1e3 * s['overhead_per_task_s']:11.0f}"
             f"{max(workers.values()):12.0f}{s['max_peak_delta_mb']:11.0f}{s['warm_compiles']:10d}"
             f"{ok:>5}/{len(results)}")
 
@@ -157,11 +172,19 @@ def identical(layout_a: dict, layout_b: dict) -> tuple[int, int]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("tyres", nargs="?", type=int, default=40)
-    ap.add_argument("steps", nargs="?", type=int, default=300)
+    ap = bc.parser(__doc__.splitlines()[0], quick_help="2 tyres, 100 steps, the 2-worker cluster only (smoke run)")
+    ap.add_argument("tyres", nargs="?", type=bc.count("a number of tyres", 1, 1000), default=40)
+    ap.add_argument("steps", nargs="?", type=bc.count("a number of sampler steps (ringfit sample needs >= 100)",
+                                                      100, 10**6), default=300)
     ap.add_argument("--keep", type=Path, default=None, help="work in this (new) folder and keep it")
     args = ap.parse_args()
+    if args.quick:
+        args.tyres, args.steps = 2, 100
+    if args.keep and args.keep.exists():
+        bc.fail(f"--keep {args.keep}: already exists; give a new folder")
+    if args.tyres <= OUTLIER_TYRE:
+        print(f"(fewer than {OUTLIER_TYRE + 1} tyres: the campaign has no planted outlier)")
+    bc.start(f"bench_batch: {args.tyres} tyres, {args.steps} sampler steps" + (" [--quick]" if args.quick else ""))
     if args.keep:
         args.keep.mkdir(parents=True)
         root = args.keep
@@ -169,9 +192,8 @@ def main() -> None:
         tmp = tempfile.TemporaryDirectory(prefix="bench_batch_")
         root = Path(tmp.name)
 
-    import os
 
-    load0 = os.getloadavg()[0]
+    failures = bc.Failures()
     t0 = time.perf_counter()
     tyres = make_tyres(root / "campaign", args.tyres)
     print(f"{args.tyres} synthetic tyres written in {time.perf_counter() - t0:.1f} s; 3 tasks per tyre "
@@ -181,13 +203,18 @@ def main() -> None:
     for label in ("cold", "warm"):
         tasks, layout = campaign_tasks(tyres, root / f"serial-{label}", args.steps)
         results, wall = serial_pass(tasks)
+        check_results(failures, f"serial, {label}", results)
         serial[label] = (results, wall, layout)
-    runs = {w: cluster_runs(w, tyres, root, args.steps) for w in (1, 2)}
+    runs = {w: cluster_runs(w, tyres, root, args.steps) for w in ((2,) if args.quick else (1, 2))}
+    for w, run in runs.items():
+        for label, (res, _, _) in run["passes"].items():
+            check_results(failures, f"{w} worker(s), {label}", res)
+    failures.refuse()
 
     print()
-    print(f"{'':<18}{'wall':>8}{'speed-up':>10}{'Σ tasks':>9}{'gap/task':>10}{'idle/task':>11}{'RSS/worker':>12}"
+    print(f"{'':<18}{'wall':>8}{'speed-up':>10}{'Σ tasks':>9}{'Σ CPU':>9}{'gap/task':>10}{'idle/task':>11}{'RSS/worker':>12}"
           f"{'task rise':>11}{'compiles':>10}{'ok':>8}")
-    print(f"{'':<18}{'[s]':>8}{'':>10}{'[s]':>9}{'[ms]':>10}{'[ms]':>11}{'peak [MiB]':>12}{'[MiB]':>11}"
+    print(f"{'':<18}{'[s]':>8}{'':>10}{'[s]':>9}{'[s]':>9}{'[ms]':>10}{'[ms]':>11}{'peak [MiB]':>12}{'[MiB]':>11}"
           f"{'warm':>10}")
     for label in ("cold", "warm"):
         res, wall, _ = serial[label]
@@ -198,8 +225,9 @@ def main() -> None:
             print(_row(f"{w} worker{'s' if w > 1 else ' '}, {label}", res, wall, serial[label][1]))
     print()
     work = sum(r.elapsed_s for r in serial["warm"][0])
+    work_cpu = sum(r.cpu_s for r in serial["warm"][0])
     per_task = {k: np.mean([r.elapsed_s for r in serial["warm"][0] if r.kind == k]) for k in ("fit", "sample", "diagnose")}
-    print(f"work per tyre (serial, warm): {work / args.tyres:.2f} s = "
+    print(f"work per tyre (serial, warm): {work / args.tyres:.2f} s wall ({work_cpu / args.tyres:.2f} s CPU) = "
           + " + ".join(f"{k} {v:.2f} s" for k, v in per_task.items()))
     for w, run in runs.items():
         res, wall, _ = run["passes"]["warm"]
@@ -210,13 +238,13 @@ def main() -> None:
               f"empty-task round trip {1e3 * run['empty_s']:.1f} ms; "
               f"{1e3 * s['overhead_per_task_s']:.0f} ms/task with the idle start and end")
     speed = serial["warm"][1] / runs[2]["passes"]["warm"][1]
-    ncpu = len(os.sched_getaffinity(0))
-    print(f"speed-up, 2 workers vs serial (warm): {speed:.2f}× on {ncpu} CPUs "
-          f"(load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end: other processes "
-          f"share these CPUs)")
-    eff = runs[1]["passes"]["warm"][1] / runs[2]["passes"]["warm"][1]
-    print(f"2 workers vs 1 worker (warm): {eff:.2f}×; Σ task time {summarize(runs[2]['passes']['warm'][0])['task_s']:.0f} s "
-          f"vs {summarize(runs[1]['passes']['warm'][0])['task_s']:.0f} s (a task runs slower when both CPUs are busy)")
+    ncpu = bc.usable_cores()
+    print(f"speed-up, 2 workers vs serial (warm, wall): {speed:.2f}× on {ncpu} CPUs (other processes share "
+          f"these CPUs: see the load averages)")
+    if 1 in runs:
+        eff = runs[1]["passes"]["warm"][1] / runs[2]["passes"]["warm"][1]
+        print(f"2 workers vs 1 worker (warm): {eff:.2f}×; Σ task time {summarize(runs[2]['passes']['warm'][0])['task_s']:.0f} s "
+              f"vs {summarize(runs[1]['passes']['warm'][0])['task_s']:.0f} s (a task runs slower when both CPUs are busy)")
     same, total = identical(serial["warm"][2], runs[2]["passes"]["warm"][2])
     print(f"outputs identical to the serial run's (fitted TOML, diagnosis JSON bytes; posterior draws): "
           f"{same}/{total} tyres")
@@ -231,6 +259,7 @@ def main() -> None:
           f"verdicts {campaign.verdict_counts()}")
     if args.keep:
         print(f"report: {report}")
+    bc.finish()
 
 
 if __name__ == "__main__":

@@ -1,8 +1,9 @@
 """Campbell diagram of the rolling, loaded tyre and its gradient (issue 13, item 7).
 
-Prints figures against the issue's targets; run with ``python benchmarks/bench_campbell.py``.
-Timings are warm (after compilation), best of repeated calls (robust to other
-processes sharing the cores), BLAS limited to one thread as the library does
+Prints figures against the issue's targets; run with ``python benchmarks/bench_campbell.py [--quick]``
+(``--quick``: 3 repeats, a smoke run). Timings are warm (after compilation), best of repeated
+calls (robust to other processes sharing the cores), wall and CPU (process time) side by side,
+ratios of CPU times, the load average at the start and the end, BLAS limited to one thread as the library does
 for these small eigenproblems (``ringfit.targets.ssi.small_matrix_threads``).
 
 1. ``campbell_modes``: 17 speeds (0–80 km/h) × the Hill basis K = 32 (modes up to
@@ -17,14 +18,17 @@ for these small eigenproblems (``ringfit.targets.ssi.small_matrix_threads``).
 
 from __future__ import annotations
 
-import time
+import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-import ringfit  # noqa: F401  (float64)
-from bench_rolling import timed  # best-of-repeat warm timing, shared by the benchmarks
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _common as bc  # noqa: E402
+
+import ringfit  # noqa: F401,E402  (float64)
 from ringfit.gap.campbell import campbell_diagram
 from ringfit.params import table9
 from ringfit.physics.contact import as_traced
@@ -39,9 +43,11 @@ ROAD = Drum(diameter=1.2192)
 NAMES = ("rho_a", "ei", "kw", "kv", "k_tread")
 
 
-def main():
-    print(f"JAX {jax.__version__} on {jax.devices()[0].platform} ({jax.device_count()} device), float64; "
-          f"{len(SPEEDS)} speeds, Hill basis K = {DEFAULT_HARMONICS}")
+def main(argv=None):
+    args = bc.parser(__doc__.splitlines()[0], quick_help="3 repeats (smoke run)").parse_args(argv)
+    rep = 3 if args.quick else 20
+    bc.start(f"bench_campbell: JAX {jax.__version__} on {jax.devices()[0].platform} ({jax.device_count()} device), "
+             f"float64; {len(SPEEDS)} speeds, Hill basis K = {DEFAULT_HARMONICS}" + (" [--quick]" if args.quick else ""))
     ring, geometry, road = as_traced((RING, GEOMETRY, ROAD))
     theta = jnp.log(jnp.array([getattr(RING, n) for n in NAMES]))
 
@@ -63,30 +69,31 @@ def main():
             return jnp.sum(jnp.where(keep, (f - target) ** 2 / target**2, 0.0))
 
         loss_j, grad_j = jax.jit(loss), jax.jit(jax.grad(loss))
-        t0 = time.perf_counter()
-        jax.block_until_ready(forward(theta))
-        t_first = time.perf_counter() - t0
-        t_fwd = timed(forward, theta, repeat=20)
-        t_loss = timed(loss_j, theta, repeat=20)
-        t_grad = timed(grad_j, theta, repeat=20)
+        t_first = bc.best(forward, theta, repeat=1, warm=False)
+        t_fwd = bc.best(forward, theta, repeat=rep)
+        t_loss = bc.best(loss_j, theta, repeat=rep)
+        t_grad = bc.best(grad_j, theta, repeat=rep)
         g = grad_j(theta)
         speeds = np.asarray(SPEEDS)
-        t_full = []
-        for _ in range(5):
-            t0 = time.perf_counter()
-            d = campbell_diagram(RING, GEOMETRY, LOAD, speeds, drum_diameter_m=1.2192)
-            t_full.append(time.perf_counter() - t0)
+        d = campbell_diagram(RING, GEOMETRY, LOAD, speeds, drum_diameter_m=1.2192)
+        t_full = bc.best(lambda: campbell_diagram(RING, GEOMETRY, LOAD, speeds, drum_diameter_m=1.2192),
+                         repeat=3 if args.quick else 5, warm=False)
+    failures = bc.Failures()
+    failures.check(bool(np.all(ok)), "the Campbell diagram", "not every contact solve converged")
+    failures.check(bool(np.all(np.isfinite(np.asarray(g)))), "the gradient", "not finite")
+    failures.refuse()
     n_modes = int(np.sum(np.asarray(order)[0] <= 15))
     print(f"\n1. Campbell diagram, {len(SPEEDS)} speeds × {n_modes} modes with n ≤ 15 "
           f"(all converged: {bool(np.all(ok))})")
-    print(f"   warm: {1e3 * t_fwd:.1f} ms   (target < 1000 ms; {1e3 * t_fwd / len(SPEEDS):.2f} ms per speed)")
-    print(f"   (first call after compilation: {1e3 * t_first:.1f} ms)")
+    print(f"   warm: {bc.ms(t_fwd, 1)}   (target < 1000 ms; {1e3 * t_fwd.wall / len(SPEEDS):.2f} ms per speed)")
+    print(f"   (first call after compilation: {bc.ms(t_first, 1)})")
     print(f"\n2. campbell_diagram (+ branch tracking by MAC and acceleration labels, NumPy): "
-          f"{1e3 * min(t_full):.1f} ms for {d.branches} branches")
+          f"{bc.ms(t_full, 1)} for {d.branches} branches")
     print(f"\n3. gradient of a least-squares loss on all n ≤ 15 branches w.r.t. {', '.join(NAMES)} (log space)")
-    print(f"   loss: {1e3 * t_loss:.1f} ms, gradient: {1e3 * t_grad:.1f} ms = {t_grad / t_fwd:.2f}× the diagram "
-          f"(target < 3×), {t_grad / t_loss:.2f}× the loss")
+    print(f"   loss: {bc.ms(t_loss, 1)}, gradient: {bc.ms(t_grad, 1)} = {t_grad.cpu / t_fwd.cpu:.2f}× the diagram "
+          f"in CPU time (target < 3×), {t_grad.cpu / t_loss.cpu:.2f}× the loss")
     print("   ∂loss/∂log θ: " + ", ".join(f"{n} {float(v):+.3g}" for n, v in zip(NAMES, g)))
+    bc.finish()
 
 
 if __name__ == "__main__":

@@ -16,12 +16,14 @@ across the lengths is the claim; the accuracy against the synthetic truth is
 printed for the longest recording.
 
     python benchmarks/bench_cleat.py [--minutes 1 10 30] [--fs 25600] [--sectors 512]
-                                     [--cache DIR] [--no-cache]
+                                     [--cache DIR] [--no-cache] [--quick]
+
+``--quick``: recordings of 0.2 and 0.5 minutes (a smoke run). The load average is printed at the
+start and the end; a processing run that fails is listed and no figures are printed.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -29,6 +31,9 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _common as bc  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Bump when the synthetic recording changes, so that stale cached files are not reused.
@@ -92,27 +97,36 @@ def recording(bench, minutes: float, cache: Path) -> tuple[Path, float | None]:
     return path, time.perf_counter() - t0
 
 
-def process(path: Path, sectors: int, field_out: str) -> dict:
-    """Run the processing in a fresh interpreter; its figures as a dict."""
+def process(path: Path, sectors: int, field_out: str) -> dict | None:
+    """Run the processing in a fresh interpreter; its figures as a dict (``None``: it failed, stderr shown)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.run([sys.executable, "-c", PROCESS, str(path), str(sectors), field_out],
                           capture_output=True, text=True, env=env)
     if proc.returncode:
         print(proc.stderr, file=sys.stderr)
-        raise SystemExit(proc.returncode)
+        return None
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 30.0])
-    ap.add_argument("--fs", type=float, default=25600.0)
-    ap.add_argument("--sectors", type=int, default=512)
-    ap.add_argument("--speed", type=float, default=40.0, help="km/h")
+    ap = bc.parser(__doc__.splitlines()[0], quick_help="recordings of 0.2 and 0.5 minutes (smoke run)")
+    ap.add_argument("--minutes", type=bc.number("a length in minutes > 0 and <= 240", 0.0, 240.0, lo_open=True),
+                    nargs="+", default=[1.0, 10.0, 30.0])
+    ap.add_argument("--fs", type=bc.number("a sampling rate in Hz from 1000 to 1e6", 1000.0, 1e6), default=25600.0)
+    ap.add_argument("--sectors", type=bc.count("a number of sectors", 8, 1 << 16), default=512)
+    ap.add_argument("--speed", type=bc.number("a speed in km/h > 0 and <= 300", 0.0, 300.0, lo_open=True),
+                    default=40.0, help="km/h")
     ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "ringfit-bench-cleat"),
                     help="folder of cached recordings (default: %(default)s)")
     ap.add_argument("--no-cache", action="store_true", help="delete the recordings afterwards")
     args = ap.parse_args()
+    if args.quick:
+        args.minutes = [0.2, 0.5]
+    if Path(args.cache).exists() and not Path(args.cache).is_dir():
+        bc.fail(f"--cache {args.cache}: not a folder")
+    bc.start(f"bench_cleat: {', '.join(f'{m:g}' for m in sorted(args.minutes))} min at {args.fs:g} Hz"
+             + (" [--quick]" if args.quick else ""))
+    failures = bc.Failures()
 
     import numpy as np
 
@@ -129,8 +143,12 @@ def main() -> None:
     for m in minutes:
         path, t_gen = recording(bench, m, cache)
         res = process(path, args.sectors, str(field_path) if m == minutes[-1] else "-")
+        if res is None:
+            failures.add(f"processing the {m:g}-minute recording", "see its error above")
+            continue
         res.update(minutes=m, size_gb=path.stat().st_size / 1e9, gen_s=t_gen, path=path)
         rows.append(res)
+    failures.refuse()
 
     print(f"cleat recordings at {args.fs:g} Hz, {args.speed:g} km/h, axes {rows[0]['axes']} + encoder + hall; "
           f"{args.sectors}-sector field over one drum period {rows[0]['field_shape']} "
@@ -177,6 +195,7 @@ def main() -> None:
     if args.no_cache:
         for r in rows:
             r["path"].unlink()
+    bc.finish()
 
 
 if __name__ == "__main__":

@@ -21,32 +21,51 @@ issue's targets:
 
 ``--cores N`` pins the process to N cores before JAX starts (default 1: the figures are per core).
 Timings are wall-clock on this machine; the CPU time of the process is printed beside them (on a
-machine shared with other jobs, the CPU time is the honest per-core figure).
+machine shared with other jobs, the CPU time is the honest per-core figure), with the load average
+at the start and the end. An estimate that raises is listed and the section prints no figures.
+``--quick``: 4 accuracy cases, 1 per robustness variation, 0.1 minutes of recording (a smoke run).
 """
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _common as bc  # noqa: E402
+
+SECTIONS = ("accuracy", "robustness", "speed")
+
 
 def parse():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--cases", type=int, default=48, help="random accuracy cases (default 48)")
-    ap.add_argument("--robust-cases", type=int, default=6, help="cases per robustness variation (default 6)")
-    ap.add_argument("--cores", type=int, default=1, help="pin to this many cores (0: no pinning)")
-    ap.add_argument("--minutes", type=float, default=1.0, help="recording length timed for the speed figures")
+    ap = bc.parser(__doc__.split("\n")[0],
+                   quick_help="4 accuracy cases, 1 per robustness variation, 0.1 min of recording (smoke run)")
+    ap.add_argument("--cases", type=bc.count("a number of cases", 2, 10**5), default=48,
+                    help="random accuracy cases (default 48)")
+    ap.add_argument("--robust-cases", type=bc.count("a number of cases", 1, 10**4), default=6,
+                    help="cases per robustness variation (default 6)")
+    ap.add_argument("--cores", type=bc.count("a number of cores (0: no pinning)", 0, 4096), default=1,
+                    help="pin to this many cores (0: no pinning)")
+    ap.add_argument("--minutes", type=bc.number("a length in minutes > 0 and <= 120", 0.0, 120.0, lo_open=True),
+                    default=1.0, help="recording length timed for the speed figures")
     ap.add_argument("--long", action="store_true", help="synthesise and time a real 30-minute recording")
-    ap.add_argument("--skip", default="", help="comma-separated sections to skip: accuracy,robustness,speed")
-    return ap.parse_args()
+    ap.add_argument("--skip", type=bc.choices_list(SECTIONS, "sections"), default=[],
+                    help="comma-separated sections to skip: accuracy,robustness,speed")
+    args = ap.parse_args()
+    if args.quick:
+        args.cases, args.robust_cases, args.minutes = 4, 1, 0.1
+    if args.cores > len(os.sched_getaffinity(0)):
+        bc.fail(f"--cores {args.cores}: this process may use only {len(os.sched_getaffinity(0))}")
+    return args
 
 
 ARGS = parse()
+FAILURES = bc.Failures()
 if ARGS.cores:
     os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[: ARGS.cores]))
 
@@ -102,13 +121,16 @@ def summarise(rows, label):
             f" ({np.isfinite(ferr).sum()} found)")
 
 
-def run_case(profile, load, ring=RING):
-    t = time.perf_counter()
-    est = estimate_load(profile, GEOMETRY, ring, settings=SETTINGS)
-    dt = time.perf_counter() - t
+def run_case(profile, load, ring=RING, what=""):
+    try:
+        est, dt = bc.timed(estimate_load, profile, GEOMETRY, ring, settings=SETTINGS)
+    except Exception as exc:  # noqa: BLE001 - listed; the section then prints no figures
+        FAILURES.add(what or f"estimate at {load:.0f} N", f"{type(exc).__name__}: {exc}")
+        return None
     return dict(err=est.load_n / load - 1, cover=est.lo < load < est.hi, conv=est.converged,
                 half=0.5 * (est.hi - est.lo) / est.load_n, feat=est.feature.load_n / load - 1,
-                poor=any(f.startswith("poor fit") for f in est.flags), ratio=est.rms / est.noise, time=dt)
+                poor=any(f.startswith("poor fit") for f in est.flags), ratio=est.rms / est.noise, time=dt.wall,
+                cpu=dt.cpu)
 
 
 def accuracy():
@@ -129,9 +151,12 @@ def accuracy():
                              points=int(rng.choice([720, 1000, 1024, 2048, 3600])),
                              offset_deg=rng.uniform(-2.0, 2.0), colour=COLOURS[i % 4], with_rate=with_rate,
                              speed_error=rng.uniform(-0.04, 0.04))
-        row = run_case(prof, load)
+        row = run_case(prof, load, what=f"accuracy case {i}")
+        if row is None:
+            continue
         row.update(drum=drum is not None, rate=with_rate, gravity=gravity, colour=COLOURS[i % 4])
         rows.append(row)
+    FAILURES.refuse()
     print(summarise(rows, "all") + "   (targets: median < 1 %, worst < 3 %, coverage ≥ 90 %)")
     for label, key, value in (("flat road", "drum", False), ("drum", "drum", True),
                               ("rotation_hz given", "rate", True), ("speed_kmh only (±4 %)", "rate", False),
@@ -139,8 +164,9 @@ def accuracy():
         print(summarise([r for r in rows if r[key] == value], label))
     for colour in COLOURS:
         print(summarise([r for r in rows if r["colour"] == colour], f"{colour} noise"))
-    times = [r["time"] for r in rows[1:]]
-    print(f"   one profile, warm: median {statistics.median(times):.2f} s (two Levenberg–Marquardt fits + load curves)")
+    times, cpu = [r["time"] for r in rows[1:]], [r["cpu"] for r in rows[1:]]
+    print(f"   one profile, warm: median {statistics.median(times):.2f} s wall, {statistics.median(cpu):.2f} s CPU "
+          f"(two Levenberg–Marquardt fits + load curves)")
 
 
 def robustness():
@@ -165,7 +191,8 @@ def robustness():
             prof = truth_profile(rng, load=load, speed=30.0 if i % 2 else 80.0, drum=DRUM if i % 3 == 0 else None,
                                  model=model, points=1024, offset_deg=0.5, colour="white", with_rate=True, ring=ring,
                                  band_limit=band)
-            rows.append(run_case(prof, load))
+            rows.append(run_case(prof, load, what=f"robustness: {label}, case {i}"))  # the tyre file's ring
+        FAILURES.refuse()
         poor = sum(r["poor"] for r in rows)
         ratio = statistics.median(r["ratio"] for r in rows)
         print(summarise(rows, label) + f"  | flagged poor {poor}/{len(rows)}, rms/noise {ratio:.2f}")
@@ -274,9 +301,9 @@ def speed():
 
 
 def main():
-    skip = set(filter(None, ARGS.skip.split(",")))
-    print(f"JAX {jax.__version__} on {jax.devices()[0].platform}, float64; "
-          f"{len(os.sched_getaffinity(0))} core(s) for this process")
+    skip = set(ARGS.skip)
+    bc.start(f"bench_estimate: JAX {jax.__version__} on {jax.devices()[0].platform}, float64; "
+             f"{len(os.sched_getaffinity(0))} core(s) for this process" + (" [--quick]" if ARGS.quick else ""))
     if "accuracy" not in skip:
         accuracy()
     if "robustness" not in skip:
@@ -284,6 +311,7 @@ def main():
     if "speed" not in skip:
         speed()
     print("\nGPU: not measured here (no accelerator in this session); the project never needs one.")
+    bc.finish()
 
 
 if __name__ == "__main__":

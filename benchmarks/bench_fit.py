@@ -1,7 +1,9 @@
 """Free-tyre fit benchmarks: ringfit's public calls against bare peers in the same script.
 
 Run: python benchmarks/bench_fit.py [--repeats 3] [--quick]
-Prints, each figure as the range over ``--repeats`` runs (targets from issues 2 and 11 in brackets):
+Prints, each figure as min / median / max over ``--repeats`` interleaved runs, wall time and CPU time
+(process time; children's for the shell commands) side by side, and the load average at the start
+and end (targets from issues 2 and 11 in brackets):
 
 1. warm fit through the public API vs a bare optimistix Levenberg–Marquardt fit of eq. 18  [< 2 ms]
 2. batched log-probability: evaluations per second at a large batch, and the cost of one call at
@@ -16,18 +18,18 @@ Prints, each figure as the range over ``--repeats`` runs (targets from issues 2 
 `--quick` shortens 3 to 1000 steps (a smoke run; its figure is not the target's).
 """
 
-import argparse
 import os
 import re
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
-import ringfit  # noqa: F401  (float64)
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _common as bc  # noqa: E402
+
+import ringfit  # noqa: F401,E402  (float64)
 import jax
 import jax.numpy as jnp
 import lineax as lx
@@ -41,48 +43,24 @@ from ringfit.params import table9
 
 MODES, TYRE = path("free-ssi.modes.csv"), path("table9.tyre.toml")
 
-#: The bare peer of a cold `ringfit fit`: the same LM fit of eq. 18 in a script of its own.
-BARE_SCRIPT = r"""
-import os, sys, csv
-os.environ["JAX_ENABLE_X64"] = "1"
-import numpy as np, jax, jax.numpy as jnp, lineax as lx, optimistix as optx
-rows = list(csv.DictReader(open(sys.argv[1])))
-n = jnp.asarray([float(r["n"]) for r in rows if r["n"]][:9]); f = jnp.asarray([float(r["freq_hz"]) for r in rows if r["n"]][:9])
-R, P = 0.296, 2.2e5 * 0.152 / 0.296
-def resid(y, args):
-    rho, ei, kw, kv = jnp.exp(y); n2 = n**2
-    k = ei / R**4 * n2 * (n2 - 1) ** 2 + P * n2 * (n2 - 1) + kw * n2 + kv
-    return (jnp.sqrt(k / (rho * (1 + n2))) / (2 * jnp.pi) - f) / (0.01 * f)
-@jax.jit
-def bare(y0):
-    solver = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10, linear_solver=lx.SVD())
-    return optx.least_squares(resid, solver, y0, max_steps=256, throw=False).value
-print(np.exp(np.asarray(bare(np.log(np.array([2.715, 0.9426, 1.294e6, 1.161e6]))))))
-"""
 
 
-def best_of(fn, repeat=7, number=20):
-    times = []
+def best_of(fn, repeat=7, number=20) -> bc.Sample:
+    """The fastest of ``repeat`` batches of ``number`` calls: wall and CPU seconds per call."""
+    best = None
     for _ in range(repeat):
-        t0 = time.perf_counter()
-        for _ in range(number):
-            fn()
-        times.append((time.perf_counter() - t0) / number)
-    return min(times)
+        with bc.Clock() as c:
+            for _ in range(number):
+                fn()
+        s = bc.Sample(c.wall / number, c.cpu / number)
+        best = s if best is None or s.wall < best.wall else best
+    return best
 
 
-def span(values, scale=1.0, fmt="{:.2f}"):
-    lo, hi = min(values) * scale, max(values) * scale
-    return fmt.format(lo) if fmt.format(lo) == fmt.format(hi) else f"{fmt.format(lo)}–{fmt.format(hi)}"
-
-
-def run_timed(argv, env):
-    t0 = time.perf_counter()
-    out = subprocess.run(argv, env=env, capture_output=True, text=True)
-    elapsed = time.perf_counter() - t0
-    if out.returncode != 0:
-        raise RuntimeError(f"{' '.join(map(str, argv))} failed:\n{out.stderr}")
-    return elapsed, out.stderr
+def both(samples, scale=1.0, fmt="{:.2f}", unit="s") -> str:
+    """``wall a / b / c unit, CPU a / b / c unit`` of samples."""
+    return (f"wall {bc.span(bc.walls(samples), scale, fmt)} {unit}, "
+            f"CPU {bc.span(bc.cpus(samples), scale, fmt)} {unit}")
 
 
 def compiled_programs(stderr: str) -> list[str]:
@@ -91,13 +69,13 @@ def compiled_programs(stderr: str) -> list[str]:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=3, help="runs per figure; the range is printed (default 3)")
-    ap.add_argument("--quick", action="store_true", help="1000 posterior steps instead of 5000 (smoke run)")
+    ap = bc.parser(__doc__.splitlines()[0], quick_help="1000 posterior steps instead of 5000, 1 repeat (smoke run)")
+    ap.add_argument("--repeats", type=bc.count("a number of runs", 1, 100), default=3,
+                    help="runs per figure; min / median / max is printed (default 3)")
     args = ap.parse_args(argv)
-    reps = max(1, args.repeats)
-    print(f"{os.cpu_count()} CPUs, load average {', '.join(f'{x:.1f}' for x in os.getloadavg())}; "
-          f"ranges over {reps} runs")
+    reps = 1 if args.quick else args.repeats
+    bc.start(f"bench_fit: min / median / max over {reps} interleaved run(s)" + (" [--quick]" if args.quick else ""))
+    failures = bc.Failures()
 
     geo, ring = table9()
     table = read_mode_table(MODES)
@@ -128,9 +106,10 @@ def main(argv=None):
     for _ in range(reps):
         t_bare.append(best_of(lambda: bare(y0).block_until_ready()))
         t_api.append(best_of(lambda: fit_natural_frequencies(table, geo, ring, prior="physical")))
-    ratio = [a / b for a, b in zip(t_api, t_bare)]
-    print(f"1. warm fit: public API {span(t_api, 1e3)} ms, bare optimistix LM {span(t_bare, 1e3)} ms "
-          f"(ratio {span(ratio)}; target < 2 ms)")
+    if not fit.converged:
+        failures.add("1. the warm fit", "did not converge")
+    lines = [f"1. warm fit: public API {both(t_api, 1e3, unit='ms')}; bare optimistix LM {both(t_bare, 1e3, unit='ms')} "
+             f"(CPU ratio {bc.ratio_span(t_api, t_bare)}; target < 2 ms)"]
 
     # --- 2. log-probability: throughput at a large batch, cost per call at emcee's batch
     batch = 200_000
@@ -147,50 +126,72 @@ def main(argv=None):
         t_peer.append(best_of(lambda: bare_lp(ys).block_until_ready(), repeat=5, number=3))
         c_ours.append(best_of(lambda: logp(small), repeat=5, number=500))
         c_triv.append(best_of(lambda: np.asarray(trivial(small)), repeat=5, number=500))
-    print(f"2. log-probability: ringfit {span([batch / t for t in t_ours], fmt='{:.3g}')} evals/s, bare vmapped "
-          f"eq. 18 {span([batch / t for t in t_peer], fmt='{:.3g}')} evals/s (target ≥ 5e6 /s); one call at "
-          f"emcee's batch of 16: ringfit {span(c_ours, 1e6, '{:.0f}')} µs, a trivial jitted function "
-          f"{span(c_triv, 1e6, '{:.0f}')} µs")
+    if not np.all(np.isfinite(logp(small))):
+        failures.add("2. log-probability", "not finite at the walkers' start")
+    lines.append(f"2. log-probability: ringfit {bc.span([batch / t.cpu for t in t_ours], fmt='{:.3g}')} evals per "
+                 f"CPU-second (per wall-second {bc.span([batch / t.wall for t in t_ours], fmt='{:.3g}')}), bare "
+                 f"vmapped eq. 18 {bc.span([batch / t.cpu for t in t_peer], fmt='{:.3g}')} per CPU-second "
+                 f"(target ≥ 5e6 /s); one call at emcee's batch of 16: ringfit {both(c_ours, 1e6, '{:.0f}', 'µs')}, "
+                 f"a trivial jitted function {both(c_triv, 1e6, '{:.0f}', 'µs')}")
 
     # --- 3. posterior 32 × 5000 (the first call in a process compiles the batch shape)
     import emcee
 
     steps = 1000 if args.quick else 5000
-    t_post = []
-    for _ in range(max(2, reps)):
-        t0 = time.perf_counter()
-        post = sample_posterior(table, geo, ring, prior="physical", walkers=32, min_steps=steps, max_steps=steps,
-                                progress=False)
-        t_post.append(time.perf_counter() - t0)
-    t_emcee = []
-    for _ in range(reps):
+
+    def posterior():
+        with bc.Clock() as c:
+            post = sample_posterior(table, geo, ring, prior="physical", walkers=32, min_steps=steps, max_steps=steps,
+                                    progress=False)
+        ok = post.chain.shape[0] >= steps and bool(np.all(np.isfinite(post.log_prob)))
+        return post, bc.Sample(c.wall, c.cpu, ok, "" if ok else "short or non-finite chain")
+
+    def emcee_alone():
         sampler = emcee.EnsembleSampler(32, 4, lambda x: -0.5 * np.sum(x**2, axis=1), vectorize=True)
-        t0 = time.perf_counter()
-        sampler.run_mcmc(np.random.default_rng(0).standard_normal((32, 4)), steps)
-        t_emcee.append(time.perf_counter() - t0)
-    print(f"3. posterior 32 walkers × {post.steps} steps (LSQ start and τ checks included): {t_post[0]:.2f} s "
-          f"first in the process, {span(t_post[1:])} s warm; emcee alone with a trivial log-prob "
-          f"{span(t_emcee)} s ({np.median(t_emcee) / steps * 1e6:.0f} µs/step of emcee's own overhead"
-          f"{'' if not args.quick else '; --quick: not the target figure'}; target < 5 s)")
+        with bc.Clock() as c:
+            sampler.run_mcmc(np.random.default_rng(0).standard_normal((32, 4)), steps)
+        return bc.Sample(c.wall, c.cpu)
+
+    post, first = posterior()  # the first call in a process compiles the batch shape
+    failures.check(first.ok, "3. posterior (first)", first.detail)
+    runs3 = bc.interleaved({"posterior": lambda: posterior()[1], "emcee": emcee_alone}, reps, failures)
+    lines.append(f"3. posterior 32 walkers × {steps} steps (LSQ start and τ checks included): {first.wall:.2f} s "
+                 f"wall, {first.cpu:.2f} s CPU first in the process; warm {both(runs3['posterior'])}; emcee alone "
+                 f"with a trivial log-prob {both(runs3['emcee'])} "
+                 f"({np.median(bc.cpus(runs3['emcee'])) / steps * 1e6:.0f} µs CPU/step of emcee's own overhead"
+                 f"{'' if not args.quick else '; --quick: not the target figure'}; target < 5 s)")
 
     # --- 4 and 5. cold CLI vs a bare cold script; XLA programs compiled
     exe = [sys.executable, "-m", "ringfit", "fit", str(MODES), "--tyre", str(TYRE), "--out"]
-    cold, warm, bare_cold, programs, bare_programs = [], [], [], [], []
+    programs, bare_programs = [], []
     with tempfile.TemporaryDirectory() as d:
         shared = dict(os.environ, RINGFIT_CACHE_DIR=str(Path(d) / "warm-cache"))
-        run_timed(exe + [str(Path(d) / "w.toml"), "--force"], shared)  # fill the cache
-        for i in range(reps):
+        filled = bc.run_process(exe + [str(Path(d) / "w.toml"), "--force"], shared)  # fill the cache
+        failures.check(filled.ok, "4. filling the cache", filled.detail)
+        count = iter(range(10**6))
+
+        def cold():
+            i = next(count)
             env = dict(os.environ, RINGFIT_CACHE_DIR=str(Path(d) / f"cold-cache-{i}"), JAX_LOG_COMPILES="1")
-            t, err = run_timed(exe + [str(Path(d) / f"c{i}.toml")], env)
-            cold.append(t)
-            programs = compiled_programs(err)
-            warm.append(run_timed(exe + [str(Path(d) / "w.toml"), "--force"], shared)[0])
-            t, err = run_timed([sys.executable, "-c", BARE_SCRIPT, str(MODES)], dict(os.environ, JAX_LOG_COMPILES="1"))
-            bare_cold.append(t)
-            bare_programs = compiled_programs(err)
-    print(f"4. cold `ringfit fit` from the shell: {span(cold)} s with an empty compilation cache, {span(warm)} s "
-          f"with it warm (target < 2.5 s); a bare script importing JAX + optimistix and solving the same fit "
-          f"cold: {span(bare_cold)} s")
+            r = bc.run_process(exe + [str(Path(d) / f"c{i}.toml")], env)
+            programs[:] = compiled_programs(r.stderr)
+            return r
+
+        def bare_cold():
+            r = bc.run_process([sys.executable, "-c", bc.BARE_FIT_SCRIPT, str(MODES)],
+                               dict(os.environ, JAX_LOG_COMPILES="1"))
+            bare_programs[:] = compiled_programs(r.stderr)
+            return r
+
+        runs4 = bc.interleaved({"cold": cold, "warm": lambda: bc.run_process(exe + [str(Path(d) / "w.toml"), "--force"],
+                                                                              shared),
+                                "bare": bare_cold}, reps, failures)
+    failures.refuse()
+    for line in lines:
+        print(line)
+    print(f"4. cold `ringfit fit` from the shell: empty compilation cache {both(runs4['cold'])}; warm cache "
+          f"{both(runs4['warm'])} (target < 2.5 s); a bare script importing JAX + optimistix and solving the "
+          f"same fit cold: {both(runs4['bare'])} (CPU ratio, empty cache: {bc.ratio_span(runs4['cold'], runs4['bare'])}×)")
 
     def summary(names):
         counts = {name: names.count(name) for name in dict.fromkeys(names)}
@@ -200,6 +201,7 @@ def main(argv=None):
           f"script: {len(bare_programs)} ({summary(bare_programs)}). The small ones are compiled while the "
           f"solve is traced, inside equinox/lineax/optimistix (enum comparisons and RESULTS.promote), "
           f"the same in both.")
+    bc.finish()
 
 
 if __name__ == "__main__":

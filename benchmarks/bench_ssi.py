@@ -58,8 +58,10 @@ and the median frequencies of those poles agree within 0.3 %. (The source's
 5 % damping criterion, ringfit's squares, is strict for 4 s of ambient
 data: damping estimates scatter more than that between orders.)
 
-Usage: ``python benchmarks/bench_ssi.py [--cases a,b,c] [--repeats 3] [--no-pyoma] [--no-growth]``
-(pyOMA2 is a benchmark-only extra: ``pip install pyOMA-2``).
+Usage: ``python benchmarks/bench_ssi.py [--cases a,b,c] [--repeats 3] [--no-pyoma] [--no-growth] [--quick]``
+(pyOMA2 is a benchmark-only extra: ``pip install pyOMA-2``; without it the pyOMA2 runs are left
+out with a note). ``--quick``: case (c), one repeat, no growth table (a smoke run). A worker
+process that fails ends the run with the failure listed and no figures for its case.
 """
 
 from __future__ import annotations
@@ -80,7 +82,11 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _common as bc  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
+CASES = ("a", "b", "c")
 FS_RAW, FS = 25600.0, 3200.0
 BLOCK_ROWS, ORDMAX, STEP = 30, 160, 2
 BAND = (20.0, 700.0)
@@ -226,7 +232,12 @@ def run_worker(tool, data, block_rows=BLOCK_ROWS, ordmax=ORDMAX, channels=10**6,
            "--repeats", str(repeats), "--workers", str(0 if workers is None else workers)]
     cmd += ["--stages"] if stages else []
     env = dict(os.environ, BENCH_SSI_BLAS_THREADS=str(blas_threads))
-    subprocess.run(cmd, check=True, env=env, cwd=ROOT)
+    proc = subprocess.run(cmd, env=env, cwd=ROOT)
+    if proc.returncode:
+        out.unlink(missing_ok=True)
+        failures = bc.Failures()
+        failures.add(f"{tool} worker on {Path(data).name}", f"exit status {proc.returncode} (its error above)")
+        failures.refuse()
     r = json.loads(out.read_text())
     out.unlink()
     return r
@@ -240,25 +251,43 @@ def found(stable_f, stable_o, f0, n_orders):
 
 
 def load() -> str:
-    return "load average " + " ".join(f"{v:.2f}" for v in os.getloadavg()) + f" on {os.cpu_count()} cores"
+    return bc.loadavg()
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--cases", default="a,b,c")
-    ap.add_argument("--repeats", type=int, default=3, help="timed runs per tool and case (best is reported)")
+    ap = bc.parser(__doc__.splitlines()[0], quick_help="case (c), one repeat, no growth table (smoke run)")
+    ap.add_argument("--cases", type=bc.choices_list(CASES, "cases"), default=list(CASES),
+                    help="comma-separated cases (default a,b,c)")
+    ap.add_argument("--repeats", type=bc.count("a number of runs", 1, 100), default=3,
+                    help="timed runs per tool and case (best is reported)")
     ap.add_argument("--no-pyoma", action="store_true")
     ap.add_argument("--no-growth", action="store_true")
-    ap.add_argument("--worker"), ap.add_argument("--data"), ap.add_argument("--out")
-    ap.add_argument("--block-rows", type=int, default=BLOCK_ROWS)
-    ap.add_argument("--ordmax", type=int, default=ORDMAX)
-    ap.add_argument("--channels", type=int, default=10**6)
+    ap.add_argument("--worker", choices=("ringfit", "pyoma2"), help=argparse.SUPPRESS)
+    ap.add_argument("--data", help=argparse.SUPPRESS)
+    ap.add_argument("--out", help=argparse.SUPPRESS)
+    ap.add_argument("--block-rows", type=bc.count("a number of block rows", 2, 1000), default=BLOCK_ROWS)
+    ap.add_argument("--ordmax", type=bc.count("a maximum model order", 2 * STEP, 10**4), default=ORDMAX)
+    ap.add_argument("--channels", type=bc.count("a number of channels", 1, 10**6), default=10**6)
     ap.add_argument("--stages", action="store_true")
-    ap.add_argument("--workers", type=int, default=0)
+    ap.add_argument("--workers", type=bc.count("a number of threads (0: the default)", 0, 1024), default=0)
     args = ap.parse_args()
+    if args.quick:
+        args.cases, args.repeats, args.no_growth = ["c"], 1, True
+    if not args.cases:
+        bc.fail("--cases: give at least one of a,b,c")
+    if args.worker and not (args.data and args.out):
+        bc.fail("--worker needs --data and --out")
     if args.worker:
         return worker(args.worker, Path(args.data), Path(args.out), args.block_rows, args.ordmax, args.channels,
                       args.repeats, args.stages, args.workers or None)
+    if not args.no_pyoma:
+        try:
+            import pyoma2  # noqa: F401
+        except ImportError:
+            print("pyOMA2 is not installed (pip install pyOMA-2): its runs are left out")
+            args.no_pyoma = True
+    bc.start("bench_ssi: ringfit's covariance SSI" + ("" if args.no_pyoma else " vs pyOMA2")
+             + (" [--quick]" if args.quick else ""))
     tmp = Path(tempfile.mkdtemp(prefix="bench_ssi_"))
     n_orders = ORDMAX // STEP
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
@@ -267,9 +296,8 @@ def main():
     print("configurations: ringfit x1 = one core (workers=1, one BLAS thread); ringfit default = its default "
           f"threads ({min(8, cores)} workers, one BLAS thread each); pyOMA2 x1 = one BLAS thread (the issue's "
           f"setting); pyOMA2 all = {cores} BLAS threads")
-    print(load())
     summary = []
-    for case in args.cases.split(","):
+    for case in args.cases:
         data = tmp / f"{case}.npz"
         make_case(case, data)
         d = np.load(data)
@@ -337,6 +365,7 @@ def main():
             print(f"case ({case}): {rw[0]:5.1f}x | {rw[1]:5.1f}x | {rw[2]:5.1f}x   memory {rm:5.1f}x  "
                   f"same modes {n_agree}/{n_truth}")
     if args.no_growth:
+        bc.finish()
         return
     data = tmp / "a.npz"
     if not data.exists():
@@ -357,7 +386,7 @@ def main():
     for om in (80, 160, 240):
         r = base if om == ORDMAX else run_worker("ringfit", data, ordmax=om, repeats=3, stages=True)
         print(row(f"max order  {om:4d}", r))
-    print(load())
+    bc.finish()
 
 
 if __name__ == "__main__":

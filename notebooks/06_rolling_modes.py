@@ -92,12 +92,14 @@ for v in (30.0, 50.0):
 # %% [markdown]
 # ## 4. Both tables matched to the branches
 # Each row is compared with the branches at its own speed (from the sidecar's `rotation_hz`) in its frame
-# (`fixed`), with σ = √(freq_std² + (2 % · f_model)²). Labels that contradict a branch cost as much as 2σ of
-# frequency, so a row is matched by frequency first and by its labels among the branches near it.
+# (`fixed`), with σ = √(freq_std² + (τ · f_model)²), τ the model's relative σ taken from the data (the robust
+# scale of the matched rows' residuals beyond their freq_std; 2 % in a first pass). Labels that contradict a
+# branch cost as much as 2σ of frequency, so a row is matched by frequency first and by its labels among the
+# branches near it.
 
 # %%
 res = match_tables(tables, RING, GEOMETRY, drum_diameter_m=DRUM, speeds_kmh=speeds)
-print(res.summary())
+print(res.summary() + "; " + res.tolerance_note)
 print(" speed   f [Hz]  SSI label      branch  model [Hz]  model label        error     z   status")
 for r in res.rows:
     lab = f"n={r['n']} {r['branch'] or r['tag']}"

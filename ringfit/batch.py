@@ -49,6 +49,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import re
 import socket
 import sys
 import threading
@@ -123,7 +124,8 @@ class TaskResult:
     - ``status``: exit status, 0 ok, 1 failed, 2 bad input.
     - ``error``: one line, empty when ok; ``log``: the task's stdout and stderr.
     - ``value``: what the callable returned.
-    - ``elapsed_s`` [s]: wall time of the callable on the worker;
+    - ``elapsed_s`` [s]: wall time of the callable on the worker; ``cpu_s`` [s]: the worker
+      process's CPU time meanwhile (``time.process_time``; on a shared machine the figure to compare);
       ``started_at`` [s]: when it started (``time.time()`` of the worker).
     - ``rss_start_mb``, ``peak_rss_mb``, ``peak_delta_mb`` [MiB]: resident
       memory of the worker process when the task started, its peak during the
@@ -142,6 +144,7 @@ class TaskResult:
     value: Any = None
     log: str = ""
     elapsed_s: float = 0.0
+    cpu_s: float = 0.0
     started_at: float = float("nan")
     rss_start_mb: float = float("nan")
     peak_rss_mb: float = float("nan")
@@ -282,7 +285,7 @@ def execute(name: str, fn: Callable, args: tuple = (), outputs: tuple = (), kind
         result = TaskResult(name, outputs=tuple(outputs), worker=f"{socket.gethostname()}:{os.getpid()}",
                             task_index=_TASKS_RUN, kind=kind, kind_index=_KINDS_RUN.get(kind, 0))
         result.started_at = time.time()
-        t0 = time.perf_counter()
+        t0, p0 = time.perf_counter(), time.process_time()
         with _PeakMemory() as mem, contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
             try:
                 result.value = fn(*args)
@@ -297,6 +300,7 @@ def execute(name: str, fn: Callable, args: tuple = (), outputs: tuple = (), kind
                 result.state, result.status = "failed", 1
                 result.error = _one_line(f"{type(exc).__name__}: {exc}")
         result.elapsed_s = time.perf_counter() - t0
+        result.cpu_s = time.process_time() - p0
         result.rss_start_mb, result.peak_rss_mb = mem.start, mem.peak
         result.peak_delta_mb = mem.peak - mem.start
         result.compiles = _JaxCompiles.count - c0
@@ -451,6 +455,49 @@ def local_cluster(workers: int | None = None, *, memory_limit: str | float | Non
         )
 
 
+_HOST = re.compile(r"^(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9]([A-Za-z0-9.\-_]*[A-Za-z0-9])?)$")
+
+
+def _is_ip(host) -> bool:
+    import ipaddress
+
+    try:
+        ipaddress.ip_address(str(host).strip("[]"))
+    except ValueError:
+        return False
+    return True
+
+
+def check_scheduler_address(address: str) -> None:
+    """``address`` is a scheduler address Dask can dial (``tcp://HOST:PORT``, ``tls://…``, ``inproc://…``; the
+    scheme defaults to tcp): :class:`~ringfit.errors.InputError` naming ``--scheduler`` otherwise, before any
+    connection is tried."""
+    from distributed.comm import parse_address
+    from distributed.comm.addressing import parse_host_port
+    from distributed.comm.registry import backends
+
+    from ringfit.errors import InputError
+
+    def bad(why):
+        return InputError(f"--scheduler {address!r}: {why}; expected an address such as tcp://10.0.0.5:8786")
+
+    try:
+        scheme, loc = parse_address(address)
+    except (ValueError, TypeError) as exc:
+        raise bad(_one_line(exc)) from None
+    if scheme not in backends:
+        raise bad(f"unknown protocol {scheme!r} (known: {', '.join(sorted(backends))})")
+    if scheme in ("tcp", "tls"):
+        try:
+            host, port = parse_host_port(loc, 8786)
+        except (ValueError, TypeError) as exc:
+            raise bad(_one_line(exc)) from None
+        if not (_HOST.match(host or "") or _is_ip(host)):
+            raise bad(f"{host!r} is not a host name or IP address")
+        if not 0 < int(port) < 65536:
+            raise bad(f"port {port} outside 1..65535")
+
+
 @contextlib.contextmanager
 def open_client(scheduler: str | None = None, workers: int | None = None, *, memory_limit="auto",
                 warmup: Callable[[], Any] | None = None, timeout: float = 30.0, quiet: bool = True,
@@ -473,11 +520,12 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *, mem
     distributed = import_distributed()
     cluster = None
     if scheduler:
+        check_scheduler_address(scheduler)
         check_scheduler_security(scheduler, security)
         try:
             client = distributed.Client(scheduler, timeout=timeout,
                                         **({} if security is None else {"security": security}))
-        except (OSError, ValueError) as exc:  # unreachable, refused handshake, wrong certificate
+        except (OSError, ValueError, TypeError) as exc:  # unreachable, refused handshake, wrong certificate
             raise InputError(f"cannot reach the scheduler ({_one_line(exc)})", source=scheduler) from None
     else:
         cluster = local_cluster(workers, memory_limit=memory_limit, quiet=quiet, dashboard=dashboard,
@@ -645,7 +693,7 @@ def summarize(results: Sequence[TaskResult], wall_s: float | None = None) -> dic
     """Figures over a run: counts by state, task time, memory, compilations on warm tasks, overhead.
 
     **Returns:** dict with ``tasks``, ``by_state`` (state → count), ``task_s``
-    (sum of task wall times) [s], ``median_task_s`` [s], ``max_peak_delta_mb`` and
+    (sum of task wall times) [s], ``cpu_s`` (sum of their CPU times) [s], ``median_task_s`` [s], ``max_peak_delta_mb`` and
     ``max_peak_rss_mb`` [MiB] over tasks, ``workers`` (distinct processes),
     ``warm_compiles`` (compilations in tasks that were not the first of their
     kind on their worker; a new input shape compiles again), ``gap_s`` [s]:
@@ -668,7 +716,7 @@ def summarize(results: Sequence[TaskResult], wall_s: float | None = None) -> dic
     for rs in per_worker.values():
         rs = sorted(rs, key=lambda r: r.started_at)
         gaps += [b.started_at - (a.started_at + a.elapsed_s) for a, b in zip(rs, rs[1:])]
-    out = dict(tasks=len(results), by_state=by_state, task_s=task_s,
+    out = dict(tasks=len(results), by_state=by_state, task_s=task_s, cpu_s=float(sum(r.cpu_s for r in ran)),
                median_task_s=float(np.median([r.elapsed_s for r in ran])) if ran else float("nan"),
                max_peak_delta_mb=max((r.peak_delta_mb for r in ran), default=float("nan")),
                max_peak_rss_mb=max((r.peak_rss_mb for r in ran), default=float("nan")),

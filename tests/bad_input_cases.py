@@ -17,6 +17,7 @@ Used by ``tests/test_bad_input_replay.py`` (pytest) and
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import io
 import json
@@ -242,6 +243,10 @@ class Case:
     - ``names``: the error line must contain one of these (file, field or option).
     - ``documented``: instead of a refusal, ``check(status, err, folder)`` must hold.
     - ``slow``: runs a real fit (kept out of the quick pytest selection).
+    - ``issue``/``item``: where the case was reported (issue 14 unless said).
+    - ``during``: ``during(folder)`` is a context manager the command runs inside (a simulated full disk,
+      read-only folder or Ctrl-C; see the issue 23 section).
+    - ``unchanged``: a ``check`` case must also leave the folder as it was.
     """
 
     id: str
@@ -251,6 +256,9 @@ class Case:
     check: Callable | None = None
     slow: bool = False
     item: int = 2
+    issue: int = 14
+    during: Callable | None = None
+    unchanged: bool = False
 
     def args(self, d: Path) -> list[str]:
         return [a.replace("{d}", str(d)) for a in self.argv]
@@ -490,6 +498,228 @@ add("ssi-orders-garbage", SSI + ["--orders", "10:2"], names=("--orders",), item=
 add("ssi-workers-0", SSI + ["--workers", "0"], names=("--workers",), item=3)
 
 
+# --- issue 23 item 3: the crashes, hangs and silent answers found by a new user -------------------------------
+
+
+def _accelerance_uff(name="acc.uff", inc=0.5, top=100.0, modes=((2, 3.1, 0.02), (3, 5.3, 0.02), (4, 7.7, 0.02))):
+    """An accelerance UFF58 (function type 4, 8 radial nodes 45° apart) written by pyuff, with its lines every
+    ``inc`` Hz: a band at a few Hz leaves no line within 1 % of a peak (the 26-FRF ``dam0.unv`` case)."""
+    def setup(d: Path):
+        import pyuff
+
+        nodes = np.arange(1, 9)
+        f = np.arange(0, int(top / inc) + 1) * inc
+        w = 2 * np.pi * f
+        sets = []
+        for node in nodes:
+            a = np.deg2rad((node - 1) * 45.0)
+            h = np.zeros(f.size, complex)
+            for n, fn, z in modes:
+                wn = 2 * np.pi * fn
+                h += np.cos(n * a) * (-(w**2)) / (2.0 * (wn**2 - w**2 + 2j * z * wn * w))
+            sets.append(pyuff.prepare_58(
+                binary=0, id1="accelerance", id2="", id3="", id4="", id5="", func_type=4, ver_num=0, load_case_id=0,
+                rsp_ent_name="tyre", rsp_node=int(node), rsp_dir=3, ref_ent_name="hammer", ref_node=100, ref_dir=3,
+                abscissa_spacing=1, abscissa_min=0.0, abscissa_inc=inc, z_axis_value=0.0, abscissa_spec_data_type=18,
+                abscissa_len_unit_exp=0, abscissa_force_unit_exp=0, abscissa_temp_unit_exp=0,
+                abscissa_axis_units_lab="Hz", ordinate_spec_data_type=12, ordinate_len_unit_exp=0,
+                ordinate_force_unit_exp=0, ordinate_temp_unit_exp=0, ordinate_axis_units_lab="m/s^2/N",
+                orddenom_spec_data_type=13, orddenom_len_unit_exp=0, orddenom_force_unit_exp=0,
+                orddenom_temp_unit_exp=0, orddenom_axis_units_lab="N", z_axis_spec_data_type=0,
+                z_axis_len_unit_exp=0, z_axis_force_unit_exp=0, z_axis_temp_unit_exp=0, z_axis_axis_units_lab="",
+                data=h, x=f))
+        pyuff.UFF(str(d / name)).write_sets(sets, mode="add")
+    return setup
+
+
+ACC_ANGLES = ",".join(f"{k}={(k - 1) * 45}" for k in range(1, 9))
+
+
+@contextlib.contextmanager
+def _patched(obj, name, value):
+    old = getattr(obj, name)
+    setattr(obj, name, value)
+    try:
+        yield
+    finally:
+        setattr(obj, name, old)
+
+
+def _writes_fail(folder_name: str, err: int):
+    """A folder of the fixtures where every new file fails with ``err`` (errno.EROFS: a read-only mount, which
+    root does not bypass; errno.ENOSPC: a full disk, where the file is created and its writing fails).
+
+    Simulated (portable, no mount needed): files opened for writing under the folder raise ``OSError(err)``;
+    ``os.open`` with O_CREAT (``tempfile.mkstemp``) raises for EROFS only. tests/test_output_failures.py
+    does the same on a real read-only bind mount and a real full tmpfs where the machine allows mounts.
+    """
+    import builtins
+    import errno as errno_mod
+
+    def during(d: Path):
+        root = (d / folder_name).resolve()
+        real_os_open, real_open = os.open, builtins.open
+
+        def inside(path) -> bool:
+            try:
+                return Path(os.fsdecode(path)).resolve().is_relative_to(root)
+            except (TypeError, ValueError):
+                return False
+
+        def os_open(path, flags, *a, **k):
+            if err == errno_mod.EROFS and flags & os.O_CREAT and inside(path):
+                raise OSError(err, os.strerror(err), os.fsdecode(path))
+            return real_os_open(path, flags, *a, **k)
+
+        def open_(file, mode="r", *a, **k):
+            if isinstance(file, (str, bytes, os.PathLike)) and any(c in mode for c in "wax+") and inside(file):
+                raise OSError(err, os.strerror(err), os.fsdecode(file))
+            return real_open(file, mode, *a, **k)
+
+        stack = contextlib.ExitStack()
+        stack.enter_context(_patched(os, "open", os_open))
+        stack.enter_context(_patched(builtins, "open", open_))
+        stack.enter_context(_patched(io, "open", open_))
+        return stack
+
+    return during
+
+
+def _ctrl_c_while_sampling(after_calls=20):
+    """SIGINT delivered from inside the log-probability, as a Ctrl-C lands while emcee evaluates it."""
+    def during(d: Path):
+        import ringfit.fit.posterior as posterior
+
+        real = posterior.log_probability_function
+
+        def wrapped(*a, **k):
+            log_prob, lo, hi = real(*a, **k)
+            calls = [0]
+
+            def lp(u):
+                calls[0] += 1
+                if calls[0] == after_calls:
+                    signal.raise_signal(signal.SIGINT)
+                return log_prob(u)
+
+            return lp, lo, hi
+
+        return _patched(posterior, "log_probability_function", wrapped)
+    return during
+
+
+def _refused_after_work(names):
+    """Exit 2, the last stderr line the error naming one of ``names``, the other lines ``WARNING:`` lines
+    (a command that ran before its output failed may have warned), no traceback, no file written or changed."""
+    def check(status, err, out, d):
+        lines = error_lines(err)
+        return (status == 2 and bool(lines) and any(n in lines[-1] for n in names) and "Traceback" not in err
+                and all(line.startswith("WARNING:") for line in lines[:-1]))
+    return check
+
+
+def _interrupted(status, err, out, d):
+    lines = error_lines(err)
+    return status == 130 and lines == ["ringfit sample: interrupted"] and "Traceback" not in err + out \
+        and not (d / "post_out.h5").exists()
+
+
+def _rolling_case(edit):
+    """The fixture case folder with a rolling test table (n = 2…4 rows) whose sidecar ``edit`` breaks."""
+    def setup(d: Path):
+        cond = {"state": "rolling", "load_n": 4000.0, "speed_kmh": 40.0, "pressure_bar": 2.2, "frame": "fixed"}
+        edit(cond)
+        text = "n,a,tag,kind,freq_hz,freq_std_hz,damping_pct\n2,,,structural,101.0,,\n3,,,structural,118.0,,\n"
+        for folder in (d, d / "case"):
+            (folder / "roll40.modes.csv").write_text(text)
+            (folder / "roll40.modes.json").write_text(json.dumps(cond))
+    return setup
+
+
+def _drop(key):
+    return lambda c: c.pop(key)
+
+
+def _set(key, value):
+    return lambda c: c.__setitem__(key, value)
+
+
+CAMPBELL = ["campbell", "--tyre", "{d}/tyre.toml", "--speeds", "0:40:20", "--out", "{d}/out.campbell.csv"]
+CAMPAIGN = ["campaign", "{d}/camp", "--out", "{d}/camp_out", "--workers", "1"]
+BATCH_FIT = ["batch", "fit", "{d}/free.modes.csv", "--out", "{d}/batch_out"]
+
+
+def _campaign_folder(d: Path):
+    (d / "camp").mkdir()
+    shutil.copytree(d / "case", d / "camp" / "t1")
+
+
+def issue23(id, argv, setup=None, names=(), **kw):
+    add(id, argv, setup, names, item=3, issue=23, **kw)
+
+
+# frf on FRFs whose lines are coarser than the band's peaks (dam0.unv --band 0.5:12): argmax of an empty window
+issue23("frf-uff-accelerance-lines-coarser-than-peaks",
+        ["frf", "{d}/acc.uff", "--out", "{d}/out.modes.csv", "--band", "0.5:12", "--angles", ACC_ANGLES],
+        setup=_accelerance_uff(), names=("--band",))
+# ssi on pyuff's binary8byte.uff (one scalar channel at 100 Hz, no force): ZeroDivisionError in group_velocity
+issue23("ssi-uff-binary8byte-group-velocity",
+        ["ssi", "{d}/b.uff", "--out", "{d}/out.modes.csv", "--angles", "1=0", "--axes", "0=radial", "--band", "1:40",
+         "--radius", "0.3"], setup=_copy_uff("binary8byte.uff", "b.uff"), names=("b.uff", "--orders", "--band"))
+# campbell: a drum of 1e300 m ("matrix contains invalid numeric entries"), speeds that would fill the memory
+for v in ("1e300", "0.001", "inf"):
+    issue23(f"campbell-drum-{v}", CAMPBELL + ["--drum", v], names=("--drum",))
+issue23("roll-drum-0.001", ROLL + ["--drum", "0.001"], names=("--drum",))
+for v, tag in (("0:1e9:1", "range-1e9"), ("0:100:1e-9", "step-1e-9"), ("1e300", "value-1e300"),
+               ("0:inf:1", "range-inf"), (",".join(["10"] * 401), "list-401"), ("-5,10", "negative")):
+    issue23(f"campbell-speeds-{tag}", CAMPBELL[:3] + ["--speeds", v] + CAMPBELL[5:], names=("--speeds",))
+issue23("campbell-load-1e300", CAMPBELL + ["--load", "1e300"], names=("--load",))
+# example --out under a regular file or an unwritable place
+issue23("example-out-under-a-file", ["example", "records", "--out", "{d}/tyre.toml/sub"], names=("--out", "tyre.toml"))
+issue23("example-out-read-only", ["example", "records", "--out", "{d}/ro/ex"], setup=_mkdir("ro"),
+        during=_writes_fail("ro", errno.EROFS), names=("--out", "ro/ex"))
+# batch --scheduler "not a url"; inputs `/` and -x...
+for v, tag in (("not a url", "not-a-url"), ("http://h:80", "http"), ("tcp://h:99999", "port"), ("tcp://:8786", "no-host")):
+    issue23(f"batch-scheduler-{tag}", BATCH_FIT + ["--scheduler", v], names=("--scheduler",))
+issue23("batch-input-root", ["batch", "fit", "/", "--out", "{d}/batch_out"], names=("/:",))
+issue23("batch-input-like-an-option", ["batch", "fit", "-x.modes.csv", "--out", "{d}/batch_out"],
+        setup=_both(_write("-x.modes.csv", "n,freq_hz\n2,100\n")), names=("-x.modes.csv",))
+# any output into a read-only folder: one line, before any work
+for cmd, argv, out in (("fit", FIT, "out.toml"), ("campbell", CAMPBELL, "out.campbell.csv"),
+                       ("ssi", SSI, "out.modes.csv"), ("sample", SAMPLE, "post_out.h5"),
+                       ("diagnose", DIAG, "out.diagnosis.json")):
+    issue23(f"{cmd}-out-read-only-folder", _replace_out(argv, "{d}/ro/" + out), setup=_mkdir("ro"),
+            during=_writes_fail("ro", errno.EROFS), names=("ro/" + out,))
+issue23("campbell-plot-read-only-folder", CAMPBELL + ["--plot", "{d}/ro/c.png"], setup=_mkdir("ro"),
+        during=_writes_fail("ro", errno.EROFS), names=("ro/c.png",))
+# disk full: sample --force (was h5py tracebacks and a segfault); ssi --plot leaves no mode table behind
+issue23("sample-disk-full", _replace_out(SAMPLE, "{d}/full/post_out.h5") + ["--min-steps", "100", "--max-steps", "100",
+                                                                          "--force", "--quiet"],
+        setup=_mkdir("full"), during=_writes_fail("full", errno.ENOSPC),
+        check=_refused_after_work(("post_out.h5",)), unchanged=True, slow=True)
+issue23("ssi-plot-disk-full", SSI + ["--plot", "{d}/full/stab.png", "--quiet"], setup=_mkdir("full"),
+        during=_writes_fail("full", errno.ENOSPC), check=_refused_after_work(("stab.png",)), unchanged=True, slow=True)
+# Ctrl-C in sample: the one-line message only (no emcee traceback), exit 130, nothing written
+issue23("sample-ctrl-c", SAMPLE + ["--quiet"], during=_ctrl_c_while_sampling(), check=_interrupted, unchanged=True,
+        slow=True)
+# silent: a rolling table whose sidecar has no state, says free with a load, or has load_n 0
+for tag, edit, key in (("no-state", _drop("state"), "'state'"), ("free-with-load", _set("state", "free"), "'state'"),
+                       ("load-0", _set("load_n", 0), "'load_n'")):
+    issue23(f"campbell-modes-sidecar-{tag}", CAMPBELL + ["--modes", "{d}/roll40.modes.csv"], setup=_rolling_case(edit),
+            names=(key,))
+    issue23(f"diagnose-rolling-sidecar-{tag}", DIAG, setup=_rolling_case(edit), names=(key,))
+issue23("diagnose-rolling-sidecar-drum-1e300", DIAG, setup=_rolling_case(_set("drum_diameter_m", 1e300)),
+        names=("'drum_diameter_m'",))
+issue23("campbell-modes-sidecar-drum-0.001", CAMPBELL + ["--modes", "{d}/roll40.modes.csv"],
+        setup=_rolling_case(_set("drum_diameter_m", 0.001)), names=("'drum_diameter_m'",))
+# campaign arguments checked before any work
+issue23("campaign-min-steps-50", CAMPAIGN + ["--min-steps", "50"], setup=_campaign_folder, names=("--min-steps",))
+issue23("campaign-effects-bogus", CAMPAIGN + ["--effects", "bogus"], setup=_campaign_folder, names=("--effects",))
+issue23("campaign-walkers-odd", CAMPAIGN + ["--walkers", "9"], setup=_campaign_folder, names=("--walkers",))
+issue23("campaign-max-below-min", CAMPAIGN + ["--min-steps", "3000", "--max-steps", "2000"], setup=_campaign_folder,
+        names=("--max-steps",))
+
+
 # ----------------------------------------------------------------------------- documented behaviour
 
 
@@ -572,11 +802,13 @@ def replay(case: Case, folder: Path, *, timeout_s: float | None = None) -> Outco
     out_buf, err_buf = io.StringIO(), io.StringIO()
     status = None
     old = signal.signal(signal.SIGALRM, _alarm) if timeout_s else None
+    during = case.during(folder) if case.during is not None else contextlib.nullcontext()
     with contextlib.redirect_stdout(out_buf), contextlib.redirect_stderr(err_buf):
         try:
             if timeout_s:
                 signal.setitimer(signal.ITIMER_REAL, timeout_s)
-            status = main(case.args(folder))
+            with during:
+                status = main(case.args(folder))
         except SystemExit as exc:  # argparse
             status = exc.code
         except CaseTimeout:
@@ -592,6 +824,9 @@ def replay(case: Case, folder: Path, *, timeout_s: float | None = None) -> Outco
     after = snapshot(folder)
     if case.check is not None:
         ok = bool(case.check(status, err, out_buf.getvalue(), folder))
+        if ok and case.unchanged and after != before:
+            changed = sorted(k for k in set(before) | set(after) if before.get(k) != after.get(k))
+            return Outcome(False, status, f"files written or changed: {changed}", err)
         return Outcome(ok, status, "" if ok else "documented behaviour not met", err)
     lines = error_lines(err)
     if status != 2:

@@ -121,7 +121,7 @@ def test_tables_from_the_model_are_matched_and_inconsistencies_explained(tyre, d
             # row 2: the right frequency with n + 1 (a shape-based label gone wrong)
             rows[1] = (rows[1][0], rows[1][1], rows[1][2] + 1, rows[1][3], "")
         tables.append(_table(d, s, rows, source=f"t{s}.modes.csv"))
-    res = match_tables(tables, r, g, drum_diameter_m=DRUM, speeds_kmh=SPEEDS)
+    res = match_tables(tables, r, g, drum_diameter_m=DRUM, speeds_kmh=SPEEDS, model_tolerance=0.02)
     by = {(Path(x["source"]).name, x["row"]): x for x in res.rows}
     for s in (1, 2):
         for j, b in enumerate(picks):
@@ -275,3 +275,128 @@ def test_end_to_end_cleat_records_to_matched_branches(tmp_path, tyre, diagram, c
         if not np.any(np.abs(truth["fixed_hz"] - f) < 0.02 * f):
             assert m["status"] != "matched", m
     print(printed)
+
+
+# ----------------------------------------------------------------------------- issue 23 item 4: a Campbell you can read
+
+
+def _crossing_pair(S=9, seed=3, noise=0.05):
+    """Two modes of fixed, distinct shapes whose frequencies cross (order swaps mid-way), plus a spectator."""
+    rng = np.random.default_rng(seed)
+    D = 8
+    q = np.linalg.qr(rng.normal(size=(D, 3)) + 1j * rng.normal(size=(D, 3)))[0].T  # 3 orthonormal shapes
+    v = np.linspace(0.0, 1.0, S)
+    freq = np.stack([120.0 + 12.0 * v, 128.0 - 10.0 * v, 160.0 + 0.0 * v], axis=1)  # modes 0 and 1 cross at v≈0.36
+    content = np.tile(q, (S, 1, 1)) + noise * (rng.normal(size=(S, 3, D)) + 1j * rng.normal(size=(S, 3, D)))
+    return freq, content, q
+
+
+def test_track_branches_follows_shapes_through_a_crossing():
+    """A veering pair whose frequency order swaps: each branch keeps its shape (MAC), not its rank."""
+    for seed in range(20):
+        freq, content, q = _crossing_pair(seed=seed)
+        S = freq.shape[0]
+        # the solver returns the modes sorted by frequency at each speed
+        order = np.argsort(freq, axis=1)
+        f_sorted = np.take_along_axis(freq, order, 1)
+        c_sorted = np.take_along_axis(content, order[..., None], 1)
+        perm = track_branches(f_sorted, c_sorted)
+        tracked = np.take_along_axis(c_sorted, perm[..., None], 1)
+        for b in range(3):
+            shape = tracked[0, b] / np.linalg.norm(tracked[0, b])
+            mac = np.abs(np.conj(q) @ (tracked[:, b] / np.linalg.norm(tracked[:, b], axis=-1, keepdims=True)).T) ** 2
+            own = int(np.argmax(np.abs(np.conj(q) @ shape) ** 2))
+            assert np.all(np.argmax(mac, axis=0) == own), (seed, b, mac.round(2))
+        # frequency-rank tracking would have jumped between the two shapes at the crossing
+        assert not np.array_equal(perm, np.tile(np.arange(3), (S, 1)))
+        np.testing.assert_allclose(np.take_along_axis(f_sorted, perm, 1), freq)
+
+
+def test_sensor_frame_is_one_line_per_branch(diagram):
+    """Each branch is drawn as one line ω + kΩ (the same k at every speed), the one it carries most weight on."""
+    d = diagram
+    hz, k, w = d.sensor_line()
+    assert np.all(k == k[0][None, :])
+    total = np.nan_to_num(d.line_weight).sum(axis=0)  # (B, H)
+    for b in range(d.branches):
+        j = int(np.flatnonzero(d.k == k[0, b])[0])
+        assert total[b, j] == pytest.approx(total[b].max())
+        np.testing.assert_allclose(hz[:, b], np.abs(d.line_hz[:, b, j]))
+    direction = d.branch_direction()
+    assert direction.shape == (d.branches,) and set(direction) <= {"backward", "forward", "standing"}
+
+
+def test_spread_labels_never_overlap_and_move_as_little_as_needed():
+    from ringfit.report.campbell_plots import spread_labels
+
+    # three labels at one height: spaced by the gap around it (the least-squares placement)
+    np.testing.assert_allclose(spread_labels([5.0, 5.0, 5.0], 0.0, 10.0, 1.0), [4.0, 5.0, 6.0])
+    # labels already apart stay where they are
+    np.testing.assert_allclose(spread_labels([1.0, 3.0, 8.0], 0.0, 10.0, 1.0), [1.0, 3.0, 8.0])
+    # a pair too close moves apart symmetrically; order of the input kept
+    np.testing.assert_allclose(spread_labels([7.0, 2.0, 2.4], 0.0, 10.0, 1.0), [7.0, 1.7, 2.7])
+    # crowded at the top edge: pushed down into the axis
+    np.testing.assert_allclose(spread_labels([9.9, 9.95, 10.0], 0.0, 10.0, 1.0), [8.0, 9.0, 10.0])
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        y = rng.uniform(100, 400, rng.integers(1, 40))
+        pos = spread_labels(y, 100.0, 400.0, 5.0)
+        o = np.argsort(y, kind="stable")
+        assert np.all(np.diff(pos[o]) >= 5.0 - 1e-9)  # no overlap, order kept
+        assert pos.min() >= 100.0 - 1e-9 and pos.max() <= 400.0 + 1e-9
+        alone = np.array([np.all(np.abs(y[i] - np.delete(y, i)) >= 10.0) for i in range(y.size)])
+        if y.size * 5.0 < 150.0:
+            assert np.all(np.abs(pos - y)[alone & (y > 105) & (y < 395)] <= 5.0 * y.size)
+
+
+def test_matching_sigma_comes_from_the_data():
+    """τ from the matched rows' residuals: on many random tables it recovers the spread the rows were drawn with."""
+    from ringfit.gap.campbell import MIN_TOLERANCE, MODEL_TOLERANCE, data_tolerance
+
+    rng = np.random.default_rng(7)
+    est = []
+    for _ in range(300):
+        tau = rng.uniform(0.003, 0.015)
+        f_hat = rng.uniform(100, 300, 30)
+        r = tau * rng.standard_normal(30)
+        rows = [{"status": "matched", "error_pct": 100 * x, "model_hz": f, "_std": math.nan} for x, f in zip(r, f_hat)]
+        got, note = data_tolerance(rows)
+        est.append(got / tau)
+        assert "30 matched rows" in note
+    est = np.asarray(est)
+    # the MAD's asymptotic relative standard error for normal data is 1.1664/√m: a nominal 90 % band
+    band = 1.645 * 1.1664 / math.sqrt(30)
+    assert abs(np.median(est) - 1.0) < 0.05, np.percentile(est, [5, 50, 95])
+    assert np.mean(np.abs(est - 1) < band) > 0.85, (band, np.mean(np.abs(est - 1) < band))
+    # rows whose own freq_std_hz accounts for their scatter leave the model nothing: τ at its floor
+    f_hat = np.full(40, 200.0)
+    r = 0.01 * rng.standard_normal(40)
+    rows = [{"status": "matched", "error_pct": 100 * x, "model_hz": 200.0, "_std": 0.02 * 200} for x in r]
+    assert data_tolerance(rows)[0] == MIN_TOLERANCE
+    # too few rows: the stated default
+    assert data_tolerance(rows[:3])[0] == MODEL_TOLERANCE
+
+
+@pytest.mark.slow
+def test_example_rolling_folder_is_matched_without_label_conflict(tmp_path, capsys):
+    """`ringfit example rolling` → fit → campbell --modes: every row matched (the 122.06 Hz row of roll40 was
+    called a label conflict: it lies on the ω + 2Ω line of its own n = 1 branch)."""
+    from ringfit.cli import main
+
+    assert main(["example", "rolling", "--out", str(tmp_path), "--quiet"]) == 0
+    folder = tmp_path / "rolling"
+    assert main(["fit", str(folder / "free.modes.csv"), "--tyre", str(folder / "tyre.toml"),
+                 "--out", str(tmp_path / "fitted.toml")]) == 0
+    out = tmp_path / "rolling.campbell.csv"
+    assert main(["campbell", "--tyre", str(tmp_path / "fitted.toml"), "--load", "4000", "--speeds", "0:60:5",
+                 "--modes", *(str(folder / f"roll{v}.modes.csv") for v in (20, 40, 60)), "--out", str(out),
+                 "--plot", str(tmp_path / "c.png")]) == 0
+    capsys.readouterr()
+    with open(tmp_path / "rolling.matched.csv") as fh:
+        matched = list(csv.DictReader(fh))
+    assert len(matched) == 27
+    bad = [(m["source"], m["row"], m["status"], m["note"]) for m in matched if m["status"] != "matched"]
+    assert not bad, bad
+    row = next(m for m in matched if m["source"].endswith("roll40.modes.csv") and m["row"] == "2")
+    assert row["n"] == "1" and row["model_n"] == "1" and row["model_k"] == "2"
+    assert abs(float(row["error_pct"])) < 0.2

@@ -34,7 +34,9 @@ def _check_table(table, modes, damping_tol=0.15):
 def test_ssi_recovers_modes_and_flags_cavity(truth, records):
     from ringfit.targets.identify import ssi_modes
 
-    res = ssi_modes(records, delay_s=0.4e-3)
+    from ringfit.physics.natural import cavity_frequency
+
+    res = ssi_modes(records, delay_s=0.4e-3, cavity_hz=float(cavity_frequency(1)))
     _check_table(res.table, truth[2])
     cav = truth[2].freq_hz[truth[2].kind == "acoustic"][0]
     ac = np.flatnonzero(res.table.kind == "acoustic")
@@ -171,7 +173,10 @@ def test_cli_ssi_chain_feeds_the_fit(tmp_path, truth):
     assert (tmp_path / "stab.png").stat().st_size > 0
     table = read_mode_table(out)
     method = table.condition.pop("method")
-    assert table.condition == {"state": "free", "frame": "fixed", "credible": True}
+    from ringfit.physics.natural import cavity_frequency
+
+    assert table.condition == {"state": "free", "frame": "fixed", "credible": True,
+                               "cavity_hz": float(cavity_frequency(1))}  # what `acoustic` was judged against
     assert method.startswith("ssi-cov; σ: leave-one-group-out jackknife over 12 groups of sensor angles")
     assert np.all(np.isfinite(table.freq_std_hz) & (table.freq_std_hz > 0))
     assert sorted(table.n[table.kind == "structural"]) == list(range(1, 10))

@@ -7,12 +7,15 @@ Each command family lives in its own module here and adds its subcommands in
 Exit codes: 0 success, 1 the job ran but did not succeed (e.g. a fit that did
 not converge), 2 bad input (one line on stderr naming file/row/field/option;
 argparse's own errors are one line too). Warnings raised by the library go to
-stderr as one ``WARNING:`` line each. ``ringfit --help`` imports no JAX.
+stderr as one ``WARNING:`` line each. ``ringfit --help`` imports no JAX. A
+command's output files appear together when it succeeds, or none does. Every command
+runs with JAX's persistent compilation cache on (:mod:`ringfit._cache`).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import sys
 import warnings
@@ -29,6 +32,12 @@ COMMAND_MODULES = (
     "ringfit.cli.campbell",
     "ringfit.cli.estimate",
 )
+
+
+#: Commands that read back files they wrote (a workflow, a folder built in steps, tasks): their outputs are
+#: written one by one. Every other command's outputs are committed together or not at all
+#: (:func:`ringfit.io.files.outputs_committed_together`).
+WRITES_AS_IT_GOES = frozenset({"demo", "example", "batch", "campaign"})
 
 
 class CommandFailed(Exception):
@@ -60,13 +69,18 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version, or a one-line usage error (status 2)
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    from ringfit._cache import enable_compilation_cache
     from ringfit.errors import InputError
+    from ringfit.io.files import outputs_committed_together
 
+    enable_compilation_cache()  # every command: a second run skips XLA compilation (imports no JAX)
+    together = outputs_committed_together() if args.command not in WRITES_AS_IT_GOES else contextlib.nullcontext()
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                status = args.run(args)
+                with together:
+                    status = args.run(args)
             finally:
                 _print_warnings(caught)
     except InputError as exc:

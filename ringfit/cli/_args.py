@@ -47,6 +47,20 @@ def integer(what: str = "a whole number", *, lo: int | None = None, hi: int | No
     return convert
 
 
+def drum_diameter():
+    """A drum diameter [m] in :data:`ringfit.io.modes.DRUM_DIAMETER_RANGE_M` (``--drum``; the range is imported
+    when the option is given, so that ``--help`` stays free of NumPy)."""
+
+    def convert(text: str) -> float:
+        from ringfit.io.modes import DRUM_DIAMETER_RANGE_M
+
+        lo, hi = DRUM_DIAMETER_RANGE_M
+        return number(f"a drum diameter in metres in [{lo:g}, {hi:g}] (omit --drum for a flat road)",
+                      lo=lo, hi=hi)(text)
+
+    return convert
+
+
 def quiet_flag(p: argparse.ArgumentParser) -> None:
     """The one switch that silences progress bars: ``--quiet`` (``--no-progress`` kept as a hidden alias)."""
     p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")

@@ -15,6 +15,7 @@ submission, progress, failures, time and memory per task) is
 from __future__ import annotations
 
 import argparse
+import contextlib
 import re
 import sys
 from dataclasses import dataclass, field
@@ -155,11 +156,12 @@ def register(sub) -> None:
     c.add_argument("campaign", type=Path, help="folder holding one case folder per tyre (each with tyre.toml)")
     c.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created if absent)")
     _cluster_options(c)
-    c.add_argument("--walkers", type=integer("a whole number of walkers >= 1", lo=1), default=32, help="emcee walkers of `ringfit sample` (default 32)")
-    steps = integer("a whole number of steps >= 1", lo=1)
+    # the same limits as `ringfit sample`'s options: a campaign refuses before any work what its samples would
+    c.add_argument("--walkers", type=integer("a whole number of walkers >= 2", lo=2), default=32, help="emcee walkers of `ringfit sample` (default 32)")
+    steps = integer("a whole number of steps >= 100", lo=100)
     c.add_argument("--min-steps", type=steps, default=2000, help="`ringfit sample --min-steps` (default 2000)")
     c.add_argument("--max-steps", type=steps, default=20000, help="`ringfit sample --max-steps` (default 20000)")
-    c.add_argument("--seed", type=int, default=0, help="`ringfit sample --seed` (default 0)")
+    c.add_argument("--seed", type=integer("a whole number >= 0", lo=0), default=0, help="`ringfit sample --seed` (default 0)")
     c.add_argument("--prior", default="physical", choices=("physical", "none"),
                    help="prior of `ringfit fit` and `ringfit sample` (default physical)")
     c.add_argument("--effects", default=None, help="`ringfit diagnose --effects` (default: all registered)")
@@ -192,6 +194,10 @@ def output_stems(inputs: list[str], rule: OutputRule) -> list[str]:
 
     paths = [Path(x) for x in inputs]
     stems = [stem(p) for p in paths]
+    for x, s in zip(inputs, stems):
+        if not s or s in (".", "..") or "/" in s or "\\" in s:
+            raise InputError(f"has no name to derive an output name from (the root folder?); expected input "
+                             "files or case folders with a name", source=x)
     counts = {s: stems.count(s) for s in stems}
     stems = [f"{p.resolve().parent.name}-{s}" if counts[s] > 1 else s for p, s in zip(paths, stems)]
     seen: dict[str, str] = {}
@@ -247,7 +253,10 @@ def plan_batch(command: str, inputs: list[str], out_dir, extra: list[str] = (), 
             return a
 
         primary = str(out) + rule.suffix
-        argv = [command, str(x), "--out", primary, *map(fill, extra)]
+        if Path(primary).parent != out_dir:
+            raise InputError(f"would write {primary}, outside --out {out_dir}", source=x)
+        arg = str(x) if not str(x).startswith("-") else "./" + str(x)  # -x... would read as an option
+        argv = [command, arg, "--out", primary, *map(fill, extra)]
         plans.append(PlannedRun(str(x), stem, argv, [primary] + [str(out) + s for s in rule.sidecars]))
     return plans
 
@@ -346,6 +355,10 @@ def _check_cluster_options(opts) -> None:
     if opts.scheduler and opts.workers:
         raise InputError("--workers starts a LocalCluster; with --scheduler the cluster's own workers run the "
                          "tasks (start them with `dask worker`)")
+    if opts.scheduler:
+        from ringfit.batch import check_scheduler_address
+
+        check_scheduler_address(opts.scheduler)
     if opts.scheduler and opts.dashboard:
         raise InputError("--dashboard starts the LocalCluster's dashboard; a --scheduler serves its own "
                          "(`dask scheduler --dashboard-address`)")
@@ -367,6 +380,17 @@ def _split_rest(rest: list[str]) -> tuple[list[str], list[str]]:
     return rest, []
 
 
+def _refuse_inputs_like_options(parser: argparse.ArgumentParser, head: list[str]) -> None:
+    """An input file whose name starts with ``-`` would be read as an option: say so, and how to name it."""
+    from ringfit.errors import InputError
+
+    known = set(parser._option_string_actions)
+    for token in head:
+        if token.startswith("-") and token.split("=", 1)[0] not in known and Path(token).exists():
+            raise InputError(f"an input whose name starts with '-' reads as an option; name it ./{token}",
+                             source=token)
+
+
 def run_batch(args) -> int:
     import os
     import shlex
@@ -374,7 +398,9 @@ def run_batch(args) -> int:
     from ringfit.errors import InputError
 
     head, extra = _split_rest(list(args.rest))
-    opts = _inner_parser(args.batch_command).parse_args(head, namespace=argparse.Namespace(**vars(args)))
+    parser = _inner_parser(args.batch_command)
+    _refuse_inputs_like_options(parser, head)
+    opts = parser.parse_args(head, namespace=argparse.Namespace(**vars(args)))
     _check_cluster_options(opts)
     plans = plan_batch(args.batch_command, opts.inputs, opts.out, extra, force=opts.force)
     check_command_line(plans[0].argv)
@@ -384,14 +410,25 @@ def run_batch(args) -> int:
         return 0
     if opts.out.exists() and not opts.out.is_dir():
         raise InputError("exists and is not a folder", source=opts.out)
-    opts.out.mkdir(parents=True, exist_ok=True)
+    created = not opts.out.exists()
+    try:
+        opts.out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out: cannot create the folder ({exc.strerror or exc.__class__.__name__})",
+                         source=opts.out) from None
 
     from ringfit.batch import Task
 
     cwd = os.getcwd()
     tasks = [Task(plan.input, run_command, (plan.argv, cwd), outputs=tuple(plan.outputs), kind=args.batch_command)
              for plan in plans]
-    results, timing = _run(opts, tasks, (args.batch_command,), f"ringfit {args.batch_command}")
+    try:
+        results, timing = _run(opts, tasks, (args.batch_command,), f"ringfit {args.batch_command}")
+    except BaseException:
+        if created:  # a scheduler that cannot be reached leaves no empty folder behind
+            with contextlib.suppress(OSError):
+                opts.out.rmdir()
+        raise
     return _report(opts, results, timing)
 
 
@@ -535,11 +572,27 @@ def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
     return tasks, layout
 
 
+def _check_campaign_options(args) -> None:
+    """What every tyre's sample and diagnosis would refuse, refused before any work (one line naming the option)."""
+    from ringfit.cli.gap import parse_effects
+    from ringfit.errors import InputError
+    from ringfit.cli.free import DEFAULT_FREE
+
+    if args.max_steps < args.min_steps:
+        raise InputError(f"--max-steps {args.max_steps} is below --min-steps {args.min_steps}")
+    k = len(DEFAULT_FREE.split(","))
+    if args.walkers % 2 or args.walkers < 2 * k:
+        raise InputError(f"--walkers {args.walkers}: emcee needs an even number of at least {2 * k} "
+                         f"(2 × {k} free parameters of the campaign's fits)")
+    parse_effects(args.effects)
+
+
 def run_campaign(args) -> int:
     from ringfit.errors import InputError
     from ringfit.io.files import check_output_path
 
     _check_cluster_options(args)
+    _check_campaign_options(args)
     tyres = campaign_tyres(args.campaign)
     if args.out.exists() and not args.out.is_dir():
         raise InputError("exists and is not a folder", source=args.out)

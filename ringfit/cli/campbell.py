@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ringfit.cli._args import force_flag, integer, number
+from ringfit.cli._args import drum_diameter, force_flag, integer, number
 
 
 def register(sub) -> None:
@@ -24,14 +24,14 @@ def register(sub) -> None:
                     "matched to a branch (n, direction, frame) with its error and σ; rows no branch explains, and "
                     "rows whose speed trend or n label contradicts every branch, are named with one sentence each.")
     p.add_argument("--tyre", required=True, type=Path, help="tyre TOML (docs/formats.md §1) with fitted [ring] values")
-    p.add_argument("--load", type=number("a positive load in N", lo=0.0, lo_open=True), default=4000.0,
+    p.add_argument("--load", type=number("a load in N in (0, 1e6]", lo=0.0, hi=1e6, lo_open=True), default=4000.0,
                    help="vertical load Fz [N] (default 4000; tables with load_n in their sidecar use their own)")
     p.add_argument("--speeds", default="0:80:5",
                    help="speeds [km/h]: START:STOP:STEP (STOP included) or a comma list (default 0:80:5)")
     p.add_argument("--frame", choices=("sensor", "fixed"), default="fixed",
                    help="frame of the freq_hz column and of the plot: the co-rotating sensor or a fixed observer "
                         "(default fixed); measured tables use the frame in their sidecar")
-    p.add_argument("--drum", type=number("a positive diameter in metres", lo=0.0, lo_open=True), default=None,
+    p.add_argument("--drum", type=drum_diameter(), default=None,
                    metavar="DIAMETER_M",
                    help="drum diameter [m]; omit for a flat road")
     p.add_argument("--out", required=True, type=Path, help="output NAME.campbell.csv")
@@ -40,30 +40,53 @@ def register(sub) -> None:
                    help="measured mode tables (docs/formats.md §2, with their .json sidecars) to match; writes "
                         "NAME.matched.csv beside --out")
     p.add_argument("--n-max", type=integer("a whole number >= 1", lo=1), default=15, help="highest dominant order n of the branches (default 15)")
-    p.add_argument("--tolerance", type=number("a positive relative σ", lo=0.0, lo_open=True), default=0.02,
-                   help="relative σ of the model used in the matching (default 0.02 = 2 %%)")
+    p.add_argument("--tolerance", type=number("a relative σ in (0, 1]", lo=0.0, hi=1.0, lo_open=True), default=None,
+                   help="relative σ of the model used in the matching (default: from the data, the robust scale "
+                        "of the matched rows' residuals beyond their freq_std_hz; 2 %% where fewer than 4 rows match)")
     force_flag(p)
     p.set_defaults(run=run_campbell)
 
 
+#: Speeds ``--speeds`` accepts [km/h] (as ``ringfit roll --speed``), and how many (each is an eigen-solve).
+SPEED_RANGE_KMH = (0.0, 1000.0)
+MAX_SPEEDS = 400
+
+
 def parse_speeds(text: str):
-    """``"0:80:5"`` (stop included) or ``"20,40,60"`` → sorted speeds [km/h]; :class:`InputError` otherwise."""
+    """``"0:80:5"`` (stop included) or ``"20,40,60"`` → sorted speeds [km/h]; :class:`InputError` otherwise.
+
+    Speeds lie in :data:`SPEED_RANGE_KMH` and there are at most :data:`MAX_SPEEDS` of them (the count of a
+    range is checked before it is made).
+    """
+    import math
+
     import numpy as np
 
     from ringfit.errors import InputError
 
+    lo, hi = SPEED_RANGE_KMH
     try:
         if ":" in text:
             start, stop, step = (float(x) for x in text.split(":"))
-            if not step > 0 or stop < start:
+            if not (math.isfinite(start) and math.isfinite(stop) and math.isfinite(step)) or not step > 0 \
+                    or stop < start:
                 raise ValueError
-            speeds = np.arange(start, stop + 0.5 * step, step)
+            values = (start, stop)
+            count = math.floor((stop - start) / step + 0.5) + 1
         else:
-            speeds = np.array([float(x) for x in text.split(",") if x.strip()])
+            values = [float(x) for x in text.split(",") if x.strip()]
+            count = len(values)
     except ValueError:
         raise InputError(f"--speeds {text!r}: expected START:STOP:STEP with STEP > 0 or a comma list of km/h") from None
-    if speeds.size == 0 or np.any(~np.isfinite(speeds)) or np.any(speeds < 0):
-        raise InputError(f"--speeds {text!r}: expected speeds >= 0 km/h")
+    if count == 0 or not all(math.isfinite(v) and lo <= v <= hi for v in values):
+        raise InputError(f"--speeds {text!r}: expected speeds in [{lo:g}, {hi:g}] km/h")
+    if count > MAX_SPEEDS:
+        raise InputError(f"--speeds {text!r}: {count} speeds; expected at most {MAX_SPEEDS} (one eigen-solve each): "
+                         "a larger STEP")
+    if ":" in text:
+        speeds = np.arange(start, stop + 0.5 * step, step)
+    else:
+        speeds = np.array(values)
     return np.unique(speeds)
 
 
@@ -75,9 +98,6 @@ def matched_path(out: Path) -> Path:
 
 
 def run_campbell(args) -> int:
-    from ringfit._cache import enable_compilation_cache
-
-    enable_compilation_cache()
     from ringfit.cli import CommandFailed
     from ringfit.io.files import atomic_write_text, check_output_paths, csv_text
     from ringfit.io.modes import sidecar_path
@@ -88,11 +108,13 @@ def run_campbell(args) -> int:
     check_output_paths(outputs, overwrite=args.force, inputs=inputs)
 
     from ringfit.gap.campbell import CAMPBELL_COLUMNS, MATCH_COLUMNS, campbell_diagram, match_rows_table, match_tables
-    from ringfit.io.modes import read_mode_table
+    from ringfit.io.modes import check_test_condition, read_mode_table
     from ringfit.io.tyre import read_tyre
 
     tyre = read_tyre(args.tyre)
     tables = [read_mode_table(m) for m in args.modes]
+    for m, t in zip(args.modes, tables):  # before the diagram's work: a sidecar whose condition cannot be modelled
+        check_test_condition(t.condition, source=sidecar_path(m))
     ring, geometry = tyre.ring, tyre.geometry
     diagram = campbell_diagram(ring, geometry, args.load, speeds, drum_diameter_m=args.drum, n_max=args.n_max)
     if not diagram.ok.all():
@@ -112,7 +134,7 @@ def run_campbell(args) -> int:
     if match is not None:
         path = matched_path(args.out)
         atomic_write_text(path, csv_text(MATCH_COLUMNS, match_rows_table(match)))
-        print(f"{path}: {match.summary()}")
+        print(f"{path}: {match.summary()}; {match.tolerance_note}")
         for r in match.rows:
             name = Path(r["source"]).name
             print(f"  {name} row {r['row']}: {r['freq_hz']:.2f} Hz at {r['speed_kmh']:g} km/h [{r['status']}] "

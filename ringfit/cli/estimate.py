@@ -47,9 +47,6 @@ def register(sub) -> None:
 
 
 def run_estimate(args) -> int:
-    from ringfit._cache import enable_compilation_cache
-
-    enable_compilation_cache()  # a second run skips XLA compilation
     import sys
 
     from ringfit.cli import CommandFailed

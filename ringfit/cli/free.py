@@ -126,9 +126,6 @@ def check_well_posed(table, free, prior, modes, rel) -> None:
 
 
 def run_fit(args) -> int:
-    from ringfit._cache import enable_compilation_cache
-
-    enable_compilation_cache()
     from ringfit.cli import CommandFailed
     from ringfit.fit.identifiability import identifiability
     from ringfit.fit.least_squares import fit_natural_frequencies, fitted_ring
@@ -157,9 +154,6 @@ def run_fit(args) -> int:
 
 
 def run_sample(args) -> int:
-    from ringfit._cache import enable_compilation_cache
-
-    enable_compilation_cache()
     import warnings
 
     from ringfit.fit.posterior import sample_posterior
@@ -211,9 +205,6 @@ def run_report(args) -> int:
 
 
 def run_demo(args) -> int:
-    from ringfit._cache import enable_compilation_cache
-
-    enable_compilation_cache()
     from ringfit.demo import run_demo as demo
     from ringfit.errors import InputError
 

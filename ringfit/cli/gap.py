@@ -6,7 +6,7 @@ JSON of docs/formats.md §5; progress goes to stderr while candidates are fitted
 
 from __future__ import annotations
 
-from ringfit.cli._args import force_flag, number, quiet_flag
+from ringfit.cli._args import force_flag, integer, number, quiet_flag
 
 
 def register(subparsers) -> None:
@@ -26,6 +26,10 @@ def register(subparsers) -> None:
                    help="frequency noise σ [Hz] instead of estimating it")
     p.add_argument("--noise-profile", type=number("a noise level in m/s² > 0", lo=0.0, hi=1e8, lo_open=True),
                    help="profile noise σ [m/s²] instead of estimating it")
+    p.add_argument("--alpha", type=number("a significance level in (0, 0.5]", lo=0.0, hi=0.5, lo_open=True),
+                   default=0.01, help="an accepted effect must beat chance (its null) at this level (default 0.01)")
+    p.add_argument("--null-draws", type=integer("a count of null draws, 20 … 20000", lo=20, hi=20000),
+                   default=200, help="draws per null distribution (default 200; p is resolved to 1/(draws + 1))")
     quiet_flag(p)
     force_flag(p)
     p.set_defaults(run=run)
@@ -54,21 +58,15 @@ def run(args) -> int:
             load_effect_module(mod)
         except Exception as exc:  # noqa: BLE001 - report any import failure as bad input
             raise InputError(f"cannot load effect module: {exc}", source=mod) from None
-    effects = None
-    if args.effects:
-        from ringfit.gap.effects import available
-
-        effects = [e.strip() for e in args.effects.split(",") if e.strip()]
-        unknown = [e for e in effects if e not in available()]
-        if unknown:
-            raise InputError(f"unknown effect(s) {unknown}; known: {', '.join(available())}", source="--effects")
+    effects = parse_effects(args.effects)
     noise = {}
     if args.noise_freq_hz is not None:
         noise["freq_hz"] = args.noise_freq_hz
     if args.noise_profile is not None:
         noise["profile_ms2"] = args.noise_profile
     print(f"ringfit diagnose: {folder}")
-    diag = diagnose(folder, effects=effects, progress=not args.quiet, noise=noise or None)
+    diag = diagnose(folder, effects=effects, progress=not args.quiet, noise=noise or None, alpha=args.alpha,
+                    null_draws=int(args.null_draws))
     diag.write(args.out, overwrite=args.force, inputs=inputs)
     if args.report:
         from ringfit.report.gap_report import write_gap_report
@@ -77,5 +75,26 @@ def run(args) -> int:
     v = diag.verdict
     print(f"verdict: {' + '.join(v['effects'])}"
           + (f" (held-out shrink {v['heldout_shrink_pct']:.0f} %)" if v["effect"] not in ("none", "unexplained") else ""))
+    for c in v.get("calibration", []):
+        print(f"  {c['sentence']}")
     print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
     return 0
+
+
+def parse_effects(text: str | None) -> list[str] | None:
+    """``--effects a,b`` → the names (``None`` for all registered); :class:`InputError` naming ``--effects`` for
+    an unknown or empty list. Shared by ``diagnose`` and ``campaign`` (checked before any work)."""
+    from ringfit.errors import InputError
+
+    if text is None:
+        return None
+    from ringfit.gap.effects import available
+
+    effects = [e.strip() for e in text.split(",") if e.strip()]
+    if not effects:
+        raise InputError(f"{text!r}: expected comma-separated effect names; known: {', '.join(available())}",
+                         source="--effects")
+    unknown = [e for e in effects if e not in available()]
+    if unknown:
+        raise InputError(f"unknown effect(s) {unknown}; known: {', '.join(available())}", source="--effects")
+    return effects

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ringfit.cli._args import force_flag, integer, number
+from ringfit.cli._args import drum_diameter, force_flag, integer, number
 
 #: Largest model grid and written profile accepted (a profile of 2^20 angles is 16 MB of CSV already).
 MAX_GRID = 1 << 14
@@ -45,7 +45,7 @@ def register(sub) -> None:
                    help="speed [km/h]")
     p.add_argument("--load", type=number("a load in N in (0, 1e6]", lo=0.0, hi=1e6, lo_open=True), default=4000.0,
                    help="vertical load Fz [N] (default 4000)")
-    p.add_argument("--drum", type=number("a drum diameter in metres in (0, 100]", lo=0.0, hi=100.0, lo_open=True),
+    p.add_argument("--drum", type=drum_diameter(),
                    default=None, metavar="DIAMETER_M", help="drum diameter [m]; omit for a flat road")
     p.add_argument("--rotation-hz", type=number("a rotation rate in Hz in (0, 1000]", lo=0.0, hi=1000.0, lo_open=True),
                    default=None, help="wheel rotation rate [Hz] (overrides V/R_e)")
@@ -74,9 +74,6 @@ def register(sub) -> None:
 
 
 def run_roll(args) -> int:
-    from ringfit._cache import enable_compilation_cache
-
-    enable_compilation_cache()  # a second run skips XLA compilation
     from ringfit.errors import InputError
     from ringfit.io.files import check_output_paths
     from ringfit.io.profiles import sidecar_path
@@ -123,9 +120,6 @@ def run_roll(args) -> int:
 
 
 def run_fit_rolling(args) -> int:
-    from ringfit._cache import enable_compilation_cache
-
-    enable_compilation_cache()  # a second run skips XLA compilation
     from ringfit.cli import CommandFailed
     from ringfit.errors import InputError
     from ringfit.io.files import check_output_paths

@@ -83,6 +83,11 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="TDMS/.mat/CSV only: channel map giving each channel's angle, axis, unit, sensitivity and "
                         "the force channels, where the file does not (docs/formats.md §17.4)")
     p.add_argument("--plot", type=Path, default=None, help="also write a PNG figure")
+    p.add_argument("--cavity", type=number("a cavity frequency in Hz, 0 < f <= 1e4", lo=0.0, hi=1e4, lo_open=True),
+                   default=None, metavar="HZ",
+                   help="the tyre's air-cavity frequency [Hz]: a row that is not ring-like is `acoustic` only "
+                        "within 8 %% of it and with an n = 1 pattern, else `unclassified` (default: eq. 22 of "
+                        "docs/physics.md with the source study's cavity length, 218.75 Hz)")
     force_flag(p)
 
 
@@ -157,6 +162,8 @@ def _finish(args, result, plot) -> int:
     for i in range(len(t)):
         n = "-" if t.n[i] < 0 else str(t.n[i])
         print(f"  n={n:>2}  {t.kind[i]:<10}  {t.freq_hz[i]:8.2f} Hz ± {t.freq_std_hz[i]:.2f}  ζ = {t.damping_pct[i]:.2f} %")
+        if t.kind[i] == "unclassified" and str(t.extra.get("reason", [""] * len(t))[i]):
+            print(f"         ({t.extra['reason'][i]})")
     for note in t.condition.get("limits", []):
         print(f"note: {note}")
     return 0
@@ -185,6 +192,15 @@ def _check_records(args, records) -> None:
         raise InputError(f"--skip {args.skip:g} s is not shorter than the records ({length:.4g} s)")
 
 
+def _cavity_hz(args) -> float:
+    """``--cavity``, else eq. 22 with the source study's cavity length (docs/physics.md §3.6)."""
+    if args.cavity is not None:
+        return float(args.cavity)
+    from ringfit.physics.natural import cavity_frequency
+
+    return float(cavity_frequency(1))
+
+
 def run_ssi(args) -> int:
     import sys
 
@@ -196,7 +212,7 @@ def run_ssi(args) -> int:
     result = ssi_modes(records, orders=args.orders, block_rows=args.block_rows, f_range=args.band,
                        skip_s=args.skip, threshold=args.threshold, delay_s=args.delay, radius_m=args.radius,
                        jackknife=args.jackknife, progress=not args.quiet and sys.stderr is not None,
-                       workers=args.workers)
+                       workers=args.workers, cavity_hz=_cavity_hz(args))
 
     def plot(res):
         from ringfit.report.targets_plots import plot_ssi_summary
@@ -213,7 +229,7 @@ def run_frf(args) -> int:
     records = _read(args, frf_ok=True)
     _check_records(args, records)
     result = frf_modes(records, f_range=args.band, delay_s=args.delay, threshold=args.threshold,
-                       min_coherence=args.min_coherence, indicator=args.indicator)
+                       min_coherence=args.min_coherence, indicator=args.indicator, cavity_hz=_cavity_hz(args))
 
     def plot(res):
         from ringfit.report.targets_plots import plot_frf

@@ -221,28 +221,39 @@ def _weighted(z, model, data, theta0, free, prior_w, prior_mean):
 
 
 def _dense(model, data, theta0, free, prior_w, prior_mean):
-    """``z -> (residuals, aux)`` whose JVP is a dense product with the Jacobian of one forward-mode pass.
+    """``(fn, linearise)``: ``fn(z) -> (residuals, aux)`` whose JVP is a dense product with the Jacobian of one
+    forward-mode pass, and ``linearise(z) -> (jacobian, (residuals, aux))``, that pass.
 
-    The solver linearises this once per step: the model is traced once (primal,
-    aux and k tangents) and the solver's further Jacobian products are small
-    matrix products, which keeps the compiled fit small. ``aux`` carries no tangent.
+    The model is traced once per solve: ``linearise`` is one inner ``jax.jit`` (primal, aux and k
+    tangents) that the primal of ``fn``, its JVP rule and the start's column norms all call (the
+    second and third calls, with the same shapes, reuse the first trace); the solver's further
+    Jacobian products are small matrix products. ``aux`` carries no tangent. The primal calls the
+    linearisation too: optimistix traces it for shapes only, since every solver step linearises.
     """
 
-    def both(z):
+    def both(z, data, theta0, free, prior_w, prior_mean):
         r, aux = _weighted(z, model, data, theta0, free, prior_w, prior_mean)
         return r, (r, aux)
 
+    lin = jax.jit(jax.jacfwd(both, has_aux=True))
+
+    def linearise(z):
+        # one tracing context for every call (optimistix's own jit regions set the, empty, abstract mesh;
+        # the solve's outer region has none), so the second and third calls reuse the first trace
+        with jax.sharding.use_abstract_mesh(jax.sharding.get_abstract_mesh()):
+            return lin(z, data, theta0, free, prior_w, prior_mean)
+
     @jax.custom_jvp
     def fn(z):
-        return _weighted(z, model, data, theta0, free, prior_w, prior_mean)
+        return linearise(z)[1]
 
     @fn.defjvp
     def fn_jvp(primals, tangents):
         (z,), (dz,) = primals, tangents
-        jac, (res, aux) = jax.jacfwd(both, has_aux=True)(z)
+        jac, (res, aux) = linearise(z)
         return (res, aux), (jac @ dz, jax.tree.map(jnp.zeros_like, aux))
 
-    return fn
+    return fn, linearise
 
 
 #: Consecutive rejected steps after which a solve that has accepted at least two steps is at a minimum
@@ -305,7 +316,7 @@ def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, 
     """One fit (traced): ``data`` arrives as flat leaves (fast dispatch); ``max_steps`` is traced."""
     data = jax.tree.unflatten(treedef, leaves)
     free = _Free(*free_arrays)
-    fn = _dense(model, data, theta0, free, prior_w, prior_mean)
+    fn, linearise = _dense(model, data, theta0, free, prior_w, prior_mean)
     if method == "levenberg_marquardt":
         # the solver works on s = d·z with d ∝ the Jacobian column norms at the start (Marquardt's
         # scaling, scipy's x_scale="jac"): the damping then acts alike on every direction; the diagonal
@@ -313,7 +324,7 @@ def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, 
         # (λ/diag = 1e-3) (a one-step evaluation needs no scaling: skip that linearisation).
         # Gauss–Newton is invariant to the scaling: it works on z.
         def column_norms(z):
-            return jnp.sqrt(jnp.sum(jax.jacfwd(lambda x: fn(x)[0])(z) ** 2, axis=0))
+            return jnp.sqrt(jnp.sum(linearise(z)[0] ** 2, axis=0))
 
         norms = jax.lax.cond(max_steps > 0, column_norms, jnp.ones_like, z0)
         d = jnp.where(norms > 0, norms, 1.0) / jnp.sqrt(JTJ_DIAGONAL)

@@ -23,9 +23,13 @@ can be rebuilt from the file alone. :func:`sample_posterior` is the free-tyre
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import io
 import json
 import math
+import signal
+import threading
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -227,19 +231,21 @@ class Posterior:
 
         path = check_output_path(path, overwrite=overwrite, inputs=inputs)
 
-        def write(tmp):
-            with h5py.File(tmp, "w") as h5:
-                h5.attrs["format"] = FORMAT
-                h5.create_dataset("chain", data=self.chain, compression="gzip")
-                h5.create_dataset("log_prob", data=self.log_prob, compression="gzip")
-                h5.create_dataset("acceptance", data=self.acceptance)
-                h5.create_dataset("tau", data=self.tau)
-                head = dict(names=list(self.names), kinds=list(self.kinds), centers=list(self.centers),
-                            scales=list(self.scales), values0=self.values0, burn=self.burn, thin=self.thin,
-                            meta=self.meta)
-                h5.attrs["meta"] = json.dumps(head, default=_json_default, allow_nan=True)
-
-        return atomic_write(path, write)
+        # HDF5 is built in memory and written as bytes by Python: a full disk is one OSError here, never a
+        # write failure inside the HDF5 library (whose cleanup of a half-written file can crash the process).
+        buf = io.BytesIO()
+        with h5py.File(buf, "w") as h5:
+            h5.attrs["format"] = FORMAT
+            h5.create_dataset("chain", data=self.chain, compression="gzip")
+            h5.create_dataset("log_prob", data=self.log_prob, compression="gzip")
+            h5.create_dataset("acceptance", data=self.acceptance)
+            h5.create_dataset("tau", data=self.tau)
+            head = dict(names=list(self.names), kinds=list(self.kinds), centers=list(self.centers),
+                        scales=list(self.scales), values0=self.values0, burn=self.burn, thin=self.thin,
+                        meta=self.meta)
+            h5.attrs["meta"] = json.dumps(head, default=_json_default, allow_nan=True)
+        image = buf.getvalue()
+        return atomic_write(path, lambda tmp: tmp.write_bytes(image))
 
 
 def _json_default(x):
@@ -342,30 +348,65 @@ def run_ensemble(log_prob_fn, p0, *, min_steps: int, max_steps: int, check_every
     state = p0
     tau = np.full(k, np.inf)
     target = min_steps  # where the next convergence check happens
-    while sampler.iteration < max_steps:
-        stop = min(target, max_steps)
-        while sampler.iteration < stop:
-            chunk = min(BAR_UPDATE, stop - sampler.iteration) if bar is not None else stop - sampler.iteration
-            for state in sampler.sample(state, iterations=chunk):
-                pass
+    with _interrupt_between_steps() as interrupted:
+        try:
+            while sampler.iteration < max_steps:
+                stop = min(target, max_steps)
+                state = _advance(sampler, state, stop, bar, interrupted, min_steps, max_steps)
+                tau = sampler.get_autocorr_time(tol=0)
+                if np.all(np.isfinite(tau)) and sampler.iteration > TAU_FACTOR * np.max(tau):
+                    break
+                target = sampler.iteration + check_every
+        finally:
             if bar is not None:
-                if sampler.iteration > bar.total:  # the next check lies beyond the τ estimate
-                    bar.total = stop
-                bar.update(chunk)
-                if sampler.iteration >= 2 * BAR_UPDATE:
-                    t = float(np.max(sampler.get_autocorr_time(tol=0)))
-                    need = int(min(max_steps, max(min_steps, TAU_FACTOR * t))) if np.isfinite(t) else bar.total
-                    if need > bar.total:
-                        bar.total = need
-                    bar.set_postfix_str(f"τ≈{t:.0f}")
-                    bar.refresh()
-        tau = sampler.get_autocorr_time(tol=0)
-        if np.all(np.isfinite(tau)) and sampler.iteration > TAU_FACTOR * np.max(tau):
-            break
-        target = sampler.iteration + check_every
-    if bar is not None:
-        bar.close()
+                bar.close()
     return sampler, np.asarray(tau)
+
+
+@contextlib.contextmanager
+def _interrupt_between_steps():
+    """Ctrl-C during sampling stops the chain between two steps, as a plain ``KeyboardInterrupt`` raised here.
+
+    emcee prints a traceback for any exception raised inside the log-probability (its wrapper catches
+    everything, prints, re-raises); the first SIGINT only sets a flag that :func:`_advance` reads after
+    each step, a second one interrupts at once. Outside the main thread (a batch worker) nothing changes.
+    """
+    flag = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield flag
+        return
+    previous = signal.getsignal(signal.SIGINT)
+
+    def handler(signum, frame):
+        flag.set()
+        signal.signal(signal.SIGINT, previous)
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _advance(sampler, state, stop, bar, interrupted, min_steps, max_steps):
+    """Run ``sampler`` to ``stop`` steps (progress in chunks of :data:`BAR_UPDATE`); Ctrl-C checked per step."""
+    while sampler.iteration < stop:
+        chunk = min(BAR_UPDATE, stop - sampler.iteration) if bar is not None else stop - sampler.iteration
+        for state in sampler.sample(state, iterations=chunk):
+            if interrupted.is_set():
+                raise KeyboardInterrupt
+        if bar is not None:
+            if sampler.iteration > bar.total:  # the next check lies beyond the τ estimate
+                bar.total = stop
+            bar.update(chunk)
+            if sampler.iteration >= 2 * BAR_UPDATE:
+                t = float(np.max(sampler.get_autocorr_time(tol=0)))
+                need = int(min(max_steps, max(min_steps, TAU_FACTOR * t))) if np.isfinite(t) else bar.total
+                if need > bar.total:
+                    bar.total = need
+                bar.set_postfix_str(f"τ≈{t:.0f}")
+                bar.refresh()
+    return state
 
 
 @functools.partial(jax.jit, static_argnames=("model", "treedef"))

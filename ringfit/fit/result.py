@@ -92,11 +92,11 @@ class FitResult:
     def interval(self, name: str, level: float = 0.95) -> tuple[float, float]:
         """Approximate interval from the Laplace approximation in the solver coordinate
         (log-normal for a log parameter, normal for a linear one)."""
-        from scipy.stats import norm
+        from scipy.special import ndtri  # the normal quantile (scipy.stats is slow to import)
 
         i = self.names.index(name)
         s = math.sqrt(max(self.covariance_log[i, i], 0.0))
-        z = norm.ppf(0.5 + level / 2)
+        z = ndtri(0.5 + level / 2)
         v = self.values[name]
         coord = next((c for c in self.coords if c.name == name), None)
         if coord is not None and coord.kind == "linear":
@@ -169,11 +169,11 @@ class BatchFitResult:
 
     def interval(self, name: str, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
         """``(lo, hi)`` ``(B,)`` Laplace intervals, as :meth:`FitResult.interval`."""
-        from scipy.stats import norm
+        from scipy.special import ndtri  # the normal quantile (scipy.stats is slow to import)
 
         i = self.names.index(name)
         s = np.sqrt(np.clip(self.covariance_log[:, i, i], 0.0, None))
-        z = norm.ppf(0.5 + level / 2)
+        z = ndtri(0.5 + level / 2)
         v = self.values(name)
         coord = next(c for c in self.coords if c.name == name)
         if coord.kind == "linear":

@@ -120,12 +120,7 @@ def heldout_linear(lin: Linearised, y, w2, folds, idx=None) -> np.ndarray:
 
 def sum_of_squares(problem: GapProblem, e, sigma) -> np.ndarray:
     """``(B,)`` Σ ψ(e/σ)² with the problem's Huber function on its robust rows."""
-    z = np.asarray(e) / sigma
-    if problem.robust is not None and problem.huber:
-        c = float(problem.huber)
-        a = np.abs(z)
-        z = np.where(np.asarray(problem.robust, dtype=bool) & (a > c), np.sqrt(np.maximum(2 * c * a - c * c, 0.0)), z)
-    return np.sum(z**2, axis=-1)
+    return np.sum(_psi2(problem, e, sigma), axis=-1)
 
 
 @dataclass
@@ -182,8 +177,6 @@ def parametric_null(problem: GapProblem, current, fits: dict, chain: tuple, elem
     rng = np.random.default_rng(seed)
     y = problem.y
     m = problem.m
-    sig = problem.sigma_heldout if problem.sigma_heldout is not None else problem.sigma
-    w2 = 1.0 / problem.sigma**2
     pred = np.asarray(current.extra["pred"])
     if problem.domain == "profiles":
         ystar = pred[None, :] + _phase_randomised(y - pred, np.asarray(problem.labels["series"]), rng, draws)
@@ -196,19 +189,48 @@ def parametric_null(problem: GapProblem, current, fits: dict, chain: tuple, elem
         kind = ("parametric: rows redrawn from the current model with each row's σ, labels kept"
                 + ("; the reference table held as measured" if ref is not None else ""))
     lin_cur = linearise(problem, current)
-    folds = problem.folds
-    ss_cur = sum_of_squares(problem, heldout_linear(lin_cur, ystar, w2, folds), sig)
-    ss_cur_obs = sum_of_squares(problem, heldout_linear(lin_cur, y, w2, folds), sig)[0]
-    t_null = np.full(draws, -np.inf)
-    observed = {}
-    for el in elements:
-        lin = linearise(problem, fits[chain + parts(el)])
-        ss = sum_of_squares(problem, heldout_linear(lin, ystar, w2, folds), sig)
-        t_null = np.maximum(t_null, 1.0 - ss / np.maximum(ss_cur, 1e-300))
-        ss_o = sum_of_squares(problem, heldout_linear(lin, y, w2, folds), sig)[0]
-        observed[el] = float(1.0 - ss_o / max(ss_cur_obs, 1e-300))
+    lins = [linearise(problem, fits[chain + parts(el)]) for el in elements]
+    t_null = np.max(candidate_shrinks(problem, lin_cur, lins, ystar), axis=1, initial=-np.inf)
+    obs = candidate_shrinks(problem, lin_cur, lins, y)[0]
+    observed = {el: float(t) for el, t in zip(elements, obs)}
     return NullResult(kind, t_null, observed, _p_values(t_null, observed),
                       "held-out shrink of the best candidate of the round over the current model (linearised refits)")
+
+
+def candidate_shrinks(problem: GapProblem, lin_cur: Linearised, lins: list, y) -> np.ndarray:
+    """``(B, C)`` held-out shrink ``1 − SS_c/SS_current`` of each linearised candidate on data ``y`` ``(B, m)`` (or
+    ``(m,)``), the problem's σ and folds: the statistic of the parametric null and of the measured data alike.
+
+    Where the problem has several row groups (profiles: the channels), a candidate may be accepted on the
+    shrink of one group (:func:`ringfit.gap.verdict.acceptance`), so its statistic is the largest of its
+    shrink over all rows and over each group — in the null as in the data."""
+    sig = problem.sigma_heldout if problem.sigma_heldout is not None else problem.sigma
+    w2 = 1.0 / problem.sigma**2
+    groups = np.asarray(problem.labels.get("group", np.zeros(problem.m)))
+    masks = [np.ones(problem.m, dtype=bool)]
+    if len(set(groups.tolist())) > 1:
+        masks += [groups == g for g in dict.fromkeys(groups.tolist())]
+
+    def ss(e):
+        z2 = _psi2(problem, e, sig)
+        return [np.sum(np.where(mk, z2, 0.0), axis=-1) for mk in masks]
+
+    ss_cur = ss(heldout_linear(lin_cur, y, w2, problem.folds))
+    cols = []
+    for lin in lins:
+        ss_c = ss(heldout_linear(lin, y, w2, problem.folds))
+        cols.append(np.max([1.0 - a / np.maximum(b, 1e-300) for a, b in zip(ss_c, ss_cur)], axis=0))
+    return np.stack(cols, axis=1) if cols else np.zeros((np.atleast_2d(y).shape[0], 0))
+
+
+def _psi2(problem: GapProblem, e, sigma) -> np.ndarray:
+    """ψ(e/σ)² per row (Huber on the problem's robust rows)."""
+    z = np.asarray(e) / sigma
+    if problem.robust is not None and problem.huber:
+        c = float(problem.huber)
+        a = np.abs(z)
+        z = np.where(np.asarray(problem.robust, dtype=bool) & (a > c), np.sqrt(np.maximum(2 * c * a - c * c, 0.0)), z)
+    return z**2
 
 
 def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, draws: int = DRAWS,
@@ -276,5 +298,5 @@ def verdict_sentence(effect: str, null: NullResult, element: str, alpha: float) 
             f"(α = {alpha:g}, {verdict})")
 
 
-__all__ = ["ALPHA", "DRAWS", "Linearised", "linearise", "heldout_linear", "sum_of_squares", "NullResult",
+__all__ = ["ALPHA", "DRAWS", "Linearised", "linearise", "heldout_linear", "sum_of_squares", "candidate_shrinks", "NullResult",
            "parametric_null", "random_line_null", "verdict_sentence"]

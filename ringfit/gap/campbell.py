@@ -26,8 +26,12 @@ This module turns it into what an engineer reads:
 
 Matching. A row at frequency f with σ_f = ``freq_std_hz`` (0 when empty) is
 compared with each candidate at f̂ through ``z = (f − f̂)/σ``,
-``σ = √(σ_f² + (tol·f̂)²)``, tol = :data:`MODEL_TOLERANCE` (2 %: the model's
-own accuracy after a free-tyre fit; a stated default, ``model_tolerance=``).
+``σ = √(σ_f² + (τ·f̂)²)``, τ the model's relative σ: from the data by default
+(:func:`data_tolerance`: a first pass at τ = :data:`MODEL_TOLERANCE` = 2 %, then
+the robust scale of the matched rows' residuals in excess of their σ_f), or
+given (``model_tolerance=``, ``ringfit campbell --tolerance``). Every line
+ω + kΩ of a branch (weight ≥ :data:`MIN_LINE_WEIGHT` of its strongest) is a
+candidate and carries the branch's n, direction and tag.
 The cost is ``z²`` plus :data:`LABEL_PENALTY` for each label the candidate
 contradicts (n; branch; tag via the contact symmetry) and, for a sensor line,
 ``−2 ln(weight/strongest weight of its mode)``; rows of one table are assigned
@@ -42,13 +46,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.io.modes import ModeTable
+from ringfit.io.files import sidecar_of
+from ringfit.io.modes import ModeTable, check_test_condition
 from ringfit.physics.operating import KMH, road_from_drum_diameter
 
 #: Highest dominant order kept in a diagram (the issue's n ≤ 15).
 DEFAULT_N_MAX = 15
-#: Relative σ of the model's frequencies used in the matching (stated default).
+#: Relative σ of the model's frequencies in the first matching pass, and where the rows cannot give one.
 MODEL_TOLERANCE = 0.02
+#: Smallest relative σ of the model taken from the rows (rows copied from the model itself must not
+#: make a 0.3 % deviation "unexplained").
+MIN_TOLERANCE = 0.002
+#: Rows needed to estimate the model's σ from the data (fewer: :data:`MODEL_TOLERANCE`).
+MIN_ROWS_FOR_TOLERANCE = 4
+#: Consistency factor of the median absolute deviation for a normal distribution.
+MAD_TO_SIGMA = 1.4826
 #: |z| up to which a row counts as explained.
 EXPLAINED_Z = 3.0
 #: Cost of each contradicted label, in units of z² (a label is worth 2σ of frequency).
@@ -136,14 +148,35 @@ class CampbellDiagram:
         return np.where(ok, tag, "").astype(object)
 
     def sensor_line(self):
-        """The strongest sensor line of each branch: ``(hz, k, weight)``, each ``(S, B)`` (hz = |ω + kΩ|/2π)."""
-        w = np.where(np.isfinite(self.line_weight), self.line_weight, -1.0)
-        j = np.argmax(w, axis=-1)
-        hz = np.abs(np.take_along_axis(self.line_hz, j[..., None], -1)[..., 0])
-        return hz, self.k[j].astype(int), np.take_along_axis(self.line_weight, j[..., None], -1)[..., 0]
+        """The principal sensor line of each branch: ``(hz, k, weight)``, each ``(S, B)`` (hz = |ω + kΩ|/2π).
+
+        One line ``ω + kΩ`` per branch, the same k at every speed: the k whose weight summed over the
+        speeds is largest (the strongest line of a mode can change with speed where contact spreads its
+        content; following the strongest line at each speed would jump between lines, a jagged curve
+        that no single wave follows). ``weight`` is that line's weight at each speed.
+        """
+        w = np.where(np.isfinite(self.line_weight), self.line_weight, 0.0)
+        j = np.argmax(w.sum(axis=0), axis=-1)  # (B,)
+        jj = np.broadcast_to(j[None, :, None], (w.shape[0], w.shape[1], 1))
+        hz = np.abs(np.take_along_axis(self.line_hz, jj, -1)[..., 0])
+        weight = np.take_along_axis(self.line_weight, jj, -1)[..., 0]
+        return hz, np.broadcast_to(self.k[j].astype(int), hz.shape).copy(), weight
+
+    def branch_direction(self) -> np.ndarray:
+        """The prevailing direction of each branch ``(B,)``: the most frequent of ``direction()`` over the
+        speeds above 0 (all speeds for a diagram at standstill only); ties go to the fastest speed's."""
+        d = self.direction()
+        moving = self.speed_kmh > 0
+        rows = d[moving] if moving.any() else d
+        out = []
+        for b in range(self.branches):
+            vals = list(rows[:, b])
+            best = max(("backward", "forward", "standing"), key=lambda x: (vals.count(x), x == vals[-1]))
+            out.append(best)
+        return np.array(out, dtype=object)
 
     def frequencies(self, frame: str) -> np.ndarray:
-        """Branch frequencies in ``frame`` (``fixed``, or ``rotating``/``sensor``: the strongest line) ``(S, B)`` [Hz]."""
+        """Branch frequencies in ``frame`` (``fixed``, or ``rotating``/``sensor``: the principal line) ``(S, B)`` [Hz]."""
         return self.fixed_hz if frame_name(frame) == "fixed" else self.sensor_line()[0]
 
     def rows(self, frame: str = "fixed") -> list[dict]:
@@ -290,6 +323,9 @@ def track_branches(freq: np.ndarray, content: np.ndarray) -> np.ndarray:
     (branch b = mode b at the first speed). Neighbouring speeds are assigned one-to-one
     (Hungarian) on ``(1 − MAC) + ½ min(1, |Δf|/(0.1 f))``: harmonic content first,
     frequency to break ties (e.g. between a standing pair that rotation starts to mix).
+    Δf is taken from the frequency the branch's last two speeds extrapolate to, so a
+    pair whose frequencies cross (their frequency order swaps) keeps its shapes: the
+    branches are never sorted by frequency.
     """
     from scipy.optimize import linear_sum_assignment
 
@@ -301,6 +337,8 @@ def track_branches(freq: np.ndarray, content: np.ndarray) -> np.ndarray:
         prev = unit[s - 1, perm[s - 1]]
         mac = np.abs(np.conj(prev) @ unit[s].T) ** 2
         fp = freq[s - 1, perm[s - 1]][:, None]
+        if s >= 2:  # linear extrapolation along the branch (crossings keep their slopes)
+            fp = 2.0 * fp - freq[s - 2, perm[s - 2]][:, None]
         df = np.abs(freq[s][None, :] - fp) / np.maximum(0.1 * np.abs(fp), 1e-12)
         cost = (1.0 - mac) + 0.5 * np.minimum(1.0, np.nan_to_num(df, nan=1.0))
         r, c = linear_sum_assignment(cost)
@@ -347,6 +385,7 @@ def table_conditions(tables, ring, geometry, *, load_n: float | None = None, dru
     for t in tables:
         c = t.condition
         src = t.source or "<table>"
+        check_test_condition(c, source=sidecar_of(t.source) if t.source else src)
         state = t.state
         contact = state in ("loaded", "rolling")
         load = c.get("load_n") if c.get("load_n") else load_n
@@ -426,7 +465,10 @@ def _candidates(d: CampbellDiagram, s: int, frame: str) -> list[_Candidate]:
             k = int(d.k[j])
             line = float(d.line_hz[s, b, j])  # signed (ω + kΩ)/2π
             sense = "standing" if k == 0 else ("backward" if k * line > 0 else "forward")  # k(ω + kΩ) > 0: backward
-            out.append(_Candidate(b, k, abs(line), abs(k), sense, float(d.symmetry[s, b]), tag[s, b],
+            # every line of the branch is a candidate and carries the branch's labels: its n is the mode's
+            # dominant order (the line ω + 2Ω of an n = 1 mode is still that n = 1 mode); a row labelled with
+            # the line's own harmonic |k| (what a shape seen by the co-rotating sensor gives) agrees too
+            out.append(_Candidate(b, k, abs(line), int(d.order[s, b]), sense, float(d.symmetry[s, b]), tag[s, b],
                                   float(w[j] / top)))
     return out
 
@@ -444,10 +486,16 @@ def _row_labels(table: ModeTable, i: int) -> dict:
     return {"n": n, "tag": tag, "branch": table.branch[i]}
 
 
+def _n_agrees(n: int, c: _Candidate) -> bool:
+    """A row's n agrees with a candidate naming its mode's dominant order, or, for a sensor line ω + kΩ,
+    the line's own harmonic |k| (the winding a co-rotating measurement sees at that line)."""
+    return n == c.n or (c.k is not None and n == abs(c.k))
+
+
 def _label_penalties(lab: dict, c: _Candidate) -> tuple[float, list[str]]:
     """Penalty and the list of contradicted labels."""
     pen, bad = 0.0, []
-    if lab["n"] >= 0 and lab["n"] != c.n:
+    if lab["n"] >= 0 and not _n_agrees(lab["n"], c):
         pen += LABEL_PENALTY
         bad.append("n")
     if lab["branch"]:
@@ -486,6 +534,8 @@ class CampbellMatch:
     rows: list[dict]
     diagrams: dict
     conditions: list
+    tolerance: float = MODEL_TOLERANCE
+    tolerance_note: str = ""
 
     def assignment(self) -> dict:
         """Each row's (mode, line) at its speed, for a diagnosis that refits through it (issue 13 item 5).
@@ -528,7 +578,7 @@ def match_tables(
     *,
     load_n: float | None = None,
     drum_diameter_m: float | None = None,
-    model_tolerance: float = MODEL_TOLERANCE,
+    model_tolerance: float | None = None,
     speeds_kmh=None,
     n_max: int = DEFAULT_N_MAX,
     harmonics: int | None = None,
@@ -541,7 +591,9 @@ def match_tables(
       state, load_n, speed_kmh or rotation_hz, frame; see :func:`table_conditions`).
     - ``ring``, ``geometry``: the fitted tyre.
     - ``load_n``: load for tables whose sidecar lacks one; ``drum_diameter_m``: None = flat road.
-    - ``model_tolerance``: relative σ of the model (default :data:`MODEL_TOLERANCE`).
+    - ``model_tolerance``: relative σ τ of the model; ``None`` (default): from the data
+      (:func:`data_tolerance`: a first pass at :data:`MODEL_TOLERANCE`, then τ from the
+      explained rows' residuals in excess of their ``freq_std_hz``, a robust scale).
     - ``speeds_kmh``: extra speeds for the tracking between the tables' speeds
       (default: every 10 km/h up to the fastest table).
     - ``n_max``, ``harmonics``: as :func:`campbell_diagram`.
@@ -552,7 +604,7 @@ def match_tables(
     tables = list(tables)
     if not tables:
         raise InputError("no mode table to match")
-    if not model_tolerance > 0:
+    if model_tolerance is not None and not (math.isfinite(model_tolerance) and model_tolerance > 0):
         raise InputError(f"model tolerance {model_tolerance}: expected a positive relative σ")
     conds = table_conditions(tables, ring, geometry, load_n=load_n, drum_diameter_m=drum_diameter_m)
     groups: dict = {}
@@ -565,6 +617,17 @@ def match_tables(
         sp = np.unique(np.round(np.concatenate([grid[grid <= top + 1e-9], [conds[i].speed_kmh for i in idx]]), 9))
         diagrams[key] = campbell_diagram(ring, geometry, key[1], sp, drum_diameter_m=drum_diameter_m,
                                          contact=key[0], n_max=n_max, harmonics=harmonics)
+    if model_tolerance is None:
+        first, _ = _match_rows(tables, conds, diagrams, drum_diameter_m, MODEL_TOLERANCE)
+        tol, note = data_tolerance(first)
+    else:
+        tol, note = float(model_tolerance), f"model σ {100 * model_tolerance:.3g} % (given)"
+    rows, ctx = _match_rows(tables, conds, diagrams, drum_diameter_m, tol)
+    _explain(rows, ctx, diagrams, tol)
+    return CampbellMatch(rows=rows, diagrams=diagrams, conditions=conds, tolerance=tol, tolerance_note=note)
+
+
+def _match_rows(tables, conds, diagrams, drum_diameter_m, tol):
     rows: list[dict] = []
     ctx: list[tuple] = []  # (diagram key, speed index, table, row index, labels)
     for ti, t in enumerate(tables):
@@ -576,13 +639,38 @@ def match_tables(
             raise InputError(f"the model did not converge at {c.speed_kmh:.4g} km/h ({c.load_n:g} N)", source=t.source)
         cands = _candidates(d, s, c.frame)
         labs = [_row_labels(t, i) for i in range(len(t))]
-        assign = _assign(t, labs, cands, model_tolerance)
+        assign = _assign(t, labs, cands, tol)
         for i in range(len(t)):
-            row = _row_record(t, i, c, d, s, labs[i], assign[i], model_tolerance)
+            row = _row_record(t, i, c, d, s, labs[i], assign[i], tol)
             rows.append(row)
             ctx.append((key, s, t, i, labs[i], c))
-    _explain(rows, ctx, diagrams, model_tolerance)
-    return CampbellMatch(rows=rows, diagrams=diagrams, conditions=conds)
+    return rows, ctx
+
+
+def data_tolerance(rows) -> tuple[float, str]:
+    """The model's relative σ τ from matched rows (a first pass at :data:`MODEL_TOLERANCE`), and a note.
+
+    Rows explained in that pass without a label conflict give relative residuals
+    ``r = (f − f̂)/f̂`` and relative measurement σ ``u = freq_std_hz/f̂`` (0 when empty); τ is
+    the robust scale of r in excess of the measurement: ``τ² = (1.4826·median|r|)² − median(u²)``,
+    kept within [:data:`MIN_TOLERANCE`, :data:`MODEL_TOLERANCE`]. A bias of the model counts in
+    τ (|r| is not centred). Fewer than :data:`MIN_ROWS_FOR_TOLERANCE` such rows: τ = MODEL_TOLERANCE.
+    """
+    r, u = [], []
+    for rec in rows:
+        if rec["status"] == "matched" and math.isfinite(rec["error_pct"]):
+            r.append(rec["error_pct"] / 100.0)
+            std = rec.get("_std", math.nan)
+            u.append(std / rec["model_hz"] if math.isfinite(std) else 0.0)
+    if len(r) < MIN_ROWS_FOR_TOLERANCE:
+        return MODEL_TOLERANCE, (f"model σ {100 * MODEL_TOLERANCE:.3g} % (default: {len(r)} matched rows, fewer "
+                                 f"than {MIN_ROWS_FOR_TOLERANCE} to estimate it from)")
+    scale2 = (MAD_TO_SIGMA * float(np.median(np.abs(r)))) ** 2 - float(np.median(np.square(u)))
+    raw = math.sqrt(max(scale2, 0.0))
+    tol = min(max(raw, MIN_TOLERANCE), MODEL_TOLERANCE)
+    bound = " (at its floor)" if tol > raw else (" (at its cap)" if tol < raw else "")
+    return tol, (f"model σ {100 * tol:.3g} %{bound} from the residuals of {len(r)} matched rows "
+                 "(1.4826·median |relative error|, less the rows' freq_std_hz)")
 
 
 def _assign(table, labs, cands, tol):
@@ -616,6 +704,7 @@ def _row_record(t, i, c: TableCondition, d, s, lab, a, tol) -> dict:
         "model_direction": "", "model_tag": "", "model_k": None, "line_weight": math.nan, "error_hz": math.nan,
         "error_pct": math.nan, "z": math.nan, "label_conflicts": "", "note": "",
     }
+    rec["_std"] = float(t.freq_std_hz[i])
     rec["_assignment"] = {"omega": float(c.omega), "load_n": float(c.load_n), "contact": bool(c.contact),
                           "fixed_frame": c.frame == "fixed", "mode_index": -1, "k": 0, "explained": False}
     if a is None:
@@ -659,7 +748,7 @@ def _alternatives(f, std, lab, d, s, frame, tol) -> str:
             return f"it is a secondary line: {weak[1].describe(frame)} (z = {weak[2]:+.1f})"
     free_n = dict(lab, n=-1)
     b = _best(f, std, free_n, cands, tol)
-    if b is not None and abs(b[2]) <= EXPLAINED_Z and lab["n"] >= 0 and b[1].n != lab["n"]:
+    if b is not None and abs(b[2]) <= EXPLAINED_Z and lab["n"] >= 0 and not _n_agrees(lab["n"], b[1]):
         return f"a different n explains it: {b[1].describe(frame)} (z = {b[2]:+.1f})"
     nolab = _best(f, std, lab, cands, tol, use_labels=False)
     if nolab is not None and abs(nolab[2]) <= EXPLAINED_Z:
@@ -694,6 +783,7 @@ def _explain(rows, ctx, diagrams, tol):
     _trend_checks(rows, ctx, diagrams, tol)
     for rec in rows:
         rec.pop("_cand", None)
+        rec.pop("_std", None)
 
 
 def _trend_checks(rows, ctx, diagrams, tol):
@@ -894,7 +984,7 @@ def compare_with_ring(table, ring, geometry, rotation_hz: float) -> list[dict]:
 
 
 __all__ = [
-    "DEFAULT_N_MAX", "MODEL_TOLERANCE", "EXPLAINED_Z", "LABEL_PENALTY", "CampbellDiagram", "campbell_diagram",
+    "DEFAULT_N_MAX", "MODEL_TOLERANCE", "MIN_TOLERANCE", "data_tolerance", "EXPLAINED_Z", "LABEL_PENALTY", "CampbellDiagram", "campbell_diagram",
     "track_branches", "TableCondition", "table_conditions", "CampbellMatch", "match_tables", "MATCH_COLUMNS",
     "CAMPBELL_COLUMNS", "match_rows_table", "resolution_flags", "label_identified_modes", "compare_with_ring",
     "frame_name",

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ringfit.errors import InputError
-from ringfit.io.modes import ModeTable, read_mode_table
+from ringfit.io.modes import ModeTable, check_test_condition, read_mode_table
 from ringfit.io.tyre import Tyre, read_tyre
 
 
@@ -72,7 +72,9 @@ def read_case(folder: str | os.PathLike) -> Case:
         if not p.with_suffix(".json").exists():
             raise InputError(f"missing sidecar {p.with_suffix('.json').name}: a test mode table needs its "
                              "condition (state, load_n, speed_kmh/rotation_hz, frame; docs/formats.md §2)", source=p)
-        tests.append(read_mode_table(p))
+        table = read_mode_table(p)
+        check_test_condition(table.condition, source=p.with_suffix(".json"))
+        tests.append(table)
     profiles = []
     profile_paths = sorted(folder.glob("*.profile.csv"))
     if profile_paths:

@@ -346,6 +346,7 @@ def _calibrate(problem, part, chain, current, remaining, entries, alpha, draws, 
     """Test the round's accepted candidates against the nulls of :mod:`ringfit.gap.calibration` (in place: an
     entry gets ``p_value``, ``null`` and ``null_sentence``; one that does not beat them at ``alpha`` is no longer
     accepted). Every candidate of the round enters the null's selection, screened-out ones refitted for it."""
+    t0, c0 = time.perf_counter(), time.process_time()
     elements = []
     for el in remaining:
         key = chain + parts(el)
@@ -360,11 +361,13 @@ def _calibrate(problem, part, chain, current, remaining, entries, alpha, draws, 
         rl = random_line_null(problem, part.fits, chain, elements, draws, seed=100 + round_no)
         if rl is not None:
             nulls.append(rl)
+    timing = {"wall_s": round(time.perf_counter() - t0, 3), "cpu_s": round(time.process_time() - c0, 3)}
     for c in entries:
         if not c["accepted"] or c["element"] not in elements:
             continue
         el = c["element"]
-        worst = max(nulls, key=lambda n: n.p[el])
+        c["null_elapsed"] = timing
+        worst = max(nulls, key=lambda n: (n.p[el], n.kind.startswith("random-line")))
         c["p_value"] = round(worst.p[el], 5)
         c["null"] = {("random_line" if n.kind.startswith("random-line") else "parametric"): n.summary(el)
                      for n in nulls}

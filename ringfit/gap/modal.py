@@ -316,7 +316,7 @@ def _table_rows(tables, geometry, patches, spins):
                 damping_std=damping_std[ti][i],
                 reference=ti == 0, a=int(t.a[i]), joint=0.0, mode_index=0, line_k=0.0, wave="",
             ))
-    return rows, (cavity[0] if cavity else float(cavity_frequency(1)))
+    return rows, (cavity[0] if cavity else float(jax.jit(cavity_frequency)(1.0)))  # one program, not two eager ops
 
 
 def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=None) -> ModalRows:
@@ -389,7 +389,7 @@ def missing_n_lines(r: dict, ring, geometry) -> tuple[np.ndarray, str]:
         fn = fixed_frame_frequencies if r["fixed"] else rotating_natural_frequencies
         waves = np.abs(np.asarray(fn(ring, geometry, n_all, r["spin"])))
         return waves[:, 0 if r["branch"] == "backward" else 1], ("eq. 26" if r["fixed"] else "eq. 25")
-    return np.asarray(natural_frequencies(ring, geometry, n_all)), "eq. 18"
+    return np.asarray(jax.jit(natural_frequencies)(ring, geometry, n_all)), "eq. 18"  # one program, not one per op
 
 
 #: Two lines within this many σ of a row's frequency: its assignment is ambiguous (docs/formats.md §5).
@@ -440,6 +440,8 @@ def _ambiguity(problem: GapProblem, rows, line_sets):
 def _match_missing_n(rows, ring, geometry):
     """Assign n to rows without one: nearest mode of the model their condition computes; returns notes."""
     notes = {}
+    if all(r["n"] >= 0 for r in rows):  # nothing to match: no model evaluated (a cold process compiles nothing)
+        return notes
     for j, r in enumerate(rows):
         if r["n"] >= 0:
             continue

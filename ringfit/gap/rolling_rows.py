@@ -110,8 +110,9 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
         by_drum.setdefault(tables[ti].condition.get("drum_diameter_m"), []).append(ti)
     position = {(r["table"], r["i"]): j for j, r in enumerate(rows)}
     for drum, idx in by_drum.items():
+        # the assignment only: the diagnosis weighs the rows with its own noise model (docs/formats.md §5)
         match = match_tables([tables[ti] for ti in idx], ring, geometry, drum_diameter_m=drum,
-                             n_max=ROLLING_N_MAX, harmonics=ROLLING_HARMONICS)
+                             model_tolerance=MODEL_TOLERANCE, n_max=ROLLING_N_MAX, harmonics=ROLLING_HARMONICS)
         offset = 0
         for ti, cond in zip(idx, match.conditions):
             t = tables[ti]
@@ -172,21 +173,21 @@ def _shared_assignment(r: dict, rec: dict, patch: float) -> str:
     """Fill the labels a row lacks (n, wave, loaded-mode type) from the line it was matched to
     (:func:`line_fields`), so that the baseline and every candidate see the same assignment
     (never each model its own nearest line). **Returns** the sentence that says so ('' if nothing was missing)."""
-    cand = rec.get("_cand")
-    if cand is None:
+    if rec.get("model_n") is None:
         return ""
-    f = line_fields(cand.n, cand.direction, cand.tag, r["mode_index"], r["line_k"], patch)
+    f = line_fields(int(rec["model_n"]), rec.get("model_direction", ""), rec.get("model_tag", ""), r["mode_index"],
+                    r["line_k"], patch)
     said = []
     if r["n"] < 1:
         r["n"] = f["n"]
-        said.append(f"n = {f['n']}")
+        said.append(f"n matched to {f['n']}")
     if not r["branch"] and not r["wave"] and f["wave"]:
         r["wave"] = f["wave"]
         said.append(f"{f['wave']} wave")
     if r["contact"] == 0 and f["contact"] and patch > 0:
         r["contact"], r["patch"] = f["contact"], patch
         said.append("cos-type (extr)" if f["contact"] == 1 else "sin-type (0)")
-    return ("shared assignment (baseline and every candidate): " + ", ".join(said) + " of the matched line"
+    return (", ".join(said) + " from the matched line (one assignment, shared by the baseline and every candidate)"
             if said else "")
 
 

@@ -2,11 +2,22 @@
 
 Every writer in ``ringfit.io`` goes through :func:`check_output_path` and an
 ``atomic_write_*`` function: the content is written to a temporary file in the
-same folder and renamed into place only when complete.
+same folder and renamed into place only when complete. Inside
+:func:`outputs_committed_together` (the CLI wraps each command in it) the
+renames wait for the end of the block: all outputs of a command appear
+together, or none does (a failing plot leaves no mode table behind).
+
+A folder that cannot take a file (read-only, not a folder, no permission)
+is found by :func:`check_output_path` before any work, and a write that
+fails half-way (disk full) ends in one :class:`InputError` naming the file,
+with nothing left behind.
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import errno
 import os
 import tempfile
 from collections.abc import Callable, Iterable
@@ -64,9 +75,87 @@ def check_output_path(
             raise InputError(f"{what}; refusing to overwrite it (pass --force to replace it)", source=path)
         if not path.parent.is_dir():
             raise InputError(f"folder {path.parent} does not exist", source=path)
+        _probe_folder(path)
     except OSError as exc:  # a name too long, a loop of links, no permission to look
         raise InputError(f"cannot be used as an output ({exc.strerror or exc.__class__.__name__})", source=path) from None
     return path
+
+
+def _probe_folder(path: Path) -> None:
+    """Create and remove a temporary file beside ``path``: a read-only or unwritable folder refused up front.
+
+    (A permission check alone would not do: root passes ``os.access`` on a read-only mount.)
+    """
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:64]}.", suffix=".probe", dir=path.parent)
+    except OSError as exc:
+        raise InputError(f"cannot be written: folder {path.parent} does not take new files "
+                         f"({exc.strerror or exc.__class__.__name__})", source=path) from None
+    os.close(fd)
+    os.unlink(tmp)
+
+
+def write_failed(path: str | os.PathLike, exc: OSError) -> InputError:
+    """The one-line :class:`InputError` for a write of ``path`` that failed with ``exc`` (disk full, read-only ...)."""
+    if exc.errno == errno.ENOSPC:
+        why = "no space left on the device"
+    elif exc.errno:
+        why = exc.strerror or os.strerror(exc.errno)
+    else:
+        why = " ".join(str(exc).split()) or exc.__class__.__name__
+    return InputError(f"could not be written ({why}); nothing was written", source=path)
+
+
+#: Files staged by :func:`atomic_write` inside :func:`outputs_committed_together`: [(tmp, destination)].
+_STAGED: contextvars.ContextVar[list | None] = contextvars.ContextVar("ringfit_staged_outputs", default=None)
+
+
+@contextlib.contextmanager
+def outputs_committed_together():
+    """Every :func:`atomic_write` inside the block is renamed into place when the block ends without an
+    exception; on an exception (or Ctrl-C) none is, and the temporary files are removed.
+
+    Nested blocks join the outermost one. Code inside must not read back what it wrote (the files appear
+    only at the end); :func:`direct_writes` suspends the staging where it must.
+    """
+    if _STAGED.get() is not None:
+        yield
+        return
+    staged: list[tuple[Path, Path]] = []
+    token = _STAGED.set(staged)
+    try:
+        yield
+    except BaseException:
+        _discard(staged)
+        raise
+    finally:
+        _STAGED.reset(token)
+    _commit(staged)
+
+
+@contextlib.contextmanager
+def direct_writes():
+    """Suspend :func:`outputs_committed_together` inside the block (writes into a private temporary folder)."""
+    token = _STAGED.set(None)
+    try:
+        yield
+    finally:
+        _STAGED.reset(token)
+
+
+def _discard(staged) -> None:
+    for tmp, _ in staged:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def _commit(staged) -> None:
+    for i, (tmp, dest) in enumerate(staged):
+        try:
+            os.replace(tmp, dest)
+        except OSError as exc:
+            _discard(staged[i:])
+            raise write_failed(dest, exc) from None
 
 
 def check_output_paths(
@@ -88,15 +177,33 @@ def check_output_paths(
 def atomic_write(path: str | os.PathLike, write: Callable[[Path], None]) -> Path:
     """Call ``write(tmp_path)`` then rename ``tmp_path`` onto ``path``; clean up on failure."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:64]}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise write_failed(path, exc) from None
     os.close(fd)
     tmp = Path(tmp)
+    staged = _STAGED.get()
+    keep = False
     try:
-        write(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
+        try:
+            write(tmp)
+            os.chmod(tmp, 0o666 & ~_umask())
+            if staged is None:
+                os.replace(tmp, path)
+            else:
+                for k, (old_tmp, dest) in enumerate(staged):  # a second write of the same output replaces the first
+                    if dest == path:
+                        with contextlib.suppress(OSError):
+                            old_tmp.unlink()
+                        del staged[k]
+                        break
+                staged.append((tmp, path))
+                keep = True
+        except OSError as exc:
+            raise write_failed(path, exc) from None
     finally:
-        if tmp.exists():
+        if not keep and tmp.exists():
             tmp.unlink()
     return path
 

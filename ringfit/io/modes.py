@@ -21,7 +21,7 @@ from ringfit.errors import InputError
 from ringfit.io.checks import check_condition_field, csv_columns, read_json_object, short_repr
 from ringfit.io.files import atomic_write, check_output_path, read_text_file
 
-KINDS = ("structural", "acoustic")
+KINDS = ("structural", "acoustic", "unclassified")
 TAGS = ("", "extr", "0", "vert", "hort")
 BRANCHES = ("", "backward", "forward")
 STATES = ("free", "loaded", "rolling")
@@ -45,7 +45,7 @@ class ModeTable:
     - ``n``: circumferential index, int; ``-1`` where not assigned.
     - ``a``: cross-sectional index, int.
     - ``tag``: loaded-tyre label (``""``, ``extr``, ``0``, ``vert``, ``hort``).
-    - ``kind``: ``structural`` or ``acoustic``.
+    - ``kind``: ``structural``, ``acoustic`` or ``unclassified`` (not ring-like, not shown to be the cavity).
     - ``freq_hz``: natural frequency [Hz].
     - ``freq_std_hz``: one standard deviation [Hz]; NaN where unknown.
     - ``damping_pct``: modal damping ratio [%]; NaN where unknown.
@@ -269,6 +269,50 @@ def validate_condition(cond: dict, *, source: str = "<condition>") -> dict:
             continue
         check_condition_field(cond, key, source=source)
     return dict(cond)
+
+
+#: Drum diameters [m] a rolling model takes (test rigs' drums are 0.5–3 m; a larger drum is a flat road for the
+#: contact patch, a smaller one leaves the contact solve's window). ``--drum`` of the CLI uses the same range.
+DRUM_DIAMETER_RANGE_M = (0.5, 100.0)
+
+
+def check_test_condition(cond: dict, *, source) -> None:
+    """A test table's sidecar says a condition that can be modelled, or :class:`InputError` naming the key.
+
+    Refused (docs/formats.md §2, "test tables"): no ``state`` while the sidecar gives a load, speed or
+    rotation (the default ``free`` would silently drop the ground contact); ``state: free`` with a load
+    (free means no ground contact; a spinning free tyre has a speed and no load); ``loaded`` or
+    ``rolling`` with ``load_n: 0``; a ``drum_diameter_m`` outside :data:`DRUM_DIAMETER_RANGE_M`.
+    ``source``: the sidecar, named in the message.
+    """
+    def positive(key):
+        v = cond.get(key)
+        return v is not None and float(v) > 0
+
+    drum = cond.get("drum_diameter_m")
+    if drum is not None:
+        lo, hi = DRUM_DIAMETER_RANGE_M
+        ok = isinstance(drum, (int, float)) and not isinstance(drum, bool) and lo <= float(drum) <= hi
+        if not ok:
+            raise InputError(f"'drum_diameter_m' = {short_repr(drum)}; expected a drum diameter in [{lo:g}, {hi:g}] m "
+                             "(no drum_diameter_m for a flat road)", source=source)
+    running = [k for k in ("load_n", "speed_kmh", "rotation_hz") if positive(k)]
+    state = cond.get("state")
+    if state is None:
+        if running:
+            raise InputError(f"no 'state' while {running[0]} = {cond[running[0]]!r}; expected 'state': 'rolling' "
+                             "(on the ground, moving), 'loaded' (on the ground, standing) or 'free' (no ground "
+                             "contact)", source=source)
+        return
+    if state == "free" and positive("load_n"):
+        moving = [k for k in ("speed_kmh", "rotation_hz") if positive(k)]
+        what = "rolling" if moving else "loaded"
+        raise InputError(f"'state': 'free' with load_n = {cond['load_n']!r} (free means no ground contact); "
+                         f"expected 'state': '{what}', or no load_n for a free tyre", source=source)
+    if state in ("loaded", "rolling") and "load_n" in cond and cond["load_n"] is not None \
+            and not positive("load_n"):
+        raise InputError(f"'load_n' = {cond['load_n']!r} for a {state} table; expected the vertical load in N "
+                         "(> 0)", source=source)
 
 
 def format_mode_table(table: ModeTable) -> str:

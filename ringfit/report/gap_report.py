@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ringfit.gap.ranking import COMPUTED
+from ringfit.gap.ranking import COMPUTED, parts
 from ringfit.report.figures import new_figure, png_data_uri
 from ringfit.report.html import esc, html_document, table_html
 
@@ -82,7 +82,7 @@ def _top_fits(part):
     out = []
     for c in cands[:TOP]:
         computed = c.get("variant") == "computed"
-        fit = part.fits.get((c["effect"] + (COMPUTED if computed else ""),))
+        fit = part.fits.get(parts(c["element"]) if "element" in c else (c["effect"] + (COMPUTED if computed else ""),))
         if fit is not None:
             out.append((f"+ {c['effect']}" + (" (computed)" if computed else ""), fit))
     if part.chain_fit is not None and len(part.chain_fit.extra["chain"]) > 1:
@@ -232,10 +232,41 @@ def _modal_heldout_figure(part):
     return fig
 
 
+def _null_candidates(summary: dict) -> list[dict]:
+    """Every candidate of a part (first round and chain rounds) that was tested against a null."""
+    rounds = [summary.get("candidates", [])] + [r["candidates"] for r in summary.get("chain", [])]
+    return [c for r in rounds for c in r if c.get("null_draws")]
+
+
+def _null_figure(cands: list[dict], title: str):
+    """Histogram of each null's selection statistic with the observed value marked (docs/formats.md §5 ``null``)."""
+    cols = max(len(c["null_draws"]) for c in cands)
+    fig, axes = new_figure(figsize=(4.2 * cols, 2.6 * len(cands)), nrows=len(cands), ncols=cols, squeeze=False)
+    for i, c in enumerate(cands):
+        for j, (kind, draws) in enumerate(sorted(c["null_draws"].items())):
+            ax = axes[i][j]
+            d = 100 * np.asarray(draws)
+            s = c["null"][kind]
+            ax.hist(d, bins=30, color=COLOURS["baseline"], alpha=0.7, label=f"null ({s['draws']} draws)")
+            ax.axvline(s["observed_pct"], color=COLOURS["accepted"] if c.get("accepted") else COLOURS["rejected"],
+                       lw=2, label=f"observed {s['observed_pct']:.0f} %, p = {s['p_value']:.3g}")
+            ax.axvline(s["q95_pct"], color="k", ls=":", lw=0.8, label="95 % of the null")
+            ax.set_xlabel("selection statistic: held-out shrink [%]")
+            ax.set_ylabel("draws")
+            ax.set_title(f"{c['effect']} ({c.get('variant', '')}): {kind.replace('_', '-')} null", fontsize=8)
+            ax.legend(fontsize=6)
+    fig.suptitle(title, fontsize=9)
+    return fig
+
+
 def figures(diag) -> list[tuple[str, str]]:
     """``(title, data URI)`` of every figure of the report."""
     out = []
     for part in diag.parts:
+        tested = _null_candidates(part.summary)
+        if tested:
+            t = f"{PART_TITLE.get(part.problem.domain, part.problem.domain)}: held-out shrink against chance"
+            out.append((t, png_data_uri(_null_figure(tested, t))))
         dom = part.problem.domain
         if dom == "profiles":
             out.append(("profiles: residual vs angle before/after, per channel and speed",
@@ -283,7 +314,7 @@ def write_gap_report(diag, path: str | os.PathLike, *, overwrite: bool = False) 
     path = check_output_path(path, overwrite=overwrite)
     c = diag.content
     rows = [[esc(x["effect"]), esc(x.get("variant", "")), esc(x["heldout_shrink_pct"]), esc(x["heldout_shrink_interval_pct"]),
-             esc(x["evidence"].get("delta_bic")), esc(_params_text(x)),
+             esc(x["evidence"].get("delta_bic")), esc(x.get("p_value", "")), esc(_params_text(x)),
              "yes" if x.get("accepted") else esc("; ".join(x.get("rejected_because", [])))]
             for x in c["candidates"]]
     where = "".join(f"<li>{esc(w['region'])}: {100 * w['share']:.0f} %</li>" for w in c["where"])
@@ -296,9 +327,12 @@ def write_gap_report(diag, path: str | os.PathLike, *, overwrite: bool = False) 
         f"held-out {b['heldout_rms']} ({esc(b.get('heldout_method', ''))}); noise RMS {b.get('noise_rms')} — "
         f"{esc(b.get('noise_method', ''))}. Held-out reduced χ² {b.get('reduced_chi2')} (effective dof "
         f"{b.get('noise_dof')}); ideal shrink {b.get('ideal_shrink_pct')} %.</p>")
+    cal = c["verdict"].get("calibration") or []
+    if cal:
+        summary += "<p><b>Against chance:</b></p><ul>" + "".join(f"<li>{esc(x['sentence'])}</li>" for x in cal) + "</ul>"
     sections = [("Verdict", summary), ("Where", f"<ul>{where}</ul>"),
                 ("Which", table_html(["effect", "variant", "held-out shrink %", "95 % interval", "ΔBIC",
-                                      "parameters [95 % interval]", "accepted"], rows)),
+                                      "p (vs chance)", "parameters [95 % interval]", "accepted"], rows)),
                 ("Rules", f"<ul>{rule_items}</ul>")]
     sections += _row_sections(c)
     sections += [(title, f'<figure><img src="{src}" alt="{esc(title)}"></figure>') for title, src in figures(diag)]

@@ -59,8 +59,14 @@ def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = Fal
     if folder.exists() and not folder.is_dir():
         raise InputError("exists and is not a folder; --out names the folder the example is written into",
                          source=folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".ringfit-example-", dir=folder))
+    created = _make_folder(folder)
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=".ringfit-example-", dir=folder))
+    except OSError as exc:
+        _remove_created(created)
+        raise InputError(f"--out: cannot write into this folder ({exc.strerror or exc.__class__.__name__})",
+                         source=folder) from None
+    done = False
     try:
         if kind == "records":
             _records(tmp, progress, fmt)
@@ -79,9 +85,47 @@ def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = Fal
         for rel in made:
             (folder / rel).parent.mkdir(parents=True, exist_ok=True)
             os.replace(tmp / rel, folder / rel)
+        done = True
+    except OSError as exc:  # a disk that fills up while the example is generated
+        raise InputError(f"--out: the example could not be written ({exc.strerror or exc.__class__.__name__}); "
+                         "nothing was written", source=folder) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+        if not done:
+            _remove_created(created)
     return [folder / rel for rel in made]
+
+
+def _make_folder(folder: Path) -> list[Path]:
+    """``mkdir -p folder``; returns the folders it created (outermost first). :class:`InputError` naming
+    ``--out`` when a file stands in the way or the place takes no folder."""
+    missing = []
+    p = folder
+    while not p.exists():
+        if os.path.lexists(p):
+            raise InputError("--out: is a dangling symbolic link; expected a folder", source=p)
+        missing.append(p)
+        p = p.parent
+    if not p.is_dir():
+        raise InputError(f"--out: {p} is a file, not a folder; the example needs a folder there", source=folder)
+    created = []
+    for q in reversed(missing):
+        try:
+            q.mkdir()
+        except OSError as exc:
+            _remove_created(created)
+            raise InputError(f"--out: cannot create the folder ({exc.strerror or exc.__class__.__name__})",
+                             source=folder) from None
+        created.append(q)
+    return created
+
+
+def _remove_created(created: list[Path]) -> None:
+    for q in reversed(created):
+        try:
+            q.rmdir()
+        except OSError:
+            pass
 
 
 # ----------------------------------------------------------------------------- the kinds

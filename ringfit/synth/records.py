@@ -217,3 +217,58 @@ def impact_records(
     force = force + force_noise * hammer_peak_n * rng.standard_normal(force.shape)
     return Records(acc=acc, axes=tuple(axes), sensor_angle_deg=angles, fs_hz=float(fs_hz),
                    force=force if with_force else None, source="<synthetic>")
+
+
+#: Degradations :func:`degrade` applies (tests and benchmarks/bench_degraded.py).
+DEGRADATIONS = ("spikes", "clipped", "hum50", "hum60", "dead", "flipped")
+
+
+def degrade(records: Records, how: str, *, seed: int = 0, channels: int = 3) -> Records:
+    """A copy of ``records`` with one rig fault, as real benches produce them.
+
+    - ``spikes``: a train of one- or two-sample spikes (8× the record's peak, every 37 ms, random sign) on
+      ``channels`` channels (record, axis) — electrical interference or a loose connector;
+    - ``clipped``: ``channels`` channels clipped at 30 % of their peak (flat tops at the range of an
+      over-driven input);
+    - ``hum50`` / ``hum60``: mains hum on every channel, 50 (60) Hz and its 2nd and 3rd harmonics at 30, 15
+      and 8 % of the records' rms, its phase drifting from record to record, non-decaying;
+    - ``dead``: ``channels`` channels reading only a little noise (an unplugged sensor);
+    - ``flipped``: ``channels`` channels with the sign inverted (a sensor mounted the other way round, or a
+      negative sensitivity).
+
+    The channels are drawn at random, one repeat of an angle each where the records repeat an angle.
+    """
+    rng = np.random.default_rng(seed)
+    acc = records.acc.copy()
+    r, a, s = acc.shape
+    rms = float(np.sqrt(np.mean(acc**2)))
+    _, group = np.unique(np.round(records.sensor_angle_deg, 9), return_inverse=True)  # one repeat per angle
+    chosen = rng.choice(group.max() + 1, size=min(channels, group.max() + 1), replace=False)
+    picks = [(int(rng.choice(np.flatnonzero(group == g))), int(rng.integers(a))) for g in chosen]
+    t = np.arange(s) / records.fs_hz
+    if how == "spikes":
+        for i, j in picks:
+            peak = np.abs(acc[i, j]).max()
+            for k in np.arange(int(rng.integers(50, 200)), s - 2, int(0.037 * records.fs_hz)):
+                w = int(rng.integers(1, 3))
+                acc[i, j, k:k + w] += 8 * peak * rng.choice([-1.0, 1.0])
+    elif how == "clipped":
+        for i, j in picks:
+            lim = 0.3 * np.abs(acc[i, j]).max()
+            acc[i, j] = np.clip(acc[i, j], -lim, lim)
+    elif how in ("hum50", "hum60"):
+        f0 = 50.0 if how == "hum50" else 60.0
+        for h, amp in ((1, 0.3), (2, 0.15), (3, 0.08)):
+            phase = rng.uniform(0, 2 * np.pi, (r, a))
+            acc += amp * rms * np.sqrt(2) * np.cos(2 * np.pi * h * f0 * t + phase[..., None])
+    elif how == "dead":
+        for i, j in picks:
+            acc[i, j] = 1e-4 * rms * rng.standard_normal(s)
+    elif how == "flipped":
+        for i, j in picks:
+            acc[i, j] = -acc[i, j]
+    else:
+        raise ValueError(f"unknown degradation {how!r}; expected one of {DEGRADATIONS}")
+    from dataclasses import replace
+
+    return replace(records, acc=acc, source=f"{records.source} ({how})")

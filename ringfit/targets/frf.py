@@ -37,7 +37,8 @@ class FRFEstimate:
     measured FRF came without coherence), ``angle_deg`` (angles,), ``axes``,
     ``kept`` (records,) bool: impacts used; ``notes`` one-line findings of the
     pre-processing (offsets, channels left out); ``credible`` False when
-    noise dominates the records; ``measured`` True for FRFs read from a file.
+    noise dominates the records; ``measured`` True for FRFs read from a file; ``lines_hz`` the mains lines
+    notched in the records and ``duration_s`` their length (:func:`~ringfit.targets.faults.repair_records`).
     """
 
     freq_hz: np.ndarray
@@ -49,6 +50,8 @@ class FRFEstimate:
     notes: list = field(default_factory=list)
     credible: bool = True
     measured: bool = False
+    lines_hz: list = field(default_factory=list)
+    duration_s: float = float("inf")
 
 
 def h1_coherence(force_spec: np.ndarray, acc_spec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -101,7 +104,9 @@ def frf_estimate(
     """H1 and coherence per sensor angle, with impact rejection (records must carry force).
 
     Offsets are removed and dead axes left out first
-    (:func:`~ringfit.targets.quality.clean_records`); a record with a junk,
+    (:func:`~ringfit.targets.quality.clean_records`), rig faults found and
+    mended or marked (:func:`~ringfit.targets.faults.repair_records`: a record
+    with a dead, clipped, sign-flipped or spiky channel is left out); a record with a junk,
     flat or out-of-scale channel (:func:`~ringfit.targets.quality.screen_channels`)
     is left out as a whole, and every such finding is a note of the estimate.
     """
@@ -109,8 +114,12 @@ def frf_estimate(
 
     if records.force is None:
         raise InputError("FRF needs a force channel; use SSI for records without force", source=records.source)
+    from ringfit.targets.faults import repair_records
+
     check_band(records, f_max_hz)
     records, notes = clean_records(records, threshold)
+    records, use, found, lines = repair_records(records, threshold=threshold, f_max_hz=f_max_hz, skip_s=pre_s + 0.0127)
+    notes += found
     acc, force = align_on_impact(records, threshold=threshold, delay_s=delay_s, pre_s=pre_s)
     q = decimation_factor(records.fs_hz, f_max_hz)
     acc, fs = decimate(acc, records.fs_hz, q)
@@ -120,12 +129,18 @@ def frf_estimate(
         raise InputError(f"only {acc.shape[-1] - pre} samples at {fs:g} Hz after the impact; expected at least 64 "
                          "(records too short?)", source=records.source)
     r, a, _ = acc.shape
+    fine = use.all(axis=1)  # records without a fault found by repair_records
+    if not fine.any():
+        raise InputError("every record has a faulty channel; nothing left for the FRF: " + "; ".join(found),
+                         source=records.source)
     try:
-        screen = screen_channels(acc[..., pre:].reshape(r * a, -1), channel_labels(records.sensor_angle_deg, records.axes))
+        screen = screen_channels(acc[fine, :, pre:].reshape(int(fine.sum()) * a, -1),
+                                 channel_labels(records.sensor_angle_deg[fine], records.axes))
     except InputError as exc:
         raise InputError(str(exc), source=records.source) from None
     notes += screen.notes
-    usable = screen.keep.reshape(r, a).all(axis=1)
+    usable = fine.copy()
+    usable[fine] = screen.keep.reshape(-1, a).all(axis=1)
     if not usable.any():
         raise InputError("every record has a bad channel; nothing left for the FRF", source=records.source)
     if not usable.all():
@@ -150,7 +165,8 @@ def frf_estimate(
         kept[idx[~keep]] = False
         h1[g], coh[g] = h1_coherence(fspec[idx[keep]], aspec[idx[keep]])
     have = np.isin(np.arange(angles.size), inverse[usable])
-    return FRFEstimate(f, h1[have], coh[have], angles[have], tuple(records.axes), kept, notes, screen.credible)
+    return FRFEstimate(f, h1[have], coh[have], angles[have], tuple(records.axes), kept, notes, screen.credible,
+                       lines_hz=lines, duration_s=records.n_samples / records.fs_hz)
 
 
 def frf_from_measured(m: MeasuredFRF, f_range: tuple[float, float] = (20.0, 400.0)) -> FRFEstimate:
@@ -281,9 +297,14 @@ def harmonic_indicators(frf: FRFEstimate, n_max: int | None = None) -> np.ndarra
     return out
 
 
+#: A peak is resolved when the line spacing is at most this share of its frequency (the ±1 % window of the
+#: per-angle peaks holds a line, and a half-power width of ζ = 0.5 % spans a line).
+RESOLVE_SHARE = 0.01
+
+
 def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = (20.0, 400.0), delay_s: float = 0.0,
               threshold: float = 0.1, min_coherence: float = 0.9, prominence_db: float = 3.0,
-              indicator: str = "harmonic"):
+              indicator: str = "harmonic", cavity_hz: float | None = None):
     """Peak picking on H1 (seed §2.2–2.3) → :class:`~ringfit.targets.identify.ModeIdentification`.
 
     ``indicator="sum"`` picks peaks on the summed receptance power (the
@@ -297,6 +318,7 @@ def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = 
 
     ``records`` may be time records (H1 is estimated here) or FRFs measured
     by other software (:class:`~ringfit.io.records.MeasuredFRF`, used as they are).
+    ``cavity_hz``: the cavity frequency of eq. 22 (see :func:`~ringfit.targets.identify.classify_rows`).
     """
     from ringfit.targets.clustering import PhysicalMode
     from ringfit.targets.identify import ModeIdentification, mode_table, note_quality
@@ -325,13 +347,22 @@ def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = 
         if all(abs(fp - q[0]) > 0.005 * fp for q in peaks):
             peaks.append((fp, i))
     peaks.sort()
+    df = float(f[1] - f[0])
+    coarse = [fp for fp, _ in peaks if df > RESOLVE_SHARE * fp]
+    if frf.measured and coarse:
+        # a peak narrower than the line spacing: neither its frequency (to 1 %) nor its half-power width is resolved
+        raise InputError(f"--band {f_range[0]:g}:{f_range[1]:g}: the measured lines are {df:g} Hz apart, coarser than "
+                         f"{RESOLVE_SHARE:.0%} of the peak at {coarse[0]:.4g} Hz; expected a band above "
+                         f"{df / RESOLVE_SHARE:g} Hz for these lines (or FRFs with finer lines)", source=records.source)
     angle = np.repeat(np.deg2rad(frf.angle_deg), len(frf.axes))
     axis = np.tile(np.array(frf.axes, dtype=object), frf.angle_deg.size)
     w2 = (2 * np.pi * f) ** 2
     per_angle = np.sum(np.abs(frf.h1 / np.where(w2 > 0, -w2, -np.inf)) ** 2, axis=1)
     modes = []
     for fp, i in peaks:
-        win = np.abs(f - fp) <= 0.01 * fp
+        # ±1 % of the peak, and never narrower than the nearest line and its neighbours (coarse lines at low f)
+        near = int(np.argmin(np.abs(f - fp)))
+        win = (np.abs(f - fp) <= 0.01 * fp) | (np.abs(np.arange(f.size) - near) <= 1)
         local = f[win][np.argmax(per_angle[:, win], axis=1)]
         shape = quadrature_shapes(frf, fp)
         nrm = np.linalg.norm(shape)
@@ -343,7 +374,8 @@ def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = 
             damping=zeta, damping_std=float("nan"), split_hz=0.0,
             basis=shape[:, None].astype(complex), shape=shape.astype(complex), pole_index=np.zeros(0, int), n_orders=0,
         ))
-    table, modes = mode_table(modes, angle, axis, f"frf-peak-picking-{indicator}")
+    table, modes = mode_table(modes, angle, axis, f"frf-peak-picking-{indicator}", cavity_hz=cavity_hz,
+                              lines_hz=frf.lines_hz, duration_s=frf.duration_s)
     limits = []
     if not (table.kind == "acoustic").any():
         limits.append("no acoustic (cavity) row: peak picking finds an acoustic mode only where its peak stands out "

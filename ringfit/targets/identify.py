@@ -52,12 +52,20 @@ class ModeIdentification:
     info: dict = field(default_factory=dict)
 
 
-def average_by_angle(acc: np.ndarray, angle_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean of the aligned records taken at the same sensor angle: (records, axes, samples) -> (angles, axes, samples)."""
+def average_by_angle(acc: np.ndarray, angle_deg: np.ndarray, use: np.ndarray | None = None):
+    """Mean of the aligned records taken at the same sensor angle: (records, axes, samples) -> (angles, axes, samples).
+
+    ``use`` (records, axes) bool: the channels of each record that count (default all); then the result is
+    ``(mean, angles, have)`` with ``have`` (angles, axes) True where at least one record counted.
+    """
     angles, inverse = np.unique(np.round(np.asarray(angle_deg, dtype=np.float64), 9), return_inverse=True)
+    w = np.ones(acc.shape[:2]) if use is None else np.asarray(use, dtype=np.float64)
     out = np.zeros((angles.size,) + acc.shape[1:])
-    np.add.at(out, inverse, acc)
-    return out / np.bincount(inverse)[:, None, None], angles
+    np.add.at(out, inverse, acc * w[..., None])
+    count = np.zeros((angles.size, acc.shape[1]))
+    np.add.at(count, inverse, w)
+    mean = out / np.maximum(count, 1)[..., None]
+    return (mean, angles) if use is None else (mean, angles, count > 0)
 
 
 @dataclass
@@ -68,7 +76,8 @@ class Decays:
     ``fs_hz`` after decimation, ``screen`` the
     :class:`~ringfit.targets.quality.ChannelScreen` of the channels before
     the bad ones were left out (None when not screened), ``notes`` one-line
-    findings of the pre-processing (offsets, channels left out, credibility).
+    findings of the pre-processing (offsets, channels left out, credibility), ``lines_hz`` the mains lines
+    notched (:func:`~ringfit.targets.faults.repair_records`), ``duration_s`` the records' length.
     """
 
     y: np.ndarray
@@ -77,6 +86,8 @@ class Decays:
     fs_hz: float
     screen: object = None
     notes: list = field(default_factory=list)
+    lines_hz: list = field(default_factory=list)
+    duration_s: float = float("inf")
 
     @property
     def credible(self) -> bool:
@@ -111,8 +122,13 @@ def free_decays(
     """
     from ringfit.targets.quality import channel_labels, clean_records, screen_channels
 
+    from ringfit.targets.faults import repair_records
+
     check_band(records, f_max_hz)
     records, notes = clean_records(records, threshold)
+    records, use, found, lines = repair_records(records, threshold=threshold, f_max_hz=f_max_hz, skip_s=skip_s,
+                                                used_from_s=skip_s + delay_s)
+    notes += found
     if records.force is not None:
         acc, _ = align_on_impact(records, threshold=threshold, delay_s=delay_s)
     else:
@@ -121,7 +137,7 @@ def free_decays(
         acc, _ = sync_by_group_velocity(records, radius_m)
     angle_deg = records.sensor_angle_deg
     if average:
-        acc, angle_deg = average_by_angle(acc, angle_deg)
+        acc, angle_deg, use = average_by_angle(acc, angle_deg, use)
     q = decimation_factor(records.fs_hz, f_max_hz) if decimate_to is None else max(1, int(round(records.fs_hz / decimate_to)))
     acc, fs = decimate(acc, records.fs_hz, q)
     acc = drop_after_impact(acc, fs, skip_s)
@@ -132,15 +148,20 @@ def free_decays(
     y = acc.reshape(r * a, s)
     angle = np.repeat(np.deg2rad(angle_deg), a)
     axis = np.tile(np.array(records.axes, dtype=object), r)
+    labels = channel_labels(angle_deg, records.axes)
+    have = np.asarray(use, bool).reshape(-1)  # channels with a usable record (repair_records)
+    if not have.any():
+        raise InputError("no usable acceleration channel: " + "; ".join(found), source=records.source)
+    y, angle, axis, labels = y[have], angle[have], axis[have], [x for x, h in zip(labels, have) if h]
     found = None
     if screen:
         try:
-            found = screen_channels(y, channel_labels(angle_deg, records.axes))
+            found = screen_channels(y, labels)
         except InputError as exc:
             raise InputError(str(exc), source=records.source) from None
         notes += found.notes
         y, angle, axis = y[found.keep], angle[found.keep], axis[found.keep]
-    return Decays(y, angle, axis, fs, found, notes)
+    return Decays(y, angle, axis, fs, found, notes, lines, records.n_samples / records.fs_hz)
 
 
 def prepare_decays(records: Records, **kwargs) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -149,20 +170,80 @@ def prepare_decays(records: Records, **kwargs) -> tuple[np.ndarray, np.ndarray, 
     return d.y, d.angle_rad, d.axis, d.fs_hz
 
 
+#: Relative tolerance around the cavity frequency of eq. 22 (docs/physics.md §3.6) within which a non-ring-like
+#: row may be the cavity: the speed of sound moves ±3.5 % over 0–40 °C and the effective cavity length of a
+#: tyre differs from the geometry's by a few percent (the thesis measured 227.0 Hz against 218.75 Hz, +3.8 %).
+CAVITY_TOL = 0.08
+#: Least share of the shape's power in harmonic n = 1 for a cavity row (the tread sensor sees the cavity's
+#: pressure drive the ring's rigid n = 1 motion).
+CAVITY_MIN_CONFIDENCE = 0.5
+
+
+def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, not_ring: np.ndarray,
+                  cavity_hz: float | None, tol: float = CAVITY_TOL, lines_hz=(), duration_s: float = np.inf
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """``structural``, ``acoustic`` or ``unclassified`` for each row, and the reason of each unclassified one.
+
+    A row that is ring-like (``not_ring`` False) is ``structural``. A row that is not is ``acoustic`` only with
+    evidence: its frequency within ``tol`` of the cavity frequency ``cavity_hz`` (eq. 22, docs/physics.md §3.6)
+    AND an n = 1-like shape (dominant harmonic 1 holding at least :data:`CAVITY_MIN_CONFIDENCE` of the power);
+    otherwise it is ``unclassified`` and the reason says which evidence is missing. Any row on a mains line
+    that was notched (``lines_hz``, :func:`~ringfit.targets.faults.on_notched_line`) is ``unclassified``.
+
+    **Returns:** ``(kind, reason)``, object arrays (rows,); reason ``""`` for classified rows.
+    """
+    kind = np.where(not_ring, "unclassified", "structural").astype(object)
+    reason = np.full(len(kind), "", dtype=object)
+    from ringfit.targets.faults import on_notched_line
+
+    for i in range(len(kind)):
+        line = on_notched_line(float(freq_hz[i]), lines_hz, duration_s)
+        if line is not None:
+            kind[i] = "unclassified"
+            reason[i] = (f"on the mains line at {line:.2f} Hz that was notched: what is left of the hum, "
+                         "not shown to be a mode")
+    for i in np.flatnonzero(not_ring & (reason == "")):
+        shape = (f"dominant harmonic n = {int(n[i])} with {100 * confidence[i]:.0f} % of the shape's power"
+                 if confidence[i] >= CAVITY_MIN_CONFIDENCE else
+                 f"no dominant harmonic (n = {int(n[i])} holds only {100 * confidence[i]:.0f} % of the power)")
+        why = ["not ring-like (" + (shape if confidence[i] < CAVITY_MIN_CONFIDENCE else
+                                    f"n = {int(n[i])} out of the ring's order of frequencies") + ")"]
+        if cavity_hz is None or not np.isfinite(cavity_hz):
+            why.append("no cavity frequency given to compare with")
+        else:
+            off = freq_hz[i] / cavity_hz - 1
+            near = abs(off) <= tol
+            one = int(n[i]) == 1 and confidence[i] >= CAVITY_MIN_CONFIDENCE
+            if near and one:
+                kind[i] = "acoustic"
+                continue
+            if not near:
+                why.append(f"not the cavity: {100 * off:+.0f} % from eq. 22's {cavity_hz:.2f} Hz "
+                           f"(tolerance ±{100 * tol:g} %)")
+            if not one:
+                why.append(f"not the cavity's n = 1 pattern ({shape})")
+        reason[i] = "; ".join(why)
+    return kind, reason
+
+
 def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.ndarray, method: str,
                *, min_confidence: float = 0.5, poles: PoleSet | None = None,
-               spurious_damping_factor: float = 1.5) -> tuple[ModeTable, list]:
-    """A :class:`ModeTable` (docs/formats.md §2) from physical modes: n from the shapes, acoustic flag, extras.
+               spurious_damping_factor: float = 1.5, cavity_hz: float | None = None, lines_hz=(),
+               duration_s: float = np.inf) -> tuple[ModeTable, list]:
+    """A :class:`ModeTable` (docs/formats.md §2) from physical modes: n from the shapes, kind, extras.
 
     With ``poles`` (SSI), modes with the same n within 1 % are first merged
     as the two halves of a double pole (:func:`~ringfit.targets.clustering.merge_pairs`).
     Modes that are not ring-like (:func:`~ringfit.targets.shapes.acoustic_candidates`)
-    are acoustic candidates when they are lighter damped than
-    ``spurious_damping_factor`` × the median structural damping (air modes
-    are lighter damped than the rubber, seed §5.1); the others are dropped as
-    mathematical (spurious) modes.
+    are kept when they are lighter damped than ``spurious_damping_factor`` ×
+    the median structural damping (air modes are lighter damped than the
+    rubber, seed §5.1); the others are dropped as mathematical (spurious)
+    modes. A kept one is ``acoustic`` only with evidence, else
+    ``unclassified`` with the reason (:func:`classify_rows`; ``cavity_hz``
+    the cavity frequency of eq. 22 for the tyre, None: nothing is called acoustic; ``lines_hz`` the notched
+    mains lines and ``duration_s`` the records' length).
 
-    Extra columns: ``n_confidence``, ``split_hz``, ``travelling``, ``damping_std_pct``.
+    Extra columns: ``n_confidence``, ``split_hz``, ``travelling``, ``damping_std_pct``, ``reason``.
 
     **Returns:** ``(table, modes)`` with ``modes`` in table order.
     """
@@ -187,16 +268,18 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     conf = np.array(conf)
     freq = np.array([m.freq_hz for m in modes])
     damping = np.array([m.damping for m in modes])
-    acoustic = acoustic_candidates(n, conf, freq, min_confidence)
-    ref = np.nanmedian(damping[~acoustic]) if (~acoustic).any() else np.inf
-    keep = ~acoustic | ~(damping > spurious_damping_factor * ref)
+    not_ring = acoustic_candidates(n, conf, freq, min_confidence)
+    ref = np.nanmedian(damping[~not_ring]) if (~not_ring).any() else np.inf
+    keep = ~not_ring | ~(damping > spurious_damping_factor * ref)
     idx = np.flatnonzero(keep)
     modes = [modes[i] for i in idx]
+    kind, reason = classify_rows(n[idx], conf[idx], freq[idx], not_ring[idx], cavity_hz, lines_hz=lines_hz,
+                                 duration_s=duration_s)
     fmt = lambda x: f"{x:.6g}" if np.isfinite(x) else ""  # noqa: E731  (empty: unknown)
     table = ModeTable(
         freq_hz=freq[idx],
-        n=np.where(acoustic[idx], -1, n[idx]),
-        kind=np.where(acoustic[idx], "acoustic", "structural").astype(object),
+        n=np.where(kind == "structural", n[idx], -1),
+        kind=kind,
         freq_std_hz=np.array([m.freq_std_hz for m in modes]),
         damping_pct=100 * damping[idx],
         extra={
@@ -204,9 +287,12 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
             "split_hz": np.array([fmt(m.split_hz) for m in modes], dtype=object),
             "travelling": np.array([fmt(trav[i]) for i in idx], dtype=object),
             "damping_std_pct": np.array([fmt(100 * m.damping_std) for m in modes], dtype=object),
+            "reason": reason,
         },
         condition={"state": "free", "frame": "fixed", "method": method},
     )
+    if cavity_hz is not None and np.isfinite(cavity_hz):
+        table.condition["cavity_hz"] = float(cavity_hz)
     return table, modes
 
 
@@ -223,10 +309,11 @@ def ssi_modes(
     radius_m: float | None = None,
     refs: np.ndarray | None = None,
     pair_aware: bool = True,
-    min_share: float = 0.3,
+    min_share: float = 0.5,
     jackknife: bool = True,
     progress: bool = False,
     workers: int | None = None,
+    cavity_hz: float | None = None,
 ) -> ModeIdentification:
     """The source's SSI chain on impact records, with pair-aware stabilization and clustering.
 
@@ -238,7 +325,9 @@ def ssi_modes(
     ``False``: σ = the spread over the model orders, said so in the method;
     ``workers`` threads for the SVD products, the order sweep and the
     jackknife's replicates (default: the usable CPUs, see
-    :func:`ringfit.targets.ssi.default_workers`).
+    :func:`ringfit.targets.ssi.default_workers`); ``cavity_hz`` the cavity
+    frequency of eq. 22 for the tyre (a non-ring-like row is ``acoustic`` only
+    near it, :func:`classify_rows`; None: such rows are ``unclassified``).
 
     **Returns:** :class:`ModeIdentification` (``table`` is the mode table).
     """
@@ -250,7 +339,8 @@ def ssi_modes(
                                      progress=progress, workers=workers)
     stab = stabilization_diagram(poles, pair_aware=pair_aware)
     modes = cluster_modes(poles, stab, f_range=f_range, min_share=min_share)
-    table, modes = mode_table(modes, angle, axis, "ssi-cov", poles=poles)
+    table, modes = mode_table(modes, angle, axis, "ssi-cov", poles=poles, cavity_hz=cavity_hz,
+                               lines_hz=d.lines_hz, duration_s=d.duration_s)
     note_quality(table, d.notes, d.credible)
     unc = jackknife_modes(factors, poles, modes, angle_groups(angle)[0] if jackknife else np.zeros(0),
                           workers=default_workers() if workers is None else workers)

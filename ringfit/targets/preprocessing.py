@@ -114,9 +114,11 @@ def round_trip_time(signal: np.ndarray, fs_hz: float, t_min: float = 2e-3, t_max
     n = env.size
     spec = np.fft.rfft(env, 2 * n)
     ac = np.fft.irfft(np.abs(spec) ** 2)[:n]
-    lo, hi = int(t_min * fs_hz), min(int(t_max * fs_hz), n - 2)
+    lo, hi = max(int(np.ceil(t_min * fs_hz)), 1), min(int(t_max * fs_hz), n - 2)
     if hi <= lo + 2:
-        raise InputError("record too short to find the round-trip time")
+        raise InputError(f"cannot find the impulse's round-trip time ({t_min * 1e3:g}-{t_max * 1e3:g} ms) in "
+                         f"{n} samples at {fs_hz:g} Hz; expected a longer record sampled above {3 / t_max:g} Hz, "
+                         "or a force channel")
     k = lo + int(np.argmax(ac[lo:hi]))
     if 0 < k < n - 1:  # parabolic refinement
         a, b, c = ac[k - 1], ac[k], ac[k + 1]
@@ -127,6 +129,8 @@ def round_trip_time(signal: np.ndarray, fs_hz: float, t_min: float = 2e-3, t_max
 
 def group_velocity(radius_m: float, t_cycle_s: float) -> float:
     """``v_g = 2πR / t_cycle`` [m/s] (seed eq. 21, docs/physics.md §3.5)."""
+    if not (np.isfinite(t_cycle_s) and t_cycle_s > 0):
+        raise InputError(f"round-trip time {t_cycle_s!r} s: expected a positive time to derive the group velocity")
     return 2 * np.pi * radius_m / t_cycle_s
 
 
@@ -148,8 +152,14 @@ def sync_by_group_velocity(
     acc = records.acc
     if t_cycle_s is None:
         near = int(np.argmin(np.abs(_wrap_deg(records.sensor_angle_deg))))
-        t_cycle_s = round_trip_time(acc[near], fs)
-    v_g = group_velocity(radius_m, t_cycle_s)
+        try:
+            t_cycle_s = round_trip_time(acc[near], fs)
+        except InputError as exc:
+            raise InputError(f"group-velocity sync: {exc}", source=records.source) from None
+    try:
+        v_g = group_velocity(radius_m, t_cycle_s)
+    except InputError as exc:
+        raise InputError(f"group-velocity sync: {exc}", source=records.source) from None
     arc = radius_m * np.abs(np.deg2rad(_wrap_deg(records.sensor_angle_deg)))
     peak = np.argmax(np.abs(acc).max(axis=1), axis=1)
     start = peak - np.round(arc / v_g * fs).astype(np.int64)

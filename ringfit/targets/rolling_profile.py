@@ -224,6 +224,13 @@ def rolling_profile(
         var = (s2 - nrev * mean**2) / (nrev - 1)
     spread = np.sqrt(np.clip(np.where(nrev > 1, var, np.nan), 0.0, None))
     rotation_hz = total_rev / ((record.samples - 1) / record.fs_hz)
+    from ringfit.targets.faults import sample_rate_note
+
+    note = sample_rate_note(rotation_hz, record.fs_hz, dict(record.condition))
+    if note:
+        import warnings
+
+        warnings.warn(f"{record.source}: {note}", RuntimeWarning, stacklevel=2)
     return RollingProfile(
         angle_deg=grid_angles_deg(points),
         axes=axes,

@@ -402,8 +402,8 @@ def poles_from_svd(
     kmax = int(orders[-1])
     l = int(n_channels)
     if orders[0] < 1 or kmax > s.shape[0]:
-        raise InputError(f"model orders must lie in 1..{s.shape[0]} (the rank of the block Hankel matrix; "
-                         f"more block rows raise it); got {orders[0]}..{kmax}")
+        raise InputError(f"--orders: model orders must lie in 1..{s.shape[0]} (the rank of the block Hankel matrix; "
+                         f"more --block-rows raise it); got {orders[0]}..{kmax}")
     if u.shape[0] - l < kmax:
         raise InputError(
             f"model order {kmax} needs at least {kmax // l + 2} block rows for {l} channels; "

@@ -1,0 +1,458 @@
+"""Rig faults in impact records, found on each channel of each record before anything is averaged.
+
+A fault left in turns into modes that are not there (a spike train, a
+clipped channel and mains hum all put stable poles into an SSI) or hides the
+ones that are (hum makes every decay look noise-dominated). Each check works
+on one channel (record, axis) with its offset removed, and each finding is a
+one-line note for the sidecar's ``preprocessing`` list and a warning:
+
+- **dead**: the channel's rms is below :data:`DEAD_REL` × the median rms of
+  the same axis over the records (an unplugged sensor reads only a little
+  noise; the averaged SSI channel would hide it at half amplitude);
+- **clipped**: flat tops at the range — the channel's largest (or smallest)
+  value held for :data:`CLIP_RUN` samples or more, or reached again in a
+  second run of two or more (an unclipped decay touches its extreme once);
+  clipping that ends before the samples the method uses (SSI: within its
+  skip after the impact) is said and the channel kept;
+- **spikes**: the robust z of the derivative, ``z = (Δx − med Δx) / (1.4826 ·
+  MAD Δ²x)`` with medians over a running window of :data:`SPIKE_WINDOW`
+  samples (the scale from the second difference: on a densely sampled decay
+  the derivative is a ramp over the window and its own MAD falls far below
+  its noise), beyond :data:`SPIKE_Z` one way and then back
+  the other way within :data:`SPIKE_WIDTH` samples; the hammer impact
+  itself (from :data:`IMPACT_GUARD_S` before to the SSI's skip after) is
+  not searched;
+- **mains hum**: a line at h × 50 or h × 60 Hz (±0.4 %) that stands
+  :data:`HUM_RATIO` × above the local spectrum of the late half of the
+  record (after the decay) and keeps its amplitude over that half (the
+  ratio of its two quarters within 1/:data:`HUM_STEADY`…:data:`HUM_STEADY`;
+  a mode's tail decays) and reaching :data:`HUM_SHARE` of that half's rms.
+  It is notched: the channel's steady tone, fitted
+  there (frequency refined, amplitude and phase by least squares), is
+  subtracted from the whole record;
+- **sign-flipped**: a repeat whose response (from the impact on,
+  :data:`FLIP_WINDOW_S`) anti-correlates (below :data:`FLIP_CORR`) with the
+  other repeats at its angle (three or more: the odd one out); two repeats
+  that anti-correlate are both left out (which one is flipped cannot be
+  told from them: the neighbouring angles are no reference, a mode of
+  n ≥ 6 changes sign between sensors 15° apart).
+
+What is done: hum is notched; a dead, clipped or flipped channel of a record
+is left out of that record (the other repeats of its angle carry it, and
+without one the channel is lost, said so); a channel with spikes is left out
+of its record where another repeat of the angle is clean, else the spike
+segments are bridged by straight lines.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: A channel whose rms is below this share of its axis's median rms over the records is dead.
+DEAD_REL = 1e-2
+#: Samples a flat top must last to be called clipping (two runs of two also count).
+CLIP_RUN = 3
+#: Robust z of the derivative beyond which a sample step is an outlier.
+SPIKE_Z = 12.0
+#: A spike goes out and comes back within this many samples.
+SPIKE_WIDTH = 4
+#: Running window [samples] of the derivative's median and MAD.
+SPIKE_WINDOW = 33
+#: Time before the impact left out of the spike search [s] (the skip after it is the SSI's, seed §4.3).
+IMPACT_GUARD_S = 0.005
+#: Mains frequencies [Hz] and their relative tolerance.
+MAINS_HZ = (50.0, 60.0)
+MAINS_TOL = 0.004
+#: A hum line stands this many times above the median power around it (±15 Hz).
+HUM_RATIO = 50.0
+#: A hum line keeps its amplitude over the late half within this factor.
+HUM_STEADY = 1.6
+#: A hum line's amplitude is at least this share of the rms of the late half (weaker lines do not matter).
+HUM_SHARE = 0.2
+#: Correlation below which two repeats of one angle disagree in sign.
+FLIP_CORR = -0.5
+#: Window after the impact [s] over which repeats are compared.
+FLIP_WINDOW_S = 0.25
+
+
+@dataclass
+class Faults:
+    """What :func:`find_faults` found and did.
+
+    - ``acc``: the records' acceleration with hum notched and lone spikes bridged, (records, axes, samples).
+    - ``use``: bool (records, axes): the channel of that record is used.
+    - ``reason``: (records, axes) str, ``""`` or the fault of the channel (``dead``, ``clipped``, ``spikes``,
+      ``flipped``).
+    - ``hum``: (records, axes) list of the line frequencies [Hz] notched in each channel.
+    - ``notes``: one-line findings.
+    """
+
+    acc: np.ndarray
+    use: np.ndarray
+    reason: np.ndarray
+    hum: list
+    notes: list = field(default_factory=list)
+
+
+def impact_estimate(acc: np.ndarray, force: np.ndarray | None, threshold: float = 0.1) -> np.ndarray:
+    """Sample of the impact in each record: from the force (:func:`~ringfit.targets.preprocessing.impact_indices`),
+    else the largest 9-sample running median of |acc| summed over the axes (spikes do not move it)."""
+    if force is not None:
+        from ringfit.targets.preprocessing import impact_indices
+
+        return impact_indices(force, threshold)
+    from scipy.ndimage import median_filter
+
+    env = median_filter(np.abs(acc).sum(axis=1), size=(1, 9), mode="nearest")
+    return np.argmax(env, axis=1)
+
+
+def clip_runs(x: np.ndarray, at: np.ndarray | None = None) -> tuple[int, int]:
+    """``(longest, runs)``: the longest run of samples at the channel's largest or smallest value and the number
+    of runs of two or more there (exact equality up to 1e-9 of the range); ``at``: take the extremes from this
+    (the whole channel) instead of ``x``."""
+    ref = x if at is None else at
+    lo, hi = float(ref.min()), float(ref.max())
+    if hi <= lo:
+        return 0, 0
+    tol = 1e-9 * (hi - lo)
+    longest = runs = 0
+    for at in (np.abs(x - hi) <= tol, np.abs(x - lo) <= tol):
+        edges = np.diff(np.concatenate([[0], at.astype(np.int8), [0]]))
+        length = np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)
+        longest = max(longest, int(length.max(initial=0)))
+        runs += int(np.sum(length >= 2))
+    return longest, runs
+
+
+def spike_segments(x: np.ndarray, exclude: tuple[int, int] = (0, 0)) -> list[tuple[int, int]]:
+    """Spikes of one channel as ``[(first, last)]`` sample ranges (see the module docstring).
+
+    ``exclude``: samples ``[a, b)`` not searched (the impact).
+    """
+    from scipy.ndimage import median_filter
+
+    d = np.diff(x)
+    if d.size < SPIKE_WINDOW:
+        return []
+    med = median_filter(d, size=SPIKE_WINDOW, mode="nearest")
+    # the scale from the second difference: on a densely sampled decay the derivative is a ramp over the
+    # window, whose running median follows it so closely that the derivative's own MAD is far below its noise
+    dd = np.diff(d, prepend=d[0])
+    dev = np.abs(dd - median_filter(dd, size=SPIKE_WINDOW, mode="nearest"))
+    scale = 1.4826 * median_filter(dev, size=SPIKE_WINDOW, mode="nearest")
+    floor = 1.4826 * float(np.median(dev)) * 0.1 + np.finfo(float).tiny
+    z = (d - med) / np.maximum(scale, floor)
+    out = np.flatnonzero(np.abs(z) > SPIKE_Z)
+    edge = SPIKE_WINDOW // 2  # the running statistics are one-sided there
+    out = out[((out < exclude[0]) | (out >= exclude[1])) & (out >= edge) & (out < d.size - edge)]
+    segs, k = [], 0
+    while k < out.size:
+        i = out[k]
+        back = out[(out > i) & (out <= i + SPIKE_WIDTH) & (np.sign(z[out]) == -np.sign(z[i]))]
+        if back.size:
+            segs.append((int(i) + 1, int(back[-1])))
+            k = int(np.searchsorted(out, back[-1], side="right"))
+        else:
+            k += 1
+    return segs
+
+
+def bridge(x: np.ndarray, segs) -> np.ndarray:
+    """``x`` with each sample range ``(first, last)`` replaced by the straight line between its neighbours."""
+    x = x.copy()
+    for a, b in segs:
+        lo, hi = max(a - 1, 0), min(b + 1, x.size - 1)
+        x[a:b + 1] = np.interp(np.arange(a, b + 1), [lo, hi], [x[lo], x[hi]])
+    return x
+
+
+def hum_lines(x: np.ndarray, fs_hz: float, start: int, f_top_hz: float) -> list[tuple[float, np.ndarray]]:
+    """Mains lines of one channel: ``[(f_hz, (a_cos, a_sin))]`` fitted on the late half from ``start`` on."""
+    late = x[start:]
+    n = late.size
+    if n / fs_hz < 0.08:  # too short to tell a line from a mode's tail
+        return []
+    t = (start + np.arange(n)) / fs_hz
+    nfft = 4 * n
+    f = np.fft.rfftfreq(nfft, 1 / fs_hz)
+    p = np.abs(np.fft.rfft((late - late.mean()) * np.hanning(n), nfft)) ** 2
+    width = 2.5 * fs_hz / n  # Hann main lobe and a little
+    cands = []
+    for base in MAINS_HZ:
+        h = 1
+        while h * base * (1 - MAINS_TOL) < min(f_top_hz, 0.95 * fs_hz / 2):
+            fh = h * base
+            h += 1
+            near = np.flatnonzero(np.abs(f - fh) <= MAINS_TOL * fh + 2.5 * fs_hz / nfft)
+            if near.size < 3:
+                continue
+            k = near[np.argmax(p[near])]
+            if k in (near[0], near[-1]) or not p[k - 1] <= p[k] >= p[k + 1]:
+                continue  # the slope of something else, not a line here
+            ring = (np.abs(f - f[k]) <= 15.0) & (np.abs(f - f[k]) > width)
+            if ring.sum() >= 8 and p[k] >= HUM_RATIO * np.median(p[ring]):
+                cands.append((float(p[k]), int(k), fh))
+    picked = []  # (frequency of the peak bin, nominal harmonic)
+    for _, k, fh in sorted(cands, reverse=True):  # strongest first: a weaker candidate beside it is its leakage
+        if not any(abs(f[k] - g) < 2 * width for g, _ in picked):
+            picked.append((float(f[k]), fh))
+    if not picked:
+        return []
+    fr = np.array([_refine(late, t, g, fs_hz / nfft) for g, _ in picked])
+    half = n // 2
+    a1 = np.hypot(*_tones(late[:half], t[:half], fr)[:, :2].T)
+    a2 = np.hypot(*_tones(late[half:], t[half:], fr)[:, :2].T)
+    late_rms = float(np.std(late))
+    keep = [i for i, (g, fh) in enumerate(picked)
+            if abs(fr[i] - fh) <= MAINS_TOL * fh + 0.5 * fs_hz / n  # else slid off: leakage of a stronger line
+            and 1 / HUM_STEADY <= a1[i] / max(a2[i], np.finfo(float).tiny) <= HUM_STEADY  # a mode's tail decays
+            and 0.5 * (a1[i] + a2[i]) >= HUM_SHARE * late_rms]  # a visible share of what the decay leaves
+    if not keep:
+        return []
+    fr = fr[keep]
+    coef = _tones(late, t, fr)
+    return [(float(g), c) for g, c in zip(fr, coef)]
+
+
+def _tones(x: np.ndarray, t: np.ndarray, f_hz: np.ndarray) -> np.ndarray:
+    """Least-squares (cos, sin) amplitudes of tones at ``f_hz`` (with a constant) in x(t): (tones, 2)."""
+    w = 2 * np.pi * np.asarray(f_hz)[None, :] * t[:, None]
+    design = np.concatenate([np.cos(w), np.sin(w), np.ones((t.size, 1))], axis=1)
+    c = np.linalg.lstsq(design, x, rcond=None)[0]
+    k = len(f_hz)
+    return np.stack([c[:k], c[k:2 * k]], axis=1)
+
+
+def _refine(x: np.ndarray, t: np.ndarray, f0: float, df: float) -> float:
+    """The frequency [Hz] of a line near ``f0``: the peak of the Hann-windowed spectrum of x(t) on a grid of
+    ``df``/20 over ±``df``, refined by a parabola through the top three points of its log."""
+    grid = f0 + df * np.linspace(-1.0, 1.0, 41)
+    xw = (x - x.mean()) * np.hanning(x.size)
+    p = np.log(np.abs(np.exp(-2j * np.pi * grid[:, None] * t[None, :]) @ xw) ** 2 + np.finfo(float).tiny)
+    k = int(np.clip(np.argmax(p), 1, grid.size - 2))
+    a, b, c = p[k - 1], p[k], p[k + 1]
+    den = a - 2 * b + c
+    return float(grid[k] + (0.5 * (a - c) / den if den < 0 else 0.0) * (grid[1] - grid[0]))
+
+
+def _nominal(f_hz: float) -> float:
+    """The mains harmonic h × 50 or h × 60 Hz nearest a line."""
+    return min((round(f_hz / b) * b for b in MAINS_HZ), key=lambda x: abs(x - f_hz))
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    den = np.sqrt(np.sum(a * a) * np.sum(b * b))
+    return float(np.sum(a * b) / den) if den > 0 else 0.0
+
+
+def find_faults(acc: np.ndarray, angle_deg: np.ndarray, axes, fs_hz: float, impact: np.ndarray, *,
+                f_max_hz: float = 400.0, skip_s: float = 0.0127, used_from_s: float = 0.0) -> Faults:
+    """Run every check of the module docstring on offset-free records and repair or mark what is found.
+
+    **Arguments:** ``acc`` (records, axes, samples) [m/s²], offsets removed; ``angle_deg`` (records,);
+    ``axes`` names; ``impact`` (records,) sample of each impact; ``f_max_hz`` the top of the band (hum lines
+    are looked for up to twice it); ``skip_s`` the time after the impact left out of the spike search;
+    ``used_from_s`` the time after the impact from which the samples are used (SSI: its skip): clipping
+    that ends before it is said but harmless.
+    """
+    acc = np.array(acc, dtype=np.float64)
+    r, a, s = acc.shape
+    reason = np.full((r, a), "", dtype=object)
+    impact = np.asarray(impact, dtype=np.int64)
+    angles, group = np.unique(np.round(np.asarray(angle_deg, dtype=np.float64), 9), return_inverse=True)
+    notes = []
+
+    def label(i, j):
+        return f"record {i} ({angle_deg[i]:g}° {axes[j]})"
+
+    def say(what, cells, action):
+        if cells:
+            shown = ", ".join(label(i, j) for i, j in cells[:4]) + (f" and {len(cells) - 4} more"
+                                                                   if len(cells) > 4 else "")
+            notes.append(f"{len(cells)} channel(s) {what}: {shown}; {action}")
+
+    # dead
+    rms = np.sqrt(np.mean(acc**2, axis=-1))
+    typical = np.median(rms, axis=0)
+    dead = (rms <= DEAD_REL * typical[None, :]) & (typical[None, :] > 0)
+    reason[dead] = "dead"
+    # clipped
+    used = impact + int(round(used_from_s * fs_hz))  # clipping before this sample is never read
+    clipped_early = []
+    for i, j in zip(*np.nonzero(~dead)):
+        longest, runs = clip_runs(acc[i, j])
+        if longest >= CLIP_RUN or runs >= 2:
+            if clip_runs(acc[i, j, used[i]:], at=acc[i, j])[0] >= 2:  # flat tops among the samples used
+                reason[i, j] = "clipped"
+            else:
+                clipped_early.append((i, j))
+    # spikes
+    guard, skip = int(round(IMPACT_GUARD_S * fs_hz)), int(round(skip_s * fs_hz)) + 1
+    spikes = {}
+    for i in range(r):
+        for j in range(a):
+            if reason[i, j] in ("dead", "clipped"):
+                continue
+            segs = spike_segments(acc[i, j], (max(0, impact[i] - guard), impact[i] + skip))
+            if segs:
+                spikes[(i, j)] = segs
+                reason[i, j] = "spikes"
+                acc[i, j] = bridge(acc[i, j], segs)  # before the hum is fitted: a spike train has mains-like lines
+    # mains hum: notched on every live channel where it stands out
+    hum = [[[] for _ in range(a)] for _ in range(r)]
+    t = np.arange(s) / fs_hz
+    peak_hum = 0.0
+    for i in range(r):
+        start = impact[i] + (s - impact[i]) // 2
+        for j in range(a):
+            if reason[i, j] == "dead":
+                continue
+            for fr, (ac, as_) in hum_lines(acc[i, j], fs_hz, int(start), 2.0 * f_max_hz):
+                acc[i, j] -= ac * np.cos(2 * np.pi * fr * t) + as_ * np.sin(2 * np.pi * fr * t)
+                hum[i][j].append(fr)
+                peak_hum = max(peak_hum, float(np.hypot(ac, as_)))
+    # sign flips among the repeats of each angle
+    n_win = int(min(FLIP_WINDOW_S * fs_hz, s - impact.max()))
+    flipped, undecided = [], []
+    if n_win > 16:
+        win = np.stack([acc[i, :, impact[i]:impact[i] + n_win] for i in range(r)])  # (records, axes, n_win)
+        ok = reason == ""
+        for g in range(angles.size):
+            members = np.flatnonzero(group == g)
+            for j in range(a):
+                rep = [i for i in members if ok[i, j]]
+                if len(rep) < 2:
+                    continue
+                c = np.array([[_corr(win[p, j], win[q, j]) for q in rep] for p in rep])
+                if len(rep) >= 3:
+                    med = np.array([np.median(np.delete(c[k], k)) for k in range(len(rep))])
+                    flipped += [(rep[k], j) for k in np.flatnonzero(med < FLIP_CORR)]
+                elif c[0, 1] < FLIP_CORR:  # two repeats: which one is flipped cannot be told
+                    undecided += [(p, j) for p in rep]
+    for i, j in flipped + undecided:
+        reason[i, j] = "flipped"
+    # actions
+    use = reason == ""
+    bridged = []
+    for (i, j), segs in spikes.items():
+        clean_repeat = any(use[k, j] for k in np.flatnonzero(group == group[i]) if k != i)
+        if not clean_repeat:
+            acc[i, j] = bridge(acc[i, j], segs)
+            use[i, j] = True
+            bridged.append((i, j))
+    lost = []
+    for g in range(angles.size):
+        members = np.flatnonzero(group == g)
+        for j in range(a):
+            if not use[members, j].any():
+                lost.append(f"{angles[g]:g}° {axes[j]}")
+    n_hum = sum(bool(hum[i][j]) for i in range(r) for j in range(a))
+    if n_hum:
+        nominal = sorted({_nominal(fr) for row in hum for cell in row for fr in cell})
+        shown = ", ".join(f"{x:g}" for x in nominal[:8]) + (" …" if len(nominal) > 8 else "")
+        notes.append(f"mains hum (lines at {shown}"
+                     f" Hz, narrow and not decaying, up to {peak_hum:.3g} m/s²) in {n_hum} of {r * a} channels: "
+                     "notched (each channel's steady tone subtracted)")
+    say("dead (rms below 1 % of the axis's median)", [tuple(c) for c in np.argwhere(reason == "dead")],
+        "left out of their record")
+    say("clipped (flat tops at the range)", [tuple(c) for c in np.argwhere(reason == "clipped")],
+        "left out of their record")
+    say("clipped only before the samples used (within the skip after the impact)", clipped_early, "kept")
+    spiky = sorted(spikes)
+    if spiky:
+        n_seg = sum(len(v) for v in spikes.values())
+        say(f"with spikes ({n_seg} found by the robust z of the derivative)", spiky,
+            "left out of their record where another repeat of the angle is clean"
+            + (f", bridged by straight lines in {len(bridged)} without one" if bridged else ""))
+    say("sign-flipped (anti-correlated with the other repeats of the angle)", flipped, "left out of their record")
+    say("of repeats that disagree in sign (which one is flipped cannot be told)", undecided,
+        "left out of their record")
+    if lost:
+        notes.append(f"no usable repeat left for {len(lost)} channel(s): {', '.join(lost[:6])}"
+                     f"{' …' if len(lost) > 6 else ''}; left out")
+    return Faults(acc, use, reason, hum, notes)
+
+
+def repair_records(records, *, threshold: float = 0.1, f_max_hz: float = 400.0, skip_s: float = 0.0127,
+                   used_from_s: float = 0.0):
+    """:func:`find_faults` on :class:`~ringfit.io.records.Records` whose offsets are removed
+    (:func:`~ringfit.targets.quality.clean_records`).
+
+    **Returns:** ``(records, use, notes, lines_hz)``: the records with hum notched and lone spikes bridged, the
+    bool ``(records, axes)`` mask of the channels to use, the one-line notes and the notched mains lines [Hz]
+    (:func:`hum_frequencies`).
+    """
+    from dataclasses import replace
+
+    impact = impact_estimate(records.acc, records.force, threshold)
+    found = find_faults(records.acc, records.sensor_angle_deg, records.axes, records.fs_hz, impact,
+                        f_max_hz=f_max_hz, skip_s=skip_s, used_from_s=used_from_s)
+    acc = found.acc
+    if any(cell for row in found.hum for cell in row):  # the offsets were taken with the hum in: again without
+        from ringfit.targets.quality import remove_offsets
+
+        acc = remove_offsets(acc, impact if records.force is not None else None)[0]
+    return replace(records, acc=acc), found.use, found.notes, hum_frequencies(found.hum)
+
+
+def hum_frequencies(hum, min_share: float = 0.25) -> list[float]:
+    """The notched lines [Hz] that a mode table must beware of: per mains harmonic notched in at least
+    ``min_share`` of the channels (a line in a few channels does not make a stable pole), the median of the
+    fitted frequencies."""
+    per = {}
+    cells = 0
+    for row in hum:
+        for cell in row:
+            cells += 1
+            for fr in cell:
+                per.setdefault(_nominal(fr), []).append(fr)
+    return [float(np.median(v)) for _, v in sorted(per.items()) if len(v) >= min_share * cells]
+
+
+def on_notched_line(freq_hz: float, lines_hz, duration_s: float) -> float | None:
+    """The notched line a row sits on — within 0.5 % of it or one frequency resolution ``1/duration_s`` of the
+    records, whichever is wider — or None. What the notch leaves of a strong hum can still form a stable pole or
+    an FRF peak there; such a row is not shown to be a mode."""
+    for line in lines_hz:
+        if abs(freq_hz - line) <= max(0.005 * line, 1.0 / duration_s):
+            return float(line)
+    return None
+
+
+#: Rolling radii [m] a road tyre can have: an encoder rate that implies another contradicts the sampling rate.
+ROLLING_RADIUS_M = (0.15, 0.75)
+#: Relative disagreement between the encoder's rotation rate and the stated one that is called a contradiction.
+RATE_TOL = 0.02
+
+
+def sample_rate_note(rotation_hz: float, fs_hz: float, condition: dict) -> str | None:
+    """A one-line note when the sampling rate contradicts the encoder, else None.
+
+    ``rotation_hz`` is the encoder's revolutions divided by the recording's length at ``fs_hz``. With a stated
+    ``rotation_hz`` in ``condition`` (the rig's own tachometer) the two must agree within :data:`RATE_TOL`;
+    with only ``speed_kmh`` the rolling radius ``V / (2π·rotation_hz)`` they imply must lie in
+    :data:`ROLLING_RADIUS_M`. A wrong ``fs_hz`` scales the encoder's rate by the same factor as every
+    frequency found in the recording, so it is worth a warning before anything is identified.
+    """
+    if not (np.isfinite(rotation_hz) and rotation_hz > 0):
+        return None
+    stated = float(condition.get("rotation_hz") or 0.0)
+    if stated > 0:
+        ratio = rotation_hz / stated
+        if abs(ratio - 1) > RATE_TOL:
+            return (f"the encoder turns {rotation_hz:.4g} times a second at the stated sampling rate {fs_hz:g} Hz, "
+                    f"but the recording states rotation_hz = {stated:g}: the sampling rate contradicts the encoder "
+                    f"(they agree at {fs_hz / ratio:.6g} Hz); every frequency found is off by {ratio:.4g}×")
+        return None
+    speed = float(condition.get("speed_kmh") or 0.0)
+    if speed > 0:
+        radius = speed / 3.6 / (2 * np.pi * rotation_hz)
+        lo, hi = ROLLING_RADIUS_M
+        if not lo <= radius <= hi:
+            return (f"the encoder turns {rotation_hz:.4g} times a second at the stated sampling rate {fs_hz:g} Hz, "
+                    f"which at speed_kmh = {speed:g} means a rolling radius of {radius:.3g} m (a tyre has "
+                    f"{lo:g}–{hi:g} m): the sampling rate (or the speed) contradicts the encoder")
+    return None

@@ -1,0 +1,150 @@
+"""Verdicts that beat chance (issue 20): the null of every accepted effect (ringfit/gap/calibration.py).
+
+- Rolling tables of *random* frequencies without labels, beside the source study's real free table:
+  no structural effect (the random-line null), whereas the same folder with the frequencies of
+  ``ringfit example rolling`` restored gets the rolling model (ground_contact + rotation).
+- The p-value is uniform under its null: a Kolmogorov–Smirnov test on 200 data sets drawn from a
+  small case's baseline, each with its own p against an independent null.
+- The linearised held-out refit equals an exact least-squares refit on a linear problem.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ringfit.data import path as data_path
+
+ROLLING_HEADER = "n,a,tag,kind,freq_hz,freq_std_hz,damping_pct,branch"
+
+
+def _rolling_example(tmp: Path) -> Path:
+    from ringfit.synth.examples import write_example
+
+    write_example("rolling", tmp / "ex")
+    return next(p.parent for p in (tmp / "ex").rglob("roll20.modes.csv"))
+
+
+def _random_line_folder(example: Path, out: Path, seed: int, restore: bool = False) -> Path:
+    """The issue's folder: the real free table (SSI, source study) as ``free.modes.csv``, three rolling tables
+    (20/40/60 km/h, 4 kN, rotating frame) with the example's row counts and uniformly random frequencies
+    in 75–485 Hz, no n/tag/branch (``restore``: the example's own frequencies instead, still unlabelled)."""
+    out.mkdir(parents=True)
+    shutil.copy(data_path("free-ssi.modes.csv"), out / "free.modes.csv")
+    shutil.copy(data_path("free-ssi.modes.json"), out / "free.modes.json")
+    shutil.copy(data_path("table9.tyre.toml"), out / "tyre.toml")
+    rng = np.random.default_rng(seed)
+    for v in (20, 40, 60):
+        src = (example / f"roll{v}.modes.csv").read_text().splitlines()[1:]
+        rows = [line.split(",") for line in src if line.strip()]
+        freqs = [float(r[4]) for r in rows if r[3] == "structural"]
+        f = np.sort(freqs) if restore else np.sort(rng.uniform(75.0, 485.0, len(freqs)))
+        lines = [ROLLING_HEADER] + [f",0,,structural,{x:.4f},,{rng.uniform(2, 8):.2f}," for x in f]
+        (out / f"roll{v}.modes.csv").write_text("\n".join(lines) + "\n")
+        (out / f"roll{v}.modes.json").write_text(json.dumps({"state": "rolling", "load_n": 4000.0,
+                                                              "speed_kmh": float(v), "pressure_bar": 2.2,
+                                                              "frame": "rotating"}))
+    return out
+
+
+@pytest.fixture(scope="module")
+def rolling_folders(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("calibration")
+    example = _rolling_example(tmp)
+    return {"random": _random_line_folder(example, tmp / "random", seed=3),
+            "restored": _random_line_folder(example, tmp / "restored", seed=3, restore=True)}
+
+
+@pytest.mark.slow
+def test_random_line_rolling_tables_get_no_structural_effect(rolling_folders):
+    from ringfit.gap import diagnose
+
+    d = diagnose(rolling_folders["random"], progress=False)
+    v = d.content["verdict"]
+    structural = [e for e in v["effects"] if e not in ("none", "unexplained")]
+    assert structural == [], v["effects"]
+    # the rolling model was tried and refused by its random-line null, not by the older rule alone
+    tried = [c for c in d.content["candidates"] if c.get("effect") == "ground_contact+rotation" and "null" in c]
+    for c in tried:
+        assert c["null"]["random_line"]["p_value"] >= 0.01
+        assert not c["accepted"]
+
+
+@pytest.mark.slow
+def test_restored_rolling_frequencies_get_the_rolling_model(rolling_folders):
+    from ringfit.gap import diagnose
+
+    d = diagnose(rolling_folders["restored"], progress=False)
+    v = d.content["verdict"]
+    assert set(v["effects"]) - {"unexplained"} == {"ground_contact", "rotation"}, v["effects"]
+    assert v["alpha"] == 0.01 and v["null_draws"] == 200
+    cal = v["calibration"]
+    assert cal and all(c["p_value"] < 0.01 for c in cal if c["effect"] == "ground_contact+rotation")
+    best = next(c for c in d.content["candidates"] if c["accepted"])
+    assert set(best["null"]) == {"parametric", "random_line"}  # unlabelled rows: both nulls
+    assert best["null"]["random_line"]["observed_pct"] > best["null"]["random_line"]["q95_pct"]
+    # physical units of the fitted contact patch and wheel speed
+    fitted = next(c for c in d.content["candidates"] if c["element"] == "ground_contact+rotation")
+    phys = fitted["params"]["ground_contact.patch_scale"]["physical"]
+    assert all(0.5 < p["half_angle_deg"] < 30 and 5 < p["length_mm"] < 400 for p in phys.values())
+    omegas = [p["omega_rad_s"] for p in fitted["params"]["rotation.speed_gain"]["physical"].values()]
+    assert len(omegas) == 3 and all(o > 0 for o in omegas)
+
+
+def test_linearised_refit_is_exact_on_a_linear_problem():
+    """``heldout_linear`` against an independent least-squares refit of each fold (numpy.linalg.lstsq)."""
+    from ringfit.gap.calibration import Linearised, heldout_linear
+
+    rng = np.random.default_rng(0)
+    m, k = 40, 3
+    X = rng.normal(size=(m, k))
+    beta = np.array([1.0, -2.0, 0.5])
+    y = X @ beta + 0.1 * rng.normal(size=m)
+    sigma = rng.uniform(0.05, 0.2, m)
+    folds = np.arange(m) % 4
+    u_hat = np.linalg.lstsq(X / sigma[:, None], y / sigma, rcond=None)[0]
+    lin = Linearised(pred=X @ u_hat, J=X, u_hat=u_hat, lam=np.zeros((k, k)), prior_grad=np.zeros(k))
+    e = heldout_linear(lin, y[None, :], 1.0 / sigma**2, folds)[0]
+    for f in range(4):
+        tr, te = folds != f, folds == f
+        b = np.linalg.lstsq(X[tr] / sigma[tr, None], y[tr] / sigma[tr], rcond=None)[0]
+        np.testing.assert_allclose(e[te], y[te] - X[te] @ b, rtol=1e-9, atol=1e-12)
+
+
+def test_p_value_is_uniform_under_the_null(tmp_path):
+    """200 data sets drawn from a small case's baseline (no effect), each with its p against an independent
+    null of 200 draws: the p-values are uniform (Kolmogorov–Smirnov), and about α of them fall below α."""
+    from scipy.stats import kstest
+
+    from ringfit.gap.calibration import _p_values, candidate_shrinks, linearise
+    from ringfit.gap.case import read_case
+    from ringfit.gap.diagnosis import build_problems, candidate_elements, resolve_effects
+    from ringfit.gap.ranking import chain_start, fit_chain, parts
+    from ringfit.synth.cases import make_case
+
+    make_case(tmp_path / "case", effect="none", seed=11)
+    case = read_case(tmp_path / "case")
+    prob = build_problems(case, resolve_effects("ground_contact,rotation,cavity_mode,ring_extensibility"))[0]
+    base = fit_chain(prob, ())
+    lin_cur = linearise(prob, base)
+    lins = []
+    for el in candidate_elements(prob):
+        fit = fit_chain(prob, parts(el), start=chain_start(prob, parts(el), base.theta))
+        lins.append(linearise(prob, fit))
+    assert len(lins) >= 4
+    rng = np.random.default_rng(5)
+    ref = np.asarray(prob.meta["reference_mask"], dtype=bool)
+
+    def draw(n):
+        noise = prob.sigma[None, :] * rng.standard_normal((n, prob.m))
+        return np.where(ref[None, :], prob.y[None, :], base.extra["pred"][None, :] + noise)
+
+    t_null = candidate_shrinks(prob, lin_cur, lins, draw(200)).max(axis=1)
+    t_obs = candidate_shrinks(prob, lin_cur, lins, draw(200)).max(axis=1)
+    p = np.array([_p_values(t_null, {"x": t})["x"] for t in t_obs])
+    assert kstest(p, "uniform").pvalue > 0.01
+    assert np.mean(p < 0.05) < 0.05 + 0.05  # nominal 5 %, with room for 200 draws (binomial sd 1.5 %)
