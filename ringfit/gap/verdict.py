@@ -109,7 +109,8 @@ RULES = {
                f"{MIN_HELDOUT_SHRINK_PCT}% with bootstrap lower bound >= {MIN_HELDOUT_SHRINK_LO_PCT}% (all rows, "
                f"or the rows of the group that decided the structure test; the bound is not used below "
                f"{MIN_INTERVAL_ROWS} rows), delta BIC <= {MAX_DELTA_BIC}, a "
-               f"parameter interval excluding its null (a computed effect: its condition value), baseline drift: "
+               f"parameter interval excluding its null (a computed effect: its condition value; a composite: in "
+               f"every part), baseline drift: "
                f"mode tables - reference-state predictions move <= {MAX_REFERENCE_DRIFT_SIGMA:g} sigma RMS; "
                f"profiles - <= {100 * MAX_DRIFT_RELATIVE:.0f}% relative (parameters with an independent prior: "
                f"Mahalanobis D^2 <= chi2_k({PRIOR_REGION}) or <= that of the baseline fit)"),
@@ -188,8 +189,14 @@ def acceptance(candidate: dict) -> tuple[bool, list[str]]:
     dbic = candidate.get("evidence", {}).get("delta_bic", math.inf)
     if not dbic <= MAX_DELTA_BIC:
         why.append(f"delta BIC {dbic:.1f} > {MAX_DELTA_BIC}")
-    if not any(p.get("excludes_null") for p in candidate.get("params", {}).values()):
+    params = candidate.get("params", {})
+    if not any(p.get("excludes_null") for p in params.values()):
         why.append("no parameter interval excludes its null value")
+    elif "+" in candidate.get("effect", ""):  # a composite stands only if every part does
+        for part in candidate["effect"].split("+"):
+            mine = [p for k, p in params.items() if k.startswith(part + ".")]
+            if mine and not any(p.get("excludes_null") for p in mine):
+                why.append(f"the {part} part: no parameter interval excludes its null value")
     rd = candidate.get("reference_drift_sigma")
     if rd is not None:
         if not rd <= MAX_REFERENCE_DRIFT_SIGMA:
