@@ -153,6 +153,9 @@ class ModalRows(eqx.Module):
     #: indices of the tables with a contact patch (static: effects solve only these tables' contact
     #: problems); None = every table
     contact_tables: tuple | None = eqx.field(static=True, default=None)
+    #: ``(m, 9)`` the wheel body of the row's table (``fixture: suspension``, docs/formats.md §2):
+    #: on (1/0), m_w, I_w, compliances 1/k_z, 1/k_x, 1/k_θ, dampers c_z, c_x, c_θ (SI; all 0 when bolted)
+    wheel: jax.Array | None = None
 
 
 class ModalData(eqx.Module):
@@ -291,11 +294,23 @@ def contact_patch(ring: RingParams, geometry: TyreGeometry, load_n: float, drum_
     return out[0], 0.5 * abs(out[2] - out[1])
 
 
+def wheel_row(condition: dict, source: str = "<condition>") -> list[float]:
+    """The 9 numbers of :attr:`ModalRows.wheel` from a table's sidecar (zeros for a bolted rim)."""
+    from ringfit.io.modes import wheel_of
+
+    w = wheel_of(condition, source=source)
+    if w is None:
+        return [0.0] * 9
+    inv = [1.0 / w[k] for k in ("k_vertical", "k_fore_aft", "k_torsion")]
+    return [1.0, w["mass"], w["inertia"], *inv, w["c_vertical"], w["c_fore_aft"], w["c_torsion"]]
+
+
 def _table_rows(tables, geometry, patches, spins):
     """Per structural row: dict of its attributes (before n-matching)."""
     cavity = [float(f) for t in tables for f, k in zip(t.freq_hz, t.kind) if k == "acoustic"]
     rows = []
     damping_std = [t.extra_floats("damping_std_pct") for t in tables]
+    wheels = [wheel_row(t.condition, str(t.source)) for t in tables]
     for ti, t in enumerate(tables):
         fixed = t.condition.get("frame", "rotating" if spins[ti] > 0 else "fixed") == "fixed"
         tl = table_label(t, ti)
@@ -312,6 +327,7 @@ def _table_rows(tables, geometry, patches, spins):
                 freq=float(t.freq_hz[i]), std=float(t.freq_std_hz[i]), damping=float(t.damping_pct[i]),
                 damping_std=damping_std[ti][i],
                 reference=ti == 0, a=int(t.a[i]), joint=0.0, mode_index=0, line_k=0.0, wave="",
+                wheel=wheels[ti],
             ))
     return rows, (cavity[0] if cavity else float(cavity_frequency(1)))
 
@@ -336,6 +352,7 @@ def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=No
         joint=col("joint"), mode_index=col("mode_index", np.int32), line_k=col("line_k"),
         table_omega=per_table("omega"), table_leading=per_table("leading"), table_trailing=per_table("trailing"),
         contact_tables=tuple(int(i) for i, a in enumerate(np.asarray(table_patch, dtype=np.float64)) if a > 0),
+        wheel=np.asarray([r.get("wheel", [0.0] * 9) for r in rows], dtype=np.float64).reshape(len(rows), 9),
     )
 
 
@@ -354,7 +371,8 @@ def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
 
     return ModalRows(**{k: grow(k, v) for k, v in fill.items()}, cavity_hz=rows.cavity_hz, table_patch=rows.table_patch,
                      table_omega=rows.table_omega, table_leading=rows.table_leading,
-                     table_trailing=rows.table_trailing, contact_tables=rows.contact_tables)
+                     table_trailing=rows.table_trailing, contact_tables=rows.contact_tables,
+                     wheel=None if rows.wheel is None else np.concatenate([rows.wheel, np.zeros((extra, 9))]))
 
 
 def _match_missing_n(rows, ring, geometry):
@@ -467,6 +485,10 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
         else:
             patches.append((0.0, 0.0))
             conditions.append("")
+    for ti, t in enumerate(tables):  # the wheel on its suspension (docs/physics.md §6 wheel_suspension)
+        note = _wheel_note(t)
+        if note:
+            conditions[ti] = "; ".join(x for x in (conditions[ti], note) if x)
     rows, cavity_hz = _table_rows(tables, geometry, patches, spins)
     rolling, rolling_notes, rolling_records = assign_rolling_rows(tables, rows, ring_ref, geometry, patches)
     if rolling is not None:
@@ -481,6 +503,25 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
     if len(damp) >= 4:
         problems.append(_damping_problem(tables, damp, cavity_hz, geometry, ring_ref, effects, noise))
     return problems
+
+
+def _wheel_note(table: ModeTable) -> str:
+    """One line on the table's fixture (empty for a bolted rim); a ``WARNING`` where defaults stand in."""
+    import warnings
+
+    from ringfit.io.modes import wheel_of
+
+    w = wheel_of(table.condition, source=str(table.source))
+    if w is None:
+        return ""
+    note = (f"fixture suspension: wheel {w['mass']:g} kg, {w['inertia']:g} kg m^2 on k_z {w['k_vertical']:.3g}, "
+            f"k_x {w['k_fore_aft']:.3g} N/m, k_theta {w['k_torsion']:.3g} N m/rad")
+    if w["defaults"]:
+        msg = (f"{table.source}: fixture 'suspension' without {', '.join(w['defaults'])}: the defaults of "
+               "docs/formats.md §2 stand in (the computed wheel_suspension candidate uses them)")
+        warnings.warn(msg, stacklevel=2)
+        note += f" (defaults for {', '.join(w['defaults'])})"
+    return note
 
 
 def _labels(rows, suffix=""):
