@@ -1,14 +1,14 @@
 """``wheel_suspension`` — the rim, hub and fixture as a rigid body on the fixture's springs (docs/physics.md §6).
 
-Modal data only, rows with n ≤ 1 of tables whose sidecar says ``fixture: suspension``
+Modal data only: rows with n ≤ 1, and tagged rows of loaded tables, of tables whose sidecar says ``fixture: suspension``
 (docs/formats.md §2; the body's mass, inertia, stiffnesses and dampers from the sidecar,
 its defaults where left out). A bolted table (the default) is never touched: the
 rim-fixed model exactly.
 
-- n = 1 rows of a loaded table tagged ``vert``/``extr`` (``hort``/``0``): the loaded
+- rows of a loaded table tagged ``vert``/``extr`` (``hort``/``0``): the loaded
   ring of :mod:`ringfit.physics.loaded` bordered by the body's vertical (fore-aft)
   coordinate at the table's computed patch (:func:`ringfit.physics.wheel.loaded_wheel_angular_frequencies`);
-  the change from the rim-fixed loaded mode is added (with ``ground_contact`` before
+  the change of the row's mode from the rim-fixed loaded mode is added (with ``ground_contact`` before
   it in a chain the sum is the bordered model exactly).
 - other n = 1 rows: the two-body root of :func:`ringfit.physics.wheel.coupled_angular_frequency`
   on the prediction so far (belt mass 2πRρA, sidewall πR(k_w + k_v)); an untagged row
@@ -48,7 +48,8 @@ class WheelSuspension(Effect):
     def modal_mask(self, rows):
         w = np.asarray(_wheel_rows(rows))
         n = np.asarray(rows.n)
-        return (w[:, 0] > 0) & (n >= 0) & (n <= 1)
+        loaded = (np.asarray(rows.contact) != 0) & (np.asarray(rows.patch) > 0) & (n >= 1)
+        return (w[:, 0] > 0) & (((n >= 0) & (n <= 1)) | loaded)
 
     def modal(self, values, omega, zeta, rows, ring, geometry):
         s = values[0]
@@ -56,7 +57,8 @@ class WheelSuspension(Effect):
         mass, inertia = w[:, 1], w[:, 2]
         cz, cx, ct = s * w[:, 3], s * w[:, 4], s * w[:, 5]
         dz, dx, dt = w[:, 6], w[:, 7], w[:, 8]
-        on = (w[:, 0] > 0) & (rows.n >= 0) & (rows.n <= 1) & (s > 0)
+        tagged = (rows.contact != 0) & (rows.patch > 0) & (rows.n >= 1)
+        on = (w[:, 0] > 0) & (((rows.n >= 0) & (rows.n <= 1)) | tagged) & (s > 0)
         body = jnp.where(on, mass, 1.0)
         m_b, K1 = belt_translation(ring, geometry)
         I_b, K0 = belt_torsion(ring, geometry)
@@ -70,9 +72,10 @@ class WheelSuspension(Effect):
         om1 = jnp.where(vertical, oz, ox)
         ze1 = jnp.where(vertical, zz, zx)
 
-        # loaded tables: the bordered loaded ring at the computed patch, rows tagged by contact
-        tagged = (rows.contact != 0) & (rows.patch > 0) & (rows.n == 1)
+        # loaded tables: the bordered loaded ring at the computed patch, rows tagged by contact (any n:
+        # the patch passes the body's motion on to the low extr modes)
         tables = rows.contact_tables
+        k = jnp.clip(rows.n, 1, _HARMONICS).astype(jnp.int32) - 1
 
         def solve(_):
             shift = jnp.zeros_like(omega)
@@ -85,7 +88,7 @@ class WheelSuspension(Effect):
                 a = rows.table_patch[t]
                 c1, s1 = loaded_wheel_angular_frequencies(ring, geometry, a, wheel, n_max=_HARMONICS)
                 c0, s0 = loaded_wheel_angular_frequencies(ring, geometry, a, rigid, n_max=_HARMONICS)
-                pick = jnp.where(rows.contact == 1, c1[0] - c0[0], s1[0] - s0[0])
+                pick = jnp.where(rows.contact == 1, c1[k] - c0[k], s1[k] - s0[k])
                 shift = jnp.where(sel & (wt[0] > 0), pick, shift)
             return shift
 
