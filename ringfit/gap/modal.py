@@ -256,7 +256,9 @@ def spin_of(table: ModeTable, outer_radius: float) -> float:
 
 def _is_reference_state(table: ModeTable) -> bool:
     c = table.condition
-    return table.state == "free" and not float(c.get("speed_kmh") or 0) and not float(c.get("rotation_hz") or 0)
+    # a free tyre on a suspended wheel is another state (its n <= 1 modes move: wheel_suspension)
+    return (table.state == "free" and not float(c.get("speed_kmh") or 0) and not float(c.get("rotation_hz") or 0)
+            and c.get("fixture", "bolted") == "bolted")
 
 
 def second_difference_sigma(residual: np.ndarray, sequence, n: np.ndarray) -> tuple[float, int]:
