@@ -1,4 +1,4 @@
-"""``ringfit example {records,case,cleat,profiles,rolling} --out DIR`` — synthetic inputs with a README of their truth.
+"""``ringfit example {records,case,cleat,profiles,rolling} --out DIR [--effect NAME]`` — synthetic inputs with a README of their truth.
 
 The one command of the product that imports :mod:`ringfit.synth` (the
 test-data generators); see :mod:`ringfit.synth.examples`.
@@ -23,6 +23,9 @@ def register(sub) -> None:
                                    "tables at 20/40/60 km/h -> diagnose, campbell).")
     p.add_argument("kind", choices=KINDS, help="which example: " + ", ".join(KINDS))
     p.add_argument("--out", required=True, type=Path, help="folder to write into (created if missing)")
+    p.add_argument("--effect", default=None, metavar="NAME",
+                   help="case only: the effect hidden in the case folder (default ground_contact), e.g. "
+                        "wheel_suspension, rotation, wave_damping, none, tread_pitch")
     force_flag(p)
     quiet_flag(p)
     p.set_defaults(run=run_example)
@@ -31,7 +34,7 @@ def register(sub) -> None:
 def run_example(args) -> int:
     from ringfit.synth.examples import write_example
 
-    paths = write_example(args.kind, args.out, overwrite=args.force, progress=not args.quiet)
+    paths = write_example(args.kind, args.out, overwrite=args.force, progress=not args.quiet, effect=args.effect)
     for p in paths:
         print(f"wrote {p}")
     print(f"see {args.out / 'README.md'} for the truth and the commands to try")
