@@ -118,7 +118,10 @@ class ModalRows(eqx.Module):
     - ``contact``: 0 untagged / free, 1 cosine type (``extr``, ``vert``), 2 sine type (``0``, ``hort``).
     - ``spin``: wheel speed Ω of the table's condition [rad/s] (0 = static).
     - ``branch``: +1 backward, −1 forward, 0 none; ``fixed_frame``: 1 fixed observer, 0 co-rotating.
-    - ``cavity_hz``: uncoupled cavity frequency used by ``cavity_mode`` [Hz] (same for all rows).
+    - ``cavity_hz``: uncoupled cavity frequency the row's ring mode meets (``cavity_mode``) [Hz], per row:
+      the unloaded line f_a, on a loaded table the fore-aft (``hort``/``0`` rows) or vertical
+      (``vert``/``extr``) line of n = 1 (:mod:`ringfit.physics.cavity`); 0 where the table's tyre
+      has no air (``pressure_bar`` = 0).
     - ``reference``: 1 for rows of ``free.modes.csv`` (the ring answers to them only).
     - ``patch``: contact half-angle computed from the table's load [rad] (0: no contact / unknown).
     - ``freq_hz``: the row's measured frequency [Hz] (damping rows: their mode's).
@@ -307,9 +310,12 @@ def wheel_row(condition: dict, source: str = "<condition>") -> list[float]:
     return [1.0, w["mass"], w["inertia"], *inv, w["c_vertical"], w["c_fore_aft"], w["c_torsion"]]
 
 
-def _table_rows(tables, geometry, patches, spins):
-    """Per structural row: dict of its attributes (before n-matching)."""
+def _table_rows(tables, geometry, patches, spins, cavity_split=None):
+    """Per structural row: dict of its attributes (before n-matching).
+
+    ``cavity_split``: per table W_2/h_c of the loaded cavity (docs/physics.md §6 cavity_mode), or None."""
     cavity = [float(f) for t in tables for f, k in zip(t.freq_hz, t.kind) if k == "acoustic"]
+    f_a = cavity[0] if cavity else float(cavity_frequency(1))
     rows = []
     damping_std = [t.extra_floats("damping_std_pct") for t in tables]
     wheels = [wheel_row(t.condition, str(t.source)) for t in tables]
@@ -329,9 +335,39 @@ def _table_rows(tables, geometry, patches, spins):
                 freq=float(t.freq_hz[i]), std=float(t.freq_std_hz[i]), damping=float(t.damping_pct[i]),
                 damping_std=damping_std[ti][i],
                 reference=ti == 0, a=int(t.a[i]), joint=0.0, mode_index=0, line_k=0.0, wave="",
-                wheel=wheels[ti],
+                wheel=wheels[ti], cavity=_row_cavity(t, f_a, contact, int(t.n[i]),
+                                                     None if cavity_split is None else cavity_split[ti]),
             ))
-    return rows, (cavity[0] if cavity else float(cavity_frequency(1)))
+    return rows, f_a
+
+
+def _row_cavity(table: ModeTable, f_a: float, contact: int, n: int, split) -> float:
+    """The cavity line a row's ring mode meets [Hz] (:attr:`ModalRows.cavity_hz`)."""
+    p = table.condition.get("pressure_bar")
+    if p is not None and float(p) == 0.0:
+        return 0.0  # no air in the cavity: cavity_mode does not act on this table
+    if split is None or n != 1 or not contact:
+        return f_a
+    # the loaded cavity's pair at rest: fore-aft sqrt(1 + e), vertical sqrt(1 - e) (docs/physics.md §6)
+    return f_a * math.sqrt(max(1.0 - split, 0.0) if contact == 1 else max(1.0 + split, 0.0))
+
+
+def cavity_splits(tables, ring, geometry) -> list:
+    """W_2/h_c of each ``loaded`` table with a load (static contact solve; docs/physics.md §6), else None."""
+    from ringfit.physics.cavity import cavity_height, deflection_cos2
+    from ringfit.physics.contact import ContactSolver, solve_rolling_jit
+    from ringfit.physics.operating import OperatingPoint, road_from_drum_diameter
+
+    out = []
+    for t in tables:
+        load = t.condition.get("load_n")
+        if t.state == "loaded" and load:
+            road = road_from_drum_diameter(t.condition.get("drum_diameter_m"))
+            sol = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, float(load), road), solver=ContactSolver())
+            out.append(float(deflection_cos2(sol)) / float(cavity_height(geometry)))
+        else:
+            out.append(None)
+    return out
 
 
 def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=None) -> ModalRows:
@@ -347,7 +383,8 @@ def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=No
         # a rolling row without a branch: the wave of eq. 25/26 it was matched to (rotation alone)
         branch=np.asarray([{"backward": 1.0, "forward": -1.0}.get(r["branch"] or r.get("wave", ""), 0.0)
                             for r in rows]),
-        fixed_frame=np.asarray([1.0 if r["fixed"] else 0.0 for r in rows]), cavity_hz=np.asarray(cavity_hz),
+        fixed_frame=np.asarray([1.0 if r["fixed"] else 0.0 for r in rows]),
+        cavity_hz=np.asarray([r.get("cavity", cavity_hz) for r in rows], dtype=np.float64),
         reference=np.asarray([1.0 if r["reference"] else 0.0 for r in rows]), patch=col("patch"),
         freq_hz=col("freq"), table=col("table", np.int32),
         table_patch=np.asarray(np.asarray(table_patch, dtype=np.float64)),
@@ -371,7 +408,9 @@ def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
         col = getattr(rows, k)
         return None if col is None else np.concatenate([col, np.full(extra, v, dtype=col.dtype)])
 
-    return ModalRows(**{k: grow(k, v) for k, v in fill.items()}, cavity_hz=rows.cavity_hz, table_patch=rows.table_patch,
+    cav = rows.cavity_hz
+    cav = cav if np.ndim(cav) == 0 else np.concatenate([cav, np.full(extra, cav[0] if m else 0.0)])
+    return ModalRows(**{k: grow(k, v) for k, v in fill.items()}, cavity_hz=cav, table_patch=rows.table_patch,
                      table_omega=rows.table_omega, table_leading=rows.table_leading,
                      table_trailing=rows.table_trailing, contact_tables=rows.contact_tables,
                      wheel=None if rows.wheel is None else np.concatenate([rows.wheel, np.zeros((extra, 9))]))
@@ -491,7 +530,7 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
         note = _wheel_note(t)
         if note:
             conditions[ti] = "; ".join(x for x in (conditions[ti], note) if x)
-    rows, cavity_hz = _table_rows(tables, geometry, patches, spins)
+    rows, cavity_hz = _table_rows(tables, geometry, patches, spins, cavity_splits(tables, ring_ref, geometry))
     rolling, rolling_notes, rolling_records = assign_rolling_rows(tables, rows, ring_ref, geometry, patches)
     if rolling is not None:
         for ti, note in rolling.notes.items():
