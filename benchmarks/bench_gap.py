@@ -56,7 +56,7 @@ def modal_ideal(d, label) -> float:
     the effect acts on (frequency rows; damping rows in ln ζ for wave_damping), SS_noise from the realised
     noise of every row (hidden label), weighted and ψ-transformed exactly as the diagnosis weights its
     held-out residuals (docs/formats.md §5)."""
-    damping = label.expected_verdict == "wave_damping"
+    damping = label.expected_verdict in ("wave_damping", "damping_growth", "viscous_damping")
     part = next(p for p in d.parts if p.problem.domain == ("damping" if damping else "modes"))
     prob = part.problem
     e = np.array([v for kind, v in label.noise["rows"] if kind == ("ln_damping" if damping else "freq")])

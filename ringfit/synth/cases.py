@@ -15,7 +15,8 @@ cavity as a 2×2 eigenproblem in NumPy).
 Injected (mode tables): ``ground_contact``, ``rotation``, ``cavity_mode``,
 ``wave_damping``, ``ring_extensibility``, ``wheel_suspension`` (an extra table
 ``suspended.modes.csv``: the free tyre on the bench's suspension, its sidecar stating the
-fixture, n ≤ 1 truth from the lumped model :func:`lumped_wheel_modes`); ``none``; and the out-of-library
+fixture, n ≤ 1 truth from the lumped model :func:`lumped_wheel_modes`), ``damping_growth`` (η(n) = 2ζ0 n^b
+on the free table's damping, ζ from the complex-stiffness eigenvalue); ``none``; and the out-of-library
 ``tread_pitch`` (a construction non-uniformity that shifts a few neighbouring
 harmonics and splits the loaded/spinning pairs), whose expected verdict is ``unexplained``.
 ``sensor_mass`` is not injected: on mode tables it is almost a uniform
@@ -41,7 +42,8 @@ import jax.numpy as jnp
 import numpy as np
 
 #: Effects the generator injects in mode-table cases, with the verdict the diagnosis should give.
-MODAL_INJECTIONS = ("none", "ground_contact", "rotation", "wave_damping", "tread_pitch", "wheel_suspension")
+MODAL_INJECTIONS = ("none", "ground_contact", "rotation", "wave_damping", "tread_pitch", "wheel_suspension",
+                    "damping_growth")
 #: Injectable but not part of the blind benchmark (see the module docstring).
 EXTRA_INJECTIONS = ("cavity_mode", "ring_extensibility")
 EXPECTED = {"none": "none", "tread_pitch": "unexplained"}
@@ -179,6 +181,13 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
         slope = float(rng.uniform(0.02, 0.06))
         magnitude["eta_slope"] = slope
         damp_free = 100.0 * (zeta0 + 0.5 * slope * free / 100.0) * np.exp(rng.normal(0.0, zeta_sd, free.size))
+    elif effect == "damping_growth":
+        # η(n) = 2ζ0 n^b rising ×6…×12 over n = 1…9; truth from the complex-stiffness eigenvalue of each
+        # mode, ω² ∝ 1 + iη: ζ = sin(½ atan η) (the effect fits ζ0 n^b, the first-order form)
+        b = float(rng.uniform(0.8, 1.15))
+        magnitude["exponent"] = b
+        eta = 2.0 * zeta0 * n_free.astype(float) ** b
+        damp_free = 100.0 * np.sin(0.5 * np.arctan(eta)) * np.exp(rng.normal(0.0, zeta_sd, free.size))
     elif effect == "tread_pitch":
         amp = float(rng.uniform(0.01, 0.02))
         magnitude["relative_amplitude"] = amp
@@ -198,6 +207,8 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
     rows = [{"n": int(n), "freq_hz": float(f), "damping_pct": float(d)}
             for n, f, d in zip(n_free, free_noisy, damp_free)]
     damp_truth = 100.0 * (zeta0 + 0.5 * magnitude.get("eta_slope", 0.0) * free / 100.0)
+    if effect == "damping_growth":
+        damp_truth = 100.0 * np.sin(0.5 * np.arctan(2.0 * zeta0 * n_free.astype(float) ** magnitude["exponent"]))
     # realised noise of every observation, in the order the diagnosis reads them (free: frequency then
     # damping per mode; then loaded.modes.csv, spinning.modes.csv): for the ideal shrink of the benchmark
     row_noise = []

@@ -17,6 +17,7 @@ from ringfit.gap.effects.base import Effect, Parameter
 BUILTIN = (
     "sensor_tilt", "gravity", "iepe_highpass", "wave_damping", "tread_shear",
     "ground_contact", "rotation", "cavity_mode", "sensor_mass", "ring_extensibility", "wheel_suspension",
+    "damping_growth", "viscous_damping",
 )
 
 _REGISTRY: dict[str, Effect] = {}
