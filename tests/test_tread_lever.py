@@ -3,7 +3,6 @@ sits at x_b − τψ cos φ, and the tip force acts on the belt through the leve
 
 import math
 
-import jax.numpy as jnp
 import numpy as np
 import pytest
 

@@ -304,7 +304,6 @@ def lumped_wheel_modes(ring, geometry, mass, inertia, k_vertical, k_fore_aft, k_
         best = None
         for j in range(ndof):
             x = vec[:, j]
-            e = mdiag * x * x
             td = x[xs] * -np.sin(th) + x[ys] * np.cos(th)  # tangential displacement of each node
             # the belt moves as a whole: a mean displacement (translation) or a mean tangential one (torsion)
             mean = {"fore_aft": abs(np.mean(x[xs])), "vertical": abs(np.mean(x[ys])), "torsion": abs(np.mean(td))}
