@@ -254,3 +254,20 @@ def test_lumped_truth_matches_the_two_body_root():
                                               rel=1e-3)
     assert truth["torsion"] == pytest.approx(float(W.coupled_angular_frequency(w0, I_b, K0, 0.9, 1 / 3e4)[0]) / TWO_PI,
                                              rel=1e-3)
+
+
+def test_campbell_diagram_with_the_wheel_at_rest_is_the_bordered_loaded_ring():
+    """`campbell_diagram(..., wheel=)` (Hill's complex basis, the patch of the contact solve) at speed 0: its
+    n = 1 branches are the bordered real-basis loaded ring's at the same patch."""
+    from ringfit.gap.campbell import campbell_diagram
+
+    g, r = table9()
+    wheel = W.Wheel.from_stiffness(20.0, 0.6, 2e5, 1e6, 1e5)
+    d = campbell_diagram(r, g, 4000.0, [0.0], n_max=4, harmonics=8, wheel=wheel)
+    a = 0.5 * math.radians(float(d.trailing_deg[0] - d.leading_deg[0]))
+    c, s = W.loaded_wheel_angular_frequencies(r, g, a, wheel, n_max=8)
+    f = np.asarray(d.fixed_hz[0])
+    for x in (float(c[0]), float(s[0])):
+        assert np.min(np.abs(f - x / TWO_PI)) / (x / TWO_PI) < 2e-3
+    rigid = campbell_diagram(r, g, 4000.0, [0.0], n_max=4, harmonics=8)
+    assert d.branches >= rigid.branches + 2  # the body's modes

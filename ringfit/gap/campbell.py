@@ -219,6 +219,7 @@ def campbell_diagram(
     contact: bool = True,
     n_max: int = DEFAULT_N_MAX,
     harmonics: int | None = None,
+    wheel=None,
 ) -> CampbellDiagram:
     """Branches of the tyre's modes against speed (docs/physics.md §3.7).
 
@@ -230,6 +231,8 @@ def campbell_diagram(
     - ``contact``: ``False`` for a free spinning ring (no patch; ``load_n`` unused, R_e = R_out).
     - ``n_max``: branches whose dominant order exceeds n_max at every speed are dropped.
     - ``harmonics``: Hill basis K (default :data:`ringfit.physics.rolling_modes.DEFAULT_HARMONICS`; ≥ 2 n_max).
+    - ``wheel``: ``None`` (rim fixed) or a :class:`ringfit.physics.wheel.Wheel`: the rim on its suspension
+      (docs/physics.md §6 ``wheel_suspension``), three more modes per speed that move the n ≤ 1 branches.
 
     **Returns:** :class:`CampbellDiagram` (check ``ok``). One compilation per
     bucket of :data:`SPEED_BUCKET` speeds and settings.
@@ -252,7 +255,7 @@ def campbell_diagram(
     road = road_from_drum_diameter(drum_diameter_m)
     with small_matrix_threads():
         cm = campbell_modes_jit(ring, geometry, float(load_n) if contact else 0.0, pad, road, harmonics=K,
-                                contact=contact)
+                                contact=contact, wheel=wheel)
         labels = _acceleration_labels(cm.modes)
         cm, labels = jax.device_get((cm, labels))
     m = cm.modes
