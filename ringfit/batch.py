@@ -345,7 +345,75 @@ def worker_env() -> dict[str, str]:
     return {"XLA_FLAGS": flags}
 
 
-def local_cluster(workers: int | None = None, *, memory_limit: str | float | None = "auto", quiet: bool = True):
+#: Dask settings that empty the HTTP servers of the scheduler and its workers: distributed always
+#: opens one per process (``/health``, ``/metrics``, ``/info``, …, besides the dashboard); with no
+#: routes it answers nothing but 404.
+NO_HTTP_CONFIG = {"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []}
+#: Keys of a ``--security FILE.toml`` (docs/formats.md §13.4) -> ``distributed.security.Security`` arguments.
+SECURITY_KEYS = {"ca_file": "tls_ca_file", "cert": "tls_client_cert", "key": "tls_client_key",
+                 "scheduler_cert": "tls_scheduler_cert", "scheduler_key": "tls_scheduler_key",
+                 "worker_cert": "tls_worker_cert", "worker_key": "tls_worker_key",
+                 "ciphers": "tls_ciphers", "min_version": "tls_min_version"}
+
+
+def read_security(path: str | os.PathLike):
+    """A ``distributed.security.Security`` from a TOML file of certificate paths (docs/formats.md §13.4).
+
+    Keys: ``ca_file`` (required), ``cert`` and ``key`` (this process's, the
+    client's; required), ``scheduler_cert``/``scheduler_key`` and
+    ``worker_cert``/``worker_key`` (for a LocalCluster this process starts;
+    default ``cert``/``key``), ``ciphers``, ``min_version`` (1.2 or 1.3).
+    Relative paths are relative to the TOML file. Encryption is required on
+    every connection (``require_encryption``).
+
+    **Raises** :class:`~ringfit.errors.InputError` naming the file and key for
+    an unknown or missing key or a certificate file that does not exist.
+    """
+    import tomllib
+    from pathlib import Path
+
+    from ringfit.errors import InputError
+
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError("file not found (--security names a TOML file of TLS certificate paths)", source=path) from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise InputError(f"not a readable TOML file ({exc})", source=path) from None
+    unknown = [k for k in data if k not in SECURITY_KEYS]
+    if unknown:
+        raise InputError(f"unknown key {unknown[0]!r}; expected {', '.join(SECURITY_KEYS)}", source=path)
+    for key in ("ca_file", "cert", "key"):
+        if key not in data:
+            raise InputError(f"missing key {key!r} (a PEM file path)", source=path)
+    kwargs = {}
+    for key, value in data.items():
+        if key == "min_version":
+            if value not in (1.2, 1.3):
+                raise InputError(f"min_version = {value!r}; expected 1.2 or 1.3", source=path)
+            import ssl
+
+            kwargs["tls_min_version"] = ssl.TLSVersion.TLSv1_2 if value == 1.2 else ssl.TLSVersion.TLSv1_3
+            continue
+        if not isinstance(value, str) or not value:
+            raise InputError(f"{key} = {value!r}; expected a file path", source=path)
+        if key == "ciphers":
+            kwargs["tls_ciphers"] = value
+            continue
+        file = (path.parent / value).expanduser()
+        if not file.is_file():
+            raise InputError(f"{key} = {value!r}: no such file ({file})", source=path)
+        kwargs[SECURITY_KEYS[key]] = str(file)
+    for role in ("scheduler", "worker"):
+        kwargs.setdefault(f"tls_{role}_cert", kwargs["tls_client_cert"])
+        kwargs.setdefault(f"tls_{role}_key", kwargs["tls_client_key"])
+    distributed = import_distributed()
+    return distributed.Security(require_encryption=True, **kwargs)
+
+
+def local_cluster(workers: int | None = None, *, memory_limit: str | float | None = "auto", quiet: bool = True,
+                  dashboard: str | None = None, security=None):
     """A ``distributed.LocalCluster`` of ``workers`` processes, one thread each.
 
     **Arguments:**
@@ -355,6 +423,11 @@ def local_cluster(workers: int | None = None, *, memory_limit: str | float | Non
       = this machine's memory / workers, ``None`` = no limit); a worker above
       95 % of it is restarted by its nanny and its task rescheduled.
     - ``quiet``: no Dask log lines (lost workers show in the results); else WARNING and above.
+    - ``dashboard``: address of the scheduler's dashboard (``":8787"``,
+      ``"127.0.0.1:8787"``); ``None`` (default): no dashboard, and the HTTP
+      servers that distributed opens anyway serve nothing (:data:`NO_HTTP_CONFIG`).
+    - ``security``: a ``distributed.Security`` (e.g. :func:`read_security`):
+      the cluster listens on ``tls://`` and every connection is encrypted.
 
     Tasks whose worker dies twice are reported ``lost`` (:data:`SCHEDULER_CONFIG`).
     Close it with ``cluster.close()``.
@@ -365,38 +438,50 @@ def local_cluster(workers: int | None = None, *, memory_limit: str | float | Non
 
     distributed = import_distributed()
     workers = int(workers or default_workers())
-    with dask.config.set(SCHEDULER_CONFIG):
+    config = dict(SCHEDULER_CONFIG)
+    if dashboard is None:
+        config.update(NO_HTTP_CONFIG)  # the nannies hand this config to their worker processes
+    tls = {} if security is None else {"security": security, "protocol": "tls://"}
+    with dask.config.set(config):
         return distributed.LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-            dashboard_address=None, env=worker_env(),
-            silence_logs=logging.CRITICAL if quiet else logging.WARNING,
+            dashboard_address=dashboard, env=worker_env(),
+            silence_logs=logging.CRITICAL if quiet else logging.WARNING, **tls,
         )
 
 
 @contextlib.contextmanager
 def open_client(scheduler: str | None = None, workers: int | None = None, *, memory_limit="auto",
-                warmup: Callable[[], Any] | None = None, timeout: float = 30.0, quiet: bool = True):
+                warmup: Callable[[], Any] | None = None, timeout: float = 30.0, quiet: bool = True,
+                security=None, dashboard: str | None = None):
     """A ``distributed.Client`` on ``scheduler`` (an address) or on a new LocalCluster.
 
-    **Arguments:** ``scheduler``: e.g. ``tcp://10.0.0.5:8786``, or ``None`` for a
-    :func:`local_cluster` of ``workers`` processes with ``memory_limit``;
+    **Arguments:** ``scheduler``: e.g. ``tcp://10.0.0.5:8786`` or
+    ``tls://10.0.0.5:8786``, or ``None`` for a :func:`local_cluster` of
+    ``workers`` processes with ``memory_limit`` and ``dashboard``;
+    ``security``: a ``distributed.Security`` (:func:`read_security`) for a
+    ``tls://`` scheduler, or to start the LocalCluster on TLS (without it a
+    ``tls://`` scheduler uses Dask's own ``distributed.comm.tls`` settings);
     ``warmup``: a picklable callable every worker runs once (:class:`WorkerSetup`);
     ``timeout`` [s]: to reach the scheduler; ``quiet``: as in :func:`local_cluster`.
 
     **Yields:** the client; on exit the client (and a cluster it started) is closed.
     """
+    from ringfit.errors import InputError
+
     distributed = import_distributed()
     cluster = None
     if scheduler:
+        check_scheduler_security(scheduler, security)
         try:
-            client = distributed.Client(scheduler, timeout=timeout)
-        except OSError as exc:
-            from ringfit.errors import InputError
-
+            client = distributed.Client(scheduler, timeout=timeout,
+                                        **({} if security is None else {"security": security}))
+        except (OSError, ValueError) as exc:  # unreachable, refused handshake, wrong certificate
             raise InputError(f"cannot reach the scheduler ({_one_line(exc)})", source=scheduler) from None
     else:
-        cluster = local_cluster(workers, memory_limit=memory_limit, quiet=quiet)
-        client = distributed.Client(cluster)
+        cluster = local_cluster(workers, memory_limit=memory_limit, quiet=quiet, dashboard=dashboard,
+                                security=security)
+        client = distributed.Client(cluster, **({} if security is None else {"security": security}))
     try:
         client.register_plugin(WorkerSetup(warmup), name=WorkerSetup.name)
         yield client
@@ -404,6 +489,30 @@ def open_client(scheduler: str | None = None, workers: int | None = None, *, mem
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def check_scheduler_security(scheduler: str | None, security) -> None:
+    """A ``tls://`` scheduler has certificates (``security`` or Dask's config); ``security`` goes with ``tls://``.
+
+    **Raises** :class:`~ringfit.errors.InputError` (one line naming the address).
+    """
+    from ringfit.errors import InputError
+
+    if not scheduler:
+        return
+    if scheduler.startswith("tls://") and security is None and not _dask_tls_configured():
+        raise InputError("a tls:// scheduler needs certificates: give --security FILE.toml (docs/formats.md "
+                         "§13.4) or set distributed.comm.tls in the Dask configuration", source=scheduler)
+    if security is not None and not scheduler.startswith("tls://"):
+        raise InputError("--security is for a tls:// scheduler (or a LocalCluster on TLS); this address is "
+                         "not encrypted", source=scheduler)
+
+
+def _dask_tls_configured() -> bool:
+    """Whether Dask's own configuration names a CA file for TLS (``distributed.comm.tls.ca-file``)."""
+    import dask
+
+    return bool(dask.config.get("distributed.comm.tls.ca-file", None))
 
 
 def _all_exist(paths) -> bool:

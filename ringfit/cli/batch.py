@@ -91,7 +91,14 @@ def _batch_options(p: argparse.ArgumentParser, *, inputs: bool) -> None:
 
 def _cluster_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a LocalCluster here)")
+                   help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786 or, encrypted, tls://10.0.0.5:8786 "
+                        "(default: a LocalCluster here)")
+    p.add_argument("--security", type=Path, default=None, metavar="FILE.toml",
+                   help="TLS certificates (ca_file, cert, key; docs/formats.md §13.4) for a tls:// scheduler, or to "
+                        "run the LocalCluster on TLS (default for tls://: Dask's distributed.comm.tls settings)")
+    p.add_argument("--dashboard", default=None, metavar="ADDRESS",
+                   help="LocalCluster: serve Dask's dashboard here, e.g. 127.0.0.1:8787 (default: none, and no "
+                        "HTTP routes at all)")
     p.add_argument("--workers", type=integer("a positive number of workers", lo=1), default=None, metavar="N",
                    help="LocalCluster worker processes, one thread each (default: usable CPUs, at most one per task)")
     p.add_argument("--memory-limit", default="auto", metavar="SIZE",
@@ -339,6 +346,17 @@ def _check_cluster_options(opts) -> None:
     if opts.scheduler and opts.workers:
         raise InputError("--workers starts a LocalCluster; with --scheduler the cluster's own workers run the "
                          "tasks (start them with `dask worker`)")
+    if opts.scheduler and opts.dashboard:
+        raise InputError("--dashboard starts the LocalCluster's dashboard; a --scheduler serves its own "
+                         "(`dask scheduler --dashboard-address`)")
+    opts.security_obj = None
+    from ringfit.batch import check_scheduler_security
+
+    check_scheduler_security(opts.scheduler, opts.security)
+    if opts.security is not None:
+        from ringfit.batch import read_security
+
+        opts.security_obj = read_security(opts.security)
     opts.memory_limit = _memory_limit(opts.memory_limit)
 
 
@@ -389,11 +407,14 @@ def _run(opts, tasks, commands, description):
         from ringfit.batch import default_workers
 
         workers = min(workers or default_workers(), len(tasks))
-    where = opts.scheduler or f"a LocalCluster of {workers} worker process{'es' if workers > 1 else ''}"
+    where = opts.scheduler or (f"a LocalCluster of {workers} worker process{'es' if workers > 1 else ''}"
+                               + (" on TLS" if getattr(opts, "security_obj", None) is not None else "")
+                               + (f", dashboard {opts.dashboard}" if opts.dashboard else ""))
     print(f"{description}: {len(tasks)} task{'s' if len(tasks) != 1 else ''} on {where}", file=sys.stderr)
     t0 = time.perf_counter()
     with open_client(opts.scheduler, workers, memory_limit=opts.memory_limit,
-                     warmup=functools.partial(warm_up, tuple(commands)), quiet=not opts.verbose) as client:
+                     warmup=functools.partial(warm_up, tuple(commands)), quiet=not opts.verbose,
+                     security=getattr(opts, "security_obj", None), dashboard=opts.dashboard) as client:
         t1 = time.perf_counter()
         results = run_tasks(client, tasks, progress=not opts.quiet, skip_existing=opts.skip_existing,
                             description=description)

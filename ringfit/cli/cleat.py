@@ -3,7 +3,8 @@
     ringfit profile RECORD --out NAME.profile.csv [--points 2048]
     ringfit cleat RECORD --sectors 512 --out FIELD.npz [--animate A.gif] [--ssi MODES.csv [--tyre FITTED.toml]]
 
-RECORD is a continuous ``*.records.npz`` (docs/records-continuous.md).
+RECORD is a continuous ``*.records.npz`` (docs/records-continuous.md) or a rig file — NI TDMS, MATLAB .mat,
+CSV — with a channel map where it lacks channel metadata (docs/formats.md §17).
 """
 
 from __future__ import annotations
@@ -19,7 +20,10 @@ def register(sub) -> None:
                        description="Average a continuous recording by sensor angle over revolutions and write "
                                    "a *.profile.csv (+ .json sidecar); the revolution-to-revolution spread goes "
                                    "into extra columns.")
-    p.add_argument("record", help="continuous *.records.npz")
+    p.add_argument("record", help="continuous *.records.npz, or a .tdms/.mat/.csv rig file (docs/formats.md §17)")
+    p.add_argument("--channels", "--channel-map", dest="channel_map", default=None, metavar="MAP.toml",
+                   help="TDMS/.mat/CSV only: channel map naming the acceleration, encoder and trigger (hall) "
+                        "channels with their axes and units (docs/formats.md §17.4)")
     p.add_argument("--out", required=True, help="output NAME.profile.csv")
     p.add_argument("--points", type=integer("a whole number of angles in 16..1048576", lo=16, hi=1 << 20),
                    default=2048, help="angle points per revolution (default 2048)")
@@ -32,7 +36,11 @@ def register(sub) -> None:
     c = sub.add_parser("cleat", help="angle–time field of a cleat test, its modes and animation",
                        description="Rebuild the cleat response on the plane of sensor angle × time since the "
                                    "cleat's arrival (hall pulses), the no-cleat reading subtracted at the same angle.")
-    c.add_argument("record", help="continuous *.records.npz with encoder and hall")
+    c.add_argument("record", help="continuous *.records.npz with encoder and hall, or a .tdms/.mat/.csv rig file "
+                                  "(docs/formats.md §17)")
+    c.add_argument("--channel-map", dest="channel_map", default=None, metavar="MAP.toml",
+                   help="TDMS/.mat/CSV only: channel map naming the acceleration, encoder and trigger (hall) "
+                        "channels (docs/formats.md §17.4; --channels is the SSI channel count here)")
     c.add_argument("--out", required=True, help="output FIELD.npz")
     c.add_argument("--sectors", type=integer("a whole number of sectors in 4..65536", lo=4, hi=1 << 16), default=512,
                    help="sectors around the tyre (default 512)")
@@ -67,8 +75,9 @@ def run_profile(args: argparse.Namespace) -> int:
     from ringfit.io.profiles import sidecar_path, write_profile
     from ringfit.targets.rolling_profile import rolling_profile
 
-    check_output_paths([args.out, sidecar_path(args.out)], overwrite=args.force, inputs=[args.record])
-    with read_continuous(args.record) as rec:
+    inputs = [args.record] + ([args.channel_map] if args.channel_map else [])
+    check_output_paths([args.out, sidecar_path(args.out)], overwrite=args.force, inputs=inputs)
+    with read_continuous(args.record, channels=args.channel_map) as rec:
         arrivals = None
         if args.quiet_after is not None and rec.has_hall:
             from ringfit.targets.cleat import detect_cleat_arrivals
@@ -101,7 +110,8 @@ def run_cleat(args: argparse.Namespace) -> int:
         from ringfit.errors import InputError
 
         raise InputError("--tyre labels the SSI modes: give --ssi MODES.csv too")
-    inputs = [args.record] + ([args.baseline] if args.baseline else []) + ([args.tyre] if args.tyre else [])
+    inputs = [args.record] + ([args.baseline] if args.baseline else []) + ([args.tyre] if args.tyre else []) + (
+        [args.channel_map] if args.channel_map else [])
     check_output_paths(outputs, overwrite=args.force, inputs=inputs)
     baseline = "auto"
     if args.no_baseline:
@@ -110,7 +120,7 @@ def run_cleat(args: argparse.Namespace) -> int:
         from ringfit.io.profiles import read_profile
 
         baseline = read_profile(args.baseline)
-    with read_continuous(args.record) as rec:
+    with read_continuous(args.record, channels=args.channel_map) as rec:
         field = angle_time_field(rec, sectors=args.sectors, time_step_s=args.time_step, duration_s=args.duration,
                                  baseline=baseline, progress=not args.quiet)
         cov = field.coverage()

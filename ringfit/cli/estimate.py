@@ -3,7 +3,7 @@
     ringfit estimate INPUT --tyre FITTED.toml --out NAME.estimate.json [--per-revolution REVS.csv] [--plot P.png]
 
 INPUT is a rolling profile ``*.profile.csv`` (its sidecar may omit ``load_n``) or a continuous
-recording ``*.records.npz`` (docs/records-continuous.md).
+recording ``*.records.npz`` (docs/records-continuous.md) or rig file (.tdms, .mat, .csv; docs/formats.md §17).
 """
 
 from __future__ import annotations
@@ -24,8 +24,11 @@ def register(sub) -> None:
                     "revolution (the angle from the encoder, or from the patch passages when there is none). Writes NAME.estimate.json (docs/formats.md §7); exit 1 if the fit does not "
                     "converge (nothing written).")
     p.add_argument("input", type=Path, help="*.profile.csv (+ .json sidecar, load_n not needed) or a continuous "
-                                            "*.records.npz")
+                                            "*.records.npz or .tdms/.mat/.csv recording (docs/formats.md §17)")
     p.add_argument("--tyre", required=True, type=Path, help="fitted tyre TOML (ring parameters and k_tread fixed)")
+    p.add_argument("--channels", "--channel-map", dest="channel_map", type=Path, default=None, metavar="MAP.toml",
+                   help="a recording in a TDMS/.mat/CSV rig file: channel map naming its acceleration and encoder "
+                        "channels with their axes and units (docs/formats.md §17.4)")
     p.add_argument("--out", required=True, type=Path, help="output NAME.estimate.json")
     p.add_argument("--per-revolution", type=Path, default=None, metavar="REVS.csv",
                    help="continuous recordings: write one row per revolution (load, interval, patch length, …)")
@@ -60,9 +63,13 @@ def run_estimate(args) -> int:
     if not 8 <= args.harmonics < args.grid // 2 - 1:
         raise InputError(f"--harmonics {args.harmonics}: expected 8 … {args.grid // 2 - 2}")
     if args.per_revolution is not None and kind != "recording":
-        raise InputError("--per-revolution needs a continuous recording (*.records.npz), not a profile",
+        raise InputError("--per-revolution needs a continuous recording (*.records.npz, .tdms, .mat, .csv), not a profile",
                          source=args.input)
-    inputs = [args.input, args.tyre] + ([sidecar_path(args.input)] if kind == "profile" else [])
+    if args.channel_map is not None and kind != "recording":
+        raise InputError("--channels applies to a recording in a TDMS, .mat or CSV file, not a profile",
+                         source=args.input)
+    inputs = [args.input, args.tyre] + ([sidecar_path(args.input)] if kind == "profile" else []) + (
+        [args.channel_map] if args.channel_map else [])
     check_output_paths([args.out, args.per_revolution, args.plot], overwrite=args.force, inputs=inputs)
 
     import json
@@ -84,7 +91,7 @@ def run_estimate(args) -> int:
         from ringfit.io.continuous import read_continuous
 
         want_revs = args.per_revolution is not None or args.plot is not None
-        with read_continuous(args.input) as rec:
+        with read_continuous(args.input, channels=args.channel_map) as rec:
             est, revs = estimate_recording(rec, tyre.geometry, tyre.ring, settings=settings,
                                            k_tread_in_file=k_in_file, per_revolution=want_revs,
                                            progress=not args.quiet)
@@ -121,12 +128,16 @@ def run_estimate(args) -> int:
 def _input_kind(path: Path) -> str:
     from ringfit.errors import InputError
 
+    from ringfit.io.profiles import sidecar_path
+
     name = path.name.lower()
     if name.endswith(".csv"):
-        return "profile"
-    if name.endswith(".npz"):
+        # a profile has its JSON sidecar (docs/formats.md §3); any other CSV is a recording (§17.3)
+        return "profile" if name.endswith(".profile.csv") or sidecar_path(path).exists() else "recording"
+    if name.endswith((".npz", ".tdms", ".mat")):
         return "recording"
-    raise InputError("expected a *.profile.csv or a continuous *.records.npz", source=path)
+    raise InputError("expected a *.profile.csv, a continuous *.records.npz or a .tdms/.mat/.csv recording",
+                     source=path)
 
 
 def _print_estimate(est) -> None:

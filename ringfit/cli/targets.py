@@ -64,7 +64,8 @@ def _node_map(kind: str):
 
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("records", type=Path,
-                   help="records *.records.npz or UFF58 (.uff/.unv) time records (docs/formats.md §4)")
+                   help="records *.records.npz or UFF58 (.uff/.unv) time records (docs/formats.md §4), or a rig file: "
+                        "NI TDMS (.tdms), MATLAB .mat (v5, v7.3) or CSV with a header (§17)")
     p.add_argument("--out", required=True, type=Path, help="output mode table *.modes.csv (+ .modes.json sidecar)")
     p.add_argument("--band", type=_band, default=(20.0, 400.0), metavar="LOW:HIGH",
                    help="frequency range of interest in Hz, below the records' Nyquist frequency; its top sets the "
@@ -78,6 +79,9 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--axes", type=_node_map("axes"), default=None, metavar="DIR=AXIS,...",
                    help="UFF only: axis of each response direction code, e.g. 0=radial for scalar channels "
                         "(default 1=tangential,2=lateral,3=radial)")
+    p.add_argument("--channels", "--channel-map", dest="channel_map", type=Path, default=None, metavar="MAP.toml",
+                   help="TDMS/.mat/CSV only: channel map giving each channel's angle, axis, unit, sensitivity and "
+                        "the force channels, where the file does not (docs/formats.md §17.4)")
     p.add_argument("--plot", type=Path, default=None, help="also write a PNG figure")
     force_flag(p)
 
@@ -128,14 +132,15 @@ def _check_outputs(args) -> None:
     from ringfit.io.files import check_output_paths
     from ringfit.io.modes import sidecar_path
 
-    check_output_paths([args.out, sidecar_path(args.out), args.plot], overwrite=args.force, inputs=[args.records])
+    inputs = [args.records] + ([args.channel_map] if args.channel_map else [])
+    check_output_paths([args.out, sidecar_path(args.out), args.plot], overwrite=args.force, inputs=inputs)
 
 
 def _read(args, *, frf_ok: bool):
     from ringfit.io.records import read_measurement, read_records
 
     read = read_measurement if frf_ok else read_records
-    return read(args.records, angles=args.angles, axes=args.axes)
+    return read(args.records, angles=args.angles, axes=args.axes, channels=args.channel_map)
 
 
 def _finish(args, result, plot) -> int:

@@ -34,8 +34,9 @@ from ringfit.gap.localisation import localise
 from ringfit.gap.problem import GapProblem
 from ringfit.fit.result import FitResult
 from ringfit.gap.modal import OUTLIER_Z
-from ringfit.gap.ranking import (COMPUTED, chain_start, drift, effect_of, fit_chain, heldout, prior_distance,
-                                 reference_drift, rms, shrink, shrink_interval, theta_names)
+from ringfit.gap.calibration import ALPHA, DRAWS, parametric_null, random_line_null, verdict_sentence
+from ringfit.gap.ranking import (COMPUTED, JOIN, chain_start, drift, effect_of, fit_chain, heldout, parts,
+                                 prior_distance, reference_drift, rms, shrink, shrink_interval, theta_names)
 from ringfit.gap.screening import SCREEN_MIN_SCORE, screen
 from ringfit.gap.verdict import P_NOISE, P_TRY_DAMPING, PREFER_COMPUTED_PTS, RULES, acceptance, residual_test
 
@@ -106,23 +107,33 @@ def read_diagnosis(path: str | os.PathLike) -> dict:
 
 # --------------------------------------------------------------------------- one part
 def candidate_elements(problem: GapProblem) -> list[str]:
-    """The candidates of a problem: each effect fitted, and also computed where its condition fixes it."""
+    """The candidates of a problem: each effect fitted, and also computed where its condition fixes it; where
+    effects only act together on some rows (the rolling model's ``ground_contact`` and ``rotation`` on rolling
+    tables, docs/physics.md §3.7) also their composite, computed and fitted, as one candidate."""
     out = []
     for e in problem.effects:
         if e.computable(problem.domain) and problem.domain in ("modes", "damping"):
             out.append(e.name + COMPUTED)
         out.append(e.name)
+    if problem.domain == "modes" and getattr(problem.predictor, "joint", None) is not None:
+        from ringfit.gap.rolling_rows import JOINT
+
+        out += [JOIN.join(n + COMPUTED for n in JOINT), JOIN.join(JOINT)]
     return out
 
 
+def computed_of(element: str) -> str:
+    """The computed sibling of a fitted candidate (``"a+b"`` → ``"a@computed+b@computed"``)."""
+    return JOIN.join(p.removesuffix(COMPUTED) + COMPUTED for p in parts(element))
+
+
 def _variant(element: str) -> str:
-    return "computed" if element.endswith(COMPUTED) else "fitted"
+    return "computed" if all(p.endswith(COMPUTED) for p in parts(element)) else "fitted"
 
 
 def _candidate_entry(problem: GapProblem, element: str, fit: FitResult, current: FitResult, current_ho: np.ndarray,
                      reference: FitResult, scores: dict, on_top_of: tuple, group: str | None = None) -> dict:
     y = problem.y
-    name = effect_of(element)
     rb, rc = y - current.extra["pred"], y - fit.extra["pred"]
     hb, hc = y - current_ho, y - fit.extra["heldout_pred"]
     rms_c, hrms_c = rms(problem, rc), rms(problem, hc)
@@ -131,27 +142,36 @@ def _candidate_entry(problem: GapProblem, element: str, fit: FitResult, current:
     dk = len(fit.names) - len(current.names)
     dchi2 = fit.chi2 - current.chi2
     params = {}
-    sl = problem.slices()[name]
-    effect = next(e for e in problem.effects if e.name == name)
     names = theta_names(problem)
-    computed = element.endswith(COMPUTED)
-    cond_sd = problem.meta.get("condition_sd", {}).get(name, {})
-    for p, i in zip(problem.effect_params(effect), range(sl.start, sl.stop)):
-        v = fit.theta[i]
-        se = float(cond_sd.get(p.name, 0.0)) if computed else fit.stderr[names[i]]
-        plo, phi = v - 1.959964 * se, v + 1.959964 * se
-        params[p.name] = {"value": _r(v, 6), "lo": _r(max(plo, p.lo), 6), "hi": _r(min(phi, p.hi), 6),
-                          "null": p.null, "unit": p.unit, "excludes_null": bool(abs(v - p.null) > 1.959964 * se),
-                          **({"fixed_by": "the measured condition"} if computed else {})}
+    partners: set = set()
+    for piece in parts(element):
+        name = effect_of(piece)
+        sl = problem.slices()[name]
+        effect = next(e for e in problem.effects if e.name == name)
+        partners |= set(effect.baseline_partners)
+        computed = piece.endswith(COMPUTED)
+        cond_sd = problem.meta.get("condition_sd", {}).get(name, {})
+        for p, i in zip(problem.effect_params(effect), range(sl.start, sl.stop)):
+            v = fit.theta[i]
+            se = float(cond_sd.get(p.name, 0.0)) if computed else fit.stderr[names[i]]
+            plo, phi = v - 1.959964 * se, v + 1.959964 * se
+            key = p.name if len(parts(element)) == 1 else f"{name}.{p.name}"
+            params[key] = {"value": _r(v, 6), "lo": _r(max(plo, p.lo), 6), "hi": _r(min(phi, p.hi), 6),
+                           "null": p.null, "unit": p.unit, "excludes_null": bool(abs(v - p.null) > 1.959964 * se),
+                           **({"fixed_by": "the measured condition"} if computed else {}),
+                           **_physical(problem, name, p.name, v, se)}
+    partners = tuple(sorted(partners))
     d = drift(problem, fit, reference)
     guarded = set(problem.meta.get("prior_guarded", ()))
-    d2, kp = prior_distance(problem, fit.theta, effect.baseline_partners)
-    d2_ref, _ = prior_distance(problem, reference.theta, effect.baseline_partners)
+    d2, kp = prior_distance(problem, fit.theta, partners)
+    d2_ref, _ = prior_distance(problem, reference.theta, partners)
     ref_drift = reference_drift(problem, fit, reference)
     entry = {
-        "effect": name,
+        "effect": effect_of(element),
+        "element": element,
         "variant": _variant(element),
-        **({"condition": problem.meta.get("conditions", {})} if computed and problem.meta.get("conditions") else {}),
+        **({"condition": problem.meta.get("conditions", {})} if _variant(element) == "computed"
+           and problem.meta.get("conditions") else {}),
         "rms": _r(rms_c), "heldout_rms": _r(hrms_c),
         "shrink_pct": _r(shrink(problem, rb, rc), 2),
         "heldout_shrink_pct": _r(shrink(problem, hb, hc, heldout=True), 2),
@@ -169,13 +189,13 @@ def _candidate_entry(problem: GapProblem, element: str, fit: FitResult, current:
                                     for i, k in enumerate(problem.base) if not problem.is_linear(i)},
         "baseline_drift_max_relative": _r(max((abs(fit.theta[i] / reference.theta[i] - 1.0)
                                                for i, k in enumerate(problem.base)
-                                               if k.split(":")[0] not in effect.baseline_partners
+                                               if k.split(":")[0] not in partners
                                                and not problem.is_linear(i)
                                                and i not in guarded), default=0.0), 4),
         **({"reference_drift_sigma": _r(ref_drift, 3)} if ref_drift is not None else {}),
         **({"baseline_prior_distance": {"d2": _r(d2, 2), "d2_baseline_fit": _r(d2_ref, 2), "k": kp,
                                         "parameters": [problem.base[i] for i in sorted(guarded)
-                                                       if problem.base[i] not in effect.baseline_partners]}}
+                                                       if problem.base[i] not in partners]}}
            if kp else {}),
         "on_top_of": [effect_of(c) for c in on_top_of],
         "screened_out": False,
@@ -205,13 +225,37 @@ def _group_shrink(problem: GapProblem, group, hb: np.ndarray, hc: np.ndarray) ->
             "heldout_shrink_in_group_interval_pct": [_r(lo, 2), _r(hi, 2)]}
 
 
+def _physical(problem: GapProblem, effect: str, param: str, value: float, se: float) -> dict:
+    """An effect parameter in physical units per table (docs/formats.md §5 ``physical``): the contact patch's
+    half-angle [deg] and length [mm] for ``ground_contact.patch_scale``, the wheel speed Ω [rad/s] the modes
+    see for ``rotation.speed_gain``; ``{}`` for other parameters."""
+    tables = problem.meta.get("table_names")
+    if not tables:
+        return {}
+    if (effect, param) == ("ground_contact", "patch_scale"):
+        radius = problem.meta.get("outer_radius_m", math.nan)
+        out = {}
+        for t, (a, _) in zip(tables, problem.meta.get("patches", ())):
+            if a > 0:
+                ang = value * a
+                out[t] = {"half_angle_deg": _r(math.degrees(ang), 3), "half_angle_sd_deg": _r(math.degrees(se * a), 3),
+                          "length_mm": _r(2000.0 * radius * math.sin(ang), 2)}
+        return {"physical": out} if out else {}
+    if (effect, param) == ("rotation", "speed_gain"):
+        out = {t: {"omega_rad_s": _r(value * w, 4), "omega_sd_rad_s": _r(se * w, 4)}
+               for t, w in zip(tables, problem.meta.get("spins", ())) if w > 0}
+        return {"physical": out} if out else {}
+    return {}
+
+
 def _screened_entry(problem, element, current, current_ho, scores, on_top_of, reason=None):
     y = problem.y
     r, h = rms(problem, y - current.extra["pred"]), rms(problem, y - current_ho)
     min_frac = float(problem.meta.get("screen_min_fraction", 0.0))
     reason = reason or (f"screen score < {SCREEN_MIN_SCORE} or alignment^2 < {min_frac:g}: "
                         "the residual does not look like this effect")
-    return {"effect": effect_of(element), "variant": _variant(element), "rms": _r(r), "heldout_rms": _r(h),
+    return {"effect": effect_of(element), "element": element, "variant": _variant(element), "rms": _r(r),
+            "heldout_rms": _r(h),
             "shrink_pct": 0.0, "heldout_shrink_pct": 0.0, "heldout_shrink_interval_pct": [0.0, 0.0],
             "evidence": {"delta_bic": 0.0, "screen_score": _r(scores.get(element, {}).get("score", 0.0), 3),
                          "alignment": _r(scores.get(element, {}).get("alignment", 0.0), 4)},
@@ -266,7 +310,8 @@ def _prefer_computed(problem, part, chain, current, current_ho, elements, ss_b):
     **Returns:** ``(chain, fit, held-out prediction, note or None)``.
     """
     effects = tuple(c for c in chain if c != "unexplained")
-    swappable = [i for i, c in enumerate(effects) if not c.endswith(COMPUTED) and c + COMPUTED in elements]
+    singles = {p for el in elements for p in parts(el)}
+    swappable = [i for i, c in enumerate(effects) if not c.endswith(COMPUTED) and c + COMPUTED in singles]
     if not swappable or ss_b <= 0:
         return chain, current, current_ho, None
     y = problem.y
@@ -296,8 +341,72 @@ def _prefer_computed(problem, part, chain, current, current_ho, elements, ss_b):
     return chain, current, current_ho, None
 
 
-def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
-    """Run baseline, where, screen, candidates and the greedy chain on one problem."""
+def _calibrate(problem, part, chain, current, remaining, entries, alpha, draws, round_no):
+    """Test the round's accepted candidates against the nulls of :mod:`ringfit.gap.calibration` (in place: an
+    entry gets ``p_value``, ``null`` and ``null_sentence``; one that does not beat them at ``alpha`` is no longer
+    accepted). Every candidate of the round enters the null's selection, screened-out ones refitted for it."""
+    elements = []
+    for el in remaining:
+        key = chain + parts(el)
+        if key not in part.fits:
+            fit = fit_chain(problem, key, start=chain_start(problem, parts(el), current.theta))
+            if not fit.converged:
+                continue
+            part.fits[key] = fit
+        elements.append(el)
+    nulls = [parametric_null(problem, current, part.fits, chain, elements, draws, seed=round_no)]
+    if problem.domain == "modes":
+        rl = random_line_null(problem, part.fits, chain, elements, draws, seed=100 + round_no)
+        if rl is not None:
+            nulls.append(rl)
+    for c in entries:
+        if not c["accepted"] or c["element"] not in elements:
+            continue
+        el = c["element"]
+        worst = max(nulls, key=lambda n: n.p[el])
+        c["p_value"] = round(worst.p[el], 5)
+        c["null"] = {("random_line" if n.kind.startswith("random-line") else "parametric"): n.summary(el)
+                     for n in nulls}
+        c["null_sentence"] = verdict_sentence(c["effect"], worst, el, alpha)
+        c["null_draws"] = {("random_line" if n.kind.startswith("random-line") else "parametric"): n.t_null.tolist()
+                           for n in nulls}
+        if not worst.p[el] < alpha:
+            c["accepted"] = False
+            c.setdefault("rejected_because", []).append(
+                f"does not beat chance: p = {worst.p[el]:.3g} >= alpha {alpha:g} ({worst.kind.split(':')[0]} null)")
+
+
+def _computed_first(problem, part, chain, accepted, entries, alpha) -> str:
+    """The element the round adds: the best accepted, except that a fitted variant gives way to its accepted
+    computed sibling unless its likelihood-ratio test against it beats alpha (the entry says so)."""
+    from scipy.stats import chi2 as chi2_dist
+
+    best = accepted[0]
+    el = best["element"]
+    if best["variant"] != "fitted":
+        return el
+    sib = computed_of(el)
+    sib_entry = next((c for c in entries if c.get("element") == sib), None)
+    f_fit, f_sib = part.fits.get(chain + parts(el)), part.fits.get(chain + parts(sib))
+    if sib_entry is None or f_fit is None or f_sib is None:
+        return el
+    k = max(len(f_fit.names) - len(f_sib.names), 1)
+    dchi2 = max(float(f_sib.extra.get("chi2_raw", f_sib.chi2)) - float(f_fit.extra.get("chi2_raw", f_fit.chi2)), 0.0)
+    p = float(chi2_dist.sf(dchi2, k))
+    best["computed_vs_fitted"] = {"delta_chi2": _r(dchi2, 3), "free_parameters": k, "p_value": _r(p, 5),
+                                  "fitted_kept": bool(p < alpha or not sib_entry["accepted"])}
+    if p < alpha or not sib_entry["accepted"]:
+        return el
+    return sib
+
+
+def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = ALPHA,
+                     null_draws: int = DRAWS) -> PartResult:
+    """Run baseline, where, screen, candidates, their nulls and the greedy chain on one problem.
+
+    ``alpha``: an accepted candidate must beat the null of its round at this level
+    (:mod:`ringfit.gap.calibration`; ``null_draws`` draws per null; 0 turns the nulls off).
+    """
     t0 = time.perf_counter()
     base = fit_chain(problem, ())
     extrapolates = problem.domain in ("modes", "damping")
@@ -334,10 +443,10 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
             elif (not chain or rescreen) and _screened_out(problem, round_scores.get(element, {})):
                 entries.append(_screened_entry(problem, element, current, current_ho, round_scores, chain))
             else:
-                start = chain_start(problem, (element,), current.theta)
-                fit = fit_chain(problem, chain + (element,), start=start)
+                start = chain_start(problem, parts(element), current.theta)
+                fit = fit_chain(problem, chain + parts(element), start=start)
                 heldout(problem, fit)
-                part.fits[chain + (element,)] = fit
+                part.fits[chain + parts(element)] = fit
                 entries.append(_candidate_entry(problem, element, fit, current, current_ho, reference, round_scores,
                                                 chain, cur["group"]))
             if bar is not None:
@@ -347,16 +456,19 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
         rounds.append(entries)
         if not cur["excess"]:
             break
+        if any(c["accepted"] for c in entries) and null_draws > 0:
+            _calibrate(problem, part, chain, current, remaining, entries, alpha, null_draws, len(rounds))
         accepted = [c for c in entries if c["accepted"]]
         if not accepted:
             if cur["structured"]:
                 chain = chain + ("unexplained",)
             break
-        best = accepted[0]["effect"] + (COMPUTED if accepted[0].get("variant") == "computed" else "")
-        chain = chain + (best,)
+        best = _computed_first(problem, part, chain, accepted, entries, alpha)
+        chain = chain + parts(best)
         current = part.fits[chain]
         current_ho = current.extra["heldout_pred"]
-        remaining = [e for e in remaining if effect_of(e) != effect_of(best)]
+        taken = set(effect_of(best).split(JOIN))
+        remaining = [e for e in remaining if not taken & set(effect_of(e).split(JOIN))]
         cur = _structure(problem, current_ho)
         if not remaining or not cur["excess"]:
             if cur["structured"]:
@@ -370,6 +482,9 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
         cur = _structure(problem, current_ho)
     part.chain_fit = current
     effects_list = [effect_of(c) for c in chain] or ["none"]
+    calibrated = [{"effect": c["effect"], "variant": c["variant"], "p_value": c["p_value"],
+                   "sentence": c.get("null_sentence", "")}
+                  for r in rounds for c in r if c.get("accepted") and "p_value" in c]
     ss_f = float(np.sum(problem.standardised(y - current_ho, heldout=True) ** 2))
     names = _row_names(problem)
     zb, zf = problem.standardised(y - base_ho, heldout=True), problem.standardised(y - current_ho, heldout=True)
@@ -380,6 +495,7 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
     verdict = {"effect": effects_list[0], "effects": effects_list,
                "variants": [_variant(c) for c in chain if c != "unexplained"],
                **({"simplified": simplified} if simplified else {}),
+               "alpha": alpha, "null_draws": int(null_draws), "calibration": calibrated,
                "heldout_shrink_pct": _r(100.0 * (1.0 - ss_f / ss_b), 2) if effects_list[0] not in
                ("none", "unexplained") and ss_b > 0 else 0.0,
                **({"explains": explains, "leaves": leaves, "outliers": outliers} if names else {}),
@@ -388,7 +504,13 @@ def diagnose_problem(problem: GapProblem, progress: bool = True) -> PartResult:
                    f" and alignment^2 >= {float(problem.meta.get('screen_min_fraction', 0.0)):g} of the residual"),
                    "shrink": ("100 (1 - SS_after/SS_before) over held-out rows, SS = sum of psi(residual/sigma)^2, "
                               "each residual weighted by its own noise sigma; psi = Huber on robust rows"),
-                   "noise": problem.noise_method, "heldout": problem.fold_kind}}
+                   "noise": problem.noise_method, "heldout": problem.fold_kind,
+                   "calibration": (f"an accepted candidate must beat the null of its round at alpha = {alpha:g}: "
+                                   f"p = (1 + #null >= observed)/(N + 1) over {null_draws} draws of the selection "
+                                   "statistic (the best candidate's held-out shrink, linearised refits) under the "
+                                   "parametric null and, for rows matched by frequency, the random-line null "
+                                   "(docs/formats.md §5); a fitted variant replaces its computed sibling only when "
+                                   f"its likelihood-ratio test beats it at alpha")}}
     part.summary = {
         "data": problem.data_files,
         "family": {"modes": "frequency", "damping": "damping", "profiles": "profile"}[problem.domain],
@@ -491,7 +613,8 @@ def resolve_effects(effects=None):
     return tuple(e if isinstance(e, effect_library.Effect) else effect_library.get(e) for e in effects)
 
 
-def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = None) -> Diagnosis:
+def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = None, alpha: float = ALPHA,
+             null_draws: int = DRAWS) -> Diagnosis:
     """Diagnose the sim-to-real gap of a case folder (docs/formats.md §6) against the baselines of docs/physics.md §6.
 
     **Arguments:**
@@ -501,6 +624,8 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
     - ``progress``: show a tqdm bar on stderr while candidates are fitted.
     - ``noise``: optional user noise levels, ``{"freq_hz": σ, "damping": σ, "profile_ms2": σ}``;
       default: estimated from the data (see :mod:`ringfit.gap.modal`, :mod:`ringfit.gap.profile`).
+    - ``alpha``: significance level every accepted effect must beat its null at
+      (:mod:`ringfit.gap.calibration`); ``null_draws``: draws per null (0: no null, not recommended).
 
     **Returns:** :class:`Diagnosis` (``.content`` is the docs/formats.md §5 dict, ``.write(path)``).
     """
@@ -513,18 +638,18 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
     # thousand rows × ≤ 12 columns), where threaded BLAS only synchronises (50× slower on a busy machine)
     from ringfit.targets.ssi import small_matrix_threads
 
-    parts = []
+    parts_ = []
     with small_matrix_threads():
         problems = build_problems(case, chosen, noise)
         for prob in problems:
             # the mode-table parts are only a test when the folder holds test tables or nothing else
             if prob.domain in ("modes", "damping") and case.profiles and not case.tests:
                 continue
-            parts.append(diagnose_problem(prob, progress))
-    content = _combine(parts)
+            parts_.append(diagnose_problem(prob, progress, alpha, null_draws))
+    content = _combine(parts_)
     content["data"] = case.data_files
     content["elapsed_s"] = round(time.perf_counter() - t0, 2)
-    return Diagnosis(content, parts, getattr(case, "folder", None))
+    return Diagnosis(content, parts_, getattr(case, "folder", None))
 
 
 def _combine(parts: list[PartResult]) -> dict:

@@ -65,6 +65,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import dataclass
 
 import equinox as eqx
 import jax
@@ -416,28 +417,90 @@ def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
                      wheel=None if rows.wheel is None else np.concatenate([rows.wheel, np.zeros((extra, 9))]))
 
 
-def _match_missing_n(rows, ring, geometry):
-    """Assign n to rows without one: nearest mode of the model their condition computes; returns notes."""
+@dataclass
+class LineSets:
+    """What the random-line null of :mod:`ringfit.gap.calibration` needs to match new frequencies by the
+    diagnosis's own rule: the frequency problem's row dicts, each rolling table's lines
+    (:func:`ringfit.gap.rolling_rows.assign_rolling_rows`), and per row without n of another test
+    table the lines of the model its condition computes (:func:`missing_n_lines`, n = 1 … MATCH_N_MAX)."""
+
+    rows: list
+    rolling_lines: dict
+    row_lines: dict
+    cavity_hz: float
+    table_patch: list
+    rolling: object
+
+
+def missing_n_lines(r: dict, ring, geometry) -> tuple[np.ndarray, str]:
+    """The frequencies [Hz] of n = 1 … :data:`MATCH_N_MAX` in the model a row's condition computes (the loaded
+    modes of its type at the computed patch, eq. 25/26 of its branch, else eq. 18), and the model's name."""
     from ringfit.physics.loaded import loaded_natural_frequencies
     from ringfit.physics.natural import fixed_frame_frequencies, natural_frequencies, rotating_natural_frequencies
 
-    notes = {}
     n_all = np.arange(1, MATCH_N_MAX + 1, dtype=float)
-    free = np.asarray(natural_frequencies(ring, geometry, n_all))
+    if r["contact"] and r["patch"] > 0:
+        c, s = (np.asarray(x)[:MATCH_N_MAX] for x in loaded_natural_frequencies(ring, geometry, r["patch"]))
+        return (c if r["contact"] == 1 else s), "loaded modes at the computed patch"
+    if r["spin"] > 0 and r["branch"]:
+        fn = fixed_frame_frequencies if r["fixed"] else rotating_natural_frequencies
+        waves = np.abs(np.asarray(fn(ring, geometry, n_all, r["spin"])))
+        return waves[:, 0 if r["branch"] == "backward" else 1], ("eq. 26" if r["fixed"] else "eq. 25")
+    return np.asarray(natural_frequencies(ring, geometry, n_all)), "eq. 18"
+
+
+#: Two lines within this many σ of a row's frequency: its assignment is ambiguous (docs/formats.md §5).
+AMBIGUOUS_Z = 2.0
+
+
+def mixture_sigma(f, sigma, hz_assigned, hz_lines):
+    """σ of rows whose frequency ``f`` lies within :data:`AMBIGUOUS_Z` σ of a line other than the one assigned:
+    √(σ² + (Δ/2)²), Δ the spacing from the assigned line to the nearest such line (the two-line mixture in moment
+    form); ``σ`` elsewhere. Arrays broadcast over rows; ``hz_lines`` ``(L,)``. **Returns** ``(σ', ambiguous, alt)``."""
+    f, sigma, hz_assigned = (np.asarray(x, dtype=np.float64) for x in (f, sigma, hz_assigned))
+    hz = np.asarray(hz_lines, dtype=np.float64)
+    near = (np.abs(hz - f[..., None]) <= AMBIGUOUS_Z * sigma[..., None]) & (np.abs(hz - hz_assigned[..., None]) > 1e-9)
+    gap = np.where(near, np.abs(hz - hz_assigned[..., None]), np.inf)
+    j = np.argmin(gap, axis=-1)
+    ambiguous = np.any(near, axis=-1)
+    alt = np.take_along_axis(np.broadcast_to(hz, gap.shape), j[..., None], -1)[..., 0]
+    half = np.where(ambiguous, np.min(gap, axis=-1) / 2.0, 0.0)
+    return np.sqrt(sigma**2 + half**2), ambiguous, alt
+
+
+def _ambiguity(problem: GapProblem, rows, line_sets):
+    """Rows of rolling tables whose frequency lies within :data:`AMBIGUOUS_Z` σ of a second line of their table:
+    the data cannot decide between the two, so the row carries the two-line mixture (equal weights) in moment form —
+    the matched line's prediction with σ² widened by (Δ/2)², Δ the lines' spacing — instead of a free choice."""
+    problem.meta["sigma_matched"] = problem.sigma.copy()  # before any widening (the random-line null widens alike)
+    if not line_sets:
+        return
+    rec = problem.labels["rolling"]
+    for j, r in enumerate(rows):
+        if r["joint"] <= 0 or r["table"] not in line_sets:
+            continue
+        mine = [ln for ln in line_sets[r["table"]] if ln["fields"]["mode_index"] == r["mode_index"]
+                and ln["fields"]["line_k"] == r["line_k"]]
+        if not mine:
+            continue
+        sig, amb, other = mixture_sigma(r["freq"], problem.sigma[j], mine[0]["hz"],
+                                        [ln["hz"] for ln in line_sets[r["table"]]])
+        if not amb:
+            continue
+        problem.sigma[j] = float(sig)
+        label = problem.labels["label"][j]
+        if label in rec:
+            rec[label].update(ambiguous=True, alternative_hz=round(float(other), 4),
+                              mixture_sigma_hz=round(float(sig), 4))
+
+
+def _match_missing_n(rows, ring, geometry):
+    """Assign n to rows without one: nearest mode of the model their condition computes; returns notes."""
+    notes = {}
     for j, r in enumerate(rows):
         if r["n"] >= 0:
             continue
-        if r["contact"] and r["patch"] > 0:
-            c, s = (np.asarray(x)[:MATCH_N_MAX] for x in loaded_natural_frequencies(ring, geometry, r["patch"]))
-            cand = c if r["contact"] == 1 else s
-            model = "loaded modes at the computed patch"
-        elif r["spin"] > 0 and r["branch"]:
-            fn = fixed_frame_frequencies if r["fixed"] else rotating_natural_frequencies
-            waves = np.abs(np.asarray(fn(ring, geometry, n_all, r["spin"])))
-            cand = waves[:, 0 if r["branch"] == "backward" else 1]
-            model = "eq. 26" if r["fixed"] else "eq. 25"
-        else:
-            cand, model = free, "eq. 18"
+        cand, model = missing_n_lines(r, ring, geometry)
         k = int(np.argmin(np.abs(cand - r["freq"])))
         r["n"] = k + 1
         notes[j] = (f"n matched to {k + 1} by frequency ({r['freq']:.1f} Hz vs {cand[k]:.1f} Hz of {model})")
@@ -531,15 +594,24 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
         if note:
             conditions[ti] = "; ".join(x for x in (conditions[ti], note) if x)
     rows, cavity_hz = _table_rows(tables, geometry, patches, spins, cavity_splits(tables, ring_ref, geometry))
-    rolling, rolling_notes, rolling_records = assign_rolling_rows(tables, rows, ring_ref, geometry, patches)
+    for r in rows:  # rows whose n (and type) the table leaves to matching by frequency: the random-line null's rows
+        r["matchable"] = (not r["reference"]) and r["n"] < 0
+    rolling, rolling_notes, rolling_records, line_sets = assign_rolling_rows(tables, rows, ring_ref, geometry, patches)
     if rolling is not None:
         for ti, note in rolling.notes.items():
             conditions[ti] = "; ".join(x for x in (conditions[ti], note) if x)
+    row_lines = {j: missing_n_lines(r, ring_ref, geometry)[0] for j, r in enumerate(rows)
+                 if r["matchable"] and r["joint"] == 0 and r["n"] < 0}
     match_notes = _match_missing_n(rows, ring_ref, geometry)
     for j, note in rolling_notes.items():
         match_notes[j] = "; ".join(x for x in (note, match_notes.get(j)) if x)
     problems = [_frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_rel, sigma_method,
                                    match_notes, patches, conditions, effects, noise, rolling, rolling_records)]
+    problems[0].meta["lines"] = LineSets(rows=rows, rolling_lines=line_sets, row_lines=row_lines,
+                                         cavity_hz=cavity_hz, table_patch=[p[0] for p in patches], rolling=rolling)
+    _ambiguity(problems[0], rows, line_sets)
+    problems[0].meta.update(table_names=[table_label(t, i) for i, t in enumerate(tables)], patches=patches,
+                            spins=spins, outer_radius_m=float(geometry.outer_radius))
     damp = [r for r in rows if math.isfinite(r["damping"]) and r["damping"] > 0]
     if len(damp) >= 4:
         problems.append(_damping_problem(tables, damp, cavity_hz, geometry, ring_ref, effects, noise))
@@ -795,3 +867,80 @@ def _damping_problem(tables, rows, cavity_hz, geometry, ring_ref, effects, noise
 
 __all__ = ["build_modal_problems", "ModalRows", "ModalData", "ModalPredictor", "DampingPredictor",
            "second_difference_sigma", "contact_patch", "spin_of", "table_label", "HUBER", "OUTLIER_Z"]
+
+
+def line_problem(problem: GapProblem):
+    """The *line problem* of a frequency problem whose test rows were matched by frequency (the random-line null
+    of :mod:`ringfit.gap.calibration`): the problem's rows followed by one row per line a new frequency of such a
+    row could be matched to (each rolling table's lines, with the labels the shared assignment gives; for a row
+    of another table, n = 1 … :data:`MATCH_N_MAX` of the model its condition computes), predicted by the same
+    predictor. ``None`` when no row was matched by frequency.
+
+    **Returns:** ``(line_problem, groups, spans)``: ``groups`` — per rolling table (or per row elsewhere)
+    its row positions ``rows``, ``kind`` and ``assign(f) -> (B, r)`` line-problem row indices for
+    frequencies ``f`` ``(B, r)`` by the diagnosis's rule (one assignment per rolling table by the matching
+    cost of ``ringfit campbell``; the nearest line elsewhere); ``spans`` — ``{table: (lowest, highest)}``
+    measured frequency. Cached in ``problem.meta``.
+    """
+    if "line_problem" in problem.meta:
+        return problem.meta["line_problem"]
+    from scipy.optimize import linear_sum_assignment
+
+    L = problem.meta.get("lines")
+    rows = L.rows if L is not None else []
+    m = len(rows)
+    matchable = [j for j, r in enumerate(rows) if r.get("matchable")]
+    if not matchable:
+        problem.meta["line_problem"] = None
+        return None
+    spans = {t: (min(r["freq"] for r in rows if r["table"] == t), max(r["freq"] for r in rows if r["table"] == t))
+             for t in {rows[j]["table"] for j in matchable}}
+    extra, groups = [], []
+    rolling_rows: dict = {}
+    for j in matchable:
+        if rows[j]["joint"] > 0 and rows[j]["table"] in L.rolling_lines:
+            rolling_rows.setdefault(rows[j]["table"], []).append(j)
+    for t, js in rolling_rows.items():
+        lines = L.rolling_lines[t]
+        start = m + len(extra)
+        extra += [{**rows[js[0]], **ln["fields"], "freq": ln["hz"], "tag": "", "branch": "", "matchable": False}
+                  for ln in lines]
+        hz = np.array([ln["hz"] for ln in lines])
+        sg = np.array([ln["sigma"] for ln in lines])
+        cost = np.array([ln["cost"] for ln in lines])
+
+        def assign(f, hz=hz, sg=sg, cost=cost, start=start):
+            c = ((f[..., None] - hz) / sg) ** 2 + cost  # (B, r, lines)
+            out = start + np.argmin(c, axis=-1)  # rows the assignment leaves without a line: their nearest
+            for b in range(f.shape[0]):
+                ri, ci = linear_sum_assignment(np.minimum(c[b], 1e6))
+                out[b, ri] = start + ci
+            return out
+
+        groups.append(dict(kind="rolling table", table=t, rows=np.asarray(js), assign=assign, hz=hz, start=start))
+    for j in matchable:
+        if j not in L.row_lines:
+            continue
+        hz = np.asarray(L.row_lines[j], dtype=np.float64)
+        start = m + len(extra)
+        extra += [{**rows[j], "n": k + 1, "freq": float(h), "matchable": False} for k, h in enumerate(hz)]
+        groups.append(dict(kind="nearest", table=rows[j]["table"], rows=np.asarray([j]),
+                           assign=lambda f, hz=hz, start=start: start + np.argmin(np.abs(f[..., None] - hz), axis=-1)))
+    if not groups:
+        problem.meta["line_problem"] = None
+        return None
+    every = list(rows) + extra
+    mrows = _rows_module(every, 1.0, L.cavity_hz, L.table_patch, L.rolling)
+    data = ModalData(rows=pad_rows(mrows), ring=problem.data.ring, geometry=problem.data.geometry)
+    p = problem.predictor
+    predictor = ModalPredictor(effects=p.effects, base=p.base, sizes=p.sizes,
+                               joint=joint_for(p.effects, p.sizes, len(p.base), rolling_tables(every)))
+    y = np.array([r["freq"] for r in every])
+    M = len(every)
+    lp = dataclasses.replace(
+        problem, y=y, sigma=np.concatenate([problem.sigma, TEST_SIGMA_FLOOR_REL * y[m:]]),
+        robust=np.concatenate([np.asarray(problem.robust, dtype=bool), np.ones(M - m, dtype=bool)]),
+        scale=np.ones(M), folds=np.zeros(M, dtype=int), data=data, predictor=predictor, sigma_heldout=None,
+        meta={**problem.meta, "padded_rows": int(data.rows.n.shape[0]), "line_problem": None})
+    problem.meta["line_problem"] = (lp, groups, spans)
+    return problem.meta["line_problem"]

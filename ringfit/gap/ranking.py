@@ -49,9 +49,20 @@ BASE_LOG_RANGE = 3.0
 COMPUTED = "@computed"
 
 
+#: Joins the parts of a composite candidate (effects that only act together on some rows, e.g. the rolling
+#: model's ``ground_contact+rotation``): one candidate, added to the chain as its parts.
+JOIN = "+"
+
+
+def parts(element: str) -> tuple[str, ...]:
+    """The chain elements of a candidate (``"ground_contact@computed+rotation@computed"`` → its two parts)."""
+    return tuple(element.split(JOIN))
+
+
 def effect_of(element: str) -> str:
-    """The effect name of a chain element (``"ground_contact@computed"`` → ``"ground_contact"``)."""
-    return element.removesuffix(COMPUTED)
+    """The effect name of a chain element (``"ground_contact@computed"`` → ``"ground_contact"``; a composite
+    ``"a@computed+b@computed"`` → ``"a+b"``)."""
+    return JOIN.join(p.removesuffix(COMPUTED) for p in parts(element))
 
 
 class GapResiduals(AbstractResiduals):
@@ -174,7 +185,7 @@ def _free_names(problem: GapProblem, chain) -> tuple[str, ...]:
     names = theta_names(problem)
     sl = problem.slices()
     idx = list(range(len(problem.base)))
-    for name in chain:
+    for name in (p for c in chain for p in parts(c)):
         if not name.endswith(COMPUTED):
             idx.extend(range(sl[name].start, sl[name].stop))
     return tuple(names[i] for i in idx)
@@ -183,7 +194,7 @@ def _free_names(problem: GapProblem, chain) -> tuple[str, ...]:
 def chain_start(problem: GapProblem, chain, theta) -> np.ndarray:
     """``theta`` with each chain effect set to its start (fitted) or its condition value (computed)."""
     theta = np.array(theta, dtype=np.float64)
-    for element in chain:
+    for element in (p for c in chain for p in parts(c)):
         name = effect_of(element)
         sl = problem.slices()[name]
         e = next(e for e in problem.effects if e.name == name)

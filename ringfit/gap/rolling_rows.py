@@ -90,18 +90,21 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
     the ring fitted to ``free.modes.csv`` (``k_tread`` of the diagnosis); ``patches`` —
     ``(a, σ_a)`` of each table's static contact solve.
 
-    **Returns:** ``(conditions, notes, records)``: :class:`RollingConditions` (``None``
-    without rolling tables), ``{row position: match sentence}`` and ``{row position:
-    structured match}`` (n, direction, tag, line k, frame, model frequency, z, status).
+    **Returns:** ``(conditions, notes, records, line_sets)``: :class:`RollingConditions` (``None``
+    without rolling tables), ``{row position: match sentence}``, ``{row position:
+    structured match}`` (n, direction, tag, line k, frame, model frequency, z, status) and
+    ``{table index: [line dicts]}`` — every line a row of that table could be matched to
+    (``hz``, matching ``cost`` and ``sigma``, the row ``fields`` of :func:`line_fields`), for the
+    random-line null of :mod:`ringfit.gap.calibration` and the ambiguity of a match.
     """
-    from ringfit.gap.campbell import _group_key, match_tables
+    from ringfit.gap.campbell import MODEL_TOLERANCE, _candidates, _group_key, match_tables
 
     T = len(tables)
     sel = [ti for ti, t in enumerate(tables) if is_rolling(t)]
     if not sel:
-        return None, {}, {}
+        return None, {}, {}, {}
     omega, lead, trail = np.zeros(T), np.zeros(T), np.zeros(T)
-    table_notes, notes, records = {}, {}, {}
+    table_notes, notes, records, line_sets = {}, {}, {}, {}
     by_drum: dict = {}
     for ti in sel:
         by_drum.setdefault(tables[ti].condition.get("drum_diameter_m"), []).append(ti)
@@ -116,6 +119,12 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
             s = int(np.argmin(np.abs(d.speed_kmh - round(cond.speed_kmh, 9))))
             omega[ti] = cond.omega
             lead[ti], trail[ti] = math.radians(d.leading_deg[s]), math.radians(d.trailing_deg[s])
+            patch = patches[ti][0]
+            line_sets[ti] = [dict(hz=c.hz, cost=-2.0 * math.log(max(c.weight, 1e-12)),
+                                  sigma=MODEL_TOLERANCE * c.hz,
+                                  fields=line_fields(c.n, c.direction, c.tag, int(d.mode_index[s, c.branch]),
+                                                     float(c.k or 0), patch))
+                             for c in _candidates(d, s, cond.frame)]
             table_notes[ti] = (f"rolling model (docs/physics.md §3.7): Ω = {cond.omega:.4g} rad/s from "
                                f"{cond.source_speed}, contact arc {d.leading_deg[s]:.2f}…{d.trailing_deg[s]:.2f} deg "
                                f"of the steady rolling solution at {cond.load_n:g} N, {cond.frame} frame, "
@@ -132,14 +141,53 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
                     notes[j] = "rolling model: no branch to match (the row keeps the single-effect predictions)"
                     continue
                 r.update(joint=1.0, mode_index=int(a["mode_index"]), line_k=float(a["k"]))
+                shared = _shared_assignment(r, rec, patches[ti][0])
                 records[j] = {"model_branch": rec["model_branch"], "model_n": rec["model_n"],
                               "model_direction": rec["model_direction"], "model_tag": rec["model_tag"],
                               "model_k": rec["model_k"], "frame": rec["frame"], "model_hz": _num(rec["model_hz"]),
                               "z": _num(rec["z"]), "status": rec["status"]}
                 notes[j] = f"rolling model: {rec['note']}".rstrip(".")
+                if shared:
+                    notes[j] += "; " + shared
             offset += len(t)
     _single_effect_labels(rows, ring, geometry, patches, notes, sel)
-    return RollingConditions(omega, lead, trail, table_notes), notes, records
+    return RollingConditions(omega, lead, trail, table_notes), notes, records, line_sets
+
+
+def line_fields(n: int, direction: str, tag: str, mode_index: int, line_k: float, patch: float) -> dict:
+    """The row fields a row assigned to one line of the rolling model takes (the shared assignment).
+
+    One assignment serves the baseline and every candidate: the line's dominant order ``n``
+    (eq. 18 of that n is the baseline), its travelling direction as the wave of eq. 25/26
+    (``rotation`` alone; none for a standing mode), its loaded-mode type from its symmetry about
+    the patch (``ground_contact`` alone: ``extr``/``vert`` the cos type, ``0``/``hort`` the sin
+    type; none for a travelling mode), and its mode and sensor line (the joint model).
+    """
+    contact = 1 if tag in ("extr", "vert") else 2 if tag in ("0", "hort") else 0
+    return dict(n=int(n), wave=direction if direction in ("backward", "forward") else "", contact=contact,
+                patch=patch if contact else 0.0, joint=1.0, mode_index=int(mode_index), line_k=float(line_k))
+
+
+def _shared_assignment(r: dict, rec: dict, patch: float) -> str:
+    """Fill the labels a row lacks (n, wave, loaded-mode type) from the line it was matched to
+    (:func:`line_fields`), so that the baseline and every candidate see the same assignment
+    (never each model its own nearest line). **Returns** the sentence that says so ('' if nothing was missing)."""
+    cand = rec.get("_cand")
+    if cand is None:
+        return ""
+    f = line_fields(cand.n, cand.direction, cand.tag, r["mode_index"], r["line_k"], patch)
+    said = []
+    if r["n"] < 1:
+        r["n"] = f["n"]
+        said.append(f"n = {f['n']}")
+    if not r["branch"] and not r["wave"] and f["wave"]:
+        r["wave"] = f["wave"]
+        said.append(f"{f['wave']} wave")
+    if r["contact"] == 0 and f["contact"] and patch > 0:
+        r["contact"], r["patch"] = f["contact"], patch
+        said.append("cos-type (extr)" if f["contact"] == 1 else "sin-type (0)")
+    return ("shared assignment (baseline and every candidate): " + ", ".join(said) + " of the matched line"
+            if said else "")
 
 
 def _num(x):
@@ -148,16 +196,17 @@ def _num(x):
 
 
 def _single_effect_labels(rows, ring, geometry, patches, notes, sel):
-    """Rows of rolling tables without a branch / tag: the nearer wave of eq. 25/26 (for ``rotation``
-    alone) and the nearer cos/sin-type loaded mode (for ``ground_contact`` alone), stated."""
+    """Rows of rolling tables the rolling model could not match (no line): the nearer wave of eq. 25/26
+    (for ``rotation`` alone) and the nearer cos/sin-type loaded mode (for ``ground_contact`` alone), stated.
+    Matched rows take their labels from their line (:func:`_shared_assignment`)."""
     from ringfit.physics.loaded import loaded_natural_frequencies
     from ringfit.physics.natural import fixed_frame_frequencies, rotating_natural_frequencies
 
     loaded = {}
     n_all = np.arange(1, ROLLING_N_MAX + 1, dtype=float)
     for j, r in enumerate(rows):
-        if r["table"] not in sel:
-            continue
+        if r["table"] not in sel or r["joint"] > 0:
+            continue  # a row matched to a line of the rolling model takes that line's labels (shared assignment)
         said = []
         if r["n"] < 1 and r["spin"] > 0:
             # no n in the table: the nearest wave of eq. 25/26 over n = 1 … ROLLING_N_MAX gives the n of

@@ -26,7 +26,7 @@ import numpy as np
 
 from ringfit.gap.problem import GapProblem
 from ringfit.fit.result import FitResult
-from ringfit.gap.ranking import COMPUTED, chain_start, effect_of, predict, predict_and_jacobian
+from ringfit.gap.ranking import COMPUTED, chain_start, effect_of, parts, predict, predict_and_jacobian
 
 SCREEN_MIN_SCORE = 1.0
 STEP = 0.05
@@ -55,15 +55,20 @@ def screen(problem: GapProblem, baseline: FitResult, elements=None) -> dict[str,
     if elements is None:
         elements = [e.name for e in problem.effects]
     for element in elements:
-        e = next(x for x in problem.effects if x.name == effect_of(element))
-        if element.endswith(COMPUTED):
-            th = chain_start(problem, (element,), th0)
+        pieces = parts(element)
+        if all(p.endswith(COMPUTED) for p in pieces):
+            th = chain_start(problem, pieces, th0)
             delta = (predict(problem, th) - p0) / sig
             delta = delta - Q @ (Q.T @ delta)
             score = float(2.0 * r @ delta - delta @ delta)
             out[element] = dict(score=score, alignment=float(np.sqrt(max(score, 0.0) / max(np.sum(r**2), 1e-300))))
             continue
+        effs = [next(x for x in problem.effects if x.name == effect_of(p)) for p in pieces]
+        if len(effs) > 1:
+            out[element] = _composite_score(problem, pieces, effs, th0, p0, r, sig, Q)
+            continue
         cols = []
+        e = effs[0]
         for j, p in zip(range(sl[e.name].start, sl[e.name].stop), problem.effect_params(e)):
             h = STEP * p.span * (1.0 if p.start >= p.null else -1.0)
             if p.null + h > p.hi or p.null + h < p.lo:
@@ -84,3 +89,25 @@ def screen(problem: GapProblem, baseline: FitResult, elements=None) -> dict[str,
         score = float(np.sum((S @ coef) ** 2))
         out[element] = dict(score=score, alignment=float(np.sqrt(score / max(np.sum(r**2), 1e-300))))
     return out
+
+
+def _composite_score(problem, pieces, effs, th0, p0, r, sig, Q) -> dict:
+    """Screen of a composite of fitted effects that acts only when all its parts are on (the rolling model):
+    the χ² removed by the jump to its start plus a linearised step of its parameters from there."""
+    sl = problem.slices()
+    th_s = chain_start(problem, pieces, th0)
+    ps = predict(problem, th_s)
+    rs = r - (ps - p0) / sig
+    rs = rs - Q @ (Q.T @ (rs - r))  # the baseline's own directions are projected out of the jump
+    cols = []
+    for e in effs:
+        for j, p in zip(range(sl[e.name].start, sl[e.name].stop), problem.effect_params(e)):
+            h = STEP * p.span * (-1.0 if p.start + STEP * p.span > p.hi else 1.0)
+            th = th_s.copy()
+            th[j] = p.start + h
+            cols.append((predict(problem, th) - ps) / sig / h)
+    S = np.stack(cols, 1)
+    S = S - Q @ (Q.T @ S)
+    coef, *_ = np.linalg.lstsq(S, rs, rcond=None)
+    score = float(np.sum(r**2) - np.sum((rs - S @ coef) ** 2))
+    return dict(score=score, alignment=float(np.sqrt(max(score, 0.0) / max(np.sum(r**2), 1e-300))))

@@ -457,8 +457,13 @@ def verify_members(path: Path, zf: zipfile.ZipFile) -> None:
                     pass
 
 
-def read_continuous(path: str | os.PathLike, *, verify: bool = True) -> ContinuousRecord:
-    """Open a continuous ``*.records.npz`` without loading its big channels.
+def read_continuous(path: str | os.PathLike, *, verify: bool = True,
+                    channels: str | os.PathLike | None = None) -> ContinuousRecord:
+    """Open a continuous ``*.records.npz`` without loading its big channels, or read a rig file.
+
+    A ``.tdms``, ``.mat`` or ``.csv`` file (docs/formats.md §17) is read into
+    memory by :mod:`ringfit.io.rig`, ``channels`` naming
+    its channel map when the file lacks channel metadata.
 
     ``verify`` (default) checks every member against its CRC first
     (:func:`verify_members`), so a corrupted file is refused rather than read.
@@ -468,6 +473,18 @@ def read_continuous(path: str | os.PathLike, *, verify: bool = True) -> Continuo
     missing or misshapen keys, an unknown axis, two encoders, channels of
     unequal length.
     """
+    from ringfit.io.rig import continuous_fields, load_channel_map, read_rig, rig_format
+
+    if rig_format(path) is not None:
+        cmap = load_channel_map(channels)  # the map's own errors before the (possibly long) read
+        rig = read_rig(path, lazy=True)  # TDMS: channels read chunk by chunk; .mat and CSV whole
+        try:
+            return ContinuousRecord(**continuous_fields(rig, cmap))
+        except BaseException:
+            rig.close()
+            raise
+    if channels is not None:
+        raise InputError("--channels applies to TDMS, .mat and CSV files; an .npz names its own channels", source=path)
     path = existing_file(path, "a continuous .npz record")
     try:
         zf = zipfile.ZipFile(path)

@@ -34,23 +34,30 @@ import numpy as np
 from ringfit.errors import InputError
 
 KINDS = ("records", "case", "cleat", "profiles", "rolling")
+#: Rig formats ``records`` can also be written in (docs/formats.md §17).
+RIG_FORMATS = ("tdms", "mat", "csv")
 
 
 def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = False, progress: bool = False,
-                  effect: str | None = None) -> list[Path]:
+                  fmt: str | None = None, effect: str | None = None) -> list[Path]:
     """Write the example ``kind`` into ``folder`` (created if missing); returns the paths written.
 
-    ``effect``: for ``case``, the effect hidden in the case folder (one of
+    ``fmt`` (``records`` only): also write the records as ``"tdms"``, ``"mat"``
+    or ``"csv"`` (+ channel map), docs/formats.md §17.
+    ``effect`` (``case`` only): the effect hidden in the case folder (one of
     :data:`ringfit.synth.cases.MODAL_INJECTIONS` or ``EXTRA_INJECTIONS``; default ``ground_contact``).
 
-    **Raises** :class:`InputError` for an unknown kind or effect, an effect for another kind, a
-    ``folder`` that is a file, or files that exist there already (unless ``overwrite``).
+    **Raises** :class:`InputError` for an unknown kind, format or effect, a format or effect for
+    another kind, a ``folder`` that is a file, or files that exist there already (unless ``overwrite``).
     """
     from ringfit.io.files import check_output_path
     from ringfit.synth.cases import EXTRA_INJECTIONS, MODAL_INJECTIONS
 
     if kind not in KINDS:
         raise InputError(f"unknown example {kind!r}; expected one of {', '.join(KINDS)}")
+    if fmt is not None and (kind != "records" or fmt not in RIG_FORMATS):
+        raise InputError(f"format {fmt!r} for example {kind!r}; expected one of {', '.join(RIG_FORMATS)} "
+                         "with the records example")
     if effect is not None and kind != "case":
         raise InputError(f"--effect is for the 'case' example only, not {kind!r}", source="--effect")
     if effect is not None and effect not in MODAL_INJECTIONS + EXTRA_INJECTIONS:
@@ -63,10 +70,12 @@ def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = Fal
     folder.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".ringfit-example-", dir=folder))
     try:
-        if kind == "case":
+        if kind == "records":
+            _records(tmp, progress, fmt)
+        elif kind == "case":
             _case(tmp, progress, effect or "ground_contact")
         else:
-            {"records": _records, "cleat": _cleat, "profiles": _profiles, "rolling": _rolling}[kind](tmp, progress)
+            {"cleat": _cleat, "profiles": _profiles, "rolling": _rolling}[kind](tmp, progress)
         made = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
         for rel in made:  # every destination checked before anything is moved
             dst = folder / rel
@@ -114,7 +123,7 @@ def _ring_table(ring) -> str:
         f"| {a} | `{b}` | {float(c):.6g} | {d} |" for a, b, c, d in rows)
 
 
-def _records(folder: Path, progress: bool) -> None:
+def _records(folder: Path, progress: bool, fmt: str | None = None) -> None:
     from ringfit.io.records import write_records
     from ringfit.synth.records import impact_records, ring_modes
 
@@ -125,6 +134,20 @@ def _records(folder: Path, progress: bool) -> None:
                          impacts_per_angle=2, sensor_delay_s=0.4e-3, noise=0.01, seed=12)
     write_records(rec, folder / "impact.records.npz")
     write_records(rec, folder / "impact.uff")
+    rig_line, rig_try = "", ""
+    if fmt in ("tdms", "mat"):
+        write_records(rec, folder / f"impact.{fmt}")
+        what = "NI TDMS (a group per record)" if fmt == "tdms" else "MATLAB v5 (ringfit's keys as variables)"
+        rig_line = f" and in {what} form in `impact.{fmt}`"
+        rig_try = f"ringfit ssi impact.{fmt} --delay 0.0004 --out {fmt}.modes.csv\n"
+    elif fmt == "csv":
+        from ringfit.io.channel_map import write_channel_map
+        from ringfit.io.csv_records import write_csv_records
+
+        _, cmap = write_csv_records(rec, folder / "impact.csv")
+        write_channel_map(cmap, folder / "impact.channels.toml")
+        rig_line = " and as CSV in `impact.csv` (its channel map, angles and axes, in `impact.channels.toml`)"
+        rig_try = "ringfit ssi impact.csv --channels impact.channels.toml --delay 0.0004 --out csv.modes.csv\n"
     _starting_tyre(folder)
     lines = "\n".join(f"| {'cavity' if k == 'acoustic' else int(n)} | {k} | {f:.2f} | {100 * z:.2f} |"
                       for n, k, f, z in zip(modes.n, modes.kind, modes.freq_hz, modes.damping))
@@ -134,7 +157,7 @@ Written by `ringfit example records`. A free tyre (Table 9 geometry, radius
 {float(geometry.radius)} m) struck radially at 0° and read by one sensor moved round the tread in
 15° steps, two impacts per angle (records × axes × samples = {rec.acc.shape}, {rec.fs_hz:g} Hz,
 radial and tangential, hammer force included, the acceleration 0.4 ms behind the force,
-noise 1 % of the signal's rms). The same records are in UFF58 form in `impact.uff`.
+noise 1 % of the signal's rms). The same records are in UFF58 form in `impact.uff`{rig_line}.
 
 ## The truth
 
@@ -156,7 +179,7 @@ The ring they come from (eq. 18 of docs/physics.md §2.1):
 ringfit ssi impact.records.npz --delay 0.0004 --out ssi.modes.csv --plot ssi.png
 ringfit frf impact.records.npz --delay 0.0004 --out frf.modes.csv --plot frf.png
 ringfit ssi impact.uff --delay 0.0004 --out uff.modes.csv
-ringfit fit ssi.modes.csv --tyre tyre.toml --out fitted.toml
+{rig_try}ringfit fit ssi.modes.csv --tyre tyre.toml --out fitted.toml
 ringfit sample ssi.modes.csv --tyre fitted.toml --out posterior.h5
 ringfit report posterior.h5 --out report.html
 ```

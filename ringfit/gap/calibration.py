@@ -1,0 +1,279 @@
+"""The null of a verdict: how much held-out shrink the diagnosis's own selection finds when no effect is there.
+
+A held-out shrink is only evidence if chance alone rarely produces it. Chance here
+includes the *selection*: several candidates are refitted and the best is kept, and
+rows without labels are matched to the nearest of many model lines — a model with more
+lines explains random frequencies better. So every acceptance is tested against the
+distribution of the **selection statistic** on data drawn with no effect in it
+(docs/formats.md §5 ``null``, docs/physics.md §6.4):
+
+    T = max over the round's candidates c of  1 − SS_c / SS_current,
+
+SS the held-out sum of ψ(residual/σ)² (the diagnosis's own definition). An accepted
+candidate with observed statistic T_c gets ``p = (1 + #{T* ≥ T_c}) / (N + 1)`` over N
+null draws (Monte-Carlo error √(p(1−p)/N) reported), and stands only when p < α
+(``--alpha``, default :data:`ALPHA`). Two nulls:
+
+- **parametric** (every kind of data): the rows are redrawn from the current model's
+  prediction (the baseline in the first round, the accepted chain later) with the row noise
+  model, labels kept as given — Gaussian with each row's σ for mode tables (the reference
+  table is held as measured: it is the baseline's data), the current residual
+  phase-randomised per run and channel for profiles (its spectrum kept: coloured noise stays
+  coloured). The candidates' statistics are those of linearised refits (below).
+- **random-line** (mode tables whose rows were matched by frequency, i.e. without n): those
+  rows' frequencies are redrawn uniformly over their table's span at its row count and
+  matched by the diagnosis's own rule (the rolling tables: the lines of the rolling model at
+  the computed condition, one assignment per table by cost; other tables: the nearest mode of
+  the model their condition computes); labelled test rows are drawn from the baseline. Its
+  statistic is the total shrink of the chain so far plus each candidate against the baseline,
+  so a chain of two effects is judged as a whole.
+
+An effect must beat both (``p`` is the larger of the two).
+
+**Linearised refits, vectorised over draws.** Each candidate's fit θ̂ to the measured data
+gives its prediction p̂ and Jacobian J (solver coordinates u: logs of positive parameters,
+effect parameters scaled) at every row; a refit to data y* on the train rows of a fold is
+the Gauss–Newton step from θ̂ with the refit's own prior, ``Δu = (JᵀWJ + Λ)⁻¹(JᵀW(y* − p̂) −
+Λ(û − μ))``, and the held-out residual of the fold's rows is ``y* − p̂ − J Δu``. The same
+formula gives the observed statistic (y* = y), so observed and null are computed alike. For
+the random-line null the rows' predictions and Jacobians are gathered from a *line problem*:
+the frequency problem's rows plus one row per line a new frequency could be matched to,
+evaluated once per candidate by the diagnosis's own predictor. The Huber weighting of robust
+rows enters the sums (ψ), not the linearised refits.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ringfit.fit.engine import LOG
+from ringfit.gap.problem import GapProblem
+from ringfit.gap.ranking import coordinates, gap_prior, parts, predict_and_jacobian, theta_names
+
+#: Default significance level of an acceptance (``ringfit diagnose --alpha``).
+ALPHA = 0.01
+#: Default number of null draws (per null).
+DRAWS = 200
+
+
+@dataclass
+class Linearised:
+    """One fit's prediction, Jacobian in solver coordinates and prior at its optimum (see module docstring)."""
+
+    pred: np.ndarray  # (M,)
+    J: np.ndarray  # (M, k)
+    u_hat: np.ndarray  # (k,)
+    lam: np.ndarray  # (k, k) prior precision
+    prior_grad: np.ndarray  # (k,) Λ(û − μ)
+
+
+def linearise(problem: GapProblem, fit) -> Linearised:
+    """:class:`Linearised` of ``fit`` (a :func:`~ringfit.gap.ranking.fit_chain` result) on ``problem``'s rows."""
+    free = np.asarray(fit.free_index, dtype=int)
+    theta = np.asarray(fit.theta, dtype=np.float64)
+    pred, J = predict_and_jacobian(problem, theta, free)
+    coords = coordinates(problem)
+    dth_du = np.array([theta[i] if coords[i].kind == LOG else coords[i].scale for i in free])
+    u_hat = np.array([float(coords[i].to_u(theta[i])) for i in free])
+    names = theta_names(problem)
+    prior = gap_prior(problem)
+    k = free.size
+    if prior is not None:
+        W, mean = prior.rows(tuple(names[i] for i in free), k)
+    else:
+        W, mean = np.zeros((k, k)), np.zeros(k)
+    lam = W.T @ W
+    return Linearised(pred, J * dth_du[None, :], u_hat, lam, lam @ (u_hat - mean))
+
+
+def heldout_linear(lin: Linearised, y, w2, folds, idx=None) -> np.ndarray:
+    """Held-out residuals ``(B, m)`` of the linearised refits to ``y`` ``(B, m)`` (``w2`` = 1/σ², ``(B, m)`` or
+    ``(m,)``), fold by fold; ``idx`` ``(B, m)``: the line-problem row each row is matched to (None: row i)."""
+    y = np.atleast_2d(np.asarray(y, dtype=np.float64))
+    B, m = y.shape
+    if idx is None:
+        pred = np.broadcast_to(lin.pred[:m], (B, m))
+        J = np.broadcast_to(lin.J[:m], (B, m, lin.J.shape[1]))
+    else:
+        pred, J = lin.pred[idx], lin.J[idx]
+    w2 = np.broadcast_to(w2, (B, m))
+    r = y - pred
+    e = np.empty_like(r)
+    k = J.shape[2]
+    ridge = 1e-10 * np.eye(k)
+    for f in np.unique(folds):
+        te = folds == f
+        tr = ~te
+        if k == 0:
+            e[:, te] = r[:, te]
+            continue
+        Jt = J[:, tr]
+        A = np.einsum("bmi,bm,bmj->bij", Jt, w2[:, tr], Jt) + lin.lam + ridge * (1.0 + np.trace(lin.lam))
+        g = np.einsum("bmi,bm->bi", Jt, w2[:, tr] * r[:, tr]) - lin.prior_grad
+        d = np.linalg.solve(A, g[..., None])[..., 0]
+        e[:, te] = r[:, te] - np.einsum("bmi,bi->bm", J[:, te], d)
+    return e
+
+
+def sum_of_squares(problem: GapProblem, e, sigma) -> np.ndarray:
+    """``(B,)`` Σ ψ(e/σ)² with the problem's Huber function on its robust rows."""
+    z = np.asarray(e) / sigma
+    if problem.robust is not None and problem.huber:
+        c = float(problem.huber)
+        a = np.abs(z)
+        z = np.where(np.asarray(problem.robust, dtype=bool) & (a > c), np.sqrt(np.maximum(2 * c * a - c * c, 0.0)), z)
+    return np.sum(z**2, axis=-1)
+
+
+@dataclass
+class NullResult:
+    """One null of one round: its ``kind``, the null statistic per draw ``t_null`` (fractions), the observed
+    statistic and p-value per candidate element."""
+
+    kind: str
+    t_null: np.ndarray
+    observed: dict
+    p: dict
+    note: str
+
+    @property
+    def draws(self) -> int:
+        return int(self.t_null.size)
+
+    def summary(self, element: str) -> dict:
+        p = self.p[element]
+        return {"kind": self.kind, "draws": self.draws, "statistic": self.note,
+                "median_pct": round(100 * float(np.median(self.t_null)), 2),
+                "q95_pct": round(100 * float(np.quantile(self.t_null, 0.95)), 2),
+                "mean_pct": round(100 * float(np.mean(self.t_null)), 2),
+                "sd_pct": round(100 * float(np.std(self.t_null)), 2),
+                "observed_pct": round(100 * self.observed[element], 2),
+                "p_value": p, "p_mc_error": round(math.sqrt(p * (1 - p) / self.draws), 4)}
+
+
+def _p_values(t_null: np.ndarray, observed: dict) -> dict:
+    n = t_null.size
+    return {c: float((1 + np.sum(t_null >= t - 1e-12)) / (n + 1)) for c, t in observed.items()}
+
+
+def _phase_randomised(res: np.ndarray, series, rng, B: int) -> np.ndarray:
+    """``(B, m)`` surrogates of ``res``: per series, Fourier amplitudes kept, phases drawn at random."""
+    out = np.empty((B, res.size))
+    for s in np.unique(series):
+        sel = np.flatnonzero(series == s)
+        x = res[sel]
+        F = np.fft.rfft(x - x.mean())
+        ph = rng.uniform(0, 2 * np.pi, (B, F.size))
+        ph[:, 0] = 0.0
+        if x.size % 2 == 0:
+            ph[:, -1] = 0.0
+        out[:, sel] = np.fft.irfft(F[None, :] * np.exp(1j * ph), n=x.size) + x.mean()
+    return out
+
+
+def parametric_null(problem: GapProblem, current, fits: dict, chain: tuple, elements, draws: int = DRAWS,
+                    seed: int = 0) -> NullResult:
+    """The parametric null of one round (module docstring): data from ``current`` (the fit of ``chain``), the
+    candidates ``elements`` (each fitted in ``fits[chain + parts(element)]``) refitted linearly."""
+    rng = np.random.default_rng(seed)
+    y = problem.y
+    m = problem.m
+    sig = problem.sigma_heldout if problem.sigma_heldout is not None else problem.sigma
+    w2 = 1.0 / problem.sigma**2
+    pred = np.asarray(current.extra["pred"])
+    if problem.domain == "profiles":
+        ystar = pred[None, :] + _phase_randomised(y - pred, np.asarray(problem.labels["series"]), rng, draws)
+        kind = "parametric: the current model plus its residual phase-randomised per run and channel"
+    else:
+        ref = problem.meta.get("reference_mask")
+        redraw = np.ones(m, dtype=bool) if ref is None else ~np.asarray(ref, dtype=bool)
+        ystar = np.where(redraw[None, :], pred[None, :] + problem.sigma[None, :] * rng.standard_normal((draws, m)),
+                         y[None, :])
+        kind = ("parametric: rows redrawn from the current model with each row's σ, labels kept"
+                + ("; the reference table held as measured" if ref is not None else ""))
+    lin_cur = linearise(problem, current)
+    folds = problem.folds
+    ss_cur = sum_of_squares(problem, heldout_linear(lin_cur, ystar, w2, folds), sig)
+    ss_cur_obs = sum_of_squares(problem, heldout_linear(lin_cur, y, w2, folds), sig)[0]
+    t_null = np.full(draws, -np.inf)
+    observed = {}
+    for el in elements:
+        lin = linearise(problem, fits[chain + parts(el)])
+        ss = sum_of_squares(problem, heldout_linear(lin, ystar, w2, folds), sig)
+        t_null = np.maximum(t_null, 1.0 - ss / np.maximum(ss_cur, 1e-300))
+        ss_o = sum_of_squares(problem, heldout_linear(lin, y, w2, folds), sig)[0]
+        observed[el] = float(1.0 - ss_o / max(ss_cur_obs, 1e-300))
+    return NullResult(kind, t_null, observed, _p_values(t_null, observed),
+                      "held-out shrink of the best candidate of the round over the current model (linearised refits)")
+
+
+def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, draws: int = DRAWS,
+                     seed: int = 1) -> NullResult | None:
+    """The random-line null (module docstring) of a frequency problem whose rows were matched by frequency;
+    ``None`` when it has none. Statistic: total shrink of ``chain`` + each candidate against the baseline."""
+    from ringfit.gap.modal import line_problem, mixture_sigma
+
+    setup = line_problem(problem)
+    if setup is None:
+        return None
+    lp, groups, tables = setup
+    rng = np.random.default_rng(seed)
+    m = problem.m
+    y = problem.y
+    sig = problem.sigma_heldout if problem.sigma_heldout is not None else problem.sigma
+    base_lin = linearise(lp, fits[()])
+    # draws: matched rows uniform over their table's span, labelled test rows from the baseline
+    ref = np.asarray(problem.meta.get("reference_mask", np.zeros(m, dtype=bool)), dtype=bool)
+    ystar = np.where(ref[None, :], y[None, :],
+                     base_lin.pred[None, :m] + problem.sigma[None, :] * rng.standard_normal((draws, m)))
+    idx = np.broadcast_to(np.arange(m), (draws, m)).copy()
+    s_meas = np.broadcast_to(problem.sigma, (draws, m)).copy()
+    s_ho = np.broadcast_to(sig, (draws, m)).copy()
+    base_sigma = problem.meta.get("sigma_matched", problem.sigma)
+    for g in groups:
+        rows = g["rows"]
+        lo, hi = tables[g["table"]]
+        f = np.sort(rng.uniform(lo, hi, (draws, rows.size)), axis=1)
+        ystar[:, rows] = f
+        idx[:, rows] = g["assign"](f)
+        s = base_sigma[rows] * f / y[rows]  # each row's relative σ, at its new frequency
+        if "hz" in g:  # rolling tables: two lines within reach → the mixture, as in the measured table
+            s = mixture_sigma(f, s, g["hz"][idx[:, rows] - g["start"]], g["hz"])[0]
+        s_meas[:, rows] = s
+        s_ho[:, rows] = s * (sig[rows] / problem.sigma[rows])  # the held-out σ's share of prediction variance
+    sig_b = s_ho
+    w2 = 1.0 / s_meas**2
+    folds = problem.folds
+    ss_base = sum_of_squares(problem, heldout_linear(base_lin, ystar, w2, folds, idx), sig_b)
+    ss_base_obs = sum_of_squares(problem, heldout_linear(base_lin, y, 1.0 / problem.sigma**2, folds), sig)[0]
+    t_null = np.full(draws, -np.inf)
+    observed = {}
+    for el in elements:
+        lin = linearise(lp, fits[chain + parts(el)])
+        ss = sum_of_squares(problem, heldout_linear(lin, ystar, w2, folds, idx), sig_b)
+        t_null = np.maximum(t_null, 1.0 - ss / np.maximum(ss_base, 1e-300))
+        ss_o = sum_of_squares(problem, heldout_linear(lin, y, 1.0 / problem.sigma**2, folds), sig)[0]
+        observed[el] = float(1.0 - ss_o / max(ss_base_obs, 1e-300))
+    n_rows = int(sum(g["rows"].size for g in groups))
+    kind = (f"random-line: the {n_rows} rows matched by frequency redrawn uniformly over their table's span and "
+            "matched by the diagnosis's rule; labelled test rows drawn from the baseline")
+    return NullResult(kind, t_null, observed, _p_values(t_null, observed),
+                      "held-out shrink of the chain plus the best candidate over the baseline (linearised refits)")
+
+
+def verdict_sentence(effect: str, null: NullResult, element: str, alpha: float) -> str:
+    """"random tables of this line density get 38 % ± 6 %; these get 64 %: p = 0.002" (docs/formats.md §5)."""
+    s = null.summary(element)
+    what = ("random tables of this line density" if null.kind.startswith("random-line")
+            else "data with no effect in it (the current model plus its noise)")
+    verdict = "accepted" if s["p_value"] < alpha else "not accepted"
+    return (f"{effect}: {what} get {s['mean_pct']:.0f} % ± {s['sd_pct']:.0f} % (95 % quantile {s['q95_pct']:.0f} %); "
+            f"these get {s['observed_pct']:.0f} %: p = {s['p_value']:.3g} over {s['draws']} draws "
+            f"(α = {alpha:g}, {verdict})")
+
+
+__all__ = ["ALPHA", "DRAWS", "Linearised", "linearise", "heldout_linear", "sum_of_squares", "NullResult",
+           "parametric_null", "random_line_null", "verdict_sentence"]
