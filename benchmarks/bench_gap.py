@@ -58,7 +58,7 @@ def modal_ideal(d, label) -> float:
     the effect acts on (frequency rows; damping rows in ln ζ for wave_damping), SS_noise from the realised
     noise of every row (hidden label), weighted and ψ-transformed exactly as the diagnosis weights its
     held-out residuals (docs/formats.md §5)."""
-    damping = label.expected_verdict == "wave_damping"
+    damping = label.expected_verdict in ("wave_damping", "damping_growth", "viscous_damping")
     part = next(p for p in d.parts if p.problem.domain == ("damping" if damping else "modes"))
     prob = part.problem
     e = np.array([v for kind, v in label.noise["rows"] if kind == ("ln_damping" if damping else "freq")])
@@ -85,8 +85,10 @@ def profile_ideal(d, label) -> float:
 
 
 def run(kind: str, n: int, offset: int, tmp: Path, confusion: Counter, errors: list, times: list,
-        failures: bc.Failures) -> None:
+        failures: bc.Failures, only: tuple[str, ...] | None = None) -> None:
     injections = PROFILE_INJECTIONS if kind == "profiles" else MODAL_INJECTIONS
+    if only:
+        injections = tuple(e for e in injections if e in only) or injections
     make = make_profile_case if kind == "profiles" else make_case
     for i in range(n):
         effect = injections[i % len(injections)]

@@ -83,7 +83,9 @@ def test_loaded_diagram(diagram):
     # drum patch shorter than the flat road's ±11.7° (docs/physics.md §7: 106 vs 129 mm)
     assert 8.0 < -d.leading_deg[0] < 11.0 and 8.0 < d.trailing_deg[0] < 11.0
     rows = d.rows("sensor")
-    assert len(rows) == d.branches * len(SPEEDS) and all(r["frame"] == "rotating" for r in rows)
+    # the ring's branches, then the cavity's fore-aft and vertical lines (kind acoustic, docs/formats.md §12)
+    assert len(rows) == (d.branches + 2) * len(SPEEDS) and all(r["frame"] == "rotating" for r in rows)
+    assert [r["direction"] for r in rows if r["kind"] == "acoustic"][:: len(SPEEDS)] == ["fore_aft", "vertical"]
     assert all(r["freq_hz"] == r["sensor_hz"] for r in rows)
 
 
@@ -215,7 +217,7 @@ def test_cli_campbell(tmp_path, tyre, diagram):
     assert main(args) == 0
     with open(out) as fh:
         rows = list(csv.DictReader(fh))
-    assert len(rows) == d.branches * 4 and rows[0]["frame"] == "rotating"
+    assert len(rows) == (d.branches + 2) * 4 and rows[0]["frame"] == "rotating"
     assert float(rows[0]["freq_hz"]) == pytest.approx(d.sensor_line()[0][0, 0], rel=1e-9)
     with open(tmp_path / "t.matched.csv") as fh:
         matched = list(csv.DictReader(fh))

@@ -78,3 +78,17 @@ def test_example_bad_input(tmp_path, capsys, argv):
     assert main([a.replace("{f}", str(f)) for a in argv]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
     assert f.read_text() == "x"
+
+
+def test_case_example_with_an_effect(tmp_path, capsys):
+    """`--effect NAME` hides that effect (wheel_suspension: an extra table whose sidecar states the fixture)."""
+    import json
+
+    out = tmp_path / "ex"
+    assert main(["example", "case", "--out", str(out), "--effect", "wheel_suspension", "--quiet"]) == 0
+    side = json.loads((out / "case" / "suspended.modes.json").read_text())
+    assert side["fixture"] == "suspension" and side["wheel_mass_kg"] > 0
+    assert "wheel_suspension" in (out / "README.md").read_text()
+    assert main(["example", "case", "--out", str(tmp_path / "b"), "--effect", "belt_wear"]) == 2
+    assert "--effect" in capsys.readouterr().err
+    assert main(["example", "records", "--out", str(tmp_path / "c"), "--effect", "none"]) == 2

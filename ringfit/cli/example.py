@@ -1,4 +1,4 @@
-"""``ringfit example {records,case,cleat,profiles,rolling} --out DIR [--format tdms|mat|csv]`` — synthetic inputs with a README of their truth.
+"""``ringfit example {records,case,cleat,profiles,rolling} --out DIR [--format tdms|mat|csv] [--effect NAME]`` — synthetic inputs with a README of their truth.
 
 The one command of the product that imports :mod:`ringfit.synth` (the
 test-data generators); see :mod:`ringfit.synth.examples`.
@@ -27,6 +27,9 @@ def register(sub) -> None:
     p.add_argument("--format", dest="fmt", choices=FORMATS, default=None,
                    help="records only: also write the records as NI TDMS (impact.tdms), MATLAB v5 (impact.mat) or "
                         "CSV (impact.csv + its channel map impact.channels.toml), docs/formats.md §17")
+    p.add_argument("--effect", default=None, metavar="NAME",
+                   help="case only: the effect hidden in the case folder (default ground_contact), e.g. "
+                        "wheel_suspension, rotation, wave_damping, none, tread_pitch")
     force_flag(p)
     quiet_flag(p)
     p.set_defaults(run=run_example)
@@ -38,7 +41,8 @@ def run_example(args) -> int:
 
     if args.fmt is not None and args.kind != "records":
         raise InputError(f"--format {args.fmt} applies to `ringfit example records` only")
-    paths = write_example(args.kind, args.out, overwrite=args.force, progress=not args.quiet, fmt=args.fmt)
+    paths = write_example(args.kind, args.out, overwrite=args.force, progress=not args.quiet, fmt=args.fmt,
+                          effect=args.effect)
     for p in paths:
         print(f"wrote {p}")
     print(f"see {args.out / 'README.md'} for the truth and the commands to try")

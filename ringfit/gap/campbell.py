@@ -123,6 +123,9 @@ class CampbellDiagram:
     leading_deg: np.ndarray
     trailing_deg: np.ndarray
     ok: np.ndarray
+    #: the cavity's first acoustic pair in the fixed frame ``(S, 2)`` [Hz]: fore-aft, vertical (docs/physics.md §6
+    #: cavity_mode, :func:`ringfit.physics.cavity.loaded_cavity_lines`); None = not computed
+    acoustic_hz: np.ndarray | None = None
 
     @property
     def rotation_hz(self) -> np.ndarray:
@@ -195,7 +198,36 @@ class CampbellDiagram:
                     "n": int(self.order[s, b]), "direction": direction[s, b], "tag": tag[s, b],
                     "travel": float(self.travel[s, b]), "symmetry": _float_or_nan(self.symmetry[s, b]),
                     "damping_pct": 100.0 * float(self.damping_ratio[s, b]), "load_n": float(self.load_n),
-                    "contact": bool(self.contact), "ok": bool(self.ok[s]),
+                    "contact": bool(self.contact), "ok": bool(self.ok[s]), "kind": "structural",
+                })
+        out += self._acoustic_rows(frame)
+        return out
+
+    def _acoustic_rows(self, frame: str) -> list[dict]:
+        """The cavity's fore-aft and vertical lines as two more branches (``kind`` = ``acoustic``).
+
+        Fixed frame: the lines of :func:`ringfit.physics.cavity.loaded_cavity_lines`; the co-rotating
+        sensor sees each shifted by ∓Ω (the air turns with the tyre): ``f_a ± (√(Ω² + g²) − Ω)/2π``.
+        """
+        if self.acoustic_hz is None:
+            return []
+        out = []
+        mid = self.acoustic_hz.mean(axis=1)
+        for j, name in enumerate(("fore_aft", "vertical")):
+            upper = self.acoustic_hz[:, j] >= mid
+            sensor = np.where(upper, self.acoustic_hz[:, j] - self.rotation_hz, self.acoustic_hz[:, j] + self.rotation_hz)
+            sensor = np.where(self.omega > 0, sensor, self.acoustic_hz[:, j])
+            for s in range(len(self.speed_kmh)):
+                fixed = float(self.acoustic_hz[s, j])
+                out.append({
+                    "branch": self.branches + j + 1, "speed_kmh": float(self.speed_kmh[s]),
+                    "rotation_hz": float(self.rotation_hz[s]), "frame": frame,
+                    "freq_hz": fixed if frame == "fixed" else float(sensor[s]), "fixed_hz": fixed,
+                    "sensor_hz": float(sensor[s]), "sensor_k": 0 if self.omega[s] == 0 else (-1 if upper[s] else 1),
+                    "sensor_weight": 1.0, "n": 1, "direction": name, "tag": "", "travel": math.nan,
+                    "symmetry": 1.0 if name == "vertical" else 0.0, "damping_pct": math.nan,
+                    "load_n": float(self.load_n), "contact": bool(self.contact), "ok": bool(self.ok[s]),
+                    "kind": "acoustic",
                 })
         return out
 
@@ -207,7 +239,7 @@ def _float_or_nan(x) -> float:
 
 CAMPBELL_COLUMNS = ("branch", "speed_kmh", "rotation_hz", "frame", "freq_hz", "fixed_hz", "sensor_hz", "sensor_k",
                     "sensor_weight", "n", "direction", "tag", "travel", "symmetry", "damping_pct", "load_n",
-                    "contact", "ok")
+                    "contact", "ok", "kind")
 
 
 def campbell_diagram(
@@ -220,6 +252,7 @@ def campbell_diagram(
     contact: bool = True,
     n_max: int = DEFAULT_N_MAX,
     harmonics: int | None = None,
+    wheel=None,
 ) -> CampbellDiagram:
     """Branches of the tyre's modes against speed (docs/physics.md §3.7).
 
@@ -231,6 +264,8 @@ def campbell_diagram(
     - ``contact``: ``False`` for a free spinning ring (no patch; ``load_n`` unused, R_e = R_out).
     - ``n_max``: branches whose dominant order exceeds n_max at every speed are dropped.
     - ``harmonics``: Hill basis K (default :data:`ringfit.physics.rolling_modes.DEFAULT_HARMONICS`; ≥ 2 n_max).
+    - ``wheel``: ``None`` (rim fixed) or a :class:`ringfit.physics.wheel.Wheel`: the rim on its suspension
+      (docs/physics.md §6 ``wheel_suspension``), three more modes per speed that move the n ≤ 1 branches.
 
     **Returns:** :class:`CampbellDiagram` (check ``ok``). One compilation per
     bucket of :data:`SPEED_BUCKET` speeds and settings.
@@ -253,7 +288,7 @@ def campbell_diagram(
     road = road_from_drum_diameter(drum_diameter_m)
     with small_matrix_threads():
         cm = campbell_modes_jit(ring, geometry, float(load_n) if contact else 0.0, pad, road, harmonics=K,
-                                contact=contact)
+                                contact=contact, wheel=wheel)
         labels = _acceleration_labels(cm.modes)
         cm, labels = jax.device_get((cm, labels))
     m = cm.modes
@@ -268,14 +303,32 @@ def campbell_diagram(
     keep = keep[np.argsort(take(freq)[0, keep], kind="stable")]
     sel = lambda a: a[:, keep]  # noqa: E731
     ok = np.asarray(cm.ok)[sl] & np.all(np.isfinite(freq), axis=1)
+    acoustic = _acoustic_lines(ring, geometry, float(load_n) if contact else 0.0, road, np.asarray(cm.omega)[sl])
     return CampbellDiagram(
         speed_kmh=speeds, omega=np.asarray(cm.omega)[sl], fixed_hz=sel(take(freq)), order=sel(order).astype(int),
         travel=sel(travel), symmetry=sel(symmetry), damping_ratio=sel(take(np.asarray(m.damping_ratio)[sl])),
         k=np.asarray(m.k)[0], line_hz=sel(take(line_hz)), line_weight=sel(take(line_w)), mode_index=sel(perm),
         load_n=float(load_n), drum_diameter_m=drum_diameter_m, contact=bool(contact),
         rolling_radius_m=float(cm.rolling_radius), leading_deg=np.degrees(np.asarray(cm.leading)[sl]),
-        trailing_deg=np.degrees(np.asarray(cm.trailing)[sl]), ok=ok,
+        trailing_deg=np.degrees(np.asarray(cm.trailing)[sl]), ok=ok, acoustic_hz=acoustic,
     )
+
+
+def _acoustic_lines(ring, geometry, load_n: float, road, omegas) -> np.ndarray:
+    """``(S, 2)`` fore-aft and vertical cavity lines [Hz] in the fixed frame (docs/physics.md §6 cavity_mode):
+    eq. 22's line split by the flat of the static contact solve at ``load_n`` (none at 0) and by rotation."""
+    from ringfit.physics.cavity import cavity_height, deflection_cos2, loaded_cavity_lines
+    from ringfit.physics.contact import ContactSolver, solve_rolling_jit
+    from ringfit.physics.natural import cavity_frequency
+    from ringfit.physics.operating import OperatingPoint
+
+    e = 0.0
+    if load_n > 0:
+        sol = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, load_n, road), solver=ContactSolver())
+        e = float(deflection_cos2(sol)) / float(cavity_height(geometry))
+    wa = 2 * math.pi * float(cavity_frequency(1))
+    fa, vt = loaded_cavity_lines(wa, e, np.asarray(omegas, dtype=np.float64))
+    return np.stack([np.asarray(fa), np.asarray(vt)], axis=1) / (2 * math.pi)
 
 
 def _acceleration_labels(modes):

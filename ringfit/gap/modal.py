@@ -119,7 +119,10 @@ class ModalRows(eqx.Module):
     - ``contact``: 0 untagged / free, 1 cosine type (``extr``, ``vert``), 2 sine type (``0``, ``hort``).
     - ``spin``: wheel speed Ω of the table's condition [rad/s] (0 = static).
     - ``branch``: +1 backward, −1 forward, 0 none; ``fixed_frame``: 1 fixed observer, 0 co-rotating.
-    - ``cavity_hz``: uncoupled cavity frequency used by ``cavity_mode`` [Hz] (same for all rows).
+    - ``cavity_hz``: uncoupled cavity frequency the row's ring mode meets (``cavity_mode``) [Hz], per row:
+      the unloaded line f_a, on a loaded table the fore-aft (``hort``/``0`` rows) or vertical
+      (``vert``/``extr``) line of n = 1 (:mod:`ringfit.physics.cavity`); 0 where the table's tyre
+      has no air (``pressure_bar`` = 0).
     - ``reference``: 1 for rows of ``free.modes.csv`` (the ring answers to them only).
     - ``patch``: contact half-angle computed from the table's load [rad] (0: no contact / unknown).
     - ``freq_hz``: the row's measured frequency [Hz] (damping rows: their mode's).
@@ -154,6 +157,9 @@ class ModalRows(eqx.Module):
     #: indices of the tables with a contact patch (static: effects solve only these tables' contact
     #: problems); None = every table
     contact_tables: tuple | None = eqx.field(static=True, default=None)
+    #: ``(m, 9)`` the wheel body of the row's table (``fixture: suspension``, docs/formats.md §2):
+    #: on (1/0), m_w, I_w, compliances 1/k_z, 1/k_x, 1/k_θ, dampers c_z, c_x, c_θ (SI; all 0 when bolted)
+    wheel: jax.Array | None = None
 
 
 class ModalData(eqx.Module):
@@ -256,7 +262,9 @@ def spin_of(table: ModeTable, outer_radius: float) -> float:
 
 def _is_reference_state(table: ModeTable) -> bool:
     c = table.condition
-    return table.state == "free" and not float(c.get("speed_kmh") or 0) and not float(c.get("rotation_hz") or 0)
+    # a free tyre on a suspended wheel is another state (its n <= 1 modes move: wheel_suspension)
+    return (table.state == "free" and not float(c.get("speed_kmh") or 0) and not float(c.get("rotation_hz") or 0)
+            and c.get("fixture", "bolted") == "bolted")
 
 
 def second_difference_sigma(residual: np.ndarray, sequence, n: np.ndarray) -> tuple[float, int]:
@@ -294,11 +302,26 @@ def contact_patch(ring: RingParams, geometry: TyreGeometry, load_n: float, drum_
     return out[0], 0.5 * abs(out[2] - out[1])
 
 
-def _table_rows(tables, geometry, patches, spins):
-    """Per structural row: dict of its attributes (before n-matching)."""
+def wheel_row(condition: dict, source: str = "<condition>") -> list[float]:
+    """The 9 numbers of :attr:`ModalRows.wheel` from a table's sidecar (zeros for a bolted rim)."""
+    from ringfit.io.modes import wheel_of
+
+    w = wheel_of(condition, source=source)
+    if w is None:
+        return [0.0] * 9
+    inv = [1.0 / w[k] for k in ("k_vertical", "k_fore_aft", "k_torsion")]
+    return [1.0, w["mass"], w["inertia"], *inv, w["c_vertical"], w["c_fore_aft"], w["c_torsion"]]
+
+
+def _table_rows(tables, geometry, patches, spins, cavity_split=None):
+    """Per structural row: dict of its attributes (before n-matching).
+
+    ``cavity_split``: per table W_2/h_c of the loaded cavity (docs/physics.md §6 cavity_mode), or None."""
     cavity = [float(f) for t in tables for f, k in zip(t.freq_hz, t.kind) if k == "acoustic"]
+    f_a = cavity[0] if cavity else float(cavity_frequency(1))
     rows = []
     damping_std = [t.extra_floats("damping_std_pct") for t in tables]
+    wheels = [wheel_row(t.condition, str(t.source)) for t in tables]
     for ti, t in enumerate(tables):
         fixed = t.condition.get("frame", "rotating" if spins[ti] > 0 else "fixed") == "fixed"
         tl = table_label(t, ti)
@@ -315,8 +338,39 @@ def _table_rows(tables, geometry, patches, spins):
                 freq=float(t.freq_hz[i]), std=float(t.freq_std_hz[i]), damping=float(t.damping_pct[i]),
                 damping_std=damping_std[ti][i],
                 reference=ti == 0, a=int(t.a[i]), joint=0.0, mode_index=0, line_k=0.0, wave="",
+                wheel=wheels[ti], cavity=_row_cavity(t, f_a, contact, int(t.n[i]),
+                                                     None if cavity_split is None else cavity_split[ti]),
             ))
-    return rows, (cavity[0] if cavity else float(jax.jit(cavity_frequency)(1.0)))  # one program, not two eager ops
+    return rows, f_a
+
+
+def _row_cavity(table: ModeTable, f_a: float, contact: int, n: int, split) -> float:
+    """The cavity line a row's ring mode meets [Hz] (:attr:`ModalRows.cavity_hz`)."""
+    p = table.condition.get("pressure_bar")
+    if p is not None and float(p) == 0.0:
+        return 0.0  # no air in the cavity: cavity_mode does not act on this table
+    if split is None or n != 1 or not contact:
+        return f_a
+    # the loaded cavity's pair at rest: fore-aft sqrt(1 + e), vertical sqrt(1 - e) (docs/physics.md §6)
+    return f_a * math.sqrt(max(1.0 - split, 0.0) if contact == 1 else max(1.0 + split, 0.0))
+
+
+def cavity_splits(tables, ring, geometry) -> list:
+    """W_2/h_c of each ``loaded`` table with a load (static contact solve; docs/physics.md §6), else None."""
+    from ringfit.physics.cavity import cavity_height, deflection_cos2
+    from ringfit.physics.contact import ContactSolver, solve_rolling_jit
+    from ringfit.physics.operating import OperatingPoint, road_from_drum_diameter
+
+    out = []
+    for t in tables:
+        load = t.condition.get("load_n")
+        if t.state == "loaded" and load:
+            road = road_from_drum_diameter(t.condition.get("drum_diameter_m"))
+            sol = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, float(load), road), solver=ContactSolver())
+            out.append(float(deflection_cos2(sol)) / float(cavity_height(geometry)))
+        else:
+            out.append(None)
+    return out
 
 
 def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=None) -> ModalRows:
@@ -332,13 +386,15 @@ def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=No
         # a rolling row without a branch: the wave of eq. 25/26 it was matched to (rotation alone)
         branch=np.asarray([{"backward": 1.0, "forward": -1.0}.get(r["branch"] or r.get("wave", ""), 0.0)
                             for r in rows]),
-        fixed_frame=np.asarray([1.0 if r["fixed"] else 0.0 for r in rows]), cavity_hz=np.asarray(cavity_hz),
+        fixed_frame=np.asarray([1.0 if r["fixed"] else 0.0 for r in rows]),
+        cavity_hz=np.asarray([r.get("cavity", cavity_hz) for r in rows], dtype=np.float64),
         reference=np.asarray([1.0 if r["reference"] else 0.0 for r in rows]), patch=col("patch"),
         freq_hz=col("freq"), table=col("table", np.int32),
         table_patch=np.asarray(np.asarray(table_patch, dtype=np.float64)),
         joint=col("joint"), mode_index=col("mode_index", np.int32), line_k=col("line_k"),
         table_omega=per_table("omega"), table_leading=per_table("leading"), table_trailing=per_table("trailing"),
         contact_tables=tuple(int(i) for i, a in enumerate(np.asarray(table_patch, dtype=np.float64)) if a > 0),
+        wheel=np.asarray([r.get("wheel", [0.0] * 9) for r in rows], dtype=np.float64).reshape(len(rows), 9),
     )
 
 
@@ -355,9 +411,12 @@ def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
         col = getattr(rows, k)
         return None if col is None else np.concatenate([col, np.full(extra, v, dtype=col.dtype)])
 
-    return ModalRows(**{k: grow(k, v) for k, v in fill.items()}, cavity_hz=rows.cavity_hz, table_patch=rows.table_patch,
+    cav = rows.cavity_hz
+    cav = cav if np.ndim(cav) == 0 else np.concatenate([cav, np.full(extra, cav[0] if m else 0.0)])
+    return ModalRows(**{k: grow(k, v) for k, v in fill.items()}, cavity_hz=cav, table_patch=rows.table_patch,
                      table_omega=rows.table_omega, table_leading=rows.table_leading,
-                     table_trailing=rows.table_trailing, contact_tables=rows.contact_tables)
+                     table_trailing=rows.table_trailing, contact_tables=rows.contact_tables,
+                     wheel=None if rows.wheel is None else np.concatenate([rows.wheel, np.zeros((extra, 9))]))
 
 
 @dataclass
@@ -534,7 +593,11 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
         else:
             patches.append((0.0, 0.0))
             conditions.append("")
-    rows, cavity_hz = _table_rows(tables, geometry, patches, spins)
+    for ti, t in enumerate(tables):  # the wheel on its suspension (docs/physics.md §6 wheel_suspension)
+        note = _wheel_note(t)
+        if note:
+            conditions[ti] = "; ".join(x for x in (conditions[ti], note) if x)
+    rows, cavity_hz = _table_rows(tables, geometry, patches, spins, cavity_splits(tables, ring_ref, geometry))
     for r in rows:  # rows whose n (and type) the table leaves to matching by frequency: the random-line null's rows
         r["matchable"] = (not r["reference"]) and r["n"] < 0
     rolling, rolling_notes, rolling_records, line_sets = assign_rolling_rows(tables, rows, ring_ref, geometry, patches)
@@ -557,6 +620,25 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
     if len(damp) >= 4:
         problems.append(_damping_problem(tables, damp, cavity_hz, geometry, ring_ref, effects, noise))
     return problems
+
+
+def _wheel_note(table: ModeTable) -> str:
+    """One line on the table's fixture (empty for a bolted rim); a ``WARNING`` where defaults stand in."""
+    import warnings
+
+    from ringfit.io.modes import wheel_of
+
+    w = wheel_of(table.condition, source=str(table.source))
+    if w is None:
+        return ""
+    note = (f"fixture suspension: wheel {w['mass']:g} kg, {w['inertia']:g} kg m^2 on k_z {w['k_vertical']:.3g}, "
+            f"k_x {w['k_fore_aft']:.3g} N/m, k_theta {w['k_torsion']:.3g} N m/rad")
+    if w["defaults"]:
+        msg = (f"{table.source}: fixture 'suspension' without {', '.join(w['defaults'])}: the defaults of "
+               "docs/formats.md §2 stand in (the computed wheel_suspension candidate uses them)")
+        warnings.warn(msg, stacklevel=2)
+        note += f" (defaults for {', '.join(w['defaults'])})"
+    return note
 
 
 def _labels(rows, suffix=""):

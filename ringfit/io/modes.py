@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.io.checks import check_condition_field, csv_columns, read_json_object, short_repr
+from ringfit.io.checks import check_condition_field, csv_columns, number_in_range, read_json_object, short_repr
 from ringfit.io.files import atomic_write, check_output_path, read_text_file
 
 KINDS = ("structural", "acoustic", "unclassified")
@@ -26,6 +26,17 @@ TAGS = ("", "extr", "0", "vert", "hort")
 BRANCHES = ("", "backward", "forward")
 STATES = ("free", "loaded", "rolling")
 FRAMES = ("rotating", "fixed")
+#: How the rim was held (sidecar ``fixture``, docs/formats.md §2): ``bolted`` = rim fixed (the default).
+FIXTURES = ("bolted", "suspension")
+#: The wheel body's sidecar keys (``fixture: suspension``) with their plausible ranges (stiffness, mass: lo excluded) ...
+WHEEL_SCALARS = {
+    "wheel_mass_kg": (0.0, 1.0e4),
+    "wheel_inertia_kg_m2": (0.0, 1.0e3),
+    "suspension_torsion_n_m_rad": (0.0, 1.0e12),
+    "suspension_torsion_damping_n_m_s_rad": (0.0, 1.0e9),
+}
+#: ... and the keys that give [vertical, fore-aft] (a single number = both).
+WHEEL_PAIRS = {"suspension_stiffness_n_m": (0.0, 1.0e12), "suspension_damping_n_s_m": (0.0, 1.0e9)}
 #: Columns of docs/formats.md §2, in the order ringfit writes them.
 COLUMNS = ("n", "a", "tag", "kind", "freq_hz", "freq_std_hz", "damping_pct", "branch")
 #: Largest plausible natural frequency [Hz] in a mode table (a tyre's modes lie below a few kHz).
@@ -268,6 +279,7 @@ def validate_condition(cond: dict, *, source: str = "<condition>") -> dict:
         if key not in cond or cond[key] is None:
             continue
         check_condition_field(cond, key, source=source)
+    wheel_of(cond, source=source)
     return dict(cond)
 
 
@@ -313,6 +325,55 @@ def check_test_condition(cond: dict, *, source) -> None:
             and not positive("load_n"):
         raise InputError(f"'load_n' = {cond['load_n']!r} for a {state} table; expected the vertical load in N "
                          "(> 0)", source=source)
+
+
+def wheel_of(cond: dict, *, source: str = "<condition>") -> dict | None:
+    """The wheel body a sidecar states (docs/formats.md §2 ``fixture``; docs/physics.md §6 ``wheel_suspension``).
+
+    **Returns:** ``None`` for a bolted rim (``fixture`` absent or ``bolted``: the rim-fixed model);
+    for ``fixture: suspension`` a dict in SI: ``mass`` [kg], ``inertia`` [kg m²], ``k_vertical``,
+    ``k_fore_aft`` [N/m], ``k_torsion`` [N m/rad], ``c_vertical``, ``c_fore_aft`` [N s/m],
+    ``c_torsion`` [N m s/rad], and ``defaults``: the keys the sidecar left out (their values are
+    those of :mod:`ringfit.physics.wheel`'s defaults; the diagnosis says so). InputError naming
+    the field for a bad value, or for a wheel key without ``fixture: suspension``.
+    """
+    fixture = cond.get("fixture", "bolted")
+    if fixture not in FIXTURES:
+        raise InputError(f"field 'fixture' = {short_repr(fixture)}; expected one of {list(FIXTURES)}", source=source)
+    keys = [k for k in (*WHEEL_SCALARS, *WHEEL_PAIRS) if k in cond]
+    if fixture != "suspension":
+        if keys:
+            raise InputError(f"field {keys[0]!r} needs 'fixture': 'suspension' (the rim is bolted here); "
+                             "drop it or say how the wheel was held", source=source)
+        return None
+    # defaults: the same numbers as ringfit.physics.wheel (io/ is NumPy only, it does not import physics/)
+    out = dict(mass=20.0, inertia=0.6, k_vertical=2.0e5, k_fore_aft=1.0e6, k_torsion=1.0e5,
+               c_vertical=0.0, c_fore_aft=0.0, c_torsion=0.0)
+    defaults = []
+    for key, (lo, hi) in WHEEL_SCALARS.items():
+        target = {"wheel_mass_kg": "mass", "wheel_inertia_kg_m2": "inertia", "suspension_torsion_n_m_rad": "k_torsion",
+                  "suspension_torsion_damping_n_m_s_rad": "c_torsion"}[key]
+        if key in cond:
+            damp = "damping" in key
+            out[target] = number_in_range(cond[key], key, lo, hi, lo_open=not damp, source=source)
+        elif "damping" not in key:
+            defaults.append(key)
+    for key, (lo, hi) in WHEEL_PAIRS.items():
+        damp = "damping" in key
+        names = ("c_vertical", "c_fore_aft") if damp else ("k_vertical", "k_fore_aft")
+        if key not in cond:
+            if not damp:
+                defaults.append(key)
+            continue
+        v = cond[key]
+        vals = v if isinstance(v, list) else [v]
+        if len(vals) not in (1, 2):
+            raise InputError(f"field {key!r} = {short_repr(v)}: expected a number or [vertical, fore-aft]",
+                             source=source)
+        nums = [number_in_range(x, key, lo, hi, lo_open=not damp, source=source) for x in vals]
+        out[names[0]], out[names[1]] = nums[0], nums[-1]
+    out["defaults"] = defaults
+    return out
 
 
 def format_mode_table(table: ModeTable) -> str:

@@ -268,16 +268,26 @@ class BrushShearLoad(eqx.Module):
     ``x_b(φ) = (R+τ+w) sin φ + v cos φ``; shear ``Δx = x_b(φ) − x_b(φ_L) − R_e(φ − φ_L)``;
     ``q_x = −k_x Δx`` clipped at ``|q_x| ≤ μ p``; loads ``q_w += q_x sin φ``,
     ``q_v += q_x cos φ``. Free rolling fixes R_e by ``∫ q_v dφ = 0``. ``k_x`` [N/m²].
+
+    ``lever`` (static, default off): the tread element stays normal to the belt, so its tip
+    sits at ``x_b − τ ψ cos φ`` (τ = R_out − R, ψ = (w′ − v)/R the belt slope, docs/physics.md §5);
+    the tip's shear force then also acts on the belt through the lever τ, a moment
+    ``m = −τ q_x cos φ`` per unit length whose virtual work ``∫ m δψ R dφ`` gives the loads
+    ``q_w += −m′/R``, ``q_v += −m/R`` (docs/physics.md §6 ``tread_shear``, the lever).
     """
 
     k_x: float
     mu: float = FRICTION
+    lever: bool = eqx.field(static=True, default=False)
 
     def __call__(self, sol, ring, geometry):
         phi = sol.phi
         p = sol.pressure
         inside = jax.lax.stop_gradient(p > 0)
         x_b = (geometry.outer_radius + sol.w) * jnp.sin(phi) + sol.v * jnp.cos(phi)
+        if self.lever:
+            tau = geometry.outer_radius - geometry.radius
+            x_b = x_b - tau * belt_slope_grid(sol, geometry) * jnp.cos(phi)
         first = jnp.argmax(inside)  # leading edge: first grid point in the patch (smallest φ)
         s = phi - phi[first]
         D = x_b - x_b[first]
@@ -287,7 +297,22 @@ class BrushShearLoad(eqx.Module):
         q_x = -self.k_x * (D - r_e * s)
         lim = self.mu * p
         q_x = jnp.where(inside, jnp.clip(q_x, -lim, lim), 0.0)
-        return q_x * jnp.sin(phi), q_x * jnp.cos(phi)
+        q_w, q_v = q_x * jnp.sin(phi), q_x * jnp.cos(phi)
+        if self.lever:
+            m = -tau * q_x * jnp.cos(phi)
+            dphi = phi[1] - phi[0]
+            dm = (jnp.roll(m, -1) - jnp.roll(m, 1)) / (2.0 * dphi)  # m is continuous: |q_x| ≤ μp → 0 at the edges
+            q_w = q_w - dm / geometry.radius
+            q_v = q_v - m / geometry.radius
+        return q_w, q_v
+
+
+def belt_slope_grid(sol, geometry):
+    """Belt slope ψ = (w′ − v)/R [rad] on the grid of a contact solution (docs/physics.md §5; w′ spectral)."""
+    M = sol.w.shape[-1]
+    k = jnp.arange(sol.w_spectrum.shape[-1], dtype=jnp.float64)
+    dw = jnp.fft.irfft(1j * k * sol.w_spectrum, M)
+    return (dw - sol.v) / geometry.radius
 
 
 _solve_rolling_compiled = eqx.filter_jit(solve_rolling)

@@ -68,6 +68,25 @@ def loaded_angular_frequencies(
     the k-th entry is the mode that continues harmonic n = k + 1 of the free
     ring (``extr``/``vert`` and ``0``/``hort`` respectively).
     """
+    mass, k_cos, k_sin = loaded_matrices(ring, geometry, half_angle, n_max, k_tread)
+    scale = 1.0 / jnp.sqrt(mass[:, None] * mass[None, :])
+
+    def eig(K):
+        lam = jnp.linalg.eigvalsh(K * scale)
+        return jnp.sqrt(jnp.clip(lam, 0.0))
+
+    return eig(k_cos), eig(k_sin)
+
+
+def loaded_matrices(ring: RingParams, geometry: TyreGeometry, half_angle, n_max: int = DEFAULT_HARMONICS,
+                    k_tread=None):
+    """Mass and stiffness of the loaded standing ring in the real basis (docs/physics.md §6 ``ground_contact``).
+
+    **Returns:** ``(mass, k_cos, k_sin)``: ``mass`` ``(N,)`` the diagonal M_n [kg]; ``k_cos``,
+    ``k_sin`` ``(N, N)`` [N/m] the stiffness of the cosine- and sine-type shapes, patch included.
+    Harmonic n = 1 is the rigid translation of the belt (vertical for ``k_cos``, fore-aft for
+    ``k_sin``): :mod:`ringfit.physics.wheel` borders these matrices with the wheel's body.
+    """
     n = jnp.arange(1, n_max + 1, dtype=jnp.float64)
     R = geometry.radius
     kt = ring.k_tread if k_tread is None else k_tread
@@ -75,14 +94,7 @@ def loaded_angular_frequencies(
     mass = ring_modal_mass(ring, geometry, n)
     stiff = jnp.pi * R * modal_stiffness(ring, geometry, n) / n**2
     cc, ss = patch_overlap(half_angle, n_max)
-    scale = 1.0 / jnp.sqrt(mass[:, None] * mass[None, :])
-
-    def eig(overlap):
-        K = jnp.diag(stiff) + kt * R * overlap
-        lam = jnp.linalg.eigvalsh(K * scale)
-        return jnp.sqrt(jnp.clip(lam, 0.0))
-
-    return eig(cc), eig(ss)
+    return mass, jnp.diag(stiff) + kt * R * cc, jnp.diag(stiff) + kt * R * ss
 
 
 def loaded_natural_frequencies(
@@ -93,4 +105,4 @@ def loaded_natural_frequencies(
     return c / (2.0 * jnp.pi), s / (2.0 * jnp.pi)
 
 
-__all__ = ["DEFAULT_HARMONICS", "patch_overlap", "loaded_angular_frequencies", "loaded_natural_frequencies"]
+__all__ = ["DEFAULT_HARMONICS", "patch_overlap", "loaded_matrices", "loaded_angular_frequencies", "loaded_natural_frequencies"]

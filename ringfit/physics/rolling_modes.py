@@ -184,6 +184,9 @@ class RollingModes(eqx.Module):
     order: jax.Array
     travel: jax.Array
     symmetry: jax.Array
+    #: with a wheel (:mod:`ringfit.physics.wheel`): the body's amplitudes ``(N, 3)`` — p₊, p₋ (rim
+    #: translation in harmonics +1, −1) and Rβ (rim rotation) — on the ring's scale; else ``None``
+    body: jax.Array | None = None
 
     @property
     def freq_hz(self):
@@ -278,16 +281,26 @@ def rolling_modes(
     *,
     harmonics: int = DEFAULT_HARMONICS,
     extensible: bool = False,
+    wheel=None,
 ) -> RollingModes:
     """Fixed-frame modes of the ring rotating at Ω with the contact ``arc`` (docs/physics.md §3.7).
 
-    **Arguments:** as :func:`gyroscopic_matrices`.
+    **Arguments:** as :func:`gyroscopic_matrices`; ``wheel``: ``None`` (rim fixed) or a
+    :class:`ringfit.physics.wheel.Wheel` — the rim as a rigid body on its suspension, three
+    extra degrees of freedom coupled to the ring's k = ±1 and 0 harmonics
+    (:func:`ringfit.physics.wheel.border_hill`, docs/physics.md §6 ``wheel_suspension``).
 
-    **Returns:** :class:`RollingModes` (dof modes, ascending). Pure JAX:
+    **Returns:** :class:`RollingModes` (dof modes, ascending; dof + 3 with a wheel, whose
+    ``body`` holds the body's amplitudes). Pure JAX:
     jit-, vmap- and grad-compatible. Valid below the critical speed (the
     stiffness must stay positive definite; beyond it the frequencies are NaN).
     """
     M, G, K, E, kd = gyroscopic_matrices(ring, geometry, omega, arc, harmonics=harmonics, extensible=extensible)
+    C = None
+    if wheel is not None:
+        from ringfit.physics.wheel import border_hill
+
+        M, G, K, E, C, kd = border_hill(M, G, K, E, kd, ring, geometry, wheel, harmonics, extensible)
     omega = jnp.asarray(omega, dtype=jnp.float64)
     n = M.shape[0]
     Gt = _hermitian(-1j * G)
@@ -304,9 +317,10 @@ def rolling_modes(
 
     k = jnp.arange(-harmonics, harmonics + 1, dtype=jnp.float64)
     H = k.size
-    d = n // H
+    d = 2 if extensible else 1
+    ring_dof = H * d
     b = harmonic_basis(k, extensible)  # (H, 2, d)
-    wv = jnp.einsum("hcd,mhd->mhc", b, q.reshape(-1, H, d))  # (N, H, 2)
+    wv = jnp.einsum("hcd,mhd->mhc", b, q[:, :ring_dof].reshape(-1, H, d))  # (N, H, 2)
     # damping (first order): σ = cᴴ E_s c / cᴴ(2ωM + G̃)c with the material frequency's sign per harmonic
     sgn = jnp.sign(w[:, None] + kd[None, :] * omega)  # (N, dof)
     eta = 2.0 * ring.damping_ratio
@@ -314,17 +328,25 @@ def rolling_modes(
     qM = jnp.einsum("md,de,me->m", jnp.conj(q), M, q).real
     qG = jnp.einsum("md,de,me->m", jnp.conj(q), Gt, q).real
     qD = 2.0 * w * qM + qG
-    zeta = jax.lax.stop_gradient(eta * qE / (qD * w))
+    zeta = eta * qE / (qD * w)
+    if C is not None:  # viscous dampers of the wheel's support: σ = ω cᴴCc / cᴴ(2ωM + G̃)c
+        zeta = zeta + jnp.einsum("md,de,me->m", jnp.conj(q), C, q).real / qD
+    zeta = jax.lax.stop_gradient(zeta)
 
     wv = jax.lax.stop_gradient(wv)
-    wv = wv / jnp.sqrt(jnp.sum(jnp.abs(wv) ** 2, axis=(-2, -1)))[:, None, None]
+    norm = jnp.sqrt(jnp.sum(jnp.abs(wv) ** 2, axis=(-2, -1)))
+    wv = wv / norm[:, None, None]
     has_w = jnp.sum(jnp.abs(wv[..., 0]) ** 2, axis=-1) > 1e-20
     src = jnp.where(has_w[:, None], wv[..., 0], wv[..., 1])
     ref = jnp.take_along_axis(src, jnp.argmax(jnp.abs(src), axis=-1)[:, None], axis=1)[:, 0]
     wv = wv * (jnp.conj(ref) / jnp.abs(ref))[:, None, None]
     W, V = wv[..., 0], wv[..., 1]
     labels = mode_labels(W, V, k, jax.lax.stop_gradient(w), omega)
-    return RollingModes(omega=omega, k=k, angular_frequency=w, radial=W, tangential=V, damping_ratio=zeta, **labels)
+    body = None
+    if wheel is not None:  # body amplitudes (p₊, p₋, Rβ) on the ring's normalisation and phase
+        body = jax.lax.stop_gradient(q[:, ring_dof:]) / norm[:, None] * (jnp.conj(ref) / jnp.abs(ref))[:, None]
+    return RollingModes(omega=omega, k=k, angular_frequency=w, radial=W, tangential=V, damping_ratio=zeta,
+                        body=body, **labels)
 
 
 _rolling_modes_compiled = eqx.filter_jit(rolling_modes)
@@ -438,14 +460,16 @@ def loaded_rolling_modes(
     model: RingModel = RingModel(),
     solver: ContactSolver = ContactSolver(),
     k_tangential=0.0,
+    wheel=None,
 ):
     """Modes of the tyre rolling at ``operating`` (Ω, Fz, road) (docs/physics.md §3.7).
 
     The contact arc comes from the steady rolling solution at the same point
-    (:func:`contact_arc`). **Returns:** ``(modes, solution)``.
+    (:func:`contact_arc`); ``wheel`` as :func:`rolling_modes`. **Returns:** ``(modes, solution)``.
     """
     arc, sol = contact_arc(ring, geometry, operating, model=model, solver=solver, k_tangential=k_tangential)
-    modes = rolling_modes(ring, geometry, operating.omega, arc, harmonics=harmonics, extensible=extensible)
+    modes = rolling_modes(ring, geometry, operating.omega, arc, harmonics=harmonics, extensible=extensible,
+                          wheel=wheel)
     return modes, sol
 
 
@@ -480,6 +504,7 @@ def campbell_modes(
     model: RingModel = RingModel(),
     solver: ContactSolver = ContactSolver(),
     k_tangential=0.0,
+    wheel=None,
 ) -> CampbellModes:
     """Modes of the loaded tyre at every speed (Campbell diagram data, docs/physics.md §3.7).
 
@@ -491,6 +516,8 @@ def campbell_modes(
       :func:`ringfit.physics.operating.rolling_radius`) or wheel speeds Ω [rad/s]
       (``speed_unit="rad/s"``).
     - ``contact`` (static): ``False`` gives the free spinning ring (no patch, R_e = R_out; ``load`` unused).
+    - ``wheel``: ``None`` (rim fixed) or a :class:`ringfit.physics.wheel.Wheel` (the rim on its
+      suspension: three more modes per speed, :func:`rolling_modes`).
     - the rest as :func:`loaded_rolling_modes` (static settings).
 
     **Returns:** :class:`CampbellModes`. Pure JAX, vmapped over speeds; use
@@ -512,12 +539,13 @@ def campbell_modes(
 
     def one(om):
         if not contact:
-            modes = rolling_modes(ring, geometry, om, ContactArc.none(), harmonics=harmonics, extensible=extensible)
+            modes = rolling_modes(ring, geometry, om, ContactArc.none(), harmonics=harmonics, extensible=extensible,
+                                  wheel=wheel)
             z = jnp.zeros(())
             return modes, z, z, z, jnp.asarray(True)
         op = OperatingPoint(om, load, road)
         modes, sol = loaded_rolling_modes(ring, geometry, op, harmonics=harmonics, extensible=extensible,
-                                          model=model, solver=solver, k_tangential=k_tangential)
+                                          model=model, solver=solver, k_tangential=k_tangential, wheel=wheel)
         lead, trail = patch_edges(sol)
         return modes, lead, trail, sol.deflection, sol.ok
 

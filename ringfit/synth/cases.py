@@ -13,7 +13,10 @@ the loaded modes with a different basis size than the diagnosis uses, the
 cavity as a 2×2 eigenproblem in NumPy).
 
 Injected (mode tables): ``ground_contact``, ``rotation``, ``cavity_mode``,
-``wave_damping``, ``ring_extensibility``; ``none``; and the out-of-library
+``wave_damping``, ``ring_extensibility``, ``wheel_suspension`` (an extra table
+``suspended.modes.csv``: the free tyre on the bench's suspension, its sidecar stating the
+fixture, n ≤ 1 truth from the lumped model :func:`lumped_wheel_modes`), ``damping_growth`` (η(n) = 2ζ0 n^b
+on the free table's damping, ζ from the complex-stiffness eigenvalue); ``none``; and the out-of-library
 ``tread_pitch`` (a construction non-uniformity that shifts a few neighbouring
 harmonics and splits the loaded/spinning pairs), whose expected verdict is ``unexplained``.
 ``sensor_mass`` is not injected: on mode tables it is almost a uniform
@@ -39,7 +42,8 @@ import jax.numpy as jnp
 import numpy as np
 
 #: Effects the generator injects in mode-table cases, with the verdict the diagnosis should give.
-MODAL_INJECTIONS = ("none", "ground_contact", "rotation", "wave_damping", "tread_pitch")
+MODAL_INJECTIONS = ("none", "ground_contact", "rotation", "wave_damping", "tread_pitch", "wheel_suspension",
+                    "damping_growth")
 #: Injectable but not part of the blind benchmark (see the module docstring).
 EXTRA_INJECTIONS = ("cavity_mode", "ring_extensibility")
 EXPECTED = {"none": "none", "tread_pitch": "unexplained"}
@@ -177,6 +181,13 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
         slope = float(rng.uniform(0.02, 0.06))
         magnitude["eta_slope"] = slope
         damp_free = 100.0 * (zeta0 + 0.5 * slope * free / 100.0) * np.exp(rng.normal(0.0, zeta_sd, free.size))
+    elif effect == "damping_growth":
+        # η(n) = 2ζ0 n^b rising ×6…×12 over n = 1…9; truth from the complex-stiffness eigenvalue of each
+        # mode, ω² ∝ 1 + iη: ζ = sin(½ atan η) (the effect fits ζ0 n^b, the first-order form)
+        b = float(rng.uniform(0.8, 1.15))
+        magnitude["exponent"] = b
+        eta = 2.0 * zeta0 * n_free.astype(float) ** b
+        damp_free = 100.0 * np.sin(0.5 * np.arctan(eta)) * np.exp(rng.normal(0.0, zeta_sd, free.size))
     elif effect == "tread_pitch":
         amp = float(rng.uniform(0.01, 0.02))
         magnitude["relative_amplitude"] = amp
@@ -186,7 +197,7 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
         free = free * (1 + pattern(n_free))
         load_cos, load_sin = load_cos * (1 + pattern(n_load)), load_sin * (1 - pattern(n_load))
         rot_b, rot_f = rot_b * (1 + pattern(n_rot)), rot_f * (1 - pattern(n_rot))
-    elif effect != "none":
+    elif effect not in ("none", "wheel_suspension"):  # wheel_suspension: its own table, written below
         raise ValueError(f"effect {effect!r} not injectable; choose from {MODAL_INJECTIONS + EXTRA_INJECTIONS}")
 
     write_tyre(Tyre(geometry, {"rho_a": 2.715, "ei": 0.9426, "kw": 1.294e6, "kv": 1.161e6,
@@ -196,6 +207,8 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
     rows = [{"n": int(n), "freq_hz": float(f), "damping_pct": float(d)}
             for n, f, d in zip(n_free, free_noisy, damp_free)]
     damp_truth = 100.0 * (zeta0 + 0.5 * magnitude.get("eta_slope", 0.0) * free / 100.0)
+    if effect == "damping_growth":
+        damp_truth = 100.0 * np.sin(0.5 * np.arctan(2.0 * zeta0 * n_free.astype(float) ** magnitude["exponent"]))
     # realised noise of every observation, in the order the diagnosis reads them (free: frequency then
     # damping per mode; then loaded.modes.csv, spinning.modes.csv): for the ideal shrink of the benchmark
     row_noise = []
@@ -219,10 +232,91 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
         row_noise += [("freq", float(fb - tb)), ("freq", float(ff - tf))]
     _write_table(folder, "spinning.modes.csv", rrows, {"state": "free", "speed_kmh": round(speed_kmh, 2),
                                                         "pressure_bar": 2.2, "frame": "rotating"}, with_std, sigma_rel)
+    if effect == "wheel_suspension":
+        # the free tyre standing on the bench's suspension: truth from the lumped discretisation below
+        # (not the diagnosis's two-body root), its own random stream so the other draws stay as they were
+        wrng = np.random.default_rng([seed, 21])
+        body = dict(wheel_mass_kg=float(wrng.uniform(10.0, 40.0)), wheel_inertia_kg_m2=float(wrng.uniform(0.3, 1.0)),
+                    suspension_stiffness_n_m=[float(np.exp(wrng.uniform(np.log(5e4), np.log(5e5)))),
+                                              float(np.exp(wrng.uniform(np.log(3e5), np.log(3e6))))],
+                    suspension_torsion_n_m_rad=float(np.exp(wrng.uniform(np.log(3e4), np.log(3e5)))))
+        magnitude.update(body)
+        truth = lumped_wheel_modes(ring, geometry, body["wheel_mass_kg"], body["wheel_inertia_kg_m2"],
+                                   *body["suspension_stiffness_n_m"], body["suspension_torsion_n_m_rad"])
+        n_hi = np.arange(2, 6)
+        srows_t = [(0, "", truth["torsion"]), (1, "vert", truth["vertical"]), (1, "hort", truth["fore_aft"])]
+        srows_t += [(int(n), "", float(f)) for n, f in
+                    zip(n_hi, np.asarray(natural_frequencies(ring, geometry, jnp.asarray(n_hi, float))))]
+        ft = np.array([f for _, _, f in srows_t])
+        fn = noisy(ft)
+        srows = [{"n": n, "tag": tag, "freq_hz": float(f)} for (n, tag, _), f in zip(srows_t, fn)]
+        row_noise += [("freq", float(a - b)) for a, b in zip(fn, ft)]
+        _write_table(folder, "suspended.modes.csv", srows,
+                     {"state": "free", "speed_kmh": 0, "pressure_bar": 2.2, "frame": "fixed", "fixture": "suspension",
+                      **body}, with_std, sigma_rel)
     return CaseLabel(effect=effect, expected_verdict=EXPECTED.get(effect, effect), magnitude=magnitude,
                      noise={"relative": sigma_rel, "colour": colour, "freq_std_given": with_std,
                             "damping_relative": zeta_sd, "rows": row_noise},
                      ring=ring.as_dict(), seed=seed)
+
+
+def lumped_wheel_modes(ring, geometry, mass, inertia, k_vertical, k_fore_aft, k_torsion, nodes: int = 64) -> dict:
+    """The n ≤ 1 modes of a free tyre on a wheel on its suspension, from a lumped model [Hz] (synthetic truth).
+
+    An independent discretisation of docs/physics.md §6 ``wheel_suspension`` (the diagnosis solves the
+    two-body root): ``nodes`` point masses ρA·R·dθ on a circle, each tied to a rigid hub by a radial spring
+    k_w·R·dθ and a tangential one k_v·R·dθ (the latter's root moves by Rβ with the hub's rotation),
+    neighbours by stiff axial links; the hub (mass, inertia) on springs k_vertical, k_fore_aft, k_torsion.
+    Cartesian coordinates, one dense generalised eigenproblem. Each mode is classed by where its kinetic
+    energy is (vertical or fore-aft translation, rotation); of the two modes of a class the belt's is the
+    one with the smaller share of its strain energy in the support spring (the other is the wheel on its
+    suspension). **Returns:** ``{"vertical", "fore_aft", "torsion"}`` [Hz].
+    """
+    import scipy.linalg
+
+    R = float(geometry.radius)
+    dth = 2 * math.pi / nodes
+    th = np.arange(nodes) * dth
+    ndof = 2 * nodes + 3
+    hub = 2 * nodes
+    K = np.zeros((ndof, ndof))
+    mdiag = np.concatenate([np.full(2 * nodes, float(ring.rho_a) * R * dth), [mass, mass, inertia]])
+    kw, kv = float(ring.kw) * R * dth, float(ring.kv) * R * dth
+    for i, t in enumerate(th):
+        er, et = np.array([math.cos(t), math.sin(t)]), np.array([-math.sin(t), math.cos(t)])
+        for e, k, rot in ((er, kw, 0.0), (et, kv, -R)):
+            v = np.zeros(ndof)
+            v[2 * i:2 * i + 2], v[hub:hub + 2], v[hub + 2] = e, -e, rot
+            K += k * np.outer(v, v)
+        j = (i + 1) % nodes
+        d = np.array([math.cos(th[j]) - math.cos(t), math.sin(th[j]) - math.sin(t)])
+        d /= np.linalg.norm(d)
+        v = np.zeros(ndof)
+        v[2 * j:2 * j + 2], v[2 * i:2 * i + 2] = d, -d
+        K += 1e3 * kw * np.outer(v, v)
+    support = {"fore_aft": (hub, k_fore_aft), "vertical": (hub + 1, k_vertical), "torsion": (hub + 2, k_torsion)}
+    for idx, k in support.values():
+        K[idx, idx] += k
+    lam, vec = scipy.linalg.eigh(K, np.diag(mdiag))
+    xs, ys = slice(0, 2 * nodes, 2), slice(1, 2 * nodes, 2)
+    out = {}
+    for name, (idx, k) in support.items():
+        best = None
+        for j in range(ndof):
+            x = vec[:, j]
+            td = x[xs] * -np.sin(th) + x[ys] * np.cos(th)  # tangential displacement of each node
+            # the belt moves as a whole: a mean displacement (translation) or a mean tangential one (torsion)
+            mean = {"fore_aft": abs(np.mean(x[xs])), "vertical": abs(np.mean(x[ys])), "torsion": abs(np.mean(td))}
+            cls = max(mean, key=mean.get)
+            if mean[cls] < 0.3 * np.sqrt(np.mean(x[xs] ** 2 + x[ys] ** 2)):
+                cls = None
+            if cls != name:
+                continue
+            share = k * x[idx] ** 2 / (x @ K @ x)
+            if best is None or share < best[0]:
+                best = (share, math.sqrt(max(lam[j], 0.0)) / (2 * math.pi))
+        out[name] = best[1]
+    return out
 
 
 #: Road speeds [km/h] and load [N] of the rolling tables of :func:`make_rolling_case` (the source study's cleat tests).

@@ -39,22 +39,30 @@ RIG_FORMATS = ("tdms", "mat", "csv")
 
 
 def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = False, progress: bool = False,
-                  fmt: str | None = None) -> list[Path]:
+                  fmt: str | None = None, effect: str | None = None) -> list[Path]:
     """Write the example ``kind`` into ``folder`` (created if missing); returns the paths written.
 
     ``fmt`` (``records`` only): also write the records as ``"tdms"``, ``"mat"``
     or ``"csv"`` (+ channel map), docs/formats.md §17.
+    ``effect`` (``case`` only): the effect hidden in the case folder (one of
+    :data:`ringfit.synth.cases.MODAL_INJECTIONS` or ``EXTRA_INJECTIONS``; default ``ground_contact``).
 
-    **Raises** :class:`InputError` for an unknown kind, a ``folder`` that is a
-    file, or files that exist there already (unless ``overwrite``).
+    **Raises** :class:`InputError` for an unknown kind, format or effect, a format or effect for
+    another kind, a ``folder`` that is a file, or files that exist there already (unless ``overwrite``).
     """
     from ringfit.io.files import check_output_path
+    from ringfit.synth.cases import EXTRA_INJECTIONS, MODAL_INJECTIONS
 
     if kind not in KINDS:
         raise InputError(f"unknown example {kind!r}; expected one of {', '.join(KINDS)}")
     if fmt is not None and (kind != "records" or fmt not in RIG_FORMATS):
         raise InputError(f"format {fmt!r} for example {kind!r}; expected one of {', '.join(RIG_FORMATS)} "
                          "with the records example")
+    if effect is not None and kind != "case":
+        raise InputError(f"--effect is for the 'case' example only, not {kind!r}", source="--effect")
+    if effect is not None and effect not in MODAL_INJECTIONS + EXTRA_INJECTIONS:
+        raise InputError(f"unknown effect {effect!r}; expected one of {', '.join(MODAL_INJECTIONS + EXTRA_INJECTIONS)}",
+                         source="--effect")
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise InputError("exists and is not a folder; --out names the folder the example is written into",
@@ -70,8 +78,10 @@ def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = Fal
     try:
         if kind == "records":
             _records(tmp, progress, fmt)
+        elif kind == "case":
+            _case(tmp, progress, effect or "ground_contact")
         else:
-            {"case": _case, "cleat": _cleat, "profiles": _profiles, "rolling": _rolling}[kind](tmp, progress)
+            {"cleat": _cleat, "profiles": _profiles, "rolling": _rolling}[kind](tmp, progress)
         made = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
         for rel in made:  # every destination checked before anything is moved
             dst = folder / rel
@@ -300,17 +310,20 @@ ringfit cleat cleat.records.npz --sectors 128 --out field2.npz --ssi rolling.mod
 """)
 
 
-def _case(folder: Path, progress: bool) -> None:
+def _case(folder: Path, progress: bool, effect: str = "ground_contact") -> None:
     from ringfit.synth.cases import make_case
 
-    label = make_case(folder / "case", effect="ground_contact", seed=5)
+    label = make_case(folder / "case", effect=effect, seed=5)
     ring = label.ring
-    mag = ", ".join(f"{k} = {v:.4g}" for k, v in label.magnitude.items()) or "-"
+    def fmt(v):
+        return "[" + ", ".join(f"{x:.4g}" for x in v) + "]" if isinstance(v, (list, tuple)) else f"{v:.4g}"
+
+    mag = ", ".join(f"{k} = {fmt(v)}" for k, v in label.magnitude.items()) or "-"
     (folder / "README.md").write_text(f"""# Example: a case folder with one hidden effect
 
 Written by `ringfit example case`. `case/` is a case folder (docs/formats.md §6): `tyre.toml`
 (Table 9 values as a start, not the truth), `free.modes.csv` (the free tyre the ring is fitted
-to) and test tables of the loaded and the spinning tyre, with relative frequency noise
+to) and test tables of the loaded and the spinning tyre{" and of the free tyre on the bench's suspension (suspended.modes.csv, its sidecar stating the fixture)" if effect == "wheel_suspension" else ""}, with relative frequency noise
 {100 * label.noise['relative']:.2g} % ({label.noise['colour']}).
 
 ## The truth (kept out of the case folder)

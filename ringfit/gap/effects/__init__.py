@@ -16,7 +16,8 @@ from ringfit.gap.effects.base import Effect, Parameter
 #: Built-in effect modules, in the order of docs/formats.md §5.
 BUILTIN = (
     "sensor_tilt", "gravity", "iepe_highpass", "wave_damping", "tread_shear",
-    "ground_contact", "rotation", "cavity_mode", "sensor_mass", "ring_extensibility",
+    "ground_contact", "rotation", "cavity_mode", "sensor_mass", "ring_extensibility", "wheel_suspension",
+    "damping_growth", "viscous_damping",
 )
 
 _REGISTRY: dict[str, Effect] = {}

@@ -8,7 +8,11 @@ structural root continues ω₀ as ``ω² = ω₀² + δ``,
 :func:`ringfit.physics.natural.cavity_coupling`, :func:`~ringfit.physics.natural.cavity_coupled_shift`).
 f_cav is the row of kind ``acoustic`` in the data when there is one (the
 uncoupled cavity frequency taken as measured) and eq. 22 (343/1.568 Hz)
-otherwise; ρ0 = 1.2 (p0 + p_atm)/p_atm, c = 343 m/s. Parameter
+otherwise; on a ``loaded`` table the contact flat splits it (:mod:`ringfit.physics.cavity`):
+an n = 1 row tagged ``hort``/``0`` meets the lower, fore-aft line ``f_cav √(1 + W_2/h_c)``,
+one tagged ``vert``/``extr`` the higher, vertical line ``f_cav √(1 − W_2/h_c)`` (W_2 from the
+static contact solve at the table's load); a table whose sidecar says ``pressure_bar = 0``
+has no air and is left alone; ρ0 = 1.2 (p0 + p_atm)/p_atm, c = 343 m/s. Parameter
 ``inverse_area_per_m2`` = 1/A_c (null 0: no coupling). Steady rolling sees
 only ~1e-3 of it (docs/physics.md §6): not a profile effect.
 """
@@ -35,13 +39,17 @@ class CavityMode(Effect):
     )
 
     def modal_mask(self, rows):
-        return (np.asarray(rows.is_freq) > 0) & (np.asarray(rows.n) >= 1)
+        air = np.broadcast_to(np.asarray(rows.cavity_hz) > 0, np.shape(rows.n))
+        return (np.asarray(rows.is_freq) > 0) & (np.asarray(rows.n) >= 1) & air
 
     def modal(self, values, omega, zeta, rows, ring, geometry):
-        nz = rows.n >= 1
+        # rows.cavity_hz: per row, the line its ring mode meets — on a loaded table the fore-aft or vertical
+        # line of the flattened cavity for n = 1 (docs/physics.md §6, ringfit.physics.cavity); 0 = no air
+        air = rows.cavity_hz > 0
+        nz = (rows.n >= 1) & air
         nn = jnp.where(nz, rows.n, 1.0)
         k = cavity_coupling(ring, geometry, nn, values[0])
-        delta = cavity_coupled_shift(omega, 2.0 * jnp.pi * rows.cavity_hz * nn, k)
+        delta = cavity_coupled_shift(omega, 2.0 * jnp.pi * jnp.where(air, rows.cavity_hz, 1.0) * nn, k)
         return jnp.where(nz, jnp.sqrt(jnp.clip(omega * omega + delta, 0.0)), omega), zeta
 
 

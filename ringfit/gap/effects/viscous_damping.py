@@ -1,0 +1,28 @@
+"""``viscous_damping`` — viscous loss on the damping rows of mode tables (docs/physics.md §6; the damping family: see
+:mod:`ringfit.gap.effects.damping_growth`)."""
+
+import jax.numpy as jnp
+import numpy as np
+
+from ringfit.gap.effects import register
+from ringfit.gap.effects.base import Effect, Parameter
+
+
+class ViscousDamping(Effect):
+    name = "viscous_damping"
+    baseline_partners = ("damping_ratio",)
+    summary = "viscous loss: damping that falls with frequency, ζ = ζ0 + c/(2ρAω)"
+    parameters = (
+        Parameter("viscous_c", "N s/m^2", null=0.0, lo=0.0, hi=5000.0, start=300.0,
+                  description="viscous damping c per unit length"),
+    )
+
+    def modal_mask(self, rows):
+        return np.asarray(rows.is_freq) == 0
+
+    def modal(self, values, omega, zeta, rows, ring, geometry):
+        add = values[0] / (2.0 * ring.rho_a * jnp.maximum(omega, 1e-9))
+        return omega, jnp.where(rows.is_freq == 0, zeta + add, zeta)
+
+
+EFFECT = register(ViscousDamping())
