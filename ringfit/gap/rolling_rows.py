@@ -158,13 +158,16 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
 def line_fields(n: int, direction: str, tag: str, mode_index: int, line_k: float, patch: float) -> dict:
     """The row fields a row assigned to one line of the rolling model takes (the shared assignment).
 
-    One assignment serves the baseline and every candidate: the line's dominant order ``n``
-    (eq. 18 of that n is the baseline), its travelling direction as the wave of eq. 25/26
+    One assignment serves the baseline and every candidate: the line's harmonic |k| of a sensor line
+    ω + kΩ (k ≠ 0), else the mode's dominant order ``n`` (eq. 18 of that n is the baseline), its travelling direction as the wave of eq. 25/26
     (``rotation`` alone; none for a standing mode), its loaded-mode type from its symmetry about
     the patch (``ground_contact`` alone: ``extr``/``vert`` the cos type, ``0``/``hort`` the sin
     type; none for a travelling mode), and its mode and sensor line (the joint model).
     """
     contact = 1 if tag in ("extr", "vert") else 2 if tag in ("0", "hort") else 0
+    # a sensor line ω + kΩ (k ≠ 0) is what the co-rotating sensor sees of winding |k|: without contact a mode of
+    # order n shows only its lines k = ±n, so the baseline and the single effects take n = |k| there
+    n = abs(int(line_k)) if line_k else int(n)
     return dict(n=int(n), wave=direction if direction in ("backward", "forward") else "", contact=contact,
                 patch=patch if contact else 0.0, joint=1.0, mode_index=int(mode_index), line_k=float(line_k))
 
