@@ -33,6 +33,11 @@ The most significant group decides. Two levels:
 An effect claimed between the two levels stands on its own held-out evidence
 (below), which does not depend on the noise level.
 
+Every acceptance is then tested against chance (:mod:`ringfit.gap.calibration`): p < α of
+the round's selection statistic under its null. A candidate refused *only* for the lower end
+of its bootstrap interval (condition 1 below; a heuristic that is wide when few rows carry
+the effect) is put to the same null test, and accepted when it beats it.
+
 **Is an effect accepted?** All of:
 
 1. held-out shrink ≥ :data:`MIN_HELDOUT_SHRINK_PCT` and the lower end of its
