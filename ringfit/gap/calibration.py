@@ -136,6 +136,7 @@ class NullResult:
 
     @property
     def draws(self) -> int:
+        """Number of null draws."""
         return int(self.t_null.size)
 
     def summary(self, element: str) -> dict:

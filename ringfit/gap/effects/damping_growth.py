@@ -27,6 +27,8 @@ from ringfit.gap.effects.base import Effect, Parameter
 
 
 class DampingGrowth(Effect):
+    """The ``damping_growth`` effect: η(n) = η₀ nᵇ on damping rows (docs/physics.md §6)."""
+
     name = "damping_growth"
     baseline_partners = ("damping_ratio",)
     summary = "a loss factor that grows as a power of n: ln ζ rises linearly in ln n"

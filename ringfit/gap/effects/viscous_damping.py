@@ -9,6 +9,8 @@ from ringfit.gap.effects.base import Effect, Parameter
 
 
 class ViscousDamping(Effect):
+    """The ``viscous_damping`` effect: ζ = ζ0 + c/(2ρAω) on damping rows (docs/physics.md §6)."""
+
     name = "viscous_damping"
     baseline_partners = ("damping_ratio",)
     summary = "viscous loss: damping that falls with frequency, ζ = ζ0 + c/(2ρAω)"

@@ -38,6 +38,8 @@ def _wheel_rows(rows):
 
 
 class WheelSuspension(Effect):
+    """The ``wheel_suspension`` effect: the rim on its fixture's springs, n ≤ 1 rows (docs/physics.md §6)."""
+
     name = "wheel_suspension"
     summary = "the wheel moves on its suspension: the n = 1 (translation) and n = 0 (torsion) modes shift and split"
     parameters = (
