@@ -23,18 +23,15 @@ can be rebuilt from the file alone. :func:`sample_posterior` is the free-tyre
 
 from __future__ import annotations
 
-import functools
 import json
 import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from ringfit.fit.engine import LOG, _Free, _setup, _weighted, in_fixed_chunks
+from ringfit.fit.engine import LOG, free_set, log_probability
 from ringfit.params import RingParams
 
 #: Stop when the chain is longer than this many integrated autocorrelation times.
@@ -279,24 +276,6 @@ def run_ensemble(log_prob_fn, p0, *, min_steps: int, max_steps: int, check_every
     return sampler, np.asarray(tau)
 
 
-@functools.partial(jax.jit, static_argnames=("model", "treedef"))
-def _batched_log_probability(u, leaves, theta0, free_arrays, prior_w, prior_mean, lo, hi, inv_s2, *, model, treedef):
-    """Log posterior density ``(walkers,)`` of solver coordinates ``u`` ``(walkers, k)``, up to a constant."""
-    data = jax.tree.unflatten(treedef, leaves)
-    free = _Free(*free_arrays)
-    k = u.shape[1]
-
-    def one(ui):
-        r, _ = _weighted(ui, model, data, theta0, free, prior_w, prior_mean)
-        m = r.shape[0] - k
-        value = -0.5 * (inv_s2 * jnp.sum(r[:m] ** 2) + jnp.sum(r[m:] ** 2))
-        inside = jnp.all((ui >= lo) & (ui <= hi))
-        value = jnp.where(inside, value, -jnp.inf)
-        return jnp.where(jnp.isnan(value), -jnp.inf, value)
-
-    return jax.vmap(one)(u)
-
-
 def log_probability_function(result, bounds: dict | None = None, chunk: int | None = None):
     """``(n, k) -> (n,)`` NumPy log-posterior of a fit's free parameters (see the module docstring).
 
@@ -309,29 +288,15 @@ def log_probability_function(result, bounds: dict | None = None, chunk: int | No
     """
     problem = result.problem
     free = tuple(result.names)
-    k = len(free)
-    index, _, setup_arrays, W, mean, lo, hi = _setup(problem, free, None)
-    lo, hi = lo.copy(), hi.copy()
-    coords = [problem.coords[i] for i in index]
+    fs = free_set(problem, free)
+    lo, hi = fs.lo_u.copy(), fs.hi_u.copy()
+    coords = [problem.coords[i] for i in fs.index]
     for j, c in enumerate(coords):
         rng = (bounds or {}).get(c.name) or (problem.plausible or {}).get(c.name)
         if rng is not None:
             lo[j], hi[j] = c.to_u(rng[0]) if c.kind != LOG or rng[0] > 0 else -np.inf, c.to_u(rng[1])
-    # the sampler moves in u itself: no sine transform of bounded coordinates
-    free_arrays = tuple(jnp.asarray(a) for a in setup_arrays[:4] + (np.zeros(k, dtype=bool), np.zeros(k), np.ones(k)))
-    leaves, treedef = jax.tree.flatten(problem.data)
-    s = float(result.extra.get("sigma_scale", 1.0))
-    consts = (tuple(jnp.asarray(x) for x in leaves), jnp.asarray(np.append(result.theta, 0.0)), free_arrays,
-              jnp.asarray(W), jnp.asarray(mean), jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(1.0 / s**2))
-
-    def evaluate(u):
-        return np.asarray(_batched_log_probability(u, *consts, model=problem.model, treedef=treedef),
-                          dtype=np.float64)
-
-    def log_prob(u):
-        u = np.asarray(u, dtype=np.float64)
-        return evaluate(u) if chunk is None else in_fixed_chunks(evaluate, u, chunk)
-
+    log_prob = log_probability(problem, result.theta, free, lo_u=lo, hi_u=hi,
+                               sigma_scale=float(result.extra.get("sigma_scale", 1.0)), chunk=chunk)
     return log_prob, lo, hi
 
 
