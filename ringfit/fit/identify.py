@@ -531,6 +531,7 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs) -> I
                          fisher_share={n: float(share[j]) for j, n in enumerate(names) if n in free_ring})
     idx = [names.index(n) for n in free_ring]
     cov = fit.covariance_log[np.ix_(idx, idx)]
+    cov = 0.5 * (cov + cov.T)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sd, sd)

@@ -240,7 +240,7 @@ def _covariance(table, ring_values: dict) -> "RingCovariance":
     source = table.get("source", "")
     if not isinstance(source, str):
         raise InputError(f"{where} source = {_show(source)}: expected a string")
-    return RingCovariance(tuple(names), 0.5 * (cov + cov.T), source)
+    return RingCovariance(tuple(names), cov if np.array_equal(cov, cov.T) else 0.5 * (cov + cov.T), source)
 
 
 @dataclass(frozen=True)
