@@ -23,8 +23,9 @@ PROFILE_POINTS = ((3000.0, 30.0), (4000.0, 50.0), (5000.0, 70.0))
 
 
 def make_identify_case(folder: str | os.PathLike, seed: int = 0, *, profiles: bool = True,
-                       loaded: bool = True, noise_colour: str | None = None) -> dict:
-    """Write the case into ``folder`` (created; must be empty or absent); returns the truth (also in ``truth.json``)."""
+                       loaded: bool = True, noise_colour: str | None = None, truth_file: bool = True) -> dict:
+    """Write the case into ``folder`` (created; must be empty or absent); returns the truth (also in
+    ``truth.json`` there when ``truth_file``; the identification does not read it)."""
     import jax.numpy as jnp
 
     from ringfit.io.modes import ModeTable, write_mode_table
@@ -98,7 +99,11 @@ def make_identify_case(folder: str | os.PathLike, seed: int = 0, *, profiles: bo
     truth = dict(seed=seed, ring={k: float(v) for k, v in ring.as_dict().items() if math.isfinite(v)},
                  sigma_rel=sigma_rel, with_std=with_std, half_angles=half_angles, profiles=truth_profiles,
                  truth_grid=fine.n_grid)
-    (folder / "truth.json").write_text(json.dumps(truth, indent=1))
+    truth["ring_object"] = ring
+    truth["geometry"] = geometry
+    if truth_file:
+        (folder / "truth.json").write_text(json.dumps({k: v for k, v in truth.items()
+                                                       if k not in ("ring_object", "geometry")}, indent=1))
     return truth
 
 
