@@ -17,7 +17,7 @@ def register(sub) -> None:
                                    "their load_n and speed (per profile a gain and an angle offset). Each data "
                                    "type's noise is estimated from its own residual. Writes the tyre file with "
                                    "[ring] and [ring.covariance] (ln θ) and NAME.identify.json beside it "
-                                   "(docs/formats.md §14). Exit 1 if the fit does not converge.")
+                                   "(docs/formats.md §17). Exit 1 if the fit does not converge.")
     p.add_argument("folder", type=Path, help="case folder (docs/formats.md §6)")
     p.add_argument("--out", required=True, type=Path, help="output tyre TOML (NAME.tyre.toml); NAME.identify.json "
                                                            "is written beside it")

@@ -552,7 +552,7 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs) -> I
 
 
 def identification_report(ident: Identification) -> dict:
-    """The ``NAME.identify.json`` content (docs/formats.md §14)."""
+    """The ``NAME.identify.json`` content (docs/formats.md §17)."""
     fit = ident.fit
     names, corr = ident.correlation
     return {
