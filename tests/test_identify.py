@@ -126,3 +126,30 @@ def test_cli_writes_tyre_and_report_beside_it(joint_case, tmp_path, capsys):
     assert "Fisher information share" in capsys.readouterr().out
     # outputs are not replaced without --force
     assert main(["identify", str(folder), "--out", str(out), "--quiet"]) == 2
+
+
+def test_diagnose_with_the_fitted_tyre_as_baseline_gives_the_same_diagnosis(tmp_path):
+    """One ring per tyre: `diagnose --tyre` with `ringfit fit`'s tyre file (the same ring the default path fits
+    to free.modes.csv) evaluates that ring instead of refitting it — the diagnosis is the same."""
+    assert main(["example", "case", "--out", str(tmp_path / "ex"), "--quiet"]) == 0
+    case = tmp_path / "ex" / "case"
+    fitted = tmp_path / "fitted.tyre.toml"
+    assert main(["fit", str(case / "free.modes.csv"), "--tyre", str(case / "tyre.toml"), "--out", str(fitted)]) == 0
+    a, b = tmp_path / "a.diagnosis.json", tmp_path / "b.diagnosis.json"
+    assert main(["diagnose", str(case), "--out", str(a), "--quiet"]) == 0
+    assert main(["diagnose", str(case), "--out", str(b), "--tyre", str(fitted), "--quiet"]) == 0
+    da, db = json.loads(a.read_text()), json.loads(b.read_text())
+    assert db["baseline_tyre"].endswith("fitted.tyre.toml") and "baseline_tyre" not in da
+    assert da["verdict"]["effects"] == db["verdict"]["effects"]
+    for key in ("rms", "reduced_chi2", "noise_rms"):
+        assert db["baseline"][key] == pytest.approx(da["baseline"][key], rel=1e-3)
+    ref_a = da["parts"][0]["baseline"]["reference_fit"]
+    ref_b = db["parts"][0]["baseline"]["reference_fit"]
+    assert ref_b["status"] == "evaluated" and ref_a["status"] == "converged"
+    for name, value in ref_a["values"].items():
+        assert ref_b["values"][name] == pytest.approx(value, rel=1e-9)
+        assert ref_b["stderr"][name] == pytest.approx(ref_a["stderr"][name], rel=1e-4)
+    # a tyre without [ring] is refused as a baseline
+    bare = tmp_path / "bare.toml"
+    bare.write_text('[tyre]\nradius_m = 0.296\nwidth_m = 0.152\npressure_bar = 2.2\n')
+    assert main(["diagnose", str(case), "--out", str(tmp_path / "c.diagnosis.json"), "--tyre", str(bare)]) == 2

@@ -427,11 +427,14 @@ def _progress(problem, progress, total):
 
 
 # --------------------------------------------------------------------------- folder
-def build_problems(case, effects, noise=None) -> list[GapProblem]:
-    """The problems of a case: mode-table frequencies and damping (:mod:`ringfit.gap.modal`) and profiles (if any)."""
+def build_problems(case, effects, noise=None, baseline: bool = False) -> list[GapProblem]:
+    """The problems of a case: mode-table frequencies and damping (:mod:`ringfit.gap.modal`) and profiles (if any).
+
+    ``baseline``: ``case.tyre``'s ring is the baseline as it is (``diagnose --tyre``), not refitted to free.modes.csv.
+    """
     from ringfit.gap.modal import build_modal_problems
 
-    problems = build_modal_problems([case.free, *case.tests], case.tyre, effects, noise=noise)
+    problems = build_modal_problems([case.free, *case.tests], case.tyre, effects, noise=noise, baseline=baseline)
     if case.profiles:
         from ringfit.gap.profile import build_profile_problem
 
@@ -491,7 +494,7 @@ def resolve_effects(effects=None):
     return tuple(e if isinstance(e, effect_library.Effect) else effect_library.get(e) for e in effects)
 
 
-def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = None) -> Diagnosis:
+def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = None, tyre=None) -> Diagnosis:
     """Diagnose the sim-to-real gap of a case folder (docs/formats.md §6) against the baselines of docs/physics.md §6.
 
     **Arguments:**
@@ -501,12 +504,19 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
     - ``progress``: show a tqdm bar on stderr while candidates are fitted.
     - ``noise``: optional user noise levels, ``{"freq_hz": σ, "damping": σ, "profile_ms2": σ}``;
       default: estimated from the data (see :mod:`ringfit.gap.modal`, :mod:`ringfit.gap.profile`).
+    - ``tyre``: an identified or fitted :class:`~ringfit.io.tyre.Tyre` whose ring (and ``[ring.covariance]``)
+      is the baseline as it is — one ring per tyre; default: the ring fitted to ``free.modes.csv``.
 
     **Returns:** :class:`Diagnosis` (``.content`` is the docs/formats.md §5 dict, ``.write(path)``).
     """
     from ringfit.gap.case import Case, read_case
 
     case = folder if isinstance(folder, Case) else read_case(folder)
+    if tyre is not None:  # the given ring on the case's own geometry
+        from ringfit.io.tyre import Tyre
+
+        case.tyre = Tyre(case.tyre.geometry, dict(tyre.ring_values), dict(case.tyre.extra), tyre.source,
+                         tyre.covariance)
     chosen = resolve_effects(effects)
     t0 = time.perf_counter()
     # one BLAS thread: every solve here is small (eigen-solves of ≤ 100 × 100, least squares of ≤ a few
@@ -515,7 +525,7 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
 
     parts = []
     with small_matrix_threads():
-        problems = build_problems(case, chosen, noise)
+        problems = build_problems(case, chosen, noise, baseline=tyre is not None)
         for prob in problems:
             # the mode-table parts are only a test when the folder holds test tables or nothing else
             if prob.domain in ("modes", "damping") and case.profiles and not case.tests:
@@ -523,6 +533,8 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
             parts.append(diagnose_problem(prob, progress))
     content = _combine(parts)
     content["data"] = case.data_files
+    if tyre is not None:
+        content["baseline_tyre"] = str(tyre.source)
     content["elapsed_s"] = round(time.perf_counter() - t0, 2)
     return Diagnosis(content, parts, getattr(case, "folder", None))
 
