@@ -153,3 +153,27 @@ def test_diagnose_with_the_fitted_tyre_as_baseline_gives_the_same_diagnosis(tmp_
     bare = tmp_path / "bare.toml"
     bare.write_text('[tyre]\nradius_m = 0.296\nwidth_m = 0.152\npressure_bar = 2.2\n')
     assert main(["diagnose", str(case), "--out", str(tmp_path / "c.diagnosis.json"), "--tyre", str(bare)]) == 2
+
+
+def test_roll_states_the_ring_band_from_the_covariance(tmp_path, capsys):
+    """The tyre's [ring.covariance] propagated into the standing deflection: a band around the nominal value that
+    grows with the covariance (k_trd ±20 % must move the deflection more than ±2 %)."""
+    import re
+
+    from ringfit.data import path as data_path
+    from ringfit.io.tyre import RingCovariance
+
+    tyre = read_tyre(data_path("table9.tyre.toml"))
+    widths = []
+    for sd in (0.02, 0.2):
+        tyre.covariance = RingCovariance(("k_tread", "kw"), np.diag([sd, 0.01]) ** 2)
+        path = tmp_path / f"t{sd}.toml"
+        write_tyre(tyre, path)
+        assert main(["roll", "--tyre", str(path), "--speed", "40", "--load", "4000", "--out",
+                     str(tmp_path / f"p{sd}.profile.csv")]) == 0
+        out = capsys.readouterr().out
+        nominal = float(re.search(r"deflection ([0-9.]+) mm, patch", out).group(1))
+        lo, hi = map(float, re.search(r"deflection ([0-9.]+) … ([0-9.]+) mm", out).groups())
+        assert lo < nominal < hi
+        widths.append(hi - lo)
+    assert widths[1] > 3 * widths[0]

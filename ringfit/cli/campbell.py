@@ -94,6 +94,9 @@ def run_campbell(args) -> int:
     tyre = read_tyre(args.tyre)
     tables = [read_mode_table(m) for m in args.modes]
     ring, geometry = tyre.ring, tyre.geometry
+    if tyre.covariance is not None:
+        print("note: the branches are the nominal ring's; the tyre file's [ring.covariance] is not propagated into "
+              "them (ringfit roll and estimate propagate it)")
     diagram = campbell_diagram(ring, geometry, args.load, speeds, drum_diameter_m=args.drum, n_max=args.n_max)
     if not diagram.ok.all():
         bad = ", ".join(f"{v:g}" for v in diagram.speed_kmh[~diagram.ok])

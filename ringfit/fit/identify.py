@@ -474,7 +474,8 @@ def identify(inputs: IdentifyInputs, *, solver: ContactSolver = ContactSolver(),
         problem = Problem(model, data, coords, plausible=BOUNDS, data_label="these measurements")
         fit = least_squares(problem, theta, free, max_steps=max_steps, rtol=rtol, atol=atol)
         if progress:
-            print(f"identify: pass {passes}: {fit.status}, χ²/m = {fit.extra['chi2_raw'] / fit.residuals.size:.3g}",
+            print(f"identify: pass {passes}: {fit.status} after {fit.iterations} steps, "
+                  f"χ²/m = {fit.extra['chi2_raw'] / fit.residuals.size:.3g}",
                   flush=True)
         if fit.converged:
             theta = fit.theta.copy()

@@ -259,6 +259,13 @@ class RingCovariance:
         i = self.names.index(name)
         return float(math.sqrt(max(self.ln[i, i], 0.0)))
 
+    def draws(self, ring: RingParams, n: int, seed: int = 0) -> list[RingParams]:
+        """``n`` rings drawn from the log-normal ``ln θ ~ N(ln ring, ln)`` (the other parameters as in ``ring``)."""
+        rng = np.random.default_rng(seed)
+        centre = np.log([float(getattr(ring, k)) for k in self.names])
+        u = rng.multivariate_normal(centre, self.ln, size=int(n), method="eigh")
+        return [ring.replace(**{k: float(math.exp(x)) for k, x in zip(self.names, row)}) for row in u]
+
     def table(self) -> dict:
         return {"names": list(self.names), "ln": [[float(x) for x in row] for row in self.ln],
                 **({"source": self.source} if self.source else {})}
