@@ -177,3 +177,16 @@ def test_roll_states_the_ring_band_from_the_covariance(tmp_path, capsys):
         assert lo < nominal < hi
         widths.append(hi - lo)
     assert widths[1] > 3 * widths[0]
+
+
+def test_cli_posterior_of_the_joint_fit(tmp_path):
+    """--posterior: emcee on the same joint problem; its medians sit inside the least-squares 95 % intervals."""
+    make_identify_case(tmp_path / "c", seed=8, profiles=False)
+    out, h5 = tmp_path / "p.tyre.toml", tmp_path / "p.h5"
+    assert main(["identify", str(tmp_path / "c"), "--out", str(out), "--posterior", str(h5), "--min-steps", "200",
+                 "--max-steps", "200", "--quiet"]) == 0
+    assert h5.stat().st_size > 0
+    doc = json.loads((tmp_path / "p.identify.json").read_text())
+    post = doc["posterior"]["parameters"]
+    for name, p in doc["parameters"].items():
+        assert p["lo95"] < post[name]["median"] < p["hi95"], name
