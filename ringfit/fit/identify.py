@@ -236,12 +236,15 @@ class JointResiduals(AbstractResiduals):
     def __call__(self, theta, data: JointArrays):
         ring = ring_from_vector(theta)
         g = data.geometry
+        # free modes: eq. 18 (docs/physics.md §2.1), block "free modes" of §11
         f_model = natural_frequencies(ring, g, data.f_n)
         rows = [(f_model - data.f_freq) / data.f_sigma]
         aux = [f_model, None, None]
-        if data.d_zeta is not None:
+        if data.d_zeta is not None:  # free damping: one modal ζ (docs/physics.md §11)
             rows.append((ring.damping_ratio - data.d_zeta) / data.d_sigma)
         if data.l_n is not None:
+            # loaded modes: the patch half-angle from the static contact solve at load_n (docs/physics.md §4.3–4.4),
+            # the modes from the patch foundation of §6 ground_contact (§11 "loaded modes")
             half = jax.vmap(lambda fz, road: standing_half_angle(ring, g, fz, road, self.solver))(
                 data.l_load, data.l_roads)
 
@@ -258,6 +261,8 @@ class JointResiduals(AbstractResiduals):
             base = len(RING_FIELDS)
             offset = theta[base : base + 2 * P : 2]
             gain = theta[base + 1 : base + 2 * P : 2]
+            # profiles: the rolling ring read by the sensor (docs/physics.md §4–§5), per profile a gain and an
+            # angle offset, compared in revolution harmonics (§11 "profiles")
             ch = profile_channels(self.profile_model, ring, g, data.p_omega, data.p_load, data.p_roads, data.p_band,
                                   0.0, self.solver)
             ch = shift_angle(ch, offset[:, None, None]) * gain[:, None, None]
