@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import math
 import os
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -290,7 +289,7 @@ def joint_coords(P: int) -> tuple[Coordinate, ...]:
 
 @dataclass
 class _Rows:
-    """Every block's rows before scaling: name -> dict of arrays; ``slices`` of each block in the residual."""
+    """Every block's rows (dicts of arrays, ``None`` for a block the folder lacks); σ arrays are rescaled in place."""
 
     free: dict
     damping: dict | None
@@ -525,8 +524,6 @@ def _rescale_profiles(pr: dict, fit: FitResult, sl: slice, model, data) -> None:
 def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs) -> Identification:
     J, r = fit.jacobian, fit.residuals
     names = fit.names
-    k = len(names)
-    m = r.size
     fisher = {b: J[sl].T @ J[sl] for b, sl in slices.items()}
     total = np.diag(J.T @ J)  # data and prior rows
     blocks = {}
@@ -551,7 +548,6 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs) -> I
                               angle_offset_deg=math.degrees(fit.values[o]),
                               angle_offset_sd_deg=math.degrees(fit.stderr[o]), gain=fit.values[g],
                               gain_sd=fit.stderr[g]))
-    del k, m
     ring = RingParams(**{n: fit.values[n] for n in RING_FIELDS})
     return Identification(fit, ring, free_ring, blocks, (free_ring, corr), covariance, nuisances, notes, passes,
                           inputs)
