@@ -42,10 +42,6 @@ if ARGS.cores:
 
 import numpy as np  # noqa: E402
 
-import ringfit  # noqa: E402
-
-ringfit.enable_compilation_cache()  # a rerun skips XLA compilation
-
 from ringfit.fit.identify import identify, read_identify_folder  # noqa: E402
 from ringfit.synth.identify import make_identify_case  # noqa: E402
 
