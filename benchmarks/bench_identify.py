@@ -33,6 +33,12 @@ def parse():
                     help="the last N cases also identified without profiles (default 3)")
     ap.add_argument("--cores", type=int, default=1, help="pin to this many cores (0: no pinning)")
     ap.add_argument("--seed", type=int, default=100, help="first seed (default 100)")
+    ap.add_argument("--jobs", type=int, default=0,
+                    help="run each case in its own process, this many at a time (0: all in this process)")
+    ap.add_argument("--case-timeout", type=float, default=600.0, help="seconds before a case process is stopped")
+    ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--without-worker", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--timed", action="store_true", help=argparse.SUPPRESS)
     return ap.parse_args()
 
 
@@ -46,6 +52,84 @@ from ringfit.fit.identify import identify, read_identify_folder  # noqa: E402
 from ringfit.synth.identify import make_identify_case  # noqa: E402
 
 NAMES = ("rho_a", "ei", "kw", "kv", "k_tread", "damping_ratio")
+
+
+def one_case(seed: int, without: bool, timed: bool) -> dict:
+    """One joint case in a temporary folder: z-scores, errors, EI σ (and without profiles), times."""
+    import json
+
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / f"case{seed}"
+        truth = make_identify_case(folder, seed=seed)
+        inputs = read_identify_folder(folder)
+        t0, c0 = time.perf_counter(), time.process_time()
+        ident = identify(inputs)
+        cold = (time.perf_counter() - t0, time.process_time() - c0)
+        warm = None
+        if timed:
+            t0, c0 = time.perf_counter(), time.process_time()
+            identify(inputs)
+            warm = (time.perf_counter() - t0, time.process_time() - c0)
+        params = ident.parameters()
+        out = dict(seed=seed, status=ident.fit.status, converged=bool(ident.converged),
+                   colour=truth["profiles"][0]["noise_colour"], cold=cold, warm=warm,
+                   z={n: math.log(params[n]["value"] / truth["ring"][n]) / params[n]["sd_ln"] for n in NAMES},
+                   err={n: abs(math.log(params[n]["value"] / truth["ring"][n])) for n in NAMES},
+                   ei_sd=params["ei"]["sd_ln"], ei_sd_without=None)
+        if without:
+            bare = Path(tmp) / f"bare{seed}"
+            shutil.copytree(folder, bare, ignore=shutil.ignore_patterns("*.profile.*"))
+            out["ei_sd_without"] = identify(read_identify_folder(bare)).parameters()["ei"]["sd_ln"]
+    print("RESULT " + json.dumps(out), flush=True)
+    return out
+
+
+def main_processes() -> None:
+    """Each case in its own process (``--jobs`` at a time): a hung or crashed case is reported, not waited for."""
+    import json
+    import subprocess
+    import sys
+    from concurrent.futures import ThreadPoolExecutor
+
+    load0 = os.getloadavg()
+    print(f"load average at start: {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}")
+    seeds = [ARGS.seed + c for c in range(ARGS.cases)]
+
+    def run(seed):
+        argv = [sys.executable, __file__, "--worker", str(seed), "--cores", "0"]
+        if seed >= seeds[-1] - ARGS.without + 1:
+            argv.append("--without-worker")
+        if seed == seeds[0]:
+            argv.append("--timed")
+        try:
+            done = subprocess.run(argv, capture_output=True, text=True, timeout=ARGS.case_timeout)
+        except subprocess.TimeoutExpired:
+            return dict(seed=seed, failed=f"no result within {ARGS.case_timeout:.0f} s")
+        line = next((x for x in done.stdout.splitlines() if x.startswith("RESULT ")), None)
+        if line is None:
+            return dict(seed=seed, failed=(done.stderr.strip().splitlines() or ["?"])[-1])
+        return json.loads(line[7:])
+
+    results = []
+    with ThreadPoolExecutor(max(1, ARGS.jobs)) as pool:
+        for r in pool.map(run, seeds):
+            results.append(r)
+            if "failed" in r:
+                print(f"case seed {r['seed']}: FAILED ({r['failed']})", flush=True)
+                continue
+            worst = max(NAMES, key=lambda n: abs(r["z"][n]))
+            print(f"case seed {r['seed']} ({r['colour']:5s} noise): {r['status']}, EI σ {100 * r['ei_sd']:.2f} %, "
+                  f"largest |z| {abs(r['z'][worst]):.2f} ({worst}), {r['cold'][0]:.1f} s wall / {r['cold'][1]:.1f} s "
+                  "CPU (cold process)", flush=True)
+    ok = [r for r in results if "failed" not in r]
+    z = {n: [r["z"][n] for r in ok] for n in NAMES}
+    err = {n: [r["err"][n] for r in ok] for n in NAMES}
+    times = [tuple(r["warm"]) for r in ok if r["warm"]]
+    print(f"{len(results) - len(ok)} of {len(results)} case processes failed")
+    _summary(len(ok), z, err, [r["ei_sd"] for r in ok], [r["ei_sd_without"] for r in ok if r["ei_sd_without"]],
+             times, sum(r["converged"] for r in ok))
+    load1 = os.getloadavg()
+    print(f"load average at end: {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}")
 
 
 def main() -> None:
@@ -118,4 +202,9 @@ def _binomial_band(n: int, p: float) -> tuple[int, int]:
 
 if __name__ == "__main__":
     np.seterr(all="ignore")
-    main()
+    if ARGS.worker is not None:
+        one_case(ARGS.worker, ARGS.without_worker, ARGS.timed)
+    elif ARGS.jobs:
+        main_processes()
+    else:
+        main()
