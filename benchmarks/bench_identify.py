@@ -203,7 +203,10 @@ def _binomial_band(n: int, p: float) -> tuple[int, int]:
 if __name__ == "__main__":
     np.seterr(all="ignore")
     if ARGS.worker is not None:
-        one_case(ARGS.worker, ARGS.without_worker, ARGS.timed)
+        from ringfit.targets.ssi import small_matrix_threads
+
+        with small_matrix_threads():  # the synthetic truth's contact solves too (see ringfit.fit.identify.identify)
+            one_case(ARGS.worker, ARGS.without_worker, ARGS.timed)
     elif ARGS.jobs:
         main_processes()
     else:

@@ -451,7 +451,18 @@ def identify(inputs: IdentifyInputs, *, solver: ContactSolver = ContactSolver(),
 
     Starts from the tyre file's ``[ring]`` (Table 9 values where it has none). Returns
     :class:`Identification`; never raises on non-convergence (check ``converged``).
+
+    Runs with one BLAS thread: the contact solves' small LU factorisations run on XLA's own threads,
+    and a threaded LAPACK under them only synchronises — on a busy machine it was seen to deadlock
+    (two XLA threads waiting in ``dgetrf``).
     """
+    from ringfit.targets.ssi import small_matrix_threads
+
+    with small_matrix_threads():
+        return _identify(inputs, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, progress=progress)
+
+
+def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identification:
     tyre = inputs.tyre
     geometry, ring0 = tyre.geometry, tyre.ring
     notes = list(inputs.skipped)
