@@ -271,8 +271,15 @@ def test_campaign_table_and_report_from_the_saved_files(cluster, tmp_path, capsy
             assert float(row[key]) == pytest.approx(read_tyre(out / tyre / "fitted.tyre.toml").ring_values[name],
                                                     rel=1e-9)
         assert row["modes"] == str(len(load_posterior(out / tyre / "posterior.h5").meta["data"]["n"]))
-        verdict = read_diagnosis(out / tyre / "diagnosis.json")["verdict"]
+        diagnosis = read_diagnosis(out / tyre / "diagnosis.json")
+        verdict = diagnosis["verdict"]
         assert row["verdict"] == "+".join(verdict["effects"])
+        # one ring per tyre: the diagnosis's baseline is the fitted tyre file the table reads, not a refit
+        fitted = read_tyre(out / tyre / "fitted.tyre.toml").ring_values
+        reference = diagnosis["parts"][0]["baseline"]["reference_fit"]
+        assert reference["status"] == "evaluated"
+        for name, value in reference["values"].items():
+            assert value == pytest.approx(fitted[name], rel=1e-12)
     assert rows["tyreA"]["distance"] == ""  # two tyres: too few for the outlier test
     page = (out / "campaign.html").read_text()
     assert "tyreA" in page and "tyreC" in page and "data:image/png;base64," in page

@@ -43,8 +43,10 @@ def test_one_quiet_flag():
 def test_max_steps_means_chain_steps_only(capsys):
     owners = {name: a.help for name, p in _subparsers().items() for a in p._actions
               if "--max-steps" in a.option_strings and a.help != argparse.SUPPRESS}
-    assert sorted(owners) == ["campaign", "sample"]  # campaign passes it on to `ringfit sample`
+    # campaign passes it on to `ringfit sample`; identify's counts the steps of its --posterior chain
+    assert sorted(owners) == ["campaign", "identify", "sample"]
     assert "ringfit sample --max-steps" in owners["campaign"]
+    assert "chain steps" in owners["identify"]
     assert main(["fit", "m.modes.csv", "--tyre", "t.toml", "--out", "o.toml", "--max-steps", "10"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--max-iterations" in err

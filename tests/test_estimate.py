@@ -353,3 +353,36 @@ def test_cli_per_revolution_csv(tmp_path):
     assert len(loads) >= 6 and np.all(np.abs(loads / 4000.0 - 1) < 0.015)
     doc = json.loads(out.read_text())
     assert doc["per_revolution"]["revolutions"] == len(loads) and doc["rotation_hz"]["source"].startswith("encoder")
+
+
+def test_cli_refuses_a_tyre_file_without_ring(profile_file, tmp_path, capsys):
+    bare = tmp_path / "bare.tyre.toml"
+    bare.write_text('[tyre]\nradius_m = 0.296\nwidth_m = 0.152\npressure_bar = 2.2\n')
+    out = tmp_path / "x.estimate.json"
+    assert run_cli(profile_file, "--tyre", bare, "--out", out, "--quiet") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bare.tyre.toml" in err[0] and "[ring]" in err[0]
+    assert not out.exists()
+
+
+def test_cli_propagates_the_tyre_files_covariance_like_k_tread_sd(profile_file, tmp_path, capsys):
+    """The [ring.covariance]'s σ of ln k_trd is what --k-tread-sd would propagate: the same interval."""
+    from ringfit.data import path as data_path
+    from ringfit.io.tyre import RingCovariance, read_tyre, write_tyre
+
+    tyre = read_tyre(data_path("table9.tyre.toml"))
+    sd = 0.08
+    cov = np.diag([0.01, 0.3, 0.02, sd]) ** 2
+    cov[1, 3] = cov[3, 1] = 0.5 * 0.3 * sd  # correlations other than k_trd's variance do not enter
+    tyre.covariance = RingCovariance(("rho_a", "ei", "kw", "k_tread"), cov, "test")
+    path = tmp_path / "cov.tyre.toml"
+    write_tyre(tyre, path)
+    a, b, c = (tmp_path / f"{x}.estimate.json" for x in "abc")
+    assert run_cli(profile_file, "--tyre", path, "--out", a) == 0
+    assert "propagated into the load interval" in capsys.readouterr().out
+    assert run_cli(profile_file, "--tyre", data_path("table9.tyre.toml"), "--out", b, "--k-tread-sd", sd,
+                   "--quiet") == 0
+    assert run_cli(profile_file, "--tyre", data_path("table9.tyre.toml"), "--out", c, "--quiet") == 0
+    la, lb, lc = (json.loads(x.read_text())["load_n"] for x in (a, b, c))
+    assert la["lo"] == pytest.approx(lb["lo"], rel=1e-9) and la["hi"] == pytest.approx(lb["hi"], rel=1e-9)
+    assert la["hi"] - la["lo"] > 2 * (lc["hi"] - lc["lo"])  # k_trd at ±8 % dominates a fixed-ring interval

@@ -23,6 +23,7 @@ import warnings
 #: Modules that contribute subcommands, in help order.
 COMMAND_MODULES = (
     "ringfit.cli.free",
+    "ringfit.cli.identify",
     "ringfit.cli.rolling",
     "ringfit.cli.gap",
     "ringfit.cli.targets",

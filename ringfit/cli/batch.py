@@ -566,8 +566,11 @@ def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
                                            paths["posterior"], *sample_opts, *force], (f"{name}/fit",),
                           [paths["posterior"]]))
         diag_opts = ["--effects", opts.effects] if opts.effects else []
-        tasks.append(step(name, "diagnose", ["diagnose", str(case), "--out", paths["diagnosis"], "--quiet",
-                                             *diag_opts, *force], after, [paths["diagnosis"]]))
+        # one ring per tyre: the diagnosis takes the fitted tyre file as its baseline (not a refit of its own), so the
+        # campaign table (read from that file) and the diagnosis agree by construction
+        tasks.append(step(name, "diagnose", ["diagnose", str(case), "--out", paths["diagnosis"], "--tyre",
+                                             paths["fitted"], "--quiet", *diag_opts, *force], (f"{name}/fit",),
+                          [paths["diagnosis"]]))
         layout[name] = paths
     return tasks, layout
 

@@ -116,6 +116,9 @@ def run_campbell(args) -> int:
     for m, t in zip(args.modes, tables):  # before the diagram's work: a sidecar whose condition cannot be modelled
         check_test_condition(t.condition, source=sidecar_path(m))
     ring, geometry = tyre.ring, tyre.geometry
+    if tyre.covariance is not None:
+        print("note: the branches are the nominal ring's; the tyre file's [ring.covariance] is not propagated into "
+              "them (ringfit roll and estimate propagate it)")
     diagram = campbell_diagram(ring, geometry, args.load, speeds, drum_diameter_m=args.drum, n_max=args.n_max)
     if not diagram.ok.all():
         bad = ", ".join(f"{v:g}" for v in diagram.speed_kmh[~diagram.ok])

@@ -36,8 +36,8 @@ def register(sub) -> None:
                    help="PNG: the fit to the profile, and for a recording the load against time with its band")
     p.add_argument("--k-tread-sd", type=number("a σ of ln k_tread in [0, 5]", lo=0.0, hi=5.0), default=None, metavar="S",
                    help="σ of ln k_tread: free the tread stiffness with this log-normal prior around the tyre "
-                        "file's value and propagate it into the interval (default: fixed; 0.3 when the tyre "
-                        "file has no k_tread)")
+                        "file's value and propagate it into the interval (default: the tyre file's "
+                        "[ring.covariance] when it has one, else fixed; 0.3 when the tyre file has no k_tread)")
     p.add_argument("--harmonics", type=integer("a number of harmonics >= 8", lo=8), default=40, metavar="K",
                    help="highest revolution harmonic fitted (default 40)")
     p.add_argument("--grid", type=integer("an even grid size >= 128", lo=128, hi=1 << 16), default=512, help="model grid M of the contact solve (default 512)")
@@ -76,7 +76,14 @@ def run_estimate(args) -> int:
     from ringfit.io.tyre import read_tyre
 
     tyre = read_tyre(args.tyre)
-    settings = EstimateSettings(n_grid=args.grid, k_max=args.harmonics, k_tread_sd=args.k_tread_sd)
+    if not tyre.ring_values:
+        raise InputError("has no [ring]: the load estimate needs the tyre's identified ring (ringfit identify, or "
+                         "ringfit fit and fit-rolling); it does not fall back to the Table 9 values",
+                         source=args.tyre)
+    k_tread_sd, note = tread_uncertainty(tyre, args.k_tread_sd)
+    if note and not args.quiet:
+        print(note)
+    settings = EstimateSettings(n_grid=args.grid, k_max=args.harmonics, k_tread_sd=k_tread_sd)
     k_in_file = "k_tread" in tyre.ring_values
     revs = None
     if kind == "profile":
@@ -120,6 +127,23 @@ def run_estimate(args) -> int:
         save_figure(estimate_figure(est, revs, title=args.input.name), args.plot)
         print(f"wrote {args.plot}")
     return 0
+
+
+def tread_uncertainty(tyre, k_tread_sd):
+    """σ of ln k_trd the estimate propagates, and a line saying where it came from.
+
+    ``--k-tread-sd`` wins; else the tyre file's ``[ring.covariance]`` (docs/formats.md §1.1: the
+    marginal σ of ln k_trd, as identified); else ``None`` (fixed, or the estimate's default prior
+    when the file has no k_trd).
+    """
+    if k_tread_sd is not None:
+        return k_tread_sd, None
+    cov = tyre.covariance
+    sd = None if cov is None else cov.sd_ln("k_tread")
+    if sd is None:
+        return None, None
+    return sd, (f"k_tread {tyre.ring_values.get('k_tread', float('nan')):.4g} N/m² ± {100 * sd:.2g} % (1σ, the tyre "
+                "file's [ring.covariance]) propagated into the load interval")
 
 
 def _input_kind(path: Path) -> str:

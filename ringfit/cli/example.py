@@ -1,4 +1,4 @@
-"""``ringfit example {records,case,cleat,profiles,rolling} --out DIR [--format tdms|mat|csv] [--effect NAME]`` — synthetic inputs with a README of their truth.
+"""``ringfit example {records,case,cleat,profiles,rolling,identify} --out DIR [--format tdms|mat|csv] [--effect NAME]`` — synthetic inputs with a README of their truth.
 
 The one command of the product that imports :mod:`ringfit.synth` (the
 test-data generators); see :mod:`ringfit.synth.examples`.
@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ringfit.cli._args import force_flag, quiet_flag
 
-KINDS = ("records", "case", "cleat", "profiles", "rolling")
+KINDS = ("records", "case", "cleat", "profiles", "rolling", "identify")
 FORMATS = ("tdms", "mat", "csv")
 
 
@@ -21,7 +21,8 @@ def register(sub) -> None:
                                    "read them: records (hammer records -> ssi, frf, fit, sample, report), profiles "
                                    "(rolling profiles -> fit-rolling, roll), cleat (drum recording -> profile, "
                                    "cleat), case (case folder -> diagnose), rolling (case folder with rolling mode "
-                                   "tables at 20/40/60 km/h -> diagnose, campbell).")
+                                   "tables at 20/40/60 km/h -> diagnose, campbell), identify (case folder with every state: free, loaded at "
+                                   "two loads, three profiles at known load -> identify, estimate).")
     p.add_argument("kind", choices=KINDS, help="which example: " + ", ".join(KINDS))
     p.add_argument("--out", required=True, type=Path, help="folder to write into (created if missing)")
     p.add_argument("--format", dest="fmt", choices=FORMATS, default=None,

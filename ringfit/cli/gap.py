@@ -30,6 +30,9 @@ def register(subparsers) -> None:
                    default=0.01, help="an accepted effect must beat chance (its null) at this level (default 0.01)")
     p.add_argument("--null-draws", type=integer("a count of null draws, 20 … 20000", lo=20, hi=20000),
                    default=200, help="draws per null distribution (default 200; p is resolved to 1/(draws + 1))")
+    p.add_argument("--tyre", default=None, metavar="TYRE.toml",
+                   help="baseline ring as identified or fitted before (ringfit identify / fit), used as it is with "
+                        "its [ring.covariance]: one ring per tyre (default: fit free.modes.csv)")
     quiet_flag(p)
     force_flag(p)
     p.set_defaults(run=run)
@@ -47,8 +50,16 @@ def run(args) -> int:
     if not folder.is_dir():
         raise InputError("not a folder; a case is a folder with tyre.toml and free.modes.csv (docs/formats.md §6)",
                          source=folder)
-    inputs = list(folder.glob("*"))
+    inputs = list(folder.glob("*")) + ([Path(args.tyre)] if args.tyre else [])
     check_output_paths([args.out, args.report], overwrite=args.force, inputs=inputs)
+    baseline = None
+    if args.tyre:
+        from ringfit.io.tyre import read_tyre
+
+        baseline = read_tyre(args.tyre)
+        if not baseline.ring_values:
+            raise InputError("has no [ring]: --tyre gives the baseline ring (ringfit identify or fit first)",
+                             source=args.tyre)
 
     from ringfit.gap import diagnose
     from ringfit.gap.effects import load_effect_module
@@ -66,7 +77,7 @@ def run(args) -> int:
         noise["profile_ms2"] = args.noise_profile
     print(f"ringfit diagnose: {folder}")
     diag = diagnose(folder, effects=effects, progress=not args.quiet, noise=noise or None, alpha=args.alpha,
-                    null_draws=int(args.null_draws))
+                    null_draws=int(args.null_draws), tyre=baseline)
     diag.write(args.out, overwrite=args.force, inputs=inputs)
     if args.report:
         from ringfit.report.gap_report import write_gap_report

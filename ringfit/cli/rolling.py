@@ -107,6 +107,8 @@ def run_roll(args) -> int:
     print(f"deflection {1e3 * float(sol.deflection):.2f} mm, patch {lead:+.2f}° … {trail:+.2f}° "
           f"({1e3 * float(contact_length(sol)):.1f} mm), p_max {float(sol.pressure.max()):.4g} N/m, "
           f"Fx {float(sol.fx):+.1f} N (rearward +)")
+    if tyre.covariance is not None:
+        _print_ring_band(tyre, args, solver, omega)
     print(f"wrote {args.out} and {sidecar_path(args.out).name}")
     if args.plot is not None:
         from ringfit.report.rolling_plots import rolling_solution_figure
@@ -117,6 +119,33 @@ def run_roll(args) -> int:
         atomic_write(args.plot, lambda tmp: fig.savefig(tmp, format="png"))
         print(f"wrote {args.plot}")
     return 0
+
+
+#: Rings drawn from the tyre file's [ring.covariance] to propagate it into the standing state.
+RING_DRAWS = 32
+
+
+def _print_ring_band(tyre, args, solver, omega: float) -> None:
+    """The tyre's [ring.covariance] propagated into deflection and patch length at this speed and load: 95 % over
+    RING_DRAWS drawn rings (Ω held at the nominal ring's; the written profile is the nominal ring's)."""
+    import numpy as np
+
+    from ringfit.physics.contact import contact_length, solve_rolling_jit
+    from ringfit.physics.operating import OperatingPoint, road_from_drum_diameter
+
+    road = road_from_drum_diameter(args.drum)
+    defl, length = [], []
+    for ring in tyre.covariance.draws(tyre.ring, RING_DRAWS):
+        sol = solve_rolling_jit(ring, tyre.geometry, OperatingPoint(float(omega), float(args.load), road), solver=solver)
+        if bool(sol.ok):
+            defl.append(1e3 * float(sol.deflection))
+            length.append(1e3 * float(contact_length(sol)))
+    if len(defl) < RING_DRAWS // 2:
+        print(f"the tyre's [ring.covariance]: only {len(defl)} of {RING_DRAWS} drawn rings solved; no band")
+        return
+    (d0, d1), (l0, l1) = np.percentile(defl, [2.5, 97.5]), np.percentile(length, [2.5, 97.5])
+    print(f"with the tyre's [ring.covariance] ({len(defl)} drawn rings): deflection "
+          f"{d0:.2f} … {d1:.2f} mm, patch {l0:.1f} … {l1:.1f} mm (95 %); the profile written is the nominal ring's")
 
 
 def run_fit_rolling(args) -> int:

@@ -640,17 +640,187 @@ def sum_of_squares_batch(problem: Problem, thetas, chunk: int = 64) -> np.ndarra
                            thetas, min(int(chunk), len(thetas)))
 
 
-def evaluate(problem: Problem, theta, free: tuple[str, ...], **kwargs) -> FitResult:
-    """Residuals, Jacobian (w.r.t. the free parameters' solver coordinates) and aux at ``theta`` — no fit.
+# ---------------------------------------------------------------------------------------------
+# The public surface besides the fits: residuals, Jacobian, log-probability at given parameters.
+# Other modules (the posterior, the gap ranking, the joint identification) build on these and
+# never on the solver's internals (the free-set arrays, the weighted rows, zero-step solves).
+# ---------------------------------------------------------------------------------------------
 
-    One step of :func:`least_squares`' compiled solve (the same executable: no extra
-    compilation); ``kwargs`` as there (``pad_to``, ``n_data``, ``rtol``, ``atol`` must
-    match the fits it should share a compilation with). ``status`` is ``"evaluated"``.
+
+@dataclass(frozen=True)
+class FreeSet:
+    """A checked free set of a problem: parameter ``index`` per free name, solver-coordinate bounds.
+
+    - ``names``: the free parameters; ``index``: their positions in ``problem.coords``.
+    - ``lo_u``, ``hi_u``: ``(k,)`` bounds of their solver coordinates ``u`` (``±inf`` when open).
+    - ``prior_w``, ``prior_mean``: whitened prior rows ``W (u − mean)`` over the (padded) free set.
     """
-    result = least_squares(problem, theta, free, max_steps=0, **kwargs)
-    result.status, result.message = "evaluated", "residuals and Jacobian at the given parameters (no fit)"
+
+    names: tuple[str, ...]
+    index: tuple[int, ...]
+    size: int
+    arrays: tuple
+    prior_w: np.ndarray
+    prior_mean: np.ndarray
+    lo_u: np.ndarray
+    hi_u: np.ndarray
+
+    def u_of_theta(self, problem: Problem, theta) -> np.ndarray:
+        """Solver coordinates ``(k,)`` of the free parameters at ``theta`` (natural units, ``(p,)``)."""
+        return np.array([problem.coords[i].to_u(float(theta[i])) for i in self.index])
+
+
+def free_set(problem: Problem, free: tuple[str, ...], pad_to: int | None = None) -> FreeSet:
+    """Check ``free`` against ``problem`` and build its :class:`FreeSet` (padded to ``pad_to`` slots)."""
+    index, K, arrays, W, mean, lo_u, hi_u = _setup(problem, tuple(free), pad_to)
+    k = len(tuple(free))
+    return FreeSet(tuple(free), tuple(index), K, arrays, W, mean, lo_u[:k], hi_u[:k])
+
+
+@functools.partial(jax.jit, static_argnames=("model", "treedef"))
+def _linearize(leaves, u, theta0, free_arrays, prior_w, prior_mean, *, model, treedef):
+    """Rows (data, then prior), their Jacobian in ``u`` (one forward-mode pass) and aux at ``u`` ``(K,)``."""
+    data = jax.tree.unflatten(treedef, leaves)
+    free = _Free(*free_arrays[:4], jnp.zeros_like(free_arrays[4]), jnp.zeros_like(free_arrays[5]),
+                 jnp.ones_like(free_arrays[6]))
+
+    def both(x):
+        r, aux = _weighted(x, model, data, theta0, free, prior_w, prior_mean)
+        return r, (r, aux)
+
+    jac, (res, aux) = jax.jacfwd(both, has_aux=True)(u)
+    return res, jac, aux
+
+
+@dataclass(frozen=True)
+class Linearization:
+    """Weighted data rows at given parameters: ``residuals`` ``(m,)``, ``jacobian`` ``(m, k)`` with respect to
+    the free parameters' solver coordinates ``u`` (ln θ or (θ − center)/scale), the model's ``aux``."""
+
+    residuals: np.ndarray
+    jacobian: np.ndarray
+    aux: object
+    names: tuple[str, ...]
+
+
+def _linearize_all(problem: Problem, theta, free, pad_to):
+    fs = free_set(problem, free, pad_to)
+    theta = np.asarray(theta, dtype=np.float64)
+    if theta.shape != (len(problem.names),):
+        raise ValueError(f"theta has shape {theta.shape}, coords {len(problem.names)}")
+    _start(problem, fs.index, fs.size, fs.arrays, theta[None])  # checks the values
+    u = np.concatenate([fs.u_of_theta(problem, theta), np.zeros(fs.size - len(fs.names))])
+    leaves, treedef = jax.tree.flatten(problem.data)
+    res, jac, aux = _linearize(leaves, u, np.append(theta, 0.0), fs.arrays, fs.prior_w, fs.prior_mean,
+                               model=problem.model, treedef=treedef)
+    return fs, u, np.asarray(res), np.asarray(jac), aux
+
+
+def linearize(problem: Problem, theta, free: tuple[str, ...], *, pad_to: int | None = None) -> Linearization:
+    """Weighted residual rows, their Jacobian and the model's aux at ``theta`` — no fit.
+
+    One compiled region per problem structure and (padded) free-set size: ``pad_to`` pads the
+    free set so that chunks of several sizes share it. The Jacobian is with respect to the
+    solver coordinates ``u`` of ``free`` (``∂r/∂ln θ`` for log parameters); prior rows are left out.
+    """
+    fs, _, res, jac, aux = _linearize_all(problem, theta, free, pad_to)
+    m = res.size - fs.size
+    return Linearization(res[:m], jac[:m, : len(fs.names)], aux, fs.names)
+
+
+@functools.partial(jax.jit, static_argnames=("model", "treedef"))
+def _residuals_at(theta, leaves, *, model, treedef):
+    return model(theta, jax.tree.unflatten(treedef, leaves))
+
+
+def residuals(problem: Problem, theta) -> tuple[np.ndarray, object]:
+    """The model's weighted residual rows ``(m,)`` and aux at ``theta`` (natural units, ``(p,)``); no prior rows."""
+    leaves, treedef = jax.tree.flatten(problem.data)
+    res, aux = _residuals_at(jnp.asarray(theta, dtype=jnp.float64), leaves, model=problem.model, treedef=treedef)
+    return np.asarray(res), aux
+
+
+@functools.partial(jax.jit, static_argnames=("model", "treedef"))
+def _batched_residuals(thetas, leaves, *, model, treedef):
+    data = jax.tree.unflatten(treedef, leaves)
+    return jax.vmap(lambda th: model(th, data)[0])(thetas)
+
+
+def residuals_batch(problem: Problem, thetas, chunk: int = 64) -> np.ndarray:
+    """Weighted residual rows ``(G, m)`` for each parameter vector of ``thetas`` ``(G, p)``, in fixed chunks."""
+    leaves, treedef = jax.tree.flatten(problem.data)
+    return in_fixed_chunks(lambda th: _batched_residuals(th, leaves, model=problem.model, treedef=treedef),
+                           thetas, min(int(chunk), len(thetas)))
+
+
+@functools.partial(jax.jit, static_argnames=("model", "treedef"))
+def _batched_log_probability(u, leaves, theta0, free_arrays, prior_w, prior_mean, lo, hi, inv_s2, *, model, treedef):
+    """Log density ``(n,)`` of solver coordinates ``u`` ``(n, k)``, up to a constant."""
+    data = jax.tree.unflatten(treedef, leaves)
+    free = _Free(*free_arrays)
+    k = u.shape[1]
+
+    def one(ui):
+        r, _ = _weighted(ui, model, data, theta0, free, prior_w, prior_mean)
+        m = r.shape[0] - k
+        value = -0.5 * (inv_s2 * jnp.sum(r[:m] ** 2) + jnp.sum(r[m:] ** 2))
+        inside = jnp.all((ui >= lo) & (ui <= hi))
+        value = jnp.where(inside, value, -jnp.inf)
+        return jnp.where(jnp.isnan(value), -jnp.inf, value)
+
+    return jax.vmap(one)(u)
+
+
+def log_probability(problem: Problem, theta, free: tuple[str, ...], *, lo_u=None, hi_u=None,
+                    sigma_scale: float = 1.0, chunk: int | None = None):
+    """``u (n, k) -> (n,)``: the log posterior density of the free parameters' solver coordinates.
+
+    ``−½ (Σ r²/s² + prior rows²)`` with ``r`` the model's weighted rows and ``s`` = ``sigma_scale``
+    (the fit's residual σ when the problem's ``sigma`` is ``"estimate"``); ``−inf`` outside
+    ``[lo_u, hi_u]`` (default: the coordinates' bounds) or where the model is not finite. The
+    fixed parameters stay at ``theta``. One jitted, vmapped region; ``chunk`` evaluates in chunks of
+    exactly that many rows (padded), so one compilation serves every batch size.
+    """
+    fs = free_set(problem, free)
+    k = len(fs.names)
+    lo = fs.lo_u if lo_u is None else np.asarray(lo_u, dtype=np.float64)
+    hi = fs.hi_u if hi_u is None else np.asarray(hi_u, dtype=np.float64)
+    # the density is over u itself: no sine transform of bounded coordinates
+    free_arrays = tuple(jnp.asarray(a) for a in fs.arrays[:4] + (np.zeros(k, dtype=bool), np.zeros(k), np.ones(k)))
+    leaves, treedef = jax.tree.flatten(problem.data)
+    consts = (tuple(jnp.asarray(x) for x in leaves), jnp.asarray(np.append(np.asarray(theta, np.float64), 0.0)),
+              free_arrays, jnp.asarray(fs.prior_w), jnp.asarray(fs.prior_mean), jnp.asarray(lo), jnp.asarray(hi),
+              jnp.asarray(1.0 / float(sigma_scale) ** 2))
+
+    def evaluate_u(u):
+        return np.asarray(_batched_log_probability(u, *consts, model=problem.model, treedef=treedef),
+                          dtype=np.float64)
+
+    def log_prob(u):
+        u = np.asarray(u, dtype=np.float64)
+        return evaluate_u(u) if chunk is None else in_fixed_chunks(evaluate_u, u, chunk)
+
+    return log_prob
+
+
+def evaluate(problem: Problem, theta, free: tuple[str, ...], *, pad_to: int | None = None,
+             n_data: int | None = None, **_ignored) -> FitResult:
+    """Residuals, Jacobian (w.r.t. the free parameters' solver coordinates), covariance and aux at ``theta`` — no fit.
+
+    :func:`linearize` packed as a :class:`~ringfit.fit.result.FitResult` (``status`` ``"evaluated"``,
+    no flags), for code that wants standard errors at given parameters.
+    """
+    fs, u, res, jac, aux = _linearize_all(problem, theta, free, pad_to)
+    k = len(fs.names)
+    m = res.size - fs.size
+    res, jac = np.concatenate([res[:m], res[m:][:k]]), np.concatenate([jac[:m], jac[m:][:k]])[:, :k]
+    result = _result(problem, fs.names, list(fs.index), np.asarray(theta, dtype=np.float64), u[:k], "evaluated",
+                     "residuals and Jacobian at the given parameters (no fit)", 0, res, jac, m, aux, n_data,
+                     fs.lo_u, fs.hi_u)
     result.flags = []
+    result.problem = problem
     return result
 
 
-__all__ = ["least_squares", "least_squares_batch", "SOLVERS", "evaluate", "sum_of_squares_batch", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]
+__all__ = ["least_squares", "least_squares_batch", "SOLVERS", "evaluate", "sum_of_squares_batch", "linearize",
+           "Linearization", "residuals", "residuals_batch", "log_probability", "free_set", "FreeSet", "in_fixed_chunks", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]

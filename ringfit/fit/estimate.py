@@ -970,7 +970,9 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
     for start in starts:
         res, _ = fit_batch(int(start), theta, weight)
         n = min(batch, R - int(start))
-        ok = res.converged[:n] & ~res.at_bound[:n, 0] & np.all(np.isfinite(res.theta[:n]), axis=1)
+        # a revolution whose load or gain sits on its bound did not find an optimum inside the model's range
+        on_bound = res.at_bound[:n][:, [free.index(LOAD), free.index(GAIN)]].any(axis=1)
+        ok = res.converged[:n] & ~on_bound & np.all(np.isfinite(res.theta[:n]), axis=1)
         if ok.any():
             theta = res.theta[np.flatnonzero(ok)[-1]].copy()
         results[int(start)] = (res, n, ok)

@@ -20,7 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares
+from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, evaluate,
+                                least_squares)
 from ringfit.fit.priors import BOUNDS, LogNormalPrior, resolve_priors
 from ringfit.fit.result import FitResult
 from ringfit.io.modes import ModeTable
@@ -161,6 +162,7 @@ def fit_natural_frequencies(
     max_steps: int = 256,
     rtol: float = 1e-10,
     atol: float = 1e-10,
+    at_initial: bool = False,
 ) -> FitResult:
     """Fit ring parameters to measured natural frequencies (eq. 18, docs/physics.md §2.1).
 
@@ -175,6 +177,8 @@ def fit_natural_frequencies(
       :mod:`ringfit.fit.priors`) or a dict name -> ``LogNormalPrior``/(median, σ_ln).
     - ``modes``: which rows take part (see :func:`frequency_data`).
     - ``default_relative_std``: σ/f where the table gives no ``freq_std_hz``.
+    - ``at_initial``: no fit: residuals, Jacobian and covariance at ``initial`` (status ``"evaluated"``;
+      a ring identified elsewhere, e.g. by ``ringfit identify``, used as it is).
 
     **Returns:** :class:`~ringfit.fit.result.FitResult`; ``extra`` holds
     ``n``, ``freq_hz``, ``model_hz``, ``sigma_hz`` (shape ``(m,)``),
@@ -213,7 +217,10 @@ def fit_natural_frequencies(
                              np.concatenate([data.sigma_hz, np.full(pad, np.inf)]))
     problem = Problem(NaturalFrequencyResiduals(), arrays, RING_COORDS, prior=log_normal_prior(priors),
                       plausible=BOUNDS, data_label="these modes")
-    result = least_squares(problem, base, free, max_steps=max_steps, rtol=rtol, atol=atol, n_data=m)
+    if at_initial:
+        result = evaluate(problem, base, free, n_data=m)
+    else:
+        result = least_squares(problem, base, free, max_steps=max_steps, rtol=rtol, atol=atol, n_data=m)
     model = np.asarray(result.extra.pop("aux"))[:m]
     result.residuals = result.residuals[:m]
     result.jacobian = np.concatenate([result.jacobian[:m], result.jacobian[m + pad:]])

@@ -34,11 +34,9 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from ringfit.fit.engine import LOG, _Free, _setup, _weighted, in_fixed_chunks
+from ringfit.fit.engine import LOG, free_set, log_probability
 from ringfit.params import RingParams
 
 #: Stop when the chain is longer than this many integrated autocorrelation times.
@@ -439,29 +437,15 @@ def log_probability_function(result, bounds: dict | None = None, chunk: int | No
     """
     problem = result.problem
     free = tuple(result.names)
-    k = len(free)
-    index, _, setup_arrays, W, mean, lo, hi = _setup(problem, free, None)
-    lo, hi = lo.copy(), hi.copy()
-    coords = [problem.coords[i] for i in index]
+    fs = free_set(problem, free)
+    lo, hi = fs.lo_u.copy(), fs.hi_u.copy()
+    coords = [problem.coords[i] for i in fs.index]
     for j, c in enumerate(coords):
         rng = (bounds or {}).get(c.name) or (problem.plausible or {}).get(c.name)
         if rng is not None:
             lo[j], hi[j] = c.to_u(rng[0]) if c.kind != LOG or rng[0] > 0 else -np.inf, c.to_u(rng[1])
-    # the sampler moves in u itself: no sine transform of bounded coordinates
-    free_arrays = tuple(jnp.asarray(a) for a in setup_arrays[:4] + (np.zeros(k, dtype=bool), np.zeros(k), np.ones(k)))
-    leaves, treedef = jax.tree.flatten(problem.data)
-    s = float(result.extra.get("sigma_scale", 1.0))
-    consts = (tuple(jnp.asarray(x) for x in leaves), jnp.asarray(np.append(result.theta, 0.0)), free_arrays,
-              jnp.asarray(W), jnp.asarray(mean), jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(1.0 / s**2))
-
-    def evaluate(u):
-        return np.asarray(_batched_log_probability(u, *consts, model=problem.model, treedef=treedef),
-                          dtype=np.float64)
-
-    def log_prob(u):
-        u = np.asarray(u, dtype=np.float64)
-        return evaluate(u) if chunk is None else in_fixed_chunks(evaluate, u, chunk)
-
+    log_prob = log_probability(problem, result.theta, free, lo_u=lo, hi_u=hi,
+                               sigma_scale=float(result.extra.get("sigma_scale", 1.0)), chunk=chunk)
     return log_prob, lo, hi
 
 

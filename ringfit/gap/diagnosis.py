@@ -567,11 +567,14 @@ def _progress(problem, progress, total):
 
 
 # --------------------------------------------------------------------------- folder
-def build_problems(case, effects, noise=None) -> list[GapProblem]:
-    """The problems of a case: mode-table frequencies and damping (:mod:`ringfit.gap.modal`) and profiles (if any)."""
+def build_problems(case, effects, noise=None, baseline: bool = False) -> list[GapProblem]:
+    """The problems of a case: mode-table frequencies and damping (:mod:`ringfit.gap.modal`) and profiles (if any).
+
+    ``baseline``: ``case.tyre``'s ring is the baseline as it is (``diagnose --tyre``), not refitted to free.modes.csv.
+    """
     from ringfit.gap.modal import build_modal_problems
 
-    problems = build_modal_problems([case.free, *case.tests], case.tyre, effects, noise=noise)
+    problems = build_modal_problems([case.free, *case.tests], case.tyre, effects, noise=noise, baseline=baseline)
     if case.profiles:
         from ringfit.gap.profile import build_profile_problem
 
@@ -632,7 +635,7 @@ def resolve_effects(effects=None):
 
 
 def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = None, alpha: float = ALPHA,
-             null_draws: int = DRAWS) -> Diagnosis:
+             null_draws: int = DRAWS, tyre=None) -> Diagnosis:
     """Diagnose the sim-to-real gap of a case folder (docs/formats.md §6) against the baselines of docs/physics.md §6.
 
     **Arguments:**
@@ -644,12 +647,19 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
       default: estimated from the data (see :mod:`ringfit.gap.modal`, :mod:`ringfit.gap.profile`).
     - ``alpha``: significance level every accepted effect must beat its null at
       (:mod:`ringfit.gap.calibration`); ``null_draws``: draws per null (0: no null, not recommended).
+    - ``tyre``: an identified or fitted :class:`~ringfit.io.tyre.Tyre` whose ring (and ``[ring.covariance]``)
+      is the baseline as it is — one ring per tyre; default: the ring fitted to ``free.modes.csv``.
 
     **Returns:** :class:`Diagnosis` (``.content`` is the docs/formats.md §5 dict, ``.write(path)``).
     """
     from ringfit.gap.case import Case, read_case
 
     case = folder if isinstance(folder, Case) else read_case(folder)
+    if tyre is not None:  # the given ring on the case's own geometry
+        from ringfit.io.tyre import Tyre
+
+        case.tyre = Tyre(case.tyre.geometry, dict(tyre.ring_values), dict(case.tyre.extra), tyre.source,
+                         tyre.covariance)
     chosen = resolve_effects(effects)
     t0 = time.perf_counter()
     # one BLAS thread: every solve here is small (eigen-solves of ≤ 100 × 100, least squares of ≤ a few
@@ -658,7 +668,7 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
 
     parts_ = []
     with small_matrix_threads():
-        problems = build_problems(case, chosen, noise)
+        problems = build_problems(case, chosen, noise, baseline=tyre is not None)
         for prob in problems:
             # the mode-table parts are only a test when the folder holds test tables or nothing else
             if prob.domain in ("modes", "damping") and case.profiles and not case.tests:
@@ -666,6 +676,8 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
             parts_.append(diagnose_problem(prob, progress, alpha, null_draws))
     content = _combine(parts_)
     content["data"] = case.data_files
+    if tyre is not None:
+        content["baseline_tyre"] = str(tyre.source)
     content["elapsed_s"] = round(time.perf_counter() - t0, 2)
     return Diagnosis(content, parts_, getattr(case, "folder", None))
 

@@ -511,12 +511,34 @@ def _match_missing_n(rows, ring, geometry):
     return notes
 
 
-def _reference_fit(free: ModeTable, geometry, ring, user_sigma_hz=None):
+def _baseline_covariance(fit, tyre) -> None:
+    """A given baseline's uncertainty: the tyre file's ``[ring.covariance]`` (ln θ) for the parameters it holds."""
+    cov = getattr(tyre, "covariance", None)
+    if cov is None:
+        fit.message = "the tyre file's ring, evaluated (not refitted); its uncertainty from the free table"
+        return
+    idx = [j for j, n in enumerate(fit.names) if n in cov.names]
+    src = [cov.names.index(fit.names[j]) for j in idx]
+    fit.covariance_log[np.ix_(idx, idx)] = cov.ln[np.ix_(src, src)]
+    for j in idx:
+        name = fit.names[j]
+        fit.stderr[name] = fit.values[name] * math.sqrt(fit.covariance_log[j, j])
+    fit.message = "the tyre file's ring, evaluated (not refitted), with its [ring.covariance]"
+
+
+def _reference_fit(free: ModeTable, geometry, ring, user_sigma_hz=None, fixed: bool = False):
     """``ringfit fit``'s fit of the ring to the free table, with the relative σ estimated from its own residual.
+
+    ``fixed``: no fit, the ring as given (evaluated at ``ring``).
 
     **Returns:** ``(fit, sigma_rel, method)``; ``sigma_rel`` NaN when ``freq_std_hz`` is complete.
     """
-    from ringfit.fit.least_squares import DEFAULT_RELATIVE_STD, fit_natural_frequencies, frequency_data
+    import functools
+
+    from ringfit.fit.least_squares import DEFAULT_RELATIVE_STD, frequency_data
+    from ringfit.fit.least_squares import fit_natural_frequencies as _fit
+
+    fit_natural_frequencies = functools.partial(_fit, at_initial=fixed)
 
     base = frequency_data(free)
     if base.sigma_source == "freq_std_hz":
@@ -561,18 +583,22 @@ def _identification_spread(tables, ref_index=0) -> tuple[float, str] | None:
 
 
 def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, ...],
-                         noise: dict | None = None) -> list[GapProblem]:
+                         noise: dict | None = None, baseline: bool = False) -> list[GapProblem]:
     """The frequency problem and (when there are damping rows) the damping problem of a case's mode tables.
 
     **Arguments:** ``tables`` — the free table first, then test tables; ``tyre`` — the case's
     :class:`~ringfit.io.tyre.Tyre` (geometry; starting ring; ``k_tread`` if known);
-    ``effects`` — candidates; ``noise`` — optional user σ (``freq_hz`` [Hz], ``damping`` [ln ζ]).
+    ``effects`` — candidates; ``noise`` — optional user σ (``freq_hz`` [Hz], ``damping`` [ln ζ]);
+    ``baseline`` — ``tyre``'s ring *is* the baseline (``diagnose --tyre``: identified or fitted before),
+    evaluated on the free table, not refitted; its ``[ring.covariance]`` replaces the fit's where it has one.
     """
     noise = noise or {}
     geometry = tyre.geometry
     free = tables[0]
-    fit, sigma_rel, sigma_method = _reference_fit(free, geometry, tyre.ring, noise.get("freq_hz"))
-    if fit.status != "converged":
+    fit, sigma_rel, sigma_method = _reference_fit(free, geometry, tyre.ring, noise.get("freq_hz"), fixed=baseline)
+    if baseline:
+        _baseline_covariance(fit, tyre)
+    if fit.status not in ("converged", "evaluated"):
         raise InputError(f"the ring fit to free.modes.csv did not converge ({fit.status}): the baseline is "
                          "undefined; check the table with `ringfit fit`", source=free.source or None)
     has_kt = "k_tread" in getattr(tyre, "ring_values", {})

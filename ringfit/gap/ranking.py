@@ -33,8 +33,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, evaluate,
-                                least_squares)
+from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
+                                linearize, residuals)
 from ringfit.fit.result import FitResult
 from ringfit.gap.problem import GapProblem
 
@@ -104,17 +104,16 @@ def _pad(problem: GapProblem) -> int:
 
 
 def predict(problem: GapProblem, theta) -> np.ndarray:
-    """Prediction ``(m,)`` of every row at ``theta`` (natural units) — one step of the compiled refit, no fit."""
-    out = evaluate(_engine_problem(problem, np.ones(problem.m, dtype=bool)), np.asarray(theta, dtype=np.float64),
-                   _free_names(problem, ()), pad_to=_pad(problem), rtol=RTOL, atol=ATOL)
-    return np.asarray(out.extra["aux"])[: problem.m]
+    """Prediction ``(m,)`` of every row at ``theta`` (natural units): the engine's residual model, no fit."""
+    _, aux = residuals(_engine_problem(problem, np.ones(problem.m, dtype=bool)), np.asarray(theta, dtype=np.float64))
+    return np.asarray(aux)[: problem.m]
 
 
 def predict_and_jacobian(problem: GapProblem, theta: np.ndarray, free) -> tuple[np.ndarray, np.ndarray]:
     """Prediction ``(m,)`` and ∂pred/∂theta for the ``free`` columns ``(m, len(free))`` (natural units of theta).
 
-    Evaluated by the refit's own compiled solve stopped after its first linearisation
-    (:func:`ringfit.fit.engine.evaluate`), in chunks of the padded free-set size. Used by the screen.
+    Evaluated by the engine's linearisation (:func:`ringfit.fit.engine.linearize`, one forward-mode
+    pass), in chunks of the padded free-set size. Used by the screen.
     """
     free = np.asarray(free, dtype=int)
     names = theta_names(problem)
@@ -126,8 +125,8 @@ def predict_and_jacobian(problem: GapProblem, theta: np.ndarray, free) -> tuple[
     pred, cols = None, []
     for start in range(0, max(len(free), 1), K):
         chunk = free[start : start + K]
-        out = evaluate(eng, theta, tuple(names[i] for i in chunk), pad_to=K, rtol=RTOL, atol=ATOL)
-        pred = np.asarray(out.extra["aux"])[:m] if pred is None else pred
+        out = linearize(eng, theta, tuple(names[i] for i in chunk), pad_to=K)
+        pred = np.asarray(out.aux)[:m] if pred is None else pred
         dtheta_du = np.array([theta[i] if coords[i].kind == LOG else coords[i].scale for i in chunk])
         cols.append(out.jacobian[:m] / w[:, None] / dtheta_du[None, :])
     J = np.concatenate(cols, axis=1)

@@ -17,6 +17,8 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from ringfit.errors import InputError
 from ringfit.io.checks import MAX_PRESSURE_BAR
 from ringfit.io.files import atomic_write_text, check_output_path
@@ -58,12 +60,14 @@ class Tyre:
     - ``ring_values``: the ``[ring]`` values present in the file, by short name
       (``rho_a``, ``ei``, ``kw``, ``kv``, ``damping_ratio``, ``k_tread``, ``ea``, ``chi``), SI.
     - ``extra``: every other table/key of the file, kept for writing back.
+    - ``covariance``: the ``[ring.covariance]`` (:class:`RingCovariance`) when the file has one.
     """
 
     geometry: TyreGeometry
     ring_values: dict[str, float] = field(default_factory=dict)
     extra: dict = field(default_factory=dict)
     source: str = ""
+    covariance: "RingCovariance | None" = None
 
     @property
     def ring(self) -> RingParams:
@@ -71,13 +75,17 @@ class Tyre:
         values = {**RING_DEFAULTS, **self.ring_values}
         return RingParams(**values)
 
-    def with_ring(self, ring: RingParams, names=None) -> "Tyre":
-        """A copy whose ``[ring]`` holds ``ring``'s values for ``names`` (default: all finite ones)."""
+    def with_ring(self, ring: RingParams, names=None, covariance: "RingCovariance | None" = None) -> "Tyre":
+        """A copy whose ``[ring]`` holds ``ring``'s values for ``names`` (default: all finite ones).
+
+        The copy carries ``covariance`` (default none: the file's old ``[ring.covariance]`` described
+        other values)."""
         d = ring.as_dict()
         names = names or [k for k, v in d.items() if math.isfinite(v)]
         values = dict(self.ring_values)
         values.update({k: d[k] for k in names})
-        return Tyre(self.geometry, values, dict(self.extra), self.source)
+        # a covariance belongs to the values it was identified with: new values drop it unless given
+        return Tyre(self.geometry, values, dict(self.extra), self.source, covariance)
 
 
 def _number(table: dict, key: str, where: str) -> float:
@@ -187,13 +195,90 @@ def _parse(doc: dict, source: str) -> Tyre:
     ring_table = dict(doc.pop("ring", {}) or {})
     by_key = {toml_key: short for short, (_, toml_key) in RING_PARAMETERS.items()}
     ring_values = {}
+    covariance = None
     for key in ring_table:
+        if key == "covariance":
+            continue
         if key not in by_key:
-            raise _unknown(key, list(by_key), "key in [ring]")
+            raise _unknown(key, list(by_key) + ["covariance"], "key in [ring]")
         ring_values[by_key[key]] = _number(ring_table, key, "ring")
+    if "covariance" in ring_table:
+        covariance = _covariance(ring_table["covariance"], ring_values)
     extra = {"tyre": {}, "ring": {}}
     extra.update(doc)  # [meta]
-    return Tyre(geometry, ring_values, extra, source)
+    return Tyre(geometry, ring_values, extra, source, covariance)
+
+
+#: Positive ring parameters a ``[ring.covariance]`` may name (it is a covariance of their logarithms).
+COVARIANCE_PARAMETERS = ("rho_a", "ei", "kw", "kv", "damping_ratio", "k_tread", "ea")
+
+
+def _covariance(table, ring_values: dict) -> "RingCovariance":
+    """``[ring.covariance]``: ``names`` (short names) and ``ln`` (k × k covariance of ln θ), checked."""
+    where = "[ring.covariance]"
+    if not isinstance(table, dict):
+        raise InputError(f"ring.covariance = {_show(table)}: expected a [ring.covariance] table (names, ln)")
+    for key in table:
+        if key not in ("names", "ln", "source"):
+            raise _unknown(key, ("names", "ln", "source"), f"key in {where}")
+    names, ln = table.get("names"), table.get("ln")
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise InputError(f"{where} names: expected a list of ring parameter names, e.g. [\"ei\", \"k_tread\"]")
+    for n in names:
+        if n not in COVARIANCE_PARAMETERS:
+            raise _unknown(n, COVARIANCE_PARAMETERS, f"parameter in {where} names")
+        if n not in ring_values:
+            raise InputError(f"{where} names {n!r}, but [ring] has no value for it")
+    if len(set(names)) != len(names):
+        raise InputError(f"{where} names lists a parameter twice")
+    k = len(names)
+    if not isinstance(ln, list) or len(ln) != k or not all(isinstance(r, list) and len(r) == k for r in ln):
+        raise InputError(f"{where} ln: expected a {k} × {k} array (one row per name)")
+    try:
+        cov = np.array([[float(x) for x in row] for row in ln], dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"{where} ln: expected numbers") from None
+    if any(isinstance(x, bool) for row in ln for x in row) or not np.all(np.isfinite(cov)):
+        raise InputError(f"{where} ln: expected finite numbers")
+    if not np.allclose(cov, cov.T, rtol=1e-9, atol=1e-300):
+        raise InputError(f"{where} ln: not symmetric")
+    if np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() < -1e-12 * max(1.0, float(np.abs(cov).max())):
+        raise InputError(f"{where} ln: not positive semi-definite")
+    if np.any(np.sqrt(np.diag(cov)) > 5.0):
+        raise InputError(f"{where} ln: a standard deviation of ln θ above 5 (a factor e^5): not an uncertainty "
+                         "a model can use")
+    source = table.get("source", "")
+    if not isinstance(source, str):
+        raise InputError(f"{where} source = {_show(source)}: expected a string")
+    return RingCovariance(tuple(names), cov if np.array_equal(cov, cov.T) else 0.5 * (cov + cov.T), source)
+
+
+@dataclass(frozen=True)
+class RingCovariance:
+    """The tyre file's ``[ring.covariance]`` (docs/formats.md §1.1): covariance ``ln`` ``(k, k)`` of ln θ for
+    ``names``; ``source`` says where it came from (e.g. the identify report)."""
+
+    names: tuple[str, ...]
+    ln: np.ndarray
+    source: str = ""
+
+    def sd_ln(self, name: str) -> float | None:
+        """σ of ln θ of ``name``, or None when the covariance does not hold it."""
+        if name not in self.names:
+            return None
+        i = self.names.index(name)
+        return float(math.sqrt(max(self.ln[i, i], 0.0)))
+
+    def draws(self, ring: RingParams, n: int, seed: int = 0) -> list[RingParams]:
+        """``n`` rings drawn from the log-normal ``ln θ ~ N(ln ring, ln)`` (the other parameters as in ``ring``)."""
+        rng = np.random.default_rng(seed)
+        centre = np.log([float(getattr(ring, k)) for k in self.names])
+        u = rng.multivariate_normal(centre, self.ln, size=int(n), method="eigh")
+        return [ring.replace(**{k: float(math.exp(x)) for k, x in zip(self.names, row)}) for row in u]
+
+    def table(self) -> dict:
+        return {"names": list(self.names), "ln": [[float(x) for x in row] for row in self.ln],
+                **({"source": self.source} if self.source else {})}
 
 
 def write_tyre(tyre: Tyre, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
@@ -212,6 +297,8 @@ def write_tyre(tyre: Tyre, path: str | os.PathLike, *, overwrite: bool = False) 
     tyre_table.update(tyre.extra.get("tyre", {}))
     ring_table = {RING_PARAMETERS[k][1]: float(v) for k, v in tyre.ring_values.items() if math.isfinite(v)}
     ring_table.update(tyre.extra.get("ring", {}))
+    if tyre.covariance is not None:
+        ring_table["covariance"] = tyre.covariance.table()
     doc = {"tyre": tyre_table, "ring": ring_table}
     doc.update({k: v for k, v in tyre.extra.items() if k not in ("tyre", "ring")})
     text = tomli_w.dumps(doc)

@@ -44,10 +44,24 @@ def draw_load_against_time(ax, revs, est=None) -> None:
     profile's estimate as a line (``est``)."""
     t = np.asarray(revs.t_s)
     ok = np.asarray(revs.converged, dtype=bool)
-    ax.fill_between(t, revs.lo / 1e3, revs.hi / 1e3, color="C0", alpha=0.3, lw=0, label="95 % interval")
-    ax.plot(t[ok], revs.load_n[ok] / 1e3, color="C0", lw=1.0, label="model fit per revolution")
+    load = np.asarray(revs.load_n, dtype=np.float64)
+    # the axis spans the accepted revolutions' loads (and their finite bands, within ±50 % of them):
+    # an unbounded or huge interval, or a rejected revolution at a bound, must not flatten the plot
+    good = load[ok & np.isfinite(load)]
+    if good.size:
+        span = max(float(good.max() - good.min()), 0.05 * float(np.median(good)))
+        y_lo, y_hi = float(good.min()) - span, float(good.max()) + span
+    else:
+        y_lo, y_hi = 0.0, 1e4
+    lo = np.clip(np.where(np.isfinite(revs.lo), revs.lo, y_lo), y_lo, y_hi)
+    hi = np.clip(np.where(np.isfinite(revs.hi), revs.hi, y_hi), y_lo, y_hi)
+    lo, hi = np.where(ok, lo, np.nan), np.where(ok, hi, np.nan)
+    ax.fill_between(t, lo / 1e3, hi / 1e3, color="C0", alpha=0.3, lw=0, label="95 % interval (clipped)")
+    ax.plot(t, np.where(ok, load, np.nan) / 1e3, color="C0", lw=1.0, label="model fit per revolution")
     if (~ok).any():
-        ax.plot(t[~ok], revs.load_n[~ok] / 1e3, "x", color="C3", ms=4, label="not converged")
+        ax.plot(t[~ok], np.clip(load[~ok], y_lo, y_hi) / 1e3, "x", color="C3", ms=4,
+                label=f"rejected ({int((~ok).sum())}: not converged or on a bound)")
+    ax.set_ylim(y_lo / 1e3, y_hi / 1e3)
     feat = np.asarray(revs.feature_load_n)
     ax.plot(t, feat / 1e3, ".", color="C2", ms=2, label="edge-peak feature method")
     if est is not None:

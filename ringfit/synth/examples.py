@@ -33,7 +33,7 @@ import numpy as np
 
 from ringfit.errors import InputError
 
-KINDS = ("records", "case", "cleat", "profiles", "rolling")
+KINDS = ("records", "case", "cleat", "profiles", "rolling", "identify")
 #: Rig formats ``records`` can also be written in (docs/formats.md §17).
 RIG_FORMATS = ("tdms", "mat", "csv")
 
@@ -81,7 +81,7 @@ def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = Fal
         elif kind == "case":
             _case(tmp, progress, effect or "ground_contact")
         else:
-            {"cleat": _cleat, "profiles": _profiles, "rolling": _rolling}[kind](tmp, progress)
+            {"cleat": _cleat, "profiles": _profiles, "rolling": _rolling, "identify": _identify}[kind](tmp, progress)
         made = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
         for rel in made:  # every destination checked before anything is moved
             dst = folder / rel
@@ -336,6 +336,52 @@ to) and test tables of the loaded and the spinning tyre{" and of the free tyre o
 
 ```bash
 ringfit diagnose case --out case.diagnosis.json --report case.html
+```
+""")
+
+
+def _identify(folder: Path, progress: bool) -> None:
+    import numpy as np
+
+    from ringfit.io.profiles import write_profile
+    from ringfit.synth.identify import make_identify_case
+    from ringfit.synth.profiles import synthetic_profile
+
+    truth = make_identify_case(folder / "case", seed=11, truth_file=False)
+    ring = truth["ring"]
+    load, speed = 4500.0, 60.0
+    prof = synthetic_profile(truth["ring_object"], truth["geometry"], speed, load, n_points=1024,
+                             noise_ms2=0.01 * 100.0, seed=12)
+    prof.condition.pop("load_n", None)
+    prof.source = ""
+    write_profile(prof, folder / "unknown-load.profile.csv")
+    runs = "\n".join(f"  - `run{i + 1}.profile.csv`: {p['load_n']:.0f} N, {p['speed_kmh']:.0f} km/h, gain "
+                     f"{p['gain']:.4f}, angle offset {p['angle_offset_deg']:+.3f}°, {p['noise_colour']} noise "
+                     f"{p['noise_ms2']:.3g} m/s²" for i, p in enumerate(truth["profiles"]))
+    loads = ", ".join(f"{x:.0f} N" for x in truth["half_angles"])
+    (folder / "README.md").write_text(f"""# Example: every state of one tyre, to identify it once
+
+Written by `ringfit example identify`. `case/` is a case folder (docs/formats.md §6): `tyre.toml`
+(Table 9 values as a start, not the truth), `free.modes.csv` (eq. 18 with damping), standing
+loaded tables at {loads} (`loaded*.modes.csv`, tagged `extr`/`vert` and `0`/`hort`) and three rolling
+profiles at known load and speed. Frequency noise {100 * truth['sigma_rel']:.2g} % (relative). The
+truth was computed on a finer contact grid ({truth['truth_grid']} points) and with more loaded-mode
+harmonics (48) than ringfit uses. `unknown-load.profile.csv` is a fourth profile whose sidecar has no
+`load_n`: {load:.0f} N at {speed:.0f} km/h (1 m/s² white noise).
+
+## The truth (kept out of the case folder)
+
+- ρA = {ring['rho_a']:.5g} kg/m, EI = {ring['ei']:.5g} N m², k_w = {ring['kw']:.5g} N/m²,
+  k_v = {ring['kv']:.5g} N/m², k_tread = {ring['k_tread']:.5g} N/m², ζ = {ring['damping_ratio']:.4g};
+- profiles:
+{runs}
+- the load of `unknown-load.profile.csv`: **{load:.0f} N**.
+
+## Try
+
+```bash
+ringfit identify case --out identified.tyre.toml          # also writes identified.identify.json
+ringfit estimate unknown-load.profile.csv --tyre identified.tyre.toml --out unknown.estimate.json
 ```
 """)
 

@@ -1,0 +1,131 @@
+"""``ringfit identify FOLDER --out NAME.tyre.toml [--posterior NAME.h5]`` — the tyre identified once from everything measured."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from ringfit.cli._args import force_flag, integer, quiet_flag
+
+
+def register(sub) -> None:
+    p = sub.add_parser("identify", help="identify the ring from every measurement of a case folder at once",
+                       description="One joint weighted least squares of the ring (ρA, EI, k_w, k_v, k_tread, ζ) "
+                                   "over every measurement of a case folder whose condition is known: "
+                                   "free.modes.csv, standing loaded tables at their load_n, rolling profiles at "
+                                   "their load_n and speed (per profile a gain and an angle offset). Each data "
+                                   "type's noise is estimated from its own residual. Writes the tyre file with "
+                                   "[ring] and [ring.covariance] (ln θ) and NAME.identify.json beside it "
+                                   "(docs/formats.md §18). Exit 1 if the fit does not converge.")
+    p.add_argument("folder", type=Path, help="case folder (docs/formats.md §6)")
+    p.add_argument("--out", required=True, type=Path, help="output tyre TOML (NAME.tyre.toml); NAME.identify.json "
+                                                           "is written beside it")
+    p.add_argument("--posterior", type=Path, default=None, metavar="NAME.h5",
+                   help="also sample the joint posterior with emcee and save it (HDF5)")
+    p.add_argument("--walkers", type=integer("an even number of walkers >= 2", lo=2), default=None,
+                   help="emcee walkers (default: 2 × the free parameters, rounded up to even)")
+    p.add_argument("--min-steps", type=integer("a whole number of steps >= 100", lo=100), default=500,
+                   help="posterior chain steps before the first convergence check (default 500)")
+    p.add_argument("--max-steps", type=integer("a whole number of steps >= 100", lo=100), default=5000,
+                   help="posterior chain steps at most (default 5000)")
+    p.add_argument("--seed", type=integer("a whole number >= 0", lo=0), default=0, help="random seed (default 0)")
+    force_flag(p)
+    quiet_flag(p)
+    p.set_defaults(run=run_identify)
+
+
+def report_path(out: Path) -> Path:
+    """``NAME.tyre.toml`` → ``NAME.identify.json`` (``NAME.toml`` → ``NAME.identify.json``)."""
+    name = out.name
+    for suffix in (".tyre.toml", ".toml"):
+        if name.endswith(suffix):
+            name = name[: -len(suffix)]
+            break
+    return out.with_name(name + ".identify.json")
+
+
+def run_identify(args) -> int:
+    from ringfit.cli import CommandFailed
+    from ringfit.errors import InputError
+    from ringfit.io.files import atomic_write_text, check_output_paths
+
+    report = report_path(args.out)
+    folder = args.folder
+    inputs_listed = list(folder.glob("*")) if folder.is_dir() else []
+    check_output_paths([args.out, report, args.posterior], overwrite=args.force, inputs=inputs_listed)
+    from ringfit.fit.identify import identification_report, identify, read_identify_folder
+    from ringfit.io.tyre import write_tyre
+
+    inputs = read_identify_folder(folder)
+    for note in inputs.skipped:
+        print(f"WARNING: {note}")
+    ident = identify(inputs, progress=not args.quiet)
+    doc = identification_report(ident)
+    _print(ident, doc)
+    if not ident.converged:
+        raise CommandFailed(f"the joint fit did not converge ({ident.fit.message}); nothing written")
+    tyre = inputs.tyre.with_ring(ident.ring, covariance=ident.covariance)
+    tyre.extra = dict(tyre.extra)
+    meta = dict(tyre.extra.get("meta", {}))
+    meta.update(identified_from=str(folder), identify_report=report.name)
+    tyre.extra["meta"] = meta
+    posterior = None
+    if args.posterior is not None:
+        from ringfit.fit.posterior import sample
+
+        k = len(ident.fit.names)
+        walkers = args.walkers or 2 * k + (2 * k) % 2
+        if walkers < 2 * k or walkers % 2:
+            raise InputError(f"--walkers {walkers}: emcee needs an even number of at least {2 * k} "
+                             f"(2 × {k} free parameters)")
+        posterior = sample(ident.fit, walkers=walkers, min_steps=args.min_steps, max_steps=args.max_steps,
+                           check_every=max(100, args.min_steps // 2), seed=args.seed, progress=not args.quiet,
+                           spread=0.25, meta={"model": "identify", "folder": str(folder)})
+        doc["posterior"] = {"file": args.posterior.name, **_posterior_summary(posterior)}
+    write_tyre(tyre, args.out, overwrite=args.force)
+    atomic_write_text(report, json.dumps(doc, indent=1, allow_nan=False, default=_json_default) + "\n")
+    print(f"wrote {args.out}")
+    print(f"wrote {report}")
+    if posterior is not None:
+        posterior.save(args.posterior, overwrite=args.force)
+        print(f"wrote {args.posterior}")
+    return 0
+
+
+def _json_default(x):
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return str(x)
+
+
+def _posterior_summary(posterior) -> dict:
+    import numpy as np
+
+    draws = np.asarray(posterior.samples)
+    out = {}
+    for j, name in enumerate(posterior.names):
+        lo, med, hi = np.percentile(draws[:, j], [2.5, 50, 97.5])
+        out[name] = dict(median=float(med), lo95=float(lo), hi95=float(hi))
+    return {"parameters": out}
+
+
+def _print(ident, doc) -> None:
+    print(f"joint fit: {doc['status']} after {doc['iterations']} steps ({doc['passes']} noise passes)")
+    print(f"{'parameter':16s} {'value':>12s} {'95 % interval':>27s} {'sd ln':>8s}")
+    for name, p in doc["parameters"].items():
+        print(f"{name:16s} {p['value']:12.5g} [{p['lo95']:12.5g}, {p['hi95']:12.5g}] {p['sd_ln']:8.3g}")
+    names = list(doc["parameters"])
+    print("Fisher information share per block (which data pin which parameter):")
+    print(f"{'block':14s} {'rows':>5s} {'σ scale':>8s} " + " ".join(f"{n[:8]:>8s}" for n in names))
+    for b, v in doc["blocks"].items():
+        print(f"{b:14s} {v['rows']:5d} {v['sigma_scale']:8.3g} "
+              + " ".join(f"{v['fisher_share'].get(n, 0.0):8.3f}" for n in names))
+    corr = doc["correlation"]["matrix"]
+    strong = [(names[i], names[j], corr[i][j]) for i in range(len(names)) for j in range(i)
+              if math.isfinite(corr[i][j]) and abs(corr[i][j]) > 0.9]
+    for a, b, c in strong:
+        print(f"posterior correlation {a}–{b}: {c:+.3f}")
+    for flag in doc["flags"]:
+        print(f"flag: {flag}")

@@ -1,0 +1,589 @@
+"""Identify the tyre once, from everything measured on it: one joint weighted least squares (docs/physics.md §11).
+
+A case folder (docs/formats.md §6) holds measurements whose condition is known. Each kind
+becomes a *residual block* on the one engine (:mod:`ringfit.fit.engine`); the blocks share the
+ring parameters and each run keeps its own nuisances:
+
+- ``free modes`` — ``free.modes.csv``: eq. 18 (docs/physics.md §2.1), rows ``(f_model − f)/σ``;
+- ``free damping`` — the free table's ``damping_pct``: modal damping ratio ζ, rows ``(ζ − ζ_i)/σ``;
+- ``loaded modes`` — tables with ``state = "loaded"`` at a known ``load_n``, standing: the
+  loaded-mode model of docs/physics.md §6 ``ground_contact`` (tread springs in the patch), the
+  patch half-angle from the static contact solve at that load (§4.3–4.4), so ``k_tread`` and the
+  ring meet the load through the patch; rows tagged ``extr``/``vert`` follow the cosine-type
+  branch, ``0``/``hort`` the sine-type one, untagged rows the branch nearer at the start;
+- ``profiles`` — ``*.profile.csv`` at known ``load_n`` and speed: the steady rolling ring read
+  by the sensor (§4–§6, :func:`ringfit.physics.profile.profile_channels`), per profile a gain
+  (sensor sensitivity) and an angle offset; the residual is taken per revolution harmonic
+  (2 … M/2 − 1, real and imaginary parts) so that coloured noise is whitened by its own
+  spectrum, estimated from the residual (power averaged over ±:data:`NOISE_SMOOTHING` harmonics).
+
+Noise scales: each block's σ is estimated from its own residual, ``s_b² = χ²_b / (m_b − tr H_bb)``
+with ``H`` the hat matrix of the weighted fit (the block's share of the fitted degrees of
+freedom), and the fit is repeated with the rescaled rows until the scales settle
+(:data:`SCALE_PASSES`): one data type cannot swamp another, whatever its row count or its
+stated σ. Rolling mode tables (speed > 0) are not part of the joint model yet: they are listed
+with a warning.
+
+The result is a :class:`~ringfit.fit.result.FitResult` of the final pass (covariance in the
+solver coordinates, ln θ for positive parameters) plus, in :class:`Identification`, the Fisher
+information of each block per parameter and the posterior correlation left among the ring
+parameters.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ringfit.errors import InputError
+from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares
+from ringfit.fit.least_squares import DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, ring_from_vector, ring_vector
+from ringfit.fit.priors import BOUNDS
+from ringfit.fit.result import FitResult
+from ringfit.io.modes import ModeTable, read_mode_table
+from ringfit.io.tyre import RingCovariance, Tyre, read_tyre
+from ringfit.params import RingParams, TyreGeometry
+from ringfit.physics.contact import ContactSolver, as_traced, patch_edges, solve_rolling
+from ringfit.physics.loaded import loaded_natural_frequencies
+from ringfit.physics.natural import natural_frequencies
+from ringfit.physics.operating import OperatingPoint
+from ringfit.physics.profile import FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels
+from ringfit.physics.sensor import shift_angle
+
+#: Passes of fit → block noise scales → refit (the scales settle in two or three).
+SCALE_PASSES = 4
+#: Stop re-weighting once every block scale changes by less than this fraction.
+SCALE_TOLERANCE = 0.02
+#: Harmonics averaged on either side for a profile's noise spectrum.
+NOISE_SMOOTHING = 4
+#: Lowest revolution harmonic of a profile used (k = 1 carries gravity and the sensor's tilt; k = 0 is removed).
+PROFILE_K_MIN = 2
+#: Relative σ of a damping ratio row before its block scale is estimated.
+DAMPING_RELATIVE_STD = 0.05
+#: Bounds of a profile's gain on the reading (sensor sensitivity, its offset from the belt).
+GAIN_RANGE = (0.5, 2.0)
+#: Bound of a profile's angle offset [rad].
+OFFSET_BOUND = math.radians(10.0)
+#: Harmonics of the loaded-mode basis (docs/physics.md §6; N = 20 is within 0.2 Hz of N = 40).
+LOADED_HARMONICS = 24
+#: Parameters of the ring the identification can free.
+RING_FREE = ("rho_a", "ei", "kw", "kv", "k_tread", "damping_ratio")
+BLOCKS = ("free modes", "free damping", "loaded modes", "profiles")
+#: z of a two-sided 95 % interval.
+Z95 = 1.959963984540054
+
+
+# ----------------------------------------------------------------------------- inputs
+
+
+@dataclass
+class IdentifyInputs:
+    """What a case folder holds for the identification (see the module docstring)."""
+
+    folder: Path
+    tyre: Tyre
+    free: ModeTable
+    loaded: list[ModeTable] = field(default_factory=list)
+    profiles: list = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+
+    @property
+    def files(self) -> list[str]:
+        return [Path(t.source).name for t in [self.free, *self.loaded]] + \
+            [Path(str(p.source)).name for p in self.profiles]
+
+
+def _number(cond: dict, key: str):
+    value = cond.get(key)
+    if value is None:
+        return None
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return math.nan
+    return value
+
+
+def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
+    """Read a case folder for :func:`identify`; a state whose condition is missing is refused (one line, its key)."""
+    from ringfit.io.profiles import read_profile
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError("is not a folder; expected a case folder with tyre.toml and free.modes.csv", source=folder)
+    if not (folder / "tyre.toml").exists():
+        raise InputError("missing tyre.toml (docs/formats.md §1: [tyre] radius_m, width_m, pressure_bar)",
+                         source=folder)
+    tyre = read_tyre(folder / "tyre.toml")
+    free_path = folder / "free.modes.csv"
+    if not free_path.exists():
+        raise InputError("missing free.modes.csv: the free, static tyre's modes (docs/formats.md §6)", source=folder)
+    free = read_mode_table(free_path)
+    if free.state != "free" or (_number(free.condition, "speed_kmh") or 0) > 0:
+        raise InputError(f"state {free.state!r}: free.modes.csv must be the static, free tyre",
+                         source=free_path.with_suffix(".json"))
+    inputs = IdentifyInputs(folder, tyre, free)
+    for p in sorted(folder.glob("*.modes.csv")):
+        if p.name == "free.modes.csv":
+            continue
+        sidecar = p.with_suffix(".json")
+        if not sidecar.exists():
+            raise InputError(f"missing sidecar {sidecar.name}: its condition (state, load_n, speed_kmh) is needed",
+                             source=p)
+        table = read_mode_table(p)
+        cond = table.condition
+        speed = _number(cond, "speed_kmh") or _number(cond, "rotation_hz") or 0.0
+        if table.state == "free" and not speed:
+            inputs.skipped.append(f"{p.name}: a second free table (only free.modes.csv is used)")
+            continue
+        if speed:
+            inputs.skipped.append(f"{p.name}: spinning/rolling table (state {table.state!r}, speed {speed:g}); "
+                                  "rolling mode tables are not part of the joint model yet")
+            continue
+        if table.state != "loaded":
+            raise InputError(f"state {table.state!r}: expected \"loaded\" (standing, with load_n) for a table "
+                             "the identification uses", source=sidecar)
+        load = _number(cond, "load_n")
+        if load is None:
+            raise InputError("missing 'load_n': a loaded table's load [N] is needed to identify from it",
+                             source=sidecar)
+        if not (math.isfinite(load) and load > 0):
+            raise InputError(f"load_n = {cond.get('load_n')!r}: expected a positive load [N]", source=sidecar)
+        inputs.loaded.append(table)
+    for p in sorted(folder.glob("*.profile.csv")):
+        sidecar = p.with_suffix(".json")
+        if not sidecar.exists():
+            raise InputError(f"missing sidecar {sidecar.name} (speed_kmh, load_n; docs/formats.md §3)", source=p)
+        prof = read_profile(p)
+        for key in ("load_n", "speed_kmh"):
+            v = _number(prof.condition, key)
+            if v is None or not (math.isfinite(v) and v > 0):
+                raise InputError(f"missing or non-positive '{key}': a profile's {key} is needed to identify "
+                                 "from it", source=sidecar)
+        inputs.profiles.append(prof)
+    inputs.profiles.sort(key=lambda pr: (float(pr.condition["load_n"]), float(pr.condition["speed_kmh"])))
+    return inputs
+
+
+# ----------------------------------------------------------------------------- the joint residual model
+
+
+class JointArrays(eqx.Module):
+    """Data of the joint model; a block the folder lacks is ``None`` (static: one compile per structure).
+
+    - free: ``f_n``, ``f_freq``, ``f_sigma`` ``(mf,)``; damping: ``d_zeta``, ``d_sigma`` ``(md,)``;
+    - loaded: ``l_n`` ``(ml,)`` harmonic − 1, ``l_sin`` ``(ml,)`` 0/1, ``l_table`` ``(ml,)``, ``l_freq``,
+      ``l_sigma``; per table ``l_load`` ``(T,)``, ``l_roads``;
+    - profiles: ``p_omega``, ``p_load`` ``(P,)``, ``p_roads``, ``p_band``, ``p_measured`` ``(P, 2, H)``
+      harmonic rows (real parts then imaginary parts of k = k_min …), ``p_sigma`` ``(P, 2, H)``.
+    """
+
+    geometry: TyreGeometry
+    f_n: jax.Array
+    f_freq: jax.Array
+    f_sigma: jax.Array
+    d_zeta: jax.Array | None
+    d_sigma: jax.Array | None
+    l_n: jax.Array | None
+    l_sin: jax.Array | None
+    l_table: jax.Array | None
+    l_freq: jax.Array | None
+    l_sigma: jax.Array | None
+    l_load: jax.Array | None
+    l_roads: FlatOrDrum | None
+    p_omega: jax.Array | None
+    p_load: jax.Array | None
+    p_roads: FlatOrDrum | None
+    p_band: jax.Array | None
+    p_measured: jax.Array | None
+    p_sigma: jax.Array | None
+
+
+def harmonic_rows(channels, k_min: int = PROFILE_K_MIN):
+    """Rows ``(..., 2H)`` of revolution harmonics k_min … M/2 − 1 of ``channels`` ``(..., M)``: real then imaginary
+    parts of ``rfft · √(2/M)`` (white noise of σ per sample gives each row variance σ²)."""
+    M = channels.shape[-1]
+    spec = jnp.fft.rfft(channels, axis=-1)[..., k_min : M // 2] * math.sqrt(2.0 / M)
+    return jnp.concatenate([spec.real, spec.imag], axis=-1)
+
+
+def standing_half_angle(ring: RingParams, geometry: TyreGeometry, load, road, solver: ContactSolver):
+    """Contact half-angle [rad] of the standing tyre at ``load`` [N]: the static contact solve (docs/physics.md §4.3–4.4)."""
+    sol = solve_rolling(ring, geometry, OperatingPoint(0.0, load, road), solver=solver)
+    lead, trail = patch_edges(sol)
+    return 0.5 * (trail - lead)
+
+
+class JointResiduals(AbstractResiduals):
+    """Rows of every block, each divided by its σ; θ = ring fields, then per profile (angle offset, gain).
+
+    aux: ``(free model Hz, loaded model Hz, profile model rows)`` (``None`` for absent blocks).
+    """
+
+    n_profiles: int = eqx.field(static=True)
+    solver: ContactSolver = eqx.field(static=True)
+    profile_model: ProfileModel = eqx.field(static=True)
+    n_harmonics: int = eqx.field(static=True, default=LOADED_HARMONICS)
+
+    def __call__(self, theta, data: JointArrays):
+        ring = ring_from_vector(theta)
+        g = data.geometry
+        # free modes: eq. 18 (docs/physics.md §2.1), block "free modes" of §11
+        f_model = natural_frequencies(ring, g, data.f_n)
+        rows = [(f_model - data.f_freq) / data.f_sigma]
+        aux = [f_model, None, None]
+        if data.d_zeta is not None:  # free damping: one modal ζ (docs/physics.md §11)
+            rows.append((ring.damping_ratio - data.d_zeta) / data.d_sigma)
+        if data.l_n is not None:
+            # loaded modes: the patch half-angle from the static contact solve at load_n (docs/physics.md §4.3–4.4),
+            # the modes from the patch foundation of §6 ground_contact (§11 "loaded modes")
+            half = jax.vmap(lambda fz, road: standing_half_angle(ring, g, fz, road, self.solver))(
+                data.l_load, data.l_roads)
+
+            def table_freqs(a):
+                c, s = loaded_natural_frequencies(ring, g, a, self.n_harmonics)
+                return jnp.stack([c, s])
+
+            freqs = jax.vmap(table_freqs)(half)  # (T, 2, N)
+            model = freqs[data.l_table, data.l_sin, data.l_n]
+            rows.append((model - data.l_freq) / data.l_sigma)
+            aux[1] = model
+        if data.p_omega is not None:
+            P = self.n_profiles
+            base = len(RING_FIELDS)
+            offset = theta[base : base + 2 * P : 2]
+            gain = theta[base + 1 : base + 2 * P : 2]
+            # profiles: the rolling ring read by the sensor (docs/physics.md §4–§5), per profile a gain and an
+            # angle offset, compared in revolution harmonics (§11 "profiles")
+            ch = profile_channels(self.profile_model, ring, g, data.p_omega, data.p_load, data.p_roads, data.p_band,
+                                  0.0, self.solver)
+            ch = shift_angle(ch, offset[:, None, None]) * gain[:, None, None]
+            model = harmonic_rows(ch)
+            rows.append(((model - data.p_measured) / data.p_sigma).ravel())
+            aux[2] = model
+        return jnp.concatenate(rows), tuple(aux)
+
+
+def nuisance_names(P: int) -> tuple[str, ...]:
+    return tuple(n for i in range(P) for n in (f"angle_offset_{i + 1}", f"gain_{i + 1}"))
+
+
+def joint_coords(P: int) -> tuple[Coordinate, ...]:
+    coords = list(RING_COORDS)
+    for i in range(P):
+        coords.append(Coordinate(f"angle_offset_{i + 1}", LINEAR, scale=math.radians(1.0), lo=-OFFSET_BOUND,
+                                 hi=OFFSET_BOUND))
+        coords.append(Coordinate(f"gain_{i + 1}", LOG, lo=GAIN_RANGE[0], hi=GAIN_RANGE[1]))
+    return tuple(coords)
+
+
+# ----------------------------------------------------------------------------- rows of each block
+
+
+@dataclass
+class _Rows:
+    """Every block's rows (dicts of arrays, ``None`` for a block the folder lacks); σ arrays are rescaled in place."""
+
+    free: dict
+    damping: dict | None
+    loaded: dict | None
+    profiles: dict | None
+
+
+def _free_rows(table: ModeTable) -> dict:
+    from ringfit.fit.least_squares import frequency_data
+
+    d = frequency_data(table)
+    return dict(n=d.n, freq=d.freq_hz, sigma=d.sigma_hz, given=d.sigma_source == "freq_std_hz", rows=d.rows)
+
+
+def _damping_rows(table: ModeTable) -> dict | None:
+    base = table.structural_with_n()
+    zeta = table.damping_pct / 100.0
+    ok = base & np.isfinite(zeta) & (zeta > 0)
+    if ok.sum() < 2:
+        return None
+    z = zeta[ok]
+    return dict(zeta=z, sigma=DAMPING_RELATIVE_STD * np.full(z.size, float(np.median(z))), given=False)
+
+
+def _loaded_rows(tables: list[ModeTable], ring: RingParams, geometry: TyreGeometry, solver) -> tuple[dict, list]:
+    notes = []
+    n, sin, tab, freq, sigma, loads, drums, untagged = [], [], [], [], [], [], [], []
+    for ti, t in enumerate(tables):
+        loads.append(float(t.condition["load_n"]))
+        d = _number(t.condition, "drum_diameter_m")
+        drums.append(d if d and math.isfinite(d) and d > 0 else math.nan)
+        std = t.freq_std_hz
+        for i in range(len(t)):
+            if t.kind[i] != "structural" or not t.n[i] >= 1 or int(t.n[i]) > LOADED_HARMONICS:
+                continue
+            tag = str(t.tag[i])
+            s = 1 if tag in ("0", "hort") else 0 if tag in ("extr", "vert") else -1
+            f = float(t.freq_hz[i])
+            n.append(int(t.n[i]) - 1)
+            sin.append(s)
+            tab.append(ti)
+            freq.append(f)
+            sigma.append(float(std[i]) if np.isfinite(std[i]) and std[i] > 0 else DEFAULT_RELATIVE_STD * f)
+            if s < 0:
+                untagged.append(len(n) - 1)
+    if not n:
+        return None, notes
+    if untagged:
+        # untagged rows: the branch (contact-symmetric or -antisymmetric) nearer to the row at the start
+        road = flat_or_drum(np.array(drums), len(tables))
+        half = [float(standing_half_angle(ring, geometry, loads[i], jax.tree.map(lambda x: x[i], road), solver))
+                for i in range(len(tables))]
+        for j in untagged:
+            c, s = (np.asarray(x) for x in loaded_natural_frequencies(ring, geometry, half[tab[j]],
+                                                                        LOADED_HARMONICS))
+            sin[j] = int(abs(s[n[j]] - freq[j]) < abs(c[n[j]] - freq[j]))
+        notes.append(f"{len(untagged)} loaded row(s) without a tag matched to the nearer branch at the start")
+    given = all(np.isfinite(t.freq_std_hz).all() for t in tables)
+    return dict(n=np.array(n), sin=np.array(sin), table=np.array(tab), freq=np.array(freq), sigma=np.array(sigma),
+                load=np.array(loads), drum=np.array(drums), given=given), notes
+
+
+def _profile_rows(profiles, geometry, ring, solver) -> dict | None:
+    if not profiles:
+        return None
+    from ringfit.fit.rolling import rolling_data
+
+    data = rolling_data(profiles, geometry, ring, solver=solver)
+    measured = np.asarray(harmonic_rows(jnp.asarray(data.measured)))
+    P = measured.shape[0]
+    # starting σ per profile and channel: the RMS of the reading's rows (rescaled by the first pass)
+    sigma = np.broadcast_to(np.sqrt(np.mean(measured**2, axis=-1, keepdims=True)) * 0.1, measured.shape).copy()
+    return dict(measured=measured, sigma=sigma, omega=data.omega, load=data.load, drum=data.drum_diameter,
+                P=P, M=data.measured.shape[-1], sources=data.sources, speed_kmh=data.speed_kmh)
+
+
+def _arrays(geometry, rows: _Rows, solver) -> JointArrays:
+    fr, dm, ld, pr = rows.free, rows.damping, rows.loaded, rows.profiles
+    kw = dict(geometry=geometry, f_n=fr["n"], f_freq=fr["freq"], f_sigma=fr["sigma"],
+              d_zeta=None, d_sigma=None, l_n=None, l_sin=None, l_table=None, l_freq=None, l_sigma=None,
+              l_load=None, l_roads=None, p_omega=None, p_load=None, p_roads=None, p_band=None, p_measured=None,
+              p_sigma=None)
+    if dm is not None:
+        kw.update(d_zeta=dm["zeta"], d_sigma=dm["sigma"])
+    if ld is not None:
+        drum = ld["drum"]
+        kw.update(l_n=ld["n"].astype(np.int32), l_sin=ld["sin"].astype(np.int32), l_table=ld["table"].astype(np.int32),
+                  l_freq=ld["freq"], l_sigma=ld["sigma"], l_load=ld["load"],
+                  l_roads=flat_or_drum(None if np.all(np.isnan(drum)) else drum, drum.size))
+    if pr is not None:
+        kw.update(p_omega=pr["omega"], p_load=pr["load"], p_roads=flat_or_drum(pr["drum"], pr["P"]),
+                  p_band=full_band(pr["P"], solver.n_grid), p_measured=pr["measured"], p_sigma=pr["sigma"])
+    return as_traced(JointArrays(**kw))
+
+
+def _slices(rows: _Rows) -> dict[str, slice]:
+    out, start = {}, 0
+    for name, block in zip(BLOCKS, (rows.free, rows.damping, rows.loaded, rows.profiles)):
+        if block is None:
+            continue
+        m = block["n"].size if name == "free modes" else block["zeta"].size if name == "free damping" else \
+            block["n"].size if name == "loaded modes" else block["measured"].size
+        out[name] = slice(start, start + m)
+        start += m
+    return out
+
+
+# ----------------------------------------------------------------------------- the identification
+
+
+@dataclass
+class Identification:
+    """The joint identification (see the module docstring).
+
+    - ``fit``: the engine's :class:`~ringfit.fit.result.FitResult` of the last pass;
+    - ``ring``: the identified :class:`RingParams`; ``free``: the ring parameters identified;
+    - ``blocks``: per block its rows, noise scale, weighted RMS, Fisher share per free parameter;
+    - ``correlation``: ``(names, matrix)`` of the ring parameters' posterior correlation;
+    - ``covariance``: :class:`~ringfit.io.tyre.RingCovariance` of the ring parameters (ln θ);
+    - ``nuisances``: per profile its gain and angle offset (deg) with σ; ``notes``: what was skipped.
+    """
+
+    fit: FitResult
+    ring: RingParams
+    free: tuple[str, ...]
+    blocks: dict
+    correlation: tuple
+    covariance: RingCovariance
+    nuisances: list
+    notes: list
+    passes: int
+    inputs: IdentifyInputs | None = None
+
+    @property
+    def converged(self) -> bool:
+        return self.fit.converged
+
+    def parameters(self) -> dict:
+        """Per ring parameter: value, lo95, hi95, sd_ln (log parameters; 95 % interval e^{ln θ ± 1.96 σ})."""
+        out = {}
+        for name in self.free:
+            value = self.fit.values[name]
+            sd = self.covariance.sd_ln(name)
+            out[name] = dict(value=value, lo95=value * math.exp(-Z95 * sd), hi95=value * math.exp(Z95 * sd),
+                             sd_ln=sd)
+        return out
+
+
+def _hat_diagonal(J: np.ndarray) -> np.ndarray:
+    """Diagonal of the hat matrix ``J (JᵀJ)⁺ Jᵀ`` (leverage of each row)."""
+    U, s, _ = np.linalg.svd(J, full_matrices=False)
+    keep = s > 1e-12 * (s[0] if s.size else 1.0)
+    return np.sum(U[:, keep] ** 2, axis=1)
+
+
+def identify(inputs: IdentifyInputs, *, solver: ContactSolver = ContactSolver(), max_steps: int = 64,
+             rtol: float = 1e-8, atol: float = 1e-8, progress: bool = False) -> Identification:
+    """Joint weighted least squares of the ring (and per-run nuisances) over every block of ``inputs``.
+
+    Starts from the tyre file's ``[ring]`` (Table 9 values where it has none). Returns
+    :class:`Identification`; never raises on non-convergence (check ``converged``).
+
+    Runs with one BLAS thread: the contact solves' small LU factorisations run on XLA's own threads,
+    and a threaded LAPACK under them only synchronises — on a busy machine it was seen to deadlock
+    (two XLA threads waiting in ``dgetrf``).
+    """
+    from ringfit.targets.ssi import small_matrix_threads
+
+    with small_matrix_threads():
+        return _identify(inputs, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, progress=progress)
+
+
+def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identification:
+    tyre = inputs.tyre
+    geometry, ring0 = tyre.geometry, tyre.ring
+    notes = list(inputs.skipped)
+    ld, ld_notes = _loaded_rows(inputs.loaded, ring0, geometry, solver) if inputs.loaded else (None, [])
+    notes += ld_notes
+    rows = _Rows(_free_rows(inputs.free), _damping_rows(inputs.free), ld,
+                 _profile_rows(inputs.profiles, geometry, ring0, solver))
+    P = 0 if rows.profiles is None else rows.profiles["P"]
+    free = ["rho_a", "ei", "kw", "kv"]
+    if rows.loaded is not None or rows.profiles is not None:
+        free.append("k_tread")
+    if rows.damping is not None or rows.profiles is not None:
+        free.append("damping_ratio")
+    free_ring = tuple(free)
+    free = tuple(free) + nuisance_names(P)
+    coords = joint_coords(P)
+    theta = np.concatenate([ring_vector(ring0), np.tile([0.0, 1.0], P)])
+    model = JointResiduals(P, solver, ProfileModel())
+    slices = _slices(rows)
+    scales = {b: 1.0 for b in slices}
+    fit = None
+    for passes in range(1, SCALE_PASSES + 1):
+        data = _arrays(geometry, rows, solver)
+        problem = Problem(model, data, coords, plausible=BOUNDS, data_label="these measurements")
+        fit = least_squares(problem, theta, free, max_steps=max_steps, rtol=rtol, atol=atol)
+        if progress:
+            print(f"identify: pass {passes}: {fit.status} after {fit.iterations} steps, "
+                  f"χ²/m = {fit.extra['chi2_raw'] / fit.residuals.size:.3g}",
+                  flush=True)
+        if fit.converged:
+            theta = fit.theta.copy()
+        r = fit.residuals
+        h = _hat_diagonal(fit.jacobian)
+        change = 0.0
+        for name, sl in slices.items():
+            m = sl.stop - sl.start
+            dof = max(m - float(h[sl].sum()), 1.0)
+            s = math.sqrt(float(r[sl] @ r[sl]) / dof)
+            block = {"free modes": rows.free, "free damping": rows.damping, "loaded modes": rows.loaded}.get(name)
+            if name == "profiles":
+                _rescale_profiles(rows.profiles, fit, sl, model, data)
+                s = 1.0
+            elif block is not None:
+                s = max(s, 1.0) if block.get("given") else s
+                block["sigma"] = block["sigma"] * s
+            change = max(change, abs(s - 1.0))
+            scales[name] *= s
+        if fit.converged and change < SCALE_TOLERANCE and passes > 1:
+            break
+    # the final weights are those the last fit used: evaluate blocks with them
+    return _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs)
+
+
+def _rescale_profiles(pr: dict, fit: FitResult, sl: slice, model, data) -> None:
+    """New σ per profile, channel and harmonic from the residual spectrum (power smoothed over ±NOISE_SMOOTHING)."""
+    res = fit.residuals[sl].reshape(pr["measured"].shape) * pr["sigma"]  # back in m/s²
+    H = res.shape[-1] // 2
+    power = 0.5 * (res[..., :H] ** 2 + res[..., H:] ** 2)
+    kernel = np.ones(2 * NOISE_SMOOTHING + 1)
+    num = np.apply_along_axis(lambda p: np.convolve(p, kernel, mode="same"), -1, power)
+    den = np.convolve(np.ones(H), kernel, mode="same")
+    # degrees of freedom the fit took from the profile rows: share them out evenly
+    h = _hat_diagonal(fit.jacobian)[sl]
+    used = float(h.sum()) / h.size
+    sigma = np.sqrt(num / den / max(1.0 - used, 0.5))
+    sigma = np.maximum(sigma, 1e-6 * max(float(sigma.max()), 1e-300))
+    pr["sigma"] = np.concatenate([sigma, sigma], axis=-1)
+
+
+def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs) -> Identification:
+    J, r = fit.jacobian, fit.residuals
+    names = fit.names
+    fisher = {b: J[sl].T @ J[sl] for b, sl in slices.items()}
+    total = np.diag(J.T @ J)  # data and prior rows
+    blocks = {}
+    for b, sl in slices.items():
+        share = np.diag(fisher[b]) / np.where(total > 0, total, 1.0)
+        blocks[b] = dict(rows=int(sl.stop - sl.start), sigma_scale=float(scales[b]),
+                         rms=float(math.sqrt(np.mean(r[sl] ** 2))),
+                         fisher_share={n: float(share[j]) for j, n in enumerate(names) if n in free_ring})
+    idx = [names.index(n) for n in free_ring]
+    cov = fit.covariance_log[np.ix_(idx, idx)]
+    cov = 0.5 * (cov + cov.T)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sd, sd)
+    covariance = RingCovariance(free_ring, cov, "ringfit identify")
+    nuisances = []
+    pr = rows.profiles
+    for i in range(P):
+        o, g = f"angle_offset_{i + 1}", f"gain_{i + 1}"
+        nuisances.append(dict(source=str(pr["sources"][i]), load_n=float(pr["load"][i]),
+                              speed_kmh=float(pr["speed_kmh"][i]),
+                              angle_offset_deg=math.degrees(fit.values[o]),
+                              angle_offset_sd_deg=math.degrees(fit.stderr[o]), gain=fit.values[g],
+                              gain_sd=fit.stderr[g]))
+    ring = RingParams(**{n: fit.values[n] for n in RING_FIELDS})
+    return Identification(fit, ring, free_ring, blocks, (free_ring, corr), covariance, nuisances, notes, passes,
+                          inputs)
+
+
+def identification_report(ident: Identification) -> dict:
+    """The ``NAME.identify.json`` content (docs/formats.md §18)."""
+    fit = ident.fit
+    names, corr = ident.correlation
+    return {
+        "format": "ringfit-identify/1",
+        "status": fit.status,
+        "converged": bool(fit.converged),
+        "message": fit.message,
+        "iterations": int(fit.iterations),
+        "passes": int(ident.passes),
+        "flags": list(fit.flags),
+        "parameters": ident.parameters(),
+        "blocks": ident.blocks,
+        "correlation": {"names": list(names), "matrix": [[float(x) for x in row] for row in corr]},
+        "nuisances": ident.nuisances,
+        "files": [] if ident.inputs is None else ident.inputs.files,
+        "notes": ident.notes,
+    }
+
+
+__all__ = ["identify", "read_identify_folder", "IdentifyInputs", "Identification", "identification_report",
+           "JointResiduals", "harmonic_rows", "standing_half_angle", "BLOCKS"]

@@ -1,0 +1,110 @@
+"""A joint identification case: every state of one tyre with a known condition, from a known truth.
+
+``make_identify_case`` writes ``tyre.toml`` (Table 9 starting values, not the truth),
+``free.modes.csv`` (eq. 18, with damping), two standing loaded tables (the loaded-mode model at
+two loads, the patch from a contact solve on a finer grid than ringfit's) and three rolling
+profiles at known load and speed (solved on a finer grid, written at other angles, with a random
+gain, angle offset and coloured noise), and returns the truth. Deliberately unlike the estimator:
+the profile truth uses ``n_grid`` 1024 or 2048 and the loaded truth 48 harmonics.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+#: Loads [N] of the standing loaded tables and of the three profiles, and the profiles' speeds [km/h].
+LOADED_LOADS = (3000.0, 5000.0)
+PROFILE_POINTS = ((3000.0, 30.0), (4000.0, 50.0), (5000.0, 70.0))
+
+
+def make_identify_case(folder: str | os.PathLike, seed: int = 0, *, profiles: bool = True,
+                       loaded: bool = True, noise_colour: str | None = None, truth_file: bool = True) -> dict:
+    """Write the case into ``folder`` (created; must be empty or absent); returns the truth (also in
+    ``truth.json`` there when ``truth_file``; the identification does not read it)."""
+    import jax.numpy as jnp
+
+    from ringfit.io.modes import ModeTable, write_mode_table
+    from ringfit.io.profiles import Profile, write_profile
+    from ringfit.io.tyre import Tyre, write_tyre
+    from ringfit.physics.contact import ContactSolver, patch_edges, solve_rolling_jit
+    from ringfit.physics.loaded import loaded_natural_frequencies
+    from ringfit.physics.natural import natural_frequencies
+    from ringfit.physics.operating import OperatingPoint
+    from ringfit.physics.profile import ProfileModel, simulate_profile
+    from ringfit.synth.cases import NOISE_COLOURS, _new_case_folder, _ring, coloured_noise
+
+    rng = np.random.default_rng(seed)
+    folder = _new_case_folder(folder)
+    geometry, ring = _ring(rng)
+    zeta = float(rng.uniform(0.015, 0.035))
+    ring = ring.replace(damping_ratio=zeta, k_tread=float(ring.k_tread * np.exp(rng.normal(0.0, 0.15))))
+    sigma_rel = float(rng.uniform(0.001, 0.003))
+    with_std = bool(rng.random() < 0.5)
+    write_tyre(Tyre(geometry, {}), folder / "tyre.toml")
+
+    def table(name, f, n, tag, damping, condition):
+        f = np.asarray(f)
+        noisy = f * (1.0 + sigma_rel * rng.standard_normal(f.size))
+        t = ModeTable(freq_hz=noisy, n=np.asarray(n), tag=np.asarray(tag, object),
+                      kind=np.array(["structural"] * f.size, object), branch=np.array([""] * f.size, object),
+                      damping_pct=np.asarray(damping), freq_std_hz=(sigma_rel * noisy) if with_std else None,
+                      condition=condition)
+        write_mode_table(t, folder / name)
+
+    n_free = np.arange(1, 10)
+    f_free = np.asarray(natural_frequencies(ring, geometry, jnp.asarray(n_free, float)))
+    damp = 100.0 * zeta * np.exp(rng.normal(0.0, 0.05, n_free.size))
+    table("free.modes.csv", f_free, n_free, [""] * n_free.size, damp, {"state": "free"})
+    fine = ContactSolver(n_grid=int(rng.choice([1024, 2048])), window_deg=40.0)
+    half_angles = {}
+    if loaded:
+        for load in LOADED_LOADS:
+            sol = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, load), solver=fine)
+            lead, trail = (float(x) for x in patch_edges(sol))
+            half = 0.5 * (trail - lead)
+            half_angles[load] = half
+            c, s = (np.asarray(x) for x in loaded_natural_frequencies(ring, geometry, half, 48))
+            n = np.arange(1, 8)
+            f = np.concatenate([c[n - 1], s[n - 1]])
+            tags = ["vert" if k == 1 else "extr" for k in n] + ["hort" if k == 1 else "0" for k in n]
+            table(f"loaded{int(load)}.modes.csv", f, np.concatenate([n, n]), tags,
+                  np.full(f.size, np.nan), {"state": "loaded", "load_n": load, "speed_kmh": 0.0})
+    truth_profiles = []
+    if profiles:
+        colour = noise_colour or str(rng.choice(NOISE_COLOURS))
+        for i, (load, speed) in enumerate(PROFILE_POINTS):
+            n_points = int(rng.choice([720, 1000, 1024]))
+            prof = simulate_profile(ring, geometry, speed_kmh=speed, load_n=load, model=ProfileModel(), solver=fine,
+                                    n_points=n_points)
+            gain = float(np.exp(rng.normal(0.0, 0.03)))
+            offset_deg = float(rng.uniform(-1.0, 1.0))
+            ch = np.asarray(prof.channels) * gain
+            # an angle offset: the recorded angle α = φ − offset (docs/physics.md §5 layer 6)
+            sigma = float(rng.uniform(0.005, 0.02)) * float(np.std(ch[0]))
+            ch = ch + np.stack([coloured_noise(rng, n_points, sigma, colour),
+                                coloured_noise(rng, n_points, sigma, colour)])
+            angle = (np.asarray(prof.angle_deg) - offset_deg + 180.0) % 360.0 - 180.0
+            order = np.argsort(angle)
+            cond = {k: v for k, v in dict(prof.condition).items()}
+            cond.update(revolutions=50, sample_rate_hz=25600.0)
+            write_profile(Profile(angle[order], ch[0][order], ch[1][order], condition=cond, source=""),
+                          folder / f"run{i + 1}.profile.csv")
+            truth_profiles.append(dict(load_n=load, speed_kmh=speed, gain=gain, angle_offset_deg=offset_deg,
+                                       noise_ms2=sigma, noise_colour=colour, n_points=n_points))
+    truth = dict(seed=seed, ring={k: float(v) for k, v in ring.as_dict().items() if math.isfinite(v)},
+                 sigma_rel=sigma_rel, with_std=with_std, half_angles=half_angles, profiles=truth_profiles,
+                 truth_grid=fine.n_grid)
+    truth["ring_object"] = ring
+    truth["geometry"] = geometry
+    if truth_file:
+        (folder / "truth.json").write_text(json.dumps({k: v for k, v in truth.items()
+                                                       if k not in ("ring_object", "geometry")}, indent=1))
+    return truth
+
+
+__all__ = ["make_identify_case", "LOADED_LOADS", "PROFILE_POINTS"]

@@ -1,0 +1,87 @@
+"""The engine's public surface (issue 22 item 4): residuals, Jacobian, log-probability at given parameters.
+
+Expected values come from outside the code under test: the residual formula written here, central finite
+differences of it, and the Gaussian log density written here.
+"""
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, evaluate,
+                                least_squares, linearize, log_probability, residuals, residuals_batch)
+
+T = np.linspace(0.0, 2.0, 25)
+
+
+class Decay(AbstractResiduals):
+    def __call__(self, theta, data):
+        t, y, s = data
+        model = theta[0] * jnp.exp(-theta[1] * t) + theta[2]
+        return (model - y) / s, model
+
+
+def _problem(prior=None):
+    rng = np.random.default_rng(1)
+    y = 3.0 * np.exp(-1.3 * T) + 0.2 + 0.01 * rng.standard_normal(T.size)
+    coords = (Coordinate("a", LOG), Coordinate("k", LOG, lo=0.01, hi=100.0), Coordinate("c", LINEAR, scale=0.1))
+    return Problem(Decay(), (T, y, np.full(T.size, 0.01)), coords, prior=prior), y
+
+
+def _rows(theta, y):
+    return (theta[0] * np.exp(-theta[1] * T) + theta[2] - y) / 0.01
+
+
+def test_residuals_and_batch_match_the_formula():
+    problem, y = _problem()
+    theta = np.array([2.5, 1.1, 0.3])
+    r, aux = residuals(problem, theta)
+    np.testing.assert_allclose(r, _rows(theta, y), rtol=1e-12)
+    np.testing.assert_allclose(aux, r * 0.01 + y, rtol=1e-12)
+    thetas = theta * np.array([[1.0, 1.0, 1.0], [1.1, 0.9, 1.0], [0.8, 1.2, 0.5]])
+    np.testing.assert_allclose(residuals_batch(problem, thetas, chunk=2), [_rows(t, y) for t in thetas], rtol=1e-12)
+
+
+def test_linearize_jacobian_matches_finite_differences_in_solver_coordinates():
+    problem, y = _problem()
+    theta = np.array([2.5, 1.1, 0.3])
+    lin = linearize(problem, theta, ("k", "a", "c"), pad_to=5)
+    assert lin.jacobian.shape == (T.size, 3)
+    np.testing.assert_allclose(lin.residuals, _rows(theta, y), rtol=1e-12)
+    h = 1e-6
+    # u = ln k, ln a, c / 0.1
+    for j, (i, step) in enumerate([(1, "log"), (0, "log"), (2, "lin")]):
+        up, dn = theta.copy(), theta.copy()
+        if step == "log":
+            up[i], dn[i] = theta[i] * math.exp(h), theta[i] * math.exp(-h)
+        else:
+            up[i], dn[i] = theta[i] + 0.1 * h, theta[i] - 0.1 * h
+        fd = (_rows(up, y) - _rows(dn, y)) / (2 * h)
+        np.testing.assert_allclose(lin.jacobian[:, j], fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
+
+
+def test_evaluate_at_the_optimum_gives_the_fits_standard_errors():
+    problem, _ = _problem(prior=GaussianPrior.independent({"a": (math.log(3.0), 0.5)}))
+    fit = least_squares(problem, np.array([2.0, 1.0, 0.0]), ("a", "k", "c"))
+    assert fit.converged
+    ev = evaluate(problem, fit.theta, ("a", "k", "c"))
+    assert ev.status == "evaluated"
+    for name in ("a", "k", "c"):
+        assert ev.stderr[name] == np.float64(ev.stderr[name])
+        np.testing.assert_allclose(ev.stderr[name], fit.stderr[name], rtol=1e-6)
+
+
+def test_log_probability_is_the_gaussian_density_and_respects_bounds():
+    prior = GaussianPrior.independent({"a": (math.log(3.0), 0.5)})
+    problem, y = _problem(prior=prior)
+    theta = np.array([2.5, 1.1, 0.3])
+    logp = log_probability(problem, theta, ("a", "k"), sigma_scale=2.0, chunk=4)
+    u = np.array([[math.log(2.5), math.log(1.1)], [math.log(2.9), math.log(1.4)], [math.log(3.0), math.log(200.0)]])
+    got = logp(u)
+    for row, value in zip(u[:2], got[:2]):
+        th = theta.copy()
+        th[:2] = np.exp(row)
+        expect = -0.5 * (np.sum(_rows(th, y) ** 2) / 4.0 + ((row[0] - math.log(3.0)) / 0.5) ** 2)
+        np.testing.assert_allclose(value, expect, rtol=1e-12)
+    assert got[2] == -np.inf  # k = 200 is beyond its bound of 100
