@@ -24,7 +24,6 @@ can be rebuilt from the file alone. :func:`sample_posterior` is the free-tyre
 from __future__ import annotations
 
 import contextlib
-import functools
 import io
 import json
 import math
@@ -405,24 +404,6 @@ def _advance(sampler, state, stop, bar, interrupted, min_steps, max_steps):
                 bar.set_postfix_str(f"τ≈{t:.0f}")
                 bar.refresh()
     return state
-
-
-@functools.partial(jax.jit, static_argnames=("model", "treedef"))
-def _batched_log_probability(u, leaves, theta0, free_arrays, prior_w, prior_mean, lo, hi, inv_s2, *, model, treedef):
-    """Log posterior density ``(walkers,)`` of solver coordinates ``u`` ``(walkers, k)``, up to a constant."""
-    data = jax.tree.unflatten(treedef, leaves)
-    free = _Free(*free_arrays)
-    k = u.shape[1]
-
-    def one(ui):
-        r, _ = _weighted(ui, model, data, theta0, free, prior_w, prior_mean)
-        m = r.shape[0] - k
-        value = -0.5 * (inv_s2 * jnp.sum(r[:m] ** 2) + jnp.sum(r[m:] ** 2))
-        inside = jnp.all((ui >= lo) & (ui <= hi))
-        value = jnp.where(inside, value, -jnp.inf)
-        return jnp.where(jnp.isnan(value), -jnp.inf, value)
-
-    return jax.vmap(one)(u)
 
 
 def log_probability_function(result, bounds: dict | None = None, chunk: int | None = None):
