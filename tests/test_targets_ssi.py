@@ -162,5 +162,5 @@ def test_bad_inputs():
 
     with pytest.raises(InputError, match="NaN"):
         ssi_cov(np.full((2, 100), np.nan), FS)
-    with pytest.raises(InputError, match="block rows"):
+    with pytest.raises(InputError, match="block.rows"):
         ssi_cov(np.random.default_rng(0).standard_normal((2, 500)), FS, orders=[40], block_rows=12)

@@ -272,10 +272,12 @@ class JointResiduals(AbstractResiduals):
 
 
 def nuisance_names(P: int) -> tuple[str, ...]:
+    """Names of the per-profile nuisances of ``P`` profiles: ``angle_offset_i`` and ``gain_i`` (i = 1 … P)."""
     return tuple(n for i in range(P) for n in (f"angle_offset_{i + 1}", f"gain_{i + 1}"))
 
 
 def joint_coords(P: int) -> tuple[Coordinate, ...]:
+    """The joint fit's coordinates: the ring's (log), then per profile its angle offset (linear) and gain (log)."""
     coords = list(RING_COORDS)
     for i in range(P):
         coords.append(Coordinate(f"angle_offset_{i + 1}", LINEAR, scale=math.radians(1.0), lo=-OFFSET_BOUND,

@@ -277,6 +277,7 @@ class RingCovariance:
         return [ring.replace(**{k: float(math.exp(x)) for k, x in zip(self.names, row)}) for row in u]
 
     def table(self) -> dict:
+        """The ``[ring.covariance]`` table of the tyre TOML (docs/formats.md §1.1)."""
         return {"names": list(self.names), "ln": [[float(x) for x in row] for row in self.ln],
                 **({"source": self.source} if self.source else {})}
 

@@ -227,8 +227,22 @@ def harmonic_response(G, Q, S):
     return W, V
 
 
-__all__ = [
+__all__ = ["harmonic_basis", 
     "DEFAULT_GRID", "harmonic_numbers", "nyquist_mask", "elastic_stiffness", "membrane_matrix",
     "centrifugal_matrix", "AbstractOperatorTerm", "Hysteretic", "Viscous", "NoDamping", "RingModel",
     "ring_operator", "inextensible_vector", "reduced_operator", "receptance", "harmonic_response",
 ]
+
+
+def harmonic_basis(k, extensible: bool):
+    """Per-harmonic basis ``b_k`` with ``(W_k, V_k) = b_k q_k``, complex ``k.shape + (2, d)``.
+
+    Inextensible (d = 1): ``u_k = [1, i/k]``, ``u_0 = [0, 1]`` (docs/physics.md §4.2);
+    extensible (d = 2): the identity.
+    """
+    k = jnp.asarray(k, dtype=jnp.float64)
+    if extensible:
+        return jnp.broadcast_to(jnp.eye(2, dtype=jnp.complex128), k.shape + (2, 2))
+    u = inextensible_vector(k)
+    u0 = jnp.array([0.0, 1.0], dtype=jnp.complex128)
+    return jnp.where((k == 0)[..., None], u0, u)[..., None]

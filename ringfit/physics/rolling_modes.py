@@ -78,7 +78,8 @@ import jax.numpy as jnp
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced, patch_edges, solve_rolling
 from ringfit.physics.operating import KMH, AbstractRoad, FlatRoad, OperatingPoint, rolling_radius
-from ringfit.physics.rolling import NoDamping, RingModel, elastic_stiffness, inextensible_vector, ring_operator
+from ringfit.physics.rolling import (NoDamping, RingModel, elastic_stiffness, harmonic_basis, inextensible_vector,
+                                     ring_operator)
 
 #: Harmonics |k| ≤ K of the Hill basis. K = 32 keeps every mode of dominant order n ≤ 15
 #: within 1e-4 of K = 200 (Table 9 tyre, 4 kN, 0–80 km/h; tests/test_rolling_modes.py).
@@ -192,20 +193,6 @@ class RollingModes(eqx.Module):
     def freq_hz(self):
         """Fixed-frame frequencies f = ω/2π [Hz], ``(..., N)``."""
         return self.angular_frequency / TWO_PI
-
-
-def harmonic_basis(k, extensible: bool):
-    """Per-harmonic basis ``b_k`` with ``(W_k, V_k) = b_k q_k``, complex ``k.shape + (2, d)``.
-
-    Inextensible (d = 1): ``u_k = [1, i/k]``, ``u_0 = [0, 1]`` (docs/physics.md §4.2);
-    extensible (d = 2): the identity.
-    """
-    k = jnp.asarray(k, dtype=jnp.float64)
-    if extensible:
-        return jnp.broadcast_to(jnp.eye(2, dtype=jnp.complex128), k.shape + (2, 2))
-    u = inextensible_vector(k)
-    u0 = jnp.array([0.0, 1.0], dtype=jnp.complex128)
-    return jnp.where((k == 0)[..., None], u0, u)[..., None]
 
 
 def gyroscopic_matrices(

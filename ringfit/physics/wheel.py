@@ -218,7 +218,7 @@ def border_hill(M, G, K, E, k_of_dof, ring: RingParams, geometry: TyreGeometry, 
     d = 2 if extensible else 1
     dof = H * d
     # basis of the ring's dofs at k = +1, −1, 0 and the body's rigid shapes e_k
-    from ringfit.physics.rolling_modes import harmonic_basis
+    from ringfit.physics.rolling import harmonic_basis
 
     found = jnp.diag(jnp.array([1.0, 0.0], dtype=jnp.complex128) * ring.kw
                      + jnp.array([0.0, 1.0], dtype=jnp.complex128) * ring.kv)
