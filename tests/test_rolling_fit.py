@@ -108,9 +108,9 @@ def test_bad_requests_are_input_errors(profiles):
 
 @pytest.mark.slow
 def test_posterior_brackets_truth(fit4):
-    before = compilations(posterior._batched_log_probability)
+    before = compilations(engine._batched_log_probability)
     post = sample_rolling_posterior(fit4, walkers=8, steps=120, seed=1)
-    assert compilations(posterior._batched_log_probability) <= before + 1  # all walkers, then halves: one
+    assert compilations(engine._batched_log_probability) <= before + 1  # all walkers, then halves: one
     row = next(r for r in post.summary_table(level=0.6827) if r["name"] == "k_tread")
     lo, med, hi = row["lo"], row["median"], row["hi"]
     assert lo < med < hi
