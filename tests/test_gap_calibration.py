@@ -148,3 +148,25 @@ def test_p_value_is_uniform_under_the_null(tmp_path):
     p = np.array([_p_values(t_null, {"x": t})["x"] for t in t_obs])
     assert kstest(p, "uniform").pvalue > 0.01
     assert np.mean(p < 0.05) < 0.05 + 0.05  # nominal 5 %, with room for 200 draws (binomial sd 1.5 %)
+
+
+@pytest.mark.slow
+def test_random_line_machinery_fed_the_measured_rows_gives_the_observed_statistic(rolling_folders):
+    """The random-line null rebuilds each draw's predictions from the line problem and the diagnosis's own
+    matching rule; fed the measured frequencies (and the labelled rows at their measured values), it must give
+    exactly the observed statistic — the check that caught the matched line not reaching the rows."""
+    from ringfit.gap.calibration import random_line_null
+    from ringfit.gap.case import read_case
+    from ringfit.gap.diagnosis import build_problems, diagnose_problem, resolve_effects
+    from ringfit.gap.ranking import chain_start, fit_chain, parts
+
+    case = read_case(rolling_folders["random"])
+    prob = build_problems(case, resolve_effects("ground_contact,rotation"))[0]
+    part = diagnose_problem(prob, progress=False, null_draws=0)
+    el = "ground_contact@computed+rotation@computed"
+    if parts(el) not in part.fits:
+        part.fits[parts(el)] = fit_chain(prob, parts(el), start=chain_start(prob, parts(el), part.baseline.theta))
+    res = random_line_null(prob, part.fits, (), [el], draws=2,
+                           frequencies=lambda rows: np.broadcast_to(np.sort(prob.y[rows]), (2, rows.size)))
+    assert res is not None
+    np.testing.assert_allclose(res.t_null, res.observed[el], rtol=1e-9, atol=1e-12)

@@ -235,9 +235,13 @@ def _psi2(problem: GapProblem, e, sigma) -> np.ndarray:
 
 
 def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, draws: int = DRAWS,
-                     seed: int = 1) -> NullResult | None:
+                     seed: int = 1, frequencies=None) -> NullResult | None:
     """The random-line null (module docstring) of a frequency problem whose rows were matched by frequency;
-    ``None`` when it has none. Statistic: total shrink of ``chain`` + each candidate against the baseline."""
+    ``None`` when it has none. Statistic: total shrink of ``chain`` + each candidate against the baseline.
+
+    ``frequencies``: optional ``f(rows) -> (draws, len(rows))`` giving the drawn frequencies of a group of rows
+    instead of uniform draws (a test feeds the measured ones back: the null's statistic must then equal the
+    observed one)."""
     from ringfit.gap.modal import line_problem, mixture_sigma
 
     setup = line_problem(problem)
@@ -260,7 +264,8 @@ def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, dr
     for g in groups:
         rows = g["rows"]
         lo, hi = tables[g["table"]]
-        f = np.sort(rng.uniform(lo, hi, (draws, rows.size)), axis=1)
+        f = (np.sort(rng.uniform(lo, hi, (draws, rows.size)), axis=1) if frequencies is None
+             else np.asarray(frequencies(rows), dtype=np.float64))
         ystar[:, rows] = f
         idx[:, rows] = g["assign"](f)
         s = base_sigma[rows] * f / y[rows]  # each row's relative σ, at its new frequency
