@@ -497,18 +497,25 @@ def _ambiguity(problem: GapProblem, rows, line_sets):
 
 
 def _match_missing_n(rows, ring, geometry):
-    """Assign n to rows without one: nearest mode of the model their condition computes; returns notes."""
-    notes = {}
-    if all(r["n"] >= 0 for r in rows):  # nothing to match: no model evaluated (a cold process compiles nothing)
-        return notes
+    """Assign n to rows without one: nearest mode of the model their condition computes.
+
+    **Returns:** ``(notes, lines)``: the match sentence and the model's lines (:func:`missing_n_lines`) of each
+    matched row, by row position. Rows that see the same model (same table condition and mode type) share one
+    evaluation of it.
+    """
+    notes, lines, seen = {}, {}, {}
     for j, r in enumerate(rows):
         if r["n"] >= 0:
             continue
-        cand, model = missing_n_lines(r, ring, geometry)
+        key = (r["contact"], r["patch"]) if r["contact"] and r["patch"] > 0 else \
+            (r["spin"], r["branch"], r["fixed"]) if r["spin"] > 0 and r["branch"] else "eq18"
+        if key not in seen:
+            seen[key] = missing_n_lines(r, ring, geometry)
+        cand, model = lines[j] = seen[key]
         k = int(np.argmin(np.abs(cand - r["freq"])))
         r["n"] = k + 1
         notes[j] = (f"n matched to {k + 1} by frequency ({r['freq']:.1f} Hz vs {cand[k]:.1f} Hz of {model})")
-    return notes
+    return notes, lines
 
 
 def _baseline_covariance(fit, tyre) -> None:
@@ -630,9 +637,8 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
     if rolling is not None:
         for ti, note in rolling.notes.items():
             conditions[ti] = "; ".join(x for x in (conditions[ti], note) if x)
-    row_lines = {j: missing_n_lines(r, ring_ref, geometry)[0] for j, r in enumerate(rows)
-                 if r["matchable"] and r["joint"] == 0 and r["n"] < 0}
-    match_notes = _match_missing_n(rows, ring_ref, geometry)
+    match_notes, matched_lines = _match_missing_n(rows, ring_ref, geometry)
+    row_lines = {j: cand for j, (cand, _) in matched_lines.items() if rows[j]["matchable"] and rows[j]["joint"] == 0}
     for j, note in rolling_notes.items():
         match_notes[j] = "; ".join(x for x in (note, match_notes.get(j)) if x)
     problems = [_frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_rel, sigma_method,
