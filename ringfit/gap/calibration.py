@@ -225,13 +225,8 @@ def candidate_shrinks(problem: GapProblem, lin_cur: Linearised, lins: list, y) -
 
 
 def _psi2(problem: GapProblem, e, sigma) -> np.ndarray:
-    """ψ(e/σ)² per row (Huber on the problem's robust rows)."""
-    z = np.asarray(e) / sigma
-    if problem.robust is not None and problem.huber:
-        c = float(problem.huber)
-        a = np.abs(z)
-        z = np.where(np.asarray(problem.robust, dtype=bool) & (a > c), np.sqrt(np.maximum(2 * c * a - c * c, 0.0)), z)
-    return z**2
+    """ψ(e/σ)² per row (:meth:`~ringfit.gap.problem.GapProblem.psi`: Huber on the problem's robust rows)."""
+    return problem.psi(np.asarray(e) / sigma) ** 2
 
 
 def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, draws: int = DRAWS,

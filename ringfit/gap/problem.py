@@ -110,12 +110,18 @@ class GapProblem:
         """``resid/σ`` with the Huber function applied to the robust rows (what refits and tests see);
         ``heldout``: σ of a held-out residual (:attr:`sigma_heldout` where set)."""
         sigma = self.sigma_heldout if heldout and self.sigma_heldout is not None else self.sigma
-        z = np.asarray(resid, dtype=np.float64) / sigma
-        if self.robust is not None and self.huber is not None:
-            c = self.huber
-            a = np.abs(z)
-            z = np.where(self.robust & (a > c), np.sign(z) * np.sqrt(np.maximum(2 * c * a - c * c, 0.0)), z)
+        z = self.psi(np.asarray(resid, dtype=np.float64) / sigma)
         return z if mask is None else z[mask]
+
+    def psi(self, z):
+        """Huber's ψ on the robust rows (``sign(z)·√(2c|z| − c²)`` beyond c = :attr:`huber`), identity elsewhere;
+        ``z`` ``(..., m)`` standardised residuals (any leading batch axes)."""
+        if self.robust is None or self.huber is None:
+            return z
+        c = float(self.huber)
+        a = np.abs(z)
+        return np.where(np.asarray(self.robust, dtype=bool) & (a > c),
+                        np.sign(z) * np.sqrt(np.maximum(2 * c * a - c * c, 0.0)), z)
 
     @property
     def m(self) -> int:
