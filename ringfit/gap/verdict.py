@@ -89,6 +89,9 @@ MIN_HELDOUT_SHRINK_PCT = 19.0
 #: Lower end of its 95 % bootstrap interval: 9.75 % of the SS is 5 % of the RMS.
 MIN_HELDOUT_SHRINK_LO_PCT = 9.75
 MAX_DELTA_BIC = -10.0
+#: How :func:`acceptance` names a refusal for the bootstrap interval's lower bound alone (the diagnosis lets the
+#: calibrated null decide such a candidate, :mod:`ringfit.gap.calibration`).
+LOWER_BOUND_REASON = "heldout shrink lower bound"
 #: Below this many rows (in the deciding group) a bootstrap interval of a sum-of-squares ratio is not
 #: informative: it is reported, and acceptance rests on the shrink itself, ΔBIC and the null exclusion.
 MIN_INTERVAL_ROWS = 20
@@ -190,7 +193,7 @@ def acceptance(candidate: dict) -> tuple[bool, list[str]]:
         if not hs >= MIN_HELDOUT_SHRINK_PCT:
             why.append(f"heldout shrink {hs:.1f}% < {MIN_HELDOUT_SHRINK_PCT}%{where}")
         else:
-            why.append(f"heldout shrink lower bound {lo:.1f}% < {MIN_HELDOUT_SHRINK_LO_PCT}%{where}")
+            why.append(f"{LOWER_BOUND_REASON} {lo:.1f}% < {MIN_HELDOUT_SHRINK_LO_PCT}%{where}")
     dbic = candidate.get("evidence", {}).get("delta_bic", math.inf)
     if not dbic <= MAX_DELTA_BIC:
         why.append(f"delta BIC {dbic:.1f} > {MAX_DELTA_BIC}")
