@@ -25,37 +25,32 @@ Run: ``python benchmarks/bench_gap_calibration.py [--per-kind N] [--kinds a,b] [
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import shutil
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _common as bc  # noqa: E402
 
 KINDS = ("rolling-random", "loaded-random", "modal-noise", "profile-noise")
 HEADER = "n,a,tag,kind,freq_hz,freq_std_hz,damping_pct,branch"
 
 
 def _args(argv):
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--per-kind", type=int, default=100, help="null folders per kind (default 100)")
-    p.add_argument("--kinds", default=",".join(KINDS), help="comma-separated kinds (default all)")
-    p.add_argument("--power", type=int, default=0, help="effect cases per effect for the power table (0: none)")
-    p.add_argument("--alpha", type=float, default=0.01)
-    p.add_argument("--draws", type=int, default=200)
-    p.add_argument("--seed-offset", type=int, default=0)
+    p = bc.parser(__doc__.split("\n")[0], quick_help="5 folders per kind, no power table (a smoke run)")
+    p.add_argument("--per-kind", type=bc.count("a number of null folders per kind"), default=100)
+    p.add_argument("--kinds", type=bc.choices_list(KINDS, "kinds"), default=list(KINDS))
+    p.add_argument("--power", type=bc.count("a number of effect cases per effect (0: none)", 0), default=0)
+    p.add_argument("--alpha", type=bc.number("a level in (0, 0.5)", 0.0, 0.5, lo_open=True), default=0.01)
+    p.add_argument("--draws", type=bc.count("a number of null draws", 20, 20000), default=200)
+    p.add_argument("--seed-offset", type=bc.count("a seed offset", 0, 10**6), default=0)
     a = p.parse_args(argv)
-    kinds = [k.strip() for k in a.kinds.split(",") if k.strip()]
-    bad = [k for k in kinds if k not in KINDS]
-    if bad or a.per_kind < 1 or not 0 < a.alpha < 0.5 or a.draws < 20 or a.power < 0:
-        print(f"bench_gap_calibration: bad arguments (kinds {bad or 'ok'}; --per-kind >= 1, 0 < --alpha < 0.5, "
-              "--draws >= 20, --power >= 0)", file=sys.stderr)
-        raise SystemExit(2)
-    a.kinds = kinds
+    if a.quick:
+        a.per_kind, a.power = 5, 0
     return a
 
 
@@ -102,12 +97,11 @@ def _example_counts(tmp: Path):
 
 
 def clopper_pearson(k: int, n: int, level: float = 0.95):
-    from scipy.stats import beta
+    """The exact (Clopper–Pearson) interval of a rate k/n (scipy's ``binomtest``)."""
+    from scipy.stats import binomtest
 
-    a = (1 - level) / 2
-    lo = 0.0 if k == 0 else float(beta.ppf(a, k, n - k + 1))
-    hi = 1.0 if k == n else float(beta.ppf(1 - a, k + 1, n - k))
-    return lo, hi
+    ci = binomtest(k, n).proportion_ci(confidence_level=level, method="exact")
+    return float(ci.low), float(ci.high)
 
 
 def accepted_effects(content: dict) -> list[str]:
@@ -123,10 +117,11 @@ def main(argv=None) -> int:
     from ringfit.gap import diagnose
     from ringfit.synth.cases import make_case, make_profile_case
 
-    print(f"load average at start: {' '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs")
+    bc.start(f"bench_gap_calibration: {args.per_kind} null folders per kind ({', '.join(args.kinds)})"
+             + (" [--quick]" if args.quick else ""))
     print(f"alpha {args.alpha}, {args.draws} null draws per null; target: false accepts <= alpha + 1 % per kind")
     results = {}
-    failures = []
+    failures = bc.Failures()
     with tempfile.TemporaryDirectory() as tmpd:
         tmp = Path(tmpd)
         counts = _example_counts(tmp) if "rolling-random" in args.kinds else None
@@ -143,24 +138,19 @@ def main(argv=None) -> int:
                     make_case(folder, effect="none", seed=seed)
                 else:
                     make_profile_case(folder, effect="none", seed=seed)
-                t0, c0 = time.perf_counter(), time.process_time()
                 try:
-                    d = diagnose(folder, progress=False, alpha=args.alpha, null_draws=args.draws)
+                    d, t = bc.timed(diagnose, folder, progress=False, alpha=args.alpha, null_draws=args.draws)
                 except Exception as exc:  # noqa: BLE001 - counted and reported: no figures then
-                    failures.append(f"{kind} seed {seed}: {type(exc).__name__}: {exc}")
+                    failures.add(f"{kind} seed {seed}", f"{type(exc).__name__}: {exc}")
                     continue
                 eff = accepted_effects(d.content)
-                rows.append((eff, time.perf_counter() - t0, time.process_time() - c0))
+                rows.append((eff, t.wall, t.cpu))
                 print(f"  {kind:15s} seed {seed:5d}: {' + '.join(d.content['verdict']['effects']):40s} "
                       f"{'FALSE ACCEPT ' + '+'.join(eff) if eff else ''} ({rows[-1][1]:.1f} s wall, "
                       f"{rows[-1][2]:.1f} s CPU)", flush=True)
                 shutil.rmtree(folder, ignore_errors=True)
             results[kind] = rows
-    if failures:
-        print("\nbench_gap_calibration: diagnoses failed, no figures printed:", file=sys.stderr)
-        for f in failures:
-            print("  " + f, file=sys.stderr)
-        return 1
+    failures.refuse()
     target = args.alpha + 0.01
     print(f"\n| null folders | n | false accepts | rate | 95 % interval | target <= {100 * target:.0f} % | "
           "median wall / CPU per folder |")
@@ -174,7 +164,7 @@ def main(argv=None) -> int:
               f"{np.median([w for _, w, _ in rows]):.1f} s / {np.median([c for _, _, c in rows]):.1f} s |")
     if args.power:
         _power(args)
-    print(f"load average at end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    bc.finish()
     return 0
 
 
@@ -186,9 +176,11 @@ def _power(args) -> None:
     cases = [("modal", e) for e in MODAL_INJECTIONS if e not in ("none", "tread_pitch")]
     cases += [("profile", e) for e in PROFILE_INJECTIONS if e not in ("none", "tread_pitch")]
     cases += [("rolling", "contact"), ("rolling", "control")]
-    kept = found_rule = 0
-    print("\n| case | effect | seed | rule alone | calibrated | p |")
-    print("|---|---|---|---|---|---|")
+    kept = found_rule = total = 0
+    print("\nA detection is the expected set of effects exactly (an extra effect, e.g. a contact claimed on the "
+          "no-contact control, is not one).")
+    print("\n| case | effect | seed | rule alone | calibrated | p | calibrated: wall / CPU |")
+    print("|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmpd:
         for kind, effect in cases:
             for i in range(args.power):
@@ -202,19 +194,20 @@ def _power(args) -> None:
                     label = make_rolling_case(folder, contact=effect == "contact", seed=seed)
                 want = set(label.expected_verdict.split("+"))
                 rule = set(accepted_effects(diagnose(folder, progress=False, null_draws=0).content))
-                d = diagnose(folder, progress=False, alpha=args.alpha, null_draws=args.draws)
+                d, t = bc.timed(diagnose, folder, progress=False, alpha=args.alpha, null_draws=args.draws)
                 cal = set(accepted_effects(d.content))
-                hit_rule = bool(want & {x for e in rule for x in e.split("+")})
-                hit_cal = bool(want & {x for e in cal for x in e.split("+")})
+                hit_rule = want == {x for e in rule for x in e.split("+")}
+                hit_cal = want == {x for e in cal for x in e.split("+")}
+                total += 1
                 found_rule += hit_rule
                 kept += hit_rule and hit_cal
                 ps = [c["p_value"] for c in d.content["verdict"].get("calibration", [])]
                 print(f"| {kind} | {effect} | {seed} | {'+'.join(sorted(rule)) or 'none'} | "
-                      f"{'+'.join(sorted(cal)) or 'none'} | {', '.join(f'{p:.3g}' for p in ps)} |", flush=True)
+                      f"{'+'.join(sorted(cal)) or 'none'} | {', '.join(f'{p:.3g}' for p in ps)} | {t.wall:.1f} s / {t.cpu:.1f} s |", flush=True)
                 shutil.rmtree(folder, ignore_errors=True)
     share = kept / found_rule if found_rule else float("nan")
     print(f"\npower: the calibration keeps {kept} of the rule's {found_rule} detections ({100 * share:.0f} %; "
-          f"target >= 95 %)")
+          f"target >= 95 %); {total} cases")
 
 
 if __name__ == "__main__":
