@@ -107,6 +107,8 @@ MAX_CHAIN_PARAMETERS = 4
 #: Rows are padded to a multiple of this (dummy rows, weight 0, dropped from every output), so one
 #: compiled refit serves mode tables of similar size.
 ROW_BUCKET = 32
+#: Rows of a line problem (the random-line null, :func:`line_problem`) are padded to a multiple of this.
+LINE_BUCKET = 128
 #: Largest n a row without n is matched to.
 MATCH_N_MAX = 15
 
@@ -967,7 +969,9 @@ def line_problem(problem: GapProblem):
         return None
     every = list(rows) + extra
     mrows = _rows_module(every, 1.0, L.cavity_hz, L.table_patch, L.rolling)
-    data = ModalData(rows=pad_rows(mrows), ring=problem.data.ring, geometry=problem.data.geometry)
+    # a coarser bucket than the problem's: line problems of different cases (a few hundred rows) then share
+    # one compiled linearisation per candidate structure instead of compiling per 32-row step
+    data = ModalData(rows=pad_rows(mrows, LINE_BUCKET), ring=problem.data.ring, geometry=problem.data.geometry)
     p = problem.predictor
     predictor = ModalPredictor(effects=p.effects, base=p.base, sizes=p.sizes,
                                joint=joint_for(p.effects, p.sizes, len(p.base), rolling_tables(every)))
