@@ -472,6 +472,7 @@ def check_scheduler_address(address: str) -> None:
     """``address`` is a scheduler address Dask can dial (``tcp://HOST:PORT``, ``tls://…``, ``inproc://…``; the
     scheme defaults to tcp): :class:`~ringfit.errors.InputError` naming ``--scheduler`` otherwise, before any
     connection is tried."""
+    import_distributed()  # without the extra: the install hint, not a bare ModuleNotFoundError
     from distributed.comm import parse_address
     from distributed.comm.addressing import parse_host_port
     from distributed.comm.registry import backends

@@ -433,7 +433,10 @@ def run_batch(args) -> int:
 
 
 def _run(opts, tasks, commands, description):
-    """Open the client and run the tasks. **Returns:** (results, (start seconds, run seconds))."""
+    """Open the client and run the tasks (``opts`` checked by :func:`_check_cluster_options`).
+
+    **Returns:** (results, (start seconds, run seconds)).
+    """
     import functools
     import time
 
@@ -445,13 +448,13 @@ def _run(opts, tasks, commands, description):
 
         workers = min(workers or default_workers(), len(tasks))
     where = opts.scheduler or (f"a LocalCluster of {workers} worker process{'es' if workers > 1 else ''}"
-                               + (" on TLS" if getattr(opts, "security_obj", None) is not None else "")
+                               + (" on TLS" if opts.security_obj is not None else "")
                                + (f", dashboard {opts.dashboard}" if opts.dashboard else ""))
     print(f"{description}: {len(tasks)} task{'s' if len(tasks) != 1 else ''} on {where}", file=sys.stderr)
     t0 = time.perf_counter()
     with open_client(opts.scheduler, workers, memory_limit=opts.memory_limit,
                      warmup=functools.partial(warm_up, tuple(commands)), quiet=not opts.verbose,
-                     security=getattr(opts, "security_obj", None), dashboard=opts.dashboard) as client:
+                     security=opts.security_obj, dashboard=opts.dashboard) as client:
         t1 = time.perf_counter()
         results = run_tasks(client, tasks, progress=not opts.quiet, skip_existing=opts.skip_existing,
                             description=description)

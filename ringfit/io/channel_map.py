@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ringfit.errors import InputError
+from ringfit.io.continuous import CONDITION_KEYS
 from ringfit.io.files import existing_file
 from ringfit.io.record_types import AXES
 
@@ -37,8 +38,9 @@ ROLES = ("acc", "force", "encoder", "pulses", "trigger", "ignore")
 CHANNEL_KEYS = ("role", "axis", "angle_deg", "record", "unit", "sensitivity")
 #: Top-level scalar keys.
 TOP_KEYS = ("fs_hz", "pulses_per_rev", "encoder_offset_deg", "hall_delay_s")
-#: Condition keys (as in docs/formats.md §9).
-CONDITION_KEYS = ("speed_kmh", "load_n", "pressure_bar", "drum_diameter_m", "rotation_hz")
+#: File-level numbers a rig file may carry (TDMS root properties, MATLAB scalars): the top-level keys and the
+#: condition keys of docs/formats.md §9 (:data:`ringfit.io.continuous.CONDITION_KEYS`).
+SCALAR_KEYS = TOP_KEYS + CONDITION_KEYS
 
 
 @dataclass

@@ -29,17 +29,15 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
+from ringfit.io.channel_map import SCALAR_KEYS
 from ringfit.io.files import atomic_write, check_output_path, existing_file
 from ringfit.io.record_types import Records
 from ringfit.io.rig_types import RawChannel, RigFile
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
-#: Keys of ringfit's own layout (docs/formats.md §4, §9) and which are scalars.
-OWN_KEYS = ("acc", "axes", "sensor_angle_deg", "fs_hz", "force", "encoder_angle_deg", "encoder_pulses", "hall",
-            "pulses_per_rev", "encoder_offset_deg", "hall_delay_s", "speed_kmh", "load_n", "pressure_bar",
-            "drum_diameter_m", "rotation_hz", "kind")
-_SCALARS = ("fs_hz", "pulses_per_rev", "encoder_offset_deg", "hall_delay_s", "speed_kmh", "load_n",
-            "pressure_bar", "drum_diameter_m", "rotation_hz")
+#: Keys of ringfit's own layout (docs/formats.md §4, §9); the scalars among them are ``SCALAR_KEYS``.
+OWN_KEYS = ("acc", "axes", "sensor_angle_deg", "force", "encoder_angle_deg", "encoder_pulses", "hall", "kind",
+            *SCALAR_KEYS)
 
 
 def is_v73(path: Path) -> bool:
@@ -182,7 +180,7 @@ def read_mat_channels(path: str | os.PathLike) -> RigFile:
             continue  # text: no channel
         a = np.asarray(value)
         if a.size == 1:
-            if key in _SCALARS:
+            if key in SCALAR_KEYS:
                 rig.props[key] = float(a.reshape(()))
             continue
         if a.ndim > 2 or (a.ndim == 2 and min(a.shape) != 1):
@@ -208,7 +206,7 @@ def _own_layout(v: dict, path: Path) -> dict:
         if isinstance(value, list):
             raise InputError(f"variable {key!r} is text; expected numbers", source=path)
         a = np.asarray(value)
-        if key in _SCALARS:
+        if key in SCALAR_KEYS:
             if a.size != 1:
                 raise InputError(f"variable {key!r} has shape {a.shape}; expected a scalar", source=path)
             out[key] = a.reshape(()).item()

@@ -82,10 +82,6 @@ def read_rig(path: str | os.PathLike, *, lazy: bool = False) -> RigFile:
 
 def load_channel_map(channels) -> ChannelMap | None:
     """A :class:`ChannelMap` from a path (read and checked), or ``channels`` itself (None or a map)."""
-    return _load_map(channels)
-
-
-def _load_map(channels) -> ChannelMap | None:
     if channels is None or isinstance(channels, ChannelMap):
         return channels
     return read_channel_map(channels)
@@ -241,7 +237,7 @@ def records_from_rig(rig: RigFile, channels=None) -> Records:
     map's ``angle_deg``, else by the TDMS group, else by the file's sensor angle; each record has one channel per axis (every
     record the same axes) and at most one force (every record or none).
     """
-    cmap = _load_map(channels)
+    cmap = load_channel_map(channels)
     if rig.arrays is not None:
         if cmap is not None:
             raise InputError("holds ringfit's own keys (acc, axes, sensor_angle_deg, fs_hz); --channels applies to "
@@ -318,7 +314,7 @@ def continuous_fields(rig: RigFile, channels=None) -> dict:
     (the hall sensor); condition keys from the file and the map's
     ``[condition]`` (the map wins).
     """
-    cmap = _load_map(channels)
+    cmap = load_channel_map(channels)
     props = dict(rig.props)
     if rig.arrays is not None:
         if cmap is not None:
@@ -385,5 +381,5 @@ def continuous_fields(rig: RigFile, channels=None) -> dict:
 
 def read_rig_records(path: str | os.PathLike, channels=None) -> Records:
     """Impact records from a TDMS, .mat or CSV file (``channels``: a channel map path, or None)."""
-    cmap = _load_map(channels)  # the map's own errors before the (possibly long) read
+    cmap = load_channel_map(channels)  # the map's own errors before the (possibly long) read
     return records_from_rig(read_rig(path), cmap)

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
+from ringfit.io.channel_map import SCALAR_KEYS
 from ringfit.io.files import atomic_write, check_output_path, existing_file
 from ringfit.io.record_types import Records
 from ringfit.io.rig_types import LazyData, RawChannel, RigFile
@@ -155,8 +156,7 @@ def read_tdms_channels(path: str | os.PathLike, *, lazy: bool = False) -> RigFil
 def _channels(path, f, groups, data, handle) -> RigFile:
     rig = RigFile(source=str(path), format="tdms")
     for key, value in f.properties.items():
-        if key in ("fs_hz", "pulses_per_rev", "encoder_offset_deg", "hall_delay_s", "speed_kmh", "load_n",
-                   "pressure_bar", "drum_diameter_m", "rotation_hz"):
+        if key in SCALAR_KEYS:
             rig.props[key] = _float(value, f"file property {key!r}", path)
     skipped = []
     for g, chans in groups:

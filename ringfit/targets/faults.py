@@ -50,6 +50,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ringfit.targets.preprocessing import SKIP_AFTER_IMPACT_S
+
 #: A channel whose rms is below this share of its axis's median rms over the records is dead.
 DEAD_REL = 1e-2
 #: Samples a flat top must last to be called clipping (two runs of two also count).
@@ -249,7 +251,7 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def find_faults(acc: np.ndarray, angle_deg: np.ndarray, axes, fs_hz: float, impact: np.ndarray, *,
-                f_max_hz: float = 400.0, skip_s: float = 0.0127, used_from_s: float = 0.0) -> Faults:
+                f_max_hz: float = 400.0, skip_s: float = SKIP_AFTER_IMPACT_S, used_from_s: float = 0.0) -> Faults:
     """Run every check of the module docstring on offset-free records and repair or mark what is found.
 
     **Arguments:** ``acc`` (records, axes, samples) [m/s²], offsets removed; ``angle_deg`` (records,);
@@ -376,7 +378,7 @@ def find_faults(acc: np.ndarray, angle_deg: np.ndarray, axes, fs_hz: float, impa
     return Faults(acc, use, reason, hum, notes)
 
 
-def repair_records(records, *, threshold: float = 0.1, f_max_hz: float = 400.0, skip_s: float = 0.0127,
+def repair_records(records, *, threshold: float = 0.1, f_max_hz: float = 400.0, skip_s: float = SKIP_AFTER_IMPACT_S,
                    used_from_s: float = 0.0):
     """:func:`find_faults` on :class:`~ringfit.io.records.Records` whose offsets are removed
     (:func:`~ringfit.targets.quality.clean_records`).

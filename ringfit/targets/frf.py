@@ -26,7 +26,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.records import MeasuredFRF, Records
 from ringfit.targets.decimation import decimate, decimation_factor
-from ringfit.targets.preprocessing import align_on_impact, check_band
+from ringfit.targets.preprocessing import SKIP_AFTER_IMPACT_S, align_on_impact, check_band
 
 
 @dataclass
@@ -118,7 +118,8 @@ def frf_estimate(
 
     check_band(records, f_max_hz)
     records, notes = clean_records(records, threshold)
-    records, use, found, lines = repair_records(records, threshold=threshold, f_max_hz=f_max_hz, skip_s=pre_s + 0.0127)
+    records, use, found, lines = repair_records(records, threshold=threshold, f_max_hz=f_max_hz,
+                                                skip_s=pre_s + SKIP_AFTER_IMPACT_S)
     notes += found
     acc, force = align_on_impact(records, threshold=threshold, delay_s=delay_s, pre_s=pre_s)
     q = decimation_factor(records.fs_hz, f_max_hz)
