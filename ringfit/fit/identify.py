@@ -505,7 +505,7 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
             s = math.sqrt(float(r[sl] @ r[sl]) / dof)
             block = {"free modes": rows.free, "free damping": rows.damping, "loaded modes": rows.loaded}.get(name)
             if name == "profiles":
-                _rescale_profiles(rows.profiles, fit, sl, model, data)
+                _rescale_profiles(rows.profiles, r[sl], h[sl])
                 s = 1.0
             elif block is not None:
                 s = max(s, 1.0) if block.get("given") else s
@@ -518,17 +518,18 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     return _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs)
 
 
-def _rescale_profiles(pr: dict, fit: FitResult, sl: slice, model, data) -> None:
-    """New σ per profile, channel and harmonic from the residual spectrum (power smoothed over ±NOISE_SMOOTHING)."""
-    res = fit.residuals[sl].reshape(pr["measured"].shape) * pr["sigma"]  # back in m/s²
+def _rescale_profiles(pr: dict, residuals: np.ndarray, leverage: np.ndarray) -> None:
+    """New σ per profile, channel and harmonic from the residual spectrum (power smoothed over ±NOISE_SMOOTHING).
+
+    ``residuals`` and ``leverage`` (the hat matrix's diagonal) are the profile block's rows of the fit."""
+    res = residuals.reshape(pr["measured"].shape) * pr["sigma"]  # back in m/s²
     H = res.shape[-1] // 2
     power = 0.5 * (res[..., :H] ** 2 + res[..., H:] ** 2)
     kernel = np.ones(2 * NOISE_SMOOTHING + 1)
     num = np.apply_along_axis(lambda p: np.convolve(p, kernel, mode="same"), -1, power)
     den = np.convolve(np.ones(H), kernel, mode="same")
     # degrees of freedom the fit took from the profile rows: share them out evenly
-    h = _hat_diagonal(fit.jacobian)[sl]
-    used = float(h.sum()) / h.size
+    used = float(leverage.sum()) / leverage.size
     sigma = np.sqrt(num / den / max(1.0 - used, 0.5))
     sigma = np.maximum(sigma, 1e-6 * max(float(sigma.max()), 1e-300))
     pr["sigma"] = np.concatenate([sigma, sigma], axis=-1)
