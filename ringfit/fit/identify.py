@@ -342,11 +342,12 @@ def _loaded_rows(tables: list[ModeTable], ring: RingParams, geometry: TyreGeomet
     if untagged:
         # untagged rows: the branch (contact-symmetric or -antisymmetric) nearer to the row at the start
         road = flat_or_drum(np.array(drums), len(tables))
-        half = [float(standing_half_angle(ring, geometry, loads[i], jax.tree.map(lambda x: x[i], road), solver))
-                for i in range(len(tables))]
+        branches = {}  # per table with untagged rows: its (cosine, sine) model frequencies at the start
+        for ti in sorted({tab[j] for j in untagged}):
+            half = float(standing_half_angle(ring, geometry, loads[ti], jax.tree.map(lambda x: x[ti], road), solver))
+            branches[ti] = [np.asarray(x) for x in loaded_natural_frequencies(ring, geometry, half, LOADED_HARMONICS)]
         for j in untagged:
-            c, s = (np.asarray(x) for x in loaded_natural_frequencies(ring, geometry, half[tab[j]],
-                                                                        LOADED_HARMONICS))
+            c, s = branches[tab[j]]
             sin[j] = int(abs(s[n[j]] - freq[j]) < abs(c[n[j]] - freq[j]))
         notes.append(f"{len(untagged)} loaded row(s) without a tag matched to the nearer branch at the start")
     given = all(np.isfinite(t.freq_std_hz).all() for t in tables)
