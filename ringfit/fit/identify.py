@@ -44,7 +44,8 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares
-from ringfit.fit.least_squares import DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, ring_from_vector, ring_vector
+from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, frequency_data,
+                                      ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
 from ringfit.fit.result import FitResult
 from ringfit.io.modes import ModeTable, read_mode_table
@@ -300,8 +301,6 @@ class _Rows:
 
 
 def _free_rows(table: ModeTable) -> dict:
-    from ringfit.fit.least_squares import frequency_data
-
     d = frequency_data(table)
     return dict(n=d.n, freq=d.freq_hz, sigma=d.sigma_hz, given=d.sigma_source == "freq_std_hz", rows=d.rows)
 
@@ -393,8 +392,7 @@ def _slices(rows: _Rows) -> dict[str, slice]:
     for name, block in zip(BLOCKS, (rows.free, rows.damping, rows.loaded, rows.profiles)):
         if block is None:
             continue
-        m = block["n"].size if name == "free modes" else block["zeta"].size if name == "free damping" else \
-            block["n"].size if name == "loaded modes" else block["measured"].size
+        m = block["sigma"].size  # one σ per row, in every block
         out[name] = slice(start, start + m)
         start += m
     return out
