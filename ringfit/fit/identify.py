@@ -77,8 +77,6 @@ LOADED_HARMONICS = 24
 #: Parameters of the ring the identification can free.
 RING_FREE = ("rho_a", "ei", "kw", "kv", "k_tread", "damping_ratio")
 BLOCKS = ("free modes", "free damping", "loaded modes", "profiles")
-#: z of a two-sided 95 % interval.
-Z95 = 1.959963984540054
 
 
 # ----------------------------------------------------------------------------- inputs
@@ -429,13 +427,13 @@ class Identification:
         return self.fit.converged
 
     def parameters(self) -> dict:
-        """Per ring parameter: value, lo95, hi95, sd_ln (log parameters; 95 % interval e^{ln θ ± 1.96 σ})."""
+        """Per ring parameter: value, lo95, hi95, sd_ln (log parameters; 95 % interval e^{ln θ ± 1.96 σ},
+        :meth:`FitResult.interval <ringfit.fit.result.FitResult.interval>`)."""
         out = {}
         for name in self.free:
-            value = self.fit.values[name]
-            sd = self.covariance.sd_ln(name)
-            out[name] = dict(value=value, lo95=value * math.exp(-Z95 * sd), hi95=value * math.exp(Z95 * sd),
-                             sd_ln=sd)
+            lo, hi = self.fit.interval(name, 0.95)
+            out[name] = dict(value=self.fit.values[name], lo95=float(lo), hi95=float(hi),
+                             sd_ln=self.covariance.sd_ln(name))
         return out
 
 
