@@ -24,7 +24,7 @@ def register(sub) -> None:
     p.add_argument("--posterior", type=Path, default=None, metavar="NAME.h5",
                    help="also sample the joint posterior with emcee and save it (HDF5)")
     p.add_argument("--walkers", type=integer("an even number of walkers >= 2", lo=2), default=None,
-                   help="emcee walkers (default: 2 × the free parameters, rounded up to even)")
+                   help="emcee walkers (default: 2 × the free parameters)")
     p.add_argument("--min-steps", type=integer("a whole number of steps >= 100", lo=100), default=500,
                    help="posterior chain steps before the first convergence check (default 500)")
     p.add_argument("--max-steps", type=integer("a whole number of steps >= 100", lo=100), default=5000,
@@ -75,7 +75,7 @@ def run_identify(args) -> int:
         from ringfit.fit.posterior import sample
 
         k = len(ident.fit.names)
-        walkers = args.walkers or 2 * k + (2 * k) % 2
+        walkers = args.walkers or 2 * k
         if walkers < 2 * k or walkers % 2:
             raise InputError(f"--walkers {walkers}: emcee needs an even number of at least {2 * k} "
                              f"(2 × {k} free parameters)")
@@ -101,14 +101,8 @@ def _json_default(x):
 
 
 def _posterior_summary(posterior) -> dict:
-    import numpy as np
-
-    draws = np.asarray(posterior.samples)
-    out = {}
-    for j, name in enumerate(posterior.names):
-        lo, med, hi = np.percentile(draws[:, j], [2.5, 50, 97.5])
-        out[name] = dict(median=float(med), lo95=float(lo), hi95=float(hi))
-    return {"parameters": out}
+    return {"parameters": {row["name"]: dict(median=row["median"], lo95=row["lo"], hi95=row["hi"])
+                           for row in posterior.summary_table(0.95)}}
 
 
 def _print(ident, doc) -> None:

@@ -669,6 +669,11 @@ class FreeSet:
         """Solver coordinates ``(k,)`` of the free parameters at ``theta`` (natural units, ``(p,)``)."""
         return np.array([problem.coords[i].to_u(float(theta[i])) for i in self.index])
 
+    def unbounded_arrays(self) -> tuple:
+        """``arrays`` without the solver's sine transform of bounded coordinates: functions of ``u`` itself."""
+        K = self.size
+        return self.arrays[:4] + (np.zeros(K, dtype=bool), np.zeros(K), np.ones(K))
+
 
 def free_set(problem: Problem, free: tuple[str, ...], pad_to: int | None = None) -> FreeSet:
     """Check ``free`` against ``problem`` and build its :class:`FreeSet` (padded to ``pad_to`` slots)."""
@@ -681,8 +686,7 @@ def free_set(problem: Problem, free: tuple[str, ...], pad_to: int | None = None)
 def _linearize(leaves, u, theta0, free_arrays, prior_w, prior_mean, *, model, treedef):
     """Rows (data, then prior), their Jacobian in ``u`` (one forward-mode pass) and aux at ``u`` ``(K,)``."""
     data = jax.tree.unflatten(treedef, leaves)
-    free = _Free(*free_arrays[:4], jnp.zeros_like(free_arrays[4]), jnp.zeros_like(free_arrays[5]),
-                 jnp.ones_like(free_arrays[6]))
+    free = _Free(*free_arrays)
 
     def both(x):
         r, aux = _weighted(x, model, data, theta0, free, prior_w, prior_mean)
@@ -711,7 +715,7 @@ def _linearize_all(problem: Problem, theta, free, pad_to):
     _start(problem, fs.index, fs.size, fs.arrays, theta[None])  # checks the values
     u = np.concatenate([fs.u_of_theta(problem, theta), np.zeros(fs.size - len(fs.names))])
     leaves, treedef = jax.tree.flatten(problem.data)
-    res, jac, aux = _linearize(leaves, u, np.append(theta, 0.0), fs.arrays, fs.prior_w, fs.prior_mean,
+    res, jac, aux = _linearize(leaves, u, np.append(theta, 0.0), fs.unbounded_arrays(), fs.prior_w, fs.prior_mean,
                                model=problem.model, treedef=treedef)
     return fs, u, np.asarray(res), np.asarray(jac), aux
 
@@ -782,11 +786,10 @@ def log_probability(problem: Problem, theta, free: tuple[str, ...], *, lo_u=None
     exactly that many rows (padded), so one compilation serves every batch size.
     """
     fs = free_set(problem, free)
-    k = len(fs.names)
     lo = fs.lo_u if lo_u is None else np.asarray(lo_u, dtype=np.float64)
     hi = fs.hi_u if hi_u is None else np.asarray(hi_u, dtype=np.float64)
     # the density is over u itself: no sine transform of bounded coordinates
-    free_arrays = tuple(jnp.asarray(a) for a in fs.arrays[:4] + (np.zeros(k, dtype=bool), np.zeros(k), np.ones(k)))
+    free_arrays = tuple(jnp.asarray(a) for a in fs.unbounded_arrays())
     leaves, treedef = jax.tree.flatten(problem.data)
     consts = (tuple(jnp.asarray(x) for x in leaves), jnp.asarray(np.append(np.asarray(theta, np.float64), 0.0)),
               free_arrays, jnp.asarray(fs.prior_w), jnp.asarray(fs.prior_mean), jnp.asarray(lo), jnp.asarray(hi),

@@ -44,7 +44,8 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares
-from ringfit.fit.least_squares import DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, ring_from_vector, ring_vector
+from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, frequency_data,
+                                      ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
 from ringfit.fit.result import FitResult
 from ringfit.io.modes import ModeTable, read_mode_table
@@ -76,8 +77,6 @@ LOADED_HARMONICS = 24
 #: Parameters of the ring the identification can free.
 RING_FREE = ("rho_a", "ei", "kw", "kv", "k_tread", "damping_ratio")
 BLOCKS = ("free modes", "free damping", "loaded modes", "profiles")
-#: z of a two-sided 95 % interval.
-Z95 = 1.959963984540054
 
 
 # ----------------------------------------------------------------------------- inputs
@@ -300,8 +299,6 @@ class _Rows:
 
 
 def _free_rows(table: ModeTable) -> dict:
-    from ringfit.fit.least_squares import frequency_data
-
     d = frequency_data(table)
     return dict(n=d.n, freq=d.freq_hz, sigma=d.sigma_hz, given=d.sigma_source == "freq_std_hz", rows=d.rows)
 
@@ -342,11 +339,12 @@ def _loaded_rows(tables: list[ModeTable], ring: RingParams, geometry: TyreGeomet
     if untagged:
         # untagged rows: the branch (contact-symmetric or -antisymmetric) nearer to the row at the start
         road = flat_or_drum(np.array(drums), len(tables))
-        half = [float(standing_half_angle(ring, geometry, loads[i], jax.tree.map(lambda x: x[i], road), solver))
-                for i in range(len(tables))]
+        branches = {}  # per table with untagged rows: its (cosine, sine) model frequencies at the start
+        for ti in sorted({tab[j] for j in untagged}):
+            half = float(standing_half_angle(ring, geometry, loads[ti], jax.tree.map(lambda x: x[ti], road), solver))
+            branches[ti] = [np.asarray(x) for x in loaded_natural_frequencies(ring, geometry, half, LOADED_HARMONICS)]
         for j in untagged:
-            c, s = (np.asarray(x) for x in loaded_natural_frequencies(ring, geometry, half[tab[j]],
-                                                                        LOADED_HARMONICS))
+            c, s = branches[tab[j]]
             sin[j] = int(abs(s[n[j]] - freq[j]) < abs(c[n[j]] - freq[j]))
         notes.append(f"{len(untagged)} loaded row(s) without a tag matched to the nearer branch at the start")
     given = all(np.isfinite(t.freq_std_hz).all() for t in tables)
@@ -392,8 +390,7 @@ def _slices(rows: _Rows) -> dict[str, slice]:
     for name, block in zip(BLOCKS, (rows.free, rows.damping, rows.loaded, rows.profiles)):
         if block is None:
             continue
-        m = block["n"].size if name == "free modes" else block["zeta"].size if name == "free damping" else \
-            block["n"].size if name == "loaded modes" else block["measured"].size
+        m = block["sigma"].size  # one σ per row, in every block
         out[name] = slice(start, start + m)
         start += m
     return out
@@ -430,13 +427,13 @@ class Identification:
         return self.fit.converged
 
     def parameters(self) -> dict:
-        """Per ring parameter: value, lo95, hi95, sd_ln (log parameters; 95 % interval e^{ln θ ± 1.96 σ})."""
+        """Per ring parameter: value, lo95, hi95, sd_ln (log parameters; 95 % interval e^{ln θ ± 1.96 σ},
+        :meth:`FitResult.interval <ringfit.fit.result.FitResult.interval>`)."""
         out = {}
         for name in self.free:
-            value = self.fit.values[name]
-            sd = self.covariance.sd_ln(name)
-            out[name] = dict(value=value, lo95=value * math.exp(-Z95 * sd), hi95=value * math.exp(Z95 * sd),
-                             sd_ln=sd)
+            lo, hi = self.fit.interval(name, 0.95)
+            out[name] = dict(value=self.fit.values[name], lo95=float(lo), hi95=float(hi),
+                             sd_ln=self.covariance.sd_ln(name))
         return out
 
 
@@ -505,7 +502,7 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
             s = math.sqrt(float(r[sl] @ r[sl]) / dof)
             block = {"free modes": rows.free, "free damping": rows.damping, "loaded modes": rows.loaded}.get(name)
             if name == "profiles":
-                _rescale_profiles(rows.profiles, fit, sl, model, data)
+                _rescale_profiles(rows.profiles, r[sl], h[sl])
                 s = 1.0
             elif block is not None:
                 s = max(s, 1.0) if block.get("given") else s
@@ -518,17 +515,18 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     return _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs)
 
 
-def _rescale_profiles(pr: dict, fit: FitResult, sl: slice, model, data) -> None:
-    """New σ per profile, channel and harmonic from the residual spectrum (power smoothed over ±NOISE_SMOOTHING)."""
-    res = fit.residuals[sl].reshape(pr["measured"].shape) * pr["sigma"]  # back in m/s²
+def _rescale_profiles(pr: dict, residuals: np.ndarray, leverage: np.ndarray) -> None:
+    """New σ per profile, channel and harmonic from the residual spectrum (power smoothed over ±NOISE_SMOOTHING).
+
+    ``residuals`` and ``leverage`` (the hat matrix's diagonal) are the profile block's rows of the fit."""
+    res = residuals.reshape(pr["measured"].shape) * pr["sigma"]  # back in m/s²
     H = res.shape[-1] // 2
     power = 0.5 * (res[..., :H] ** 2 + res[..., H:] ** 2)
     kernel = np.ones(2 * NOISE_SMOOTHING + 1)
     num = np.apply_along_axis(lambda p: np.convolve(p, kernel, mode="same"), -1, power)
     den = np.convolve(np.ones(H), kernel, mode="same")
     # degrees of freedom the fit took from the profile rows: share them out evenly
-    h = _hat_diagonal(fit.jacobian)[sl]
-    used = float(h.sum()) / h.size
+    used = float(leverage.sum()) / leverage.size
     sigma = np.sqrt(num / den / max(1.0 - used, 0.5))
     sigma = np.maximum(sigma, 1e-6 * max(float(sigma.max()), 1e-300))
     pr["sigma"] = np.concatenate([sigma, sigma], axis=-1)
