@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 
 from ringfit.params import RingParams, TyreGeometry
-from ringfit.physics.loaded import DEFAULT_HARMONICS, loaded_matrices
+from ringfit.physics.loaded import DEFAULT_HARMONICS, eigen_angular_frequencies, loaded_matrices
 
 #: Defaults of the body when a sidecar says ``fixture: suspension`` but leaves a value out
 #: (docs/formats.md §2): a passenger-car wheel with hub on a test-bench suspension.
@@ -184,12 +184,8 @@ def loaded_wheel_angular_frequencies(ring: RingParams, geometry: TyreGeometry, h
     mass, k_cos, k_sin = loaded_matrices(ring, geometry, half_angle, n_max, k_tread)
     _, K1 = belt_translation(ring, geometry)
 
-    def rigid(K):  # the same operations as loaded_angular_frequencies: bit for bit its values
-        scale = 1.0 / jnp.sqrt(mass[:, None] * mass[None, :])
-        return jnp.sqrt(jnp.clip(jnp.linalg.eigvalsh(K * scale), 0.0))
-
-    def one(K, c):
-        return jnp.where(c > 0, _bordered_roots(mass, K, wheel.mass, c, K1), rigid(K))
+    def one(K, c):  # rigid: loaded_angular_frequencies' own solve, bit for bit its values
+        return jnp.where(c > 0, _bordered_roots(mass, K, wheel.mass, c, K1), eigen_angular_frequencies(mass, K))
 
     return one(k_cos, wheel.compliance_vertical), one(k_sin, wheel.compliance_fore_aft)
 
