@@ -357,17 +357,15 @@ def _row_cavity(table: ModeTable, f_a: float, contact: int, n: int, split) -> fl
 
 def cavity_splits(tables, ring, geometry) -> list:
     """W_2/h_c of each ``loaded`` table with a load (static contact solve; docs/physics.md §6), else None."""
-    from ringfit.physics.cavity import cavity_height, deflection_cos2
-    from ringfit.physics.contact import ContactSolver, solve_rolling_jit
-    from ringfit.physics.operating import OperatingPoint, road_from_drum_diameter
+    from ringfit.physics.cavity import static_cavity_split
+    from ringfit.physics.operating import road_from_drum_diameter
 
     out = []
     for t in tables:
         load = t.condition.get("load_n")
         if t.state == "loaded" and load:
             road = road_from_drum_diameter(t.condition.get("drum_diameter_m"))
-            sol = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, float(load), road), solver=ContactSolver())
-            out.append(float(deflection_cos2(sol)) / float(cavity_height(geometry)))
+            out.append(float(static_cavity_split(ring, geometry, float(load), road=road)))
         else:
             out.append(None)
     return out
