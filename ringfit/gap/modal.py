@@ -351,8 +351,11 @@ def _row_cavity(table: ModeTable, f_a: float, contact: int, n: int, split) -> fl
         return 0.0  # no air in the cavity: cavity_mode does not act on this table
     if split is None or n != 1 or not contact:
         return f_a
-    # the loaded cavity's pair at rest: fore-aft sqrt(1 + e), vertical sqrt(1 - e) (docs/physics.md §6)
-    return f_a * math.sqrt(max(1.0 - split, 0.0) if contact == 1 else max(1.0 + split, 0.0))
+    from ringfit.physics.cavity import loaded_cavity_lines
+
+    # the loaded cavity's pair at rest: fore-aft f_a sqrt(1 + e), vertical f_a sqrt(1 - e) (docs/physics.md §6)
+    fore_aft, vertical = loaded_cavity_lines(f_a, split)
+    return float(vertical if contact == 1 else fore_aft)
 
 
 def cavity_splits(tables, ring, geometry) -> list:
