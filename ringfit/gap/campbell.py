@@ -317,15 +317,10 @@ def campbell_diagram(
 def _acoustic_lines(ring, geometry, load_n: float, road, omegas) -> np.ndarray:
     """``(S, 2)`` fore-aft and vertical cavity lines [Hz] in the fixed frame (docs/physics.md §6 cavity_mode):
     eq. 22's line split by the flat of the static contact solve at ``load_n`` (none at 0) and by rotation."""
-    from ringfit.physics.cavity import cavity_height, deflection_cos2, loaded_cavity_lines
-    from ringfit.physics.contact import ContactSolver, solve_rolling_jit
+    from ringfit.physics.cavity import loaded_cavity_lines, static_cavity_split
     from ringfit.physics.natural import cavity_frequency
-    from ringfit.physics.operating import OperatingPoint
 
-    e = 0.0
-    if load_n > 0:
-        sol = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, load_n, road), solver=ContactSolver())
-        e = float(deflection_cos2(sol)) / float(cavity_height(geometry))
+    e = float(static_cavity_split(ring, geometry, load_n, road=road)) if load_n > 0 else 0.0
     wa = 2 * math.pi * float(cavity_frequency(1))
     fa, vt = loaded_cavity_lines(wa, e, np.asarray(omegas, dtype=np.float64))
     return np.stack([np.asarray(fa), np.asarray(vt)], axis=1) / (2 * math.pi)

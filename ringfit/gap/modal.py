@@ -353,23 +353,24 @@ def _row_cavity(table: ModeTable, f_a: float, contact: int, n: int, split) -> fl
         return 0.0  # no air in the cavity: cavity_mode does not act on this table
     if split is None or n != 1 or not contact:
         return f_a
-    # the loaded cavity's pair at rest: fore-aft sqrt(1 + e), vertical sqrt(1 - e) (docs/physics.md §6)
-    return f_a * math.sqrt(max(1.0 - split, 0.0) if contact == 1 else max(1.0 + split, 0.0))
+    from ringfit.physics.cavity import loaded_cavity_lines
+
+    # the loaded cavity's pair at rest: fore-aft f_a sqrt(1 + e), vertical f_a sqrt(1 - e) (docs/physics.md §6)
+    fore_aft, vertical = loaded_cavity_lines(f_a, split)
+    return float(vertical if contact == 1 else fore_aft)
 
 
 def cavity_splits(tables, ring, geometry) -> list:
     """W_2/h_c of each ``loaded`` table with a load (static contact solve; docs/physics.md §6), else None."""
-    from ringfit.physics.cavity import cavity_height, deflection_cos2
-    from ringfit.physics.contact import ContactSolver, solve_rolling_jit
-    from ringfit.physics.operating import OperatingPoint, road_from_drum_diameter
+    from ringfit.physics.cavity import static_cavity_split
+    from ringfit.physics.operating import road_from_drum_diameter
 
     out = []
     for t in tables:
         load = t.condition.get("load_n")
         if t.state == "loaded" and load:
             road = road_from_drum_diameter(t.condition.get("drum_diameter_m"))
-            sol = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, float(load), road), solver=ContactSolver())
-            out.append(float(deflection_cos2(sol)) / float(cavity_height(geometry)))
+            out.append(float(static_cavity_split(ring, geometry, float(load), road=road)))
         else:
             out.append(None)
     return out

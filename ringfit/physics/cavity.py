@@ -54,6 +54,17 @@ def deflection_cos2(solution):
     return 2.0 * jnp.real(solution.w_spectrum[..., 2]) / M
 
 
+def static_cavity_split(ring, geometry: TyreGeometry, load_n, *, road=None, cavity_length: float = CAVITY_LENGTH):
+    """W_2/h_c of the standing tyre at ``load_n`` [N]: :func:`deflection_cos2` of the static contact solve
+    (Ω = 0, :func:`ringfit.physics.contact.solve_rolling_jit`; ``road`` None = flat) over :func:`cavity_height`."""
+    from ringfit.physics.contact import ContactSolver, solve_rolling_jit
+    from ringfit.physics.operating import FlatRoad, OperatingPoint
+
+    sol = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, load_n, road if road is not None else FlatRoad()),
+                            solver=ContactSolver())
+    return deflection_cos2(sol) / cavity_height(geometry, cavity_length)
+
+
 def loaded_cavity_lines(omega_acoustic, w2_over_height, omega=0.0):
     """The first acoustic pair of the loaded, possibly rolling tyre in the fixed frame [rad/s].
 
@@ -88,15 +99,10 @@ def loaded_cavity_frequencies(ring, geometry: TyreGeometry, load_n, omega=0.0, *
     gives W_2; then :func:`loaded_cavity_lines` at the wheel speed ``omega`` [rad/s].
     Also returns W_2/h_c: ``(fore_aft_hz, vertical_hz, w2_over_height)``.
     """
-    from ringfit.physics.contact import ContactSolver, solve_rolling_jit
-    from ringfit.physics.operating import FlatRoad, OperatingPoint
-
-    sol = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, load_n, road if road is not None else FlatRoad()),
-                            solver=ContactSolver())
-    e = deflection_cos2(sol) / cavity_height(geometry, cavity_length)
+    e = static_cavity_split(ring, geometry, load_n, road=road, cavity_length=cavity_length)
     wa = 2.0 * jnp.pi * sound_speed / cavity_length
     fa, vt = loaded_cavity_lines(wa, e, omega)
     return fa / (2.0 * jnp.pi), vt / (2.0 * jnp.pi), e
 
 
-__all__ = ["cavity_height", "deflection_cos2", "loaded_cavity_lines", "loaded_cavity_frequencies"]
+__all__ = ["cavity_height", "deflection_cos2", "static_cavity_split", "loaded_cavity_lines", "loaded_cavity_frequencies"]

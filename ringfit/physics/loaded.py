@@ -69,13 +69,14 @@ def loaded_angular_frequencies(
     ring (``extr``/``vert`` and ``0``/``hort`` respectively).
     """
     mass, k_cos, k_sin = loaded_matrices(ring, geometry, half_angle, n_max, k_tread)
+    return eigen_angular_frequencies(mass, k_cos), eigen_angular_frequencies(mass, k_sin)
+
+
+def eigen_angular_frequencies(mass, stiffness):
+    """``√λ`` [rad/s], ascending, of ``K φ = λ M φ`` with a diagonal ``mass`` ``(N,)`` and ``stiffness`` ``(N, N)``
+    (symmetric scaling by ``1/√(M_i M_j)``; negative λ clipped to 0)."""
     scale = 1.0 / jnp.sqrt(mass[:, None] * mass[None, :])
-
-    def eig(K):
-        lam = jnp.linalg.eigvalsh(K * scale)
-        return jnp.sqrt(jnp.clip(lam, 0.0))
-
-    return eig(k_cos), eig(k_sin)
+    return jnp.sqrt(jnp.clip(jnp.linalg.eigvalsh(stiffness * scale), 0.0))
 
 
 def loaded_matrices(ring: RingParams, geometry: TyreGeometry, half_angle, n_max: int = DEFAULT_HARMONICS,
@@ -105,4 +106,5 @@ def loaded_natural_frequencies(
     return c / (2.0 * jnp.pi), s / (2.0 * jnp.pi)
 
 
-__all__ = ["DEFAULT_HARMONICS", "patch_overlap", "loaded_matrices", "loaded_angular_frequencies", "loaded_natural_frequencies"]
+__all__ = ["DEFAULT_HARMONICS", "patch_overlap", "loaded_matrices", "eigen_angular_frequencies", "loaded_angular_frequencies",
+           "loaded_natural_frequencies"]

@@ -227,13 +227,6 @@ def harmonic_response(G, Q, S):
     return W, V
 
 
-__all__ = ["harmonic_basis", 
-    "DEFAULT_GRID", "harmonic_numbers", "nyquist_mask", "elastic_stiffness", "membrane_matrix",
-    "centrifugal_matrix", "AbstractOperatorTerm", "Hysteretic", "Viscous", "NoDamping", "RingModel",
-    "ring_operator", "inextensible_vector", "reduced_operator", "receptance", "harmonic_response",
-]
-
-
 def harmonic_basis(k, extensible: bool):
     """Per-harmonic basis ``b_k`` with ``(W_k, V_k) = b_k q_k``, complex ``k.shape + (2, d)``.
 
@@ -246,3 +239,10 @@ def harmonic_basis(k, extensible: bool):
     u = inextensible_vector(k)
     u0 = jnp.array([0.0, 1.0], dtype=jnp.complex128)
     return jnp.where((k == 0)[..., None], u0, u)[..., None]
+
+
+__all__ = [
+    "DEFAULT_GRID", "harmonic_numbers", "nyquist_mask", "elastic_stiffness", "membrane_matrix",
+    "centrifugal_matrix", "AbstractOperatorTerm", "Hysteretic", "Viscous", "NoDamping", "RingModel",
+    "ring_operator", "inextensible_vector", "harmonic_basis", "reduced_operator", "receptance", "harmonic_response",
+]

@@ -78,8 +78,7 @@ import jax.numpy as jnp
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced, patch_edges, solve_rolling
 from ringfit.physics.operating import KMH, AbstractRoad, FlatRoad, OperatingPoint, rolling_radius
-from ringfit.physics.rolling import (NoDamping, RingModel, elastic_stiffness, harmonic_basis, inextensible_vector,
-                                     ring_operator)
+from ringfit.physics.rolling import NoDamping, RingModel, elastic_stiffness, harmonic_basis, ring_operator
 
 #: Harmonics |k| ≤ K of the Hill basis. K = 32 keeps every mode of dominant order n ≤ 15
 #: within 1e-4 of K = 200 (Table 9 tyre, 4 kN, 0–80 km/h; tests/test_rolling_modes.py).

@@ -34,7 +34,8 @@ import jax
 import jax.numpy as jnp
 
 from ringfit.params import RingParams, TyreGeometry
-from ringfit.physics.loaded import DEFAULT_HARMONICS, loaded_matrices
+from ringfit.physics.loaded import DEFAULT_HARMONICS, eigen_angular_frequencies, loaded_matrices
+from ringfit.physics.rolling import harmonic_basis
 
 #: Defaults of the body when a sidecar says ``fixture: suspension`` but leaves a value out
 #: (docs/formats.md §2): a passenger-car wheel with hub on a test-bench suspension.
@@ -75,12 +76,6 @@ class Wheel(eqx.Module):
         f = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
         return cls(f(mass), f(inertia), comp(k_vertical), comp(k_fore_aft), comp(k_torsion),
                    f(c_vertical), f(c_fore_aft), f(c_torsion))
-
-    def scaled(self, factor) -> "Wheel":
-        """The same body with every compliance times ``factor`` (0 = rim fixed)."""
-        return eqx.tree_at(lambda w: (w.compliance_vertical, w.compliance_fore_aft, w.compliance_torsion), self,
-                           (self.compliance_vertical * factor, self.compliance_fore_aft * factor,
-                            self.compliance_torsion * factor))
 
 
 def belt_translation(ring: RingParams, geometry: TyreGeometry):
@@ -184,12 +179,8 @@ def loaded_wheel_angular_frequencies(ring: RingParams, geometry: TyreGeometry, h
     mass, k_cos, k_sin = loaded_matrices(ring, geometry, half_angle, n_max, k_tread)
     _, K1 = belt_translation(ring, geometry)
 
-    def rigid(K):  # the same operations as loaded_angular_frequencies: bit for bit its values
-        scale = 1.0 / jnp.sqrt(mass[:, None] * mass[None, :])
-        return jnp.sqrt(jnp.clip(jnp.linalg.eigvalsh(K * scale), 0.0))
-
-    def one(K, c):
-        return jnp.where(c > 0, _bordered_roots(mass, K, wheel.mass, c, K1), rigid(K))
+    def one(K, c):  # rigid: loaded_angular_frequencies' own solve, bit for bit its values
+        return jnp.where(c > 0, _bordered_roots(mass, K, wheel.mass, c, K1), eigen_angular_frequencies(mass, K))
 
     return one(k_cos, wheel.compliance_vertical), one(k_sin, wheel.compliance_fore_aft)
 
@@ -202,8 +193,8 @@ def border_hill(M, G, K, E, k_of_dof, ring: RingParams, geometry: TyreGeometry, 
     ``p₊ = (a − ib)/2``, ``p₋ = (a + ib)/2`` — the rim translation (a toward the patch
     centre, the vertical; b along α = 90°, fore-aft) in the harmonics k = +1, −1 of the
     ring's translation — and ``p₀ = Rβ`` (rim rotation β at the belt's radius, k = 0).
-    The sidewall springs act on ``c_k − p_k``: with ``e_k = [1, i/k]`` (``[0, 1]`` at k = 0)
-    the ring–body block is ``−b_kᴴ diag(k_w, k_v) e_k``, the body's own
+    The sidewall springs act on ``c_k − p_k``: with ``e_k = [1, i/k]`` (``[0, 1]`` at k = 0; the inextensible
+    ``u_k`` of :func:`ringfit.physics.rolling.harmonic_basis`) the ring–body block is ``−b_kᴴ diag(k_w, k_v) e_k``, the body's own
     ``e_kᴴ diag(k_w, k_v) e_k`` (k_w + k_v; k_v at k = 0). Body mass ``m_w/(πR)`` on p±,
     ``I_w/(2πR³)`` on p₀; support ``[[k_z + k_x, k_z − k_x], [k_z − k_x, k_z + k_x]]/(2πR)``
     on (p₊, p₋) (an anisotropic support couples +1 and −1, as the patch does),
@@ -213,21 +204,19 @@ def border_hill(M, G, K, E, k_of_dof, ring: RingParams, geometry: TyreGeometry, 
     **Returns:** ``(M, G, K, E, C, k_of_dof)`` of size dof + 3.
     """
     R = geometry.radius
-    k = jnp.arange(-harmonics, harmonics + 1, dtype=jnp.float64)
-    H = k.size
     d = 2 if extensible else 1
-    dof = H * d
-    # basis of the ring's dofs at k = +1, −1, 0 and the body's rigid shapes e_k
-    from ringfit.physics.rolling import harmonic_basis
+    dof = (2 * harmonics + 1) * d
+
+    def grow(A):
+        return jnp.zeros((dof + 3, dof + 3), dtype=jnp.complex128).at[:dof, :dof].set(A)
 
     found = jnp.diag(jnp.array([1.0, 0.0], dtype=jnp.complex128) * ring.kw
                      + jnp.array([0.0, 1.0], dtype=jnp.complex128) * ring.kv)
-    e = {1: jnp.array([1.0, 1j]), -1: jnp.array([1.0, -1j]), 0: jnp.array([0.0, 1.0])}
-    Kb = jnp.zeros((dof + 3, dof + 3), dtype=jnp.complex128).at[:dof, :dof].set(K)
+    Kb = grow(K)
     for col, kk in enumerate((1, -1, 0)):
         h = kk + harmonics
-        b = harmonic_basis(jnp.asarray(float(kk)), extensible)  # (2, d)
-        ek = e[kk].astype(jnp.complex128)
+        b = harmonic_basis(jnp.asarray(float(kk)), extensible)  # (2, d): the ring's dofs at k = +1, −1, 0
+        ek = harmonic_basis(jnp.asarray(float(kk)), False)[:, 0]  # the body's rigid shape e_k = u_k
         block = -(jnp.conj(b.T) @ found @ ek)  # (d,)
         rows = h * d + jnp.arange(d)
         Kb = Kb.at[rows, dof + col].set(block).at[dof + col, rows].set(jnp.conj(block))
@@ -246,12 +235,7 @@ def border_hill(M, G, K, E, k_of_dof, ring: RingParams, geometry: TyreGeometry, 
     Cb = Cb.at[dof:dof + 2, dof:dof + 2].set(jnp.array([[cz + cx, cz - cx], [cz - cx, cz + cx]]) / two_pi_r)
     Cb = Cb.at[dof + 2, dof + 2].set(wheel.damping_torsion / (two_pi_r * R * R))
     body_mass = jnp.array([wheel.mass / (jnp.pi * R), wheel.mass / (jnp.pi * R), wheel.inertia / (two_pi_r * R * R)])
-    Mb = jnp.zeros((dof + 3, dof + 3), dtype=jnp.complex128).at[:dof, :dof].set(M)
-    Mb = Mb.at[dof + jnp.arange(3), dof + jnp.arange(3)].set(body_mass.astype(jnp.complex128))
-
-    def grow(A):
-        return jnp.zeros((dof + 3, dof + 3), dtype=jnp.complex128).at[:dof, :dof].set(A)
-
+    Mb = grow(M).at[dof + jnp.arange(3), dof + jnp.arange(3)].set(body_mass.astype(jnp.complex128))
     kd = jnp.concatenate([k_of_dof, jnp.array([1.0, -1.0, 0.0])])
     return Mb, grow(G), Kb, grow(E), Cb, kd
 

@@ -187,7 +187,8 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
         b = float(rng.uniform(0.8, 1.15))
         magnitude["exponent"] = b
         eta = 2.0 * zeta0 * n_free.astype(float) ** b
-        damp_free = 100.0 * np.sin(0.5 * np.arctan(eta)) * np.exp(rng.normal(0.0, zeta_sd, free.size))
+        growth_truth = 100.0 * np.sin(0.5 * np.arctan(eta))
+        damp_free = growth_truth * np.exp(rng.normal(0.0, zeta_sd, free.size))
     elif effect == "tread_pitch":
         amp = float(rng.uniform(0.01, 0.02))
         magnitude["relative_amplitude"] = amp
@@ -208,7 +209,7 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
             for n, f, d in zip(n_free, free_noisy, damp_free)]
     damp_truth = 100.0 * (zeta0 + 0.5 * magnitude.get("eta_slope", 0.0) * free / 100.0)
     if effect == "damping_growth":
-        damp_truth = 100.0 * np.sin(0.5 * np.arctan(2.0 * zeta0 * n_free.astype(float) ** magnitude["exponent"]))
+        damp_truth = growth_truth
     # realised noise of every observation, in the order the diagnosis reads them (free: frequency then
     # damping per mode; then loaded.modes.csv, spinning.modes.csv): for the ideal shrink of the benchmark
     row_noise = []

@@ -1,11 +1,14 @@
 """``viscous_damping`` — viscous loss on the damping rows of mode tables (docs/physics.md §6; the damping family: see
 :mod:`ringfit.gap.effects.damping_growth`)."""
 
+from dataclasses import replace
+
 import jax.numpy as jnp
 import numpy as np
 
 from ringfit.gap.effects import register
-from ringfit.gap.effects.base import Effect, Parameter
+from ringfit.gap.effects.base import Effect
+from ringfit.gap.effects.wave_damping import VISCOUS_C
 
 
 class ViscousDamping(Effect):
@@ -14,10 +17,8 @@ class ViscousDamping(Effect):
     name = "viscous_damping"
     baseline_partners = ("damping_ratio",)
     summary = "viscous loss: damping that falls with frequency, ζ = ζ0 + c/(2ρAω)"
-    parameters = (
-        Parameter("viscous_c", "N s/m^2", null=0.0, lo=0.0, hi=5000.0, start=300.0,
-                  description="viscous damping c per unit length"),
-    )
+    # the c of wave_damping's viscous profile form (same name, unit and bounds: docs/physics.md §6)
+    parameters = (replace(VISCOUS_C, description="viscous damping c per unit length"),)
 
     def modal_mask(self, rows):
         return np.asarray(rows.is_freq) == 0

@@ -28,6 +28,7 @@ import numpy as np
 
 from ringfit.gap.effects import register
 from ringfit.gap.effects.base import Effect, Parameter
+from ringfit.physics.loaded import loaded_angular_frequencies
 from ringfit.physics.wheel import (Wheel, belt_torsion, belt_translation, coupled_angular_frequency,
                                    loaded_wheel_angular_frequencies)
 
@@ -86,10 +87,9 @@ class WheelSuspension(Effect):
                 cnt = jnp.maximum(jnp.sum(sel), 1)
                 wt = jnp.sum(jnp.where(sel[:, None], w, 0.0), axis=0) / cnt
                 wheel = Wheel(jnp.where(wt[0] > 0, wt[1], 1.0), wt[2], s * wt[3], s * wt[4], s * wt[5])
-                rigid = Wheel(wheel.mass, wheel.inertia, 0.0, 0.0, 0.0)
                 a = rows.table_patch[t]
                 c1, s1 = loaded_wheel_angular_frequencies(ring, geometry, a, wheel, n_max=_HARMONICS)
-                c0, s0 = loaded_wheel_angular_frequencies(ring, geometry, a, rigid, n_max=_HARMONICS)
+                c0, s0 = loaded_angular_frequencies(ring, geometry, a, _HARMONICS)  # the rim-fixed loaded modes
                 pick = jnp.where(rows.contact == 1, c1[k] - c0[k], s1[k] - s0[k])
                 shift = jnp.where(sel & (wt[0] > 0), pick, shift)
             return shift
