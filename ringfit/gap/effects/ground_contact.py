@@ -37,7 +37,7 @@ class GroundContact(Effect):
 
     def modal_mask(self, rows):
         # rows of a loaded mode type, and rows the rolling model predicts (with rotation: docs/physics.md §3.7)
-        joint = np.zeros(np.shape(rows.n), dtype=bool) if rows.joint is None else np.asarray(rows.joint) > 0
+        joint = rows.joint_rows()
         typed = (np.asarray(rows.contact) != 0) & (np.asarray(rows.patch) > 0)
         return (typed | joint) & (np.asarray(rows.is_freq) > 0)
 

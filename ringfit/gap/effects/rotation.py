@@ -52,7 +52,7 @@ class Rotation(Effect):
 
     def modal_mask(self, rows):
         # rows with a wave, and rows the rolling model predicts (with ground_contact: docs/physics.md §3.7)
-        joint = np.zeros(np.shape(rows.n), dtype=bool) if rows.joint is None else np.asarray(rows.joint) > 0
+        joint = rows.joint_rows()
         return (np.asarray(rows.spin) > 0) & ((np.asarray(rows.branch) != 0) | joint) & (np.asarray(rows.is_freq) > 0)
 
     def modal(self, values, omega, zeta, rows, ring, geometry):
