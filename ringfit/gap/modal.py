@@ -159,6 +159,11 @@ class ModalRows(eqx.Module):
     #: indices of the tables with a contact patch (static: effects solve only these tables' contact
     #: problems); None = every table
     contact_tables: tuple | None = eqx.field(static=True, default=None)
+
+    def joint_rows(self) -> np.ndarray:
+        """``(m,)`` bool (NumPy): rows the rolling model predicts (:mod:`ringfit.gap.rolling_rows`), for the
+        effects' masks; all False for rows built without rolling tables."""
+        return np.zeros(np.shape(self.n), dtype=bool) if self.joint is None else np.asarray(self.joint) > 0
     #: ``(m, 9)`` the wheel body of the row's table (``fixture: suspension``, docs/formats.md §2):
     #: on (1/0), m_w, I_w, compliances 1/k_z, 1/k_x, 1/k_θ, dampers c_z, c_x, c_θ (SI; all 0 when bolted)
     wheel: jax.Array | None = None
@@ -291,17 +296,24 @@ def contact_patch(ring: RingParams, geometry: TyreGeometry, load_n: float, drum_
     The static contact solve of the rolling model (docs/physics.md §4.3–4.4, Ω = 0): the
     half-angle is half the patch between its edges; σ from k_trd·e^{±k_tread_sd}.
     """
+    a, sa, _ = _static_contact(ring, geometry, load_n, drum_diameter_m, k_tread_sd)
+    return a, sa
+
+
+def _static_contact(ring, geometry, load_n, drum_diameter_m, k_tread_sd):
+    """:func:`contact_patch`'s ``(a, σ_a)`` and the nominal static solution (the loaded cavity's split uses it)."""
     from ringfit.physics.contact import ContactSolver, patch_edges, solve_rolling_jit
     from ringfit.physics.operating import OperatingPoint, road_from_drum_diameter
 
     road = road_from_drum_diameter(drum_diameter_m)
-    out = []
+    out, sols = [], []
     for factor in (1.0, math.exp(-k_tread_sd), math.exp(k_tread_sd)):
         r = ring.replace(k_tread=float(ring.k_tread) * factor)
         sol = solve_rolling_jit(r, geometry, OperatingPoint(0.0, float(load_n), road), solver=ContactSolver())
         lead, trail = (float(x) for x in patch_edges(sol))
         out.append(0.5 * (trail - lead))
-    return out[0], 0.5 * abs(out[2] - out[1])
+        sols.append(sol)
+    return out[0], 0.5 * abs(out[2] - out[1]), sols[0]
 
 
 def wheel_row(condition: dict, source: str = "<condition>") -> list[float]:
@@ -358,22 +370,6 @@ def _row_cavity(table: ModeTable, f_a: float, contact: int, n: int, split) -> fl
     # the loaded cavity's pair at rest: fore-aft f_a sqrt(1 + e), vertical f_a sqrt(1 - e) (docs/physics.md §6)
     fore_aft, vertical = loaded_cavity_lines(f_a, split)
     return float(vertical if contact == 1 else fore_aft)
-
-
-def cavity_splits(tables, ring, geometry) -> list:
-    """W_2/h_c of each ``loaded`` table with a load (static contact solve; docs/physics.md §6), else None."""
-    from ringfit.physics.cavity import static_cavity_split
-    from ringfit.physics.operating import road_from_drum_diameter
-
-    out = []
-    for t in tables:
-        load = t.condition.get("load_n")
-        if t.state == "loaded" and load:
-            road = road_from_drum_diameter(t.condition.get("drum_diameter_m"))
-            out.append(float(static_cavity_split(ring, geometry, float(load), road=road)))
-        else:
-            out.append(None)
-    return out
 
 
 def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=None) -> ModalRows:
@@ -617,23 +613,28 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
         ring_ref = ring_ref.replace(k_tread=DEFAULT_K_TREAD)
     kt_sd = K_TREAD_FITTED_SD if has_kt else K_TREAD_PRIOR_SD
     spins = [spin_of(t, geometry.outer_radius) for t in tables]
-    patches, conditions = [], []
+    from ringfit.physics.cavity import cavity_height, deflection_cos2
+
+    patches, conditions, splits = [], [], []
     for t in tables:
         load = t.condition.get("load_n")
         if t.state in ("loaded", "rolling") and load:
-            a, sa = contact_patch(ring_ref, geometry, float(load), t.condition.get("drum_diameter_m"), kt_sd)
+            a, sa, sol = _static_contact(ring_ref, geometry, float(load), t.condition.get("drum_diameter_m"), kt_sd)
             patches.append((a, sa))
+            # the loaded cavity's split W_2/h_c (docs/physics.md §6) from the same static solve
+            splits.append(float(deflection_cos2(sol) / cavity_height(geometry)) if t.state == "loaded" else None)
             conditions.append(f"patch half-angle {math.degrees(a):.2f} ± {math.degrees(sa):.2f} deg from "
                               f"load_n = {float(load):g} N (k_trd {ring_ref.k_tread:.3g} N/m^2"
                               f"{'' if has_kt else ', tyre.toml has none: its prior'})")
         else:
             patches.append((0.0, 0.0))
             conditions.append("")
+            splits.append(None)
     for ti, t in enumerate(tables):  # the wheel on its suspension (docs/physics.md §6 wheel_suspension)
         note = _wheel_note(t)
         if note:
             conditions[ti] = "; ".join(x for x in (conditions[ti], note) if x)
-    rows, cavity_hz = _table_rows(tables, geometry, patches, spins, cavity_splits(tables, ring_ref, geometry))
+    rows, cavity_hz = _table_rows(tables, geometry, patches, spins, splits)
     for r in rows:  # rows whose n (and type) the table leaves to matching by frequency: the random-line null's rows
         r["matchable"] = (not r["reference"]) and r["n"] < 0
     rolling, rolling_notes, rolling_records, line_sets = assign_rolling_rows(tables, rows, ring_ref, geometry, patches)
