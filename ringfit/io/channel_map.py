@@ -28,9 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ringfit.errors import InputError
-from ringfit.io.continuous import CONDITION_KEYS
 from ringfit.io.files import existing_file
-from ringfit.io.record_types import AXES
+from ringfit.io.record_types import AXES, CONDITION_KEYS
 
 #: What a channel can be. ``pulses``: incremental encoder (0/1 levels); ``trigger``: the hall / cleat trigger.
 ROLES = ("acc", "force", "encoder", "pulses", "trigger", "ignore")
@@ -39,7 +38,7 @@ CHANNEL_KEYS = ("role", "axis", "angle_deg", "record", "unit", "sensitivity")
 #: Top-level scalar keys.
 TOP_KEYS = ("fs_hz", "pulses_per_rev", "encoder_offset_deg", "hall_delay_s")
 #: File-level numbers a rig file may carry (TDMS root properties, MATLAB scalars): the top-level keys and the
-#: condition keys of docs/formats.md §9 (:data:`ringfit.io.continuous.CONDITION_KEYS`).
+#: condition keys of docs/formats.md §9 (:data:`ringfit.io.record_types.CONDITION_KEYS`).
 SCALAR_KEYS = TOP_KEYS + CONDITION_KEYS
 
 

@@ -32,11 +32,10 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.io.files import atomic_write, check_output_path, existing_file
+from ringfit.io.record_types import CONDITION_KEYS
 
 KIND = "continuous"
 AXES = ("radial", "tangential", "lateral")
-#: Optional scalar keys describing the test condition (same names as the profile sidecar, docs/formats.md §3).
-CONDITION_KEYS = ("speed_kmh", "load_n", "pressure_bar", "drum_diameter_m", "rotation_hz")
 #: Samples per chunk when walking a recording (8 MB per float64 channel).
 DEFAULT_CHUNK = 1 << 20
 

@@ -16,6 +16,10 @@ import numpy as np
 
 from ringfit.errors import InputError
 
+#: Optional scalar keys describing the test condition (same names as the profile sidecar, docs/formats.md §3),
+#: shared by continuous recordings and rig files.
+CONDITION_KEYS = ("speed_kmh", "load_n", "pressure_bar", "drum_diameter_m", "rotation_hz")
+
 #: Allowed sensor axes (docs/formats.md §4). Sign convention of ``radial``: positive toward the wheel centre.
 AXES = ("radial", "tangential", "lateral")
 #: Highest sample rate accepted [Hz]; a value above is a unit slip or a corrupted file.
