@@ -152,6 +152,7 @@ def _raise(exc):
 
 
 # ============================================================================ the cluster
+@pytest.mark.slow  # end to end, > 7 s: CI runs it with -m slow (issue 24 item 3)
 def test_batch_fit_matches_serial_and_survives_a_broken_input(cluster, tables, tmp_path, capsys, monkeypatch):
     good, broken = tables
     monkeypatch.chdir(tmp_path)  # relative paths: the workers read them from the batch's folder
@@ -182,6 +183,7 @@ def test_batch_fit_matches_serial_and_survives_a_broken_input(cluster, tables, t
     assert "3 ok, 1 failed" in printed
 
 
+@pytest.mark.slow  # end to end, > 7 s: CI runs it with -m slow (issue 24 item 3)
 def test_warm_workers_do_not_recompile_and_sample_matches_serial(cluster, tables, tmp_path):
     """Same-shape inputs: after a worker's first task of a kind, no XLA compilation; files as the serial ones."""
     import h5py
@@ -233,6 +235,7 @@ def _make_campaign(root: Path):
     (root / "notes").mkdir()  # not a case folder: ignored
 
 
+@pytest.mark.slow  # end to end, > 7 s: CI runs it with -m slow (issue 24 item 3)
 def test_campaign_table_and_report_from_the_saved_files(cluster, tmp_path, capsys):
     from ringfit.fit.posterior import load_posterior
     from ringfit.io.tyre import read_tyre

@@ -97,6 +97,7 @@ def test_tls_local_cluster_runs_a_tiny_batch(tmp_path):
                 pass
 
 
+@pytest.mark.slow  # end to end, > 7 s: CI runs it with -m slow (issue 24 item 3)
 def test_batch_cli_on_a_tls_local_cluster(tmp_path, capsys):
     sec = _security_file(tmp_path)
     out = tmp_path / "out"

@@ -202,6 +202,7 @@ def test_targets_stay_free_of_jax():
                     (path.name, name)
 
 
+@pytest.mark.slow  # end to end, > 7 s: CI runs it with -m slow (issue 24 item 3)
 def test_cli_campbell(tmp_path, tyre, diagram):
     from ringfit.cli import main
 
@@ -234,6 +235,7 @@ def test_cli_campbell(tmp_path, tyre, diagram):
     assert not (tmp_path / "v.campbell.csv").exists()
 
 
+@pytest.mark.slow  # end to end, > 7 s: CI runs it with -m slow (issue 24 item 3)
 def test_end_to_end_cleat_records_to_matched_branches(tmp_path, tyre, diagram, capsys):
     """Synthetic cleat records of the rolling, loaded tyre (known modes) → field → SSI → matched branches."""
     from ringfit.cli import main

@@ -17,6 +17,7 @@ def run(*args):
     return main([str(a) for a in args])
 
 
+@pytest.mark.slow  # end to end, > 7 s: CI runs it with -m slow (issue 24 item 3)
 def test_fit_sample_report_chain(tmp_path, capsys):
     fitted = tmp_path / "fitted.toml"
     assert run("fit", MODES, "--tyre", TYRE, "--out", fitted) == 0
@@ -139,6 +140,7 @@ def test_help(cmd, capsys):
     assert "usage: ringfit" in capsys.readouterr().out
 
 
+@pytest.mark.slow  # end to end, > 7 s: CI runs it with -m slow (issue 24 item 3)
 def test_demo_end_to_end(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "ringfit", "demo", "--out", str(tmp_path / "d")],
                           capture_output=True, text=True, timeout=300)

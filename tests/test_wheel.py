@@ -224,6 +224,7 @@ def test_support_damping_adds_to_damping_rows():
     assert float(o[0]) == float(omega[0]) and float(z[0]) > 0.02
 
 
+@pytest.mark.slow  # end to end, > 7 s: CI runs it with -m slow (issue 24 item 3)
 def test_blind_case_from_the_lumped_model_is_recovered(tmp_path):
     """A case whose suspended table's n ≤ 1 truth comes from the lumped discretisation of
     :func:`ringfit.synth.cases.lumped_wheel_modes` (not the effect's two-body root): the diagnosis names
@@ -256,6 +257,7 @@ def test_lumped_truth_matches_the_two_body_root():
                                              rel=1e-3)
 
 
+@pytest.mark.slow  # end to end, > 7 s: CI runs it with -m slow (issue 24 item 3)
 def test_campbell_diagram_with_the_wheel_at_rest_is_the_bordered_loaded_ring():
     """`campbell_diagram(..., wheel=)` (Hill's complex basis, the patch of the contact solve) at speed 0: its
     n = 1 branches are the bordered real-basis loaded ring's at the same patch."""
