@@ -167,14 +167,14 @@ def test_per_revolution_estimates_follow_a_load_step(step_recording):
 def test_per_revolution_fits_that_do_not_settle_are_redone(step_recording, monkeypatch):
     """Gauss–Newton capped at one step settles nowhere: every revolution goes to Levenberg–Marquardt alone,
     reusing the averaged profile's compiled fit."""
-    import ringfit.fit.estimate as estimate
+    import ringfit.fit.estimate.revolutions as revolutions
 
     bench, record = step_recording
     data = recording_revolutions(record, k_max=SETTINGS.k_max)
     ref = estimate_load(data.profile, GEOMETRY, RING, settings=SETTINGS, omega=2 * math.pi * data.rotation_hz.mean(),
                         omega_source="encoder", response=data.response, noise_per_angle=data.noise)
     before = engine._solve._cache_size()
-    monkeypatch.setattr(estimate, "REVOLUTION_MAX_STEPS", 1)
+    monkeypatch.setattr(revolutions, "REVOLUTION_MAX_STEPS", 1)
     revs = estimate_revolutions(data, ref, RING, settings=SETTINGS)
     assert engine._solve._cache_size() == before
     assert revs.converged.all() and np.all(revs.iterations > 1)
@@ -317,7 +317,7 @@ def test_cli_writes_the_estimate_json(profile_file, tmp_path, capsys):
 
 
 def test_cli_exit_codes_and_nothing_written(profile_file, tmp_path, monkeypatch):
-    import ringfit.fit.estimate as estimate
+    import ringfit.fit.estimate.load as estimate
     from ringfit.data import path as data_path
 
     tyre = data_path("table9.tyre.toml")
