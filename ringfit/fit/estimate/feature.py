@@ -7,14 +7,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ringfit.fit.estimate.harmonics import grid_signal
-
-if TYPE_CHECKING:
-    from ringfit.fit.estimate.curves import LoadCurves
 
 #: Points of the band-limited reading searched for the edge peaks (0.09° spacing).
 PEAK_GRID = 4096
@@ -76,8 +72,9 @@ class FeatureEstimate:
                           "load–spacing curve"}
 
 
-def feature_estimate(amplitudes, curves: LoadCurves, outer_radius: float) -> FeatureEstimate:
-    """The classic feature method on measured radial amplitudes ``(K,)`` (k = 2…, band limited like ``curves``)."""
+def feature_estimate(amplitudes, curves, outer_radius: float) -> FeatureEstimate:
+    """The classic feature method on measured radial amplitudes ``(K,)`` (k = 2…, band limited like ``curves``, a
+    :class:`~ringfit.fit.estimate.curves.LoadCurves`, which imports this module for its own edge peaks)."""
     lead, trail, spacing, _ = edge_peaks(amplitudes, 2)
     load = float(curves.load_from_spacing(spacing)) if math.isfinite(spacing) else math.nan
     return FeatureEstimate(load, lead, trail, 1e3 * outer_radius * math.radians(spacing))
