@@ -1,13 +1,16 @@
-"""Before/after check of splitting ``ringfit/fit/estimate.py`` into a package (issue 22 item 4): run
-``ringfit estimate`` on ``ringfit example`` data and compare every number of the outputs with a reference run.
+"""Before/after check of two moves of issue 22 item 4 — ``ringfit/fit/estimate.py`` split into a package, the
+Campbell diagram moved from ``gap/campbell.py`` to ``physics/campbell.py`` — on ``ringfit example`` data:
+run ``ringfit estimate`` and ``ringfit campbell`` and compare every number of the outputs with a reference run.
 
-    python experiments/compare_estimate_split.py INPUTS OUT_DIR                   # write outputs
-    python experiments/compare_estimate_split.py INPUTS OUT_DIR --compare REF_DIR
+    python experiments/compare_restructure.py INPUTS OUT_DIR [--make-inputs] [--only estimate|campbell]
+    python experiments/compare_restructure.py INPUTS OUT_DIR --compare REF_DIR
 
 INPUTS is made once (``--make-inputs``) so that both runs read the same files:
 ``ringfit example profiles``, ``ringfit example cleat`` (a continuous recording: averaged profile and every
-revolution) and ``ringfit example identify`` (its unknown-load profile). The runs cover a fixed k_trd, a
-``--k-tread-sd``, a tyre file with ``[ring.covariance]``, fewer harmonics and a coarser grid.
+revolution), ``ringfit example identify`` (its unknown-load profile) and ``ringfit example rolling`` (rolling
+mode tables at 20/40/60 km/h). The estimate runs cover a fixed k_trd, a ``--k-tread-sd``, a tyre file with
+``[ring.covariance]``, fewer harmonics and a coarser grid; the Campbell runs the sensor and fixed frames, a
+drum, and the three rolling tables matched (data tolerance and a given one).
 
 Produce the reference with the code before the change on ``PYTHONPATH`` (e.g. ``git archive`` of the
 old commit), the new outputs with the new code. The split moves code, not arithmetic: every number must be
@@ -34,19 +37,38 @@ source = "experiments/compare_estimate_split.py"
 
 
 def run(*args):
-    subprocess.run([*RINGFIT, *map(str, args), "--quiet", "--force"], check=True, stdout=subprocess.DEVNULL)
+    quiet = ["--quiet"] if args[0] != "campbell" else []  # campbell prints no progress
+    subprocess.run([*RINGFIT, *map(str, args), *quiet, "--force"], check=True, stdout=subprocess.DEVNULL)
 
 
 def make_inputs(inputs: Path) -> None:
-    for kind in ("profiles", "cleat", "identify"):
+    for kind in ("profiles", "cleat", "identify", "rolling"):
         subprocess.run([*RINGFIT, "example", kind, "--out", str(inputs / kind), "--quiet", "--force"], check=True,
                        stdout=subprocess.DEVNULL)
     tyre = (inputs / "profiles" / "tyre.toml").read_text()
     (inputs / "covariance.tyre.toml").write_text(tyre.rstrip() + "\n" + COVARIANCE)
 
 
-def produce(inputs: Path, out: Path) -> None:
+def produce(inputs: Path, out: Path, only: str | None = None) -> None:
     out.mkdir(parents=True, exist_ok=True)
+    if only in (None, "campbell"):
+        produce_campbell(inputs, out)
+    if only in (None, "estimate"):
+        produce_estimate(inputs, out)
+
+
+def produce_campbell(inputs: Path, out: Path) -> None:
+    tyre = inputs / "rolling" / "rolling" / "tyre.toml"
+    tables = [inputs / "rolling" / "rolling" / f"roll{v}.modes.csv" for v in (20, 40, 60)]
+    run("campbell", "--tyre", tyre, "--load", 4000, "--speeds", "0:60:5", "--modes", *tables,
+        "--out", out / "rolling.campbell.csv")
+    run("campbell", "--tyre", tyre, "--load", 4000, "--speeds", "0:60:5", "--modes", *tables, "--tolerance", 0.01,
+        "--out", out / "tol.campbell.csv")
+    run("campbell", "--tyre", tyre, "--load", 3000, "--speeds", "0:80:10", "--frame", "fixed", "--drum", 1.2192,
+        "--out", out / "drum-fixed.campbell.csv")
+
+
+def produce_estimate(inputs: Path, out: Path) -> None:
     tyre = inputs / "profiles" / "tyre.toml"
     for name in ("run30", "run60"):
         run("estimate", inputs / "profiles" / f"{name}.profile.csv", "--tyre", tyre, "--out",
@@ -55,7 +77,7 @@ def produce(inputs: Path, out: Path) -> None:
     run("estimate", p30, "--tyre", tyre, "--k-tread-sd", 0.1, "--out", out / "run30-sd.estimate.json")
     run("estimate", p30, "--tyre", inputs / "covariance.tyre.toml", "--out", out / "run30-cov.estimate.json")
     run("estimate", p30, "--tyre", tyre, "--harmonics", 24, "--grid", 384, "--out", out / "run30-k24.estimate.json")
-    run("estimate", inputs / "identify" / "unknown-load.profile.csv", "--tyre", inputs / "identify" / "case" / "tyre.toml",
+    run("estimate", inputs / "identify" / "unknown-load.profile.csv", "--tyre", tyre,
         "--out", out / "unknown.estimate.json")
     run("estimate", inputs / "cleat" / "cleat.records.npz", "--tyre", tyre, "--out", out / "cleat.estimate.json",
         "--per-revolution", out / "cleat.revolutions.csv")
@@ -107,6 +129,6 @@ if __name__ == "__main__":
     inputs, out = Path(sys.argv[1]), Path(sys.argv[2])
     if "--make-inputs" in sys.argv:
         make_inputs(inputs)
-    produce(inputs, out)
+    produce(inputs, out, sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv else None)
     if "--compare" in sys.argv:
         sys.exit(1 if compare(out, Path(sys.argv[sys.argv.index("--compare") + 1])) else 0)
