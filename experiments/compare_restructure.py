@@ -2,12 +2,12 @@
 Campbell diagram moved from ``gap/campbell.py`` to ``physics/campbell.py`` — on ``ringfit example`` data:
 run ``ringfit estimate`` and ``ringfit campbell`` and compare every number of the outputs with a reference run.
 
-    python experiments/compare_restructure.py INPUTS OUT_DIR [--make-inputs] [--only estimate|campbell]
+    python experiments/compare_restructure.py INPUTS OUT_DIR [--make-inputs] [--only campbell|estimate|recording]
     python experiments/compare_restructure.py INPUTS OUT_DIR --compare REF_DIR
 
 INPUTS is made once (``--make-inputs``) so that both runs read the same files:
 ``ringfit example profiles``, ``ringfit example cleat`` (a continuous recording: averaged profile and every
-revolution), ``ringfit example identify`` (its unknown-load profile) and ``ringfit example rolling`` (rolling
+revolution), ``ringfit example identify`` (a profile of its case) and ``ringfit example rolling`` (rolling
 mode tables at 20/40/60 km/h). The estimate runs cover a fixed k_trd, a ``--k-tread-sd``, a tyre file with
 ``[ring.covariance]``, fewer harmonics and a coarser grid; the Campbell runs the sensor and fixed frames, a
 drum, and the three rolling tables matched (data tolerance and a given one).
@@ -37,8 +37,12 @@ source = "experiments/compare_estimate_split.py"
 
 
 def run(*args):
+    """Run one command; its exit status and error line go to ``OUT.status`` (a refusal is an output too)."""
     quiet = ["--quiet"] if args[0] != "campbell" else []  # campbell prints no progress
-    subprocess.run([*RINGFIT, *map(str, args), *quiet, "--force"], check=True, stdout=subprocess.DEVNULL)
+    done = subprocess.run([*RINGFIT, *map(str, args), *quiet, "--force"], stdout=subprocess.DEVNULL,
+                          stderr=subprocess.PIPE, text=True)
+    out = Path(str(args[list(args).index("--out") + 1]))
+    out.with_name(out.name + ".status").write_text(f"exit {done.returncode}\n{done.stderr.strip()}\n")
 
 
 def make_inputs(inputs: Path) -> None:
@@ -55,6 +59,8 @@ def produce(inputs: Path, out: Path, only: str | None = None) -> None:
         produce_campbell(inputs, out)
     if only in (None, "estimate"):
         produce_estimate(inputs, out)
+    if only in (None, "recording"):
+        produce_recording(inputs, out)
 
 
 def produce_campbell(inputs: Path, out: Path) -> None:
@@ -77,10 +83,13 @@ def produce_estimate(inputs: Path, out: Path) -> None:
     run("estimate", p30, "--tyre", tyre, "--k-tread-sd", 0.1, "--out", out / "run30-sd.estimate.json")
     run("estimate", p30, "--tyre", inputs / "covariance.tyre.toml", "--out", out / "run30-cov.estimate.json")
     run("estimate", p30, "--tyre", tyre, "--harmonics", 24, "--grid", 384, "--out", out / "run30-k24.estimate.json")
-    run("estimate", inputs / "identify" / "unknown-load.profile.csv", "--tyre", tyre,
-        "--out", out / "unknown.estimate.json")
-    run("estimate", inputs / "cleat" / "cleat.records.npz", "--tyre", tyre, "--out", out / "cleat.estimate.json",
-        "--per-revolution", out / "cleat.revolutions.csv")
+    run("estimate", inputs / "identify" / "case" / "run2.profile.csv", "--tyre", tyre, "--k-tread-sd", 0.3,
+        "--out", out / "identify-run2.estimate.json")
+
+
+def produce_recording(inputs: Path, out: Path) -> None:
+    run("estimate", inputs / "cleat" / "cleat.records.npz", "--tyre", inputs / "profiles" / "tyre.toml",
+        "--out", out / "cleat.estimate.json", "--per-revolution", out / "cleat.revolutions.csv")
 
 
 NUM = re.compile(r"-?(?:\d+\.\d*|\d*\.\d+|\d+)(?:[eE][-+]?\d+)?|nan|NaN")
