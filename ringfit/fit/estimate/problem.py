@@ -66,6 +66,8 @@ class EstimateSettings:
       smaller window is a smaller dense contact solve: 20° holds loads up to ~10 kN on the Table 9 tyre
       and is widened automatically when a recording's patch needs more).
     - ``curve_points``, ``curve_grid``: loads and model grid of the load curves (patch, feature).
+    - ``grid_check``: refine the grid once at the fit (M → 2M) and carry the load's shift into its
+      interval (docs/physics.md §10, *the estimator's own grid*); ``False`` leaves the interval statistical.
     """
 
     n_grid: int = 512
@@ -79,6 +81,7 @@ class EstimateSettings:
     revolution_window_deg: float = 20.0
     curve_points: int = 48
     curve_grid: int = 512
+    grid_check: bool = True
 
     @property
     def solver(self) -> ContactSolver:
