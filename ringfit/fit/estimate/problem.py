@@ -55,7 +55,8 @@ class EstimateSettings:
     - ``n_grid``: model grid M of the contact solve (docs/physics.md §4.4–4.5). The fitted harmonics
       converge by M = 256, but the patch's discrete active set makes the load–shape relation a
       staircase: fitting M = 2048 profiles, M = 256 is biased by up to 1 % (at some loads), 384 by
-      0.3 %, 512 by < 0.1 % (``benchmarks/bench_estimate.py``).
+      0.3 %, 512 by < 0.1 % (``benchmarks/bench_estimate.py``), up to 0.24 % at 1.5–2 kN against an
+      independent finite-difference truth; ``grid_check`` carries it into the interval.
     - ``k_max``: highest revolution harmonic fitted (lowered to the data's band limit).
     - ``window_deg``: contact candidate window (the patch must lie inside).
     - ``k_tread_sd``: σ of ln k_trd; ``None`` = fixed at the tyre file's value (when the file has one).
