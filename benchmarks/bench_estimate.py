@@ -200,16 +200,20 @@ def independent():
     from ringfit.io.profiles import grid_angles_deg
 
     print(f"\n1b. Independent discretisation: {ARGS.fd_cases} profiles of a finite-difference truth (n = 2048, no "
-          "damping, no gravity or high-pass), loads 1.5–6.5 kN, half noise-free, half 1 % white noise; "
+          "damping, no gravity or high-pass), loads 1.5–6.5 kN, half noise-free, half 1 % white noise, and a "
+          "noise-free sweep of light loads; "
           f"estimator M = {SETTINGS.n_grid} with its grid check (M → {2 * SETTINGS.n_grid})")
     rng = np.random.default_rng(22)
     ring = RING.replace(damping_ratio=0.0)
     rows = []
-    for i in range(ARGS.fd_cases):
-        load = float(rng.uniform(1500.0, 6500.0))
+    # random loads (half of them noisy), then a noise-free sweep of the light loads in 50 N steps, where the
+    # M = 512 contact solve's staircase is widest
+    sweep = np.arange(1500.0, 2101.0, 50.0)[: max(1, ARGS.fd_cases // 2)]
+    loads = [float(x) for x in rng.uniform(1500.0, 6500.0, ARGS.fd_cases)] + [float(x) for x in sweep]
+    for i, load in enumerate(loads):
         omega = 2 * math.pi * float(rng.uniform(2.0, 8.0))
         _, reading = fd_profile(ring, GEOMETRY, load, 2048, omega=omega)
-        if i % 2:
+        if i % 2 and i < ARGS.fd_cases:
             reading = reading + 0.01 * np.max(np.abs(reading)) * rng.standard_normal(reading.size)
         prof = Profile(grid_angles_deg(2048), reading, np.zeros(2048), source="fd",
                        condition={"speed_kmh": 60.0, "pressure_bar": float(GEOMETRY.pressure) / 1e5,
@@ -221,7 +225,8 @@ def independent():
             continue
         lo, hi = est.fit.interval(LOAD)
         rows.append(dict(load=load, err=est.load_n / load - 1, cover=est.lo < load < est.hi, stat=lo < load < hi,
-                         shift=est.grid_check["load_shift_pct"] / 100, noisy=bool(i % 2),
+                         shift=est.grid_check["load_shift_pct"] / 100, noisy=bool(i % 2 and i < ARGS.fd_cases),
+                         sweep=i >= ARGS.fd_cases,
                          half=0.5 * (est.hi - est.lo) / est.load_n, cpu=dt.cpu))
     FAILURES.refuse()
     print("   | load band | n | signed error median | mean (± s.e.) | worst abs | coverage with grid check | "
@@ -238,10 +243,13 @@ def independent():
               f"{100 * np.mean([r['cover'] for r in band]):.0f} % | {100 * np.mean([r['stat'] for r in band]):.0f} % | "
               f"{100 * np.median([r['half'] for r in band]):.3f} % | "
               f"{100 * np.median(np.abs([r['shift'] for r in band])):.3f} % |")
-    for noisy in (False, True):
-        sub = [r for r in rows if r["noisy"] == noisy]
-        print(f"   {'1 % white noise' if noisy else 'noise-free'}: n={len(sub)}, coverage with grid check "
-              f"{100 * np.mean([r['cover'] for r in sub]):.0f} %, statistical only {100 * np.mean([r['stat'] for r in sub]):.0f} %")
+    for label, sub in (("noise-free", [r for r in rows if not r["noisy"]]),
+                       ("1 % white noise", [r for r in rows if r["noisy"]]),
+                       ("light-load sweep 1.5–2.1 kN, 50 N steps, noise-free", [r for r in rows if r["sweep"]])):
+        e = np.abs([r["err"] for r in sub])
+        print(f"   {label}: n={len(sub)}, |error| median {100 * np.median(e):.3f} % worst {100 * np.max(e):.3f} %, "
+              f"coverage with grid check {100 * np.mean([r['cover'] for r in sub]):.0f} %, statistical only "
+              f"{100 * np.mean([r['stat'] for r in sub]):.0f} %")
     print(f"   one profile with the grid check: median {statistics.median(r['cpu'] for r in rows):.2f} s CPU")
 
 
