@@ -65,11 +65,29 @@ def grid():
 
 
 def radius():
-    for with_rate in (True, False):
-        for load in LOADS:
+    """The rolling-radius convention: a truth at 20 km/h with gravity, a 1 Hz high-pass and tilt 1, whose
+    wheel turns at V/R_e' for another convention R_e' (the loaded radius R_out − δ, or the free radius
+    R_out), its sidecar giving only ``speed_kmh``: the estimator takes Ω = V/R_e with R_e = R_out − δ/3
+    (docs/physics.md §4.3), so Ω is off by up to 2δ/3R; the gain absorbs Ω² and only the high-pass and
+    gravity's share see it."""
+    from ringfit.physics.profile import effective_rolling_radius
+
+    speed = 20.0
+    model = ProfileModel().with_sensor(gravity=9.81, corner_hz=1.0, tilt_gain=1.0)
+    r_out = float(GEOMETRY.outer_radius)
+    for load in (1500.0, 2000.0, 3000.0, 6000.0):
+        r_e = float(effective_rolling_radius(RING, GEOMETRY, load, None))
+        delta = 3 * (r_out - r_e)
+        for label, radius_m in (("same convention", r_e), ("R_out − δ", r_out - delta), ("free radius R_out", r_out)):
+            rot = speed / 3.6 / radius_m / (2 * math.pi)
+            prof = simulate_profile(RING, GEOMETRY, speed_kmh=speed, load_n=load, rotation_hz=rot, model=model,
+                                    solver=ContactSolver(n_grid=2048), n_points=2048)
+            cond = {k: v for k, v in prof.condition.items() if k not in ("load_n", "rotation_hz")}
+            ch = prof.channels + 1e-4 * np.max(np.abs(prof.channels[0])) * np.random.default_rng(0).standard_normal(
+                prof.channels.shape)
             t0 = time.perf_counter()
-            est = estimate_load(truth(load, 2048, with_rate=with_rate), GEOMETRY, RING)
-            line("rotation_hz" if with_rate else "speed_kmh only", load, est, time.perf_counter() - t0)
+            est = estimate_load(Profile(prof.angle_deg, ch[0], ch[1], condition=cond, source="radius"), GEOMETRY, RING)
+            line(f"{label} (Ω {100 * (r_e / radius_m - 1):+.2f} %)", load, est, time.perf_counter() - t0)
 
 
 def staircase():
