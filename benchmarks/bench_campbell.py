@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common as bc  # noqa: E402
 
 import ringfit  # noqa: F401,E402  (float64)
-from ringfit.gap.campbell import campbell_diagram
+from ringfit.physics.campbell import campbell_diagram
 from ringfit.params import table9
 from ringfit.physics.contact import as_traced
 from ringfit.physics.operating import Drum

@@ -11,6 +11,9 @@ issue's targets:
    720–3600 angles; the estimator solves on 512 points. Load error median (target < 1 %) and worst
    (< 3 %), 95 % interval coverage (≥ 90 %), the edge-peak feature method beside it; the signed error
    (bias) and coverage by load band (2–3, 3–4.5, 4.5–6.5 kN).
+1b. **Independent discretisation** (issue 22 item 5): truths from 4th-order finite differences in φ with
+   their own contact loop (``benchmarks/_independent_ring.py``), loads 1.5–6.5 kN, half noise-free: signed
+   error and coverage by load band, with the grid check (M → 2M shift in the interval) and without it.
 2. **Robustness** (no target): effects the estimator does not model (sensor offset, a band limit, a
    second high-pass stage, tread shear, a finite EA, χ < 1, a k_tread 10 % off) — load errors, coverage
    and whether the fit flags itself as poor.
@@ -40,7 +43,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common as bc  # noqa: E402
 
-SECTIONS = ("accuracy", "robustness", "speed")
+SECTIONS = ("accuracy", "independent", "robustness", "speed")
 
 
 def parse():
@@ -56,10 +59,12 @@ def parse():
                     default=1.0, help="recording length timed for the speed figures")
     ap.add_argument("--long", action="store_true", help="synthesise and time a real 30-minute recording")
     ap.add_argument("--skip", type=bc.choices_list(SECTIONS, "sections"), default=[],
-                    help="comma-separated sections to skip: accuracy,robustness,speed")
+                    help="comma-separated sections to skip: accuracy,independent,robustness,speed")
+    ap.add_argument("--fd-cases", type=bc.count("a number of cases", 2, 10**4), default=32,
+                    help="profiles of the independent finite-difference truth (default 32)")
     args = ap.parse_args()
     if args.quick:
-        args.cases, args.robust_cases, args.minutes = 4, 1, 0.1
+        args.cases, args.robust_cases, args.minutes, args.fd_cases = 4, 1, 0.1, 4
     if args.cores > len(os.sched_getaffinity(0)):
         bc.fail(f"--cores {args.cores}: this process may use only {len(os.sched_getaffinity(0))}")
     return args
@@ -180,6 +185,72 @@ def accuracy():
     times, cpu = [r["time"] for r in rows[1:]], [r["cpu"] for r in rows[1:]]
     print(f"   one profile, warm: median {statistics.median(times):.2f} s wall, {statistics.median(cpu):.2f} s CPU "
           f"(two Levenberg–Marquardt fits + load curves)")
+
+
+#: Load bands [N] of the independent truth's table (down to 1.5 kN: light loads are the issue's concern).
+FD_BANDS = ((1500.0, 2000.0), (2000.0, 3000.0), (3000.0, 4500.0), (4500.0, 6500.01))
+
+
+def independent():
+    """Truths from an independent discretisation (benchmarks/_independent_ring.py: 4th-order finite differences
+    in φ on 2048 points, its own contact loop; no ringfit physics): the load's signed error and the coverage of
+    the interval with the grid check and of the statistical (Laplace) interval alone, by load band."""
+    from _independent_ring import fd_profile
+
+    from ringfit.io.profiles import grid_angles_deg
+
+    print(f"\n1b. Independent discretisation: {ARGS.fd_cases} profiles of a finite-difference truth (n = 2048, no "
+          "damping, no gravity or high-pass), loads 1.5–6.5 kN, half noise-free, half 1 % white noise, and a "
+          "noise-free sweep of light loads; "
+          f"estimator M = {SETTINGS.n_grid} with its grid check (M → {2 * SETTINGS.n_grid})")
+    rng = np.random.default_rng(22)
+    ring = RING.replace(damping_ratio=0.0)
+    rows = []
+    # random loads (half of them noisy), then a noise-free sweep of the light loads in 50 N steps, where the
+    # M = 512 contact solve's staircase is widest
+    sweep = np.arange(1500.0, 2101.0, 50.0)[: max(1, ARGS.fd_cases // 2)]
+    loads = [float(x) for x in rng.uniform(1500.0, 6500.0, ARGS.fd_cases)] + [float(x) for x in sweep]
+    for i, load in enumerate(loads):
+        omega = 2 * math.pi * float(rng.uniform(2.0, 8.0))
+        _, reading = fd_profile(ring, GEOMETRY, load, 2048, omega=omega)
+        if i % 2 and i < ARGS.fd_cases:
+            reading = reading + 0.01 * np.max(np.abs(reading)) * rng.standard_normal(reading.size)
+        prof = Profile(grid_angles_deg(2048), reading, np.zeros(2048), source="fd",
+                       condition={"speed_kmh": 60.0, "pressure_bar": float(GEOMETRY.pressure) / 1e5,
+                                  "rotation_hz": omega / (2 * math.pi)})
+        try:
+            est, dt = bc.timed(estimate_load, prof, GEOMETRY, ring, settings=SETTINGS)
+        except Exception as exc:  # noqa: BLE001 - listed; the section then prints no figures
+            FAILURES.add(f"independent case {i} at {load:.0f} N", f"{type(exc).__name__}: {exc}")
+            continue
+        lo, hi = est.fit.interval(LOAD)
+        rows.append(dict(load=load, err=est.load_n / load - 1, cover=est.lo < load < est.hi, stat=lo < load < hi,
+                         shift=est.grid_check["load_shift_pct"] / 100, noisy=bool(i % 2 and i < ARGS.fd_cases),
+                         sweep=i >= ARGS.fd_cases,
+                         half=0.5 * (est.hi - est.lo) / est.load_n, cpu=dt.cpu))
+    FAILURES.refuse()
+    print("   | load band | n | signed error median | mean (± s.e.) | worst abs | coverage with grid check | "
+          "statistical only | median half-width | median abs grid shift |")
+    print("   |---|---|---|---|---|---|---|---|---|")
+    for lo_b, hi_b in FD_BANDS + ((1500.0, 6500.01),):
+        band = [r for r in rows if lo_b <= r["load"] < hi_b]
+        if not band:
+            continue
+        e = np.array([r["err"] for r in band])
+        label = "all" if (lo_b, hi_b) == (1500.0, 6500.01) else f"{lo_b / 1e3:.1f}–{hi_b / 1e3:.1f} kN"
+        print(f"   | {label} | {len(band)} | {100 * np.median(e):+.3f} % | {100 * np.mean(e):+.3f} % "
+              f"(± {100 * np.std(e) / math.sqrt(len(e)):.3f}) | {100 * np.max(np.abs(e)):.3f} % | "
+              f"{100 * np.mean([r['cover'] for r in band]):.0f} % | {100 * np.mean([r['stat'] for r in band]):.0f} % | "
+              f"{100 * np.median([r['half'] for r in band]):.3f} % | "
+              f"{100 * np.median(np.abs([r['shift'] for r in band])):.3f} % |")
+    for label, sub in (("noise-free", [r for r in rows if not r["noisy"]]),
+                       ("1 % white noise", [r for r in rows if r["noisy"]]),
+                       ("light-load sweep 1.5–2.1 kN, 50 N steps, noise-free", [r for r in rows if r["sweep"]])):
+        e = np.abs([r["err"] for r in sub])
+        print(f"   {label}: n={len(sub)}, |error| median {100 * np.median(e):.3f} % worst {100 * np.max(e):.3f} %, "
+              f"coverage with grid check {100 * np.mean([r['cover'] for r in sub]):.0f} %, statistical only "
+              f"{100 * np.mean([r['stat'] for r in sub]):.0f} %")
+    print(f"   one profile with the grid check: median {statistics.median(r['cpu'] for r in rows):.2f} s CPU")
 
 
 def robustness():
@@ -319,6 +390,8 @@ def main():
              f"{len(os.sched_getaffinity(0))} core(s) for this process" + (" [--quick]" if ARGS.quick else ""))
     if "accuracy" not in skip:
         accuracy()
+    if "independent" not in skip:
+        independent()
     if "robustness" not in skip:
         robustness()
     if "speed" not in skip:

@@ -21,9 +21,10 @@ from pathlib import Path
 import numpy as np
 
 import ringfit  # noqa: F401  (float64)
-from ringfit.gap.campbell import campbell_diagram, label_identified_modes, match_tables
+from ringfit.gap.campbell import label_identified_modes, match_tables
 from ringfit.io.modes import ModeTable
 from ringfit.params import table9
+from ringfit.physics.campbell import campbell_diagram
 from ringfit.report.campbell_plots import plot_campbell
 from ringfit.synth.cleat import CleatBench
 from ringfit.targets.cleat import angle_time_field

@@ -9,15 +9,10 @@ import numpy as np
 import pytest
 
 from ringfit.data import path as data_path
-from ringfit.gap.campbell import (
-    campbell_diagram,
-    label_identified_modes,
-    match_tables,
-    resolution_flags,
-    track_branches,
-)
+from ringfit.gap.campbell import label_identified_modes, match_tables, resolution_flags
 from ringfit.io.modes import ModeTable, write_mode_table
 from ringfit.params import table9
+from ringfit.physics.campbell import campbell_diagram, track_branches
 from ringfit.physics.natural import fixed_frame_frequencies, rotating_natural_frequencies
 
 DRUM = 1.2192
@@ -404,3 +399,18 @@ def test_example_rolling_folder_is_matched_without_label_conflict(tmp_path, caps
     row = next(m for m in matched if m["source"].endswith("roll40.modes.csv") and m["row"] == "2")
     assert row["n"] == "1" and row["model_n"] == "1" and row["model_k"] == "2"
     assert abs(float(row["error_pct"])) < 0.2
+
+
+def test_the_diagram_lives_in_physics_and_is_still_importable_from_gap():
+    """Issue 22 item 4: the diagram (a model view) moved to physics/; gap/ matches tables to it and
+    re-exports every name it had, the same objects; physics/campbell.py imports nothing of gap/."""
+    import ringfit.gap.campbell as matching
+    import ringfit.physics.campbell as model
+
+    for name in ("campbell_diagram", "CampbellDiagram", "track_branches", "frame_name", "CAMPBELL_COLUMNS",
+                 "DEFAULT_N_MAX", "TRAVELLING_RATIO", "SPEED_BUCKET", "FRAMES"):
+        assert getattr(matching, name) is getattr(model, name), name
+    tree = ast.parse(Path(model.__file__).read_text())
+    imported = [n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
+    assert not any(m.startswith(("ringfit.gap", "ringfit.fit")) for m in imported), imported
+    assert not hasattr(model, "match_tables")

@@ -105,7 +105,7 @@ def test_without_contact_the_rolling_tables_are_rotation_only(tmp_path, capsys):
 def test_joint_prediction_is_the_campbell_line_and_the_null_is_eq18(contact_case):
     """At the computed condition the predictor gives the matched line of an independent evaluation of the
     model (``campbell_diagram``, vmapped over speeds, with its own contact solve); at the nulls, eq. 18."""
-    from ringfit.gap.campbell import campbell_diagram
+    from ringfit.physics.campbell import campbell_diagram
     from ringfit.gap.case import read_case
     from ringfit.gap.ranking import predict
     from ringfit.gap.rolling_rows import ROLLING_HARMONICS

@@ -261,7 +261,7 @@ def test_lumped_truth_matches_the_two_body_root():
 def test_campbell_diagram_with_the_wheel_at_rest_is_the_bordered_loaded_ring():
     """`campbell_diagram(..., wheel=)` (Hill's complex basis, the patch of the contact solve) at speed 0: its
     n = 1 branches are the bordered real-basis loaded ring's at the same patch."""
-    from ringfit.gap.campbell import campbell_diagram
+    from ringfit.physics.campbell import campbell_diagram
 
     g, r = table9()
     wheel = W.Wheel.from_stiffness(20.0, 0.6, 2e5, 1e6, 1e5)

@@ -107,9 +107,10 @@ def run_campbell(args) -> int:
     outputs = [args.out] + ([matched_path(args.out)] if args.modes else []) + ([args.plot] if args.plot else [])
     check_output_paths(outputs, overwrite=args.force, inputs=inputs)
 
-    from ringfit.gap.campbell import CAMPBELL_COLUMNS, MATCH_COLUMNS, campbell_diagram, match_rows_table, match_tables
+    from ringfit.gap.campbell import MATCH_COLUMNS, match_rows_table, match_tables
     from ringfit.io.modes import check_test_condition, read_mode_table
     from ringfit.io.tyre import read_tyre
+    from ringfit.physics.campbell import CAMPBELL_COLUMNS, campbell_diagram
 
     tyre = read_tyre(args.tyre)
     tables = [read_mode_table(m) for m in args.modes]

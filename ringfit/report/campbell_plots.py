@@ -27,7 +27,7 @@ _STATUS_STYLE = {
 
 def plot_campbell(diagram, path=None, *, frame: str = "fixed", match=None, title: str = "", f_max: float | None = None,
                   overwrite: bool = True):
-    """Draw a :class:`~ringfit.gap.campbell.CampbellDiagram` (and the rows of a ``CampbellMatch``).
+    """Draw a :class:`~ringfit.physics.campbell.CampbellDiagram` (and the rows of a ``CampbellMatch``).
 
     **Arguments:** ``frame`` — ``fixed`` or ``sensor``/``rotating``; ``match`` —
     optional :class:`~ringfit.gap.campbell.CampbellMatch` whose rows are overlaid;
@@ -35,7 +35,7 @@ def plot_campbell(diagram, path=None, *, frame: str = "fixed", match=None, title
 
     **Returns:** the figure, or the path when ``path`` is given.
     """
-    from ringfit.gap.campbell import frame_name
+    from ringfit.physics.campbell import frame_name
 
     frame = frame_name(frame)
     rows = list(match.rows) if match is not None else []

@@ -1,0 +1,64 @@
+"""Revolution harmonics of the radial reading, and their noise spectrum (docs/physics.md §10).
+
+The load estimate fits harmonics k = 2 … k_max of the radial reading on a grid of angles
+φ_j = −π + 2πj/M. This module converts between grid signals and complex amplitudes
+(:func:`harmonic_amplitudes`, :func:`band_signal`, :func:`grid_signal`), lays amplitudes out as real
+residual rows (:func:`harmonic_rows`) and estimates σ per harmonic from a residual
+(:func:`smoothed_noise`: the second pass's whitening weights). NumPy and JAX arrays alike.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+#: Harmonics averaged on either side for the second pass's noise spectrum.
+NOISE_SMOOTHING = 4
+
+
+def harmonic_amplitudes(signal, k_min: int, k_max: int):
+    """Complex amplitudes ``a_k`` (k = k_min … k_max) of grid signals ``(..., M)`` on φ_j = −π + 2πj/M.
+
+    ``x(α) = Σ_k Re(a_k e^{ikα})`` (k ≥ 1): ``a_k = (2/M)(−1)^k rfft(x)_k``. Works on JAX and
+    NumPy arrays (returns the same kind). **Returns:** ``(..., k_max − k_min + 1)`` [units of x].
+    """
+    xp = jnp if isinstance(signal, jax.Array) else np
+    M = signal.shape[-1]
+    k = np.arange(k_min, k_max + 1)
+    spec = xp.fft.rfft(signal, axis=-1)[..., k_min : k_max + 1]
+    return spec * (2.0 / M) * np.where(k % 2, -1.0, 1.0)
+
+
+def harmonic_rows(amplitudes) -> np.ndarray:
+    """Real residual rows ``[Re a_k …, Im a_k …]`` ``(..., 2K)`` of complex amplitudes ``(..., K)``."""
+    xp = jnp if isinstance(amplitudes, jax.Array) else np
+    return xp.concatenate([amplitudes.real, amplitudes.imag], axis=-1)
+
+
+def band_signal(amplitudes, k_min: int, angle_rad) -> np.ndarray:
+    """``Σ_k Re(a_k e^{ikα})`` at angles ``α`` [rad] ``(N,)`` of amplitudes ``(..., K)`` → ``(..., N)``."""
+    k = np.arange(k_min, k_min + np.shape(amplitudes)[-1])
+    return np.real(np.asarray(amplitudes) @ np.exp(1j * np.outer(k, angle_rad)))
+
+
+def grid_signal(amplitudes, k_min: int, n_points: int) -> np.ndarray:
+    """:func:`band_signal` on the grid α_j = −π + 2πj/n (one inverse FFT) → ``(..., n_points)``."""
+    amplitudes = np.asarray(amplitudes)
+    K = amplitudes.shape[-1]
+    k = np.arange(k_min, k_min + K)
+    spec = np.zeros(amplitudes.shape[:-1] + (n_points // 2 + 1,), dtype=complex)
+    spec[..., k_min : k_min + K] = amplitudes * np.where(k % 2, -1.0, 1.0) * (n_points / 2.0)
+    return np.fft.irfft(spec, n_points, axis=-1)
+
+
+def smoothed_noise(rows: np.ndarray, half_width: int = NOISE_SMOOTHING) -> np.ndarray:
+    """σ per row ``(..., 2K)`` from residual rows ``(..., 2K)``: power per harmonic averaged over ±half_width harmonics."""
+    K = rows.shape[-1] // 2
+    power = 0.5 * (rows[..., :K] ** 2 + rows[..., K:] ** 2)
+    kernel = np.ones(2 * half_width + 1)
+    num = np.apply_along_axis(lambda p: np.convolve(p, kernel, mode="same"), -1, power)
+    den = np.convolve(np.ones(K), kernel, mode="same")
+    sigma = np.sqrt(num / den)
+    sigma = np.maximum(sigma, 1e-6 * max(float(np.max(sigma)), 1e-300))
+    return np.concatenate([sigma, sigma], axis=-1)

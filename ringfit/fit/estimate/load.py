@@ -1,0 +1,352 @@
+"""The load and contact patch from one profile (docs/physics.md §10; docs/formats.md §3 → §7).
+
+:func:`estimate_load`: Ω from the sidecar, the load curves and the feature method for starting values,
+then two passes of the engine on :func:`~ringfit.fit.estimate.problem.estimate_problem` (equal weights,
+then whitened per harmonic), and :class:`LoadEstimate` with the interval, the patch, the fit's quality
+and its flags.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import equinox as eqx
+import numpy as np
+from scipy.special import ndtri
+
+from ringfit.errors import InputError
+from ringfit.fit.engine import GaussianPrior, least_squares, residuals
+from ringfit.fit.estimate.curves import LoadCurves, load_curves
+from ringfit.fit.estimate.feature import FeatureEstimate, _num, feature_estimate
+from ringfit.fit.estimate.harmonics import band_signal, grid_signal, harmonic_amplitudes, harmonic_rows, smoothed_noise
+from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, GAIN, K_TREAD, LOAD, LOAD_RANGE, TILT, EstimateArrays,
+                                          EstimateSettings, estimate_problem, nuisance_priors)
+from ringfit.fit.result import FitResult
+from ringfit.params import BAR, RingParams, TyreGeometry
+from ringfit.physics.operating import KMH
+from ringfit.physics.profile import effective_rolling_radius, flat_or_drum
+
+#: σ of ln k_trd used when the tyre file has no k_tread (a ±60 % range at 95 %).
+DEFAULT_K_TREAD_SD = 0.3
+#: An angle offset beyond this [deg] is flagged (the profile's zero is not the patch centre).
+OFFSET_WARN_DEG = 10.0
+#: A residual RMS above this multiple of the noise is flagged as a poor fit …
+POOR_FIT_RATIO = 1.5
+#: … when it is also above this fraction of the reading's RMS in the fitted band (the estimator's own
+#: discretisation leaves ~0.1 %: noise-free profiles of the same model are not "poor").
+MODEL_FLOOR = 0.005
+
+
+@dataclass
+class LoadEstimate:
+    """An estimate of the load and the contact patch from one profile (docs/formats.md §7).
+
+    - ``load_n``, ``lo``, ``hi``: the load and its 95 % interval [N]: the Laplace σ of ln(load) and
+      the grid check's shift (``grid_check``) in quadrature.
+    - ``patch``: ``length_mm``, ``leading_deg``, ``trailing_deg`` (docs/physics.md §4.4, φ from the
+      vertical) of the model at the load, and ``length_lo_mm``/``length_hi_mm`` at the interval's ends.
+    - ``rotation_hz``, ``rotation_source``: Ω/2π used and where it came from.
+    - ``status``: the solver's status; ``converged``: solver converged, load inside its range and
+      contact patch inside the solver window.
+    - ``rms``, ``noise``, ``noise_source``: residual RMS and noise level in the fitted band [m/s²].
+    - ``nuisances``: gain, angle offset [deg], corner [Hz], tilt, k_trd [N/m²] with standard errors.
+    - ``feature``: the classic method (:class:`FeatureEstimate`); ``flags``: warnings.
+    - ``fit``: the engine's :class:`~ringfit.fit.result.FitResult` (second pass); ``curves``: the
+      :class:`LoadCurves`; ``angle_deg``, ``measured``, ``model``: the input's angles and the radial
+      reading and model in the fitted band ``(N,)`` [m/s²] (for plots); ``k_max``: top harmonic fitted.
+    - ``grid_check``: ``grid`` [M, 2M], ``load_shift_pct`` (the load's change when the grid is refined,
+      :func:`grid_shift`), ``statistical_sd_pct`` and ``sd_pct`` (σ of ln load without and with it, in %);
+      None when the check is off (``EstimateSettings.grid_check``).
+    """
+
+    load_n: float
+    lo: float
+    hi: float
+    patch: dict
+    rotation_hz: float
+    rotation_source: str
+    status: str
+    converged: bool
+    rms: float
+    noise: float
+    noise_source: str
+    nuisances: dict
+    feature: FeatureEstimate
+    flags: list = field(default_factory=list)
+    fit: FitResult | None = None
+    curves: LoadCurves | None = None
+    angle_deg: np.ndarray | None = None
+    measured: np.ndarray | None = None
+    model: np.ndarray | None = None
+    k_max: int = 0
+    omega: float = 0.0
+    drum_diameter_m: float | None = None
+    grid_check: dict | None = None
+
+    def to_record(self, input_name: str) -> dict:
+        """The docs/formats.md §7 JSON object."""
+        return {
+            "input": str(input_name),
+            "load_n": {"value": self.load_n, "lo": self.lo, "hi": self.hi},
+            "patch": {k: _num(v) for k, v in self.patch.items()},
+            "rotation_hz": {"value": self.rotation_hz, "source": self.rotation_source},
+            "fit": {"status": self.status, "converged": self.converged, "rms": self.rms, "noise": self.noise,
+                    "unit": "m/s^2", "noise_source": self.noise_source, "harmonics": [2, self.k_max],
+                    "channel": "radial", "flags": list(self.flags),
+                    **({"grid_check": self.grid_check} if self.grid_check is not None else {})},
+            "nuisances": self.nuisances,
+            "feature_method": self.feature.to_record(),
+        }
+
+
+def rotation_from_profile(profile, geometry: TyreGeometry, ring: RingParams, load_guess: float,
+                          settings: EstimateSettings = EstimateSettings()) -> tuple[float, str, list[str]]:
+    """Ω [rad/s], its source and warnings for a profile (docs/formats.md §3).
+
+    ``rotation_hz`` (the rim encoder) when the sidecar has it; else ``speed_kmh/R_e`` with
+    R_e = R_out − δ/3 at ``load_guess`` — with a warning: the speed is nominal, and the load
+    does not depend on it (the free gain absorbs Ω²), only the fitted high-pass corner does.
+    """
+    if profile.rotation_hz is not None:
+        return 2 * math.pi * profile.rotation_hz, "sidecar rotation_hz (rim encoder)", []
+    speed = profile.condition.get("speed_kmh")
+    if speed is None or not speed > 0:
+        raise InputError("no rotation_hz and no positive speed_kmh in the sidecar: Ω unknown", source=profile.source)
+    r_e = effective_rolling_radius(ring, geometry, load_guess, profile.drum_diameter_m,
+                                   solver=settings.solver)
+    omega = speed * KMH / r_e
+    msg = (f"WARNING: no rotation_hz in {profile.source or 'the sidecar'}: Ω = speed_kmh/R_e = {omega:.4g} rad/s from "
+           f"the nominal speed {speed:g} km/h (R_e = {r_e:.4f} m at {load_guess:.0f} N). The load does not rest on it "
+           "(the gain absorbs Ω²); the reported rotation rate and high-pass corner do.")
+    return omega, f"speed_kmh / R_e (nominal speed, R_e = {r_e:.4f} m)", [msg]
+
+
+def _geometry_at_pressure(geometry: TyreGeometry, profile) -> tuple[TyreGeometry, list[str]]:
+    """The geometry at the profile's pressure (with a warning when it differs from the tyre file's by > 5 %)."""
+    notes = []
+    pb = profile.condition.get("pressure_bar")
+    if pb is not None:
+        tyre_bar = float(geometry.pressure) / BAR
+        if abs(pb - tyre_bar) > 0.05 * tyre_bar:
+            notes.append(f"WARNING: the profile's pressure_bar = {pb:g} differs from the tyre file's {tyre_bar:g} bar "
+                         "by more than 5 %; the model uses the profile's pressure with the tyre file's ring")
+        geometry = TyreGeometry(geometry.radius, geometry.width, pb * BAR, geometry.tread_thickness, name=geometry.name)
+    return geometry, notes
+
+
+def check_sign(amplitudes, curves: LoadCurves, source) -> None:
+    """Refuse a radial reading that is the model turned upside down (positive outward, docs/formats.md §3).
+
+    The circular cross-correlation of the measured and the model reading (4 kN, harmonics 2…k_max) is
+    largest in magnitude at the patch's shift; a negative value there means the sign convention is
+    inverted. **Raises** :class:`InputError` naming ``source``.
+    """
+    model = curves.amplitudes[int(np.argmin(np.abs(np.log(curves.load_n / 4000.0))))]
+    xcorr = grid_signal(np.asarray(amplitudes) * np.conj(model), 2, 1024)
+    peak = xcorr[int(np.argmax(np.abs(xcorr)))]
+    if peak < 0:
+        raise InputError("the radial reading looks inverted (the contact patch shows as a peak): docs/formats.md §3 "
+                         "wants acc_radial_ms2 positive toward the wheel centre", source=source or None)
+
+
+def profile_amplitudes(profile, n_grid: int, k_max: int) -> np.ndarray:
+    """Radial harmonic amplitudes ``(K,)`` (k = 2…k_max) of a profile (band-limited, trapezoid weights)."""
+    from ringfit.io.profiles import resample_profile
+
+    grid = resample_profile(profile, n_grid)[0]
+    return harmonic_amplitudes(grid, 2, k_max)
+
+
+def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings: EstimateSettings = EstimateSettings(),
+                  k_tread_in_file: bool = True, omega: float | None = None, omega_source: str | None = None,
+                  noise_per_angle: np.ndarray | None = None, noise_source: str | None = None,
+                  response: np.ndarray | None = None) -> LoadEstimate:
+    """Estimate the load and contact patch from one rolling profile (docs/formats.md §3 → §7).
+
+    **Arguments:**
+
+    - ``profile``: a :class:`~ringfit.io.profiles.Profile` (its ``load_n`` is not used); radial
+      channel, angles from the patch centre; ``rotation_hz``/``speed_kmh``, ``drum_diameter_m``,
+      ``pressure_bar`` from its sidecar.
+    - ``geometry``, ``ring``: the fitted tyre (fixed).
+    - ``settings``: :class:`EstimateSettings`; ``k_tread_in_file``: whether the tyre file gave k_trd
+      (if not, it gets the prior :data:`DEFAULT_K_TREAD_SD` unless the settings set one).
+    - ``omega``, ``omega_source``: Ω [rad/s] and its source, when known from elsewhere (a recording).
+    - ``noise_per_angle``: ``(N,)`` standard error of the profile per angle [m/s²] (e.g. the
+      revolution spread / √revolutions), used for the reported noise (``noise_source`` says what it
+      is); default: the spread columns of a ``ringfit profile`` output, else the residual away from
+      the patch.
+    - ``response``: ``(k_max − 1,)`` the acquisition's gain on harmonics 2…k_max (default 1).
+
+    **Returns:** :class:`LoadEstimate`. Never raises on non-convergence (check ``converged``).
+    """
+    geometry, flags = _geometry_at_pressure(geometry, profile)
+    N = len(profile)
+    k_max = int(min(settings.k_max, (N - 1) // 2 - 1, settings.n_grid // 2 - 2))
+    if k_max < 8:
+        raise InputError(f"{N} angles resolve harmonics up to {(N - 1) // 2}; the estimate needs at least 8",
+                         source=profile.source)
+    amp = profile_amplitudes(profile, settings.n_grid, k_max)
+    resp = np.ones(k_max - 1) if response is None else np.asarray(response, dtype=np.float64)[: k_max - 1]
+    drum = profile.drum_diameter_m
+    # Ω (its uncertainty hardly matters: the gain absorbs Ω²) and the model curves
+    if omega is None:
+        omega, omega_source, notes = rotation_from_profile(profile, geometry, ring, 4000.0, settings)
+        flags += notes
+    curves = load_curves(geometry, ring, omega, drum, settings=settings, k_max=k_max)
+    check_sign(amp, curves, profile.source)
+    feature = feature_estimate(amp, curves, float(geometry.outer_radius))
+
+    # starting values: the feature method's load and patch position, the gain from the load curve's reading
+    load0 = feature.load_n if math.isfinite(feature.load_n) else 4000.0
+    offset0 = 0.0
+    if math.isfinite(feature.leading_deg) and math.isfinite(feature.trailing_deg):
+        # φ = α + offset: the model's peak midpoint at the start load minus the data's
+        model_mid = float(curves._interp(curves.peak_mid_deg, load0))
+        offset0 = math.radians(model_mid - 0.5 * (feature.leading_deg + feature.trailing_deg))
+    sd = settings.k_tread_sd
+    if sd is None and not k_tread_in_file:
+        sd = DEFAULT_K_TREAD_SD
+        flags.append(f"WARNING: the tyre file has no k_tread_n_per_m2: the model uses {float(ring.k_tread):.3g} N/m² "
+                     f"with a ±{100 * sd:.0f} % (1σ) prior, propagated into the load's interval; the load and k_trd "
+                     "are ~99 % correlated in a profile, so this interval is wide")
+    free = [LOAD, GAIN, ANGLE_OFFSET, CORNER, TILT]
+    entries = nuisance_priors()
+    if sd is not None and sd > 0:
+        entries[K_TREAD] = (math.log(float(ring.k_tread)), float(sd))
+        free.append(K_TREAD)
+    prior = GaussianPrior.independent(entries)
+    K = amp.shape[-1]
+    measured = harmonic_rows(amp)[None]
+    arrays = EstimateArrays(geometry=geometry, ring=ring, omega=np.array([omega]), roads=flat_or_drum(drum, 1),
+                            response=resp[None], measured=measured, weight=np.ones((1, 2 * K)))
+    theta0 = np.array([load0, curves.gain_at(load0, amp), offset0, 0.3, 0.5, float(ring.k_tread)])
+    problem = estimate_problem(arrays, settings, k_max, prior)
+    first = least_squares(problem, theta0, tuple(free), max_steps=settings.max_steps, rtol=settings.rtol,
+                          atol=settings.atol)
+    # second pass: whiten the residual spectrum
+    resid_rows = np.asarray(first.extra["aux"])[0] - measured[0]
+    weight = 1.0 / smoothed_noise(resid_rows)
+    weight = weight / np.mean(weight)
+    arrays = eqx.tree_at(lambda a: a.weight, arrays, weight[None])
+    problem = estimate_problem(arrays, settings, k_max, prior)
+    fit = least_squares(problem, first.theta, tuple(free), max_steps=settings.max_steps, rtol=settings.rtol,
+                        atol=settings.atol)
+    shift = grid_shift(fit, settings) if settings.grid_check and np.all(np.isfinite(fit.theta)) else None
+    return _finish(fit, profile, curves, feature, amp, omega, omega_source, flags, k_max, drum, settings,
+                   noise_per_angle, noise_source, shift)
+
+
+def grid_shift(fit: FitResult, settings: EstimateSettings, factor: int = 2) -> float:
+    """The change of ln(load) when the model's grid M is refined to ``factor``·M at the fit (docs/physics.md §10).
+
+    The contact solve's discrete active set makes the load–shape relation a fine staircase (up to ~0.2 %
+    at light loads for M = 512, where the patch spans few grid points). One Gauss–Newton step from the
+    fit, with its Jacobian (prior rows included, σ scale as fitted), on the residual rows of the same data
+    and weights under the refined model estimates how far the optimum moves: ``δu = −J⁺ Δr``. Against
+    an independent finite-difference truth this shift predicts the M = 512 estimate's error to within
+    ~0.07 % (``experiments/light_load_bias.py refine``). One residual evaluation at ``factor``·M.
+    """
+    coarse = fit.problem
+    fine = estimate_problem(coarse.data, dataclasses.replace(settings, n_grid=factor * settings.n_grid),
+                            coarse.model.k_max, coarse.prior)
+    r_fine, _ = residuals(fine, fit.theta)
+    scale = float(fit.extra["sigma_scale"])
+    m = fit.residuals.size
+    delta = np.zeros(fit.jacobian.shape[0])
+    delta[:m] = r_fine / scale - fit.residuals
+    du = -np.linalg.lstsq(fit.jacobian, delta, rcond=None)[0]
+    return float(du[list(fit.names).index(LOAD)])
+
+
+def _finish(fit, profile, curves, feature, amp, omega, omega_source, flags, k_max, drum, settings,
+            noise_per_angle, noise_source=None, shift=None) -> LoadEstimate:
+    """The :class:`LoadEstimate` of a fit: interval, patch, fit quality, flags, nuisances.
+
+    ``shift``: :func:`grid_shift` (ln load), added in quadrature to the Laplace σ of ln(load).
+    """
+    load = fit.values[LOAD]
+    lo, hi = fit.interval(LOAD)
+    grid = None
+    if shift is not None and math.isfinite(shift):
+        z = float(ndtri(0.975))
+        s_stat = math.log(hi / lo) / (2 * z)
+        s = math.hypot(s_stat, shift)
+        lo, hi = load * math.exp(-z * s), load * math.exp(z * s)
+        grid = {"grid": [settings.n_grid, 2 * settings.n_grid], "load_shift_pct": 100 * math.expm1(shift),
+                "statistical_sd_pct": 100 * s_stat, "sd_pct": 100 * s}
+    model_rows = np.asarray(fit.extra["aux"])[0]
+    K = amp.shape[-1]
+    model_amp = model_rows[:K] + 1j * model_rows[K:]
+    resid_amp = amp - model_amp
+    alpha = np.radians(profile.angle_deg)
+    offset_deg = math.degrees(fit.values[ANGLE_OFFSET])
+    # fit quality in the fitted band: RMS over the revolution (Parseval), noise level
+    rms = float(np.sqrt(0.5 * np.sum(np.abs(resid_amp) ** 2)))
+    N = len(profile)
+    if noise_per_angle is None:
+        noise_per_angle = _spread_noise(profile)
+    if noise_per_angle is not None:
+        noise = float(np.sqrt(np.mean(np.asarray(noise_per_angle) ** 2) * 2 * K / N))
+        noise_source = noise_source or "revolution spread / √revolutions, in the fitted band"
+    else:
+        resid = band_signal(resid_amp, 2, alpha)
+        far = np.abs((profile.angle_deg + offset_deg + 180.0) % 360.0 - 180.0) > 60.0
+        noise = float(np.sqrt(np.mean(resid[far] ** 2))) if far.any() else rms
+        noise_source = "residual RMS away from the patch (|φ| > 60°)"
+    sol_ok = bool(np.all(curves.ok[(curves.load_n >= 0.8 * lo) & (curves.load_n <= 1.25 * hi)]))
+    at_bound = LOAD in fit.extra["at_bound"] or not (
+        LOAD_RANGE[0] * 1.001 < load < LOAD_RANGE[1] * 0.999)
+    converged = fit.converged and not at_bound and sol_ok
+    flags = list(flags)
+    for f in fit.flags:
+        if f.startswith(LOAD) or f.startswith(K_TREAD) or "solver did not converge" in f:
+            flags.append(f)
+    if not sol_ok:
+        flags.append(f"the contact patch at {load:.0f} N does not fit inside the ±{settings.window_deg:g}° solver window")
+    if abs(offset_deg) > OFFSET_WARN_DEG:
+        flags.append(f"the profile's angle zero is {offset_deg:+.1f}° from the patch centre (angle offset); "
+                     "check the encoder offset or the angle convention (docs/formats.md §3)")
+    signal_rms = float(np.sqrt(0.5 * np.sum(np.abs(amp) ** 2)))
+    if rms > POOR_FIT_RATIO * noise and rms > MODEL_FLOOR * signal_rms:
+        flags.append(f"poor fit: residual RMS {rms:.3g} m/s² is {rms / max(noise, 1e-300):.1f}× the noise level "
+                     f"({noise:.3g} m/s²): the model does not explain this profile to its noise; the load may be "
+                     "biased beyond its interval")
+    patch = curves.patch_at(load)
+    patch_lo, patch_hi = curves.patch_at(lo), curves.patch_at(hi)
+    patch = {"length_mm": float(patch["length_mm"]), "leading_deg": float(patch["leading_deg"]),
+             "trailing_deg": float(patch["trailing_deg"]), "length_lo_mm": float(patch_lo["length_mm"]),
+             "length_hi_mm": float(patch_hi["length_mm"])}
+    nuisances = {}
+    for name, key, scale in ((GAIN, "gain", 1.0), (ANGLE_OFFSET, "angle_offset_deg", 180 / math.pi),
+                             (CORNER, "corner_hz", 1.0), (TILT, "tilt_gain", 1.0), (K_TREAD, "k_tread_n_per_m2", 1.0)):
+        value = fit.values[name] * scale
+        entry = {"value": value, "free": name in fit.names}
+        if name in fit.names:
+            entry["stderr"] = _num(fit.stderr[name] * scale)
+        nuisances[key] = entry
+    if CORNER in fit.names and fit.values[CORNER] < 0.01:
+        nuisances["corner_hz"]["note"] = "below 0.01 Hz: no high-pass resolved"
+    return LoadEstimate(
+        load_n=float(load), lo=float(lo), hi=float(hi), patch=patch, rotation_hz=omega / (2 * math.pi),
+        rotation_source=str(omega_source), status=fit.status, converged=bool(converged), rms=rms, noise=noise,
+        noise_source=noise_source, nuisances=nuisances, feature=feature, flags=flags, fit=fit, curves=curves,
+        angle_deg=profile.angle_deg, measured=band_signal(amp, 2, alpha), model=band_signal(model_amp, 2, alpha),
+        k_max=k_max, omega=float(omega), drum_diameter_m=drum, grid_check=grid)
+
+
+def _spread_noise(profile) -> np.ndarray | None:
+    """Standard error per angle of a ``ringfit profile`` output (spread / √revolutions), or None."""
+    col = profile.extra.get("acc_radial_spread_ms2")
+    revs = profile.condition.get("revolutions")
+    if col is None or not revs or revs < 2:
+        return None
+    try:
+        spread = np.array([float(x) for x in col])
+    except ValueError:
+        return None
+    if not np.all(np.isfinite(spread)):
+        return None
+    return spread / math.sqrt(float(revs))

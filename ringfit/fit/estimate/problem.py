@@ -1,0 +1,155 @@
+"""The estimate as a problem on the one engine (docs/physics.md §10): parameters, coordinates, settings,
+data arrays and residuals.
+
+θ = (load, gain, angle offset, high-pass corner, tilt, k_trd) (:data:`PARAMETERS`, :data:`COORDS`); the
+residuals are the weighted radial harmonics 2…k_max of :func:`ringfit.physics.profile.profile_channels`
+less the measured ones (:class:`EstimateResiduals` on :class:`EstimateArrays`); :func:`estimate_problem`
+makes the :class:`~ringfit.fit.engine.Problem` that :mod:`ringfit.fit.estimate.load` and
+:mod:`ringfit.fit.estimate.revolutions` solve. No solver of its own.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem
+from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows
+from ringfit.params import RingParams, TyreGeometry
+from ringfit.physics.contact import ContactSolver, as_traced
+from ringfit.physics.profile import FlatOrDrum, ProfileModel, full_band, profile_channels
+from ringfit.physics.sensor import STANDARD_GRAVITY
+
+LOAD, GAIN, ANGLE_OFFSET, CORNER, TILT, K_TREAD = "load_n", "gain", "angle_offset", "corner_hz", "tilt_gain", "k_tread"
+#: Every parameter of the estimate problem, in θ order.
+PARAMETERS = (LOAD, GAIN, ANGLE_OFFSET, CORNER, TILT, K_TREAD)
+#: Plausible loads [N]: the load's bounds (a fit that ends there has failed).
+LOAD_RANGE = (200.0, 20000.0)
+#: Range of the gain on the reading.
+GAIN_RANGE = (0.5, 2.0)
+#: Weak priors on the sensor nuisances (natural units): the high-pass corner's median [Hz] and σ of
+#: its logarithm (0.005–16 Hz at 2σ; below ~0.01 Hz it has no effect on harmonics k ≥ 2), the tilt's
+#: mean and σ (γ ∈ 0–1.1 with gravity, 0 without, docs/physics.md §6). They keep the nuisances finite
+#: where the data say little (a high speed, no gravity) and are propagated like any other parameter.
+CORNER_PRIOR = (0.3, 2.0)
+TILT_PRIOR = (0.5, 0.5)
+
+COORDS = (
+    Coordinate(LOAD, LOG, lo=LOAD_RANGE[0], hi=LOAD_RANGE[1]),
+    Coordinate(GAIN, LOG, lo=GAIN_RANGE[0], hi=GAIN_RANGE[1]),
+    Coordinate(ANGLE_OFFSET, LINEAR, scale=math.radians(1.0)),
+    Coordinate(CORNER, LOG),
+    Coordinate(TILT, LINEAR, scale=0.1),
+    Coordinate(K_TREAD, LOG, lo=1e5, hi=1e9),
+)
+
+
+@dataclass(frozen=True)
+class EstimateSettings:
+    """How the estimate is computed.
+
+    - ``n_grid``: model grid M of the contact solve (docs/physics.md §4.4–4.5). The fitted harmonics
+      converge by M = 256, but the patch's discrete active set makes the load–shape relation a
+      staircase: fitting M = 2048 profiles, M = 256 is biased by up to 1 % (at some loads), 384 by
+      0.3 %, 512 by < 0.1 % (``benchmarks/bench_estimate.py``), up to 0.24 % at 1.5–2 kN against an
+      independent finite-difference truth; ``grid_check`` carries it into the interval.
+    - ``k_max``: highest revolution harmonic fitted (lowered to the data's band limit).
+    - ``window_deg``: contact candidate window (the patch must lie inside).
+    - ``k_tread_sd``: σ of ln k_trd; ``None`` = fixed at the tyre file's value (when the file has one).
+    - ``highpass_order``: stages of the modelled high-pass (1: the IEPE sensor).
+    - ``max_steps``, ``rtol``, ``atol``: Levenberg–Marquardt step cap and Cauchy tolerances (solver
+      coordinates: log load, degrees of offset; residual rows in m/s²).
+    - ``revolution_window_deg``: candidate window for the per-revolution fits (the patch must fit; a
+      smaller window is a smaller dense contact solve: 20° holds loads up to ~10 kN on the Table 9 tyre
+      and is widened automatically when a recording's patch needs more).
+    - ``curve_points``, ``curve_grid``: loads and model grid of the load curves (patch, feature).
+    - ``grid_check``: refine the grid once at the fit (M → 2M) and carry the load's shift into its
+      interval (docs/physics.md §10, *the estimator's own grid*); ``False`` leaves the interval statistical.
+    """
+
+    n_grid: int = 512
+    k_max: int = 40
+    window_deg: float = 35.0
+    k_tread_sd: float | None = None
+    highpass_order: int = 1
+    max_steps: int = 100
+    rtol: float = 1e-6
+    atol: float = 1e-6
+    revolution_window_deg: float = 20.0
+    curve_points: int = 48
+    curve_grid: int = 512
+    grid_check: bool = True
+
+    @property
+    def solver(self) -> ContactSolver:
+        return ContactSolver(n_grid=self.n_grid, window_deg=self.window_deg)
+
+    def profile_model(self) -> ProfileModel:
+        """The forward model: baseline ring, gravity on, tilt and high-pass set per fit (traced)."""
+        return ProfileModel().with_sensor(gravity=STANDARD_GRAVITY, highpass_order=self.highpass_order)
+
+
+class EstimateArrays(eqx.Module):
+    """Data of one estimate (leading axis P = 1 profile; a batch adds an axis in front).
+
+    - ``geometry``, ``ring``: the tyre (k_trd is replaced by θ's).
+    - ``omega``: ``(P,)`` Ω [rad/s]; ``roads``: :class:`~ringfit.physics.profile.FlatOrDrum` ``(P,)``.
+    - ``response``: ``(P, K)`` the acquisition's gain on harmonics k_min…k_max (resampling, bin averaging; 1 = none).
+    - ``measured``: ``(P, 2K)`` radial harmonic rows (Re, Im) [m/s²]; ``weight``: ``(P, 2K)`` 1/σ per row.
+    """
+
+    geometry: TyreGeometry
+    ring: RingParams
+    omega: jax.Array
+    roads: FlatOrDrum
+    response: jax.Array
+    measured: jax.Array
+    weight: jax.Array
+
+
+class EstimateResiduals(AbstractResiduals):
+    """``weight·(model − measured)`` of the radial harmonics k_min…k_max; aux: the model rows ``(P, 2K)``.
+
+    θ = (load [N], gain, angle offset [rad], high-pass corner [Hz], tilt γ, k_trd [N/m²]) —
+    :data:`PARAMETERS`; the reading is :func:`ringfit.physics.profile.profile_channels` of
+    ``profile`` with the corner and tilt set from θ, times the gain.
+    """
+
+    profile: ProfileModel = eqx.field(static=True)
+    solver: ContactSolver = eqx.field(static=True)
+    k_min: int = eqx.field(static=True)
+    k_max: int = eqx.field(static=True)
+
+    def channels(self, theta, data: EstimateArrays):
+        """Model channels ``(P, 2, M)`` [m/s²] at θ (gain applied)."""
+        load, gain, offset, corner, tilt, k_tread = (theta[i] for i in range(6))
+        model = self.profile.with_sensor(corner_hz=corner, tilt_gain=tilt)
+        ring = data.ring.replace(k_tread=k_tread)
+        P = data.omega.shape[0]
+        ch = profile_channels(model, ring, data.geometry, data.omega, jnp.full(P, load), data.roads,
+                              full_band(P, self.solver.n_grid), offset, self.solver)
+        return gain * ch
+
+    def __call__(self, theta, data: EstimateArrays):
+        radial = self.channels(theta, data)[:, 0]
+        rows = harmonic_rows(harmonic_amplitudes(radial, self.k_min, self.k_max) * data.response)
+        return ((rows - data.measured) * data.weight).ravel(), rows
+
+
+def nuisance_priors() -> dict:
+    """``name -> (mean, sd)`` in solver coordinates of the high-pass corner and tilt priors."""
+    tilt = COORDS[PARAMETERS.index(TILT)]
+    return {CORNER: (math.log(CORNER_PRIOR[0]), CORNER_PRIOR[1]),
+            TILT: ((TILT_PRIOR[0] - tilt.center) / tilt.scale, TILT_PRIOR[1] / tilt.scale)}
+
+
+def estimate_problem(arrays: EstimateArrays, settings: EstimateSettings, k_max: int,
+                     prior: GaussianPrior | None = None) -> Problem:
+    """The engine :class:`~ringfit.fit.engine.Problem` of an estimate (σ estimated from the residual)."""
+    residuals = EstimateResiduals(settings.profile_model(), settings.solver, 2, int(k_max))
+    return Problem(residuals, as_traced(arrays), COORDS, prior=prior, sigma="estimate",
+                   plausible={LOAD: LOAD_RANGE}, data_label="this profile")

@@ -1,0 +1,345 @@
+"""Load and patch revolution by revolution of a continuous recording (docs/physics.md §10; docs/formats.md §7).
+
+:func:`recording_revolutions` walks the recording once (harmonics of every whole revolution, their
+average as a profile); :func:`estimate_revolutions` fits each revolution in batches on the engine with
+the nuisances of the averaged profile's fit; :func:`estimate_recording` does both.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import jax
+import numpy as np
+
+from ringfit.errors import InputError
+from ringfit.fit.engine import least_squares, least_squares_batch
+from ringfit.fit.estimate.feature import _num, edge_peaks
+from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows, smoothed_noise
+from ringfit.fit.estimate.load import LoadEstimate, estimate_load
+from ringfit.fit.estimate.problem import ANGLE_OFFSET, GAIN, LOAD, EstimateArrays, EstimateSettings, estimate_problem
+from ringfit.io.profiles import grid_angles_deg
+from ringfit.params import RingParams, TyreGeometry
+from ringfit.physics.contact import as_traced
+from ringfit.physics.profile import flat_or_drum
+
+#: Revolutions fitted in one call of the engine (one compiled vmap or scan; the last batch is padded).
+#: 16 is the fastest on a CPU (benchmarks/bench_estimate.py); an accelerator wants more.
+REVOLUTION_BATCH = 16
+#: Per-revolution Gauss–Newton tolerances (Cauchy test on the solver coordinates and the residual rows;
+#: near the optimum the steps shrink fast, so the error left after the last step is far below the
+#: per-revolution standard error of ~0.2–0.3 %) and step cap.
+REVOLUTION_TOL = 1e-4
+REVOLUTION_MAX_STEPS = 30
+
+
+@dataclass
+class RevolutionEstimates:
+    """Per-revolution estimates of a continuous recording (arrays of shape ``(R,)``).
+
+    ``revolution`` (numbers counted from the recording's first angle), ``t_s`` (middle of the
+    revolution [s]), ``rotation_hz`` (encoder), ``load_n``, ``lo``, ``hi`` (95 % Laplace interval [N];
+    statistical: the high-pass corner, tilt and k_trd are fixed at the averaged profile's fit),
+    ``length_mm`` (patch length of the model at the load), ``gain``, ``angle_offset_deg``, ``rms``
+    [m/s²] (residual in the fitted band), ``converged``, ``iterations``, ``feature_load_n`` (the
+    classic method on the revolution); ``window_deg``: the contact window used.
+    """
+
+    revolution: np.ndarray
+    t_s: np.ndarray
+    rotation_hz: np.ndarray
+    load_n: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    length_mm: np.ndarray
+    gain: np.ndarray
+    angle_offset_deg: np.ndarray
+    rms: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray
+    feature_load_n: np.ndarray
+    window_deg: float = 0.0
+
+    #: Columns of the per-revolution CSV (docs/formats.md §7), in order.
+    COLUMNS = ("revolution", "t_s", "rotation_hz", "load_n", "lo", "hi", "patch_length_mm", "gain",
+               "angle_offset_deg", "rms_ms2", "converged", "feature_load_n")
+
+    def __len__(self) -> int:
+        return self.revolution.size
+
+    def columns(self) -> dict:
+        """Column name → ``(R,)`` array, in :attr:`COLUMNS` order."""
+        return {"revolution": self.revolution, "t_s": self.t_s, "rotation_hz": self.rotation_hz,
+                "load_n": self.load_n, "lo": self.lo, "hi": self.hi, "patch_length_mm": self.length_mm,
+                "gain": self.gain, "angle_offset_deg": self.angle_offset_deg, "rms_ms2": self.rms,
+                "converged": self.converged.astype(int), "feature_load_n": self.feature_load_n}
+
+    def summary(self) -> dict:
+        """Counts and the load's range over the revolutions (for the JSON)."""
+        ok = self.converged
+        load = self.load_n[ok]
+        return {"revolutions": int(len(self)), "converged": int(ok.sum()),
+                "load_n_median": _num(np.median(load)) if load.size else None,
+                "load_n_min": _num(load.min()) if load.size else None,
+                "load_n_max": _num(load.max()) if load.size else None,
+                "contact_window_deg": float(self.window_deg)}
+
+
+@dataclass
+class RecordingRevolutions:
+    """One pass over a continuous recording: each whole revolution's radial harmonics and the average.
+
+    ``rows`` ``(R, 2K)`` harmonic rows k = 2…k_max (:func:`harmonic_rows`) [m/s²]; ``revolution``,
+    ``t_s``, ``rotation_hz`` ``(R,)``; ``profile``: the averaged profile (docs/formats.md §3, the
+    revolution-to-revolution spread as ``acc_radial_spread_ms2``); ``response`` ``(K,)``: the resampling's
+    gain on the harmonics (sinc²(k/samples per revolution), linear interpolation); ``k_max``; ``noise``
+    ``(M,)`` the standard error of the averaged profile per angle [m/s²], from the differences of
+    successive revolutions (a load that changes does not count as noise, unlike in the spread).
+    """
+
+    rows: np.ndarray
+    revolution: np.ndarray
+    t_s: np.ndarray
+    rotation_hz: np.ndarray
+    profile: object
+    response: np.ndarray
+    k_max: int
+    noise: np.ndarray | None = None
+    rotation_source: str = "encoder (mean over the recording)"
+
+
+def first_rotation_hz(record, samples: int = 1 << 18) -> float:
+    """Rotation rate [Hz] over the first ``samples`` samples of a recording (from its encoder)."""
+    n = int(min(samples, record.samples))
+    ch = next(record.chunks(n, stop=n, acc=False))
+    rate = (ch.angle_deg[-1] - ch.angle_deg[0]) / 360.0 / ((n - 1) / record.fs_hz)
+    if not rate > 0:
+        raise InputError("the encoder angle does not advance over the first samples: is the wheel turning?",
+                         source=record.source)
+    return float(rate)
+
+
+def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progress: bool = False
+                          ) -> RecordingRevolutions:
+    """Walk a continuous recording once (bounded memory): every whole revolution's radial reading on
+    the angle grid (:func:`ringfit.targets.rolling_profile.revolution_grids`, M = the power of two at or
+    above the samples per revolution, so that every sample takes part), its harmonics 2…k_max, and
+    their average and spread over revolutions as a profile.
+
+    The sensor angle comes from the encoder; a recording without one gets it from the patch
+    passages in the radial reading (:func:`ringfit.targets.rolling_profile.patch_passages`, one more
+    pass): φ = 0 at each passage, linear in time in between (the angle offset then takes up where
+    the dip sits relative to the patch centre).
+
+    **Raises** :class:`InputError` without a radial axis, without an encoder and without clear patch
+    passages, with fewer than 2 whole revolutions, or with too few samples per revolution.
+    """
+    from ringfit.io.profiles import Profile
+    from ringfit.targets.rolling_profile import patch_passages, revolution_grids
+
+    if "radial" not in record.axes:
+        raise InputError(f"no 'radial' axis (have: {', '.join(record.axes)}); the estimate reads the radial channel",
+                         source=record.source)
+    passages = None
+    if record.has_encoder:
+        spr = record.fs_hz / first_rotation_hz(record)
+        source = "encoder (mean over the recording)"
+    else:  # the sensor angle from the patch passages in the reading itself
+        passages = patch_passages(record, progress=progress)
+        spr = float(np.median(np.diff(passages)))
+        source = "patch passages in the radial reading (no encoder; mean over the recording)"
+    if spr < 4 * (k_max + 2):
+        raise InputError(f"{spr:.0f} samples per revolution are too few to resolve harmonic {k_max} "
+                         f"(need ≥ {4 * (k_max + 2)})", source=record.source)
+    points = int(min(4096, max(128, 2 ** math.ceil(math.log2(spr)))))
+    rows, rev, t_s, rate = [], [], [], []
+    s1, s2, sd = np.zeros(points), np.zeros(points), np.zeros(points)
+    previous = None
+    for block in revolution_grids(record, points=points, axes=("radial",), passages=passages, progress=progress):
+        values = block.values[0]
+        rows.append(harmonic_rows(harmonic_amplitudes(values, 2, k_max)))
+        rev.append(block.revolution)
+        t_s.append(block.t_s)
+        rate.append(block.rotation_hz)
+        s1 += values.sum(axis=0)
+        s2 += (values**2).sum(axis=0)
+        chain = values if previous is None else np.concatenate([previous, values])
+        sd += (np.diff(chain, axis=0) ** 2).sum(axis=0)
+        previous = values[-1:]
+    R = int(sum(r.size for r in rev))
+    if R < 2:
+        raise InputError(f"{R} whole revolution(s) in the recording; the estimate needs at least 2",
+                         source=record.source)
+    mean = s1 / R
+    spread = np.sqrt(np.clip((s2 - R * mean**2) / (R - 1), 0.0, None))
+    # noise of one revolution from successive differences: blind to a load that changes slowly or in steps
+    noise = np.sqrt(sd / (2 * (R - 1)))
+    rate = np.concatenate(rate)
+    cond = {k: float(record.condition[k]) for k in ("speed_kmh", "pressure_bar", "drum_diameter_m")
+            if record.condition.get(k) is not None}
+    cond.update(revolutions=R, sample_rate_hz=float(record.fs_hz), rotation_hz=float(np.mean(rate)),
+                missing_axes=["tangential"])
+    angle = grid_angles_deg(points)
+    profile = Profile(angle, mean, np.zeros(points), condition=cond, source=str(record.source),
+                      extra={"acc_radial_spread_ms2": np.array([repr(float(x)) for x in spread], dtype=object)})
+    k = np.arange(2, k_max + 1)
+    return RecordingRevolutions(rows=np.concatenate(rows), revolution=np.concatenate(rev), t_s=np.concatenate(t_s),
+                                rotation_hz=rate, profile=profile, response=np.sinc(k / spr) ** 2, k_max=k_max,
+                                noise=noise / math.sqrt(R), rotation_source=source)
+
+
+def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ring: RingParams, *,
+                         settings: EstimateSettings = EstimateSettings(), batch: int = REVOLUTION_BATCH,
+                         mode: str = "batch", progress: bool = False) -> RevolutionEstimates:
+    """Load and patch for every whole revolution (from :func:`recording_revolutions`).
+
+    Each revolution's harmonics 2…k_max are fitted for the load, the gain and the angle offset,
+    with the high-pass corner, tilt and k_trd fixed at ``reference`` (the fit to the averaged
+    profile; the gain is free because the averaged profile of a recording whose load changes is not
+    the profile of one load, and a gain fixed there would bias every revolution) and Ω from the
+    encoder per revolution. Revolutions go ``batch`` at a time to
+    :func:`ringfit.fit.engine.least_squares_batch` (one compilation):
+
+    - ``mode="batch"`` (default): each batch vmapped, every fit warm-started from the previous
+      batch's last revolution (on a CPU, batches of 16 are ~20 % faster than the chain: the small
+      matrix work vectorises across the batch, and Gauss–Newton takes 3–4 steps in every fit).
+    - ``mode="chain"``: in order, each fit warm-started from the previous revolution's, the whole
+      batch in one compiled ``lax.scan``; each batch continues from the previous batch's last fit.
+
+    (Fitting stretches of the recording in parallel threads deadlocked XLA's CPU runtime here:
+    one thread; on a CPU the batches run at ~600 revolutions per second.)
+
+    Each fit is undamped Gauss–Newton (``method="gauss_newton"`` of the engine: from a neighbour's
+    optimum it stops after 3–4 steps); a fit that does not settle is redone alone with
+    Levenberg–Marquardt from the reference. The first batch is fitted twice: its residual spectrum, averaged over its revolutions, weights
+    every fit (coloured noise, as in :func:`estimate_load`). A smaller contact window
+    (``settings.revolution_window_deg``, widened to 1.3 × the reference patch) makes each solve
+    cheaper; a batch in which a patch comes within 1.5° of it is refitted with ``settings.window_deg``.
+
+    **Returns:** :class:`RevolutionEstimates`.
+    """
+    from tqdm import tqdm
+
+    if mode not in ("chain", "batch"):
+        raise ValueError(f"mode={mode!r}; expected 'chain' or 'batch'")
+    fit = reference.fit
+    k_max = data.k_max
+    if k_max != reference.k_max:
+        raise ValueError("the reference estimate was fitted to other harmonics")
+    K = k_max - 1
+    geometry = fit.problem.data.geometry
+    half = max(abs(reference.patch["leading_deg"]), abs(reference.patch["trailing_deg"]))
+    window = float(min(settings.window_deg, max(settings.revolution_window_deg, 1.3 * half)))
+    drum = reference.drum_diameter_m
+    response = np.asarray(data.response, dtype=np.float64)
+    template = EstimateArrays(geometry=geometry, ring=ring, omega=np.ones(1), roads=flat_or_drum(drum, 1),
+                              response=response[None], measured=np.zeros((1, 2 * K)), weight=np.ones((1, 2 * K)))
+    problems = {window: estimate_problem(template, dataclasses.replace(settings, window_deg=window),
+                                         k_max),
+                settings.window_deg: estimate_problem(template, settings, k_max)}
+    free = (LOAD, GAIN, ANGLE_OFFSET)
+    rows_all, omega_all = data.rows, 2 * math.pi * data.rotation_hz
+    R = rows_all.shape[0]
+    fixed = jax.tree.map(lambda x: np.broadcast_to(np.asarray(x), (batch,) + np.shape(x)).copy(),
+                         (as_traced(geometry), as_traced(ring), flat_or_drum(drum, 1), response[None]))
+
+    def _arrays(take, weight):
+        geo, rng, roads, resp = fixed
+        return EstimateArrays(geometry=geo, ring=rng, omega=omega_all[take][:, None], roads=roads, response=resp,
+                              measured=rows_all[take][:, None], weight=np.broadcast_to(weight, (batch, 1, 2 * K)))
+
+    def solve(start, theta, weight, win):
+        """Fit revolutions start … start + batch − 1 (the last batch repeats its last revolution)."""
+        take = np.minimum(np.arange(start, start + batch), R - 1)
+        return least_squares_batch(problems[win], theta, free, _arrays(take, weight), max_steps=REVOLUTION_MAX_STEPS,
+                                   rtol=REVOLUTION_TOL, atol=REVOLUTION_TOL, warm_start=mode == "chain",
+                                   method="gauss_newton"), take
+
+    def fit_batch(start, theta, weight):
+        res, take = solve(start, theta, weight, window)
+        patch = reference.curves.patch_at(res.values(LOAD))
+        win = window
+        if window < settings.window_deg and np.any(np.maximum(np.abs(patch["leading_deg"]),
+                                                              np.abs(patch["trailing_deg"])) > window - 1.5):
+            win = settings.window_deg
+            res, take = solve(start, res.theta[0] if mode == "chain" else res.theta, weight, win)
+        n = min(batch, R - start)
+        for b in np.flatnonzero(~(res.converged[:n] & np.all(np.isfinite(res.theta[:n]), axis=1))):
+            # Gauss–Newton did not settle: Levenberg–Marquardt from the reference, this revolution alone (the
+            # averaged profile's compiled fit: same model, free set padded to its size)
+            alone = dataclasses.replace(problems[settings.window_deg],
+                                        data=as_traced(jax.tree.map(lambda x: x[b], _arrays(take, weight))))
+            one = least_squares(alone, theta_ref, free, max_steps=settings.max_steps, rtol=settings.rtol,
+                                atol=settings.atol, pad_to=len(fit.names))
+            res.theta[b], res.status[b], res.iterations[b] = one.theta, one.status, one.iterations
+            res.covariance_log[b], res.stderr[b] = one.covariance_log, [one.stderr[k] for k in free]
+            res.residuals[b], res.chi2_raw[b] = one.residuals, one.extra["chi2_raw"]
+            res.sigma_scale[b], res.aux[b] = one.extra["sigma_scale"], np.asarray(one.extra["aux"])
+            res.at_bound[b] = [k in one.extra["at_bound"] for k in free]
+        return res, take
+
+    # weights from the first batch's residual spectrum
+    theta_ref = np.asarray(fit.theta, dtype=np.float64).copy()
+    first, take = fit_batch(0, theta_ref, np.ones(2 * K))
+    n0 = min(batch, R)
+    sigma = smoothed_noise(np.sqrt(np.mean((first.aux[:n0, 0] - rows_all[take[:n0]]) ** 2, axis=0)))
+    weight = (1.0 / sigma) / np.mean(1.0 / sigma)
+
+    starts = np.arange(0, R, batch)
+    bar = tqdm(total=R, unit="rev", disable=not progress, desc="per-revolution fits")
+    results = {}
+    theta = theta_ref
+    for start in starts:
+        res, _ = fit_batch(int(start), theta, weight)
+        n = min(batch, R - int(start))
+        # a revolution whose load or gain sits on its bound did not find an optimum inside the model's range
+        on_bound = res.at_bound[:n][:, [free.index(LOAD), free.index(GAIN)]].any(axis=1)
+        ok = res.converged[:n] & ~on_bound & np.all(np.isfinite(res.theta[:n]), axis=1)
+        if ok.any():
+            theta = res.theta[np.flatnonzero(ok)[-1]].copy()
+        results[int(start)] = (res, n, ok)
+        bar.update(n)
+    bar.close()
+    parts = []
+    for start in starts:
+        res, n, ok = results[int(start)]
+        lo, hi = res.interval(LOAD)
+        resid = res.aux[:n, 0] - rows_all[start:start + n]
+        parts.append(dict(load=res.values(LOAD)[:n], lo=lo[:n], hi=hi[:n], gain=res.values(GAIN)[:n],
+                          offset=np.degrees(res.values(ANGLE_OFFSET)[:n]),
+                          rms=np.sqrt(0.5 * np.sum(resid[:, :K] ** 2 + resid[:, K:] ** 2, axis=1)), ok=ok,
+                          iterations=res.iterations[:n]))
+    cat = {key: np.concatenate([r[key] for r in parts]) for key in parts[0]}
+    spacing = edge_peaks(rows_all[:, :K] + 1j * rows_all[:, K:], 2)[:, 2]
+    return RevolutionEstimates(
+        revolution=data.revolution, t_s=data.t_s, rotation_hz=data.rotation_hz, load_n=cat["load"], lo=cat["lo"],
+        hi=cat["hi"], length_mm=np.asarray(reference.curves.patch_at(cat["load"])["length_mm"]), gain=cat["gain"],
+        angle_offset_deg=cat["offset"], rms=cat["rms"], converged=cat["ok"], iterations=cat["iterations"],
+        feature_load_n=reference.curves.load_from_spacing(spacing), window_deg=window)
+
+
+def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
+                       settings: EstimateSettings = EstimateSettings(), k_tread_in_file: bool = True,
+                       per_revolution: bool = True, batch: int = REVOLUTION_BATCH, mode: str = "batch",
+                       progress: bool = False):
+    """The averaged and the per-revolution estimates of a continuous recording (one pass over it).
+
+    The averaged profile (:func:`recording_revolutions`) is estimated like any profile
+    (:func:`estimate_load`; Ω the encoder's mean rate, noise the revolution spread); its nuisances then
+    serve every revolution (:func:`estimate_revolutions`).
+
+    **Returns:** ``(LoadEstimate, RevolutionEstimates or None)``.
+    """
+    data = recording_revolutions(record, k_max=settings.k_max, progress=progress)
+    rate = float(np.mean(data.rotation_hz))
+    reference = estimate_load(data.profile, geometry, ring, settings=settings, k_tread_in_file=k_tread_in_file,
+                              omega=2 * math.pi * rate, omega_source=data.rotation_source,
+                              response=data.response, noise_per_angle=data.noise,
+                              noise_source="differences of successive revolutions / √(2·revolutions), in the fitted band")
+    revs = None
+    if per_revolution:
+        revs = estimate_revolutions(data, reference, ring, settings=settings, batch=batch, mode=mode,
+                                    progress=progress)
+    return reference, revs
