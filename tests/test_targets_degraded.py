@@ -453,3 +453,100 @@ def test_cli_frf_single_repeat_flip_warned_and_in_the_sidecar(tmp_path, capsys, 
     for n, f in zip(truth.n[truth.structural()], truth.freq_hz[truth.structural()]):
         rows = np.flatnonzero((table.n == n) & (table.kind == "structural"))
         assert rows.size == 1 and abs(table.freq_hz[rows[0]] / f - 1) < 0.002, (n, f, table.freq_hz)
+
+
+# --- a sampling rate that contradicts the cleat trigger's spacing or the encoder ---------------------------------
+
+
+@pytest.fixture(scope="module")
+def cleat_record():
+    """1.5 s on the 1.2192 m drum at the bench's speed, sampled at 6.4 kHz, with the cleat's hall trigger."""
+    from ringfit.synth.cleat import CleatBench
+
+    bench = CleatBench(steady="analytic", fs_hz=6400.0, noise_ms2=5.0)
+    return bench, bench.record(1.5)
+
+
+def _stated(record, fs_hz=None, **condition):
+    """The same samples with another stated sampling rate and condition."""
+    import copy
+
+    rec = copy.copy(record)
+    if fs_hz is not None:
+        rec.fs_hz = float(fs_hz)
+    rec.condition = {**dict(record.condition), **condition}
+    return rec
+
+
+@pytest.mark.parametrize("fs_hz, condition, said", [
+    (6400.0, {}, ()),
+    (6300.0, {}, ()),  # 1.6 % off: within the stated 2 %
+    (25600.0, {}, ("trigger spacing", "encoder")),  # 4× the true rate: both the trigger and the encoder say so
+    (6400.0, {"speed_kmh": 50.0}, ("trigger spacing",)),  # a wrong speed: the trigger spacing contradicts it
+    (6912.0, {"drum_diameter_m": None, "rotation_hz": None, "speed_kmh": None}, ()),  # nothing stated to compare
+])
+def test_sample_rate_against_the_cleat_trigger(cleat_record, fs_hz, condition, said):
+    from ringfit.targets.cleat import detect_cleat_arrivals
+
+    bench, record = cleat_record
+    rec = _stated(record, fs_hz, **condition)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        found = detect_cleat_arrivals(rec, chunk=1 << 20)
+        if "encoder" in said:
+            from ringfit.targets.rolling_profile import rolling_profile
+
+            rolling_profile(rec, points=256)
+    text = [str(w.message) for w in caught]
+    trig = [t for t in text if "contradicts the trigger spacing" in t]
+    assert bool(trig) == ("trigger spacing" in said), text
+    assert bool([t for t in text if "contradicts the encoder" in t]) == ("encoder" in said), text
+    assert len(found) >= 2
+    if trig:  # names the file and both numbers: the stated rate and the one at which they agree
+        expected = bench.drum_period_s if "speed_kmh" not in condition else (
+            np.pi * bench.drum_diameter_m / (condition["speed_kmh"] / 3.6))
+        assert trig[0].startswith(f"{rec.source}: ") and f"stated sampling rate {fs_hz:g} Hz" in trig[0]
+        agree = float(trig[0].split("they agree at ")[1].split(" Hz")[0])
+        assert agree == pytest.approx(fs_hz * (bench.drum_period_s * 6400.0 / fs_hz) / expected, rel=2e-3)
+
+
+def test_trigger_rate_note_numbers():
+    from ringfit.targets.faults import trigger_rate_note
+
+    # 60 km/h on a 1.2192 m drum: one revolution in π·1.2192/16.667 = 229.8 ms
+    period = np.pi * 1.2192 / (60 / 3.6)
+    cond = {"speed_kmh": 60.0, "drum_diameter_m": 1.2192}
+    assert trigger_rate_note(period * 1.019, 25600.0, cond) is None
+    note = trigger_rate_note(period * 25000.0 / 25600.0, 25600.0, cond)  # a 25 kHz recording said to be 25.6 kHz
+    assert note and "they agree at 25000 Hz" in note and "229.8" in note
+    assert trigger_rate_note(period * 2, 25600.0, {"speed_kmh": 60.0}) is None  # a flat track: nothing to compare
+    assert trigger_rate_note(float("nan"), 25600.0, cond) is None
+
+
+def test_cli_cleat_warns_of_a_sampling_rate_against_the_trigger(tmp_path, capsys, cleat_record):
+    from ringfit.cli import main
+    from ringfit.io.continuous import write_continuous
+
+    _, record = cleat_record
+    path = tmp_path / "drum.records.npz"
+    write_continuous(_stated(record, 7680.0), path)  # 6.4 kHz samples said to be 7.68 kHz
+    assert main(["profile", str(path), "--out", str(tmp_path / "p.profile.csv"), "--quiet-after", "0.1",
+                 "--quiet"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    said = [line for line in err if line.startswith("WARNING:") and "contradicts the trigger spacing" in line]
+    assert len(said) == 1 and str(path) in said[0] and "7680 Hz" in said[0] and "they agree at 6400" in said[0], err
+
+
+@pytest.mark.parametrize("fs_hz, warned", [(6400.0, False), (8000.0, True)])
+def test_estimate_recording_warns_of_a_sampling_rate_against_the_encoder(cleat_record, fs_hz, warned):
+    from ringfit.fit.estimate import recording_revolutions
+
+    _, record = cleat_record
+    rec = _stated(record, fs_hz)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        recording_revolutions(rec, k_max=20)
+    said = [str(w.message) for w in caught if "contradicts the encoder" in str(w.message)]
+    assert bool(said) == warned, said
+    if warned:
+        assert "they agree at 6400 Hz" in said[0] or "they agree at 6400." in said[0], said[0]

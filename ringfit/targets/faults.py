@@ -641,3 +641,25 @@ def sample_rate_note(rotation_hz: float, fs_hz: float, condition: dict) -> str |
                     f"which at speed_kmh = {speed:g} means a rolling radius of {radius:.3g} m (a tyre has "
                     f"{lo:g}–{hi:g} m): the sampling rate (or the speed) contradicts the encoder")
     return None
+
+
+def trigger_rate_note(interval_s: float, fs_hz: float, condition: dict) -> str | None:
+    """A one-line note when the sampling rate contradicts the cleat trigger's spacing, else None.
+
+    The hall (cleat) trigger fires once per drum revolution, so its median spacing ``interval_s`` (counted in
+    samples, divided by the stated ``fs_hz``) must equal ``π·drum_diameter_m / V`` at the stated ``speed_kmh``
+    within :data:`RATE_TOL` (a drum holds its set speed to well under that; a
+    25 kHz recording said to be 25.6 kHz is 2.4 % off; docs/physics.md §9). Without both keys (a flat track, no speed) nothing is said.
+    A wrong ``fs_hz`` scales every time and frequency found in the recording by the same factor.
+    """
+    drum = float(condition.get("drum_diameter_m") or 0.0)
+    speed = float(condition.get("speed_kmh") or 0.0)
+    if not (drum > 0 and speed > 0 and np.isfinite(interval_s) and interval_s > 0):
+        return None
+    expected = np.pi * drum / (speed / 3.6)
+    if abs(interval_s / expected - 1) <= RATE_TOL:
+        return None
+    return (f"the cleat trigger fires every {1e3 * interval_s:.5g} ms at the stated sampling rate {fs_hz:g} Hz, but "
+            f"one revolution of the {drum:g} m drum at speed_kmh = {speed:g} takes {1e3 * expected:.5g} ms: the "
+            f"sampling rate (or the speed) contradicts the trigger spacing (they agree at "
+            f"{fs_hz * interval_s / expected:.6g} Hz); every frequency found is off by {expected / interval_s:.4g}×")
