@@ -406,6 +406,7 @@ def bounded_revolutions(step_recording):
     return scaled, estimate_revolutions(data, ref, RING, settings=SETTINGS), ref
 
 
+@pytest.mark.slow  # the bound revolutions are redone alone with Levenberg–Marquardt: ~10 s CPU when nothing is compiled
 def test_a_revolution_on_a_bound_is_not_converged(bounded_revolutions):
     from ringfit.fit.estimate import GAIN_RANGE, LOAD_RANGE
 
@@ -431,6 +432,7 @@ def _load_axes(revs):
     return ax
 
 
+@pytest.mark.slow  # shares the fit above
 def test_estimate_plot_marks_rejected_revolutions_and_keeps_the_axis_on_the_accepted(bounded_revolutions):
     scaled, revs, _ = bounded_revolutions
     ax = _load_axes(revs)
