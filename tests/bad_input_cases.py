@@ -70,8 +70,10 @@ def _profile_csv(points=64, noise=0.0, seed=0):
     return "\n".join(lines) + "\n"
 
 
-def _drum_record(fs=2000.0, seconds=3.0, rotation_hz=10.0, drum_period_s=0.3137):
-    """A small continuous drum recording (NumPy only): encoder, hall pulses, a steady pattern and ringing after each hit."""
+def _drum_record(fs=2000.0, seconds=3.0, rotation_hz=10.0, drum_period_s=np.pi * 1.2192 / (40.0 / 3.6)):
+    """A small continuous drum recording (NumPy only): encoder, hall pulses, a steady pattern and ringing after each hit.
+
+    The hits come once per revolution of the 1.2192 m drum at the stated 40 km/h (0.3447 s apart)."""
     from ringfit.io.continuous import ContinuousRecord
 
     t = np.arange(int(fs * seconds)) / fs
@@ -718,6 +720,82 @@ issue23("campaign-effects-bogus", CAMPAIGN + ["--effects", "bogus"], setup=_camp
 issue23("campaign-walkers-odd", CAMPAIGN + ["--walkers", "9"], setup=_campaign_folder, names=("--walkers",))
 issue23("campaign-max-below-min", CAMPAIGN + ["--min-steps", "3000", "--max-steps", "2000"], setup=_campaign_folder,
         names=("--max-steps",))
+
+
+# issue 23 (second round): degraded records that are answered with a warning and a repair, not a refusal
+
+
+def _stated_rate(name, fs_hz):
+    """``name``: the drum recording's samples with a wrong stated sampling rate."""
+    def setup(d: Path):
+        from ringfit.io.continuous import write_continuous
+
+        rec = _drum_record()
+        rec.fs_hz = float(fs_hz)
+        write_continuous(rec, d / name)
+    return setup
+
+
+def _warned(*parts, outputs=(), agree_hz=None):
+    """Exit 0, one ``WARNING:`` line holding every one of ``parts``, every output written; with ``agree_hz``,
+    the line's "they agree at F Hz" within 1 % of it."""
+    def check(status, err, out, d):
+        said = [line for line in error_lines(err) if line.startswith("WARNING:") and all(p in line for p in parts)]
+        if agree_hz is not None and len(said) == 1:
+            m = re.search(r"they agree at ([0-9.eE+]+) Hz", said[0])
+            if m is None or abs(float(m.group(1)) / agree_hz - 1) > 0.01:
+                return False
+        return status == 0 and len(said) == 1 and all((d / o).is_file() for o in outputs)
+    return check
+
+
+def _negated_channel(record, axis):
+    """``rec1.records.npz``: single-repeat impact records of a ring (n = 1…6, 16 angles, 3.2 kHz) with one
+    channel's sign inverted."""
+    def setup(d: Path):
+        from dataclasses import replace
+
+        from ringfit.io.records import write_records
+        from ringfit.params import table9
+        from ringfit.synth.records import impact_records, ring_modes
+
+        geometry, ring = table9()
+        rec = impact_records(ring_modes(ring, geometry, n_values=range(1, 7), seed=1), np.arange(16) * 22.5,
+                             fs_hz=3200.0, duration_s=0.4, seed=4)
+        acc = rec.acc.copy()
+        acc[record, axis] *= -1
+        write_records(replace(rec, acc=acc), d / "rec1.records.npz")
+    return setup
+
+
+def _warned_and_recorded(*parts):
+    """:func:`_warned` for a mode table, and the same finding in its sidecar's ``preprocessing`` list."""
+    def check(status, err, out, d):
+        if not _warned(*parts, outputs=("out.modes.csv", "out.modes.json"))(status, err, out, d):
+            return False
+        notes = json.loads((d / "out.modes.json").read_text()).get("preprocessing", [])
+        return any(all(p in n for p in parts) for n in notes)
+    return check
+
+
+# a sampling rate that contradicts the cleat trigger's spacing: said with both numbers, the file named
+issue23("cleat-sampling-rate-contradicts-the-trigger",
+        ["cleat", "{d}/fast.records.npz", "--out", "{d}/field.npz", "--sectors", "32"],
+        setup=_stated_rate("fast.records.npz", 2400.0),
+        check=_warned("fast.records.npz", "stated sampling rate 2400 Hz", "contradicts the trigger spacing",
+                      outputs=("field.npz",), agree_hz=2000.0))
+issue23("profile-sampling-rate-contradicts-the-encoder",
+        ["profile", "{d}/fast.records.npz", "--out", "{d}/out.profile.csv", "--points", "64"],
+        setup=_stated_rate("fast.records.npz", 2400.0),
+        check=_warned("fast.records.npz", "stated sampling rate 2400 Hz", "contradicts the encoder",
+                      outputs=("out.profile.csv",), agree_hz=2000.0))
+# a sign-flipped channel with a single repeat: told by the ring's mode shapes, turned round, said and recorded
+for cmd in ("frf", "ssi"):
+    issue23(f"{cmd}-single-repeat-sign-flip", [cmd, "{d}/rec1.records.npz", "--out", "{d}/out.modes.csv", "--band",
+                                               "20:300"] + (["--orders", "2:40", "--quiet"] if cmd == "ssi" else []),
+            setup=_negated_channel(3, 0),
+            check=_warned_and_recorded("sign-flipped against the ring's mode shapes", "record 3 (67.5° radial)",
+                                       "turned round"))
 
 
 # ----------------------------------------------------------------------------- documented behaviour

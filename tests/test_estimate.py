@@ -450,3 +450,88 @@ def test_the_grid_check_carries_the_estimators_own_discretisation_into_the_inter
                                                                     100 * shift), rel=1e-9)
     off = estimate_load(prof, GEOMETRY, ring, settings=dataclasses.replace(SETTINGS, grid_check=False))
     assert off.grid_check is None and (off.lo, off.hi) == pytest.approx(off.fit.interval("load_n"), rel=1e-12)
+# --- issue 23 item 5: a revolution on a bound is not converged; the plot clips and marks ---------------------------
+
+
+@pytest.fixture(scope="module")
+def bounded_revolutions(step_recording):
+    """The step recording with revolutions 2 and 5 read 4× too strong and revolution 7 at a tenth: the gain's
+    range (:data:`ringfit.fit.estimate.GAIN_RANGE`, 0.5…2) cannot take them up, so the load or the gain of
+    each ends on its bound."""
+    bench, record = step_recording
+    data = recording_revolutions(record, k_max=SETTINGS.k_max)
+    ref = estimate_load(data.profile, GEOMETRY, RING, settings=SETTINGS, omega=2 * math.pi * data.rotation_hz.mean(),
+                        omega_source="encoder", response=data.response, noise_per_angle=data.noise)
+    scaled = {2: 4.0, 5: 4.0, 7: 0.1}
+    for r, factor in scaled.items():
+        data.rows[r] *= factor
+    return scaled, estimate_revolutions(data, ref, RING, settings=SETTINGS), ref
+
+
+@pytest.mark.slow  # the bound revolutions are redone alone with Levenberg–Marquardt: ~10 s CPU when nothing is compiled
+def test_a_revolution_on_a_bound_is_not_converged(bounded_revolutions):
+    from ringfit.fit.estimate import GAIN_RANGE, LOAD_RANGE
+
+    scaled, revs, _ = bounded_revolutions
+    bad = np.zeros(len(revs), bool)
+    bad[list(scaled)] = True
+    assert not revs.converged[bad].any()
+    assert revs.converged[~bad].all()
+    for r in scaled:  # each rejected one really sits on a bound (of its gain or its load)
+        on_gain = min(abs(revs.gain[r] / g - 1) for g in GAIN_RANGE) < 1e-3
+        on_load = min(abs(revs.load_n[r] / x - 1) for x in LOAD_RANGE) < 1e-3
+        assert on_gain or on_load, (r, revs.gain[r], revs.load_n[r])
+    assert revs.summary()["converged"] == len(revs) - len(scaled)  # the JSON's count and range leave them out
+    assert revs.summary()["load_n_max"] < 6000
+
+
+def _load_axes(revs):
+    from ringfit.report.estimate_plots import draw_load_against_time
+    from ringfit.report.figures import new_figure
+
+    fig, ax = new_figure(1, 1)
+    draw_load_against_time(ax, revs)
+    return ax
+
+
+@pytest.mark.slow  # shares the fit above
+def test_estimate_plot_marks_rejected_revolutions_and_keeps_the_axis_on_the_accepted(bounded_revolutions):
+    scaled, revs, _ = bounded_revolutions
+    ax = _load_axes(revs)
+    lo, hi = ax.get_ylim()
+    good = revs.load_n[revs.converged] / 1e3
+    assert np.isfinite([lo, hi]).all() and lo <= good.min() and hi >= good.max()
+    assert hi - lo < 3 * (good.max() - good.min()) + 1e-9  # not stretched to a bound at 20 kN
+    marks = [ln for ln in ax.get_lines() if ln.get_label().startswith("rejected")]
+    assert len(marks) == 1 and "rejected (3:" in marks[0].get_label()
+    assert np.allclose(np.sort(marks[0].get_xdata()), np.sort(revs.t_s[list(scaled)]))
+    y = np.asarray(marks[0].get_ydata())
+    assert np.all((y >= lo) & (y <= hi))  # drawn at the edge, clipped into view
+    fit_line = [ln for ln in ax.get_lines() if ln.get_label() == "model fit per revolution"][0]
+    assert np.isnan(np.asarray(fit_line.get_ydata())[list(scaled)]).all()  # not joined into the accepted line
+
+
+def test_estimate_plot_clips_unbounded_intervals():
+    """Hand-made revolutions: an infinite and a huge interval on accepted ones, a rejected one at 20 kN."""
+    from ringfit.fit.estimate import RevolutionEstimates
+
+    R = 8
+    load = np.full(R, 4000.0) + np.arange(R) * 10.0
+    lo, hi = load - 50.0, load + 50.0
+    lo[1], hi[1] = -np.inf, np.inf
+    hi[3] = 1e9
+    ok = np.ones(R, bool)
+    ok[5], load[5] = False, 20000.0
+    revs = RevolutionEstimates(revolution=np.arange(R), t_s=0.1 * np.arange(R), rotation_hz=np.full(R, 8.0),
+                               load_n=load, lo=lo, hi=hi, length_mm=np.full(R, 130.0), gain=np.ones(R),
+                               angle_offset_deg=np.zeros(R), rms=np.ones(R), converged=ok,
+                               iterations=np.full(R, 4), feature_load_n=load)
+    ax = _load_axes(revs)
+    y_lo, y_hi = ax.get_ylim()
+    assert np.isfinite([y_lo, y_hi]).all() and 3.5 < y_lo < 4.0 and 4.07 < y_hi < 4.6
+    band = [c for c in ax.collections if c.get_label().startswith("95 % interval")][0]
+    verts = np.concatenate([p.vertices for p in band.get_paths()])
+    assert np.isfinite(verts).all() and verts[:, 1].min() >= y_lo - 1e-12 and verts[:, 1].max() <= y_hi + 1e-12
+    marks = [ln for ln in ax.get_lines() if ln.get_label().startswith("rejected")]
+    assert len(marks) == 1 and np.allclose(marks[0].get_xdata(), [0.5])
+    assert np.allclose(marks[0].get_ydata(), [y_hi])  # the bound at 20 kN drawn at the top edge

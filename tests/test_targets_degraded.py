@@ -15,7 +15,8 @@ import pytest
 from ringfit.params import table9
 from ringfit.physics.natural import cavity_frequency
 from ringfit.synth.records import DEGRADATIONS, degrade, impact_records, ring_modes
-from ringfit.targets.faults import clip_runs, find_faults, hum_lines, impact_estimate, spike_segments
+from ringfit.targets.faults import (SHAPE_FLIP, clip_runs, find_faults, hum_lines, impact_estimate, shape_flips,
+                                    spike_segments)
 from ringfit.targets.identify import CAVITY_TOL, classify_rows
 from ringfit.targets.quality import remove_offsets
 
@@ -23,7 +24,7 @@ ANGLES = np.arange(16) * 22.5
 BAND = (20.0, 300.0)
 CAVITY = float(cavity_frequency(1))  # eq. 22, 218.75 Hz
 SAID = {"spikes": "with spikes", "clipped": "clipped (flat tops", "hum50": "mains hum (lines at 50, 100, 150 Hz",
-        "hum60": "mains hum (lines at 60, 120, 180 Hz", "dead": "dead (rms below", "flipped": "disagree in sign"}
+        "hum60": "mains hum (lines at 60, 120, 180 Hz", "dead": "dead (rms below", "flipped": "sign-flipped"}
 
 
 def _records(seed=2, n_values=range(1, 7), **kw):
@@ -279,3 +280,273 @@ def test_clipping_within_the_skip_is_said_and_kept():
     if clip_runs(base[i, j])[0] >= 3:  # the clip made a flat top (it does unless the peak was a lone sample)
         assert ssi_like.reason[i, j] == "" and any("before the samples used" in n for n in ssi_like.notes)
         assert frf_like.reason[i, j] == "clipped"
+
+
+# --- sign flips with a single repeat: the ring's mode shapes are the reference -----------------------------------
+
+
+def _faults_with_force(rec, f_max_hz=300.0):
+    idx = impact_estimate(rec.acc, rec.force)
+    acc = remove_offsets(rec.acc, idx)[0]
+    return acc, find_faults(acc, rec.sensor_angle_deg, rec.axes, rec.fs_hz, idx, force=rec.force, f_max_hz=f_max_hz)
+
+
+def _turned(acc, found):
+    """(records, axes) channels that find_faults turned round (returned as the negative of what it was given)."""
+    return np.all(np.isclose(found.acc, -acc, rtol=0, atol=1e-12 * np.abs(acc).max()), axis=-1) & (
+        np.abs(acc).max(axis=-1) > 0)
+
+
+def _flip_draws(draws, angles_per_turn=(16,), noise=(0.003, 0.01, 0.03, 0.1), seed0=200):
+    """Clean and 2-channel-flipped single-repeat records over seeds, noise levels, standing and travelling pairs:
+    ``(false flags, clean channels, misses, flipped channels)`` counted over the channels turned round; a flipped
+    tangential channel at 0° or 180° is not counted (every pair's tangential node when struck radially at 0°: it
+    reads nothing to judge)."""
+    geometry, ring = table9()
+    false = clean_channels = missed = flipped = 0
+    for seed in range(draws):
+        truth = ring_modes(ring, geometry, n_values=range(1, 8), seed=seed,
+                           travelling=(0.0, 0.3, 1.0, 0.1)[seed % 4])
+        m = angles_per_turn[seed % len(angles_per_turn)]
+        rec = impact_records(truth, np.arange(m) * 360.0 / m, impacts_per_angle=1, fs_hz=3200.0, duration_s=0.4,
+                             noise=noise[(seed // len(angles_per_turn)) % len(noise)], seed=seed0 + seed)
+        for r in (rec, degrade(rec, "flipped", seed=seed, channels=2)):
+            changed = np.any(r.acc != rec.acc, axis=-1)
+            acc, found = _faults_with_force(r)
+            turned = _turned(acc, found)
+            assert not (found.reason == "flipped").any()  # a single repeat is turned round, never left out
+            false += int(np.sum(turned & ~changed))
+            clean_channels += int(np.sum(~changed))
+            nodal = (np.isclose(np.cos(np.deg2rad(r.sensor_angle_deg)) ** 2, 1.0)[:, None]
+                     & (np.asarray(r.axes) == "tangential")[None, :])
+            missed += int(np.sum(changed & ~turned & ~nodal))
+            flipped += int(np.sum(changed & ~nodal))
+    return false, clean_channels, missed, flipped
+
+
+def test_single_repeat_sign_flips_found_and_turned_round_on_random_draws():
+    """8 draws (noise 0.3–10 %, standing and travelling pairs), clean and with 2 flipped channels each: every
+    flipped channel turned round, no clean one (about 500 clean channels)."""
+    false, clean_channels, missed, flipped = _flip_draws(8, noise=(0.003, 0.03, 0.1))
+    assert (false, missed) == (0, 0), (false, clean_channels, missed, flipped)
+    assert clean_channels > 480 and flipped >= 12
+
+
+@pytest.mark.slow
+def test_single_repeat_sign_flip_false_flag_rate_over_layouts():
+    """96 draws over 12, 16, 24 and 36 angles and noise 0.3–10 %: ≤ 1 false flag in 1000 clean channels
+    (the check's nominal rate is 0: on 32 draws clean scores sat at ≥ 0.88, flipped ones at ≤ −0.89), ≤ 2 % misses off the
+    tangential nodes."""
+    false, clean_channels, missed, flipped = _flip_draws(96, angles_per_turn=(12, 16, 24, 36), seed0=900)
+    assert false <= clean_channels / 1000, (false, clean_channels)
+    assert missed <= 0.02 * flipped, (missed, flipped)
+
+
+def test_shape_scores_separate_right_from_wrong_sign():
+    """The scores themselves: about +1 for every judged clean channel, about −1 for the flipped one."""
+    from ringfit.targets.faults import impact_spectra
+
+    truth, rec = _records(seed=7)
+    rec = _single(rec)
+    acc = rec.acc.copy()
+    acc[5, 0] *= -1  # 112.5° radial
+    idx = impact_estimate(acc, rec.force)
+    f, h = impact_spectra(remove_offsets(acc, idx)[0], rec.force, idx, rec.fs_hz)
+    ok = np.ones(acc.shape[:2], bool)
+    flipped, score = shape_flips(f, h, np.deg2rad(rec.sensor_angle_deg), ok, BAND)
+    assert [tuple(c) for c in np.argwhere(flipped)] == [(5, 0)]
+    judged = np.isfinite(score)
+    assert judged[:, 0].all() and judged.sum() >= 28  # tangential at 0° and 180° sits on every pair's node
+    assert np.all(score[judged] > 0.8)  # the flipped one turned round, the rest as read
+    ok[5, 0] = False  # without the flipped channel nothing is found
+    assert not shape_flips(f, h, np.deg2rad(rec.sensor_angle_deg), ok, BAND)[0].any()
+    assert SHAPE_FLIP < 0
+
+
+def _single(rec):
+    """One repeat per angle: the first impact of each."""
+    from dataclasses import replace
+
+    keep = np.arange(0, rec.n_records, 2)
+    return replace(rec, acc=rec.acc[keep], force=rec.force[keep], sensor_angle_deg=rec.sensor_angle_deg[keep])
+
+
+def test_two_disagreeing_repeats_the_shapes_tell_which():
+    """Two repeats that anti-correlate: the one against the mode shapes is left out, the other kept."""
+    _, rec = _records(seed=8)
+    acc = rec.acc.copy()
+    acc[7, 1] *= -1  # record 7 = the second repeat at 67.5°, tangential
+    idx = impact_estimate(acc, rec.force)
+    found = find_faults(remove_offsets(acc, idx)[0], rec.sensor_angle_deg, rec.axes, rec.fs_hz, idx,
+                        force=rec.force, f_max_hz=300.0)
+    assert [tuple(c) for c in np.argwhere(found.reason != "")] == [(7, 1)]
+    assert any("against the ring's mode shapes" in n and "record 7 (67.5° tangential)" in n
+               and "left out" in n for n in found.notes), found.notes
+    # without the force the shapes cannot be compared: both repeats are left out, as before
+    found = find_faults(remove_offsets(acc, idx)[0], rec.sensor_angle_deg, rec.axes, rec.fs_hz, idx)
+    assert [tuple(c) for c in np.argwhere(found.reason != "")] == [(6, 1), (7, 1)]
+
+
+def test_every_repeat_of_an_angle_flipped_is_turned_round():
+    """A sensor mounted the other way round at one position: both repeats flipped, the repeats agree."""
+    _, rec = _records(seed=9)
+    acc = rec.acc.copy()
+    acc[[10, 11], 0] *= -1  # both repeats at 112.5°, radial
+    idx = impact_estimate(acc, rec.force)
+    clean = remove_offsets(acc, idx)[0]
+    found = find_faults(clean, rec.sensor_angle_deg, rec.axes, rec.fs_hz, idx, force=rec.force, f_max_hz=300.0)
+    assert not (found.reason != "").any()
+    assert [tuple(c) for c in np.argwhere(_turned(clean, found))] == [(10, 0), (11, 0)]
+
+
+@pytest.fixture(scope="module")
+def example_single():
+    """`ringfit example records` as the command writes it, one repeat per angle kept, and its truth."""
+    import tempfile
+    from pathlib import Path
+
+    from ringfit.io.records import read_records
+    from ringfit.synth.examples import _true_ring, write_example
+
+    with tempfile.TemporaryDirectory() as tmp:
+        write_example("records", tmp)
+        rec = read_records(Path(tmp) / "impact.records.npz")
+    geometry, ring = _true_ring()
+    return _single(rec), ring_modes(ring, geometry, n_values=range(1, 10), seed=11)
+
+
+@pytest.mark.parametrize("seed", [3, 4, 5])
+def test_example_records_single_repeat_flip_found_in_repair(example_single, seed):
+    from ringfit.targets.faults import repair_records
+    from ringfit.targets.quality import clean_records
+
+    rec, _ = example_single
+    bad = degrade(rec, "flipped", seed=seed)
+    changed = np.argwhere(np.any(bad.acc != rec.acc, axis=-1))
+    mended, use, notes, _ = repair_records(clean_records(bad)[0])
+    assert use.all()
+    assert len(notes) == 1 and notes[0].startswith("3 channel(s) sign-flipped against the ring's mode shapes")
+    assert "turned round" in notes[0]
+    for i, j in changed:
+        assert f"record {i} ({rec.sensor_angle_deg[i]:g}° {rec.axes[j]})" in notes[0]
+    ref = clean_records(rec)[0]
+    assert np.allclose(mended.acc, ref.acc, atol=1e-9 * np.abs(ref.acc).max())  # turned back to what it was
+    assert repair_records(ref)[2] == []  # the clean example: nothing said
+
+
+def test_cli_frf_single_repeat_flip_warned_and_in_the_sidecar(tmp_path, capsys, example_single):
+    """`ringfit frf` on the example's records with one repeat per angle and three channels negated."""
+    from ringfit.cli import main
+    from ringfit.io.modes import read_mode_table
+    from ringfit.io.records import write_records
+
+    rec, truth = example_single
+    path = tmp_path / "one.records.npz"
+    write_records(degrade(rec, "flipped", seed=3), path)
+    out = tmp_path / "one.modes.csv"
+    assert main(["frf", str(path), "--delay", "0.0004", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert any(line.startswith("WARNING:") and "sign-flipped against the ring's mode shapes" in line
+               for line in err.splitlines()), err
+    table = read_mode_table(out)
+    assert any("turned round" in note for note in table.condition["preprocessing"])
+    for n, f in zip(truth.n[truth.structural()], truth.freq_hz[truth.structural()]):
+        rows = np.flatnonzero((table.n == n) & (table.kind == "structural"))
+        assert rows.size == 1 and abs(table.freq_hz[rows[0]] / f - 1) < 0.002, (n, f, table.freq_hz)
+
+
+# --- a sampling rate that contradicts the cleat trigger's spacing or the encoder ---------------------------------
+
+
+@pytest.fixture(scope="module")
+def cleat_record():
+    """1.5 s on the 1.2192 m drum at the bench's speed, sampled at 6.4 kHz, with the cleat's hall trigger."""
+    from ringfit.synth.cleat import CleatBench
+
+    bench = CleatBench(steady="analytic", fs_hz=6400.0, noise_ms2=5.0)
+    return bench, bench.record(1.5)
+
+
+def _stated(record, fs_hz=None, **condition):
+    """The same samples with another stated sampling rate and condition."""
+    import copy
+
+    rec = copy.copy(record)
+    if fs_hz is not None:
+        rec.fs_hz = float(fs_hz)
+    rec.condition = {**dict(record.condition), **condition}
+    return rec
+
+
+@pytest.mark.parametrize("fs_hz, condition, said", [
+    (6400.0, {}, ()),
+    (6300.0, {}, ()),  # 1.6 % off: within the stated 2 %
+    (25600.0, {}, ("trigger spacing", "encoder")),  # 4× the true rate: both the trigger and the encoder say so
+    (6400.0, {"speed_kmh": 50.0}, ("trigger spacing",)),  # a wrong speed: the trigger spacing contradicts it
+    (6912.0, {"drum_diameter_m": None, "rotation_hz": None, "speed_kmh": None}, ()),  # nothing stated to compare
+])
+def test_sample_rate_against_the_cleat_trigger(cleat_record, fs_hz, condition, said):
+    from ringfit.targets.cleat import detect_cleat_arrivals
+
+    bench, record = cleat_record
+    rec = _stated(record, fs_hz, **condition)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        found = detect_cleat_arrivals(rec, chunk=1 << 20)
+        if "encoder" in said:
+            from ringfit.targets.rolling_profile import rolling_profile
+
+            rolling_profile(rec, points=256)
+    text = [str(w.message) for w in caught]
+    trig = [t for t in text if "contradicts the trigger spacing" in t]
+    assert bool(trig) == ("trigger spacing" in said), text
+    assert bool([t for t in text if "contradicts the encoder" in t]) == ("encoder" in said), text
+    assert len(found) >= 2
+    if trig:  # names the file and both numbers: the stated rate and the one at which they agree
+        expected = bench.drum_period_s if "speed_kmh" not in condition else (
+            np.pi * bench.drum_diameter_m / (condition["speed_kmh"] / 3.6))
+        assert trig[0].startswith(f"{rec.source}: ") and f"stated sampling rate {fs_hz:g} Hz" in trig[0]
+        agree = float(trig[0].split("they agree at ")[1].split(" Hz")[0])
+        assert agree == pytest.approx(fs_hz * (bench.drum_period_s * 6400.0 / fs_hz) / expected, rel=2e-3)
+
+
+def test_trigger_rate_note_numbers():
+    from ringfit.targets.faults import trigger_rate_note
+
+    # 60 km/h on a 1.2192 m drum: one revolution in π·1.2192/16.667 = 229.8 ms
+    period = np.pi * 1.2192 / (60 / 3.6)
+    cond = {"speed_kmh": 60.0, "drum_diameter_m": 1.2192}
+    assert trigger_rate_note(period * 1.019, 25600.0, cond) is None
+    note = trigger_rate_note(period * 25000.0 / 25600.0, 25600.0, cond)  # a 25 kHz recording said to be 25.6 kHz
+    assert note and "they agree at 25000 Hz" in note and "229.8" in note
+    assert trigger_rate_note(period * 2, 25600.0, {"speed_kmh": 60.0}) is None  # a flat track: nothing to compare
+    assert trigger_rate_note(float("nan"), 25600.0, cond) is None
+
+
+def test_cli_cleat_warns_of_a_sampling_rate_against_the_trigger(tmp_path, capsys, cleat_record):
+    from ringfit.cli import main
+    from ringfit.io.continuous import write_continuous
+
+    _, record = cleat_record
+    path = tmp_path / "drum.records.npz"
+    write_continuous(_stated(record, 7680.0), path)  # 6.4 kHz samples said to be 7.68 kHz
+    assert main(["profile", str(path), "--out", str(tmp_path / "p.profile.csv"), "--quiet-after", "0.1",
+                 "--quiet"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    said = [line for line in err if line.startswith("WARNING:") and "contradicts the trigger spacing" in line]
+    assert len(said) == 1 and str(path) in said[0] and "7680 Hz" in said[0] and "they agree at 6400" in said[0], err
+
+
+@pytest.mark.parametrize("fs_hz, warned", [(6400.0, False), (8000.0, True)])
+def test_estimate_recording_warns_of_a_sampling_rate_against_the_encoder(cleat_record, fs_hz, warned):
+    from ringfit.fit.estimate import recording_revolutions
+
+    _, record = cleat_record
+    rec = _stated(record, fs_hz)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        recording_revolutions(rec, k_max=20)
+    said = [str(w.message) for w in caught if "contradicts the encoder" in str(w.message)]
+    assert bool(said) == warned, said
+    if warned:
+        assert "they agree at 6400 Hz" in said[0] or "they agree at 6400." in said[0], said[0]

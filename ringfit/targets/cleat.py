@@ -167,7 +167,15 @@ def detect_cleat_arrivals(
         angle = (np.asarray(angles) + 180.0) % 360.0 - 180.0
     else:
         angle = np.full(sample.shape, np.nan)
-    return CleatArrivals(sample=sample, time_s=sample / record.fs_hz, sensor_angle_deg=angle, fs_hz=record.fs_hz)
+    found = CleatArrivals(sample=sample, time_s=sample / record.fs_hz, sensor_angle_deg=angle, fs_hz=record.fs_hz)
+    from ringfit.targets.faults import trigger_rate_note
+
+    note = trigger_rate_note(found.interval_s, record.fs_hz, dict(record.condition))
+    if note:
+        import warnings
+
+        warnings.warn(f"{record.source}: {note}", RuntimeWarning, stacklevel=2)
+    return found
 
 
 def time_since_arrival(sample_index, arrivals_sample: np.ndarray, fs_hz: float) -> np.ndarray:

@@ -34,12 +34,22 @@ one-line note for the sidecar's ``preprocessing`` list and a warning:
   :data:`FLIP_WINDOW_S`) anti-correlates (below :data:`FLIP_CORR`) with the
   other repeats at its angle (three or more: the odd one out); two repeats
   that anti-correlate are both left out (which one is flipped cannot be
-  told from them: the neighbouring angles are no reference, a mode of
-  n ≥ 6 changes sign between sensors 15° apart).
+  told from them: the neighbouring angles are no direct reference, a mode
+  of n ≥ 6 changes sign between sensors 15° apart);
+- **sign-flipped against the ring's mode shapes** (with a force channel,
+  any number of repeats): at each resonance a ring mode reads one
+  circumferential harmonic ``c·cos nθ + s·sin nθ`` on every axis, so the
+  other channels of the axis predict each channel's accelerance there
+  (:func:`shape_scores`); a channel that reads the other sign at the
+  resonances it sees is flipped. This tells which of two disagreeing
+  repeats is the flipped one, and finds a flip with a single repeat or with
+  every repeat of an angle flipped (a sensor mounted the other way round).
 
 What is done: hum is notched; a dead, clipped or flipped channel of a record
 is left out of that record (the other repeats of its angle carry it, and
-without one the channel is lost, said so); a channel with spikes is left out
+without one the channel is lost, said so) — except a channel flipped against
+the mode shapes with no repeat of its angle that reads right: it is turned
+round; a channel with spikes is left out
 of its record where another repeat of the angle is clean, else the spike
 segments are bridged by straight lines.
 """
@@ -77,6 +87,22 @@ HUM_SHARE = 0.2
 FLIP_CORR = -0.5
 #: Window after the impact [s] over which repeats are compared.
 FLIP_WINDOW_S = 0.25
+#: Shape check: least share of a resonance's pattern (after trimming) that one circumferential harmonic explains.
+SHAPE_FIT = 0.8
+#: Shape check: share of the channels per axis and resonance left out of the fit as the worst-fitting (trimmed).
+SHAPE_TRIM = 0.15
+#: Shape check: agreement score below which a channel reads with the wrong sign.
+SHAPE_FLIP = -0.5
+#: Shape check: a channel sees a resonance when its predicted value is at least this share of the pattern's rms.
+SHAPE_SEEN = 0.3
+#: Shape check: resonances a channel must see for its sign to be judged.
+SHAPE_PEAKS = 2
+#: Shape check: fewest distinct sensor angles per axis (fewer: the harmonics cannot be told apart).
+SHAPE_MIN_ANGLES = 6
+#: Shape check: strongest resonances of the axis looked at.
+SHAPE_MAX_PEAKS = 16
+#: Shape check: the force is read up to this time after the impact [s] (the hammer's contact; ``frf``'s window).
+SHAPE_FORCE_S = 0.02
 
 
 @dataclass
@@ -250,15 +276,141 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sum(a * b) / den) if den > 0 else 0.0
 
 
+def impact_spectra(acc: np.ndarray, force: np.ndarray, impact: np.ndarray, fs_hz: float, *, pre_s: float = 0.002,
+                   force_s: float = SHAPE_FORCE_S) -> tuple[np.ndarray, np.ndarray]:
+    """Accelerance spectra of each record and axis, from ``pre_s`` before its impact to the common end.
+
+    ``H = X·conj(F) / (|F|² + ε)`` with ``ε`` = 10⁻³ of the largest ``|F|²`` (a soft hammer tip's spectral zeros
+    do not blow up); the force is read from ``pre_s`` before the impact to ``force_s`` after it, its pre-impact
+    mean removed. Dividing by the force takes out each record's time origin and impact strength.
+
+    **Returns:** ``(f_hz (F,), H (records, axes, F))``, the spectra zero-padded to twice the window.
+    """
+    r, a, s = acc.shape
+    pre = int(round(pre_s * fs_hz))
+    start = np.maximum(np.asarray(impact, dtype=np.int64) - pre, 0)
+    n = int(s - start.max())
+    x = np.stack([acc[i, :, start[i]:start[i] + n] for i in range(r)])
+    fo = np.stack([force[i, start[i]:start[i] + n] - np.mean(force[i, :max(int(start[i]), 1)]) for i in range(r)])
+    fo = fo * (np.arange(n) <= pre + int(round(force_s * fs_hz)))
+    nfft = 2 * n
+    fspec = np.fft.rfft(fo, nfft, axis=-1)
+    p = np.abs(fspec) ** 2
+    eps = 1e-3 * p.max(axis=-1, keepdims=True) + np.finfo(float).tiny
+    h = np.fft.rfft(x, nfft, axis=-1) * (np.conj(fspec) / (p + eps))[:, None, :]
+    return np.fft.rfftfreq(nfft, 1 / fs_hz), h
+
+
+def _harmonics(theta: np.ndarray, n: int) -> np.ndarray:
+    """Columns ``cos nθ, sin nθ`` (n ≥ 1) or ``1`` (n = 0) at the angles ``theta`` [rad] (docs/physics.md §9)."""
+    return np.ones((theta.size, 1)) if n == 0 else np.stack([np.cos(n * theta), np.sin(n * theta)], axis=1)
+
+
+def shape_scores(f_hz: np.ndarray, h: np.ndarray, theta: np.ndarray, ok: np.ndarray, band: tuple[float, float]
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """How well each channel's sign agrees with the circumferential pattern of its axis at the resonances.
+
+    Per axis, at each of the :data:`SHAPE_MAX_PEAKS` strongest peaks of ``Σ_records |H|²`` in ``band``: the
+    channels' values ``z_r`` are one circumferential harmonic ``c·cos nθ + s·sin nθ`` of a ring mode
+    (docs/physics.md §9, sign flips), n the harmonic that explains most of them after the worst-fitting
+    :data:`SHAPE_TRIM` share is left out; a peak where it explains less than :data:`SHAPE_FIT` is passed over.
+    Each channel's value is predicted from the others (leave-one-out, ``ẑ_r``), and
+
+    ``score_r = Σ_peaks Re(conj(ẑ_r) z_r) / Σ_peaks |ẑ_r| |z_r|``
+
+    over the peaks where the channel is not near a node (``|ẑ_r|`` ≥ :data:`SHAPE_SEEN` × the pattern's rms):
+    about +1 for a channel that reads with the ring, −1 for one that reads with the wrong sign.
+
+    **Arguments:** ``h`` (records, axes, F) from :func:`impact_spectra`; ``theta`` (records,) [rad]; ``ok`` bool
+    (records, axes): the channels taken into account.
+
+    **Returns:** ``(score, seen)`` (records, axes): NaN where fewer than :data:`SHAPE_PEAKS` peaks judge the
+    channel (or its axis has fewer than :data:`SHAPE_MIN_ANGLES` angles), and the number of peaks that do.
+    """
+    from scipy.signal import find_peaks
+
+    r, a, _ = h.shape
+    sel = np.flatnonzero((f_hz >= band[0]) & (f_hz <= band[1]))
+    score = np.full((r, a), np.nan)
+    seen = np.zeros((r, a), dtype=np.int64)
+    for j in range(a):
+        rows = np.flatnonzero(ok[:, j])
+        th = theta[rows]
+        angles = np.unique(np.round(np.mod(th, 2 * np.pi), 9)).size
+        if angles < SHAPE_MIN_ANGLES or sel.size < 3:
+            continue
+        n_max = (angles - 2) // 2  # harmonics the angles can tell apart, with one to spare for the left-out one
+        hj = h[rows, j]
+        power = 10 * np.log10(np.maximum(np.sum(np.abs(hj[:, sel]) ** 2, axis=0), np.finfo(float).tiny))
+        pk, _ = find_peaks(power, prominence=3.0)
+        pk = sel[pk[np.argsort(power[pk])[::-1][:SHAPE_MAX_PEAKS]]]
+        num, den, cnt = np.zeros(rows.size), np.zeros(rows.size), np.zeros(rows.size, dtype=np.int64)
+        trim = max(1, int(round(SHAPE_TRIM * rows.size)))
+        for k in pk:
+            z = hj[:, k]
+            best = None
+            for n in range(n_max + 1):
+                basis = _harmonics(th, n)
+                res = np.abs(z - basis @ np.linalg.lstsq(basis, z, rcond=None)[0])
+                keep = np.ones(rows.size, bool)
+                keep[np.argsort(res)[-trim:]] = False
+                coef = np.linalg.lstsq(basis[keep], z[keep], rcond=None)[0]
+                explained = 1 - np.sum(np.abs(z[keep] - basis[keep] @ coef) ** 2) / max(
+                    float(np.sum(np.abs(z[keep]) ** 2)), np.finfo(float).tiny)
+                if best is None or explained > best[0]:
+                    best = (explained, basis, keep, coef)
+            explained, basis, keep, coef = best
+            if explained < SHAPE_FIT:
+                continue
+            q, _ = np.linalg.qr(basis[keep])
+            lev = np.sum(q**2, axis=1)
+            if lev.max() >= 0.99:
+                continue  # a channel the pattern hinges on: no prediction without it
+            pred = basis @ coef  # the trimmed channels: predicted by the kept ones
+            zk = z[keep]
+            pred[keep] = (q @ (q.T @ zk) - lev * zk) / (1 - lev)  # leave-one-out through the hat matrix
+            visible = np.abs(pred) >= SHAPE_SEEN * np.sqrt(np.mean(np.abs(pred) ** 2))
+            num += np.where(visible, np.real(np.conj(pred) * z), 0.0)
+            den += np.where(visible, np.abs(pred) * np.abs(z), 0.0)
+            cnt += visible
+        score[rows, j] = np.where(cnt >= SHAPE_PEAKS, num / np.where(den > 0, den, 1.0), np.nan)
+        seen[rows, j] = cnt
+    return score, seen
+
+
+def shape_flips(f_hz: np.ndarray, h: np.ndarray, theta: np.ndarray, ok: np.ndarray, band: tuple[float, float],
+                rounds: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Channels whose sign contradicts the ring's mode shapes (:func:`shape_scores` below :data:`SHAPE_FLIP`).
+
+    Found in rounds: the channels found are turned round and the scores taken again (several flipped channels
+    spoil the patterns the others are judged by), until no new one is found.
+
+    **Returns:** ``(flipped, score)``: bool (records, axes) and the last round's scores with the flipped
+    channels turned round (so a flipped channel scores about +1 there).
+    """
+    h = np.array(h)
+    flipped = np.zeros(ok.shape, dtype=bool)
+    for _ in range(rounds):
+        score, _ = shape_scores(f_hz, h, theta, ok, band)
+        new = (score < SHAPE_FLIP) & ~flipped & ok
+        if not new.any():
+            return flipped, score
+        flipped |= new
+        h[new] *= -1
+    return flipped, shape_scores(f_hz, h, theta, ok, band)[0]
+
+
 def find_faults(acc: np.ndarray, angle_deg: np.ndarray, axes, fs_hz: float, impact: np.ndarray, *,
-                f_max_hz: float = 400.0, skip_s: float = SKIP_AFTER_IMPACT_S, used_from_s: float = 0.0) -> Faults:
+                f_max_hz: float = 400.0, skip_s: float = SKIP_AFTER_IMPACT_S, used_from_s: float = 0.0,
+                force: np.ndarray | None = None) -> Faults:
     """Run every check of the module docstring on offset-free records and repair or mark what is found.
 
     **Arguments:** ``acc`` (records, axes, samples) [m/s²], offsets removed; ``angle_deg`` (records,);
     ``axes`` names; ``impact`` (records,) sample of each impact; ``f_max_hz`` the top of the band (hum lines
     are looked for up to twice it); ``skip_s`` the time after the impact left out of the spike search;
     ``used_from_s`` the time after the impact from which the samples are used (SSI: its skip): clipping
-    that ends before it is said but harmless.
+    that ends before it is said but harmless; ``force`` (records, samples) [N] the hammer's force, for the
+    sign check against the ring's mode shapes (without it, only repeats of an angle are compared).
     """
     acc = np.array(acc, dtype=np.float64)
     r, a, s = acc.shape
@@ -334,7 +486,34 @@ def find_faults(acc: np.ndarray, angle_deg: np.ndarray, axes, fs_hz: float, impa
                     flipped += [(rep[k], j) for k in np.flatnonzero(med < FLIP_CORR)]
                 elif c[0, 1] < FLIP_CORR:  # two repeats: which one is flipped cannot be told
                     undecided += [(p, j) for p in rep]
-    for i, j in flipped + undecided:
+    for i, j in flipped:
+        reason[i, j] = "flipped"
+    # sign flips against the ring's mode shapes: any number of repeats, and which of two disagreeing ones
+    shape_out, shape_back = [], []
+    if force is not None and n_win > 16:
+        judged = reason == ""  # the undecided pairs among them
+        f_hz, spec = impact_spectra(acc, np.asarray(force, dtype=np.float64), impact, fs_hz)
+        bad, score = shape_flips(f_hz, spec, np.deg2rad(np.asarray(angle_deg, dtype=np.float64)), judged,
+                                 (min(5.0, 0.5 * f_max_hz), f_max_hz))
+        pairs = {}
+        for i, j in undecided:
+            pairs.setdefault((group[i], j), []).append(i)
+        for (_, j), (p, q) in pairs.items():
+            if bad[p, j] != bad[q, j] and score[q if bad[p, j] else p, j] >= -SHAPE_FLIP:  # the shapes tell
+                undecided.remove((p, j))
+                undecided.remove((q, j))
+        still = set(undecided)
+        for i, j in zip(*np.nonzero(bad & judged)):
+            if (i, j) in still:
+                continue
+            others = [k for k in np.flatnonzero(group == group[i])
+                      if k != i and judged[k, j] and (k, j) not in still and not bad[k, j]]
+            if others:
+                shape_out.append((int(i), int(j)))
+            else:  # the only usable repeat of its angle (or all of them read the other way): turned round
+                acc[i, j] = -acc[i, j]
+                shape_back.append((int(i), int(j)))
+    for i, j in undecided + shape_out:
         reason[i, j] = "flipped"
     # actions
     use = reason == ""
@@ -372,6 +551,10 @@ def find_faults(acc: np.ndarray, angle_deg: np.ndarray, axes, fs_hz: float, impa
     say("sign-flipped (anti-correlated with the other repeats of the angle)", flipped, "left out of their record")
     say("of repeats that disagree in sign (which one is flipped cannot be told)", undecided,
         "left out of their record")
+    said = "sign-flipped against the ring's mode shapes (the circumferential harmonic of the other channels " \
+           "at each resonance predicts the other sign)"
+    say(said, shape_out, "left out of their record (another repeat of the angle reads right)")
+    say(said, shape_back, "turned round (no repeat of the angle reads right)")
     if lost:
         notes.append(f"no usable repeat left for {len(lost)} channel(s): {', '.join(lost[:6])}"
                      f"{' …' if len(lost) > 6 else ''}; left out")
@@ -391,7 +574,7 @@ def repair_records(records, *, threshold: float = 0.1, f_max_hz: float = 400.0, 
 
     impact = impact_estimate(records.acc, records.force, threshold)
     found = find_faults(records.acc, records.sensor_angle_deg, records.axes, records.fs_hz, impact,
-                        f_max_hz=f_max_hz, skip_s=skip_s, used_from_s=used_from_s)
+                        f_max_hz=f_max_hz, skip_s=skip_s, used_from_s=used_from_s, force=records.force)
     acc = found.acc
     if any(cell for row in found.hum for cell in row):  # the offsets were taken with the hum in: again without
         from ringfit.targets.quality import remove_offsets
@@ -458,3 +641,25 @@ def sample_rate_note(rotation_hz: float, fs_hz: float, condition: dict) -> str |
                     f"which at speed_kmh = {speed:g} means a rolling radius of {radius:.3g} m (a tyre has "
                     f"{lo:g}–{hi:g} m): the sampling rate (or the speed) contradicts the encoder")
     return None
+
+
+def trigger_rate_note(interval_s: float, fs_hz: float, condition: dict) -> str | None:
+    """A one-line note when the sampling rate contradicts the cleat trigger's spacing, else None.
+
+    The hall (cleat) trigger fires once per drum revolution, so its median spacing ``interval_s`` (counted in
+    samples, divided by the stated ``fs_hz``) must equal ``π·drum_diameter_m / V`` at the stated ``speed_kmh``
+    within :data:`RATE_TOL` (a drum holds its set speed to well under that; a
+    25 kHz recording said to be 25.6 kHz is 2.4 % off; docs/physics.md §9). Without both keys (a flat track, no speed) nothing is said.
+    A wrong ``fs_hz`` scales every time and frequency found in the recording by the same factor.
+    """
+    drum = float(condition.get("drum_diameter_m") or 0.0)
+    speed = float(condition.get("speed_kmh") or 0.0)
+    if not (drum > 0 and speed > 0 and np.isfinite(interval_s) and interval_s > 0):
+        return None
+    expected = np.pi * drum / (speed / 3.6)
+    if abs(interval_s / expected - 1) <= RATE_TOL:
+        return None
+    return (f"the cleat trigger fires every {1e3 * interval_s:.5g} ms at the stated sampling rate {fs_hz:g} Hz, but "
+            f"one revolution of the {drum:g} m drum at speed_kmh = {speed:g} takes {1e3 * expected:.5g} ms: the "
+            f"sampling rate (or the speed) contradicts the trigger spacing (they agree at "
+            f"{fs_hz * interval_s / expected:.6g} Hz); every frequency found is off by {expected / interval_s:.4g}×")

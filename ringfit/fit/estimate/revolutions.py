@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from dataclasses import dataclass
 
 import jax
@@ -177,6 +178,11 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     # noise of one revolution from successive differences: blind to a load that changes slowly or in steps
     noise = np.sqrt(sd / (2 * (R - 1)))
     rate = np.concatenate(rate)
+    from ringfit.targets.faults import sample_rate_note
+
+    note = sample_rate_note(float(np.mean(rate)), record.fs_hz, dict(record.condition))
+    if note:
+        warnings.warn(f"{record.source}: {note}", RuntimeWarning, stacklevel=2)
     cond = {k: float(record.condition[k]) for k in ("speed_kmh", "pressure_bar", "drum_diameter_m")
             if record.condition.get(k) is not None}
     cond.update(revolutions=R, sample_rate_hz=float(record.fs_hz), rotation_hz=float(np.mean(rate)),
