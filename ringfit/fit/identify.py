@@ -507,10 +507,6 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     model = JointResiduals(P, solver, ProfileModel())
     slices = _slices(rows)
     scales = {b: 1.0 for b in slices}
-    error = _ModelError(geometry, rows, solver, P, coords)
-    for block in (rows.loaded, rows.profiles):
-        if block is not None:
-            block["noise"] = block["sigma"].copy()
     fit = None
     for passes in range(1, SCALE_PASSES + 1):
         data = _arrays(geometry, rows, solver)
@@ -524,28 +520,16 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
             theta = fit.theta.copy()
         r = fit.residuals
         h = _hat_diagonal(fit.jacobian)
-        delta = error(problem, fit.theta)  # the model's discretisation error at this fit (docs/physics.md §11)
         change = 0.0
         for name, sl in slices.items():
             m = sl.stop - sl.start
             dof = max(m - float(h[sl].sum()), 1.0)
+            s = math.sqrt(float(r[sl] @ r[sl]) / dof)
             block = {"free modes": rows.free, "free damping": rows.damping, "loaded modes": rows.loaded}.get(name)
             if name == "profiles":
-                _rescale_profiles(rows.profiles, r[sl], h[sl], delta["profiles"])
+                _rescale_profiles(rows.profiles, r[sl], h[sl])
                 s = 1.0
-            elif name == "loaded modes":
-                # noise scale from the residual against the finer model, then the model-error floor added
-                d = delta["loaded modes"]
-                rn = (r[sl] * block["sigma"] + d) / block["noise"]
-                s = math.sqrt(float(rn @ rn) / dof)
-                s = max(s, 1.0) if block.get("given") else s
-                block["noise"] = block["noise"] * s
-                old = block["sigma"]
-                block["sigma"] = np.sqrt(block["noise"] ** 2 + d**2)
-                block["floor"] = np.abs(d)
-                s = float(np.sqrt(np.mean((block["sigma"] / old) ** 2)))
-            else:
-                s = math.sqrt(float(r[sl] @ r[sl]) / dof)
+            elif block is not None:
                 s = max(s, 1.0) if block.get("given") else s
                 block["sigma"] = block["sigma"] * s
             change = max(change, abs(s - 1.0))
@@ -556,69 +540,21 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     return _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs)
 
 
-def _rescale_profiles(pr: dict, residuals: np.ndarray, leverage: np.ndarray, delta: np.ndarray) -> None:
-    """New σ per profile, channel and harmonic: the noise spectrum plus the model-error floor (docs/physics.md §11).
+def _rescale_profiles(pr: dict, residuals: np.ndarray, leverage: np.ndarray) -> None:
+    """New σ per profile, channel and harmonic from the residual spectrum (power smoothed over ±NOISE_SMOOTHING).
 
-    ``residuals`` and ``leverage`` (the hat matrix's diagonal) are the profile block's rows of the fit; ``delta``
-    the finer model's rows minus this model's [m/s²]. The noise power is that of the residual against the finer
-    model, the floor that of ``delta``, each smoothed over ±NOISE_SMOOTHING harmonics."""
-    res = residuals.reshape(pr["measured"].shape) * pr["sigma"] + delta  # against the finer model, m/s²
+    ``residuals`` and ``leverage`` (the hat matrix's diagonal) are the profile block's rows of the fit."""
+    res = residuals.reshape(pr["measured"].shape) * pr["sigma"]  # back in m/s²
     H = res.shape[-1] // 2
+    power = 0.5 * (res[..., :H] ** 2 + res[..., H:] ** 2)
     kernel = np.ones(2 * NOISE_SMOOTHING + 1)
+    num = np.apply_along_axis(lambda p: np.convolve(p, kernel, mode="same"), -1, power)
     den = np.convolve(np.ones(H), kernel, mode="same")
-
-    def smoothed(x):
-        power = 0.5 * (x[..., :H] ** 2 + x[..., H:] ** 2)
-        return np.apply_along_axis(lambda q: np.convolve(q, kernel, mode="same"), -1, power) / den
-
     # degrees of freedom the fit took from the profile rows: share them out evenly
     used = float(leverage.sum()) / leverage.size
-    noise = smoothed(res) / max(1.0 - used, 0.5)
-    floor = smoothed(delta)
-    sigma = np.sqrt(noise + floor)
+    sigma = np.sqrt(num / den / max(1.0 - used, 0.5))
     sigma = np.maximum(sigma, 1e-6 * max(float(sigma.max()), 1e-300))
     pr["sigma"] = np.concatenate([sigma, sigma], axis=-1)
-    pr["noise"] = np.sqrt(np.concatenate([noise, noise], axis=-1))
-    pr["floor"] = np.sqrt(np.concatenate([floor, floor], axis=-1))
-
-
-class _ModelError:
-    """The joint model's discretisation error per row, from grid convergence (docs/physics.md §11).
-
-    The same joint model on a contact grid twice as fine and with twice the loaded-mode harmonics, evaluated
-    at the fitted parameters; ``fine − this`` per row estimates the error of this model's discretisation
-    (free modes and damping are closed forms: none). Returned as ``{"loaded modes": (ml,) Hz, "profiles":
-    (P, 2, 2H) m/s²}`` (``None`` for absent blocks)."""
-
-    def __init__(self, geometry, rows: _Rows, solver: ContactSolver, P: int, coords):
-        self.fine_solver = ContactSolver(n_grid=2 * solver.n_grid, window_deg=solver.window_deg,
-                                         max_iter=solver.max_iter)
-        pr = rows.profiles
-        fine_profiles = None
-        if pr is not None:
-            H = self.fine_solver.n_grid // 2 - PROFILE_K_MIN
-            fine_profiles = dict(pr, measured=np.zeros((P, 2, 2 * H)), sigma=np.ones((P, 2, 2 * H)))
-        self.rows = _Rows(rows.free, rows.damping, rows.loaded, fine_profiles)
-        self.geometry, self.P, self.coords = geometry, P, coords
-        self.model = JointResiduals(P, self.fine_solver, ProfileModel(), n_harmonics=2 * LOADED_HARMONICS)
-
-    def __call__(self, problem: Problem, theta) -> dict:
-        from ringfit.fit.engine import residuals
-
-        fine = Problem(self.model, _arrays(self.geometry, self.rows, self.fine_solver), self.coords)
-        _, (_, l_this, p_this) = residuals(problem, theta)
-        _, (_, l_fine, p_fine) = residuals(fine, theta)
-        out = {"loaded modes": None, "profiles": None}
-        if l_this is not None:
-            out["loaded modes"] = np.asarray(l_fine) - np.asarray(l_this)
-        if p_this is not None:
-            p_this, p_fine = np.asarray(p_this), np.asarray(p_fine)
-            H, Hf = p_this.shape[-1] // 2, p_fine.shape[-1] // 2
-            # harmonic rows scale as √M (harmonic_rows): the finer grid's rows of k < M/2, brought to this grid's
-            ratio = math.sqrt(2 * (H + PROFILE_K_MIN) / self.fine_solver.n_grid)
-            fine = np.concatenate([p_fine[..., :H], p_fine[..., Hf : Hf + H]], axis=-1) * ratio
-            out["profiles"] = fine - p_this
-        return out
 
 
 def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs) -> Identification:
@@ -632,10 +568,6 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs) -> I
         blocks[b] = dict(rows=int(sl.stop - sl.start), sigma_scale=float(scales[b]),
                          rms=float(math.sqrt(np.mean(r[sl] ** 2))),
                          fisher_share={n: float(share[j]) for j, n in enumerate(names) if n in free_ring})
-        block = {"loaded modes": rows.loaded, "profiles": rows.profiles}.get(b)
-        if block is not None and "floor" in block:
-            # RMS of the model-error floor over the row σ (0: none; 1: the rows' σ is all model error)
-            blocks[b]["model_error"] = float(math.sqrt(np.mean((block["floor"] / block["sigma"]) ** 2)))
     idx = [names.index(n) for n in free_ring]
     cov = fit.covariance_log[np.ix_(idx, idx)]
     cov = 0.5 * (cov + cov.T)
