@@ -75,13 +75,22 @@ def one_case(seed: int, without: bool, timed: bool) -> dict:
                    colour=truth["profiles"][0]["noise_colour"], cold=cold, warm=warm,
                    z={n: math.log(params[n]["value"] / truth["ring"][n]) / params[n]["sd_ln"] for n in NAMES},
                    err={n: abs(math.log(params[n]["value"] / truth["ring"][n])) for n in NAMES},
-                   ei_sd=params["ei"]["sd_ln"], ei_sd_without=None)
+                   ei_sd=params["ei"]["sd_ln"], ei_sd_without=None, nz=_nuisance_z(ident, truth))
         if without:
             bare = Path(tmp) / f"bare{seed}"
             shutil.copytree(folder, bare, ignore=shutil.ignore_patterns("*.profile.*"))
             out["ei_sd_without"] = identify(read_identify_folder(bare)).parameters()["ei"]["sd_ln"]
     print("RESULT " + json.dumps(out), flush=True)
     return out
+
+
+def _nuisance_z(ident, truth) -> dict:
+    """z-scores of the per-profile gains (in ln) and angle offsets against the truth."""
+    gain, offset = [], []
+    for got, want in zip(ident.nuisances, truth["profiles"]):
+        gain.append(math.log(got["gain"] / want["gain"]) / (got["gain_sd"] / got["gain"]))
+        offset.append((got["angle_offset_deg"] - want["angle_offset_deg"]) / got["angle_offset_sd_deg"])
+    return {"gain (each profile)": gain, "angle offset (each)": offset}
 
 
 def main_processes() -> None:
@@ -123,6 +132,8 @@ def main_processes() -> None:
                   "CPU (cold process)", flush=True)
     ok = [r for r in results if "failed" not in r]
     z = {n: [r["z"][n] for r in ok] for n in NAMES}
+    for key in ("gain (each profile)", "angle offset (each)"):
+        z[key] = [x for r in ok for x in r["nz"][key]]
     err = {n: [r["err"][n] for r in ok] for n in NAMES}
     times = [tuple(r["warm"]) for r in ok if r["warm"]]
     print(f"{len(results) - len(ok)} of {len(results)} case processes failed")
@@ -155,6 +166,8 @@ def main() -> None:
                 e = math.log(params[n]["value"] / truth["ring"][n])
                 z[n].append(e / params[n]["sd_ln"])
                 err[n].append(abs(e))
+            for key, values in _nuisance_z(ident, truth).items():
+                z.setdefault(key, []).extend(values)
             ei_sd.append(params["ei"]["sd_ln"])
             if c >= ARGS.cases - ARGS.without:
                 bare = Path(tmp) / f"bare{seed}"
@@ -176,11 +189,15 @@ def _summary(N, z, err, ei_sd, ei_sd_without, times, converged) -> None:
     print()
     print(f"{N} joint cases, {converged} converged; covered: target 95 % (with {N} cases {lo} … {hi} is within "
           "the binomial 95 % band)")
-    print(f"{'parameter':14s} {'median |err|':>13s} {'worst |err|':>12s} {'covered':>8s} {'rate':>6s}  verdict")
-    for n in NAMES:
+    print(f"{'parameter':14s} {'median |err|':>13s} {'worst |err|':>12s} {'covered':>8s} {'rate':>6s} "
+          f"{'Clopper-Pearson 95 %':>21s}  verdict")
+    for n in [*NAMES, *(k for k in z if k not in NAMES)]:
         cov = int(sum(abs(x) < 1.959964 for x in z[n]))
-        print(f"{n:14s} {100 * statistics.median(err[n]):12.3f}% {100 * max(err[n]):11.3f}% {cov:5d}/{N:<3d}"
-              f"{100 * cov / N:5.0f}%  {'ok' if lo <= cov <= hi else 'OFF'}")
+        M = len(z[n])
+        a, b = _clopper_pearson(cov, M)
+        e = f"{100 * statistics.median(err[n]):12.3f}% {100 * max(err[n]):11.3f}%" if n in err else f"{'':13s} {'':12s}"
+        print(f"{n:14s} {e} {cov:5d}/{M:<3d}{100 * cov / M:5.0f}% {100 * a:9.1f} … {100 * b:5.1f} %  "
+              f"{'ok' if a <= 0.95 <= b else 'OFF'}")
     print(f"EI relative σ with profiles: median {100 * statistics.median(ei_sd):.2f} %, worst "
           f"{100 * max(ei_sd):.2f} % (target < 10 %)")
     if ei_sd_without:
@@ -192,6 +209,14 @@ def _summary(N, z, err, ei_sd, ei_sd_without, times, converged) -> None:
         print(f"time of one identification, warm (free + 2 loaded + 3 profiles; median of {len(times)}): "
               f"{w:.1f} s wall, {cpu:.1f} s CPU on {ARGS.cores or os.cpu_count()} core(s) (target < 10 s)")
     print(flush=True)
+
+
+def _clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Exact (Clopper–Pearson) interval of a binomial rate k/n."""
+    from scipy.stats import binomtest
+
+    ci = binomtest(k, n).proportion_ci(confidence_level=level, method="exact")
+    return float(ci.low), float(ci.high)
 
 
 def _binomial_band(n: int, p: float) -> tuple[int, int]:

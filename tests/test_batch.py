@@ -222,6 +222,10 @@ def _make_campaign(root: Path):
     from ringfit.synth.records import impact_records, ring_modes
 
     make_case(root / "tyreA", effect="none", seed=3)
+    # tyreA: free modes and rolling tables only (no joint data): fitted and sampled; tyreB keeps its standing loaded
+    # table at load_n: identified once (ringfit identify) from its free and loaded modes
+    for f in ("loaded.modes.csv", "loaded.modes.json"):
+        (root / "tyreA" / f).unlink()
     make_case(root / "tyreB", effect="none", seed=4)
     # tyreB's free table comes from impact records by SSI instead
     (root / "tyreB" / "free.modes.csv").unlink()
@@ -247,12 +251,12 @@ def test_campaign_table_and_report_from_the_saved_files(cluster, tmp_path, capsy
                    "--walkers", "8", "--min-steps", "150", "--max-steps", "150", "--quiet"])
     printed = capsys.readouterr().out
     assert status == 1  # tyreC's tyre file is bad
-    assert "tyreC/fit" in printed and "pressure_bar" in printed
+    assert "tyreC/identify" in printed and "pressure_bar" in printed
     import csv
 
     rows = {r["tyre"]: r for r in csv.DictReader((out / "campaign.csv").open())}
     assert sorted(rows) == ["tyreA", "tyreB", "tyreC"]
-    assert rows["tyreC"]["status"] == "failed" and rows["tyreC"]["failed_step"] == "fit"
+    assert rows["tyreC"]["status"] == "failed" and rows["tyreC"]["failed_step"] == "identify"
     assert "pressure_bar" in rows["tyreC"]["error"] and rows["tyreC"]["ei_n_m2_median"] == ""
     assert rows["tyreB"]["targets"] == "ssi:free.records.npz" and rows["tyreA"]["targets"] == "free.modes.csv"
     assert (out / "tyreB" / "case" / "free.modes.csv").exists()  # the SSI table, beside tyreB's test tables
@@ -265,15 +269,20 @@ def test_campaign_table_and_report_from_the_saved_files(cluster, tmp_path, capsy
             meta = __import__("json").loads(h5.attrs["meta"])
         names = meta["names"]
         assert set(meta["kinds"]) == {"log"}  # the chain holds log-parameters (docs/formats.md §11)
+        # tyreA: the free-mode fit's four parameters; tyreB: the identification's six (k_tread from the loaded table)
+        assert len(names) == (4 if tyre == "tyreA" else 6)
+        assert (out / tyre / "fitted.identify.json").exists() == (tyre == "tyreB")
         draws = np.exp(chain[meta["burn"]::meta["thin"]].reshape(-1, len(names)))
         for j, name in enumerate(names):
-            key = {"rho_a": "rho_a_kg_per_m", "ei": "ei_n_m2", "kw": "kw_n_per_m2", "kv": "kv_n_per_m2"}[name]
+            key = {"rho_a": "rho_a_kg_per_m", "ei": "ei_n_m2", "kw": "kw_n_per_m2", "kv": "kv_n_per_m2",
+                   "k_tread": "k_tread_n_per_m2", "damping_ratio": "damping_ratio"}[name]
             lo, med, hi = np.percentile(draws[:, j], [2.5, 50, 97.5])
             np.testing.assert_allclose([float(row[f"{key}_lo"]), float(row[f"{key}_median"]),
                                         float(row[f"{key}_hi"])], [lo, med, hi], rtol=1e-9)
             assert float(row[key]) == pytest.approx(read_tyre(out / tyre / "fitted.tyre.toml").ring_values[name],
                                                     rel=1e-9)
-        assert row["modes"] == str(len(load_posterior(out / tyre / "posterior.h5").meta["data"]["n"]))
+        if tyre == "tyreA":
+            assert row["modes"] == str(len(load_posterior(out / tyre / "posterior.h5").meta["data"]["n"]))
         diagnosis = read_diagnosis(out / tyre / "diagnosis.json")
         verdict = diagnosis["verdict"]
         assert row["verdict"] == "+".join(verdict["effects"])

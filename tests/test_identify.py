@@ -1,5 +1,8 @@
 """ringfit identify (issue 22): the joint identification of the ring over every measured state.
 
+The joint fits (a synthetic case's fine-grid truth and a cold compile take minutes on a shared core) are
+`slow`; the default run checks the compiled programs' shape that once hung (no batched LAPACK call).
+
 Truth from the synthetic generator (ringfit.synth.identify: a finer contact grid and more loaded-mode
 harmonics than the identification uses, coloured profile noise, a random gain and angle offset);
 refusals checked by their one line; the tyre file's covariance by a round trip.
@@ -7,10 +10,11 @@ refusals checked by their one line; the tyre file's covariance by a round trip.
 
 import json
 import math
+import re
 import shutil
 
-import os
-
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -20,12 +24,79 @@ from ringfit.fit.identify import identification_report, identify, read_identify_
 from ringfit.io.tyre import read_tyre, write_tyre
 from ringfit.synth.identify import make_identify_case
 
-# The joint fit's compiled solve (contact solves inside the Levenberg–Marquardt loop) has been seen to hang in
-# XLA's CPU runtime on jaxlib 0.10.2: every XLA thread idle, the main thread awaiting a result (stop 19's note).
-# Until that is understood these tests run only when asked, so that a hang cannot stop the suite.
-pytestmark = pytest.mark.skipif(os.environ.get("RINGFIT_RUN_IDENTIFY") != "1",
-                                reason="identify can hang in XLA's CPU runtime (jaxlib 0.10.2); "
-                                       "run with RINGFIT_RUN_IDENTIFY=1 (see README, ringfit identify)")
+
+
+def batched_lapack_calls(lowered_text: str) -> list[tuple[str, str]]:
+    """LAPACK custom calls of a lowered program whose first operand holds more than one matrix.
+
+    jaxlib 0.10.2 runs such a call in chunks on XLA's intra-op pool and blocks a pool thread until they finish;
+    two at once on a two-thread pool hang the program (ringfit.fit.identify.serial_map)."""
+    out = []
+    for m in re.finditer(r"custom_call @(lapack_\w+)\(.*?\) .*?: \((tensor<[^>]*>)", lowered_text):
+        dims = [int(d) for d in re.findall(r"(\d+)x", m.group(2))]
+        if int(np.prod(dims[:-2])) > 1:
+            out.append((m.group(1), m.group(2)))
+    return out
+
+
+def test_the_check_finds_a_batched_lapack_call():
+    """The check below is not vacuous: a vmapped solve lowers to one batched LU call, a mapped one to single ones."""
+    a, b = jnp.ones((3, 40, 40)) + 40 * jnp.eye(40), jnp.ones((3, 40, 1))
+    vmapped = jax.jit(jax.vmap(jnp.linalg.solve)).lower(a, b).as_text()
+    mapped = jax.jit(lambda a, b: jax.lax.map(lambda ab: jnp.linalg.solve(*ab), (a, b))).lower(a, b).as_text()
+    assert any(name == "lapack_dgetrf_ffi" for name, _ in batched_lapack_calls(vmapped))
+    assert "lapack_dgetrf_ffi" in mapped and batched_lapack_calls(mapped) == []
+
+
+def _small_joint_problem(T: int = 2, P: int = 3):
+    """The joint problem of free modes, T loaded tables and P profiles, on made-up rows (for its programs' shape)."""
+    from ringfit.fit import identify as im
+    from ringfit.fit.engine import Problem
+    from ringfit.fit.least_squares import ring_vector
+    from ringfit.params import table9
+    from ringfit.physics.contact import ContactSolver
+    from ringfit.physics.profile import ProfileModel
+
+    geometry, ring = table9()
+    solver = ContactSolver()
+    M = solver.n_grid
+    H = M // 2 - im.PROFILE_K_MIN
+    n = np.arange(1, 6)
+    rows = im._Rows(
+        free=dict(n=n.astype(float), freq=100.0 * n, sigma=np.ones(5)),
+        damping=dict(zeta=np.full(5, 0.02), sigma=np.full(5, 0.001)),
+        loaded=dict(n=np.tile(n - 1, T), sin=np.zeros(5 * T, int), table=np.repeat(np.arange(T), 5),
+                    freq=np.tile(100.0 * n, T), sigma=np.ones(5 * T), load=np.linspace(3000.0, 5000.0, T),
+                    drum=np.full(T, np.nan)),
+        profiles=dict(measured=np.zeros((P, 2, 2 * H)), sigma=np.ones((P, 2, 2 * H)), omega=np.full(P, 30.0),
+                      load=np.linspace(3000.0, 5000.0, P), drum=np.full(P, np.nan), P=P))
+    problem = Problem(im.JointResiduals(P, solver, ProfileModel()), im._arrays(geometry, rows, solver),
+                      im.joint_coords(P))
+    theta = np.concatenate([ring_vector(ring), np.tile([0.0, 1.0], P)])
+    return problem, theta, tuple(problem.names)[:6]
+
+
+def test_the_joint_programs_hold_no_batched_lapack_call():
+    """The hang of `ringfit identify` (jaxlib 0.10.2: concurrent batched LAPACK calls wait for each other on XLA's
+    CPU pool): neither the joint least-squares solve nor the posterior's log-probability over a chunk of walkers
+    may hold one (both traced only, not compiled)."""
+    from ringfit.fit import engine
+
+    problem, theta, free = _small_joint_problem()
+    fs = engine.free_set(problem, free)
+    z0 = engine._start(problem, fs.index, fs.size, fs.arrays, theta[None])[0]
+    leaves, treedef = jax.tree.flatten(problem.data)
+    solve = engine._solve.lower(leaves, z0, np.append(theta, 0.0), fs.arrays, fs.prior_w, fs.prior_mean,
+                                np.int64(8), model=problem.model, treedef=treedef, rtol=1e-8, atol=1e-8,
+                                method="levenberg_marquardt").as_text()
+    assert "lapack_dgetrf_ffi" in solve  # the contact solves are in it
+    assert batched_lapack_calls(solve) == []
+    walkers = np.tile(z0, (6, 1))
+    logp = engine._batched_log_probability.lower(
+        walkers, leaves, np.append(theta, 0.0), fs.unbounded_arrays(), fs.prior_w, fs.prior_mean,
+        np.full(fs.size, -np.inf), np.full(fs.size, np.inf), 1.0, model=problem.model, treedef=treedef).as_text()
+    assert "lapack_dgetrf_ffi" in logp
+    assert batched_lapack_calls(logp) == []
 
 
 @pytest.fixture(scope="module")
@@ -46,6 +117,7 @@ def _z(ident, truth, name):
     return math.log(p["value"] / truth["ring"][name]) / p["sd_ln"]
 
 
+@pytest.mark.slow
 def test_joint_fit_recovers_the_truth_within_its_intervals(joint):
     ident, truth = joint
     assert ident.converged
@@ -59,6 +131,7 @@ def test_joint_fit_recovers_the_truth_within_its_intervals(joint):
         assert abs(got["angle_offset_deg"] - want["angle_offset_deg"]) < 0.1
 
 
+@pytest.mark.slow
 def test_report_has_fisher_shares_that_sum_to_one_and_a_correlation(joint):
     ident, _ = joint
     doc = identification_report(ident)
@@ -75,6 +148,7 @@ def test_report_has_fisher_shares_that_sum_to_one_and_a_correlation(joint):
     np.testing.assert_allclose(corr, corr.T, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_free_and_loaded_tables_alone_identify_k_tread(tmp_path):
     truth = make_identify_case(tmp_path / "c", seed=5, profiles=False)
     ident = identify(read_identify_folder(tmp_path / "c"))
@@ -84,6 +158,7 @@ def test_free_and_loaded_tables_alone_identify_k_tread(tmp_path):
     assert ident.blocks["loaded modes"]["fisher_share"]["k_tread"] == pytest.approx(1.0)
 
 
+@pytest.mark.slow
 def test_a_loaded_table_without_load_is_refused_naming_the_key(joint_case, tmp_path):
     folder, _ = joint_case
     bad = tmp_path / "bad"
@@ -98,6 +173,7 @@ def test_a_loaded_table_without_load_is_refused_naming_the_key(joint_case, tmp_p
     assert not (tmp_path / "x.tyre.toml").exists() and not (tmp_path / "x.identify.json").exists()
 
 
+@pytest.mark.slow
 def test_tyre_covariance_round_trips_and_bad_ones_are_refused(tmp_path, joint):
     ident, _ = joint
     from ringfit.io.tyre import Tyre
@@ -121,6 +197,7 @@ def test_tyre_covariance_round_trips_and_bad_ones_are_refused(tmp_path, joint):
         read_tyre(tmp_path / "c.toml")
 
 
+@pytest.mark.slow
 def test_cli_writes_tyre_and_report_beside_it(joint_case, tmp_path, capsys):
     folder, truth = joint_case
     out = tmp_path / "id.tyre.toml"
@@ -137,6 +214,7 @@ def test_cli_writes_tyre_and_report_beside_it(joint_case, tmp_path, capsys):
     assert main(["identify", str(folder), "--out", str(out), "--quiet"]) == 2
 
 
+@pytest.mark.slow
 def test_diagnose_with_the_fitted_tyre_as_baseline_gives_the_same_diagnosis(tmp_path):
     """One ring per tyre: `diagnose --tyre` with `ringfit fit`'s tyre file (the same ring the default path fits
     to free.modes.csv) evaluates that ring instead of refitting it — the diagnosis is the same."""
@@ -164,6 +242,7 @@ def test_diagnose_with_the_fitted_tyre_as_baseline_gives_the_same_diagnosis(tmp_
     assert main(["diagnose", str(case), "--out", str(tmp_path / "c.diagnosis.json"), "--tyre", str(bare)]) == 2
 
 
+@pytest.mark.slow
 def test_roll_states_the_ring_band_from_the_covariance(tmp_path, capsys):
     """The tyre's [ring.covariance] propagated into the standing deflection: a band around the nominal value that
     grows with the covariance (k_trd ±20 % must move the deflection more than ±2 %)."""
@@ -188,6 +267,7 @@ def test_roll_states_the_ring_band_from_the_covariance(tmp_path, capsys):
     assert widths[1] > 3 * widths[0]
 
 
+@pytest.mark.slow
 def test_cli_posterior_of_the_joint_fit(tmp_path):
     """--posterior: emcee on the same joint problem; its medians sit inside the least-squares 95 % intervals."""
     make_identify_case(tmp_path / "c", seed=8, profiles=False)

@@ -13,8 +13,6 @@ NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.py"))
 @pytest.mark.slow
 @pytest.mark.parametrize("notebook", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
 def test_notebook_runs(notebook, tmp_path):
-    if "identify" in notebook.name and os.environ.get("RINGFIT_RUN_IDENTIFY") != "1":
-        pytest.skip("ringfit identify can hang in XLA's CPU runtime (jaxlib 0.10.2); RINGFIT_RUN_IDENTIFY=1 runs it")
     env = dict(os.environ, MPLBACKEND="Agg", RINGFIT_NOTEBOOK_OUT=str(tmp_path))
     proc = subprocess.run(
         [sys.executable, str(notebook)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600

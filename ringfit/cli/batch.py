@@ -62,6 +62,7 @@ WARM_MODULES = {
     "ssi": ("ringfit.io.records", "ringfit.targets.identify"),
     "fit": ("ringfit.fit.least_squares", "ringfit.fit.identifiability", "ringfit.io.tyre"),
     "sample": ("ringfit.fit.posterior", "ringfit.io.tyre"),
+    "identify": ("ringfit.fit.identify", "ringfit.fit.posterior", "ringfit.io.tyre"),
     "diagnose": ("ringfit.gap",),
     "profile": ("ringfit.io.continuous", "ringfit.targets.rolling_profile"),
     "estimate": ("ringfit.fit.estimate", "ringfit.io.profiles", "ringfit.io.tyre"),
@@ -521,12 +522,32 @@ def campaign_tyres(folder: Path) -> list[Path]:
 FREE_RECORDS = ("free.records.npz", "free.uff", "free.unv")
 
 
+def has_joint_data(folder: Path) -> bool:
+    """Whether a tyre's folder holds states ``ringfit identify`` uses beside the free table: a rolling profile, or a
+    standing table whose sidecar says ``state = "loaded"`` (its ``load_n`` is checked by identify itself)."""
+    import json
+
+    if any(folder.glob("*.profile.csv")):
+        return True
+    for sidecar in folder.glob("*.modes.json"):
+        if sidecar.name == "free.modes.json":
+            continue
+        try:
+            cond = json.loads(sidecar.read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(cond, dict) and cond.get("state") == "loaded" and not (cond.get("speed_kmh") or 0):
+            return True
+    return False
+
+
 def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
     """Tasks of a campaign and, per tyre, its output paths (docs/formats.md §13 layout)."""
     import os
     import shutil
 
     from ringfit.batch import Task
+    from ringfit.cli.identify import report_path as identify_report_path
 
     force = ["--force"] if opts.force else []
     sample_opts = ["--walkers", str(opts.walkers), "--min-steps", str(opts.min_steps), "--max-steps",
@@ -563,16 +584,27 @@ def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
         else:
             case, targets = tyre, tyre / "free.modes.csv"
             paths.update(case=str(case), targets=str(targets))
-        tasks.append(step(name, "fit", ["fit", str(targets), "--tyre", str(tyre / "tyre.toml"), "--out",
-                                        paths["fitted"], "--prior", opts.prior, *force], after, [paths["fitted"]]))
-        tasks.append(step(name, "sample", ["sample", str(targets), "--tyre", paths["fitted"], "--out",
-                                           paths["posterior"], *sample_opts, *force], (f"{name}/fit",),
-                          [paths["posterior"]]))
+        if has_joint_data(tyre):
+            # loaded tables at a known load or profiles: the tyre is identified once from everything measured
+            # (``ringfit identify``, its posterior included); every later step reads that tyre file
+            tasks.append(step(name, "identify", ["identify", str(case), "--out", paths["fitted"], "--posterior",
+                                                 paths["posterior"], *sample_opts[2:-3], "--quiet", *force], after,
+                              [paths["fitted"], paths["posterior"], identify_report_path(Path(paths["fitted"]))]))
+            paths["identified"] = True
+            first = f"{name}/identify"
+        else:
+            tasks.append(step(name, "fit", ["fit", str(targets), "--tyre", str(tyre / "tyre.toml"), "--out",
+                                            paths["fitted"], "--prior", opts.prior, *force], after,
+                              [paths["fitted"]]))
+            tasks.append(step(name, "sample", ["sample", str(targets), "--tyre", paths["fitted"], "--out",
+                                               paths["posterior"], *sample_opts, *force], (f"{name}/fit",),
+                              [paths["posterior"]]))
+            first = f"{name}/fit"
         diag_opts = ["--effects", opts.effects] if opts.effects else []
         # one ring per tyre: the diagnosis takes the fitted tyre file as its baseline (not a refit of its own), so the
         # campaign table (read from that file) and the diagnosis agree by construction
         tasks.append(step(name, "diagnose", ["diagnose", str(case), "--out", paths["diagnosis"], "--tyre",
-                                             paths["fitted"], "--quiet", *diag_opts, *force], (f"{name}/fit",),
+                                             paths["fitted"], "--quiet", *diag_opts, *force], (first,),
                           [paths["diagnosis"]]))
         layout[name] = paths
     return tasks, layout
@@ -610,7 +642,7 @@ def run_campaign(args) -> int:
     for path in (table_path, report_path):
         check_output_path(path, overwrite=rebuild)
     tasks, layout = plan_campaign(tyres, args.out, args)
-    results, timing = _run(args, tasks, ("ssi", "fit", "sample", "diagnose"), "ringfit campaign")
+    results, timing = _run(args, tasks, ("ssi", "fit", "sample", "identify", "diagnose"), "ringfit campaign")
 
     from ringfit.report.campaign import collect_campaign, write_campaign_csv, write_campaign_report
 

@@ -44,6 +44,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -150,10 +151,23 @@ class GaussianPrior:
 
 
 class AbstractResiduals(eqx.Module):
-    """A residual model: ``model(theta, data) -> (residuals (m,), aux)``; fields are static configuration."""
+    """A residual model: ``model(theta, data) -> (residuals (m,), aux)``; fields are static configuration.
+
+    ``serial_batches`` (class attribute): evaluate batches of parameter vectors (:func:`residuals_batch`,
+    :func:`sum_of_squares_batch`, :func:`log_probability`) one vector after another instead of vmapped — for
+    models with several independent LAPACK-backed solves, whose batched calls can hang XLA's CPU thread pool
+    (:func:`ringfit.fit.identify.serial_map`).
+    """
+
+    serial_batches: ClassVar[bool] = False
 
     def __call__(self, theta, data):
         raise NotImplementedError
+
+
+def map_parameters(model: AbstractResiduals, fn, xs):
+    """``fn`` over the leading axis of ``xs`` (parameter vectors): vmapped, or serially for ``model.serial_batches``."""
+    return jax.lax.map(fn, xs) if model.serial_batches else jax.vmap(fn)(xs)
 
 
 @dataclass(frozen=True)
@@ -612,7 +626,7 @@ def least_squares_batch(
 @functools.partial(jax.jit, static_argnames=("model", "treedef"))
 def _batched_sum_of_squares(thetas, leaves, *, model, treedef):
     data = jax.tree.unflatten(treedef, leaves)
-    return jax.vmap(lambda th: jnp.sum(model(th, data)[0] ** 2))(thetas)
+    return map_parameters(model, lambda th: jnp.sum(model(th, data)[0] ** 2), thetas)
 
 
 def in_fixed_chunks(batched_fn, rows, size: int) -> np.ndarray:
@@ -747,7 +761,7 @@ def residuals(problem: Problem, theta) -> tuple[np.ndarray, object]:
 @functools.partial(jax.jit, static_argnames=("model", "treedef"))
 def _batched_residuals(thetas, leaves, *, model, treedef):
     data = jax.tree.unflatten(treedef, leaves)
-    return jax.vmap(lambda th: model(th, data)[0])(thetas)
+    return map_parameters(model, lambda th: model(th, data)[0], thetas)
 
 
 def residuals_batch(problem: Problem, thetas, chunk: int = 64) -> np.ndarray:
@@ -772,7 +786,7 @@ def _batched_log_probability(u, leaves, theta0, free_arrays, prior_w, prior_mean
         value = jnp.where(inside, value, -jnp.inf)
         return jnp.where(jnp.isnan(value), -jnp.inf, value)
 
-    return jax.vmap(one)(u)
+    return map_parameters(model, one, u)
 
 
 def log_probability(problem: Problem, theta, free: tuple[str, ...], *, lo_u=None, hi_u=None,

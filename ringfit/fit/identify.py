@@ -36,6 +36,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -220,12 +221,31 @@ def standing_half_angle(ring: RingParams, geometry: TyreGeometry, load, road, so
     return 0.5 * (trail - lead)
 
 
+def serial_map(f, xs):
+    """``f`` over the leading axis of the pytree ``xs``, one element after another (``jax.lax.map``), not vmapped.
+
+    Why: jaxlib's CPU LAPACK kernels (LU, triangular solve, eigh, …; jaxlib 0.10.2) split a *batched* call
+    into chunks, schedule them on XLA's intra-op thread pool and block the calling pool thread until they are
+    done. XLA runs independent parts of one program concurrently on that same pool, so when two batched calls
+    (the loaded tables' contact solves and the profiles', say) start together on a pool of two threads — a
+    2-core machine — every pool thread waits for a chunk no thread is free to run: the program hangs for ever
+    with every XLA thread idle. A call with one matrix runs inline and never waits, so mapping the contact
+    solves one condition after another removes the hang whatever else runs beside them (the cost is nil: the
+    kernel loops over the matrices either way). tests/test_identify.py checks the compiled programs for
+    batched LAPACK calls; :attr:`JointResiduals.serial_batches` makes the engine's batches over parameter
+    vectors (the posterior's walkers) serial too.
+    """
+    return jax.lax.map(f, xs)
+
+
 class JointResiduals(AbstractResiduals):
     """Rows of every block, each divided by its σ; θ = ring fields, then per profile (angle offset, gain).
 
     aux: ``(free model Hz, loaded model Hz, profile model rows)`` (``None`` for absent blocks).
     """
 
+    #: the posterior's walkers are evaluated one after another (see :func:`serial_map`)
+    serial_batches: ClassVar[bool] = True
     n_profiles: int = eqx.field(static=True)
     solver: ContactSolver = eqx.field(static=True)
     profile_model: ProfileModel = eqx.field(static=True)
@@ -242,15 +262,15 @@ class JointResiduals(AbstractResiduals):
             rows.append((ring.damping_ratio - data.d_zeta) / data.d_sigma)
         if data.l_n is not None:
             # loaded modes: the patch half-angle from the static contact solve at load_n (docs/physics.md §4.3–4.4),
-            # the modes from the patch foundation of §6 ground_contact (§11 "loaded modes")
-            half = jax.vmap(lambda fz, road: standing_half_angle(ring, g, fz, road, self.solver))(
-                data.l_load, data.l_roads)
-
-            def table_freqs(a):
+            # the modes from the patch foundation of §6 ground_contact (§11 "loaded modes"); one table after another
+            # (serial_map: no batched LAPACK call, see its docstring)
+            def table_freqs(args):
+                fz, road = args
+                a = standing_half_angle(ring, g, fz, road, self.solver)
                 c, s = loaded_natural_frequencies(ring, g, a, self.n_harmonics)
                 return jnp.stack([c, s])
 
-            freqs = jax.vmap(table_freqs)(half)  # (T, 2, N)
+            freqs = serial_map(table_freqs, (data.l_load, data.l_roads))  # (T, 2, N)
             model = freqs[data.l_table, data.l_sin, data.l_n]
             rows.append((model - data.l_freq) / data.l_sigma)
             aux[1] = model
@@ -260,9 +280,14 @@ class JointResiduals(AbstractResiduals):
             offset = theta[base : base + 2 * P : 2]
             gain = theta[base + 1 : base + 2 * P : 2]
             # profiles: the rolling ring read by the sensor (docs/physics.md §4–§5), per profile a gain and an
-            # angle offset, compared in revolution harmonics (§11 "profiles")
-            ch = profile_channels(self.profile_model, ring, g, data.p_omega, data.p_load, data.p_roads, data.p_band,
-                                  0.0, self.solver)
+            # angle offset, compared in revolution harmonics (§11 "profiles"); one profile after another (serial_map)
+
+            def one_profile(args):
+                om, fz, road, band = args
+                return profile_channels(self.profile_model, ring, g, om[None], fz[None],
+                                        jax.tree.map(lambda x: x[None], road), band[None], 0.0, self.solver)[0]
+
+            ch = serial_map(one_profile, (data.p_omega, data.p_load, data.p_roads, data.p_band))
             ch = shift_angle(ch, offset[:, None, None]) * gain[:, None, None]
             model = harmonic_rows(ch)
             rows.append(((model - data.p_measured) / data.p_sigma).ravel())

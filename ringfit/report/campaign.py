@@ -34,7 +34,7 @@ from ringfit.report.html import esc, figure_html, fmt, html_document, table_html
 #: Family-wise false-flag rate of the outlier test (Bonferroni over the tyres).
 OUTLIER_ALPHA = 0.05
 #: Steps of a campaign in order (a tyre's first failed step is reported).
-STEPS = ("ssi", "fit", "sample", "diagnose")
+STEPS = ("ssi", "fit", "sample", "identify", "diagnose")
 
 
 @dataclass
@@ -175,9 +175,12 @@ def collect_campaign(layout: dict[str, dict], results=()) -> Campaign:
                     row.update(status="failed", failed_step=step, error=r.error)
         row["targets"] = (f"ssi:{Path(paths['records']).name}" if paths.get("records")
                           else Path(paths["targets"]).name)
-        if usable(tyre, "fit", paths.get("fitted")):
+        # a tyre with joint data is identified once (step "identify": its tyre file and posterior), others are fitted
+        # to their free modes and sampled (steps "fit", "sample"); the diagnosis reads the same tyre file
+        identified = bool(paths.get("identified"))
+        if usable(tyre, "identify" if identified else "fit", paths.get("fitted")):
             row["_lsq"] = read_tyre(paths["fitted"]).ring_values
-        if usable(tyre, "sample", paths.get("posterior")):
+        if usable(tyre, "identify" if identified else "sample", paths.get("posterior")):
             post = load_posterior(paths["posterior"])
             posts[tyre] = post
             data = post.meta.get("data") or {}
@@ -191,7 +194,8 @@ def collect_campaign(layout: dict[str, dict], results=()) -> Campaign:
             row["heldout_shrink_pct"] = shrink if v["effect"] not in ("none", "unexplained") else None
         rows.append(row)
 
-    names = {n for p in posts.values() for n in p.names}
+    # ring parameters (and any effect parameters); not the identification's per-run nuisances (gain_i, angle_offset_i)
+    names = {n for p in posts.values() for n in p.names if not n.startswith(("gain_", "angle_offset_"))}
     parameters = [p for p in RING_PARAMETERS if p in names] + sorted(names - set(RING_PARAMETERS))
     N, k = len(rows), len(parameters)
     median, lo, hi = (np.full((N, k), np.nan) for _ in range(3))
@@ -200,7 +204,7 @@ def collect_campaign(layout: dict[str, dict], results=()) -> Campaign:
         post = posts.get(row["tyre"])
         lsq = row.pop("_lsq", {})
         summary = {s["name"]: s for s in post.summary_table()} if post is not None else {}
-        if post is not None and set(post.names) == set(parameters):
+        if post is not None and set(parameters) <= set(post.names):
             draws = post.samples
             log_mean[i] = [np.log(draws[:, j]).mean() if np.all(draws[:, j] > 0) else draws[:, j].mean()
                            for j in (post.names.index(p) for p in parameters)]
