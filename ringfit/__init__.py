@@ -87,7 +87,7 @@ _EXPORTS = {
     "read_case": "ringfit.gap.case",
     "diagnose": "ringfit.gap.diagnosis",
     # state estimation
-    "estimate_load": "ringfit.fit.estimate",
+    "estimate_load": "ringfit.fit.estimate.load",
     # everywhere
     "InputError": "ringfit.errors",
     "enable_compilation_cache": "ringfit._cache",
@@ -106,10 +106,10 @@ _ELSEWHERE = {
     "GaussianPrior": "ringfit.fit.engine",
     "Problem": "ringfit.fit.engine",
     "least_squares": "ringfit.fit.engine",
-    "EstimateSettings": "ringfit.fit.estimate",
-    "LoadEstimate": "ringfit.fit.estimate",
-    "RevolutionEstimates": "ringfit.fit.estimate",
-    "estimate_recording": "ringfit.fit.estimate",
+    "EstimateSettings": "ringfit.fit.estimate.problem",
+    "LoadEstimate": "ringfit.fit.estimate.load",
+    "RevolutionEstimates": "ringfit.fit.estimate.revolutions",
+    "estimate_recording": "ringfit.fit.estimate.revolutions",
     "Identifiability": "ringfit.fit.identifiability",
     "Posterior": "ringfit.fit.posterior",
     "log_probability_function": "ringfit.fit.posterior",
