@@ -622,7 +622,7 @@ def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed
         magnitude.update(c_w=c_w, c_v=c_w * ring.kv / ring.kw)
         model = RingModel(damping=Hysteretic(), terms=(Viscous(c_w=c_w, c_v=magnitude["c_v"]),))
     elif effect == "tread_shear":
-        magnitude.update(k_x=float(rng.uniform(3e6, 30e6)), mu=float(rng.uniform(0.7, 1.2)))
+        magnitude.update(k_x=float(rng.uniform(8e6, 40e6)), mu=float(rng.uniform(0.7, 1.2)))
         shear = LeverShearTruth(magnitude["k_x"], magnitude["mu"])
     elif effect == "rotation":
         magnitude["chi"] = float(rng.uniform(0.1, 0.6))
