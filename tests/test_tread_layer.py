@@ -34,6 +34,7 @@ def test_softening_law_limits_and_series():
     assert np.all(np.diff(g) <= 0)
 
 
+@pytest.mark.slow  # two compilations of the patch block: ~10 s on a free core
 def test_zero_rib_width_is_the_winkler_patch_and_narrow_ribs_tend_to_it():
     from ringfit.physics.loaded import loaded_matrices
 
