@@ -61,11 +61,11 @@ def test_lever_loads_do_the_virtual_work_of_the_tip_kinematics(solution):
         dwp = np.fft.irfft(1j * np.arange(M // 2 + 1) * np.fft.rfft(dw), M)
         eps = 1e-3
 
-        def x_tip(s):  # linear tip kinematics at belt displacement + s·(δw, δv)
+        def x_tip(s):  # tip kinematics of the element normal to the belt at belt displacement + s·(δw, δv)
             w, v = np.asarray(sol.w) + s * dw, np.asarray(sol.v) + s * dv
             wp = np.fft.irfft(1j * np.arange(M // 2 + 1) * np.fft.rfft(w), M)
             ps = (wp - v) / R
-            return (g.outer_radius + w) * np.sin(phi) + v * np.cos(phi) - tau * ps * np.cos(phi)
+            return (R + w) * np.sin(phi) + v * np.cos(phi) + tau * np.sin(phi - ps)
 
         dx = (x_tip(eps) - x_tip(-eps)) / (2 * eps)
         work_kinematics = np.sum(qx * dx) * R * dphi
@@ -86,18 +86,19 @@ def test_lever_loads_do_the_virtual_work_of_the_tip_kinematics(solution):
 
 def _lever_qx(load, sol, r, g):
     """The tip force q_x of the lever model, from the hook's own loads: q_v = q_x cos φ − m/R and
-    m = −τ q_x cos φ give q_v = q_x cos φ (1 + τ/R)."""
+    m = −τ q_x cos(φ − ψ) give q_v = q_x (cos φ + (τ/R) cos(φ − ψ))."""
     _, qv = load(sol, r, g)
     phi = np.asarray(sol.phi)
     tau = g.outer_radius - g.radius
-    c = np.cos(phi) * (1.0 + tau / g.radius)
+    psi = np.asarray(belt_slope_grid(sol, g))
+    c = np.cos(phi) + (tau / g.radius) * np.cos(phi - psi)
     return np.where(np.abs(c) > 1e-9, np.asarray(qv) / np.where(np.abs(c) > 1e-9, c, 1.0), 0.0)
 
 
 def test_lever_loads_agree_with_an_independent_discretisation(solution):
     """The blind cases' truth (ringfit.synth.cases.LeverShearTruth: exact rotated element, finite-difference slope,
     interpolated leading edge, R_e by bisection, loads by reverse-mode virtual work) and the diagnosis's
-    BrushShearLoad(lever=True) give the same belt loads to the two discretisations' difference (~1.6 % L2), while
+    BrushShearLoad(lever=True) give the same belt loads to the two discretisations' difference (~1 % L2), while
     the plain brush (no lever) is far from both."""
     from ringfit.synth.cases import LeverShearTruth
 
