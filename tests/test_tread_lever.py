@@ -130,7 +130,7 @@ def test_blind_lever_shear_case_is_recovered_and_not_absorbed_by_k_tread(tmp_pat
 
     label = make_profile_case(tmp_path / "case", "tread_shear", seed=2001)
     d = diagnose(tmp_path / "case", progress=False)
-    assert d.verdict["effects"] == ["tread_shear"]
+    assert d.verdict["effect"] == "tread_shear", d.verdict  # the library effect found (a remaining "unexplained" allowed)
     cand = next(c for c in d.content["candidates"] if c["effect"] == "tread_shear" and c.get("accepted"))
     k_x = cand["params"]["shear_stiffness_mn_per_m2"]["value"] * 1e6
     assert k_x == pytest.approx(label.magnitude["k_x"], rel=0.3)
