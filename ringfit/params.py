@@ -44,6 +44,9 @@ class TyreGeometry(eqx.Module):
     - ``pressure``: inflation (gauge) pressure p0 [Pa].
     - ``tread_thickness``: tread / secondary-spring thickness τ [m];
       the outer radius is R + τ.
+    - ``tread_rib_width``: width B [m] of the tread's ribs (between circumferential grooves)
+      for the incompressible tread layer of the loaded modes (docs/physics.md §6 ``ground_contact``);
+      0 (default) = local tread springs (Winkler).
     - ``name``: free text, static.
     """
 
@@ -51,6 +54,7 @@ class TyreGeometry(eqx.Module):
     width: float
     pressure: float
     tread_thickness: float = 0.020
+    tread_rib_width: float = 0.0
     name: str = eqx.field(static=True, default="")
 
     @property

@@ -92,3 +92,13 @@ def test_case_example_with_an_effect(tmp_path, capsys):
     assert main(["example", "case", "--out", str(tmp_path / "b"), "--effect", "belt_wear"]) == 2
     assert "--effect" in capsys.readouterr().err
     assert main(["example", "records", "--out", str(tmp_path / "c"), "--effect", "none"]) == 2
+
+
+@pytest.mark.slow
+def test_case_example_with_a_profile_effect(tmp_path):
+    """`--effect tread_shear` writes a case of rolling profiles (the lever truth of ringfit.synth.cases)."""
+    out = tmp_path / "ex"
+    assert main(["example", "case", "--out", str(out), "--effect", "tread_shear", "--quiet"]) == 0
+    assert len(list((out / "case").glob("run*.profile.csv"))) == 4
+    assert (out / "case" / "tyre.toml").is_file() and (out / "case" / "free.modes.csv").is_file()
+    assert "tread_shear" in (out / "README.md").read_text()

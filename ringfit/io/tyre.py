@@ -24,9 +24,10 @@ from ringfit.io.checks import MAX_PRESSURE_BAR
 from ringfit.io.files import atomic_write_text, check_output_path
 from ringfit.params import BAR, RING_PARAMETERS, RingParams, TyreGeometry
 
-_TYRE_KEYS = {"radius_m": "radius", "width_m": "width", "tread_thickness_m": "tread_thickness"}
+_TYRE_KEYS = {"radius_m": "radius", "width_m": "width", "tread_thickness_m": "tread_thickness",
+              "tread_rib_width_m": "tread_rib_width"}
 #: Keys of the [tyre] table.
-TYRE_KEYS = ("name", "radius_m", "width_m", "pressure_bar", "tread_thickness_m")
+TYRE_KEYS = ("name", "radius_m", "width_m", "pressure_bar", "tread_thickness_m", "tread_rib_width_m")
 #: Top-level tables of a tyre file; ``meta`` is free-form (notes, provenance).
 TABLES = ("tyre", "ring", "meta")
 
@@ -38,6 +39,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "width_m": (0.005, 2.0),
     "pressure_bar": (0.0, MAX_PRESSURE_BAR),
     "tread_thickness_m": (0.0, 0.2),
+    "tread_rib_width_m": (0.0, 2.0),
     "rho_a_kg_per_m": (1e-3, 1e3),
     "ei_n_m2": (1e-6, 1e6),
     "kw_n_per_m2": (1.0, 1e11),
@@ -295,6 +297,8 @@ def write_tyre(tyre: Tyre, path: str | os.PathLike, *, overwrite: bool = False) 
         radius_m=float(g.radius), width_m=float(g.width), pressure_bar=float(g.pressure) / BAR,
         tread_thickness_m=float(g.tread_thickness),
     )
+    if float(g.tread_rib_width) > 0:
+        tyre_table["tread_rib_width_m"] = float(g.tread_rib_width)
     tyre_table.update(tyre.extra.get("tyre", {}))
     ring_table = {RING_PARAMETERS[k][1]: float(v) for k, v in tyre.ring_values.items() if math.isfinite(v)}
     ring_table.update(tyre.extra.get("ring", {}))

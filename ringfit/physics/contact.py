@@ -270,10 +270,11 @@ class BrushShearLoad(eqx.Module):
     ``q_v += q_x cos φ``. Free rolling fixes R_e by ``∫ q_v dφ = 0``. ``k_x`` [N/m²].
 
     ``lever`` (static, default off): the tread element stays normal to the belt, so its tip
-    sits at ``x_b − τ ψ cos φ`` (τ = R_out − R, ψ = (w′ − v)/R the belt slope, docs/physics.md §5);
-    the tip's shear force then also acts on the belt through the lever τ, a moment
-    ``m = −τ q_x cos φ`` per unit length whose virtual work ``∫ m δψ R dφ`` gives the loads
-    ``q_w += −m′/R``, ``q_v += −m/R`` (docs/physics.md §6 ``tread_shear``, the lever).
+    sits at ``(R + w) sin φ + v cos φ + τ sin(φ − ψ)`` (τ = R_out − R, ψ = (w′ − v)/R the belt slope,
+    docs/physics.md §5; to first order in ψ, ``x_b − τψ cos φ``); the tip's shear force then also acts
+    on the belt through the lever τ, a moment ``m = −τ q_x cos(φ − ψ)`` per unit length whose virtual
+    work ``∫ m δψ R dφ`` gives the loads ``q_w += −m′/R``, ``q_v += −m/R`` (docs/physics.md §6
+    ``tread_shear``, the lever).
     """
 
     k_x: float
@@ -285,9 +286,10 @@ class BrushShearLoad(eqx.Module):
         p = sol.pressure
         inside = jax.lax.stop_gradient(p > 0)
         x_b = (geometry.outer_radius + sol.w) * jnp.sin(phi) + sol.v * jnp.cos(phi)
-        if self.lever:
+        if self.lever:  # the element normal to the belt, exactly: its tip at (R + w) sin φ + v cos φ + τ sin(φ − ψ)
             tau = geometry.outer_radius - geometry.radius
-            x_b = x_b - tau * belt_slope_grid(sol, geometry) * jnp.cos(phi)
+            psi = belt_slope_grid(sol, geometry)
+            x_b = (geometry.radius + sol.w) * jnp.sin(phi) + sol.v * jnp.cos(phi) + tau * jnp.sin(phi - psi)
         first = jnp.argmax(inside)  # leading edge: first grid point in the patch (smallest φ)
         s = phi - phi[first]
         D = x_b - x_b[first]
@@ -299,7 +301,7 @@ class BrushShearLoad(eqx.Module):
         q_x = jnp.where(inside, jnp.clip(q_x, -lim, lim), 0.0)
         q_w, q_v = q_x * jnp.sin(phi), q_x * jnp.cos(phi)
         if self.lever:
-            m = -tau * q_x * jnp.cos(phi)
+            m = -tau * q_x * jnp.cos(phi - psi)  # q_x ∂x_tip/∂ψ
             dphi = phi[1] - phi[0]
             dm = (jnp.roll(m, -1) - jnp.roll(m, 1)) / (2.0 * dphi)  # m is continuous: |q_x| ≤ μp → 0 at the edges
             q_w = q_w - dm / geometry.radius

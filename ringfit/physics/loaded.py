@@ -52,6 +52,56 @@ def patch_overlap(half_angle, n_max: int = DEFAULT_HARMONICS):
     return 0.5 * (S(i - j) + S(i + j)), 0.5 * (S(i - j) - S(i + j))
 
 
+#: Sine modes of the patch kept in :func:`tread_layer_overlap` (the layer weights g(s_k) fall as 3/s_k²).
+LAYER_SINES = 256
+#: Gauss–Legendre points over the patch for the projections of :func:`tread_layer_overlap`.
+LAYER_QUADRATURE = 640
+
+
+def layer_softening(s):
+    """g(s) = 3(1 − tanh s / s)/s² (g(0) = 1): the stiffness of an incompressible tread rib of width B against a
+    belt pattern of wavenumber κ along it, relative to a uniform compression, s = κB/2 (docs/physics.md §6
+    ``ground_contact``, the tread layer). Series 1 − 2s²/5 + 17s⁴/105 − 62s⁶/945 below s = 0.05 (no cancellation)."""
+    s = jnp.asarray(s, dtype=jnp.float64)
+    small = s < 0.05
+    t = jnp.where(small, 1.0, s)
+    series = 1.0 - 0.4 * s**2 + (17.0 / 105.0) * s**4 - (62.0 / 945.0) * s**6
+    return jnp.where(small, series, 3.0 * (1.0 - jnp.tanh(t) / t) / t**2)
+
+
+def tread_layer_overlap(half_angle, radius, rib_width, n_max: int = DEFAULT_HARMONICS,
+                        n_sines: int = LAYER_SINES, n_quad: int = LAYER_QUADRATURE):
+    """Patch stiffness integrals of an incompressible tread of ribs of width B (docs/physics.md §6
+    ``ground_contact``, the tread layer), in the units of :func:`patch_overlap` (k_trd R times these is [N/m]).
+
+    The patch's arc ``x = Rφ ∈ [−L/2, L/2]`` (L = 2aR) is expanded in its Dirichlet sine modes
+    ``s_k(x) = sin(kπ(x + L/2)/L)``; the rib's pressure vanishes at the patch's edges and at the rib's sides,
+    and each sine mode is stiffened by ``k_trd g(s_k)``, s_k = kπB/(2L) (:func:`layer_softening`):
+
+        K_ij / (k_trd R) = (2/(L R)) Σ_k g(s_k) c_ik c_jk,   c_ik = ∫ Φ_i(x/R) s_k(x) dx
+
+    B → 0 gives :func:`patch_overlap` (Winkler, Parseval); a = 0 gives 0.
+
+    **Returns:** ``(cc, ss)``, each ``(N, N)``, for cos iφ, cos jφ and sin iφ, sin jφ, i, j = 1…N.
+    """
+    import numpy as np
+
+    a = jnp.asarray(half_angle, dtype=jnp.float64)
+    L = 2.0 * a * radius
+    Ls = jnp.where(L > 0, L, 1.0)
+    xg, wg = np.polynomial.legendre.leggauss(n_quad)
+    x, w = xg * Ls / 2.0, wg * Ls / 2.0
+    k = jnp.arange(1, n_sines + 1, dtype=jnp.float64)
+    sk = jnp.sin(k[:, None] * jnp.pi * (x[None, :] + Ls / 2.0) / Ls)  # (K, Q)
+    n = jnp.arange(1, n_max + 1, dtype=jnp.float64)
+    g = layer_softening(k * jnp.pi * rib_width / (2.0 * Ls))
+    out = []
+    for shape in (jnp.cos, jnp.sin):
+        c = (shape(n[:, None] * x[None, :] / radius) * w) @ sk.T  # (N, K)
+        out.append(jnp.where(L > 0, (2.0 / (Ls * radius)) * (c * g) @ c.T, 0.0))
+    return out[0], out[1]
+
+
 def loaded_angular_frequencies(
     ring: RingParams, geometry: TyreGeometry, half_angle, n_max: int = DEFAULT_HARMONICS, k_tread=None
 ):
@@ -95,6 +145,10 @@ def loaded_matrices(ring: RingParams, geometry: TyreGeometry, half_angle, n_max:
     mass = ring_modal_mass(ring, geometry, n)
     stiff = jnp.pi * R * modal_stiffness(ring, geometry, n) / n**2
     cc, ss = patch_overlap(half_angle, n_max)
+    rib = geometry.tread_rib_width
+    if not (isinstance(rib, (int, float)) and rib == 0):  # a rib width given (or traced): the tread layer
+        lc, ls = tread_layer_overlap(half_angle, R, rib, n_max)
+        cc, ss = jnp.where(rib > 0, lc, cc), jnp.where(rib > 0, ls, ss)
     return mass, jnp.diag(stiff) + kt * R * cc, jnp.diag(stiff) + kt * R * ss
 
 
@@ -106,5 +160,6 @@ def loaded_natural_frequencies(
     return c / (2.0 * jnp.pi), s / (2.0 * jnp.pi)
 
 
-__all__ = ["DEFAULT_HARMONICS", "patch_overlap", "loaded_matrices", "eigen_angular_frequencies", "loaded_angular_frequencies",
+__all__ = ["DEFAULT_HARMONICS", "LAYER_SINES", "LAYER_QUADRATURE", "layer_softening", "tread_layer_overlap",
+           "patch_overlap", "loaded_matrices", "eigen_angular_frequencies", "loaded_angular_frequencies",
            "loaded_natural_frequencies"]

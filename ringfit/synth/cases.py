@@ -439,11 +439,14 @@ def write_label(label: CaseLabel, path: str | os.PathLike) -> None:
 
 # ============================================================================ rolling-profile cases
 #: Effects the generator injects in profile cases (expected verdict = the name, except as in EXPECTED).
-PROFILE_INJECTIONS = ("none", "sensor_tilt", "gravity", "iepe_highpass", "wave_damping", "rotation", "tread_pitch")
-#: Injectable in profiles but not in the blind benchmark: with the baseline sensor (e = 0, γ = 0) and an
-#: inextensible belt the brush tread shear moves the readings by < 0.1 m/s² even at k_x = 40 MN/m²
-#: (docs/physics.md §6: it needs finite EA or an offset e to show) — below any realistic noise.
-PROFILE_EXTRA_INJECTIONS = ("tread_shear",)
+#: ``tread_shear`` is the brush *with the lever* (the tread element's tip force acting on the belt through
+#: its height τ), simulated by :class:`LeverShearTruth`, a discretisation independent of the diagnosis's
+#: :class:`ringfit.physics.contact.BrushShearLoad`; without the lever the shear would move the readings of a
+#: centreline sensor on an inextensible belt by < 0.1 m/s² (docs/physics.md §6 tread_shear).
+PROFILE_INJECTIONS = ("none", "sensor_tilt", "gravity", "iepe_highpass", "wave_damping", "rotation", "tread_pitch",
+                      "tread_shear")
+#: Injectable in profiles but not in the blind benchmark.
+PROFILE_EXTRA_INJECTIONS = ()
 #: Speeds of a profile case [km/h] (each jittered by up to ±2 km/h).
 PROFILE_SPEEDS = (20.0, 30.0, 40.0, 60.0)
 NOISE_COLOURS = ("white", "pink", "red", "band")
@@ -496,6 +499,65 @@ class PitchModulation(eqx.Module):
         return q_w, jnp.zeros_like(q_w)
 
 
+class LeverShearTruth(eqx.Module):
+    """Blind-case truth of ``tread_shear`` with the lever, written independently of
+    :class:`ringfit.physics.contact.BrushShearLoad` (which the diagnosis uses) as a load hook
+    ``(solution, ring, geometry) -> (q_w, q_v)``.
+
+    Different discretisation and kinematics on purpose: the tread element stays normal to the
+    belt *exactly*, its tip at ``(R + w) sin φ + v cos φ + τ sin(φ − ψ)`` (not the linearised
+    ``−τψ cos φ``); the belt slope ψ = (w′ − v)/R takes w′ by central differences (not spectrally);
+    the tip sticks at the leading edge interpolated from the penetration's zero crossing (not the
+    first grid point); the rolling radius R_e is set by bisection so that the *clipped* tip forces
+    drive no torque (not the unclipped least-squares formula); and the belt loads are the
+    work-conjugate forces of the tip force through the tip kinematics, taken by reverse-mode
+    differentiation of ``Σ q_x x_tip`` with q_x held fixed (not the hand-derived moment pair
+    ``−m′/R``, ``−m/R``).
+    """
+
+    k_x: float
+    mu: float
+
+    def __call__(self, sol, ring, geometry):
+        import jax
+
+        phi, p = sol.phi, sol.pressure
+        R, tau = geometry.radius, geometry.outer_radius - geometry.radius
+        dphi = phi[1] - phi[0]
+        inside = p > 0
+
+        def x_tip(w, v, at=phi):
+            wp = (jnp.roll(w, -1) - jnp.roll(w, 1)) / (2.0 * dphi)
+            psi = (wp - v) / R
+            return (R + w) * jnp.sin(at) + v * jnp.cos(at) + tau * jnp.sin(at - psi)
+
+        x = x_tip(sol.w, sol.v)
+        pen = sol.penetration
+        i0 = jnp.argmax(inside)
+        t = (0.0 - pen[i0 - 1]) / (pen[i0] - pen[i0 - 1])  # leading edge between grid points i0−1 and i0
+        phi_l = phi[i0 - 1] + t * dphi
+        x_l = x[i0 - 1] + t * (x[i0] - x[i0 - 1])
+        s = phi - phi_l
+
+        def forces(r_e):
+            q = -self.k_x * (x - x_l - r_e * s)
+            return jnp.where(inside, jnp.clip(q, -self.mu * p, self.mu * p), 0.0)
+
+        def torque(r_e):  # the tips' tangential force about the axle; increasing in r_e (s > 0 in the patch)
+            return jnp.sum(forces(r_e) * jnp.cos(phi))
+
+        def bisect(_, ab):
+            a, b = ab
+            m = 0.5 * (a + b)
+            above = torque(m) > 0  # the root lies below m
+            return jnp.where(above, a, m), jnp.where(above, m, b)
+
+        lo, hi = jax.lax.fori_loop(0, 80, bisect, (0.8 * R, 1.2 * (R + tau)))
+        q_x = jax.lax.stop_gradient(forces(0.5 * (lo + hi)))
+        q_w, q_v = jax.grad(lambda w, v: jnp.sum(q_x * x_tip(w, v)), argnums=(0, 1))(sol.w, sol.v)
+        return q_w, q_v
+
+
 def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 0) -> CaseLabel:
     """Write a blind rolling-profile case (docs/formats.md §6) into ``folder`` (created; must be empty or absent).
 
@@ -515,7 +577,7 @@ def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed
     """
     from ringfit.io.profiles import Profile, grid_angles_deg, resample_profile, write_profile
     from ringfit.io.tyre import Tyre, write_tyre
-    from ringfit.physics.contact import BrushShearLoad, ContactSolver
+    from ringfit.physics.contact import ContactSolver
     from ringfit.physics.operating import KMH
     from ringfit.physics.profile import ProfileModel, effective_rolling_radius, simulate_profile
     from ringfit.physics.rolling import Hysteretic, RingModel, Viscous
@@ -561,7 +623,7 @@ def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed
         model = RingModel(damping=Hysteretic(), terms=(Viscous(c_w=c_w, c_v=magnitude["c_v"]),))
     elif effect == "tread_shear":
         magnitude.update(k_x=float(rng.uniform(8e6, 40e6)), mu=float(rng.uniform(0.7, 1.2)))
-        shear = BrushShearLoad(magnitude["k_x"], magnitude["mu"])
+        shear = LeverShearTruth(magnitude["k_x"], magnitude["mu"])
     elif effect == "rotation":
         magnitude["chi"] = float(rng.uniform(0.1, 0.6))
         ring = ring.replace(chi=magnitude["chi"])

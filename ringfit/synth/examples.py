@@ -45,13 +45,14 @@ def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = Fal
     ``fmt`` (``records`` only): also write the records as ``"tdms"``, ``"mat"``
     or ``"csv"`` (+ channel map), docs/formats.md §17.
     ``effect`` (``case`` only): the effect hidden in the case folder (one of
-    :data:`ringfit.synth.cases.MODAL_INJECTIONS` or ``EXTRA_INJECTIONS``; default ``ground_contact``).
+    :data:`ringfit.synth.cases.MODAL_INJECTIONS` or ``EXTRA_INJECTIONS``: mode tables; or a profile-only
+    effect of ``PROFILE_INJECTIONS`` such as ``tread_shear``: rolling profiles; default ``ground_contact``).
 
     **Raises** :class:`InputError` for an unknown kind, format or effect, a format or effect for
     another kind, a ``folder`` that is a file, or files that exist there already (unless ``overwrite``).
     """
     from ringfit.io.files import check_output_path
-    from ringfit.synth.cases import EXTRA_INJECTIONS, MODAL_INJECTIONS
+    from ringfit.synth.cases import EXTRA_INJECTIONS, MODAL_INJECTIONS, PROFILE_INJECTIONS
 
     if kind not in KINDS:
         raise InputError(f"unknown example {kind!r}; expected one of {', '.join(KINDS)}")
@@ -60,9 +61,9 @@ def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = Fal
                          "with the records example")
     if effect is not None and kind != "case":
         raise InputError(f"--effect is for the 'case' example only, not {kind!r}", source="--effect")
-    if effect is not None and effect not in MODAL_INJECTIONS + EXTRA_INJECTIONS:
-        raise InputError(f"unknown effect {effect!r}; expected one of {', '.join(MODAL_INJECTIONS + EXTRA_INJECTIONS)}",
-                         source="--effect")
+    known = MODAL_INJECTIONS + EXTRA_INJECTIONS + tuple(e for e in PROFILE_INJECTIONS if e not in MODAL_INJECTIONS)
+    if effect is not None and effect not in known:
+        raise InputError(f"unknown effect {effect!r}; expected one of {', '.join(known)}", source="--effect")
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise InputError("exists and is not a folder; --out names the folder the example is written into",
@@ -310,9 +311,39 @@ ringfit cleat cleat.records.npz --sectors 128 --out field2.npz --ssi rolling.mod
 """)
 
 
-def _case(folder: Path, progress: bool, effect: str = "ground_contact") -> None:
-    from ringfit.synth.cases import make_case
+def _profile_case(folder: Path, effect: str) -> None:
+    """A case of rolling profiles hiding a profile-only effect (``tread_shear``: the independent lever truth)."""
+    from ringfit.synth.cases import make_profile_case
 
+    label = make_profile_case(folder / "case", effect=effect, seed=5)
+    mag = ", ".join(f"{k} = {v:.4g}" for k, v in label.magnitude.items()) or "-"
+    ring = label.ring
+    (folder / "README.md").write_text(f"""# Example: a case folder of rolling profiles with one hidden effect
+
+Written by `ringfit example case --effect {effect}`. `case/` is a case folder (docs/formats.md §6):
+`tyre.toml` (Table 9 values as a start, not the truth), `free.modes.csv` (the free tyre) and one
+rolling acceleration profile per speed (`run*.profile.csv` + sidecar) at {ring['load_n']:.0f} N, with
+{label.noise['colour']} noise of {label.noise['grid_rms_ms2']:.3g} m/s² RMS.
+
+## The truth (kept out of the case folder)
+
+- injected effect: **{label.effect}** ({mag}); the diagnosis should answer `{label.expected_verdict}`;
+- the ring: ρA = {ring['rho_a']:.4g} kg/m, EI = {ring['ei']:.4g} N m², k_w = {ring['kw']:.4g} N/m²,
+  k_v = {ring['kv']:.4g} N/m², k_tread = {ring['k_tread']:.4g} N/m².
+
+## Try
+
+```bash
+ringfit diagnose case --out case.diagnosis.json --report case.html
+```
+""")
+
+
+def _case(folder: Path, progress: bool, effect: str = "ground_contact") -> None:
+    from ringfit.synth.cases import EXTRA_INJECTIONS, MODAL_INJECTIONS, make_case
+
+    if effect not in MODAL_INJECTIONS + EXTRA_INJECTIONS:
+        return _profile_case(folder, effect)
     label = make_case(folder / "case", effect=effect, seed=5)
     ring = label.ring
     def fmt(v):

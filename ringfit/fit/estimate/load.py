@@ -132,7 +132,8 @@ def _geometry_at_pressure(geometry: TyreGeometry, profile) -> tuple[TyreGeometry
         if abs(pb - tyre_bar) > 0.05 * tyre_bar:
             notes.append(f"WARNING: the profile's pressure_bar = {pb:g} differs from the tyre file's {tyre_bar:g} bar "
                          "by more than 5 %; the model uses the profile's pressure with the tyre file's ring")
-        geometry = TyreGeometry(geometry.radius, geometry.width, pb * BAR, geometry.tread_thickness, name=geometry.name)
+        geometry = TyreGeometry(geometry.radius, geometry.width, pb * BAR, geometry.tread_thickness,
+                                geometry.tread_rib_width, name=geometry.name)
     return geometry, notes
 
 
