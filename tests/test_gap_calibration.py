@@ -115,6 +115,7 @@ def test_linearised_refit_is_exact_on_a_linear_problem():
         np.testing.assert_allclose(e[te], y[te] - X[te] @ b, rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.slow  # > 10 s: CI runs it with -m slow (issue 24 item 3)
 def test_p_value_is_uniform_under_the_null(tmp_path):
     """200 data sets drawn from a small case's baseline (no effect), each with its p against an independent
     null of 200 draws: the p-values are uniform (Kolmogorov–Smirnov), and about α of them fall below α."""

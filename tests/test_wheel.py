@@ -100,6 +100,7 @@ def test_two_body_root_matches_lumped_discretisation(kz, kx, kt):
         assert abs(nearest - f) / f < 1e-3, (f, nearest)
 
 
+@pytest.mark.slow  # > 10 s: CI runs it with -m slow (issue 24 item 3)
 def test_bordered_loaded_ring_rigid_limit_and_hill_at_rest():
     g, r = table9()
     a = math.radians(11.69)
