@@ -325,7 +325,14 @@ Written by `ringfit example case --effect {effect}`. `case/` is a case folder (d
 rolling acceleration profile per speed (`run*.profile.csv` + sidecar) at {ring['load_n']:.0f} N, with
 {label.noise['colour']} noise of {label.noise['grid_rms_ms2']:.3g} m/s² RMS.
 
-## The truth (kept out of the case folder)
+{_truth_and_try(label, mag)}""")
+
+
+
+def _truth_and_try(label, mag: str) -> str:
+    """The README's hidden truth and the command to try, shared by the modal and the profile case."""
+    ring = label.ring
+    return f"""## The truth (kept out of the case folder)
 
 - injected effect: **{label.effect}** ({mag}); the diagnosis should answer `{label.expected_verdict}`;
 - the ring: ρA = {ring['rho_a']:.4g} kg/m, EI = {ring['ei']:.4g} N m², k_w = {ring['kw']:.4g} N/m²,
@@ -336,8 +343,7 @@ rolling acceleration profile per speed (`run*.profile.csv` + sidecar) at {ring['
 ```bash
 ringfit diagnose case --out case.diagnosis.json --report case.html
 ```
-""")
-
+"""
 
 def _case(folder: Path, progress: bool, effect: str = "ground_contact") -> None:
     from ringfit.synth.cases import EXTRA_INJECTIONS, MODAL_INJECTIONS, make_case
@@ -345,7 +351,6 @@ def _case(folder: Path, progress: bool, effect: str = "ground_contact") -> None:
     if effect not in MODAL_INJECTIONS + EXTRA_INJECTIONS:
         return _profile_case(folder, effect)
     label = make_case(folder / "case", effect=effect, seed=5)
-    ring = label.ring
     def fmt(v):
         return "[" + ", ".join(f"{x:.4g}" for x in v) + "]" if isinstance(v, (list, tuple)) else f"{v:.4g}"
 
@@ -357,18 +362,7 @@ Written by `ringfit example case`. `case/` is a case folder (docs/formats.md §6
 to) and test tables of the loaded and the spinning tyre{" and of the free tyre on the bench's suspension (suspended.modes.csv, its sidecar stating the fixture)" if effect == "wheel_suspension" else ""}, with relative frequency noise
 {100 * label.noise['relative']:.2g} % ({label.noise['colour']}).
 
-## The truth (kept out of the case folder)
-
-- injected effect: **{label.effect}** ({mag}); the diagnosis should answer `{label.expected_verdict}`;
-- the ring: ρA = {ring['rho_a']:.4g} kg/m, EI = {ring['ei']:.4g} N m², k_w = {ring['kw']:.4g} N/m²,
-  k_v = {ring['kv']:.4g} N/m², k_tread = {ring['k_tread']:.4g} N/m².
-
-## Try
-
-```bash
-ringfit diagnose case --out case.diagnosis.json --report case.html
-```
-""")
+{_truth_and_try(label, mag)}""")
 
 
 def _identify(folder: Path, progress: bool) -> None:
