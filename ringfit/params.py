@@ -54,7 +54,9 @@ class TyreGeometry(eqx.Module):
     width: float
     pressure: float
     tread_thickness: float = 0.020
-    tread_rib_width: float = 0.0
+    # static: a tyre's tread pattern, never fitted; a Python float lets the loaded model leave the layer's
+    # sine-series operator out of every program of a tyre without ribs (0, the default), where it cost ~6×
+    tread_rib_width: float = eqx.field(static=True, default=0.0)
     name: str = eqx.field(static=True, default="")
 
     @property

@@ -145,10 +145,9 @@ def loaded_matrices(ring: RingParams, geometry: TyreGeometry, half_angle, n_max:
     mass = ring_modal_mass(ring, geometry, n)
     stiff = jnp.pi * R * modal_stiffness(ring, geometry, n) / n**2
     cc, ss = patch_overlap(half_angle, n_max)
-    rib = geometry.tread_rib_width
-    if not (isinstance(rib, (int, float)) and rib == 0):  # a rib width given (or traced): the tread layer
-        lc, ls = tread_layer_overlap(half_angle, R, rib, n_max)
-        cc, ss = jnp.where(rib > 0, lc, cc), jnp.where(rib > 0, ls, ss)
+    rib = float(geometry.tread_rib_width)  # static (params.TyreGeometry): no layer is traced for B = 0
+    if rib > 0:
+        cc, ss = tread_layer_overlap(half_angle, R, rib, n_max)
     return mass, jnp.diag(stiff) + kt * R * cc, jnp.diag(stiff) + kt * R * ss
 
 
