@@ -1,9 +1,10 @@
 """Test configuration: float64 everywhere, strict promotion, headless plots; parallel runs.
 
 The default run is parallel (``-n auto --maxprocesses 4`` in pyproject's addopts; pytest-xdist,
-in the ``test`` extra): each file's tests stay together on one worker (an ``xdist_group`` per
-file, so a module-scoped fixture is computed once), except the files in :data:`SPLIT`, whose
-tests are independent and long. Each worker gets its own JAX compilation cache folder (JAX
+in the ``test`` extra) with ``--dist loadfile``: each file's tests stay together on one worker, so a
+module-scoped fixture is computed once. (``--dist loadgroup`` with an ``xdist_group`` mark per file did
+not group anything under pytest 9.2: xdist 3.8 renames ``item._nodeid``, which pytest 9.2 no longer
+reads, so the long module fixtures were computed once per worker.) Each worker gets its own JAX compilation cache folder (JAX
 writes cache entries in place, so two processes must not share one). ``-n 0`` runs serially.
 """
 
@@ -24,12 +25,3 @@ import ringfit  # noqa: E402,F401  (enables jax_enable_x64)
 
 jax.config.update("jax_numpy_dtype_promotion", "standard")
 assert jax.config.jax_enable_x64, "importing ringfit must enable float64"
-
-#: Test files whose tests are spread over the workers one by one (independent, long, no shared fixture).
-SPLIT = {"test_notebooks.py"}
-
-
-def pytest_collection_modifyitems(config, items):
-    for item in items:
-        if item.path.name not in SPLIT:
-            item.add_marker(pytest.mark.xdist_group(item.path.name))
