@@ -327,6 +327,15 @@ def check_test_condition(cond: dict, *, source) -> None:
                          "(> 0)", source=source)
 
 
+#: Defaults of the wheel body when a sidecar says ``fixture: suspension`` but leaves a value out
+#: (docs/formats.md §2): a passenger-car wheel with hub on a test-bench suspension. Defined here, at the
+#: format's edge (io/ is NumPy only); :mod:`ringfit.physics.wheel` takes them from here.
+DEFAULT_WHEEL_MASS_KG = 20.0
+DEFAULT_WHEEL_INERTIA_KG_M2 = 0.6
+DEFAULT_STIFFNESS_N_M = (2.0e5, 1.0e6)  # vertical, fore-aft
+DEFAULT_TORSION_N_M_RAD = 1.0e5
+
+
 def wheel_of(cond: dict, *, source: str = "<condition>") -> dict | None:
     """The wheel body a sidecar states (docs/formats.md §2 ``fixture``; docs/physics.md §6 ``wheel_suspension``).
 
@@ -346,8 +355,8 @@ def wheel_of(cond: dict, *, source: str = "<condition>") -> dict | None:
             raise InputError(f"field {keys[0]!r} needs 'fixture': 'suspension' (the rim is bolted here); "
                              "drop it or say how the wheel was held", source=source)
         return None
-    # defaults: the same numbers as ringfit.physics.wheel (io/ is NumPy only, it does not import physics/)
-    out = dict(mass=20.0, inertia=0.6, k_vertical=2.0e5, k_fore_aft=1.0e6, k_torsion=1.0e5,
+    out = dict(mass=DEFAULT_WHEEL_MASS_KG, inertia=DEFAULT_WHEEL_INERTIA_KG_M2, k_vertical=DEFAULT_STIFFNESS_N_M[0],
+               k_fore_aft=DEFAULT_STIFFNESS_N_M[1], k_torsion=DEFAULT_TORSION_N_M_RAD,
                c_vertical=0.0, c_fore_aft=0.0, c_torsion=0.0)
     defaults = []
     for key, (lo, hi) in WHEEL_SCALARS.items():

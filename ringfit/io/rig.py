@@ -19,7 +19,7 @@ A file may instead hold ringfit's own key layout (the keys of docs/formats.md
 §4 / §9 as arrays, as a MATLAB user saves them); the readers return that as
 ``RigFile.arrays`` and it is used as an npz would be.
 
-Units are converted with the UFF reader's unit table (:func:`ringfit.io.uff._unit`).
+Units are converted with the UFF reader's unit table (:func:`ringfit.io.uff.unit_scale`).
 Nothing is guessed silently: a channel whose role, axis, angle or unit is
 unknown is refused with a one-line hint to ``--channels MAP.toml``.
 """
@@ -38,7 +38,7 @@ from ringfit.errors import InputError
 from ringfit.io.channel_map import CONDITION_KEYS, ChannelMap, ChannelSpec, read_channel_map
 from ringfit.io.record_types import AXES, Records
 from ringfit.io.rig_types import LazyData, RawChannel, RigFile, ScaledChannel
-from ringfit.io.uff import _unit
+from ringfit.io.uff import unit_scale
 
 __all__ = ["RawChannel", "RigFile", "RIG_SUFFIXES", "rig_format", "read_rig", "records_from_rig",
            "continuous_fields", "read_rig_records", "load_channel_map"]
@@ -133,7 +133,7 @@ def _factor(raw: RawChannel, role: str, unit: str | None, sensitivity: float, ri
     if unit is None or not unit.strip():
         raise InputError(f"{where}: no unit in the file; give it{hint or ' in --channels MAP.toml'} "
                          f"(e.g. unit = \"{'m/s^2' if role == 'acc' else 'N'}\")", source=rig.source)
-    parsed = _unit(unit)
+    parsed = unit_scale(unit)
     want = "acc" if role == "acc" else "force"
     if parsed is None or parsed[0] != want:
         what = "an acceleration (m/s^2, mm/s^2, g)" if want == "acc" else "a force (N, kN, lbf)"

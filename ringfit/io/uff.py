@@ -305,7 +305,7 @@ def _axis_map(axes: dict | None, path) -> dict[int, str]:
     return out
 
 
-def _unit(label: str) -> tuple[str, float] | None:
+def unit_scale(label: str) -> tuple[str, float] | None:
     """(quantity, scale to SI) of a unit label, e.g. 'g' -> ('acc', 9.80665); None if unknown."""
     t = label.strip().lower().replace(" ", "").replace("**", "^")
     t = t.strip("[]()")
@@ -330,7 +330,7 @@ def _ratio_unit(label: str) -> tuple[str, float] | None:
         if not m:
             return None
         num, den = m.group(1), m.group(2)
-    n, d = _unit(num), _unit(den)
+    n, d = unit_scale(num), unit_scale(den)
     if n is None or d is None or d[0] != "force":
         return None
     return n[0], n[1] / d[1]
@@ -340,7 +340,7 @@ def _ordinate(i, s, path) -> tuple[str, float]:
     """(quantity, scale) of a time-response dataset's ordinate: 'acc' or 'force'; others refused."""
     spec = int(s.get("ordinate_spec_data_type", 0))
     label = str(s.get("ordinate_axis_units_lab", ""))
-    unit = _unit(label)
+    unit = unit_scale(label)
     where = f"dataset {i} (node {s.get('rsp_node')}, direction {s.get('rsp_dir')})"
     kind = {ACCELERATION: "acc", FORCE: "force", 9: "force"}.get(spec)
     if spec in (PRESSURE, SOUND_PRESSURE) or (unit and unit[0] == "pressure"):
@@ -458,14 +458,14 @@ def _frf_ordinate(i, s, path) -> tuple[str, float]:
         raise InputError(f"{where}: FRF of a {_SPECIFIC[spec]} (a microphone?), not of an acceleration", source=path)
     ratio = _ratio_unit(label)
     if ratio is None:
-        unit = _unit(label)
+        unit = unit_scale(label)
         if unit and unit[0] == "pressure":
             raise InputError(f"{where}: FRF unit {label.strip()!r} is a pressure, not an acceleration per force",
                              source=path)
         if by_type is not None and den in (0, FORCE) and unit is None:
             return by_type, 1.0  # typed by the header; unit label missing: SI per N
         if by_type is not None and unit is not None and unit[0] == by_type and den == FORCE:
-            den_unit = _unit(str(s.get("orddenom_axis_units_lab", ""))) or ("force", 1.0)
+            den_unit = unit_scale(str(s.get("orddenom_axis_units_lab", ""))) or ("force", 1.0)
             return by_type, unit[1] / den_unit[1]
         raise InputError(f"{where}: FRF unit {label.strip()!r} (ordinate type {spec}, {_SPECIFIC.get(spec, '?')}); "
                          "expected acceleration, velocity or displacement per force, e.g. '(m/s^2)/N'", source=path)

@@ -33,16 +33,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ringfit.io.modes import (  # noqa: F401  (the sidecar's defaults, docs/formats.md §2; re-exported)
+    DEFAULT_STIFFNESS_N_M, DEFAULT_TORSION_N_M_RAD, DEFAULT_WHEEL_INERTIA_KG_M2, DEFAULT_WHEEL_MASS_KG)
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.loaded import DEFAULT_HARMONICS, eigen_angular_frequencies, loaded_matrices
 from ringfit.physics.rolling import harmonic_basis
 
-#: Defaults of the body when a sidecar says ``fixture: suspension`` but leaves a value out
-#: (docs/formats.md §2): a passenger-car wheel with hub on a test-bench suspension.
-DEFAULT_WHEEL_MASS_KG = 20.0
-DEFAULT_WHEEL_INERTIA_KG_M2 = 0.6
-DEFAULT_STIFFNESS_N_M = (2.0e5, 1.0e6)  # vertical, fore-aft
-DEFAULT_TORSION_N_M_RAD = 1.0e5
 #: Smallest compliance used where a stiffness must stay finite (Hill's Cholesky factor) [m/N].
 _MIN_COMPLIANCE = 1e-15
 
