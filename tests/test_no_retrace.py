@@ -4,7 +4,8 @@ Each public fitting or simulating function is called once to warm it, then again
 values of the same structure (other frequencies, another start, other speeds and loads):
 the second call must trace nothing and compile nothing. Counted from JAX's own monitoring
 events (a trace and a backend compile each emit one), so any jit region the call goes
-through — the public function's own or one inside it — is covered.
+through — the public function's own or one inside it — is covered. ``fit_rolling``'s check is in
+tests/test_rolling_fit.py (it reuses that file's compiled fit instead of compiling its own).
 """
 
 import contextlib
@@ -100,24 +101,3 @@ def test_simulate_profile_does_not_retrace():
                              drum_diameter_m=1.5, solver=SOLVER)
     assert seen == {TRACE: 0, COMPILE: 0}
     assert p.condition["speed_kmh"] == 45.0 and np.all(np.isfinite(p.channels))
-
-
-def test_fit_rolling_does_not_retrace():
-    """The structure of tests/test_rolling_fit.py (four speeds on the drum, 1024-point profiles): in
-    one session the compiled fit is shared with it, so this costs little beyond that file's own."""
-    from ringfit.fit.rolling import fit_rolling
-    from ringfit.synth.profiles import synthetic_profile
-
-    truth = RING.replace(k_tread=25e6, damping_ratio=0.03)
-
-    def profiles(speeds, seed):
-        return [synthetic_profile(truth, GEOMETRY, v, drum_diameter_m=1.2192, noise_ms2=2.0, seed=seed + i)
-                for i, v in enumerate(speeds)]
-
-    first = fit_rolling(profiles((20.0, 30.0, 40.0, 50.0), 0), GEOMETRY, RING.replace(damping_ratio=0.03))
-    assert first.converged
-    data = profiles((15.0, 25.0, 35.0, 60.0), 10)
-    with count_traces() as seen:
-        res = fit_rolling(data, GEOMETRY, RING.replace(k_tread=15e6, damping_ratio=0.03))
-    assert seen == {TRACE: 0, COMPILE: 0}
-    assert res.converged and res.values["k_tread"] == pytest.approx(25e6, rel=0.01)

@@ -54,8 +54,17 @@ def test_recovers_tread_stiffness_from_four_speeds(fit4):
 
 
 def test_refit_reuses_the_compiled_fit(profiles, fit4):
-    """Another start and other data of the same structure: no recompilation (floats are traced)."""
+    """Another start and other data of the same structure (other speeds, other noise): nothing is traced or
+    compiled (JAX's own monitoring events, tests/test_no_retrace.py), the engine's solve included."""
+    from test_no_retrace import COMPILE, TRACE, count_traces
+
     before = compilations(engine._solve)
+    other = [synthetic_profile(TRUTH, GEOMETRY, v, drum_diameter_m=DRUM, noise_ms2=NOISE, seed=10 + i)
+             for i, v in enumerate((15.0, 25.0, 35.0, 60.0))]
+    with count_traces() as seen:
+        moved = fit_rolling(other, GEOMETRY, RING.replace(k_tread=15e6, damping_ratio=0.03))
+    assert seen == {TRACE: 0, COMPILE: 0}
+    assert moved.converged and moved.values["k_tread"] == pytest.approx(25e6, rel=0.01)
     res = fit_rolling(profiles[::-1], GEOMETRY, RING.replace(k_tread=15e6, damping_ratio=0.03))
     assert compilations(engine._solve) == before
     assert res.converged and res.values["k_tread"] == pytest.approx(fit4.values["k_tread"], rel=1e-4)
