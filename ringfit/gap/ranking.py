@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
-                                linearize, residuals)
+                                linearize)
 from ringfit.fit.result import FitResult
 from ringfit.gap.problem import GapProblem
 
@@ -104,9 +104,14 @@ def _pad(problem: GapProblem) -> int:
 
 
 def predict(problem: GapProblem, theta) -> np.ndarray:
-    """Prediction ``(m,)`` of every row at ``theta`` (natural units): the engine's residual model, no fit."""
-    _, aux = residuals(_engine_problem(problem, np.ones(problem.m, dtype=bool)), np.asarray(theta, dtype=np.float64))
-    return np.asarray(aux)[: problem.m]
+    """Prediction ``(m,)`` of every row at ``theta`` (natural units): the engine's residual model, no fit.
+
+    Evaluated by the refits' own compiled solve (:func:`ringfit.fit.engine.linearize`, the baseline's
+    parameters free, padded as every refit): a cold diagnosis compiles no separate program for it.
+    """
+    eng = _engine_problem(problem, np.ones(problem.m, dtype=bool))
+    out = linearize(eng, np.asarray(theta, dtype=np.float64), _free_names(problem, ()), pad_to=_pad(problem))
+    return np.asarray(out.aux)[: problem.m]
 
 
 def predict_and_jacobian(problem: GapProblem, theta: np.ndarray, free) -> tuple[np.ndarray, np.ndarray]:
