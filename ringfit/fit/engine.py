@@ -157,9 +157,15 @@ class AbstractResiduals(eqx.Module):
     :func:`sum_of_squares_batch`, :func:`log_probability`) one vector after another instead of vmapped — for
     models with several independent LAPACK-backed solves, whose batched calls can hang XLA's CPU thread pool
     (:func:`ringfit.fit.identify.serial_map`).
+
+    ``compile_quick`` (class attribute, or a static field where it depends on the instance): a small model
+    whose fits cost microseconds but whose solve, compiled in a cold process, costs seconds — its
+    :func:`least_squares` and :func:`linearize` are compiled with :data:`QUICK_COMPILE` (about half the
+    compile time; each fit a little slower, which a cold process never notices).
     """
 
     serial_batches: ClassVar[bool] = False
+    compile_quick: ClassVar[bool] = False
 
     def __call__(self, theta, data):
         raise NotImplementedError
@@ -374,6 +380,16 @@ def _column_scaling(jac_s) -> np.ndarray:
 _STATIC = ("model", "treedef", "method")
 #: The whole fit in one compiled region.
 _solve = functools.partial(jax.jit, static_argnames=_STATIC)(_solve_one)
+#: XLA's options for the solve of a model with ``compile_quick`` (:class:`AbstractResiduals`): the CPU
+#: backend's optimisation off (LLVM -O0), which halves the compile time of the solver's loop.
+QUICK_COMPILE = {"xla_backend_optimization_level": 0}
+#: The same solve compiled with :data:`QUICK_COMPILE`.
+_solve_quick = functools.partial(jax.jit, static_argnames=_STATIC, compiler_options=QUICK_COMPILE)(_solve_one)
+
+
+def _solve_program(model):
+    """The jitted solve of ``model``: :data:`_solve_quick` where the model asks for a quick compile, else :data:`_solve`."""
+    return _solve_quick if getattr(model, "compile_quick", False) else _solve
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
@@ -493,10 +509,11 @@ def least_squares(
     args = (leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean)
     tol = (np.float64(rtol), np.float64(atol))
     d = np.ones(K)
+    solve = _solve_program(model)
     if method == "levenberg_marquardt" and int(max_steps) > 0:
         # Marquardt's scaling from the Jacobian at the start: the same compiled solve, evaluating only
-        d = _column_scaling(_solve(*args, np.int64(0), *tol, d, model=model, treedef=treedef, method=method)[6])
-    out = _solve(*args, np.int64(max_steps), *tol, d, model=model, treedef=treedef, method=method)
+        d = _column_scaling(solve(*args, np.int64(0), *tol, d, model=model, treedef=treedef, method=method)[6])
+    out = solve(*args, np.int64(max_steps), *tol, d, model=model, treedef=treedef, method=method)
     u_free, result, steps, res, jac, aux, _ = out
     u_free, res, jac = np.asarray(u_free)[: len(free)], np.asarray(res), np.asarray(jac)[:, : len(free)]
     m = res.size - K
@@ -737,10 +754,11 @@ def _linearize_all(problem: Problem, theta, free, pad_to):
     leaves, treedef = jax.tree.flatten(problem.data)
     # the solve's own compiled program, evaluating only (no step): with the free set unbounded, z = u
     # (no sine transform), so its Jacobian is in u; no second program holding the model
-    _, _, _, res, jac, aux, _ = _solve(leaves, u, np.append(theta, 0.0), fs.unbounded_arrays(), fs.prior_w,
-                                       fs.prior_mean, np.int64(0), np.float64(1e-10), np.float64(1e-10),
-                                       np.ones(fs.size), model=problem.model, treedef=treedef,
-                                       method="levenberg_marquardt")
+    solve = _solve_program(problem.model)
+    _, _, _, res, jac, aux, _ = solve(leaves, u, np.append(theta, 0.0), fs.unbounded_arrays(), fs.prior_w,
+                                      fs.prior_mean, np.int64(0), np.float64(1e-10), np.float64(1e-10),
+                                      np.ones(fs.size), model=problem.model, treedef=treedef,
+                                      method="levenberg_marquardt")
     return fs, u, np.asarray(res), np.asarray(jac), aux
 
 

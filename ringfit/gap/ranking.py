@@ -71,6 +71,13 @@ class GapResiduals(AbstractResiduals):
 
     predictor: object = eqx.field(static=True)
     huber: float = eqx.field(static=True, default=0.0)
+    #: the damping problems' solve (a few rows, one level per table) compiles quickly (the engine's
+    #: ``compile_quick``); the frequency and profile problems keep XLA's optimised code for their many refits
+    quick: bool = eqx.field(static=True, default=False)
+
+    @property
+    def compile_quick(self) -> bool:
+        return self.quick
 
     def __call__(self, theta, data):
         pdata, y, w, robust = data
@@ -95,8 +102,8 @@ def _engine_problem(problem: GapProblem, train) -> Problem:
         y, w = np.concatenate([y, np.zeros(pad)]), np.concatenate([w, np.zeros(pad)])
         robust = np.concatenate([robust, np.zeros(pad, dtype=bool)])
     huber = float(problem.huber) if problem.huber and problem.robust is not None and robust.any() else 0.0
-    return Problem(GapResiduals(problem.predictor, huber), (problem.data, y, w, robust), coordinates(problem),
-                   prior=gap_prior(problem), sigma="inflate", data_label="the gap data")
+    return Problem(GapResiduals(problem.predictor, huber, problem.domain == "damping"), (problem.data, y, w, robust),
+                   coordinates(problem), prior=gap_prior(problem), sigma="inflate", data_label="the gap data")
 
 
 def _pad(problem: GapProblem) -> int:
