@@ -331,21 +331,24 @@ class _GaussNewton(optx.GaussNewton):
 SOLVERS = {"levenberg_marquardt": _LevenbergMarquardt, "gauss_newton": _GaussNewton}
 
 
-def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, d=None, *, model,
+def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, norms=None, *, model,
                treedef, method="levenberg_marquardt"):
     """One fit (traced): ``data`` arrives as flat leaves (fast dispatch); ``max_steps`` and the tolerances are
     traced, so one compiled solve serves every step limit and tolerance, and with ``max_steps = 0`` every
     evaluation (:func:`linearize`, :func:`evaluate`).
 
-    ``d`` ``(K,)``: the solver's variable scaling ``s = d·z`` (see below), given by the caller
-    (:func:`least_squares` takes it from a ``max_steps = 0`` call of this same program, so the compiled
-    solve holds one linearisation of the model, in the solver's loop, instead of two); ``None``
-    computes it here (batched and chained solves).
+    ``norms`` ``(K,)``: the Jacobian's column norms at the start (in z), from which the solver's variable
+    scaling ``s = d·z`` follows (see below), given by the caller: :func:`least_squares` takes them from a
+    ``max_steps = 0`` call of this same program (its last output), so the compiled solve holds one
+    linearisation of the model, in the solver's loop, instead of two; ``None`` computes them here
+    (batched and chained solves). A call with ``max_steps = 0`` works on z itself (``d = 1``).
     """
     data = jax.tree.unflatten(treedef, leaves)
     free = _Free(*free_arrays)
     fn, linearise = _dense(model, data, theta0, free, prior_w, prior_mean)
-    if d is None and method == "levenberg_marquardt":
+    if norms is not None and method == "levenberg_marquardt":
+        d = jnp.where(max_steps > 0, jnp.where(norms > 0, norms, 1.0) / jnp.sqrt(JTJ_DIAGONAL), 1.0)
+    elif method == "levenberg_marquardt":
         # the solver works on s = d·z with d ∝ the Jacobian column norms at the start (Marquardt's
         # scaling, scipy's x_scale="jac"): the damping then acts alike on every direction; the diagonal
         # of JᵀJ in s is JTJ_DIAGONAL, so optimistix's initial damping λ = 1 starts near Gauss–Newton
@@ -356,7 +359,7 @@ def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, 
 
         norms = jax.lax.cond(max_steps > 0, column_norms, jnp.ones_like, z0)
         d = jnp.where(norms > 0, norms, 1.0) / jnp.sqrt(JTJ_DIAGONAL)
-    elif d is None:
+    else:
         d = jnp.ones_like(z0)
     solver = SOLVERS[method](rtol=rtol, atol=atol, linear_solver=lx.SVD())
     sol = optx.least_squares(lambda s, _: fn(s / d), solver, z0 * d, args=max_steps, has_aux=True,
@@ -367,14 +370,9 @@ def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, 
     info = sol.state.f_info
     res, jac_s, aux = info.residual, info.jac.as_matrix(), sol.state.aux
     jac_u = jac_s * d[None, :] / free.du_dz(z)[None, :]
-    return free.u_of(z), sol.result._value, sol.stats["num_steps"], res, jac_u, aux, jac_s
-
-
-def _column_scaling(jac_s) -> np.ndarray:
-    """Marquardt's scaling ``d`` from the Jacobian in z at the start (what :func:`_solve_one` computes when not given):
-    the column norms, 1 for an empty column, over √:data:`JTJ_DIAGONAL`."""
-    norms = np.sqrt(np.sum(np.asarray(jac_s) ** 2, axis=0))
-    return np.where(norms > 0, norms, 1.0) / math.sqrt(JTJ_DIAGONAL)
+    # the column norms of the Jacobian in z at the returned point (with max_steps = 0: at the start, d = 1)
+    return (free.u_of(z), sol.result._value, sol.stats["num_steps"], res, jac_u, aux,
+            jnp.sqrt(jnp.sum((jac_s * d[None, :]) ** 2, axis=0)))
 
 
 _STATIC = ("model", "treedef", "method")
@@ -508,12 +506,12 @@ def least_squares(
         raise InputError(f"max_steps = {max_steps}: expected 1 … {STEP_CAP} (0: evaluate only)")
     args = (leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean)
     tol = (np.float64(rtol), np.float64(atol))
-    d = np.ones(K)
+    norms = np.ones(K)
     solve = _solve_program(model)
     if method == "levenberg_marquardt" and int(max_steps) > 0:
         # Marquardt's scaling from the Jacobian at the start: the same compiled solve, evaluating only
-        d = _column_scaling(solve(*args, np.int64(0), *tol, d, model=model, treedef=treedef, method=method)[6])
-    out = solve(*args, np.int64(max_steps), *tol, d, model=model, treedef=treedef, method=method)
+        norms = solve(*args, np.int64(0), *tol, norms, model=model, treedef=treedef, method=method)[6]
+    out = solve(*args, np.int64(max_steps), *tol, norms, model=model, treedef=treedef, method=method)
     u_free, result, steps, res, jac, aux, _ = out
     u_free, res, jac = np.asarray(u_free)[: len(free)], np.asarray(res), np.asarray(jac)[:, : len(free)]
     m = res.size - K
