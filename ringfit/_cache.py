@@ -18,6 +18,13 @@ from pathlib import Path
 _SETTINGS = {"jax_persistent_cache_min_compile_time_secs": 0.0, "jax_persistent_cache_min_entry_size_bytes": 0}
 
 
+#: XLA options for the programs a cold process compiles once and runs for milliseconds (eq. 18's fit,
+#: the gap's damping refits, the static contact solve): the CPU backend's optimisation off (LLVM -O0)
+#: about halves their compile time; their answers are the optimised programs' (IEEE arithmetic either way)
+#: and their run time, measured, the same or a few percent longer.
+QUICK_COMPILE = {"xla_backend_optimization_level": 0}
+
+
 def cache_directory(directory: str | os.PathLike | None = None) -> Path:
     """The cache's directory: ``directory``, else ``$RINGFIT_CACHE_DIR``, else ``~/.cache/ringfit/jax``."""
     return Path(directory or os.environ.get("RINGFIT_CACHE_DIR") or Path.home() / ".cache" / "ringfit" / "jax")

@@ -53,6 +53,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
+from ringfit._cache import QUICK_COMPILE
 from ringfit.errors import InputError
 from ringfit.fit.result import (BatchFitResult, FitResult, covariance_batch, covariance_from_jacobian, parameter_flags,
                                 solver_flags, solver_status)
@@ -160,7 +161,7 @@ class AbstractResiduals(eqx.Module):
 
     ``compile_quick`` (class attribute, or a static field where it depends on the instance): a small model
     whose fits cost microseconds but whose solve, compiled in a cold process, costs seconds — its
-    :func:`least_squares` and :func:`linearize` are compiled with :data:`QUICK_COMPILE` (about half the
+    :func:`least_squares` and :func:`linearize` are compiled with :data:`ringfit._cache.QUICK_COMPILE` (about half the
     compile time; each fit a little slower, which a cold process never notices).
     """
 
@@ -378,10 +379,8 @@ def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, 
 _STATIC = ("model", "treedef", "method")
 #: The whole fit in one compiled region.
 _solve = functools.partial(jax.jit, static_argnames=_STATIC)(_solve_one)
-#: XLA's options for the solve of a model with ``compile_quick`` (:class:`AbstractResiduals`): the CPU
-#: backend's optimisation off (LLVM -O0), which halves the compile time of the solver's loop.
-QUICK_COMPILE = {"xla_backend_optimization_level": 0}
-#: The same solve compiled with :data:`QUICK_COMPILE`.
+#: The same solve compiled with :data:`ringfit._cache.QUICK_COMPILE` (the CPU backend's optimisation off:
+#: about half the compile time), for models with ``compile_quick`` (:class:`AbstractResiduals`).
 _solve_quick = functools.partial(jax.jit, static_argnames=_STATIC, compiler_options=QUICK_COMPILE)(_solve_one)
 
 
