@@ -13,7 +13,6 @@ initial values.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -124,9 +123,6 @@ class FrequencyArrays(eqx.Module):
 
 class NaturalFrequencyResiduals(AbstractResiduals):
     """Rows ``(f_model(n_i) − f_i)/σ_i`` of eq. 18 (docs/physics.md §2.1); aux: the model frequencies [Hz]."""
-
-    #: a closed-form model of a few rows: its solve compiles quickly (``ringfit fit``'s cold start)
-    compile_quick: ClassVar[bool] = True
 
     def __call__(self, theta, data: FrequencyArrays):
         model = natural_frequencies(ring_from_vector(theta), data.geometry, data.n)
