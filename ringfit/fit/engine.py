@@ -509,7 +509,8 @@ def least_squares(
     solve = _solve_program(model)
     if method == "levenberg_marquardt" and int(max_steps) > 0:
         # Marquardt's scaling from the Jacobian at the start: the same compiled solve, evaluating only
-        norms = solve(*args, np.int64(0), *tol, norms, model=model, treedef=treedef, method=method)[6]
+        # (as a NumPy array, as the first call's: one entry of the jit's dispatch cache)
+        norms = np.asarray(solve(*args, np.int64(0), *tol, norms, model=model, treedef=treedef, method=method)[6])
     out = solve(*args, np.int64(max_steps), *tol, norms, model=model, treedef=treedef, method=method)
     u_free, result, steps, res, jac, aux, _ = out
     u_free, res, jac = np.asarray(u_free)[: len(free)], np.asarray(res), np.asarray(jac)[:, : len(free)]
