@@ -161,8 +161,8 @@ class AbstractResiduals(eqx.Module):
 
     ``compile_quick`` (class attribute, or a static field where it depends on the instance): a small model
     whose fits cost microseconds but whose solve, compiled in a cold process, costs seconds — its
-    :func:`least_squares` and :func:`linearize` are compiled with :data:`ringfit._cache.QUICK_COMPILE` (about half the
-    compile time; each fit a little slower, which a cold process never notices).
+    :func:`least_squares` and :func:`linearize` are compiled with :data:`ringfit._cache.QUICK_COMPILE` (about
+    half the compile time; each fit a little slower at most, which a cold process never notices).
     """
 
     serial_batches: ClassVar[bool] = False
@@ -385,7 +385,7 @@ _solve_quick = functools.partial(jax.jit, static_argnames=_STATIC, compiler_opti
 
 
 def _solve_program(model):
-    """The jitted solve of ``model``: :data:`_solve_quick` where the model asks for a quick compile, else :data:`_solve`."""
+    """The jitted solve of ``model``: :data:`_solve_quick` where it asks for a quick compile, else :data:`_solve`."""
     return _solve_quick if getattr(model, "compile_quick", False) else _solve
 
 
