@@ -49,7 +49,7 @@ def test_the_model_is_traced_once_per_solve():
     problem = Problem(_CountingLine(), (x, y, sigma), (Coordinate("a", LINEAR), Coordinate("b", LINEAR)))
     CALLS["n"] = 0
     fit = least_squares(problem, np.array([0.0, 1.0]), ("a", "b"))
-    assert CALLS["n"] == 1  # one trace serves the primal, the JVP rule and the column norms
+    assert CALLS["n"] == 1  # one trace serves the primal, the JVP rule and the column norms' evaluation
     # the answer: weighted linear least squares in closed form (normal equations), not the engine
     A = np.stack([np.ones_like(x), x], axis=1) / sigma[:, None]
     expected = np.linalg.solve(A.T @ A, A.T @ (y / sigma))
@@ -61,6 +61,62 @@ def test_the_model_is_traced_once_per_solve():
     # a second solve of the same structure traces nothing
     least_squares(problem, np.array([1.0, 0.0]), ("a", "b"))
     assert CALLS["n"] == 1
+
+
+class _QuickLine(_CountingLine):
+    compile_quick = True
+
+
+def _line_problem(model, bounded=False):
+    rng = np.random.default_rng(5)
+    x = np.linspace(0.0, 2.0, 13)
+    y = 0.3 + 1.7 * x + 0.01 * rng.standard_normal(x.size)
+    sigma = np.full(x.size, 0.01)
+    b = Coordinate("b", LINEAR, lo=-10.0, hi=10.0) if bounded else Coordinate("b", LINEAR)
+    return Problem(model, (x, y, sigma), (Coordinate("a", LINEAR), b)), x, y, sigma
+
+
+def test_fits_linearisations_and_evaluations_of_a_problem_share_one_compiled_solve():
+    """Cold start: :func:`linearize` (and so every gap prediction and the calibration's linearisation) runs the
+    fit's own compiled solve with a step limit of 0 — no second program; its rows and Jacobian are the closed
+    form's (the straight line: ∂r/∂a = 1/σ, ∂r/∂b = x/σ)."""
+    from ringfit.fit import engine
+
+    problem, x, y, sigma = _line_problem(_CountingLine(), bounded=True)
+    CALLS["n"] = 0
+    fit = least_squares(problem, np.array([0.0, 1.0]), ("a", "b"), pad_to=3)
+    before = engine._solve._cache_size()
+    traces = CALLS["n"]
+    theta = np.array([0.2, 1.5])
+    lin = engine.linearize(problem, theta, ("a", "b"), pad_to=3)
+    assert engine._solve._cache_size() == before and CALLS["n"] == traces  # nothing traced or compiled
+    A = np.stack([np.ones_like(x), x], axis=1) / sigma[:, None]
+    np.testing.assert_allclose(lin.jacobian, A, rtol=1e-12)
+    np.testing.assert_allclose(lin.residuals, (theta[0] + theta[1] * x - y) / sigma, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(lin.aux), theta[0] + theta[1] * x, rtol=1e-13)
+    # the same at the optimum: the fit's own residuals
+    at_fit = engine.linearize(problem, fit.theta, ("a", "b"), pad_to=3)
+    np.testing.assert_allclose(at_fit.residuals, fit.residuals, rtol=1e-10, atol=1e-12)
+    assert engine._solve._cache_size() == before
+
+
+def test_a_quick_compile_gives_the_fit_of_the_optimised_program():
+    """A model with ``compile_quick`` is solved by the program compiled with XLA's backend optimisation off:
+    the same optimum (the closed-form least-squares line) as the optimised program's."""
+    from ringfit.fit import engine
+
+    quick, x, y, sigma = _line_problem(_QuickLine())
+    default, *_ = _line_problem(_CountingLine())
+    n_quick, n_default = engine._solve_quick._cache_size(), engine._solve._cache_size()
+    a = least_squares(quick, np.array([0.0, 1.0]), ("a", "b"))
+    assert engine._solve_quick._cache_size() == n_quick + 1 and engine._solve._cache_size() == n_default
+    b = least_squares(default, np.array([0.0, 1.0]), ("a", "b"))
+    A = np.stack([np.ones_like(x), x], axis=1) / sigma[:, None]
+    expected = np.linalg.solve(A.T @ A, A.T @ (y / sigma))
+    assert a.converged and b.converged
+    np.testing.assert_allclose(a.theta, expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(a.theta, b.theta, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(a.covariance_log, b.covariance_log, rtol=1e-10)
 
 
 @pytest.mark.parametrize("warm_start", [False, True])  # vmapped fits, and fits chained by lax.scan

@@ -53,6 +53,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
+from ringfit._cache import QUICK_COMPILE
 from ringfit.errors import InputError
 from ringfit.fit.result import (BatchFitResult, FitResult, covariance_batch, covariance_from_jacobian, parameter_flags,
                                 solver_flags, solver_status)
@@ -157,9 +158,15 @@ class AbstractResiduals(eqx.Module):
     :func:`sum_of_squares_batch`, :func:`log_probability`) one vector after another instead of vmapped — for
     models with several independent LAPACK-backed solves, whose batched calls can hang XLA's CPU thread pool
     (:func:`ringfit.fit.identify.serial_map`).
+
+    ``compile_quick`` (class attribute, or a static field where it depends on the instance): a small model
+    whose fits cost microseconds but whose solve, compiled in a cold process, costs seconds — its
+    :func:`least_squares` and :func:`linearize` are compiled with :data:`ringfit._cache.QUICK_COMPILE` (about
+    half the compile time; each fit a little slower at most, which a cold process never notices).
     """
 
     serial_batches: ClassVar[bool] = False
+    compile_quick: ClassVar[bool] = False
 
     def __call__(self, theta, data):
         raise NotImplementedError
@@ -325,13 +332,24 @@ class _GaussNewton(optx.GaussNewton):
 SOLVERS = {"levenberg_marquardt": _LevenbergMarquardt, "gauss_newton": _GaussNewton}
 
 
-def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, *, model, treedef, rtol, atol,
-               method="levenberg_marquardt"):
-    """One fit (traced): ``data`` arrives as flat leaves (fast dispatch); ``max_steps`` is traced."""
+def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, norms=None, *, model,
+               treedef, method="levenberg_marquardt"):
+    """One fit (traced): ``data`` arrives as flat leaves (fast dispatch); ``max_steps`` and the tolerances are
+    traced, so one compiled solve serves every step limit and tolerance, and with ``max_steps = 0`` every
+    evaluation (:func:`linearize`, :func:`evaluate`).
+
+    ``norms`` ``(K,)``: the Jacobian's column norms at the start (in z), from which the solver's variable
+    scaling ``s = d·z`` follows (see below), given by the caller: :func:`least_squares` takes them from a
+    ``max_steps = 0`` call of this same program (its last output), so the compiled solve holds one
+    linearisation of the model, in the solver's loop, instead of two; ``None`` computes them here
+    (batched and chained solves). A call with ``max_steps = 0`` works on z itself (``d = 1``).
+    """
     data = jax.tree.unflatten(treedef, leaves)
     free = _Free(*free_arrays)
     fn, linearise = _dense(model, data, theta0, free, prior_w, prior_mean)
-    if method == "levenberg_marquardt":
+    if norms is not None and method == "levenberg_marquardt":
+        d = jnp.where(max_steps > 0, jnp.where(norms > 0, norms, 1.0) / jnp.sqrt(JTJ_DIAGONAL), 1.0)
+    elif method == "levenberg_marquardt":
         # the solver works on s = d·z with d ∝ the Jacobian column norms at the start (Marquardt's
         # scaling, scipy's x_scale="jac"): the damping then acts alike on every direction; the diagonal
         # of JᵀJ in s is JTJ_DIAGONAL, so optimistix's initial damping λ = 1 starts near Gauss–Newton
@@ -353,27 +371,37 @@ def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, 
     info = sol.state.f_info
     res, jac_s, aux = info.residual, info.jac.as_matrix(), sol.state.aux
     jac_u = jac_s * d[None, :] / free.du_dz(z)[None, :]
-    return free.u_of(z), sol.result._value, sol.stats["num_steps"], res, jac_u, aux
+    # the column norms of the Jacobian in z at the returned point (with max_steps = 0: at the start, d = 1)
+    return (free.u_of(z), sol.result._value, sol.stats["num_steps"], res, jac_u, aux,
+            jnp.sqrt(jnp.sum((jac_s * d[None, :]) ** 2, axis=0)))
 
 
-_STATIC = ("model", "treedef", "rtol", "atol", "method")
+_STATIC = ("model", "treedef", "method")
 #: The whole fit in one compiled region.
 _solve = functools.partial(jax.jit, static_argnames=_STATIC)(_solve_one)
+#: The same solve compiled with :data:`ringfit._cache.QUICK_COMPILE` (the CPU backend's optimisation off:
+#: about half the compile time), for models with ``compile_quick`` (:class:`AbstractResiduals`).
+_solve_quick = functools.partial(jax.jit, static_argnames=_STATIC, compiler_options=QUICK_COMPILE)(_solve_one)
+
+
+def _solve_program(model):
+    """The jitted solve of ``model``: :data:`_solve_quick` where it asks for a quick compile, else :data:`_solve`."""
+    return _solve_quick if getattr(model, "compile_quick", False) else _solve
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
-def _solve_batch(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, *, model, treedef, rtol, atol,
+def _solve_batch(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, *, model, treedef,
                  method="levenberg_marquardt"):
     """B fits of one problem structure in one compiled region: data leaves, z0 and theta0 carry a leading axis B."""
     def one(lv, z, th):
-        return _solve_one(lv, z, th, free_arrays, prior_w, prior_mean, max_steps, model=model, treedef=treedef,
-                          rtol=rtol, atol=atol, method=method)
+        return _solve_one(lv, z, th, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, model=model,
+                          treedef=treedef, method=method)[:6]
 
     return jax.vmap(one)(leaves, z0, theta0)
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
-def _solve_chain(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, *, model, treedef, rtol, atol,
+def _solve_chain(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, *, model, treedef,
                  method="levenberg_marquardt"):
     """B fits one after another in one compiled region (``lax.scan``), each started at the previous optimum.
 
@@ -382,8 +410,8 @@ def _solve_chain(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps
     """
     def step(z_start, xs):
         lv, th = xs
-        out = _solve_one(lv, z_start, th, free_arrays, prior_w, prior_mean, max_steps, model=model,
-                         treedef=treedef, rtol=rtol, atol=atol, method=method)
+        out = _solve_one(lv, z_start, th, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, model=model,
+                         treedef=treedef, method=method)[:6]
         z_end = jnp.where(free_arrays[4], jnp.arcsin(jnp.clip((out[0] - free_arrays[5]) / free_arrays[6], -1, 1)),
                           out[0])
         good = (out[1] == 0) & jnp.all(jnp.isfinite(z_end))
@@ -475,9 +503,16 @@ def least_squares(
         raise ValueError(f"method={method!r}; expected one of {list(SOLVERS)}")
     if not 0 <= int(max_steps) <= STEP_CAP:
         raise InputError(f"max_steps = {max_steps}: expected 1 … {STEP_CAP} (0: evaluate only)")
-    out = _solve(leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean, np.int64(max_steps), model=model,
-                 treedef=treedef, rtol=float(rtol), atol=float(atol), method=method)
-    u_free, result, steps, res, jac, aux = out
+    args = (leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean)
+    tol = (np.float64(rtol), np.float64(atol))
+    norms = np.ones(K)
+    solve = _solve_program(model)
+    if method == "levenberg_marquardt" and int(max_steps) > 0:
+        # Marquardt's scaling from the Jacobian at the start: the same compiled solve, evaluating only
+        # (as a NumPy array, as the first call's: one entry of the jit's dispatch cache)
+        norms = np.asarray(solve(*args, np.int64(0), *tol, norms, model=model, treedef=treedef, method=method)[6])
+    out = solve(*args, np.int64(max_steps), *tol, norms, model=model, treedef=treedef, method=method)
+    u_free, result, steps, res, jac, aux, _ = out
     u_free, res, jac = np.asarray(u_free)[: len(free)], np.asarray(res), np.asarray(jac)[:, : len(free)]
     m = res.size - K
     res, jac = np.concatenate([res[:m], res[m:][: len(free)]]), np.concatenate([jac[:m], jac[m:][: len(free)]])
@@ -592,8 +627,8 @@ def least_squares_batch(
         raise InputError(f"max_steps = {max_steps}: expected 1 … {STEP_CAP}")
     solve = _solve_chain if warm_start else _solve_batch
     u, codes, steps, res, jac, aux = solve(leaves, z0[0] if warm_start else z0, theta0_pad, free_arrays, W, mean,
-                                           np.int64(max_steps), model=problem.model, treedef=treedef,
-                                           rtol=float(rtol), atol=float(atol), method=method)
+                                           np.int64(max_steps), np.float64(rtol), np.float64(atol),
+                                           model=problem.model, treedef=treedef, method=method)
     u, res, jac, codes = np.asarray(u), np.asarray(res), np.asarray(jac), np.asarray(codes)
     coords = problem.coords
     theta = theta0.copy()
@@ -696,20 +731,6 @@ def free_set(problem: Problem, free: tuple[str, ...], pad_to: int | None = None)
     return FreeSet(tuple(free), tuple(index), K, arrays, W, mean, lo_u[:k], hi_u[:k])
 
 
-@functools.partial(jax.jit, static_argnames=("model", "treedef"))
-def _linearize(leaves, u, theta0, free_arrays, prior_w, prior_mean, *, model, treedef):
-    """Rows (data, then prior), their Jacobian in ``u`` (one forward-mode pass) and aux at ``u`` ``(K,)``."""
-    data = jax.tree.unflatten(treedef, leaves)
-    free = _Free(*free_arrays)
-
-    def both(x):
-        r, aux = _weighted(x, model, data, theta0, free, prior_w, prior_mean)
-        return r, (r, aux)
-
-    jac, (res, aux) = jax.jacfwd(both, has_aux=True)(u)
-    return res, jac, aux
-
-
 @dataclass(frozen=True)
 class Linearization:
     """Weighted data rows at given parameters: ``residuals`` ``(m,)``, ``jacobian`` ``(m, k)`` with respect to
@@ -729,16 +750,22 @@ def _linearize_all(problem: Problem, theta, free, pad_to):
     _start(problem, fs.index, fs.size, fs.arrays, theta[None])  # checks the values
     u = np.concatenate([fs.u_of_theta(problem, theta), np.zeros(fs.size - len(fs.names))])
     leaves, treedef = jax.tree.flatten(problem.data)
-    res, jac, aux = _linearize(leaves, u, np.append(theta, 0.0), fs.unbounded_arrays(), fs.prior_w, fs.prior_mean,
-                               model=problem.model, treedef=treedef)
+    # the solve's own compiled program, evaluating only (no step): with the free set unbounded, z = u
+    # (no sine transform), so its Jacobian is in u; no second program holding the model
+    solve = _solve_program(problem.model)
+    _, _, _, res, jac, aux, _ = solve(leaves, u, np.append(theta, 0.0), fs.unbounded_arrays(), fs.prior_w,
+                                      fs.prior_mean, np.int64(0), np.float64(1e-10), np.float64(1e-10),
+                                      np.ones(fs.size), model=problem.model, treedef=treedef,
+                                      method="levenberg_marquardt")
     return fs, u, np.asarray(res), np.asarray(jac), aux
 
 
 def linearize(problem: Problem, theta, free: tuple[str, ...], *, pad_to: int | None = None) -> Linearization:
     """Weighted residual rows, their Jacobian and the model's aux at ``theta`` — no fit.
 
-    One compiled region per problem structure and (padded) free-set size: ``pad_to`` pads the
-    free set so that chunks of several sizes share it. The Jacobian is with respect to the
+    Evaluated by the compiled solve of :func:`least_squares` (a step limit of 0), so a problem's fits and
+    linearisations with the same (padded) free-set size share one program: ``pad_to`` pads the free
+    set so that chunks of several sizes share it. The Jacobian is with respect to the
     solver coordinates ``u`` of ``free`` (``∂r/∂ln θ`` for log parameters); prior rows are left out.
     """
     fs, _, res, jac, aux = _linearize_all(problem, theta, free, pad_to)

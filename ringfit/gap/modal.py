@@ -316,6 +316,14 @@ def _static_contact(ring, geometry, load_n, drum_diameter_m, k_tread_sd):
     return out[0], 0.5 * abs(out[2] - out[1]), sols[0]
 
 
+@jax.jit
+def _cavity_split(solution, geometry):
+    """W_2/h_c of a static contact solution (docs/physics.md §6 cavity_mode), in one compiled program."""
+    from ringfit.physics.cavity import cavity_height, deflection_cos2
+
+    return deflection_cos2(solution) / cavity_height(geometry)
+
+
 def wheel_row(condition: dict, source: str = "<condition>") -> list[float]:
     """The 9 numbers of :attr:`ModalRows.wheel` from a table's sidecar (zeros for a bolted rim)."""
     from ringfit.io.modes import wheel_of
@@ -332,7 +340,7 @@ def _table_rows(tables, geometry, patches, spins, cavity_split=None):
 
     ``cavity_split``: per table W_2/h_c of the loaded cavity (docs/physics.md §6 cavity_mode), or None."""
     cavity = [float(f) for t in tables for f, k in zip(t.freq_hz, t.kind) if k == "acoustic"]
-    f_a = cavity[0] if cavity else float(cavity_frequency(1))
+    f_a = cavity[0] if cavity else float(jax.jit(cavity_frequency)(1))  # one program, not one per operation
     rows = []
     damping_std = [t.extra_floats("damping_std_pct") for t in tables]
     wheels = [wheel_row(t.condition, str(t.source)) for t in tables]
@@ -367,8 +375,9 @@ def _row_cavity(table: ModeTable, f_a: float, contact: int, n: int, split) -> fl
         return f_a
     from ringfit.physics.cavity import loaded_cavity_lines
 
-    # the loaded cavity's pair at rest: fore-aft f_a sqrt(1 + e), vertical f_a sqrt(1 - e) (docs/physics.md §6)
-    fore_aft, vertical = loaded_cavity_lines(f_a, split)
+    # the loaded cavity's pair at rest: fore-aft f_a sqrt(1 + e), vertical f_a sqrt(1 - e) (docs/physics.md §6);
+    # one compiled program, not one per operation (a cold process compiles each)
+    fore_aft, vertical = jax.jit(loaded_cavity_lines)(f_a, split)
     return float(vertical if contact == 1 else fore_aft)
 
 
@@ -613,8 +622,6 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
         ring_ref = ring_ref.replace(k_tread=DEFAULT_K_TREAD)
     kt_sd = K_TREAD_FITTED_SD if has_kt else K_TREAD_PRIOR_SD
     spins = [spin_of(t, geometry.outer_radius) for t in tables]
-    from ringfit.physics.cavity import cavity_height, deflection_cos2
-
     patches, conditions, splits = [], [], []
     for t in tables:
         load = t.condition.get("load_n")
@@ -622,7 +629,7 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
             a, sa, sol = _static_contact(ring_ref, geometry, float(load), t.condition.get("drum_diameter_m"), kt_sd)
             patches.append((a, sa))
             # the loaded cavity's split W_2/h_c (docs/physics.md §6) from the same static solve
-            splits.append(float(deflection_cos2(sol) / cavity_height(geometry)) if t.state == "loaded" else None)
+            splits.append(float(_cavity_split(sol, geometry)) if t.state == "loaded" else None)
             conditions.append(f"patch half-angle {math.degrees(a):.2f} ± {math.degrees(sa):.2f} deg from "
                               f"load_n = {float(load):g} N (k_trd {ring_ref.k_tread:.3g} N/m^2"
                               f"{'' if has_kt else ', tyre.toml has none: its prior'})")

@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
-                                linearize, residuals)
+                                linearize)
 from ringfit.fit.result import FitResult
 from ringfit.gap.problem import GapProblem
 
@@ -71,6 +71,13 @@ class GapResiduals(AbstractResiduals):
 
     predictor: object = eqx.field(static=True)
     huber: float = eqx.field(static=True, default=0.0)
+    #: the damping problems' solve (a few rows, one level per table) compiles quickly (the engine's
+    #: ``compile_quick``); the frequency and profile problems keep XLA's optimised code for their many refits
+    quick: bool = eqx.field(static=True, default=False)
+
+    @property
+    def compile_quick(self) -> bool:
+        return self.quick
 
     def __call__(self, theta, data):
         pdata, y, w, robust = data
@@ -95,8 +102,8 @@ def _engine_problem(problem: GapProblem, train) -> Problem:
         y, w = np.concatenate([y, np.zeros(pad)]), np.concatenate([w, np.zeros(pad)])
         robust = np.concatenate([robust, np.zeros(pad, dtype=bool)])
     huber = float(problem.huber) if problem.huber and problem.robust is not None and robust.any() else 0.0
-    return Problem(GapResiduals(problem.predictor, huber), (problem.data, y, w, robust), coordinates(problem),
-                   prior=gap_prior(problem), sigma="inflate", data_label="the gap data")
+    return Problem(GapResiduals(problem.predictor, huber, problem.domain == "damping"), (problem.data, y, w, robust),
+                   coordinates(problem), prior=gap_prior(problem), sigma="inflate", data_label="the gap data")
 
 
 def _pad(problem: GapProblem) -> int:
@@ -104,9 +111,14 @@ def _pad(problem: GapProblem) -> int:
 
 
 def predict(problem: GapProblem, theta) -> np.ndarray:
-    """Prediction ``(m,)`` of every row at ``theta`` (natural units): the engine's residual model, no fit."""
-    _, aux = residuals(_engine_problem(problem, np.ones(problem.m, dtype=bool)), np.asarray(theta, dtype=np.float64))
-    return np.asarray(aux)[: problem.m]
+    """Prediction ``(m,)`` of every row at ``theta`` (natural units): the engine's residual model, no fit.
+
+    Evaluated by the refits' own compiled solve (:func:`ringfit.fit.engine.linearize`, the baseline's
+    parameters free, padded as every refit): a cold diagnosis compiles no separate program for it.
+    """
+    eng = _engine_problem(problem, np.ones(problem.m, dtype=bool))
+    out = linearize(eng, np.asarray(theta, dtype=np.float64), _free_names(problem, ()), pad_to=_pad(problem))
+    return np.asarray(out.aux)[: problem.m]
 
 
 def predict_and_jacobian(problem: GapProblem, theta: np.ndarray, free) -> tuple[np.ndarray, np.ndarray]:
