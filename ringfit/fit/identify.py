@@ -557,7 +557,8 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     # a scale estimated from ν residual degrees of freedom: its parameters follow Student's t_ν, not the normal
     widen = {n: t_widening(d) for n, d in block_dof.items() if n != "profiles"}
     check = None
-    if np.all(np.isfinite(fit.theta)) and (rows.loaded is not None or rows.profiles is not None):
+    # (θ holds EA = ∞ of the inextensible ring: only the free parameters need be finite)
+    if all(math.isfinite(fit.values[n]) for n in fit.names) and (rows.loaded is not None or rows.profiles is not None):
         check = grid_check(fit, rows, geometry, solver, P)
     return _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, check, widen)
 
