@@ -202,7 +202,10 @@ def main() -> None:
                 colour=truth["profiles"][0]["noise_colour"], cold=None, warm=[wall, cpu] if c > 0 else None,
                 z={n: z[n][-1] for n in NAMES}, err={n: err[n][-1] for n in NAMES}, ei_sd=params["ei"]["sd_ln"],
                 ei_sd_without=ei_sd_without[-1] if c >= ARGS.cases - ARGS.without else None,
-                nz=_nuisance_z(ident, truth), grid_shift=ident.grid_check)), flush=True)
+                nz=_nuisance_z(ident, truth), grid_shift=ident.grid_check,
+                signed={n: math.log(params[n]["value"] / truth["ring"][n]) for n in NAMES},
+                sd={n: params[n]["sd_ln"] for n in NAMES}, truth_grid=truth.get("truth_grid"),
+                fisher={b: v["fisher_share"] for b, v in ident.blocks.items()})), flush=True)
             print(f"case {c + 1:2d} (seed {seed}, {truth['profiles'][0]['noise_colour']:5s} noise): {ident.fit.status}, "
                   f"EI σ {100 * params['ei']['sd_ln']:.2f} %, largest |z| {abs(z[worst][-1]):.2f} ({worst}), "
                   f"{wall:.1f} s wall / {cpu:.1f} s CPU", flush=True)
