@@ -210,15 +210,17 @@ class JointArrays(eqx.Module):
     p_sigma: jax.Array | None
 
 
-def harmonic_rows(channels, k_min: int = PROFILE_K_MIN, rows_grid: int | None = None):
+def harmonic_rows(channels, k_min: int = PROFILE_K_MIN, rows_grid: int | None = None, k_top: int = 0):
     """Rows ``(..., 2H)`` of revolution harmonics k_min … M/2 − 1 of ``channels`` ``(..., M)``: real then imaginary
     parts of ``rfft · √(2/M)`` (white noise of σ per sample gives each row variance σ²).
 
     ``rows_grid``: the rows of the same revolution band-limited to that many points (harmonics k_min …
-    rows_grid/2 − 1), for a model evaluated on a finer grid than the data's (the grid check)."""
+    rows_grid/2 − 1), for a model evaluated on a finer grid than the data's (the grid check). ``k_top`` > 0: the
+    rows stop at harmonic k_top (the profiles' band, :func:`profile_band`)."""
     M = channels.shape[-1]
     R = M if rows_grid is None else int(rows_grid)
-    spec = jnp.fft.rfft(channels, axis=-1)[..., k_min : R // 2] * (R / M) * math.sqrt(2.0 / R)
+    top = R // 2 if k_top <= 0 else min(R // 2, int(k_top) + 1)
+    spec = jnp.fft.rfft(channels, axis=-1)[..., k_min:top] * (R / M) * math.sqrt(2.0 / R)
     return jnp.concatenate([spec.real, spec.imag], axis=-1)
 
 
@@ -260,6 +262,8 @@ class JointResiduals(AbstractResiduals):
     n_harmonics: int = eqx.field(static=True, default=LOADED_HARMONICS)
     #: profile rows as on a grid of this many points (0: the solver's grid); the grid check's finer model
     rows_grid: int = eqx.field(static=True, default=0)
+    #: highest profile harmonic compared (0: M/2 − 1); :func:`profile_band`
+    k_top: int = eqx.field(static=True, default=0)
 
     def __call__(self, theta, data: JointArrays):
         ring = ring_from_vector(theta)
@@ -299,7 +303,7 @@ class JointResiduals(AbstractResiduals):
 
             ch = serial_map(one_profile, (data.p_omega, data.p_load, data.p_roads, data.p_band))
             ch = shift_angle(ch, offset[:, None, None]) * gain[:, None, None]
-            model = harmonic_rows(ch, rows_grid=self.rows_grid or None)
+            model = harmonic_rows(ch, rows_grid=self.rows_grid or None, k_top=self.k_top)
             rows.append(((model - data.p_measured) / data.p_sigma).ravel())
             aux[2] = model
         return jnp.concatenate(rows), tuple(aux)
@@ -393,12 +397,25 @@ def _profile_rows(profiles, geometry, ring, solver) -> dict | None:
     from ringfit.fit.rolling import rolling_data
 
     data = rolling_data(profiles, geometry, ring, solver=solver)
-    measured = np.asarray(harmonic_rows(jnp.asarray(data.measured)))
+    k_top = profile_band(profiles, solver.n_grid)
+    measured = np.asarray(harmonic_rows(jnp.asarray(data.measured), k_top=k_top))
     P = measured.shape[0]
     # starting σ per profile and channel: the RMS of the reading's rows (rescaled by the first pass)
     sigma = np.broadcast_to(np.sqrt(np.mean(measured**2, axis=-1, keepdims=True)) * 0.1, measured.shape).copy()
     return dict(measured=measured, sigma=sigma, omega=data.omega, load=data.load, drum=data.drum_diameter,
-                P=P, M=data.measured.shape[-1], sources=data.sources, speed_kmh=data.speed_kmh)
+                P=P, M=data.measured.shape[-1], sources=data.sources, speed_kmh=data.speed_kmh, k_top=k_top)
+
+
+#: Harmonics kept below the coarsest profile's Nyquist harmonic (its resampling's edge).
+PROFILE_BAND_MARGIN = 8
+
+
+def profile_band(profiles, n_grid: int) -> int:
+    """The highest revolution harmonic the profile rows compare: below the grid's Nyquist (M/2 − 1) and
+    :data:`PROFILE_BAND_MARGIN` below what the coarsest profile resolves ((N − 1)/2 for N angles) — a
+    profile holds nothing above that, and a model row there would be compared with a zero."""
+    n_min = min(len(p) for p in profiles)
+    return int(min(n_grid // 2 - 1, (n_min - 1) // 2 - PROFILE_BAND_MARGIN))
 
 
 def _arrays(geometry, rows: _Rows, solver) -> JointArrays:
@@ -517,7 +534,7 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     free = tuple(free) + nuisance_names(P)
     coords = joint_coords(P)
     theta = np.concatenate([ring_vector(ring0), np.tile([0.0, 1.0], P)])
-    model = JointResiduals(P, solver, ProfileModel())
+    model = JointResiduals(P, solver, ProfileModel(), k_top=0 if rows.profiles is None else rows.profiles["k_top"])
     slices = _slices(rows)
     scales = {b: 1.0 for b in slices}
     fit = None
@@ -590,7 +607,8 @@ def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: Cont
     of ``fit.names``).
     """
     fine = ContactSolver(n_grid=factor * solver.n_grid, window_deg=solver.window_deg, max_iter=solver.max_iter)
-    model = JointResiduals(P, fine, ProfileModel(), n_harmonics=factor * LOADED_HARMONICS, rows_grid=solver.n_grid)
+    model = JointResiduals(P, fine, ProfileModel(), n_harmonics=factor * LOADED_HARMONICS, rows_grid=solver.n_grid,
+                           k_top=0 if rows.profiles is None else rows.profiles["k_top"])
     problem = Problem(model, _arrays(geometry, rows, fine), fit.coords, data_label="these measurements")
     r_fine, _ = residuals(problem, fit.theta)
     m = fit.residuals.size
