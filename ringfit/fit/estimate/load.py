@@ -242,8 +242,10 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
                           atol=settings.atol)
     # second pass: whiten the residual spectrum
     resid_rows = np.asarray(first.extra["aux"])[0] - measured[0]
+    # rows in units of their σ (not normalised): the priors (k_trd, corner, tilt) then weigh in the fit as they do
+    # in its covariance (J/s); normalised to a mean weight of 1 the rows were in m/s², so a prior counted 1/s² times
+    # too much in the point estimate (a k_trd prior held the fit at its mean whatever the profile said)
     weight = 1.0 / smoothed_noise(resid_rows)
-    weight = weight / np.mean(weight)
     arrays = eqx.tree_at(lambda a: a.weight, arrays, weight[None])
     problem = estimate_problem(arrays, settings, k_max, prior)
     fit = least_squares(problem, first.theta, tuple(free), max_steps=settings.max_steps, rtol=settings.rtol,
