@@ -12,6 +12,12 @@ white, pink, red or band-coloured noise; the truth solved on a 1024- or 2048-poi
 2. EI's relative σ with profiles (target < 10 %) and, on the last ``--without`` cases, without them;
 3. the warm time of one identification (free + 2 loaded + 3 profiles; target < 10 s on one core),
    CPU time beside wall, the load average at start and end. The summary is printed every 5 cases too.
+
+On a busy machine run shards of seeds as separate processes and merge their logs: e.g.
+``--seed 100 --cases 7 --without 0 > a.log``, ``--seed 107 --cases 7 --without 0 > b.log``,
+``--seed 114 --cases 6 --without 1 > c.log``, then ``--merge a.log b.log c.log`` (each case prints a
+``RESULT`` line: signed errors, σ, the grid check, the Fisher shares). The merged time line is the shards'
+warm times (CPU time is the per-core figure when they ran unpinned).
 """
 
 from __future__ import annotations

@@ -14,15 +14,21 @@ ring parameters and each run keeps its own nuisances:
 - ``profiles`` — ``*.profile.csv`` at known ``load_n`` and speed: the steady rolling ring read
   by the sensor (§4–§6, :func:`ringfit.physics.profile.profile_channels`), per profile a gain
   (sensor sensitivity) and an angle offset; the residual is taken per revolution harmonic
-  (2 … M/2 − 1, real and imaginary parts) so that coloured noise is whitened by its own
-  spectrum, estimated from the residual (power averaged over ±:data:`NOISE_SMOOTHING` harmonics).
+  (2 … M/2 − 1, and :data:`PROFILE_BAND_MARGIN` below what the coarsest profile resolves; real and
+  imaginary parts) so that coloured noise is whitened by its own spectrum, estimated from the residual
+  (:func:`noise_spectrum`: a power law, then the ratio averaged over the ±:data:`NOISE_SMOOTHING`
+  neighbouring harmonics, each harmonic's own residual left out, times ν/(ν − 4) for weights estimated
+  from ν parts).
 
 Noise scales: each block's σ is estimated from its own residual, ``s_b² = χ²_b / (m_b − tr H_bb)``
 with ``H`` the hat matrix of the weighted fit (the block's share of the fitted degrees of
 freedom), and the fit is repeated with the rescaled rows until the scales settle
 (:data:`SCALE_PASSES`): one data type cannot swamp another, whatever its row count or its
 stated σ. Rolling mode tables (speed > 0) are not part of the joint model yet: they are listed
-with a warning.
+with a warning. A block scale from ν residual degrees of freedom widens that block's share of the
+covariance by Student's t_ν (:func:`t_widening`), and the model's own discretisation (contact grid,
+loaded-mode basis) is checked once at the optimum (:func:`grid_check`, refined ×2) and carried into the
+covariance as a rank-one term.
 
 The result is a :class:`~ringfit.fit.result.FitResult` of the final pass (covariance in the
 solver coordinates, ln θ for positive parameters) plus, in :class:`Identification`, the Fisher
