@@ -242,10 +242,8 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
                           atol=settings.atol)
     # second pass: whiten the residual spectrum
     resid_rows = np.asarray(first.extra["aux"])[0] - measured[0]
-    # rows in units of their σ (not normalised): the priors (k_trd, corner, tilt) then weigh in the fit as they do
-    # in its covariance (J/s); normalised to a mean weight of 1 the rows were in m/s², so a prior counted 1/s² times
-    # too much in the point estimate (a k_trd prior held the fit at its mean whatever the profile said)
     weight = 1.0 / smoothed_noise(resid_rows)
+    weight = weight / np.mean(weight)
     arrays = eqx.tree_at(lambda a: a.weight, arrays, weight[None])
     problem = estimate_problem(arrays, settings, k_max, prior)
     fit = least_squares(problem, first.theta, tuple(free), max_steps=settings.max_steps, rtol=settings.rtol,
@@ -287,21 +285,24 @@ def ring_propagation(fit: FitResult, ring: RingParams, spread: dict) -> dict:
     """The ring parameters' uncertainty carried into ln(load) by linear propagation (docs/physics.md §10).
 
     The fit's optimum û moves with a ring parameter q_j (held fixed in the fit) by
-    ``∂û/∂ln q = −(JᵀJ)⁻¹ Jᵀ ∂r/∂ln q`` (J the fit's Jacobian with its prior rows, ∂r/∂ln q the engine's
-    Jacobian of the same weighted rows in ln q, :func:`ringfit.fit.engine.linearize`), and with the k_trd
-    prior's mean μ by ``∂û/∂μ = (JᵀJ)⁻¹ e_k / σ_k²``; the prior's mean moves with q by ``spread["shift"]``
-    (:func:`ring_spread`). With g = ∂ln load/∂ln q in total, the ring adds ``gᵀ Σ_qq g`` to the variance of
-    ln(load). **Returns** ``dict(names, sensitivity, k_tread_prior_sd, load_sd_pct)``.
+    ``∂û/∂ln q = −(JᵀJ)⁻¹ Jᵀ ∂r/∂ln q`` (J the Jacobian of the rows the fit minimised, its prior rows
+    included, ∂r/∂ln q the engine's Jacobian of the same rows in ln q, :func:`ringfit.fit.engine.linearize`),
+    and with the k_trd prior's mean μ by ``∂û/∂μ = (JᵀJ)⁻¹ e_k / σ_k²``; the prior's mean moves with q by
+    ``spread["shift"]`` (:func:`ring_spread`). With g = ∂ln load/∂ln q in total, the ring adds ``gᵀ Σ_qq g`` to
+    the variance of ln(load). The rows are those the solver minimised (weights of mean 1, not divided by the
+    fitted σ scale s), so g is the estimator's own sensitivity. **Returns** ``dict(names, sensitivity,
+    k_tread_prior_sd, load_sd_pct)``.
     """
     names = tuple(spread["names"])
     problem = ring_sensitivity_problem(fit.problem, names)
     theta = np.concatenate([fit.theta, [float(getattr(ring, n)) for n in names]])
     lin = linearize(problem, theta, names)
-    J = fit.jacobian
     m = fit.residuals.size
+    J = fit.jacobian.copy()
+    J[:m] *= float(fit.extra["sigma_scale"])  # the rows the solver minimised (FitResult divides them by s)
     Jq = np.zeros((J.shape[0], len(names)))
-    Jq[:m] = lin.jacobian / float(fit.extra["sigma_scale"])  # the fit's rows are in units of the estimated σ
-    cov = fit.covariance_log
+    Jq[:m] = lin.jacobian
+    cov = np.linalg.pinv(J.T @ J)
     iL = list(fit.names).index(LOAD)
     g = -(cov @ (J.T @ Jq))[iL]
     if K_TREAD in fit.names and spread["k_tread_sd"] is not None:
