@@ -14,6 +14,12 @@ issue's targets:
 1b. **Independent discretisation** (issue 22 item 5): truths from 4th-order finite differences in φ with
    their own contact loop (``benchmarks/_independent_ring.py``), loads 1.5–6.5 kN, half noise-free: signed
    error and coverage by load band, with the grid check (M → 2M shift in the interval) and without it.
+2b. **Known-load identification** (issue 22 item 2): a tyre file whose k_tread is 10 % off is identified
+   (``ringfit identify``: free modes, two loaded tables, three profiles at known loads;
+   ``ringfit.synth.identify.make_identify_case``), and profiles of the true tyre at other loads (2.5–5.5 kN,
+   30–80 km/h, pink 1 % noise, truth on a 1024-point grid) are estimated with the identified ring and its
+   whole ``[ring.covariance]``: coverage (target 95 %, with its Clopper–Pearson interval) and error, beside
+   the same profiles estimated with the file's wrong k_tread held fixed. ``--known-cases`` tyres (default 8).
 2. **Robustness** (no target): effects the estimator does not model (sensor offset, a band limit, a
    second high-pass stage, tread shear, a finite EA, χ < 1, a k_tread 10 % off) — load errors, coverage
    and whether the fit flags itself as poor.
@@ -43,7 +49,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common as bc  # noqa: E402
 
-SECTIONS = ("accuracy", "independent", "robustness", "speed")
+SECTIONS = ("accuracy", "independent", "robustness", "known-load", "speed")
 
 
 def parse():
@@ -59,11 +65,14 @@ def parse():
                     default=1.0, help="recording length timed for the speed figures")
     ap.add_argument("--long", action="store_true", help="synthesise and time a real 30-minute recording")
     ap.add_argument("--skip", type=bc.choices_list(SECTIONS, "sections"), default=[],
-                    help="comma-separated sections to skip: accuracy,independent,robustness,speed")
+                    help="comma-separated sections to skip: accuracy,independent,robustness,known-load,speed")
     ap.add_argument("--fd-cases", type=bc.count("a number of cases", 2, 10**4), default=32,
                     help="profiles of the independent finite-difference truth (default 32)")
+    ap.add_argument("--known-cases", type=bc.count("a number of cases", 1, 10**4), default=8,
+                    help="identified tyres of the known-load section (default 8; two profiles each)")
     args = ap.parse_args()
     if args.quick:
+        args.known_cases = 2
         args.cases, args.robust_cases, args.minutes, args.fd_cases = 4, 1, 0.1, 4
     if args.cores > len(os.sched_getaffinity(0)):
         bc.fail(f"--cores {args.cores}: this process may use only {len(os.sched_getaffinity(0))}")
@@ -282,6 +291,59 @@ def robustness():
         print(summarise(rows, label) + f"  | flagged poor {poor}/{len(rows)}, rms/noise {ratio:.2f}")
 
 
+def known_load():
+    """Section 2b: estimate with an identified tyre (k_tread 10 % off in the file, identified at known loads)."""
+    from scipy.stats import binomtest
+
+    from ringfit.fit.identify import identify, read_identify_folder
+    from ringfit.io.tyre import read_tyre, write_tyre
+    from ringfit.synth.identify import make_identify_case
+
+    print(f"\n2b. Known-load identification: {ARGS.known_cases} tyres whose file's k_tread is 10 % off, identified "
+          "(free + 2 loaded + 3 profiles at known loads), two profiles each at other loads")
+    solver = ContactSolver(n_grid=1024, window_deg=40.0)
+    rows, fixed_rows, ident_cpu = [], [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for c in range(ARGS.known_cases):
+            folder = Path(tmp) / f"case{c}"
+            truth = make_identify_case(folder, seed=900 + c)
+            ring_true = truth["ring_object"]
+            tyre = read_tyre(folder / "tyre.toml")
+            wrong = ring_true.replace(k_tread=1.1 * float(ring_true.k_tread))
+            write_tyre(tyre.with_ring(wrong), folder / "tyre.toml", overwrite=True)
+            ident, dt = bc.timed(identify, read_identify_folder(folder))
+            ident_cpu.append(dt.cpu)
+            rng = np.random.default_rng(900 + c)
+            for _ in range(2):
+                load, speed = float(rng.uniform(2500.0, 5500.0)), float(rng.uniform(30.0, 80.0))
+                prof = simulate_profile(ring_true, truth["geometry"], speed_kmh=speed, load_n=load, solver=solver,
+                                        n_points=1000)
+                sigma = 0.01 * float(np.max(np.abs(prof.channels[0])))
+                ch = prof.channels + np.stack([coloured_noise(rng, 1000, sigma, "pink") for _ in range(2)])
+                cond = {k: v for k, v in prof.condition.items() if k != "load_n"}
+                prof = Profile(prof.angle_deg, ch[0], ch[1], condition=cond, source="bench")
+                est = estimate_load(prof, truth["geometry"], ident.ring, settings=SETTINGS,
+                                    ring_covariance=ident.covariance)
+                rows.append(dict(err=est.load_n / load - 1, cover=est.lo < load < est.hi, conv=est.converged,
+                                 half=0.5 * (est.hi - est.lo) / est.load_n, feat=est.feature.load_n / load - 1,
+                                 ring_pct=(est.ring_propagation or {}).get("load_sd_pct", math.nan)))
+                fixed = estimate_load(prof, truth["geometry"], wrong, settings=SETTINGS)
+                fixed_rows.append(dict(err=fixed.load_n / load - 1, cover=fixed.lo < load < fixed.hi,
+                                       conv=fixed.converged, half=0.5 * (fixed.hi - fixed.lo) / fixed.load_n,
+                                       feat=fixed.feature.load_n / load - 1))
+            print(f"   tyre {c + 1}: k_tread identified {float(ident.ring.k_tread) / float(ring_true.k_tread) - 1:+.2%} "
+                  f"(σ {ident.covariance.sd_ln('k_tread'):.2%}); loads covered "
+                  f"{sum(r['cover'] for r in rows[-2:])}/2 (wrong k_tread fixed: {sum(r['cover'] for r in fixed_rows[-2:])}/2)",
+                  flush=True)
+    k = sum(r["cover"] for r in rows)
+    ci = binomtest(k, len(rows)).proportion_ci(method="exact")
+    print(summarise(rows, "identified tyre + [ring.covariance]") + f"  | Clopper–Pearson {100 * ci.low:.1f} … "
+          f"{100 * ci.high:.1f} % ({'ok' if ci.low <= 0.95 <= ci.high else 'OFF'} against 95 %)")
+    print(f"   ring's share of σ(ln load): median {statistics.median(r['ring_pct'] for r in rows):.2f} %")
+    print(summarise(fixed_rows, "the file's k_tread (+10 %) fixed"))
+    print(f"   identification: median {statistics.median(ident_cpu):.1f} s CPU per tyre")
+
+
 def cpu_and_wall(fn):
     c, w = time.process_time(), time.perf_counter()
     out = fn()
@@ -394,6 +456,8 @@ def main():
         independent()
     if "robustness" not in skip:
         robustness()
+    if "known-load" not in skip:
+        known_load()
     if "speed" not in skip:
         speed()
     print("\nGPU: not measured here (no accelerator in this session); the project never needs one.")

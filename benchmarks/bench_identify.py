@@ -12,6 +12,12 @@ white, pink, red or band-coloured noise; the truth solved on a 1024- or 2048-poi
 2. EI's relative σ with profiles (target < 10 %) and, on the last ``--without`` cases, without them;
 3. the warm time of one identification (free + 2 loaded + 3 profiles; target < 10 s on one core),
    CPU time beside wall, the load average at start and end. The summary is printed every 5 cases too.
+
+On a busy machine run shards of seeds as separate processes and merge their logs: e.g.
+``--seed 100 --cases 7 --without 0 > a.log``, ``--seed 107 --cases 7 --without 0 > b.log``,
+``--seed 114 --cases 6 --without 1 > c.log``, then ``--merge a.log b.log c.log`` (each case prints a
+``RESULT`` line: signed errors, σ, the grid check, the Fisher shares). The merged time line is the shards'
+warm times (CPU time is the per-core figure when they ran unpinned).
 """
 
 from __future__ import annotations
@@ -36,6 +42,9 @@ def parse():
     ap.add_argument("--jobs", type=int, default=0,
                     help="run each case in its own process, this many at a time (0: all in this process)")
     ap.add_argument("--case-timeout", type=float, default=600.0, help="seconds before a case process is stopped")
+    ap.add_argument("--merge", nargs="+", default=None, metavar="LOG",
+                    help="print the summary of the RESULT lines in these logs of earlier runs (shards of seeds run "
+                         "as separate processes, e.g. --seed 100 --cases 7 and --seed 107 --cases 7) and stop")
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--without-worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--timed", action="store_true", help=argparse.SUPPRESS)
@@ -143,7 +152,27 @@ def main_processes() -> None:
     print(f"load average at end: {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}")
 
 
+def merge(logs) -> None:
+    """The summary of the RESULT lines of earlier runs' logs (``--merge``)."""
+    import json
+
+    ok = []
+    for log in logs:
+        ok += [json.loads(x[7:]) for x in Path(log).read_text().splitlines() if x.startswith("RESULT ")]
+    ok.sort(key=lambda r: r["seed"])
+    print(f"merged {len(ok)} cases (seeds {', '.join(str(r['seed']) for r in ok)}) from {len(logs)} log(s)")
+    z = {n: [r["z"][n] for r in ok] for n in NAMES}
+    for key in ("gain (each profile)", "angle offset (each)"):
+        z[key] = [x for r in ok for x in r["nz"][key]]
+    err = {n: [r["err"][n] for r in ok] for n in NAMES}
+    times = [tuple(r["warm"]) for r in ok if r.get("warm")]
+    _summary(len(ok), z, err, [r["ei_sd"] for r in ok], [r["ei_sd_without"] for r in ok if r.get("ei_sd_without")],
+             times, sum(r["converged"] for r in ok))
+
+
 def main() -> None:
+    import json
+
     load0 = os.getloadavg()
     print(f"load average at start: {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}")
     z = {n: [] for n in NAMES}
@@ -174,6 +203,15 @@ def main() -> None:
                 shutil.copytree(folder, bare, ignore=shutil.ignore_patterns("*.profile.*"))
                 ei_sd_without.append(identify(read_identify_folder(bare)).parameters()["ei"]["sd_ln"])
             worst = max(NAMES, key=lambda n: abs(z[n][-1]))
+            print("RESULT " + json.dumps(dict(
+                seed=seed, status=ident.fit.status, converged=bool(ident.converged),
+                colour=truth["profiles"][0]["noise_colour"], cold=None, warm=[wall, cpu] if c > 0 else None,
+                z={n: z[n][-1] for n in NAMES}, err={n: err[n][-1] for n in NAMES}, ei_sd=params["ei"]["sd_ln"],
+                ei_sd_without=ei_sd_without[-1] if c >= ARGS.cases - ARGS.without else None,
+                nz=_nuisance_z(ident, truth), grid_shift=ident.grid_check,
+                signed={n: math.log(params[n]["value"] / truth["ring"][n]) for n in NAMES},
+                sd={n: params[n]["sd_ln"] for n in NAMES}, truth_grid=truth.get("truth_grid"),
+                fisher={b: v["fisher_share"] for b, v in ident.blocks.items()})), flush=True)
             print(f"case {c + 1:2d} (seed {seed}, {truth['profiles'][0]['noise_colour']:5s} noise): {ident.fit.status}, "
                   f"EI σ {100 * params['ei']['sd_ln']:.2f} %, largest |z| {abs(z[worst][-1]):.2f} ({worst}), "
                   f"{wall:.1f} s wall / {cpu:.1f} s CPU", flush=True)
@@ -227,7 +265,9 @@ def _binomial_band(n: int, p: float) -> tuple[int, int]:
 
 if __name__ == "__main__":
     np.seterr(all="ignore")
-    if ARGS.worker is not None:
+    if ARGS.merge:
+        merge(ARGS.merge)
+    elif ARGS.worker is not None:
         from ringfit.targets.ssi import small_matrix_threads
 
         with small_matrix_threads():  # the synthetic truth's contact solves too (see ringfit.fit.identify.identify)

@@ -370,26 +370,38 @@ def test_cli_refuses_a_tyre_file_without_ring(profile_file, tmp_path, capsys):
 
 
 def test_cli_propagates_the_tyre_files_covariance_like_k_tread_sd(profile_file, tmp_path, capsys):
-    """The [ring.covariance]'s σ of ln k_trd is what --k-tread-sd would propagate: the same interval."""
+    """A [ring.covariance] of k_trd alone is what --k-tread-sd would propagate: the same interval. One with
+    other ring parameters propagates them too (docs/physics.md §10; tests/test_estimate_covariance.py)."""
     from ringfit.data import path as data_path
     from ringfit.io.tyre import RingCovariance, read_tyre, write_tyre
 
     tyre = read_tyre(data_path("table9.tyre.toml"))
     sd = 0.08
-    cov = np.diag([0.01, 0.3, 0.02, sd]) ** 2
-    cov[1, 3] = cov[3, 1] = 0.5 * 0.3 * sd  # correlations other than k_trd's variance do not enter
-    tyre.covariance = RingCovariance(("rho_a", "ei", "kw", "k_tread"), cov, "test")
+    tyre.covariance = RingCovariance(("k_tread",), np.array([[sd**2]]), "test")
     path = tmp_path / "cov.tyre.toml"
     write_tyre(tyre, path)
-    a, b, c = (tmp_path / f"{x}.estimate.json" for x in "abc")
+    cov = np.diag([0.01, 0.3, 0.02, sd]) ** 2
+    cov[1, 3] = cov[3, 1] = 0.5 * 0.3 * sd
+    tyre.covariance = RingCovariance(("rho_a", "ei", "kw", "k_tread"), cov, "test")
+    full = tmp_path / "full.tyre.toml"
+    write_tyre(tyre, full)
+    a, b, c, d = (tmp_path / f"{x}.estimate.json" for x in "abcd")
     assert run_cli(profile_file, "--tyre", path, "--out", a) == 0
     assert "propagated into the load interval" in capsys.readouterr().out
     assert run_cli(profile_file, "--tyre", data_path("table9.tyre.toml"), "--out", b, "--k-tread-sd", sd,
                    "--quiet") == 0
     assert run_cli(profile_file, "--tyre", data_path("table9.tyre.toml"), "--out", c, "--quiet") == 0
+    assert run_cli(profile_file, "--tyre", full, "--out", d, "--quiet") == 0
     la, lb, lc = (json.loads(x.read_text())["load_n"] for x in (a, b, c))
     assert la["lo"] == pytest.approx(lb["lo"], rel=1e-9) and la["hi"] == pytest.approx(lb["hi"], rel=1e-9)
     assert la["hi"] - la["lo"] > 2 * (lc["hi"] - lc["lo"])  # k_trd at ±8 % dominates a fixed-ring interval
+    rec = json.loads(d.read_text())
+    prop = rec["fit"]["ring_propagation"]
+    assert prop["names"] == ["rho_a", "ei", "kw"]
+    assert prop["k_tread_prior_sd"] == pytest.approx(sd * math.sqrt(1 - 0.5**2), rel=1e-9)  # k_trd given EI
+    z = 1.959963984540054
+    assert math.log(rec["load_n"]["hi"] / rec["load_n"]["lo"]) / (2 * z) == pytest.approx(prop["sd_pct"] / 100,
+                                                                                         rel=1e-6)
 
 
 def test_every_name_of_the_old_module_is_importable_from_the_package():

@@ -37,7 +37,8 @@ def register(sub) -> None:
     p.add_argument("--k-tread-sd", type=number("a σ of ln k_tread in [0, 5]", lo=0.0, hi=5.0), default=None, metavar="S",
                    help="σ of ln k_tread: free the tread stiffness with this log-normal prior around the tyre "
                         "file's value and propagate it into the interval (default: the tyre file's "
-                        "[ring.covariance] when it has one, else fixed; 0.3 when the tyre file has no k_tread)")
+                        "[ring.covariance] when it has one, every ring parameter it holds propagated, else fixed; "
+                        "0.3 when the tyre file has no k_tread)")
     p.add_argument("--harmonics", type=integer("a number of harmonics >= 8", lo=8), default=40, metavar="K",
                    help="highest revolution harmonic fitted (default 40)")
     p.add_argument("--grid", type=integer("an even grid size >= 128", lo=128, hi=1 << 16), default=512, help="model grid M of the contact solve (default 512)")
@@ -80,17 +81,19 @@ def run_estimate(args) -> int:
         raise InputError("has no [ring]: the load estimate needs the tyre's identified ring (ringfit identify, or "
                          "ringfit fit and fit-rolling); it does not fall back to the Table 9 values",
                          source=args.tyre)
-    k_tread_sd, note = tread_uncertainty(tyre, args.k_tread_sd)
+    _, note = tread_uncertainty(tyre, args.k_tread_sd)
     if note and not args.quiet:
         print(note)
-    settings = EstimateSettings(n_grid=args.grid, k_max=args.harmonics, k_tread_sd=k_tread_sd)
+    # the tyre's [ring.covariance] (k_trd given the rest, and the rest by linear propagation) unless --k-tread-sd
+    settings = EstimateSettings(n_grid=args.grid, k_max=args.harmonics, k_tread_sd=args.k_tread_sd)
     k_in_file = "k_tread" in tyre.ring_values
     revs = None
     if kind == "profile":
         from ringfit.io.profiles import read_profile
 
         profile = read_profile(args.input)
-        est = estimate_load(profile, tyre.geometry, tyre.ring, settings=settings, k_tread_in_file=k_in_file)
+        est = estimate_load(profile, tyre.geometry, tyre.ring, settings=settings, k_tread_in_file=k_in_file,
+                            ring_covariance=tyre.covariance)
     else:
         from ringfit.io.continuous import read_continuous
 
@@ -98,7 +101,7 @@ def run_estimate(args) -> int:
         with read_continuous(args.input, channels=args.channel_map) as rec:
             est, revs = estimate_recording(rec, tyre.geometry, tyre.ring, settings=settings,
                                            k_tread_in_file=k_in_file, per_revolution=want_revs,
-                                           progress=not args.quiet)
+                                           progress=not args.quiet, ring_covariance=tyre.covariance)
     if not args.quiet:
         for flag in est.flags:
             print(f"ringfit estimate: {flag}", file=sys.stderr)
@@ -142,8 +145,10 @@ def tread_uncertainty(tyre, k_tread_sd):
     sd = None if cov is None else cov.sd_ln("k_tread")
     if sd is None:
         return None, None
+    others = [n for n in cov.names if n != "k_tread"]
     return sd, (f"k_tread {tyre.ring_values.get('k_tread', float('nan')):.4g} N/m² ± {100 * sd:.2g} % (1σ, the tyre "
-                "file's [ring.covariance]) propagated into the load interval")
+                "file's [ring.covariance]) propagated into the load interval"
+                + (f", with {', '.join(others)} and their correlations" if others else ""))
 
 
 def _input_kind(path: Path) -> str:

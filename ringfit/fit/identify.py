@@ -14,15 +14,21 @@ ring parameters and each run keeps its own nuisances:
 - ``profiles`` — ``*.profile.csv`` at known ``load_n`` and speed: the steady rolling ring read
   by the sensor (§4–§6, :func:`ringfit.physics.profile.profile_channels`), per profile a gain
   (sensor sensitivity) and an angle offset; the residual is taken per revolution harmonic
-  (2 … M/2 − 1, real and imaginary parts) so that coloured noise is whitened by its own
-  spectrum, estimated from the residual (power averaged over ±:data:`NOISE_SMOOTHING` harmonics).
+  (2 … M/2 − 1, and :data:`PROFILE_BAND_MARGIN` below what the coarsest profile resolves; real and
+  imaginary parts) so that coloured noise is whitened by its own spectrum, estimated from the residual
+  (:func:`noise_spectrum`: a power law, then the ratio averaged over the ±:data:`NOISE_SMOOTHING`
+  neighbouring harmonics, each harmonic's own residual left out, times ν/(ν − 4) for weights estimated
+  from ν parts).
 
 Noise scales: each block's σ is estimated from its own residual, ``s_b² = χ²_b / (m_b − tr H_bb)``
 with ``H`` the hat matrix of the weighted fit (the block's share of the fitted degrees of
 freedom), and the fit is repeated with the rescaled rows until the scales settle
 (:data:`SCALE_PASSES`): one data type cannot swamp another, whatever its row count or its
 stated σ. Rolling mode tables (speed > 0) are not part of the joint model yet: they are listed
-with a warning.
+with a warning. A block scale from ν residual degrees of freedom widens that block's share of the
+covariance by Student's t_ν (:func:`t_widening`), and the model's own discretisation (contact grid,
+loaded-mode basis) is checked once at the optimum (:func:`grid_check`, refined ×2) and carried into the
+covariance as a rank-one term.
 
 The result is a :class:`~ringfit.fit.result.FitResult` of the final pass (covariance in the
 solver coordinates, ln θ for positive parameters) plus, in :class:`Identification`, the Fisher
@@ -44,11 +50,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares
+from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares, residuals
 from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, frequency_data,
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
-from ringfit.fit.result import FitResult
+from ringfit.fit.result import FitResult, covariance_from_jacobian
 from ringfit.io.modes import ModeTable, read_mode_table
 from ringfit.io.tyre import RingCovariance, Tyre, read_tyre
 from ringfit.params import RingParams, TyreGeometry
@@ -69,12 +75,16 @@ NOISE_SMOOTHING = 4
 PROFILE_K_MIN = 2
 #: Relative σ of a damping ratio row before its block scale is estimated.
 DAMPING_RELATIVE_STD = 0.05
+#: The two-sided 95 % normal quantile.
+Z95 = 1.959963984540054
 #: Bounds of a profile's gain on the reading (sensor sensitivity, its offset from the belt).
 GAIN_RANGE = (0.5, 2.0)
 #: Bound of a profile's angle offset [rad].
 OFFSET_BOUND = math.radians(10.0)
 #: Harmonics of the loaded-mode basis (docs/physics.md §6; N = 20 is within 0.2 Hz of N = 40).
 LOADED_HARMONICS = 24
+#: The grid check refines the contact grid and the loaded-mode basis by this factor (docs/physics.md §11).
+GRID_CHECK_FACTOR = 2
 #: Parameters of the ring the identification can free.
 RING_FREE = ("rho_a", "ei", "kw", "kv", "k_tread", "damping_ratio")
 BLOCKS = ("free modes", "free damping", "loaded modes", "profiles")
@@ -206,11 +216,17 @@ class JointArrays(eqx.Module):
     p_sigma: jax.Array | None
 
 
-def harmonic_rows(channels, k_min: int = PROFILE_K_MIN):
+def harmonic_rows(channels, k_min: int = PROFILE_K_MIN, rows_grid: int | None = None, k_top: int = 0):
     """Rows ``(..., 2H)`` of revolution harmonics k_min … M/2 − 1 of ``channels`` ``(..., M)``: real then imaginary
-    parts of ``rfft · √(2/M)`` (white noise of σ per sample gives each row variance σ²)."""
+    parts of ``rfft · √(2/M)`` (white noise of σ per sample gives each row variance σ²).
+
+    ``rows_grid``: the rows of the same revolution band-limited to that many points (harmonics k_min …
+    rows_grid/2 − 1), for a model evaluated on a finer grid than the data's (the grid check). ``k_top`` > 0: the
+    rows stop at harmonic k_top (the profiles' band, :func:`profile_band`)."""
     M = channels.shape[-1]
-    spec = jnp.fft.rfft(channels, axis=-1)[..., k_min : M // 2] * math.sqrt(2.0 / M)
+    R = M if rows_grid is None else int(rows_grid)
+    top = R // 2 if k_top <= 0 else min(R // 2, int(k_top) + 1)
+    spec = jnp.fft.rfft(channels, axis=-1)[..., k_min:top] * (R / M) * math.sqrt(2.0 / R)
     return jnp.concatenate([spec.real, spec.imag], axis=-1)
 
 
@@ -250,6 +266,10 @@ class JointResiduals(AbstractResiduals):
     solver: ContactSolver = eqx.field(static=True)
     profile_model: ProfileModel = eqx.field(static=True)
     n_harmonics: int = eqx.field(static=True, default=LOADED_HARMONICS)
+    #: profile rows as on a grid of this many points (0: the solver's grid); the grid check's finer model
+    rows_grid: int = eqx.field(static=True, default=0)
+    #: highest profile harmonic compared (0: M/2 − 1); :func:`profile_band`
+    k_top: int = eqx.field(static=True, default=0)
 
     def __call__(self, theta, data: JointArrays):
         ring = ring_from_vector(theta)
@@ -289,7 +309,7 @@ class JointResiduals(AbstractResiduals):
 
             ch = serial_map(one_profile, (data.p_omega, data.p_load, data.p_roads, data.p_band))
             ch = shift_angle(ch, offset[:, None, None]) * gain[:, None, None]
-            model = harmonic_rows(ch)
+            model = harmonic_rows(ch, rows_grid=self.rows_grid or None, k_top=self.k_top)
             rows.append(((model - data.p_measured) / data.p_sigma).ravel())
             aux[2] = model
         return jnp.concatenate(rows), tuple(aux)
@@ -383,12 +403,25 @@ def _profile_rows(profiles, geometry, ring, solver) -> dict | None:
     from ringfit.fit.rolling import rolling_data
 
     data = rolling_data(profiles, geometry, ring, solver=solver)
-    measured = np.asarray(harmonic_rows(jnp.asarray(data.measured)))
+    k_top = profile_band(profiles, solver.n_grid)
+    measured = np.asarray(harmonic_rows(jnp.asarray(data.measured), k_top=k_top))
     P = measured.shape[0]
     # starting σ per profile and channel: the RMS of the reading's rows (rescaled by the first pass)
     sigma = np.broadcast_to(np.sqrt(np.mean(measured**2, axis=-1, keepdims=True)) * 0.1, measured.shape).copy()
     return dict(measured=measured, sigma=sigma, omega=data.omega, load=data.load, drum=data.drum_diameter,
-                P=P, M=data.measured.shape[-1], sources=data.sources, speed_kmh=data.speed_kmh)
+                P=P, M=data.measured.shape[-1], sources=data.sources, speed_kmh=data.speed_kmh, k_top=k_top)
+
+
+#: Harmonics kept below the coarsest profile's Nyquist harmonic (its resampling's edge).
+PROFILE_BAND_MARGIN = 8
+
+
+def profile_band(profiles, n_grid: int) -> int:
+    """The highest revolution harmonic the profile rows compare: below the grid's Nyquist (M/2 − 1) and
+    :data:`PROFILE_BAND_MARGIN` below what the coarsest profile resolves ((N − 1)/2 for N angles) — a
+    profile holds nothing above that, and a model row there would be compared with a zero."""
+    n_min = min(len(p) for p in profiles)
+    return int(min(n_grid // 2 - 1, (n_min - 1) // 2 - PROFILE_BAND_MARGIN))
 
 
 def _arrays(geometry, rows: _Rows, solver) -> JointArrays:
@@ -434,6 +467,9 @@ class Identification:
     - ``correlation``: ``(names, matrix)`` of the ring parameters' posterior correlation;
     - ``covariance``: :class:`~ringfit.io.tyre.RingCovariance` of the ring parameters (ln θ);
     - ``nuisances``: per profile its gain and angle offset (deg) with σ; ``notes``: what was skipped.
+    - ``grid_check``: the model's own discretisation (:func:`grid_check`): ``grid``, ``loaded_harmonics`` (coarse,
+      fine) and per parameter ``shift`` (the optimum's move when both are refined; ln θ, degrees for an angle
+      offset), carried into every σ and interval above as a rank-one term ``δu δuᵀ``; None when it was not run.
     """
 
     fit: FitResult
@@ -446,6 +482,7 @@ class Identification:
     notes: list
     passes: int
     inputs: IdentifyInputs | None = None
+    grid_check: dict | None = None
 
     @property
     def converged(self) -> bool:
@@ -456,9 +493,8 @@ class Identification:
         :meth:`FitResult.interval <ringfit.fit.result.FitResult.interval>`)."""
         out = {}
         for name in self.free:
-            lo, hi = self.fit.interval(name, 0.95)
-            out[name] = dict(value=self.fit.values[name], lo95=float(lo), hi95=float(hi),
-                             sd_ln=self.covariance.sd_ln(name))
+            value, sd = self.fit.values[name], self.covariance.sd_ln(name)
+            out[name] = dict(value=value, lo95=value * math.exp(-Z95 * sd), hi95=value * math.exp(Z95 * sd), sd_ln=sd)
         return out
 
 
@@ -504,7 +540,7 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     free = tuple(free) + nuisance_names(P)
     coords = joint_coords(P)
     theta = np.concatenate([ring_vector(ring0), np.tile([0.0, 1.0], P)])
-    model = JointResiduals(P, solver, ProfileModel())
+    model = JointResiduals(P, solver, ProfileModel(), k_top=0 if rows.profiles is None else rows.profiles["k_top"])
     slices = _slices(rows)
     scales = {b: 1.0 for b in slices}
     fit = None
@@ -521,15 +557,19 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
         r = fit.residuals
         h = _hat_diagonal(fit.jacobian)
         change = 0.0
+        block_dof = {}
         for name, sl in slices.items():
             m = sl.stop - sl.start
             dof = max(m - float(h[sl].sum()), 1.0)
+            block_dof[name] = dof
             s = math.sqrt(float(r[sl] @ r[sl]) / dof)
             block = {"free modes": rows.free, "free damping": rows.damping, "loaded modes": rows.loaded}.get(name)
             if name == "profiles":
                 _rescale_profiles(rows.profiles, r[sl], h[sl])
                 s = 1.0
             elif block is not None:
+                if block.get("given") and s <= 1.0:
+                    block_dof[name] = math.inf  # the stated σ holds: no scale estimated
                 s = max(s, 1.0) if block.get("given") else s
                 block["sigma"] = block["sigma"] * s
             change = max(change, abs(s - 1.0))
@@ -537,39 +577,125 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
         if fit.converged and change < SCALE_TOLERANCE and passes > 1:
             break
     # the final weights are those the last fit used: evaluate blocks with them
-    return _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs)
+    # a scale estimated from ν residual degrees of freedom: its parameters follow Student's t_ν, not the normal
+    widen = {n: t_widening(d) for n, d in block_dof.items() if n != "profiles"}
+    check = None
+    # (θ holds EA = ∞ of the inextensible ring: only the free parameters need be finite)
+    if all(math.isfinite(fit.values[n]) for n in fit.names) and (rows.loaded is not None or rows.profiles is not None):
+        check = grid_check(fit, rows, geometry, solver, P)
+    return _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, check, widen)
+
+
+def t_widening(dof: float) -> float:
+    """``t_{ν, 0.975} / z_{0.975}``: how much wider a 95 % interval must be when the σ of its rows is estimated
+    from ν residual degrees of freedom (1 for ν = ∞). A block whose scale came from a few rows (9 free modes
+    less the ~4 parameters they pin leave ν ≈ 5: ×1.31) has its Fisher information divided by its square."""
+    if not math.isfinite(dof):
+        return 1.0
+    from scipy.special import stdtrit
+
+    return float(stdtrit(max(dof, 1.0), 0.975)) / Z95
+
+
+def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: ContactSolver, P: int,
+               factor: int = GRID_CHECK_FACTOR) -> dict:
+    """How far the joint optimum moves when the model's discretisation is refined (docs/physics.md §11).
+
+    The contact solve's discrete active set makes the patch (its edges, so the loaded modes' half-angle and
+    the profiles' shape around the patch) a fine staircase in the parameters, and the loaded-mode basis is
+    truncated at :data:`LOADED_HARMONICS`; both are systematic, the same in every row of a profile, so they
+    are not noise the block scales could absorb. One Gauss–Newton step from the fit, with its Jacobian, on the
+    same rows and weights under the model refined by ``factor`` (grid ``factor``·M, ``factor``·N harmonics;
+    the profiles' model rows band-limited to the data's harmonics) estimates the move: ``δu = −J⁺ Δr`` (the
+    estimate's grid check, docs/physics.md §10, for the joint model). One residual evaluation of the fine model.
+
+    **Returns** ``dict(grid, loaded_harmonics, shift_u)`` (``shift_u`` ``(k,)`` in the solver coordinates
+    of ``fit.names``).
+    """
+    fine = ContactSolver(n_grid=factor * solver.n_grid, window_deg=solver.window_deg, max_iter=solver.max_iter)
+    model = JointResiduals(P, fine, ProfileModel(), n_harmonics=factor * LOADED_HARMONICS, rows_grid=solver.n_grid,
+                           k_top=0 if rows.profiles is None else rows.profiles["k_top"])
+    problem = Problem(model, _arrays(geometry, rows, fine), fit.coords, data_label="these measurements")
+    r_fine, _ = residuals(problem, fit.theta)
+    m = fit.residuals.size
+    delta = np.zeros(fit.jacobian.shape[0])
+    delta[:m] = np.asarray(r_fine) - fit.residuals
+    du = -np.linalg.lstsq(fit.jacobian, delta, rcond=None)[0]
+    return dict(grid=[solver.n_grid, fine.n_grid], loaded_harmonics=[LOADED_HARMONICS, factor * LOADED_HARMONICS],
+                shift_u=du)
+
+
+def noise_spectrum(power: np.ndarray, k_min: int = PROFILE_K_MIN, half_width: int = NOISE_SMOOTHING) -> tuple:
+    """Noise power per harmonic ``(..., H)`` (k = k_min …) from residual powers, and its degrees of freedom ``(H,)``.
+
+    Coloured noise (docs/physics.md §11, *profile noise*): a power law ``a·k^b`` fitted to ln power per series takes
+    out the spectrum's slope (pink and red noise change by ×5 over the first few harmonics, where a plain moving
+    average mixes them); the ratio to it is averaged over the ±``half_width`` *neighbouring* harmonics, leaving
+    each harmonic's own residual out, so a row's weight does not depend on its own noise (a bump — a structural
+    mode — is followed by the average). ``dof``: 2 × the neighbours averaged (each harmonic's residual holds a
+    real and an imaginary part).
+    """
+    H = power.shape[-1]
+    k = np.arange(k_min, k_min + H, dtype=np.float64)
+    X = np.stack([np.ones(H), np.log(k)], axis=1)
+    floor = 1e-300 + 1e-30 * float(np.max(power)) if power.size else 1e-300
+    lp = np.log(np.maximum(power, floor)).reshape(-1, H)
+    coef = np.linalg.lstsq(X, lp.T, rcond=None)[0]
+    trend = np.exp(X @ coef).T.reshape(power.shape)
+    kernel = np.ones(2 * half_width + 1)
+    kernel[half_width] = 0.0  # leave the harmonic's own residual out
+    num = np.apply_along_axis(lambda p: np.convolve(p, kernel, mode="same"), -1, power / trend)
+    den = np.convolve(np.ones(H), kernel, mode="same")
+    return trend * num / den, 2.0 * den
 
 
 def _rescale_profiles(pr: dict, residuals: np.ndarray, leverage: np.ndarray) -> None:
-    """New σ per profile, channel and harmonic from the residual spectrum (power smoothed over ±NOISE_SMOOTHING).
+    """New σ per profile, channel and harmonic from the residual spectrum (:func:`noise_spectrum`).
 
-    ``residuals`` and ``leverage`` (the hat matrix's diagonal) are the profile block's rows of the fit."""
+    ``residuals`` and ``leverage`` (the hat matrix's diagonal) are the profile block's rows of the fit.
+
+    Weights estimated from ν = ``dof`` residual parts make the weighted fit's actual variance larger than
+    ``(JᵀŴJ)⁻¹`` says: with ŵ = w/c, c ~ χ²_ν/ν independent of the row, the estimator's variance is
+    E[1/c²]/E[1/c]² / Σ J²w and the formula's E[1/c]⁻¹ / Σ J²w, a ratio ν/(ν − 4). The σ² of each row is
+    multiplied by it, so that the covariance of the fit is the weighted estimator's (docs/physics.md §11)."""
     res = residuals.reshape(pr["measured"].shape) * pr["sigma"]  # back in m/s²
     H = res.shape[-1] // 2
     power = 0.5 * (res[..., :H] ** 2 + res[..., H:] ** 2)
-    kernel = np.ones(2 * NOISE_SMOOTHING + 1)
-    num = np.apply_along_axis(lambda p: np.convolve(p, kernel, mode="same"), -1, power)
-    den = np.convolve(np.ones(H), kernel, mode="same")
+    noise, dof = noise_spectrum(power)
     # degrees of freedom the fit took from the profile rows: share them out evenly
     used = float(leverage.sum()) / leverage.size
-    sigma = np.sqrt(num / den / max(1.0 - used, 0.5))
+    inflate = dof / np.maximum(dof - 4.0, 1.0)
+    sigma = np.sqrt(noise * inflate / max(1.0 - used, 0.5))
     sigma = np.maximum(sigma, 1e-6 * max(float(sigma.max()), 1e-300))
     pr["sigma"] = np.concatenate([sigma, sigma], axis=-1)
 
 
-def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs) -> Identification:
+def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, check=None, widen=None) -> Identification:
     J, r = fit.jacobian, fit.residuals
     names = fit.names
+    cov_u = fit.covariance_log
+    if widen and any(w > 1.0 for w in widen.values()):
+        Jw = J.copy()
+        for b, w in widen.items():
+            Jw[slices[b]] /= w  # the block's σ times t_ν/z (t_widening)
+        cov_u = covariance_from_jacobian(Jw)
+    grid = None
+    if check is not None and np.all(np.isfinite(check["shift_u"])):
+        du = check["shift_u"]
+        cov_u = cov_u + np.outer(du, du)  # the discretisation's move: one systematic direction (grid_check)
+        grid = dict(grid=check["grid"], loaded_harmonics=check["loaded_harmonics"],
+                    shift={n: float(x) for n, x in zip(names, du)})
     fisher = {b: J[sl].T @ J[sl] for b, sl in slices.items()}
     total = np.diag(J.T @ J)  # data and prior rows
     blocks = {}
     for b, sl in slices.items():
         share = np.diag(fisher[b]) / np.where(total > 0, total, 1.0)
         blocks[b] = dict(rows=int(sl.stop - sl.start), sigma_scale=float(scales[b]),
+                         t_widening=float((widen or {}).get(b, 1.0)),
                          rms=float(math.sqrt(np.mean(r[sl] ** 2))),
                          fisher_share={n: float(share[j]) for j, n in enumerate(names) if n in free_ring})
     idx = [names.index(n) for n in free_ring]
-    cov = fit.covariance_log[np.ix_(idx, idx)]
+    cov = cov_u[np.ix_(idx, idx)]
     cov = 0.5 * (cov + cov.T)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -579,14 +705,16 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs) -> I
     pr = rows.profiles
     for i in range(P):
         o, g = f"angle_offset_{i + 1}", f"gain_{i + 1}"
+        io, ig = names.index(o), names.index(g)
+        scale_o = fit.coords[[c.name for c in fit.coords].index(o)].scale
         nuisances.append(dict(source=str(pr["sources"][i]), load_n=float(pr["load"][i]),
                               speed_kmh=float(pr["speed_kmh"][i]),
                               angle_offset_deg=math.degrees(fit.values[o]),
-                              angle_offset_sd_deg=math.degrees(fit.stderr[o]), gain=fit.values[g],
-                              gain_sd=fit.stderr[g]))
+                              angle_offset_sd_deg=math.degrees(scale_o * math.sqrt(max(cov_u[io, io], 0.0))),
+                              gain=fit.values[g], gain_sd=fit.values[g] * math.sqrt(max(cov_u[ig, ig], 0.0))))
     ring = RingParams(**{n: fit.values[n] for n in RING_FIELDS})
     return Identification(fit, ring, free_ring, blocks, (free_ring, corr), covariance, nuisances, notes, passes,
-                          inputs)
+                          inputs, grid)
 
 
 def identification_report(ident: Identification) -> dict:
@@ -605,6 +733,7 @@ def identification_report(ident: Identification) -> dict:
         "blocks": ident.blocks,
         "correlation": {"names": list(names), "matrix": [[float(x) for x in row] for row in corr]},
         "nuisances": ident.nuisances,
+        **({"grid_check": ident.grid_check} if ident.grid_check is not None else {}),
         "files": [] if ident.inputs is None else ident.inputs.files,
         "notes": ident.notes,
     }

@@ -17,12 +17,12 @@ import numpy as np
 from scipy.special import ndtri
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import GaussianPrior, least_squares, residuals
+from ringfit.fit.engine import GaussianPrior, least_squares, linearize, residuals
 from ringfit.fit.estimate.curves import LoadCurves, load_curves
 from ringfit.fit.estimate.feature import FeatureEstimate, _num, feature_estimate
 from ringfit.fit.estimate.harmonics import band_signal, grid_signal, harmonic_amplitudes, harmonic_rows, smoothed_noise
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, GAIN, K_TREAD, LOAD, LOAD_RANGE, TILT, EstimateArrays,
-                                          EstimateSettings, estimate_problem, nuisance_priors)
+                                          EstimateSettings, estimate_problem, nuisance_priors, ring_sensitivity_problem)
 from ringfit.fit.result import FitResult
 from ringfit.params import BAR, RingParams, TyreGeometry
 from ringfit.physics.operating import KMH
@@ -59,6 +59,10 @@ class LoadEstimate:
     - ``grid_check``: ``grid`` [M, 2M], ``load_shift_pct`` (the load's change when the grid is refined,
       :func:`grid_shift`), ``statistical_sd_pct`` and ``sd_pct`` (σ of ln load without and with it, in %);
       None when the check is off (``EstimateSettings.grid_check``).
+    - ``ring_propagation``: the tyre's ``[ring.covariance]`` carried into the load (:func:`ring_propagation`):
+      ``names``, ``sensitivity`` (∂ln load/∂ln θ per ring parameter), ``k_tread_prior_sd`` (σ of ln k_trd given
+      the others, the prior of the fitted k_trd), ``load_sd_pct`` (the ring's part of σ of ln load, in %),
+      ``sd_pct`` (σ of ln load with everything); None without a covariance.
     """
 
     load_n: float
@@ -84,6 +88,7 @@ class LoadEstimate:
     omega: float = 0.0
     drum_diameter_m: float | None = None
     grid_check: dict | None = None
+    ring_propagation: dict | None = None
 
     def to_record(self, input_name: str) -> dict:
         """The docs/formats.md §7 JSON object."""
@@ -95,7 +100,8 @@ class LoadEstimate:
             "fit": {"status": self.status, "converged": self.converged, "rms": self.rms, "noise": self.noise,
                     "unit": "m/s^2", "noise_source": self.noise_source, "harmonics": [2, self.k_max],
                     "channel": "radial", "flags": list(self.flags),
-                    **({"grid_check": self.grid_check} if self.grid_check is not None else {})},
+                    **({"grid_check": self.grid_check} if self.grid_check is not None else {}),
+                    **({"ring_propagation": self.ring_propagation} if self.ring_propagation is not None else {})},
             "nuisances": self.nuisances,
             "feature_method": self.feature.to_record(),
         }
@@ -163,7 +169,7 @@ def profile_amplitudes(profile, n_grid: int, k_max: int) -> np.ndarray:
 def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings: EstimateSettings = EstimateSettings(),
                   k_tread_in_file: bool = True, omega: float | None = None, omega_source: str | None = None,
                   noise_per_angle: np.ndarray | None = None, noise_source: str | None = None,
-                  response: np.ndarray | None = None) -> LoadEstimate:
+                  response: np.ndarray | None = None, ring_covariance=None) -> LoadEstimate:
     """Estimate the load and contact patch from one rolling profile (docs/formats.md §3 → §7).
 
     **Arguments:**
@@ -180,6 +186,10 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
       is); default: the spread columns of a ``ringfit profile`` output, else the residual away from
       the patch.
     - ``response``: ``(k_max − 1,)`` the acquisition's gain on harmonics 2…k_max (default 1).
+    - ``ring_covariance``: the tyre file's :class:`~ringfit.io.tyre.RingCovariance` (ln θ, docs/formats.md §1.1):
+      propagated into the load's interval (:func:`ring_propagation`, docs/physics.md §10). Its k_trd part
+      frees k_trd with the prior σ of ln k_trd *given* the other ring parameters (unless ``settings.k_tread_sd``
+      is set, which wins); the other parameters enter through the estimate's sensitivities.
 
     **Returns:** :class:`LoadEstimate`. Never raises on non-convergence (check ``converged``).
     """
@@ -208,6 +218,9 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
         model_mid = float(curves._interp(curves.peak_mid_deg, load0))
         offset0 = math.radians(model_mid - 0.5 * (feature.leading_deg + feature.trailing_deg))
     sd = settings.k_tread_sd
+    spread = ring_spread(ring_covariance, use_k_tread=sd is None)
+    if spread is not None and spread["k_tread_sd"] is not None:
+        sd = spread["k_tread_sd"]
     if sd is None and not k_tread_in_file:
         sd = DEFAULT_K_TREAD_SD
         flags.append(f"WARNING: the tyre file has no k_tread_n_per_m2: the model uses {float(ring.k_tread):.3g} N/m² "
@@ -235,9 +248,69 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
     problem = estimate_problem(arrays, settings, k_max, prior)
     fit = least_squares(problem, first.theta, tuple(free), max_steps=settings.max_steps, rtol=settings.rtol,
                         atol=settings.atol)
-    shift = grid_shift(fit, settings) if settings.grid_check and np.all(np.isfinite(fit.theta)) else None
+    finite = bool(np.all(np.isfinite(fit.theta)))
+    shift = grid_shift(fit, settings) if settings.grid_check and finite else None
+    propagated = ring_propagation(fit, ring, spread) if spread is not None and spread["names"] and finite else None
     return _finish(fit, profile, curves, feature, amp, omega, omega_source, flags, k_max, drum, settings,
-                   noise_per_angle, noise_source, shift)
+                   noise_per_angle, noise_source, shift, propagated)
+
+
+def ring_spread(covariance, use_k_tread: bool = True) -> dict | None:
+    """How the tyre's ``[ring.covariance]`` enters an estimate (docs/physics.md §10, *the tyre's uncertainty*).
+
+    Splits ln θ into k_trd (fitted by the estimate with a prior) and the rest q (propagated):
+    ``k_tread_sd`` = σ of ln k_trd given q, √(Σ_kk − Σ_kq Σ_qq⁻¹ Σ_qk), and ``shift`` = Σ_qq⁻¹ Σ_qk, how the
+    prior's mean moves with q. Without k_trd in the covariance (or ``use_k_tread`` false: a σ given by the
+    user wins), ``k_tread_sd`` is None and ``shift`` zero. **Returns** ``dict(names, cov, k_tread_sd, shift)``
+    or None without a covariance.
+    """
+    if covariance is None:
+        return None
+    fields = {f.name for f in dataclasses.fields(RingParams)}
+    names = [n for n in covariance.names if n in fields and n != K_TREAD]
+    idx = [covariance.names.index(n) for n in names]
+    cov = np.asarray(covariance.ln, dtype=np.float64)
+    cqq = cov[np.ix_(idx, idx)]
+    out = dict(names=tuple(names), cov=cqq, k_tread_sd=None, shift=np.zeros(len(names)))
+    if use_k_tread and K_TREAD in covariance.names:
+        k = covariance.names.index(K_TREAD)
+        ckq = cov[k, idx]
+        shift = np.linalg.lstsq(cqq, ckq, rcond=None)[0] if names else np.zeros(0)  # Σ_qq⁻¹ Σ_qk (Σ_qq symmetric)
+        out["k_tread_sd"] = math.sqrt(max(float(cov[k, k] - ckq @ shift), 1e-24))
+        out["shift"] = shift
+    return out
+
+
+def ring_propagation(fit: FitResult, ring: RingParams, spread: dict) -> dict:
+    """The ring parameters' uncertainty carried into ln(load) by linear propagation (docs/physics.md §10).
+
+    The fit's optimum û moves with a ring parameter q_j (held fixed in the fit) by
+    ``∂û/∂ln q = −(JᵀJ)⁻¹ Jᵀ ∂r/∂ln q`` (J the Jacobian of the rows the fit minimised, its prior rows
+    included, ∂r/∂ln q the engine's Jacobian of the same rows in ln q, :func:`ringfit.fit.engine.linearize`),
+    and with the k_trd prior's mean μ by ``∂û/∂μ = (JᵀJ)⁻¹ e_k / σ_k²``; the prior's mean moves with q by
+    ``spread["shift"]`` (:func:`ring_spread`). With g = ∂ln load/∂ln q in total, the ring adds ``gᵀ Σ_qq g`` to
+    the variance of ln(load). The rows are those the solver minimised (weights of mean 1, not divided by the
+    fitted σ scale s), so g is the estimator's own sensitivity. **Returns** ``dict(names, sensitivity,
+    k_tread_prior_sd, load_sd_pct)``.
+    """
+    names = tuple(spread["names"])
+    problem = ring_sensitivity_problem(fit.problem, names)
+    theta = np.concatenate([fit.theta, [float(getattr(ring, n)) for n in names]])
+    lin = linearize(problem, theta, names)
+    m = fit.residuals.size
+    J = fit.jacobian.copy()
+    J[:m] *= float(fit.extra["sigma_scale"])  # the rows the solver minimised (FitResult divides them by s)
+    Jq = np.zeros((J.shape[0], len(names)))
+    Jq[:m] = lin.jacobian
+    cov = np.linalg.pinv(J.T @ J)
+    iL = list(fit.names).index(LOAD)
+    g = -(cov @ (J.T @ Jq))[iL]
+    if K_TREAD in fit.names and spread["k_tread_sd"] is not None:
+        ik = list(fit.names).index(K_TREAD)
+        g = g + cov[iL, ik] / spread["k_tread_sd"] ** 2 * spread["shift"]
+    var = float(g @ spread["cov"] @ g)
+    return dict(names=list(names), sensitivity={n: float(x) for n, x in zip(names, g)},
+                k_tread_prior_sd=spread["k_tread_sd"], load_sd_pct=100.0 * math.sqrt(max(var, 0.0)))
 
 
 def grid_shift(fit: FitResult, settings: EstimateSettings, factor: int = 2) -> float:
@@ -263,21 +336,27 @@ def grid_shift(fit: FitResult, settings: EstimateSettings, factor: int = 2) -> f
 
 
 def _finish(fit, profile, curves, feature, amp, omega, omega_source, flags, k_max, drum, settings,
-            noise_per_angle, noise_source=None, shift=None) -> LoadEstimate:
+            noise_per_angle, noise_source=None, shift=None, propagated=None) -> LoadEstimate:
     """The :class:`LoadEstimate` of a fit: interval, patch, fit quality, flags, nuisances.
 
-    ``shift``: :func:`grid_shift` (ln load), added in quadrature to the Laplace σ of ln(load).
+    ``shift``: :func:`grid_shift` (ln load), and ``propagated`` (:func:`ring_propagation`), the ring's part of
+    σ of ln(load), added in quadrature to the Laplace σ of ln(load).
     """
     load = fit.values[LOAD]
     lo, hi = fit.interval(LOAD)
+    z = float(ndtri(0.975))
+    s_stat = math.log(hi / lo) / (2 * z)
     grid = None
+    s = s_stat
     if shift is not None and math.isfinite(shift):
-        z = float(ndtri(0.975))
-        s_stat = math.log(hi / lo) / (2 * z)
         s = math.hypot(s_stat, shift)
-        lo, hi = load * math.exp(-z * s), load * math.exp(z * s)
         grid = {"grid": [settings.n_grid, 2 * settings.n_grid], "load_shift_pct": 100 * math.expm1(shift),
                 "statistical_sd_pct": 100 * s_stat, "sd_pct": 100 * s}
+    if propagated is not None and math.isfinite(propagated["load_sd_pct"]):
+        s = math.hypot(s, propagated["load_sd_pct"] / 100.0)
+        propagated = dict(propagated, sd_pct=100 * s)
+    if s != s_stat:
+        lo, hi = load * math.exp(-z * s), load * math.exp(z * s)
     model_rows = np.asarray(fit.extra["aux"])[0]
     K = amp.shape[-1]
     model_amp = model_rows[:K] + 1j * model_rows[K:]
@@ -335,7 +414,7 @@ def _finish(fit, profile, curves, feature, amp, omega, omega_source, flags, k_ma
         rotation_source=str(omega_source), status=fit.status, converged=bool(converged), rms=rms, noise=noise,
         noise_source=noise_source, nuisances=nuisances, feature=feature, flags=flags, fit=fit, curves=curves,
         angle_deg=profile.angle_deg, measured=band_signal(amp, 2, alpha), model=band_signal(model_amp, 2, alpha),
-        k_max=k_max, omega=float(omega), drum_diameter_m=drum, grid_check=grid)
+        k_max=k_max, omega=float(omega), drum_diameter_m=drum, grid_check=grid, ring_propagation=propagated)
 
 
 def _spread_noise(profile) -> np.ndarray | None:

@@ -140,6 +140,30 @@ class EstimateResiduals(AbstractResiduals):
         return ((rows - data.measured) * data.weight).ravel(), rows
 
 
+class RingSensitivityResiduals(AbstractResiduals):
+    """:class:`EstimateResiduals` with ring parameters appended to θ: θ = (:data:`PARAMETERS`…, ``ring_names``…).
+
+    Only for the Jacobian of the estimate's rows with respect to the tyre's ring parameters (ln θ), which
+    propagates the tyre file's ``[ring.covariance]`` into the load (:func:`ringfit.fit.estimate.load.ring_propagation`,
+    docs/physics.md §10); never fitted. ``k_tread`` is θ's own :data:`K_TREAD`, not a ring name here.
+    """
+
+    base: EstimateResiduals
+    ring_names: tuple = eqx.field(static=True)
+
+    def __call__(self, theta, data: EstimateArrays):
+        n = len(PARAMETERS)
+        ring = data.ring.replace(**{name: theta[n + i] for i, name in enumerate(self.ring_names)})
+        return self.base(theta[:n], eqx.tree_at(lambda a: a.ring, data, ring))
+
+
+def ring_sensitivity_problem(problem: Problem, ring_names: tuple[str, ...]) -> Problem:
+    """The estimate ``problem`` with ``ring_names`` (log coordinates) appended to θ (:class:`RingSensitivityResiduals`)."""
+    coords = tuple(problem.coords) + tuple(Coordinate(n, LOG) for n in ring_names)
+    return Problem(RingSensitivityResiduals(problem.model, tuple(ring_names)), problem.data, coords,
+                   sigma=problem.sigma, data_label=problem.data_label)
+
+
 def nuisance_priors() -> dict:
     """``name -> (mean, sd)`` in solver coordinates of the high-pass corner and tilt priors."""
     tilt = COORDS[PARAMETERS.index(TILT)]

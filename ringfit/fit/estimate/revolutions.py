@@ -329,12 +329,14 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
 def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
                        settings: EstimateSettings = EstimateSettings(), k_tread_in_file: bool = True,
                        per_revolution: bool = True, batch: int = REVOLUTION_BATCH, mode: str = "batch",
-                       progress: bool = False):
+                       progress: bool = False, ring_covariance=None):
     """The averaged and the per-revolution estimates of a continuous recording (one pass over it).
 
     The averaged profile (:func:`recording_revolutions`) is estimated like any profile
     (:func:`estimate_load`; Ω the encoder's mean rate, noise the revolution spread); its nuisances then
-    serve every revolution (:func:`estimate_revolutions`).
+    serve every revolution (:func:`estimate_revolutions`). ``ring_covariance`` (the tyre file's) is propagated into
+    the averaged estimate's interval (:func:`~ringfit.fit.estimate.load.estimate_load`); the per-revolution
+    intervals stay statistical (the ring's error is common to every revolution of one recording).
 
     **Returns:** ``(LoadEstimate, RevolutionEstimates or None)``.
     """
@@ -343,7 +345,8 @@ def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
     reference = estimate_load(data.profile, geometry, ring, settings=settings, k_tread_in_file=k_tread_in_file,
                               omega=2 * math.pi * rate, omega_source=data.rotation_source,
                               response=data.response, noise_per_angle=data.noise,
-                              noise_source="differences of successive revolutions / √(2·revolutions), in the fitted band")
+                              noise_source="differences of successive revolutions / √(2·revolutions), in the fitted band",
+                              ring_covariance=ring_covariance)
     revs = None
     if per_revolution:
         revs = estimate_revolutions(data, reference, ring, settings=settings, batch=batch, mode=mode,
