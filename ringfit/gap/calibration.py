@@ -22,8 +22,10 @@ null draws (Monte-Carlo error √(p(1−p)/N) reported), and stands only when p 
   coloured). The candidates' statistics are those of linearised refits (below).
 - **random-line** (mode tables whose rows were matched by frequency, i.e. without n): those
   rows' frequencies are redrawn uniformly over their table's span at its row count and
-  matched by the diagnosis's own rule (the rolling tables: the lines of the rolling model at
-  the computed condition, one assignment per table by cost; other tables: the nearest mode of
+  matched by the diagnosis's own rule (the rolling tables: the model structure — rolling, loaded
+  model or free spinning ring — chosen again for every draw by the rule that chose it for the
+  measured rows, then one assignment per table by cost on that structure's lines at the computed
+  condition; other tables: the nearest mode of
   the model their condition computes); labelled test rows are drawn from the baseline. Its
   statistic is the total shrink of the chain so far plus each candidate against the baseline,
   so a chain of two effects is judged as a whole.

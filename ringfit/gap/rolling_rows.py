@@ -8,7 +8,13 @@ tread springs of the steady contact patch, Hill's method) and by what the table'
 observer sees of it (:func:`~ringfit.physics.rolling_modes.observed_frequencies`: the
 co-rotating sensor a line ω + kΩ, a fixed observer ω).
 
-**Assignment, once, outside the refits.** Every structural row of the rolling tables
+**Which model, chosen by the data.** The sidecar of a rolling table gives a load, but its rows
+may come from a tyre that does not touch the ground. The rows are therefore assigned under the
+model structure their frequencies choose, once per case (:class:`StructureChoice`,
+docs/physics.md §6.4): the rolling, loaded model below or the free spinning ring (eq. 25/26 at the
+same Ω; rows then carry the ring's n and wave, and the composite has no line to follow).
+
+**Assignment, once, outside the refits.** Under the rolling, loaded model every structural row of the rolling tables
 is matched to a branch (fixed frame) or to a line of a branch (co-rotating frame) by
 :func:`ringfit.gap.campbell.match_tables` — the matching of ``ringfit campbell`` —
 at the computed condition: the ring fitted to ``free.modes.csv``, ``k_trd`` of the
@@ -513,4 +519,4 @@ def joint_for(effects, sizes, i0, tables) -> RollingJoint | None:
 
 
 __all__ = ["ROLLING_HARMONICS", "JOINT", "is_rolling", "assign_rolling_rows", "RollingConditions", "RollingJoint",
-           "joint_for"]
+           "joint_for", "StructureChoice", "structure_loglik", "LOADED", "FREE"]
