@@ -172,3 +172,23 @@ def test_example_writes_a_rolling_case_folder(tmp_path, capsys):
     assert sorted(t.condition["speed_kmh"] for t in case.tests) == [20.0, 40.0, 60.0]
     assert all(t.condition["frame"] == "rotating" and not any(t.branch) for t in case.tests)
     assert "rotation` and `ground_contact`" in (tmp_path / "README.md").read_text()
+
+
+def test_the_rows_choose_their_model_structure_on_many_seeds(tmp_path):
+    """The structure choice (docs/physics.md §6.4) on 12 seeds of each kind of case: rows of the rolling, loaded
+    tyre choose the rolling, loaded model; rows of the free spinning ring (sidecars still saying 4 kN) choose the
+    ring. Only the problem is built (no diagnosis): the rule is out of sample of every candidate."""
+    from ringfit.gap.case import read_case
+    from ringfit.gap.diagnosis import build_problems, resolve_effects
+
+    wrong = []
+    for seed in range(100, 112):
+        for contact in (True, False):
+            folder = tmp_path / f"{seed}-{int(contact)}"
+            make_rolling_case(folder, contact=contact, seed=seed)
+            prob = build_problems(read_case(folder), resolve_effects(EFFECTS))[0]
+            st = prob.meta["rolling_structure"]
+            want = "rolling_loaded" if contact else "free_spinning"
+            if st["chosen"] != want:
+                wrong.append((seed, contact, st["cost"]))
+    assert not wrong, wrong
