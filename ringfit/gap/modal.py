@@ -1031,13 +1031,10 @@ def _rolling_group(choice, rows, matchable, extra, m):
     def choose(ystar):
         """``(idx (B, r), [(positions, idx (B, l))], loaded (B,))`` for the drawn data ``ystar`` ``(B, m)``."""
         loaded = choice.choose({t: ystar[:, tb["rows"]] for t, tb in choice.tables.items()})
-        out, col = [], 0
+        out = []
         for s in segments:
             f = ystar[:, s["rows"]]
-            a = hungarian(f, *s[LOADED])
-            b = hungarian(f, *s[FREE])
-            out.append(np.where(loaded[:, None], a, b))
-            col += s["rows"].size
+            out.append(np.where(loaded[:, None], hungarian(f, *s[LOADED]), hungarian(f, *s[FREE])))
         same = loaded if chosen == LOADED else ~loaded
         lab = np.where(same[:, None], labelled[None, :], swapped[None, :])
         return np.concatenate(out, axis=1), [(labelled, lab)], loaded
