@@ -57,6 +57,8 @@ def test_rolling_tables_are_rotation_plus_ground_contact(contact_case):
     assert v["variants"] == ["computed", "computed"], v
     ideal = _ideal_shrink(c, label)
     assert abs(v["heldout_shrink_pct"] - ideal) < 10, (v["heldout_shrink_pct"], ideal)
+    st = c["baseline"]["rolling_structure"]  # the rows chose the rolling, loaded model (docs/formats.md §5)
+    assert st["chosen"] == "rolling_loaded" and st["cost"]["rolling_loaded"] < st["cost"]["free_spinning"], st
     # the rolling model is one candidate (a standing mode of the loaded, rolling tyre has no wave of its own):
     # its computed variant (no free parameter: the patch from load_n, Ω from speed_kmh) is accepted and
     # beats chance, both the parametric and the random-line null (the rows have no n)
@@ -79,15 +81,14 @@ def test_rolling_rows_state_their_match(contact_case):
     assert "rolling model" in json.dumps(c["baseline"]["conditions"])
 
 
-@pytest.mark.xfail(strict=True, reason="issue 20 item 2: unlabelled rolling rows share ONE assignment, made at the "
-                   "computed (loaded) condition; on this control (no contact, sidecars saying 4 kN) the loaded "
-                   "model's dense sensor lines give many rows another winding than the spinning ring's, so "
-                   "rotation alone no longer reaches the acceptance rule (it did with each model's own nearest "
-                   "line, the freedom the shared assignment removes)")
-def test_without_contact_the_rolling_tables_are_rotation_only(tmp_path, capsys):
-    """The control, end to end through the CLI: the same tables made without the contact patch."""
+@pytest.mark.parametrize("seed", [0, 5000, 5001])
+def test_without_contact_the_rolling_tables_are_rotation_only(tmp_path, capsys, seed):
+    """The control, end to end through the CLI: the same tables made without the contact patch (sidecars still
+    saying 4 kN). The rows' model structure is chosen by the data: the free spinning ring's lines explain them
+    better than the rolling, loaded model's, so no contact is claimed (issue 20: seeds 5000 and 5001 accepted a
+    fitted patch of ~0.7 of the computed one when the rows were assigned at the loaded condition)."""
     folder = tmp_path / "control"
-    label = make_rolling_case(folder, contact=False, seed=0)
+    label = make_rolling_case(folder, contact=False, seed=seed)
     out = tmp_path / "control.diagnosis.json"
     assert main(["diagnose", str(folder), "--out", str(out), "--effects", EFFECTS, "--quiet"]) == 0
     assert "verdict: rotation" in capsys.readouterr().out
@@ -96,9 +97,14 @@ def test_without_contact_the_rolling_tables_are_rotation_only(tmp_path, capsys):
     assert v["effects"] == ["rotation"], v
     ideal = _ideal_shrink(c, label)
     assert abs(v["heldout_shrink_pct"] - ideal) < 10, (v["heldout_shrink_pct"], ideal)
+    st = c["baseline"]["rolling_structure"]
+    assert st["chosen"] == "free_spinning" and st["cost"]["free_spinning"] < st["cost"]["rolling_loaded"], st
+    assert all("ground_contact" not in x["effect"] or not x["accepted"] for x in c["candidates"])
     # ground contact alone was refused, and rotation left nothing for it to explain
     gc = [x for x in c["candidates"] if x["effect"] == "ground_contact"]
-    assert gc and not any(x["accepted"] for x in gc)
+    assert not any(x["accepted"] for x in gc)
+    if not gc:  # under the free spinning ring no row has a contact type: contact has nothing to predict here
+        assert "ground_contact" in json.dumps(c["not_applicable"]), c["not_applicable"]
     assert not c["baseline"]["remaining_structured"]
 
 
@@ -166,3 +172,23 @@ def test_example_writes_a_rolling_case_folder(tmp_path, capsys):
     assert sorted(t.condition["speed_kmh"] for t in case.tests) == [20.0, 40.0, 60.0]
     assert all(t.condition["frame"] == "rotating" and not any(t.branch) for t in case.tests)
     assert "rotation` and `ground_contact`" in (tmp_path / "README.md").read_text()
+
+
+def test_the_rows_choose_their_model_structure_on_many_seeds(tmp_path):
+    """The structure choice (docs/physics.md §6.4) on 12 seeds of each kind of case: rows of the rolling, loaded
+    tyre choose the rolling, loaded model; rows of the free spinning ring (sidecars still saying 4 kN) choose the
+    ring. Only the problem is built (no diagnosis): the rule is out of sample of every candidate."""
+    from ringfit.gap.case import read_case
+    from ringfit.gap.diagnosis import build_problems, resolve_effects
+
+    wrong = []
+    for seed in range(100, 112):
+        for contact in (True, False):
+            folder = tmp_path / f"{seed}-{int(contact)}"
+            make_rolling_case(folder, contact=contact, seed=seed)
+            prob = build_problems(read_case(folder), resolve_effects(EFFECTS))[0]
+            st = prob.meta["rolling_structure"]
+            want = "rolling_loaded" if contact else "free_spinning"
+            if st["chosen"] != want:
+                wrong.append((seed, contact, st["cost"]))
+    assert not wrong, wrong

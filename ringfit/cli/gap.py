@@ -88,6 +88,10 @@ def run(args) -> int:
           + (f" (held-out shrink {v['heldout_shrink_pct']:.0f} %)" if v["effect"] not in ("none", "unexplained") else ""))
     for c in v.get("calibration", []):
         print(f"  {c['sentence']}")
+    st = (diag.content.get("baseline") or {}).get("rolling_structure")
+    if st:  # the model structure the rolling rows were assigned to (docs/physics.md §6.4)
+        print(f"  rolling rows assigned to {st['chosen']} (cost −2 ln L: "
+              + ", ".join(f"{k} {val:.1f}" for k, val in st["cost"].items()) + ")")
     print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
     return 0
 

@@ -22,8 +22,10 @@ null draws (Monte-Carlo error √(p(1−p)/N) reported), and stands only when p 
   coloured). The candidates' statistics are those of linearised refits (below).
 - **random-line** (mode tables whose rows were matched by frequency, i.e. without n): those
   rows' frequencies are redrawn uniformly over their table's span at its row count and
-  matched by the diagnosis's own rule (the rolling tables: the lines of the rolling model at
-  the computed condition, one assignment per table by cost; other tables: the nearest mode of
+  matched by the diagnosis's own rule (the rolling tables: the model structure — rolling, loaded
+  model or free spinning ring — chosen again for every draw by the rule that chose it for the
+  measured rows, then one assignment per table by cost on that structure's lines at the computed
+  condition; other tables: the nearest mode of
   the model their condition computes); labelled test rows are drawn from the baseline. Its
   statistic is the total shrink of the chain so far plus each candidate against the baseline,
   so a chain of two effects is judged as a whole.
@@ -256,16 +258,27 @@ def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, dr
     s_meas = np.broadcast_to(problem.sigma, (draws, m)).copy()
     s_ho = np.broadcast_to(sig, (draws, m)).copy()
     base_sigma = problem.meta.get("sigma_matched", problem.sigma)
+    loaded_draws = None
     for g in groups:
         rows = g["rows"]
-        lo, hi = tables[g["table"]]
-        f = (np.sort(rng.uniform(lo, hi, (draws, rows.size)), axis=1) if frequencies is None
-             else np.asarray(frequencies(rows), dtype=np.float64))
+        if frequencies is not None:
+            f = np.asarray(frequencies(rows), dtype=np.float64)
+        elif "draw" in g:  # rolling tables: each table's rows over its own span
+            f = g["draw"](rng, draws)
+        else:
+            lo, hi = tables[g["table"]]
+            f = np.sort(rng.uniform(lo, hi, (draws, rows.size)), axis=1)
         ystar[:, rows] = f
-        idx[:, rows] = g["assign"](f)
         s = base_sigma[rows] * f / y[rows]  # each row's relative σ, at its new frequency
-        if "hz" in g:  # rolling tables: two lines within reach → the mixture, as in the measured table
-            s = mixture_sigma(f, s, g["hz"][idx[:, rows] - g["start"]], g["hz"])[0]
+        if "choose" in g:  # rolling tables: the model structure chosen per draw by the case's own rule
+            idx[:, rows], swaps, loaded_draws = g["choose"](ystar)
+            for where, ix in swaps:
+                idx[:, where] = ix
+            s = g["sigma"](f, s, idx[:, rows], loaded_draws)
+        else:
+            idx[:, rows] = g["assign"](f)
+            if "hz" in g:  # two lines within reach → the mixture, as in the measured table
+                s = mixture_sigma(f, s, g["hz"][idx[:, rows] - g["start"]], g["hz"])[0]
         s_meas[:, rows] = s
         s_ho[:, rows] = s * (sig[rows] / problem.sigma[rows])  # the held-out σ's share of prediction variance
     sig_b = s_ho
@@ -284,6 +297,10 @@ def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, dr
     n_rows = int(sum(g["rows"].size for g in groups))
     kind = (f"random-line: the {n_rows} rows matched by frequency redrawn uniformly over their table's span and "
             "matched by the diagnosis's rule; labelled test rows drawn from the baseline")
+    if loaded_draws is not None:
+        kind += (f"; the rolling rows' model structure chosen per draw by the same rule as the measured rows "
+                 f"(the rolling, loaded model in {int(np.sum(loaded_draws))} of {draws} draws, else the free "
+                 "spinning ring)")
     return NullResult(kind, t_null, observed, _p_values(t_null, observed),
                       "held-out shrink of the chain plus the best candidate over the baseline (linearised refits)")
 

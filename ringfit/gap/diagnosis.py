@@ -545,6 +545,8 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
                      "parameters": {k: _r(v, 6) for k, v in zip(problem.base, base.theta)},
                      **({"reference_fit": problem.meta["reference_fit"]} if "reference_fit" in problem.meta else {}),
                      **({"conditions": problem.meta["conditions"]} if problem.meta.get("conditions") else {}),
+                     **({"rolling_structure": problem.meta["rolling_structure"]}
+                        if "rolling_structure" in problem.meta else {}),
                      **({"sources": problem.meta["sources"]} if "sources" in problem.meta else {})},
         "where": loc["where"],
         "where_detail": {k: v for k, v in loc.items() if k != "where"},

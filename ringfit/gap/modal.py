@@ -430,12 +430,14 @@ def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
 @dataclass
 class LineSets:
     """What the random-line null of :mod:`ringfit.gap.calibration` needs to match new frequencies by the
-    diagnosis's own rule: the frequency problem's row dicts, each rolling table's lines
-    (:func:`ringfit.gap.rolling_rows.assign_rolling_rows`), and per row without n of another test
+    diagnosis's own rule: the frequency problem's row dicts, the rolling tables' lines under both model
+    structures and the rule that chooses between them (``rolling_lines``: the
+    :class:`~ringfit.gap.rolling_rows.StructureChoice` of :func:`ringfit.gap.rolling_rows.assign_rolling_rows`,
+    ``None`` without rolling tables), and per row without n of another test
     table the lines of the model its condition computes (:func:`missing_n_lines`, n = 1 … MATCH_N_MAX)."""
 
     rows: list
-    rolling_lines: dict
+    rolling_lines: object
     row_lines: dict
     cavity_hz: float
     table_patch: list
@@ -478,22 +480,20 @@ def mixture_sigma(f, sigma, hz_assigned, hz_lines):
     return np.sqrt(sigma**2 + half**2), ambiguous, alt
 
 
-def _ambiguity(problem: GapProblem, rows, line_sets):
-    """Rows of rolling tables whose frequency lies within :data:`AMBIGUOUS_Z` σ of a second line of their table:
-    the data cannot decide between the two, so the row carries the two-line mixture (equal weights) in moment form —
+def _ambiguity(problem: GapProblem, rows, choice):
+    """Rows of rolling tables whose frequency lies within :data:`AMBIGUOUS_Z` σ of a second line of their table
+    (of the model structure the case chose, :class:`ringfit.gap.rolling_rows.StructureChoice`): the data cannot
+    decide between the two, so the row carries the two-line mixture (equal weights) in moment form —
     the matched line's prediction with σ² widened by (Δ/2)², Δ the lines' spacing — instead of a free choice."""
     problem.meta["sigma_matched"] = problem.sigma.copy()  # before any widening (the random-line null widens alike)
-    if not line_sets:
+    if choice is None:
         return
+    line_sets = choice.lines[choice.chosen]
     rec = problem.labels["rolling"]
     for j, r in enumerate(rows):
-        if r["joint"] <= 0 or r["table"] not in line_sets:
+        if not r.get("rolling_matched") or r["table"] not in line_sets or r.get("line_hz") is None:
             continue
-        mine = [ln for ln in line_sets[r["table"]] if ln["fields"]["mode_index"] == r["mode_index"]
-                and ln["fields"]["line_k"] == r["line_k"]]
-        if not mine:
-            continue
-        sig, amb, other = mixture_sigma(r["freq"], problem.sigma[j], mine[0]["hz"],
+        sig, amb, other = mixture_sigma(r["freq"], problem.sigma[j], r["line_hz"],
                                         [ln["hz"] for ln in line_sets[r["table"]]])
         if not amb:
             continue
@@ -644,7 +644,7 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
     rows, cavity_hz = _table_rows(tables, geometry, patches, spins, splits)
     for r in rows:  # rows whose n (and type) the table leaves to matching by frequency: the random-line null's rows
         r["matchable"] = (not r["reference"]) and r["n"] < 0
-    rolling, rolling_notes, rolling_records, line_sets = assign_rolling_rows(tables, rows, ring_ref, geometry, patches)
+    rolling, rolling_notes, rolling_records, choice = assign_rolling_rows(tables, rows, ring_ref, geometry, patches)
     if rolling is not None:
         for ti, note in rolling.notes.items():
             conditions[ti] = "; ".join(x for x in (conditions[ti], note) if x)
@@ -654,9 +654,11 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
         match_notes[j] = "; ".join(x for x in (note, match_notes.get(j)) if x)
     problems = [_frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_rel, sigma_method,
                                    match_notes, patches, conditions, effects, noise, rolling, rolling_records)]
-    problems[0].meta["lines"] = LineSets(rows=rows, rolling_lines=line_sets, row_lines=row_lines,
+    problems[0].meta["lines"] = LineSets(rows=rows, rolling_lines=choice, row_lines=row_lines,
                                          cavity_hz=cavity_hz, table_patch=[p[0] for p in patches], rolling=rolling)
-    _ambiguity(problems[0], rows, line_sets)
+    if choice is not None:  # the model structure the rolling rows were assigned to (docs/formats.md §5)
+        problems[0].meta["rolling_structure"] = choice.record()
+    _ambiguity(problems[0], rows, choice)
     problems[0].meta.update(table_names=[table_label(t, i) for i, t in enumerate(tables)], patches=patches,
                             spins=spins, outer_radius_m=float(geometry.outer_radius))
     damp = [r for r in rows if math.isfinite(r["damping"]) and r["damping"] > 0]
@@ -943,28 +945,10 @@ def line_problem(problem: GapProblem):
     spans = {t: (min(r["freq"] for r in rows if r["table"] == t), max(r["freq"] for r in rows if r["table"] == t))
              for t in {rows[j]["table"] for j in matchable}}
     extra, groups = [], []
-    rolling_rows: dict = {}
-    for j in matchable:
-        if rows[j]["joint"] > 0 and rows[j]["table"] in L.rolling_lines:
-            rolling_rows.setdefault(rows[j]["table"], []).append(j)
-    for t, js in rolling_rows.items():
-        lines = L.rolling_lines[t]
-        start = m + len(extra)
-        extra += [{**rows[js[0]], **ln["fields"], "freq": ln["hz"], "tag": "", "branch": "", "matchable": False}
-                  for ln in lines]
-        hz = np.array([ln["hz"] for ln in lines])
-        sg = np.array([ln["sigma"] for ln in lines])
-        cost = np.array([ln["cost"] for ln in lines])
-
-        def assign(f, hz=hz, sg=sg, cost=cost, start=start):
-            c = ((f[..., None] - hz) / sg) ** 2 + cost  # (B, r, lines)
-            out = start + np.argmin(c, axis=-1)  # rows the assignment leaves without a line: their nearest
-            for b in range(f.shape[0]):
-                ri, ci = linear_sum_assignment(np.minimum(c[b], 1e6))
-                out[b, ri] = start + ci
-            return out
-
-        groups.append(dict(kind="rolling table", table=t, rows=np.asarray(js), assign=assign, hz=hz, start=start))
+    if L.rolling_lines is not None:
+        g = _rolling_group(L.rolling_lines, rows, matchable, extra, m)
+        if g is not None:
+            groups.append(g)
     for j in matchable:
         if j not in L.row_lines:
             continue
@@ -982,8 +966,10 @@ def line_problem(problem: GapProblem):
     # one compiled linearisation per candidate structure instead of compiling per 32-row step
     data = ModalData(rows=pad_rows(mrows, LINE_BUCKET), ring=problem.data.ring, geometry=problem.data.geometry)
     p = problem.predictor
+    # the joint rolling model only where the problem has it (a case whose rows chose the free spinning ring has none)
     predictor = ModalPredictor(effects=p.effects, base=p.base, sizes=p.sizes,
-                               joint=joint_for(p.effects, p.sizes, len(p.base), rolling_tables(every)))
+                               joint=None if p.joint is None else
+                               joint_for(p.effects, p.sizes, len(p.base), rolling_tables(every)))
     y = np.array([r["freq"] for r in every])
     M = len(every)
     lp = dataclasses.replace(
@@ -993,3 +979,88 @@ def line_problem(problem: GapProblem):
         meta={**problem.meta, "padded_rows": int(data.rows.n.shape[0]), "line_problem": None})
     problem.meta["line_problem"] = (lp, groups, spans)
     return problem.meta["line_problem"]
+
+
+def _rolling_group(choice, rows, matchable, extra, m):
+    """The random-line null's group of the rolling tables' rows matched by frequency (:func:`line_problem`): the
+    model structure chosen per draw by the case's own rule (:class:`ringfit.gap.rolling_rows.StructureChoice`,
+    from every structural row of the rolling tables: the drawn rows and the labelled rows as drawn), then one
+    assignment per table under that structure by the matching cost of ``ringfit campbell`` (Hungarian). Adds to
+    ``extra`` one line-problem row per line of either structure, and per labelled rolling row its copy with the
+    other structure's assignment (swapped in on draws that choose the other structure). ``None`` without such rows."""
+    from scipy.optimize import linear_sum_assignment
+
+    from ringfit.gap.rolling_rows import FREE, LOADED
+
+    per_table: dict = {}
+    for j in matchable:
+        if rows[j].get("rolling_matched") and rows[j]["table"] in choice.tables:
+            per_table.setdefault(rows[j]["table"], []).append(j)
+    if not per_table:
+        return None
+    chosen = choice.chosen
+    segments = []  # per table: its rows, and per structure (start, hz, sigma, cost) of its line rows
+    for t, js in per_table.items():
+        mine = [r["freq"] for r in rows if r["table"] == t]  # the table's span, as every random-line draw
+        seg = {"table": t, "rows": np.asarray(js), "lo": min(mine), "hi": max(mine)}
+        for name in (LOADED, FREE):
+            lines = choice.lines[name][t]
+            start = m + len(extra)
+            extra += [{**rows[js[0]], **ln["fields"], "freq": ln["hz"], "tag": "", "branch": "", "matchable": False,
+                       "line_hz": ln["hz"]} for ln in lines]
+            seg[name] = (start, np.array([ln["hz"] for ln in lines]), np.array([ln["sigma"] for ln in lines]),
+                         np.array([ln["cost"] for ln in lines]))
+        segments.append(seg)
+    # labelled rows of the rolling tables: their assignment under the structure the measured rows did not choose
+    other = FREE if chosen == LOADED else LOADED
+    labelled, swapped = [], []
+    for j, r in enumerate(rows):
+        if "structure_fields" in r and not r.get("matchable"):
+            labelled.append(j)
+            swapped.append(m + len(extra))
+            extra.append({**r, **r["structure_fields"][other], "matchable": False})
+    labelled, swapped = np.asarray(labelled, dtype=int), np.asarray(swapped, dtype=int)
+    all_rows = np.concatenate([s["rows"] for s in segments])
+
+    def hungarian(f, start, hz, sg, cost):
+        c = ((f[..., None] - hz) / sg) ** 2 + cost  # (B, r, lines)
+        out = start + np.argmin(c, axis=-1)  # rows the assignment leaves without a line: their nearest
+        for b in range(f.shape[0]):
+            ri, ci = linear_sum_assignment(np.minimum(c[b], 1e6))
+            out[b, ri] = start + ci
+        return out
+
+    def draw(rng, B):
+        # per table, uniform over its span at its row count (sorted, as a table lists its rows)
+        return np.concatenate([np.sort(rng.uniform(s["lo"], s["hi"], (B, s["rows"].size)), axis=1)
+                               for s in segments], axis=1)
+
+    def choose(ystar):
+        """``(idx (B, r), [(positions, idx (B, l))], loaded (B,))`` for the drawn data ``ystar`` ``(B, m)``."""
+        loaded = choice.choose({t: ystar[:, tb["rows"]] for t, tb in choice.tables.items()})
+        out = []
+        for s in segments:
+            f = ystar[:, s["rows"]]
+            out.append(np.where(loaded[:, None], hungarian(f, *s[LOADED]), hungarian(f, *s[FREE])))
+        same = loaded if chosen == LOADED else ~loaded
+        lab = np.where(same[:, None], labelled[None, :], swapped[None, :])
+        return np.concatenate(out, axis=1), [(labelled, lab)], loaded
+
+    def sigma(f, s_rows, idx_rows, loaded):
+        """The two-line mixture's σ of each drawn row under the structure its draw chose (as the measured rows)."""
+        out, col = np.array(s_rows, dtype=np.float64), 0
+        for sg in segments:
+            k = sg["rows"].size
+            sl = slice(col, col + k)
+            res = []
+            for name in (LOADED, FREE):
+                start, hz, _, _ = sg[name]
+                ix = np.clip(idx_rows[:, sl] - start, 0, hz.size - 1)
+                res.append(mixture_sigma(f[:, sl], out[:, sl], hz[ix], hz)[0])
+            out[:, sl] = np.where(loaded[:, None], res[0], res[1])
+            col += k
+        return out
+
+    return dict(kind="rolling tables", table=segments[0]["table"], rows=all_rows, draw=draw, choose=choose,
+                sigma=sigma, chosen=chosen)
+

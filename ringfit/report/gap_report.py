@@ -327,6 +327,12 @@ def write_gap_report(diag, path: str | os.PathLike, *, overwrite: bool = False) 
         f"held-out {b['heldout_rms']} ({esc(b.get('heldout_method', ''))}); noise RMS {b.get('noise_rms')} — "
         f"{esc(b.get('noise_method', ''))}. Held-out reduced χ² {b.get('reduced_chi2')} (effective dof "
         f"{b.get('noise_dof')}); ideal shrink {b.get('ideal_shrink_pct')} %.</p>")
+    st = b.get("rolling_structure")
+    if st:  # the model structure the rolling rows were assigned to, chosen by the data (docs/physics.md §6.4)
+        name = {"rolling_loaded": "the rolling, loaded model", "free_spinning": "the free spinning ring (no contact)"}
+        costs = ", ".join(f"{esc(name.get(k, k))} {v}" for k, v in st["cost"].items())
+        summary += (f"<p><b>Rolling rows</b> assigned to {esc(name.get(st['chosen'], st['chosen']))}, chosen by "
+                    f"their lines' fit (cost −2 ln L, lower wins: {costs}).</p>")
     cal = c["verdict"].get("calibration") or []
     if cal:
         summary += "<p><b>Against chance:</b></p><ul>" + "".join(f"<li>{esc(x['sentence'])}</li>" for x in cal) + "</ul>"
