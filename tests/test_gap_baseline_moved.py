@@ -102,3 +102,24 @@ def test_nonlinear_screen_scores_the_refit_from_the_reference_baseline():
     assert prior_chi2(p, out["fit"].theta, ("toy_bend",)) == pytest.approx((np.log(ref.x[0]) / 0.05) ** 2, rel=1e-4)
     lin = screen(p, base, ["toy_bend"])["toy_bend"]
     assert lin["score"] < out["score"]
+
+
+def test_movement_in_the_json_and_the_report():
+    """``baseline.drift`` as docs/formats.md §5 has it, the sentence naming the worst parameters, and the report."""
+    from ringfit.gap.diagnosis import _movement_json
+    from ringfit.report.gap_report import _drift_html
+
+    moved = {"against": "prior", "max_abs_sigma": 5.04,
+             "parameters": {"k_tread": {"reference": 19e6, "value": 8.5e6, "sigma": -0.804, "pct": -55.26},
+                            "ei": {"reference": 0.88, "value": 0.25, "sigma": -5.04, "pct": -71.59}},
+             "prior_distance": {"d2": 41.3, "k": 5, "limit": 20.52, "outside": True}}
+    j = _movement_json(moved)
+    assert j["parameters"]["ei"] == {"reference": 0.88, "value": 0.25, "sigma": -5.04, "pct": -71.6}
+    assert j["prior_distance"]["outside"] is True
+    assert j["sentence"].startswith("the baseline fit left its prior (D^2 41.3 > 20.5")
+    assert j["sentence"].index("ei -72 % (-5.0 sigma)") < j["sentence"].index("k_tread -55 %")
+    html = _drift_html(j)
+    assert "ei -71.6 % (-5.04 σ)" in html and "<b>outside</b>" in html
+    inside = dict(moved, prior_distance={"d2": 3.0, "k": 5, "limit": 20.52, "outside": False})
+    assert "stayed inside its prior" in _movement_json(inside)["sentence"]
+    assert _drift_html(None) == ""
