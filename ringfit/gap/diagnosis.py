@@ -481,16 +481,16 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
     moved = baseline_movement(problem, base, reference)
     rescued = {}
     if moved is not None and moved.get("prior_distance", {}).get("outside"):
-        # the baseline left its prior: it may have absorbed the effect, so the linearised screen at it is not
-        # trusted — every candidate is also refitted from the reference baseline (screening.nonlinear_screen)
-        for element, nl in nonlinear_screen(problem, base, elements).items():
-            rescued[element] = nl.pop("fit")
-            if nl["score"] > scores.get(element, {}).get("score", 0.0):
-                scores[element] = {**nl, "linearised": scores.get(element, {})}
-    if moved is not None and moved.get("prior_distance", {}).get("outside"):
         import warnings
 
         warnings.warn(f"{problem.domain}: {_movement_sentence(moved)}", stacklevel=2)
+        if test["excess"]:  # (below it no candidate is refitted: the screen's figures are all there is)
+            # the baseline left its prior: it may have absorbed the effect, so the linearised screen at it is not
+            # trusted — every candidate is also refitted from the reference baseline (screening.nonlinear_screen)
+            for element, nl in nonlinear_screen(problem, base, elements).items():
+                rescued[element] = nl.pop("fit")
+                if nl["score"] > scores.get(element, {}).get("score", 0.0):
+                    scores[element] = {**nl, "linearised": scores.get(element, {})}
     y = problem.y
     noise_rms = float(np.sqrt(np.mean((problem.sigma * problem.scale) ** 2)))
     hrms_b = rms(problem, y - base_ho)
