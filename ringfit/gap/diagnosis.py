@@ -290,8 +290,8 @@ def _movement_sentence(moved: dict) -> str:
     if not pd["outside"]:
         return f"the baseline stayed inside its prior (D^2 {pd['d2']:.1f} <= {pd['limit']:.1f}; {each})"
     return (f"the baseline fit left its prior (D^2 {pd['d2']:.1f} > {pd['limit']:.1f}, the 99.9 % region; "
-            f"{each}): it may be absorbing an unmodelled effect, so every candidate was also refitted from "
-            "the reference baseline (nonlinear screen)")
+            f"{each}): it may be absorbing an unmodelled effect; where candidates are refitted, each is also "
+            "refitted from the reference baseline (nonlinear screen)")
 
 
 def _screen_kind(score: dict) -> dict:
