@@ -25,14 +25,12 @@ parameters outside their prior's 99.9 % ellipsoid, e.g. k_trd pulled down by a f
 and EI by 70 % under tread shear — is such a bad point: the effect's signature, projected
 off the baseline's own directions *there*, may be small although the effect explains the
 data and puts the baseline back. So when the baseline fit left its prior, every candidate
-is also screened *nonlinearly* (:func:`nonlinear_screen`): refitted jointly with the baseline from the reference baseline
+the linearised screen would drop is screened *nonlinearly* instead
+(:func:`nonlinear_screen`): refitted jointly with the baseline from the reference baseline
 (:func:`reference_start`: the prior means — the free-table ring, ``tyre.toml``'s k_trd —
 nuisances as fitted), its score the drop of the refit's objective (data χ² plus the prior's
-χ²) below the baseline's; the higher of the two scores counts, against the same two
-thresholds. A refitted candidate keeps the better of this refit and the one from the moved
-baseline (lower objective). The noise-level gate of :mod:`ringfit.gap.verdict` is not
-trusted either (a residual the baseline has partly eaten looks like noise): the candidates
-are refitted although the residual may be at the noise level. The
+χ²) below the baseline's. The same two thresholds apply. A candidate that passes keeps
+that refit as its fit (the better of it and the refit from the moved baseline). The
 calibration's null refits every candidate of a round whatever the screen said, so the
 nonlinear screen changes which candidates are refitted on the data, never the null.
 """
@@ -48,8 +46,6 @@ from ringfit.gap.ranking import (COMPUTED, chain_start, effect_of, fit_chain, pa
 
 SCREEN_MIN_SCORE = 1.0
 STEP = 0.05
-#: Solver steps of a nonlinear screen's refit: it starts far from the moved baseline it is compared with.
-NONLINEAR_MAX_STEPS = 200
 
 
 def screen(problem: GapProblem, baseline: FitResult, elements=None) -> dict[str, dict]:
@@ -159,8 +155,7 @@ def nonlinear_screen(problem: GapProblem, baseline: FitResult, elements) -> dict
     start = reference_start(problem, baseline)
     out = {}
     for element in elements:
-        fit = fit_chain(problem, parts(element), start=chain_start(problem, parts(element), start),
-                        max_steps=NONLINEAR_MAX_STEPS)
+        fit = fit_chain(problem, parts(element), start=chain_start(problem, parts(element), start))
         score = base_obj - objective(problem, fit) if fit.converged else 0.0
         out[element] = dict(score=float(score), alignment=float(np.sqrt(max(score, 0.0) / max(r2, 1e-300))),
                             fit=fit, screen="nonlinear")
