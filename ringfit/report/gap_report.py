@@ -318,8 +318,8 @@ def _drift_html(drift: dict | None) -> str:
     where = ""
     if pd:
         where = (f" D² = {pd['d2']} against χ²<sub>{pd['k']}</sub>(0.999) = {pd['limit']}: "
-                 + ("<b>outside</b> — the baseline may be absorbing an unmodelled effect, so the candidates were "
-                    "refitted, each also from the reference baseline (nonlinear screen)."
+                 + ("<b>outside</b> — the baseline may be absorbing an unmodelled effect; where candidates are "
+                    "refitted, each is also refitted from the reference baseline (nonlinear screen)."
                     if pd["outside"] else "inside."))
     return f"<p><b>Baseline moved</b> from {esc(against)}: {each}.{where}</p>"
 
