@@ -35,9 +35,10 @@ from ringfit.gap.problem import GapProblem
 from ringfit.fit.result import FitResult
 from ringfit.gap.modal import OUTLIER_Z
 from ringfit.gap.calibration import ALPHA, DRAWS, parametric_null, random_line_null, verdict_sentence
-from ringfit.gap.ranking import (COMPUTED, JOIN, chain_start, drift, effect_of, fit_chain, heldout, parts,
-                                 prior_distance, reference_drift, rms, shrink, shrink_interval, theta_names)
-from ringfit.gap.screening import SCREEN_MIN_SCORE, screen
+from ringfit.gap.ranking import (COMPUTED, JOIN, baseline_movement, chain_start, drift, effect_of, fit_chain,
+                                 heldout, parts, prior_distance, reference_drift, rms, shrink, shrink_interval,
+                                 theta_names)
+from ringfit.gap.screening import SCREEN_MIN_SCORE, nonlinear_screen, objective, screen
 from ringfit.gap.verdict import (LOWER_BOUND_REASON, P_NOISE, P_TRY_DAMPING, PREFER_COMPUTED_PTS, RULES, acceptance,
                                  residual_test)
 
@@ -183,7 +184,8 @@ def _candidate_entry(problem: GapProblem, element: str, fit: FitResult, current:
         "evidence": {"delta_bic": _r(dchi2 + dk * math.log(m), 2), "delta_chi2": _r(dchi2, 2),
                      "free_parameters_added": dk,
                      "screen_score": _r(scores.get(element, {}).get("score", math.nan), 3),
-                     "alignment": _r(scores.get(element, {}).get("alignment", math.nan), 4)},
+                     "alignment": _r(scores.get(element, {}).get("alignment", math.nan), 4),
+                     **_screen_kind(scores.get(element, {}))},
         "params": params,
         "baseline_drift_sigma": {k: _r(v, 2) for k, v in d.items()},
         "baseline_drift_max_sigma": _r(max((abs(v) for v in d.values()), default=0.0), 2),
@@ -260,9 +262,46 @@ def _screened_entry(problem, element, current, current_ho, scores, on_top_of, re
             "heldout_rms": _r(h),
             "shrink_pct": 0.0, "heldout_shrink_pct": 0.0, "heldout_shrink_interval_pct": [0.0, 0.0],
             "evidence": {"delta_bic": 0.0, "screen_score": _r(scores.get(element, {}).get("score", 0.0), 3),
-                         "alignment": _r(scores.get(element, {}).get("alignment", 0.0), 4)},
+                         "alignment": _r(scores.get(element, {}).get("alignment", 0.0), 4),
+                         **_screen_kind(scores.get(element, {}))},
             "params": {}, "on_top_of": [effect_of(c) for c in on_top_of], "screened_out": True, "accepted": False,
             "rejected_because": [reason]}
+
+
+def _movement_json(moved: dict) -> dict:
+    """``baseline.drift`` of docs/formats.md §5 from :func:`ringfit.gap.ranking.baseline_movement`."""
+    out = {"against": moved["against"], "max_abs_sigma": _r(moved["max_abs_sigma"], 2),
+           "parameters": {k: {"reference": _r(v["reference"], 6), "value": _r(v["value"], 6),
+                              "sigma": _r(v["sigma"], 2), "pct": _r(v["pct"], 1)}
+                          for k, v in moved["parameters"].items()}}
+    if "prior_distance" in moved:
+        pd = moved["prior_distance"]
+        out["prior_distance"] = {"d2": _r(pd["d2"], 2), "k": pd["k"], "limit": _r(pd["limit"], 2),
+                                 "outside": pd["outside"]}
+        out["sentence"] = _movement_sentence(moved)
+    return out
+
+
+def _movement_sentence(moved: dict) -> str:
+    """One line on how far the baseline moved from its prior (the worst three parameters)."""
+    pd = moved["prior_distance"]
+    worst = sorted(moved["parameters"].items(), key=lambda kv: -abs(kv[1]["sigma"]))[:3]
+    each = ", ".join(f"{k} {v['pct']:+.0f} % ({v['sigma']:+.1f} sigma)" for k, v in worst)
+    if not pd["outside"]:
+        return f"the baseline stayed inside its prior (D^2 {pd['d2']:.1f} <= {pd['limit']:.1f}; {each})"
+    return (f"the baseline fit left its prior (D^2 {pd['d2']:.1f} > {pd['limit']:.1f}, the 99.9 % region; "
+            f"{each}): it may be absorbing an unmodelled effect; where candidates are refitted, each is also "
+            "refitted from the reference baseline (nonlinear screen)")
+
+
+def _screen_kind(score: dict) -> dict:
+    """``{"screen": "nonlinear", "linearised_screen_score": …}`` for a candidate screened by its refit from the
+    reference baseline (the baseline had left its prior), ``{}`` for the linearised screen."""
+    if score.get("screen") != "nonlinear":
+        return {}
+    lin = score.get("linearised", {})
+    return {"screen": "nonlinear", "linearised_screen_score": _r(lin.get("score", math.nan), 3),
+            "linearised_alignment": _r(lin.get("alignment", math.nan), 4)}
 
 
 def _screened_out(problem: GapProblem, score: dict) -> bool:
@@ -439,6 +478,19 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
     test = _structure(problem, base_ho)
     elements = candidate_elements(problem)
     scores = screen(problem, base, elements=elements)
+    moved = baseline_movement(problem, base, reference)
+    rescued = {}
+    if moved is not None and moved.get("prior_distance", {}).get("outside"):
+        import warnings
+
+        warnings.warn(f"{problem.domain}: {_movement_sentence(moved)}", stacklevel=2)
+        if test["excess"]:  # (below it no candidate is refitted: the screen's figures are all there is)
+            # the baseline left its prior: it may have absorbed the effect, so the linearised screen at it is not
+            # trusted — every candidate is also refitted from the reference baseline (screening.nonlinear_screen)
+            for element, nl in nonlinear_screen(problem, base, elements).items():
+                rescued[element] = nl.pop("fit")
+                if nl["score"] > scores.get(element, {}).get("score", 0.0):
+                    scores[element] = {**nl, "linearised": scores.get(element, {})}
     y = problem.y
     noise_rms = float(np.sqrt(np.mean((problem.sigma * problem.scale) ** 2)))
     hrms_b = rms(problem, y - base_ho)
@@ -464,6 +516,10 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
             else:
                 start = chain_start(problem, parts(element), current.theta)
                 fit = fit_chain(problem, chain + parts(element), start=start)
+                if not chain and element in rescued:  # the better refit: from the moved or the reference baseline
+                    alt = rescued[element]
+                    if alt.converged and (not fit.converged or objective(problem, alt) < objective(problem, fit)):
+                        fit = alt
                 heldout(problem, fit)
                 part.fits[chain + parts(element)] = fit
                 entries.append(_candidate_entry(problem, element, fit, current, current_ho, reference, round_scores,
@@ -543,6 +599,7 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
                      "remaining_reduced_chi2": _r(cur["reduced_chi2"], 3), "remaining_structured": cur["structured"],
                      "noise_method": problem.noise_method, "heldout_method": problem.fold_kind,
                      "parameters": {k: _r(v, 6) for k, v in zip(problem.base, base.theta)},
+                     **({"drift": _movement_json(moved)} if moved is not None else {}),
                      **({"reference_fit": problem.meta["reference_fit"]} if "reference_fit" in problem.meta else {}),
                      **({"conditions": problem.meta["conditions"]} if problem.meta.get("conditions") else {}),
                      **({"rolling_structure": problem.meta["rolling_structure"]}

@@ -345,3 +345,63 @@ def prior_distance(problem: GapProblem, theta: np.ndarray, exclude=()) -> tuple[
     d = np.log(np.asarray(theta)[idx]) - np.log(mean[idx])
     cov = np.asarray(problem.base_prior_cov)[np.ix_(idx, idx)]
     return float(d @ np.linalg.solve(cov, d)), len(idx)
+
+
+def baseline_movement(problem: GapProblem, fit: FitResult, reference: FitResult) -> dict | None:
+    """How far the baseline fit moved from what independent data say (docs/formats.md §5 ``baseline.drift``).
+
+    Against the baseline prior where the problem has one from independent data (profiles: the ring
+    stiffnesses and damping from the free-table fit, k_trd from ``tyre.toml``): each positive parameter's
+    change in σ of that prior (log units) and in per cent, and the squared Mahalanobis distance D² of the
+    prior-guarded ones (χ²_k under the prior). Otherwise against the reference fit (mode tables: the fit to
+    the reference rows), in its standard errors. ``None`` when there is nothing to compare with.
+    """
+    from scipy.special import chdtri  # χ² quantile
+
+    from ringfit.gap.verdict import PRIOR_REGION
+
+    nb = len(problem.base)
+    guarded = [i for i in problem.meta.get("prior_guarded", ())]
+    if guarded and problem.base_prior_cov is not None and problem.base_prior_mean is not None:
+        mean = np.asarray(problem.base_prior_mean, dtype=np.float64)
+        sd = np.sqrt(np.diag(np.asarray(problem.base_prior_cov, dtype=np.float64)))
+        against = "prior"
+    elif reference is not fit:
+        mean = np.asarray(reference.theta[:nb], dtype=np.float64)
+        sd = np.sqrt(np.maximum(np.diag(reference.covariance_log)[:nb], 1e-300))
+        against = "reference_fit"
+    else:
+        return None
+    params = {}
+    for i, name in enumerate(problem.base):
+        if problem.is_linear(i) or not np.isfinite(sd[i]) or not mean[i] > 0:
+            continue
+        dlog = math.log(fit.theta[i]) - math.log(mean[i])
+        params[name] = {"reference": float(mean[i]), "value": float(fit.theta[i]), "sigma": dlog / sd[i],
+                        "pct": 100.0 * (fit.theta[i] / mean[i] - 1.0)}
+    out = {"against": against, "parameters": params,
+           "max_abs_sigma": max((abs(p["sigma"]) for p in params.values()), default=0.0)}
+    if against == "prior":
+        d2, k = prior_distance(problem, fit.theta)
+        limit = float(chdtri(k, 1.0 - PRIOR_REGION)) if k else math.inf
+        out["prior_distance"] = {"d2": d2, "k": k, "limit": limit, "outside": bool(d2 > limit)}
+    return out
+
+
+def prior_chi2(problem: GapProblem, theta: np.ndarray, chain=()) -> float:
+    """The prior's part of a refit's objective at ``theta``: the baseline prior's whitened rows (log units)
+    plus the Gaussian prior of each fitted (not computed) chain element's parameters."""
+    theta = np.asarray(theta, dtype=np.float64)
+    idx, mean_u, W = problem.prior_rows()
+    total = 0.0
+    if idx.size:
+        d = W @ (np.log(theta[idx]) - mean_u)
+        total += float(d @ d)
+    sl = problem.slices()
+    for element in (p for c in chain for p in parts(c) if not p.endswith(COMPUTED)):
+        name = effect_of(element)
+        e = next(x for x in problem.effects if x.name == name)
+        for p, j in zip(problem.effect_params(e), range(sl[name].start, sl[name].stop)):
+            if p.prior is not None:
+                total += float(((theta[j] - p.prior[0]) / p.prior[1]) ** 2)
+    return total

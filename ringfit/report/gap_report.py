@@ -307,6 +307,23 @@ def _row_sections(content: dict) -> list[tuple[str, str]]:
     return out
 
 
+def _drift_html(drift: dict | None) -> str:
+    """How far the baseline moved from its prior or reference fit (docs/formats.md §5 ``baseline.drift``)."""
+    if not drift:
+        return ""
+    against = {"prior": "its prior (independent data)", "reference_fit": "the reference fit"}.get(drift["against"],
+                                                                                                 drift["against"])
+    each = ", ".join(f"{esc(k)} {v['pct']:+.1f} % ({v['sigma']:+.2f} σ)" for k, v in drift["parameters"].items())
+    pd = drift.get("prior_distance")
+    where = ""
+    if pd:
+        where = (f" D² = {pd['d2']} against χ²<sub>{pd['k']}</sub>(0.999) = {pd['limit']}: "
+                 + ("<b>outside</b> — the baseline may be absorbing an unmodelled effect; where candidates are "
+                    "refitted, each is also refitted from the reference baseline (nonlinear screen)."
+                    if pd["outside"] else "inside."))
+    return f"<p><b>Baseline moved</b> from {esc(against)}: {each}.{where}</p>"
+
+
 def write_gap_report(diag, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
     """Write the HTML report of a :class:`ringfit.gap.Diagnosis` (atomic; refuses to overwrite unless asked)."""
     from ringfit.io.files import atomic_write_text, check_output_path
@@ -333,6 +350,7 @@ def write_gap_report(diag, path: str | os.PathLike, *, overwrite: bool = False) 
         costs = ", ".join(f"{esc(name.get(k, k))} {v}" for k, v in st["cost"].items())
         summary += (f"<p><b>Rolling rows</b> assigned to {esc(name.get(st['chosen'], st['chosen']))}, chosen by "
                     f"their lines' fit (cost −2 ln L, lower wins: {costs}).</p>")
+    summary += _drift_html(b.get("drift"))
     cal = c["verdict"].get("calibration") or []
     if cal:
         summary += "<p><b>Against chance:</b></p><ul>" + "".join(f"<li>{esc(x['sentence'])}</li>" for x in cal) + "</ul>"
