@@ -369,6 +369,8 @@ def test_cli_refuses_a_tyre_file_without_ring(profile_file, tmp_path, capsys):
     assert not out.exists()
 
 
+# ~15 s (a CLI subprocess compiling the estimate); the library path: tests/test_estimate_covariance.py
+@pytest.mark.slow
 def test_cli_propagates_the_tyre_files_covariance_like_k_tread_sd(profile_file, tmp_path, capsys):
     """A [ring.covariance] of k_trd alone is what --k-tread-sd would propagate: the same interval. One with
     other ring parameters propagates them too (docs/physics.md §10; tests/test_estimate_covariance.py)."""

@@ -127,6 +127,9 @@ def test_bordered_loaded_ring_rigid_limit_and_hill_at_rest():
     assert np.all(np.asarray(c3) > 2 * TWO_PI * 20)
 
 
+# ~13 s (the Hill model with the wheel, compiled for this test alone); the two-body root against the
+# lumped model stays in the default run
+@pytest.mark.slow
 def test_hill_free_ring_with_wheel_matches_lumped():
     g, r = table9()
     wheel = W.Wheel.from_stiffness(25.0, 0.7, 2e5, 1e6, 1e5)
