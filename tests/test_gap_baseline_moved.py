@@ -16,7 +16,7 @@ from scipy import optimize, stats
 import ringfit  # noqa: F401  (x64)
 from ringfit.gap.effects.base import Effect, Parameter
 from ringfit.gap.problem import GapProblem
-from ringfit.gap.ranking import baseline_movement, fit_chain, prior_chi2
+from ringfit.gap.ranking import baseline_movement, fit_chain
 from ringfit.gap.screening import nonlinear_screen, objective, reference_start, screen
 
 
@@ -99,7 +99,7 @@ def test_nonlinear_screen_scores_the_refit_from_the_reference_baseline():
     assert out["score"] == pytest.approx(base_obj - 2 * ref.cost, rel=1e-6)
     r2 = float(np.sum(((y - base.extra["pred"]) / sigma) ** 2))
     assert out["alignment"] == pytest.approx(np.sqrt(out["score"] / r2), rel=1e-9)
-    assert prior_chi2(p, out["fit"].theta, ("toy_bend",)) == pytest.approx((np.log(ref.x[0]) / 0.05) ** 2, rel=1e-4)
+    assert out["fit"].extra["prior_chi2"] == pytest.approx((np.log(ref.x[0]) / 0.05) ** 2, rel=1e-4)
     lin = screen(p, base, ["toy_bend"])["toy_bend"]
     assert lin["score"] < out["score"]
 

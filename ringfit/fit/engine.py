@@ -563,7 +563,7 @@ def _result(problem, free, index, theta0, u_free, status, message, steps, res, j
         covariance_log=cov * infl**2, residuals=res[:m] / (s if sigma == "estimate" else 1.0),
         jacobian=J, n_data=data_rows, iterations=steps, flags=flags,
         extra={"aux": aux, "sigma_scale": s if sigma == "estimate" else 1.0, "chi2_raw": chi2,
-               "at_bound": tuple(at_bound)},
+               "prior_chi2": float(res[m:] @ res[m:]), "at_bound": tuple(at_bound)},
         theta=theta, coords=tuple(coords),
     )
 

@@ -386,22 +386,3 @@ def baseline_movement(problem: GapProblem, fit: FitResult, reference: FitResult)
         limit = float(chdtri(k, 1.0 - PRIOR_REGION)) if k else math.inf
         out["prior_distance"] = {"d2": d2, "k": k, "limit": limit, "outside": bool(d2 > limit)}
     return out
-
-
-def prior_chi2(problem: GapProblem, theta: np.ndarray, chain=()) -> float:
-    """The prior's part of a refit's objective at ``theta``: the baseline prior's whitened rows (log units)
-    plus the Gaussian prior of each fitted (not computed) chain element's parameters."""
-    theta = np.asarray(theta, dtype=np.float64)
-    idx, mean_u, W = problem.prior_rows()
-    total = 0.0
-    if idx.size:
-        d = W @ (np.log(theta[idx]) - mean_u)
-        total += float(d @ d)
-    sl = problem.slices()
-    for element in (p for c in chain for p in parts(c) if not p.endswith(COMPUTED)):
-        name = effect_of(element)
-        e = next(x for x in problem.effects if x.name == name)
-        for p, j in zip(problem.effect_params(e), range(sl[name].start, sl[name].stop)):
-            if p.prior is not None:
-                total += float(((theta[j] - p.prior[0]) / p.prior[1]) ** 2)
-    return total

@@ -41,8 +41,7 @@ import numpy as np
 
 from ringfit.gap.problem import GapProblem
 from ringfit.fit.result import FitResult
-from ringfit.gap.ranking import (COMPUTED, chain_start, effect_of, fit_chain, parts, predict, predict_and_jacobian,
-                                prior_chi2)
+from ringfit.gap.ranking import COMPUTED, chain_start, effect_of, fit_chain, parts, predict, predict_and_jacobian
 
 SCREEN_MIN_SCORE = 1.0
 STEP = 0.05
@@ -130,8 +129,9 @@ def _composite_score(problem, pieces, effs, th0, p0, r, sig, Q) -> dict:
 
 
 def objective(problem: GapProblem, fit: FitResult) -> float:
-    """What a refit minimises: the data χ² plus the prior's χ² (baseline prior and effect priors)."""
-    return fit.chi2 + prior_chi2(problem, fit.theta, fit.extra.get("chain", ()))
+    """What a refit minimises: the data χ² plus the prior's χ² (the baseline prior and the fitted effects'
+    priors: the engine's prior rows at the end point, ``fit.extra["prior_chi2"]``)."""
+    return fit.chi2 + fit.extra["prior_chi2"]
 
 
 def reference_start(problem: GapProblem, baseline: FitResult) -> np.ndarray:
