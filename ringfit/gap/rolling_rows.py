@@ -49,6 +49,7 @@ stated limitation: the computed variants are the predictions the verdict leans o
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -56,6 +57,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.special import logsumexp
 
 #: Harmonics |k| ≤ K of the Hill basis for the diagnosis's rolling rows (n ≤ 12 branches are
 #: kept). K = 24 keeps the 16 lowest modes of the Table 9 tyre (to 290 Hz; 4 kN, 60 km/h) within
@@ -254,15 +256,21 @@ def free_line_fields(n: int, direction: str) -> dict:
     return dict(n=int(n), wave=direction, contact=0, patch=0.0, joint=0.0, mode_index=0, line_k=0.0)
 
 
+@functools.cache
+def _free_ring_program(fixed: bool):
+    """eq. 26 (fixed observer) or eq. 25 (co-rotating sensor), jitted once per process."""
+    from ringfit.physics.natural import fixed_frame_frequencies, rotating_natural_frequencies
+
+    return jax.jit(fixed_frame_frequencies if fixed else rotating_natural_frequencies)
+
+
 def _free_ring_candidates(ring, geometry, omega: float, fixed: bool):
     """The waves n = 1 … :data:`ROLLING_N_MAX` of the free spinning ring at Ω (eq. 25 co-rotating, eq. 26 fixed)
     as matching candidates (weight 1; a travelling wave: no symmetry about a patch)."""
     from ringfit.gap.campbell import _Candidate
-    from ringfit.physics.natural import fixed_frame_frequencies, rotating_natural_frequencies
 
     n_all = np.arange(1, ROLLING_N_MAX + 1, dtype=float)
-    fn = fixed_frame_frequencies if fixed else rotating_natural_frequencies
-    w = np.abs(np.asarray(jax.jit(fn)(ring, geometry, n_all, omega)))  # [Hz], (n, 2): backward, forward
+    w = np.abs(np.asarray(_free_ring_program(fixed)(ring, geometry, n_all, omega)))  # [Hz], (n, 2): backward, forward
     out = []
     for k, n in enumerate(n_all.astype(int)):
         for b, direction in enumerate(("backward", "forward")):
@@ -302,8 +310,7 @@ def structure_loglik(f, std, hz, weight, pen, lo: float, hi: float) -> np.ndarra
         sig = np.sqrt(std[:, None] ** 2 + (tau * hz[None, :]) ** 2)  # (r, L)
         z = (f[..., None] - hz) / sig  # (B, r, L)
         comp = log_prior - 0.5 * z * z - np.log(sig) - 0.5 * math.log(2 * math.pi) - 0.5 * pen
-        top = np.max(comp, axis=-1, keepdims=True)
-        lines = top[..., 0] + np.log(np.sum(np.exp(comp - top), axis=-1))  # (B, r)
+        lines = logsumexp(comp, axis=-1)  # (B, r)
         row = np.logaddexp(math.log(1 - BACKGROUND) + lines, background)
         out.append(np.sum(row, axis=-1))
     return np.stack(out, axis=-1)
