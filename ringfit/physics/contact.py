@@ -292,9 +292,14 @@ class BrushShearLoad(eqx.Module):
             tau = geometry.outer_radius - geometry.radius
             psi = belt_slope_grid(sol, geometry)
             x_b = (geometry.radius + sol.w) * jnp.sin(phi) + sol.v * jnp.cos(phi) + tau * jnp.sin(phi - psi)
-        first = jnp.argmax(inside)  # leading edge: first grid point in the patch (smallest φ)
-        s = phi - phi[first]
-        D = x_b - x_b[first]
+        # leading edge φ_L: the zero crossing of the penetration δ between the last point before the patch and the
+        # first in it, linearly interpolated (docs/physics.md §6 tread_shear); the first grid point instead moves
+        # the sticking point by up to one grid step, a shear offset (x_b′ − R_e)Δφ that does not converge with M
+        first = jnp.argmax(inside)
+        d0, d1 = sol.penetration[first - 1], sol.penetration[first]
+        t = jnp.where(jnp.isfinite(d0) & (d1 > d0), jnp.clip(-d0 / jnp.where(d1 > d0, d1 - d0, 1.0), 0.0, 1.0), 1.0)
+        s = phi - (phi[first - 1] + t * (phi[first] - phi[first - 1]))
+        D = x_b - (x_b[first - 1] + t * (x_b[first] - x_b[first - 1]))
         num = jnp.sum(jnp.where(inside, D * jnp.cos(phi), 0.0))
         den = jnp.sum(jnp.where(inside, s * jnp.cos(phi), 0.0))
         r_e = num / jnp.where(den == 0, 1.0, den)
