@@ -300,11 +300,9 @@ class BrushShearLoad(eqx.Module):
         t = jnp.where(jnp.isfinite(d0) & (d1 > d0), jnp.clip(-d0 / jnp.where(d1 > d0, d1 - d0, 1.0), 0.0, 1.0), 1.0)
         s = phi - (phi[first - 1] + t * (phi[first] - phi[first - 1]))
         D = x_b - (x_b[first - 1] + t * (x_b[first] - x_b[first - 1]))
-        num = jnp.sum(jnp.where(inside, D * jnp.cos(phi), 0.0))
-        den = jnp.sum(jnp.where(inside, s * jnp.cos(phi), 0.0))
-        r_e = num / jnp.where(den == 0, 1.0, den)
-        q_x = -self.k_x * (D - r_e * s)
         lim = self.mu * p
+        r_e = free_rolling_radius(D, s, jnp.cos(phi), self.k_x, lim, inside)
+        q_x = -self.k_x * (D - r_e * s)
         q_x = jnp.where(inside, jnp.clip(q_x, -lim, lim), 0.0)
         q_w, q_v = q_x * jnp.sin(phi), q_x * jnp.cos(phi)
         if self.lever:
@@ -314,6 +312,41 @@ class BrushShearLoad(eqx.Module):
             q_w = q_w - dm / geometry.radius
             q_v = q_v - m / geometry.radius
         return q_w, q_v
+
+
+def free_rolling_radius(D, s, c, k_x, lim, inside, steps: int = 60):
+    """R_e of free rolling: the clipped tip forces ``q_x = clip(−k_x (D − R_e s), ±lim)`` inside the patch drive no
+    torque, ``Σ q_x c = 0`` (docs/physics.md §6 tread_shear; ``c = cos φ``, the arm of a tangential tip force).
+
+    The torque is piecewise linear and non-decreasing in R_e (s > 0 in the patch): bisection on a bracket around
+    the unclipped least-squares root, then one Newton step at the bisected root with the derivatives flowing, so
+    that ∂R_e/∂θ is the implicit function's ``−(∂T/∂θ)/(∂T/∂R_e)`` (the bisection itself is not differentiated).
+    Without clipping the root is ``Σ D c / Σ s c`` (the bracket's centre); with the tips sliding near the exit
+    (|q_x| at μp) it differs from that formula, which would leave the real tip forces a net torque.
+    """
+    def torque(r):
+        q = jnp.where(inside, jnp.clip(-k_x * (D - r * s), -lim, lim), 0.0)
+        return jnp.sum(q * c)
+
+    sg = jax.lax.stop_gradient
+    num = jnp.sum(jnp.where(inside, D * c, 0.0))
+    den = jnp.sum(jnp.where(inside, s * c, 0.0))
+    r_ls = sg(num / jnp.where(den == 0, 1.0, den))
+    span = 0.5 * jnp.abs(r_ls) + 1e-3
+
+    def bisect(_, ab):
+        a, b = ab
+        m = 0.5 * (a + b)
+        above = torque(m) > 0.0  # the root lies below m
+        return jnp.where(above, a, m), jnp.where(above, m, b)
+
+    lo, hi = jax.lax.fori_loop(0, steps, bisect, (r_ls - span, r_ls + span))
+    r0 = sg(0.5 * (lo + hi))
+    q = -k_x * (D - r0 * s)
+    free = inside & (jnp.abs(q) < lim)  # tips sticking at r0: the torque's slope in R_e
+    slope = jnp.sum(jnp.where(free, k_x * s * c, 0.0))
+    step = torque(r0) / jnp.where(slope > 0, slope, 1.0)
+    return r0 - jnp.where(slope > 0, step - sg(step), 0.0)  # value r0; derivative −T_θ/T_r
 
 
 def belt_slope_grid(sol, geometry):
