@@ -184,6 +184,8 @@ def test_free_rolling_radius_zeroes_the_clipped_tips_torque(solution, mu):
         assert not sliding and r_e == pytest.approx(closed, abs=1e-9)
     if mu == 0.3:
         assert sliding and abs(torque(closed)) > 1e-3 * np.sum(np.abs(np.where(inside, lim * c, 0)))
+    # the null k_x = 0 (no torque at any R_e): the limit k_x → 0⁺, where no tip slides, i.e. the closed form
+    assert float(jax.jit(free_rolling_radius)(D, s, c, 0.0, lim, inside)) == pytest.approx(closed, abs=1e-9)
 
 
 def test_free_rolling_radius_derivative_matches_finite_differences(solution):

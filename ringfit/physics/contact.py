@@ -341,7 +341,9 @@ def free_rolling_radius(D, s, c, k_x, lim, inside, steps: int = 60):
         return jnp.where(above, a, m), jnp.where(above, m, b)
 
     lo, hi = jax.lax.fori_loop(0, steps, bisect, (r_ls - span, r_ls + span))
-    r0 = sg(0.5 * (lo + hi))
+    # k_x = 0 (the effect's null): T ≡ 0; R_e is then the limit k_x → 0⁺, where no tip slides: the closed form
+    # (what the linearised screen's derivative ∂q_x/∂k_x = −(D − R_e s) needs)
+    r0 = jnp.where(sg(k_x) > 0, sg(0.5 * (lo + hi)), r_ls)
     q = -k_x * (D - r0 * s)
     free = inside & (jnp.abs(q) < lim)  # tips sticking at r0: the torque's slope in R_e
     slope = jnp.sum(jnp.where(free, k_x * s * c, 0.0))
