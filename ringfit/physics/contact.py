@@ -266,10 +266,11 @@ class BrushShearLoad(eqx.Module):
     """Brush tread shear in the patch (docs/physics.md §6 ``tread_shear``) as a load hook
     ``(solution, ring, geometry) -> (q_w, q_v)`` grid loads [N/m].
 
-    The tip sticks at the leading edge φ_L and then moves with the road; base position
-    ``x_b(φ) = (R+τ+w) sin φ + v cos φ``; shear ``Δx = x_b(φ) − x_b(φ_L) − R_e(φ − φ_L)``;
-    ``q_x = −k_x Δx`` clipped at ``|q_x| ≤ μ p``; loads ``q_w += q_x sin φ``,
-    ``q_v += q_x cos φ``. Free rolling fixes R_e by ``∫ q_v dφ = 0``. ``k_x`` [N/m²].
+    The tip sticks at the leading edge φ_L (the penetration's interpolated zero crossing) and then moves with
+    the road; base position ``x_b(φ) = (R+τ+w) sin φ + v cos φ``; shear
+    ``Δx = x_b(φ) − x_b(φ_L) − R_e(φ − φ_L)``; ``q_x = −k_x Δx`` clipped at ``|q_x| ≤ μ p``; loads
+    ``q_w += q_x sin φ``, ``q_v += q_x cos φ``. Free rolling fixes R_e: the clipped tip forces drive no
+    torque (:func:`free_rolling_radius`). ``k_x`` [N/m²].
 
     ``lever`` (static, default off): the tread element stays normal to the belt, so its tip
     sits at ``(R + w) sin φ + v cos φ + τ sin(φ − ψ)`` (τ = R_out − R, ψ = (w′ − v)/R the belt slope,
@@ -404,7 +405,7 @@ def contact_length(solution: RollingSolution):
 
 
 __all__ = [
-    "BrushShearLoad", "FRICTION",
+    "BrushShearLoad", "FRICTION", "free_rolling_radius",
     "ContactSolver", "RollingSolution", "tread_pressure", "circulant_block", "solve_rolling",
     "solve_rolling_jit", "as_traced", "patch_edges", "contact_length",
 ]
