@@ -298,7 +298,9 @@ class BrushShearLoad(eqx.Module):
         # the sticking point by up to one grid step, a shear offset (x_b′ − R_e)Δφ that does not converge with M
         first = jnp.argmax(inside)
         d0, d1 = sol.penetration[first - 1], sol.penetration[first]
-        t = jnp.where(jnp.isfinite(d0) & (d1 > d0), jnp.clip(-d0 / jnp.where(d1 > d0, d1 - d0, 1.0), 0.0, 1.0), 1.0)
+        reach = jnp.isfinite(d0)  # (the road out of reach before the patch: the edge at `first`)
+        d0 = jnp.where(reach, d0, 0.0)  # finite in both branches: no NaN in the derivative
+        t = jnp.where(reach & (d1 > d0), jnp.clip(-d0 / jnp.where(d1 > d0, d1 - d0, 1.0), 0.0, 1.0), 1.0)
         s = phi - (phi[first - 1] + t * (phi[first] - phi[first - 1]))
         D = x_b - (x_b[first - 1] + t * (x_b[first] - x_b[first - 1]))
         lim = self.mu * p
@@ -320,7 +322,7 @@ def free_rolling_radius(D, s, c, k_x, lim, inside, steps: int = 60):
     torque, ``Σ q_x c = 0`` (docs/physics.md §6 tread_shear; ``c = cos φ``, the arm of a tangential tip force).
 
     The torque is piecewise linear and non-decreasing in R_e (s > 0 in the patch): bisection on a bracket around
-    the unclipped least-squares root, then one Newton step at the bisected root with the derivatives flowing, so
+    the unclipped closed-form root, then one Newton step at the bisected root with the derivatives flowing, so
     that ∂R_e/∂θ is the implicit function's ``−(∂T/∂θ)/(∂T/∂R_e)`` (the bisection itself is not differentiated).
     Without clipping the root is ``Σ D c / Σ s c`` (the bracket's centre); with the tips sliding near the exit
     (|q_x| at μp) it differs from that formula, which would leave the real tip forces a net torque.
