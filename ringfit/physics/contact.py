@@ -266,10 +266,11 @@ class BrushShearLoad(eqx.Module):
     """Brush tread shear in the patch (docs/physics.md §6 ``tread_shear``) as a load hook
     ``(solution, ring, geometry) -> (q_w, q_v)`` grid loads [N/m].
 
-    The tip sticks at the leading edge φ_L and then moves with the road; base position
-    ``x_b(φ) = (R+τ+w) sin φ + v cos φ``; shear ``Δx = x_b(φ) − x_b(φ_L) − R_e(φ − φ_L)``;
-    ``q_x = −k_x Δx`` clipped at ``|q_x| ≤ μ p``; loads ``q_w += q_x sin φ``,
-    ``q_v += q_x cos φ``. Free rolling fixes R_e by ``∫ q_v dφ = 0``. ``k_x`` [N/m²].
+    The tip sticks at the leading edge φ_L (the penetration's interpolated zero crossing) and then moves with
+    the road; base position ``x_b(φ) = (R+τ+w) sin φ + v cos φ``; shear
+    ``Δx = x_b(φ) − x_b(φ_L) − R_e(φ − φ_L)``; ``q_x = −k_x Δx`` clipped at ``|q_x| ≤ μ p``; loads
+    ``q_w += q_x sin φ``, ``q_v += q_x cos φ``. Free rolling fixes R_e: the clipped tip forces drive no
+    torque (:func:`free_rolling_radius`). ``k_x`` [N/m²].
 
     ``lever`` (static, default off): the tread element stays normal to the belt, so its tip
     sits at ``(R + w) sin φ + v cos φ + τ sin(φ − ψ)`` (τ = R_out − R, ψ = (w′ − v)/R the belt slope,
@@ -292,14 +293,19 @@ class BrushShearLoad(eqx.Module):
             tau = geometry.outer_radius - geometry.radius
             psi = belt_slope_grid(sol, geometry)
             x_b = (geometry.radius + sol.w) * jnp.sin(phi) + sol.v * jnp.cos(phi) + tau * jnp.sin(phi - psi)
-        first = jnp.argmax(inside)  # leading edge: first grid point in the patch (smallest φ)
-        s = phi - phi[first]
-        D = x_b - x_b[first]
-        num = jnp.sum(jnp.where(inside, D * jnp.cos(phi), 0.0))
-        den = jnp.sum(jnp.where(inside, s * jnp.cos(phi), 0.0))
-        r_e = num / jnp.where(den == 0, 1.0, den)
-        q_x = -self.k_x * (D - r_e * s)
+        # leading edge φ_L: the zero crossing of the penetration δ between the last point before the patch and the
+        # first in it, linearly interpolated (docs/physics.md §6 tread_shear); the first grid point instead moves
+        # the sticking point by up to one grid step, a shear offset (x_b′ − R_e)Δφ that does not converge with M
+        first = jnp.argmax(inside)
+        d0, d1 = sol.penetration[first - 1], sol.penetration[first]
+        reach = jnp.isfinite(d0)  # (the road out of reach before the patch: the edge at `first`)
+        d0 = jnp.where(reach, d0, 0.0)  # finite in both branches: no NaN in the derivative
+        t = jnp.where(reach & (d1 > d0), jnp.clip(-d0 / jnp.where(d1 > d0, d1 - d0, 1.0), 0.0, 1.0), 1.0)
+        s = phi - (phi[first - 1] + t * (phi[first] - phi[first - 1]))
+        D = x_b - (x_b[first - 1] + t * (x_b[first] - x_b[first - 1]))
         lim = self.mu * p
+        r_e = free_rolling_radius(D, s, jnp.cos(phi), self.k_x, lim, inside)
+        q_x = -self.k_x * (D - r_e * s)
         q_x = jnp.where(inside, jnp.clip(q_x, -lim, lim), 0.0)
         q_w, q_v = q_x * jnp.sin(phi), q_x * jnp.cos(phi)
         if self.lever:
@@ -309,6 +315,43 @@ class BrushShearLoad(eqx.Module):
             q_w = q_w - dm / geometry.radius
             q_v = q_v - m / geometry.radius
         return q_w, q_v
+
+
+def free_rolling_radius(D, s, c, k_x, lim, inside, steps: int = 60):
+    """R_e of free rolling: the clipped tip forces ``q_x = clip(−k_x (D − R_e s), ±lim)`` inside the patch drive no
+    torque, ``Σ q_x c = 0`` (docs/physics.md §6 tread_shear; ``c = cos φ``, the arm of a tangential tip force).
+
+    The torque is piecewise linear and non-decreasing in R_e (s > 0 in the patch): bisection on a bracket around
+    the unclipped closed-form root, then one Newton step at the bisected root with the derivatives flowing, so
+    that ∂R_e/∂θ is the implicit function's ``−(∂T/∂θ)/(∂T/∂R_e)`` (the bisection itself is not differentiated).
+    Without clipping the root is ``Σ D c / Σ s c`` (the bracket's centre); with the tips sliding near the exit
+    (|q_x| at μp) it differs from that formula, which would leave the real tip forces a net torque.
+    """
+    def torque(r):
+        q = jnp.where(inside, jnp.clip(-k_x * (D - r * s), -lim, lim), 0.0)
+        return jnp.sum(q * c)
+
+    sg = jax.lax.stop_gradient
+    num = jnp.sum(jnp.where(inside, D * c, 0.0))
+    den = jnp.sum(jnp.where(inside, s * c, 0.0))
+    r_ls = sg(num / jnp.where(den == 0, 1.0, den))
+    span = 0.5 * jnp.abs(r_ls) + 1e-3
+
+    def bisect(_, ab):
+        a, b = ab
+        m = 0.5 * (a + b)
+        above = torque(m) > 0.0  # the root lies below m
+        return jnp.where(above, a, m), jnp.where(above, m, b)
+
+    lo, hi = jax.lax.fori_loop(0, steps, bisect, (r_ls - span, r_ls + span))
+    # k_x = 0 (the effect's null): T ≡ 0; R_e is then the limit k_x → 0⁺, where no tip slides: the closed form
+    # (what the linearised screen's derivative ∂q_x/∂k_x = −(D − R_e s) needs)
+    r0 = jnp.where(sg(k_x) > 0, sg(0.5 * (lo + hi)), r_ls)
+    q = -k_x * (D - r0 * s)
+    free = inside & (jnp.abs(q) < lim)  # tips sticking at r0: the torque's slope in R_e
+    slope = jnp.sum(jnp.where(free, k_x * s * c, 0.0))
+    step = torque(r0) / jnp.where(slope > 0, slope, 1.0)
+    return r0 - jnp.where(slope > 0, step - sg(step), 0.0)  # value r0; derivative −T_θ/T_r
 
 
 def belt_slope_grid(sol, geometry):
@@ -364,7 +407,7 @@ def contact_length(solution: RollingSolution):
 
 
 __all__ = [
-    "BrushShearLoad", "FRICTION",
+    "BrushShearLoad", "FRICTION", "free_rolling_radius",
     "ContactSolver", "RollingSolution", "tread_pressure", "circulant_block", "solve_rolling",
     "solve_rolling_jit", "as_traced", "patch_edges", "contact_length",
 ]
