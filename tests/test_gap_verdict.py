@@ -205,3 +205,82 @@ def test_prediction_jacobian_is_the_model_derivative_on_huber_rows(tmp_path):
     down[j] -= h
     fd = (predict(damp, up) - predict(damp, down)) / (2 * h)
     np.testing.assert_allclose(J[:, 0], fd, rtol=1e-5, atol=1e-8)
+
+
+# --------------------------------------------------------------------------- the null decides the heuristic bars
+def test_the_null_decides_a_shrink_between_the_floor_and_the_bar():
+    """Condition 1's shrink bar is a heuristic: a candidate that passes every other condition with a shrink
+    between the floor and the bar is refused by the rule alone but handed to its null (verdict.null_decides)."""
+    c = good(heldout_shrink_pct=0.5 * (V.MIN_HELDOUT_SHRINK_FLOOR_PCT + V.MIN_HELDOUT_SHRINK_PCT))
+    ok, why = V.acceptance(c)
+    assert not ok and len(why) == 1 and "heldout shrink" in why[0]
+    assert V.null_decides(dict(c, accepted=ok, rejected_because=why))
+    assert V.acceptance(c, bars=False) == (True, [])
+    # below the floor: not worth reporting, whatever the null says
+    low = good(heldout_shrink_pct=V.MIN_HELDOUT_SHRINK_FLOOR_PCT - 0.1)
+    ok, why = V.acceptance(low)
+    assert not V.null_decides(dict(low, accepted=ok, rejected_because=why))
+    assert "floor" in V.acceptance(low, bars=False)[1][0]
+    # the floor reached on the deciding group only (an effect diluted over all rows)
+    grp = good(heldout_shrink_pct=1.0, heldout_shrink_interval_pct=[-2.0, 4.0], group="tangential",
+               heldout_shrink_in_group_pct=V.MIN_HELDOUT_SHRINK_FLOOR_PCT + 1.0,
+               heldout_shrink_in_group_interval_pct=[0.0, 20.0])
+    ok, why = V.acceptance(grp)
+    assert not ok and V.null_decides(dict(grp, accepted=ok, rejected_because=why))
+
+
+def test_the_null_decides_the_bootstrap_bound_but_never_a_physical_check():
+    lb = good(heldout_shrink_interval_pct=[V.MIN_HELDOUT_SHRINK_LO_PCT - 5.0, 80.0])
+    ok, why = V.acceptance(lb)
+    assert not ok and V.null_decides(dict(lb, accepted=ok, rejected_because=why))
+    mid = V.MIN_HELDOUT_SHRINK_FLOOR_PCT + 1.0
+    for broken in ({"evidence": {"delta_bic": V.MAX_DELTA_BIC + 0.1}},
+                   {"params": {"tilt_gain": {"value": 0.1, "excludes_null": False}}},
+                   {"baseline_drift_max_relative": V.MAX_DRIFT_RELATIVE + 0.01},
+                   {"reference_drift_sigma": V.MAX_REFERENCE_DRIFT_SIGMA + 0.01}):
+        c = good(heldout_shrink_pct=mid, **broken)
+        ok, why = V.acceptance(c)
+        assert not ok and len(why) == 2
+        assert not V.null_decides(dict(c, accepted=ok, rejected_because=why)), broken
+    # a candidate the screen kept from being refitted has no evidence of its own
+    assert not V.null_decides(good(heldout_shrink_pct=mid, screened_out=True, rejected_because=["screen"]))
+    assert not V.null_decides(dict(good(), accepted=True))
+
+
+def test_the_refit_gate_is_the_chi2_test_alone():
+    """A residual 1.48 × the noise in the χ² over 340 effective dof (p ~ 1e-11) is an excess: no fixed bar on the
+    reduced χ² refuses it; the same reduced χ² over 8 rows (p ~ 0.16) is not, except under the damping family's
+    gate. The p the gate uses is scipy's χ² survival function."""
+    from scipy.stats import chi2
+
+    z = np.full(340, math.sqrt(1.48))
+    out = V.residual_test(z, np.zeros(340))
+    assert out["p"] == pytest.approx(chi2.sf(1.48 * 340, 340), rel=1e-9)
+    assert out["excess"] and not out["structured"]
+    few = V.residual_test(np.full(8, math.sqrt(1.48)), np.zeros(8))
+    assert few["p"] == pytest.approx(chi2.sf(1.48 * 8, 8), rel=1e-9) and not few["excess"]
+    assert V.residual_test(np.full(8, math.sqrt(1.48)), np.zeros(8), p_try=V.P_TRY_DAMPING)["excess"]
+    # below its median the χ² never opens the damping gate
+    assert not V.residual_test(np.full(8, 0.8), np.zeros(8), p_try=V.P_TRY_DAMPING)["excess"]
+
+
+@pytest.mark.parametrize("p_try, groups", [(V.P_NOISE, 2), (V.P_TRY_DAMPING, 1)])
+def test_the_refit_gate_opens_on_pure_noise_at_its_nominal_rate(p_try, groups):
+    """20 000 white-noise residuals (40 rows per group): the gate opens on a share p_try (Bonferroni over the
+    groups: at most p_try, about p_try for one group), inside its binomial 99.9 % band."""
+    from scipy.stats import binom
+
+    rng = np.random.default_rng(21)
+    n, rows = 20000, 40
+    lab = np.repeat(np.arange(groups), rows)
+    z = rng.standard_normal((n, rows * groups))
+    # the test in closed form per draw (residual_test's loop is the reference on the first 200)
+    chi = (z**2).reshape(n, groups, rows).sum(axis=2)
+    from scipy.stats import chi2
+
+    opened = (chi2.sf(chi, rows) < p_try / groups).any(axis=1)
+    assert [V.residual_test(z[i], lab, p_try=p_try)["excess"] for i in range(200)] == opened[:200].tolist()
+    lo, hi = binom.ppf([0.0005, 0.9995], n, p_try)
+    assert opened.sum() <= hi
+    if groups == 1:
+        assert opened.sum() >= lo

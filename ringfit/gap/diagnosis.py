@@ -39,7 +39,7 @@ from ringfit.gap.ranking import (COMPUTED, JOIN, baseline_movement, chain_start,
                                  heldout, parts, prior_distance, reference_drift, rms, shrink, shrink_interval,
                                  theta_names)
 from ringfit.gap.screening import SCREEN_MIN_SCORE, nonlinear_screen, objective, screen
-from ringfit.gap.verdict import (LOWER_BOUND_REASON, P_NOISE, P_TRY_DAMPING, PREFER_COMPUTED_PTS, RULES, acceptance,
+from ringfit.gap.verdict import (P_NOISE, P_TRY_DAMPING, PREFER_COMPUTED_PTS, RULES, acceptance, null_decides,
                                  residual_test)
 
 
@@ -403,7 +403,7 @@ def _calibrate(problem, part, chain, current, remaining, entries, alpha, draws, 
             nulls.append(rl)
     timing = {"wall_s": round(time.perf_counter() - t0, 3), "cpu_s": round(time.process_time() - c0, 3)}
     for c in entries:
-        pending = _only_interval(c)
+        pending = null_decides(c)
         if not (c["accepted"] or pending) or c["element"] not in elements:
             continue
         el = c["element"]
@@ -421,19 +421,11 @@ def _calibrate(problem, part, chain, current, remaining, entries, alpha, draws, 
             c["accepted"] = False
             c.setdefault("rejected_because", []).append(
                 f"does not beat chance: p = {worst.p[el]:.3g} >= alpha {alpha:g} ({worst.kind.split(':')[0]} null)")
-        elif pending:  # the calibrated null decides where the bootstrap interval's heuristic bound alone refused
+        elif pending:  # the calibrated null decides where only the heuristic bars of condition 1 refused
             c["accepted"] = True
-            c["interval_overruled"] = c.pop("rejected_because")
-            c["null_sentence"] += " — the null test decides instead of the bootstrap interval's lower bound"
-
-
-def _only_interval(c: dict) -> bool:
-    """A candidate the rule refused only for the lower end of its bootstrap interval of the held-out shrink: few
-    rows carry the effect (e.g. the n ≤ 1 rows of a wheel on its suspension), so the interval is wide; its null
-    (which knows how many rows there are) decides instead."""
-    why = c.get("rejected_because") or []
-    return (not c.get("accepted") and not c.get("screened_out") and bool(why)
-            and all(w.startswith(LOWER_BOUND_REASON) for w in why))
+            c["null_overruled"] = c.pop("rejected_because")
+            c["null_sentence"] += (" — the null test decides instead of the fixed shrink bar or its bootstrap bound "
+                                   "(verdict.null_decides)")
 
 
 def _computed_first(problem, part, chain, accepted, entries, alpha) -> str:
@@ -533,7 +525,7 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
         rounds.append(entries)
         if not cur["excess"]:
             break
-        if any(c["accepted"] or _only_interval(c) for c in entries) and null_draws > 0:
+        if any(c["accepted"] or null_decides(c) for c in entries) and null_draws > 0:
             _calibrate(problem, part, chain, current, remaining, entries, alpha, null_draws, len(rounds))
         accepted = [c for c in entries if c["accepted"]]
         if not accepted:
