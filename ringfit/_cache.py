@@ -166,6 +166,12 @@ def _signature(args) -> tuple:
     return tree, tuple((np.shape(x), np.result_type(x).str, type(x) in (int, float, complex)) for x in leaves)
 
 
+def _kept_folder() -> str | None:
+    """The compilation cache's folder where it is on (exported programs are kept inside it), else ``None``."""
+    jax = sys.modules.get("jax")
+    return (jax.config.jax_compilation_cache_dir or None) if jax is not None else None
+
+
 class ExportedJit:
     """A jitted function whose programs are kept as exported StableHLO beside the compilation cache.
 
@@ -198,9 +204,7 @@ class ExportedJit:
         return getattr(self.jitted, name)
 
     def __call__(self, *args, **static):
-        import jax
-
-        folder = jax.config.jax_compilation_cache_dir
+        folder = _kept_folder()
         if not folder:
             return self.jitted(*args, **static)
         key = (tuple(sorted(static.items())), _signature(args), folder)
