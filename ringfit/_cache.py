@@ -9,7 +9,6 @@ environment also carries them to processes the command starts (batch workers).
 from __future__ import annotations
 
 import functools
-import hashlib
 import logging
 import os
 import sys
@@ -91,7 +90,7 @@ def _describe(obj, depth: int = 0) -> str:
     attributes. Anything else raises :class:`_Unstable`, and the caller traces as usual.
     """
     import dataclasses
-    import functools
+    import hashlib
     import types
 
     import numpy as np
@@ -138,6 +137,7 @@ def _describe(obj, depth: int = 0) -> str:
 def _environment() -> str:
     """What else decides a program: the versions of JAX and the libraries traced into it, ringfit's own source
     (a hash of every ``.py`` file of the package: a changed line is a new program), the backend."""
+    import hashlib
     import importlib.metadata as md
 
     import jax
@@ -214,6 +214,8 @@ class ExportedJit:
         return program(*args)
 
     def _program(self, folder: Path, args, static):
+        import hashlib
+
         import jax
         from jax import export
 
