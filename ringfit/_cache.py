@@ -244,7 +244,12 @@ class ExportedJit:
                            type(exc).__name__, exc)
                 exported = None
         if exported is None:
-            exported = export.export(jax.jit(functools.partial(self.fn, **static)))(*args)
+            try:
+                exported = export.export(jax.jit(functools.partial(self.fn, **static)))(*args)
+            except Exception as exc:  # noqa: BLE001 — e.g. a custom call jax.export does not keep: trace as usual
+                _log.debug("%s: no exported program (%s: %s)", self.fn.__qualname__, type(exc).__name__, exc)
+                self.sources.append("jit")
+                return functools.partial(self.jitted, **static)
             self.sources.append("exported")
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
