@@ -230,3 +230,19 @@ def test_a_warm_diagnose_loads_every_solve_and_writes_the_same_answer(tmp_path):
     assert json.dumps(strip(outs[0]), sort_keys=True) == json.dumps(strip(outs[1]), sort_keys=True)
     # the warm run loaded them: no entry was written again
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
+
+
+def _with_callback(x, *, scale):
+    host = jax.pure_callback(lambda v: np.asarray(v) * 2.0, jax.ShapeDtypeStruct(x.shape, x.dtype), x)
+    return host * scale
+
+
+def test_a_program_that_cannot_be_exported_is_traced_as_usual(toy, caplog):
+    _, folder = toy
+    program = ExportedJit(_with_callback, jax.jit(_with_callback, static_argnames="scale"))
+    x = np.linspace(0.0, 1.0, 4)
+    with caplog.at_level(logging.DEBUG, logger="ringfit.cache"):
+        out = program(x, scale=3.0)
+    np.testing.assert_allclose(out, 6.0 * x, rtol=1e-15)
+    assert program.sources == ["jit"] and not list(folder.glob("*.bin"))
+    assert any("no exported program" in r.getMessage() for r in caplog.records)
