@@ -258,4 +258,10 @@ class ExportedJit:
                 os.replace(tmp, path)
             except Exception as exc:  # noqa: BLE001 — a read-only cache, no flatbuffers: run without keeping it
                 _log.debug("%s: could not keep the exported program %s (%s)", self.fn.__qualname__, path, exc)
-        return jax.jit(exported.call, compiler_options=self.compiler_options or None)
+
+        def run(*call_args):
+            return exported.call(*call_args)
+
+        # named as the function, so its XLA program (logs, cache entries) is named as the jit's
+        run.__name__ = run.__qualname__ = self.fn.__name__
+        return jax.jit(run, compiler_options=self.compiler_options or None)
