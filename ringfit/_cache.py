@@ -8,6 +8,8 @@ environment also carries them to processes the command starts (batch workers).
 
 from __future__ import annotations
 
+import functools
+import logging
 import os
 import sys
 from pathlib import Path
@@ -65,3 +67,201 @@ def enable_compilation_cache(directory: str | os.PathLike | None = None) -> Path
         for key, value in settings.items():
             os.environ[key.upper()] = str(value)
     return path
+
+
+# --------------------------------------------------------------------------- exported programs
+#: Folder, inside the compilation cache's, of exported programs (``jax.export``, serialised StableHLO).
+EXPORT_FOLDER = "exported"
+
+_log = logging.getLogger("ringfit.cache")
+
+
+class _Unstable(Exception):
+    """A static argument with no description that is the same in every process (no exported program)."""
+
+
+def _describe(obj, depth: int = 0) -> str:
+    """A description of a static argument that is the same in every process, or :class:`_Unstable`.
+
+    Plain values by ``repr``; tuples, lists, dicts and dataclasses (``eqx.Module`` included) field by
+    field; NumPy arrays by dtype, shape and a hash of their bytes; functions and classes by module and
+    qualified name (a closure or lambda is refused: what it captured is not described); tree structures
+    by their text (refused where it shows an object's address); other objects by their class and
+    attributes. Anything else raises :class:`_Unstable`, and the caller traces as usual.
+    """
+    import dataclasses
+    import hashlib
+    import types
+
+    import numpy as np
+
+    if depth > 40:
+        raise _Unstable("nested too deep")
+    if obj is None or isinstance(obj, (bool, int, float, complex, str, bytes)):
+        return repr(obj)
+    if isinstance(obj, (tuple, list)):
+        return f"{type(obj).__name__}(" + ",".join(_describe(x, depth + 1) for x in obj) + ")"
+    if isinstance(obj, dict):
+        return "dict(" + ",".join(f"{_describe(k, depth + 1)}:{_describe(v, depth + 1)}"
+                                  for k, v in sorted(obj.items(), key=lambda kv: repr(kv[0]))) + ")"
+    if isinstance(obj, (np.ndarray, np.generic)):
+        a = np.ascontiguousarray(obj)
+        return f"array({a.dtype.str},{a.shape},{hashlib.sha256(a.tobytes()).hexdigest()[:24]})"
+    if isinstance(obj, functools.partial):
+        return (f"partial({_describe(obj.func, depth + 1)},{_describe(obj.args, depth + 1)},"
+                f"{_describe(obj.keywords, depth + 1)})")
+    if isinstance(obj, (types.FunctionType, type)):
+        name = f"{obj.__module__}.{obj.__qualname__}"
+        if "<lambda>" in name or "<locals>" in name:
+            raise _Unstable(f"local function {name}")
+        return name
+    if type(obj).__name__ == "PyTreeDef":
+        text = str(obj)
+        if " at 0x" in text:
+            raise _Unstable("a tree structure that shows an object's address")
+        return text
+    cls = type(obj)
+    name = f"{cls.__module__}.{cls.__qualname__}"
+    if "<locals>" in name:
+        raise _Unstable(f"local class {name}")
+    if dataclasses.is_dataclass(obj):
+        fields = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
+    elif hasattr(obj, "__dict__"):  # class attributes are source, which the key holds (:func:`_environment`)
+        fields = dict(vars(obj))
+    else:
+        raise _Unstable(f"{name} has no stable description")
+    return f"{name}(" + ",".join(f"{k}={_describe(v, depth + 1)}" for k, v in sorted(fields.items())) + ")"
+
+
+@functools.cache
+def _environment() -> str:
+    """What else decides a program: the versions of JAX and the libraries traced into it, ringfit's own source
+    (a hash of every ``.py`` file of the package: a changed line is a new program), the backend."""
+    import hashlib
+    import importlib.metadata as md
+
+    import jax
+
+    versions = []
+    for dist in ("jax", "jaxlib", "equinox", "optimistix", "lineax"):
+        try:
+            versions.append(f"{dist}={md.version(dist)}")
+        except md.PackageNotFoundError:
+            versions.append(f"{dist}=none")
+    h = hashlib.sha256()
+    package = Path(__file__).resolve().parent
+    for path in sorted(package.rglob("*.py")):
+        h.update(str(path.relative_to(package)).encode())
+        h.update(path.read_bytes())
+    flags = (jax.config.jax_enable_x64, jax.config.jax_default_matmul_precision, jax.default_backend())
+    return ";".join(versions) + f";ringfit-source={h.hexdigest()};flags={flags}"
+
+
+def _signature(args) -> tuple:
+    """Shapes, dtypes and the tree structure of a call's arguments (what an exported program is specialised to)."""
+    import jax
+    import numpy as np
+
+    leaves, tree = jax.tree.flatten(args)
+    return tree, tuple((np.shape(x), np.result_type(x).str, type(x) in (int, float, complex)) for x in leaves)
+
+
+def _kept_folder() -> str | None:
+    """The compilation cache's folder where it is on (exported programs are kept inside it), else ``None``."""
+    jax = sys.modules.get("jax")
+    return (jax.config.jax_compilation_cache_dir or None) if jax is not None else None
+
+
+class ExportedJit:
+    """A jitted function whose programs are kept as exported StableHLO beside the compilation cache.
+
+    Called as the jitted function (``fn(*args, **static)``, ``static`` its static keyword arguments).
+    Where JAX's persistent compilation cache is on (:func:`enable_compilation_cache`) and the static
+    arguments have a description that is the same in every process (:func:`_describe`), the first call
+    of each argument signature looks for the program in ``<cache>/exported/``: found, it is deserialised
+    (``jax.export``) and run — no tracing or lowering, and XLA's executable comes from the compilation
+    cache; not found, the function is exported (traced and lowered once, as the jit would), saved
+    (atomically) and run the same way. The file's name is a hash of the function, its static arguments,
+    the arguments' shapes and dtypes, the versions of JAX and the libraries, and ringfit's own source:
+    any change makes a new program, never a stale one. An entry that cannot be read, does not
+    deserialise or does not fit the arguments is ignored (a debug log line on ``ringfit.cache``) and
+    written again. Without the cache, or where a static argument has no stable description, it is
+    the plain jitted function.
+
+    - ``fn``: the function (traced with ``static`` bound); ``jitted``: ``jax.jit`` of it with the same
+      static argument names and compiler options, used when no exported program applies;
+      ``compiler_options``: XLA options the exported program is compiled with (as the jit's).
+    """
+
+    def __init__(self, fn, jitted, compiler_options=None):
+        self.fn, self.jitted = fn, jitted
+        self.compiler_options = dict(compiler_options or {})
+        self._programs: dict = {}
+        #: how each program of this process was obtained: "loaded", "exported" or "jit" (tests, benchmarks)
+        self.sources: list[str] = []
+
+    def __getattr__(self, name):  # lower, _cache_size, … of the jitted function
+        return getattr(self.jitted, name)
+
+    def __call__(self, *args, **static):
+        folder = _kept_folder()
+        if not folder:
+            return self.jitted(*args, **static)
+        key = (tuple(sorted(static.items())), _signature(args), folder)
+        program = self._programs.get(key)
+        if program is None:
+            program = self._programs[key] = self._program(Path(folder), args, static)
+        return program(*args)
+
+    def _program(self, folder: Path, args, static):
+        import hashlib
+
+        import jax
+        from jax import export
+
+        try:
+            static_text = _describe(static)
+        except _Unstable as why:
+            _log.debug("%s: no exported program (%s)", self.fn.__qualname__, why)
+            self.sources.append("jit")
+            return functools.partial(self.jitted, **static)
+        tree, avals = _signature(args)
+        text = "\n".join([f"{self.fn.__module__}.{self.fn.__qualname__}", static_text, str(tree), repr(avals),
+                          repr(sorted(self.compiler_options.items())), _environment()])
+        path = folder / EXPORT_FOLDER / f"{self.fn.__name__}-{hashlib.sha256(text.encode()).hexdigest()[:40]}.bin"
+        exported = None
+        if path.exists():
+            try:
+                exported = export.deserialize(bytearray(path.read_bytes()))
+                flat = jax.tree.leaves(args)
+                if len(exported.in_avals) != len(flat) or any(
+                        tuple(a.shape) != tuple(shape) or a.dtype.str != dtype
+                        for a, (shape, dtype, _) in zip(exported.in_avals, avals)):
+                    raise ValueError("its arguments are not this call's")
+                self.sources.append("loaded")
+            except Exception as exc:  # noqa: BLE001 — any unreadable entry is ignored, never trusted
+                _log.debug("%s: ignoring the exported program %s (%s: %s)", self.fn.__qualname__, path,
+                           type(exc).__name__, exc)
+                exported = None
+        if exported is None:
+            try:
+                exported = export.export(jax.jit(functools.partial(self.fn, **static)))(*args)
+            except Exception as exc:  # noqa: BLE001 — e.g. a custom call jax.export does not keep: trace as usual
+                _log.debug("%s: no exported program (%s: %s)", self.fn.__qualname__, type(exc).__name__, exc)
+                self.sources.append("jit")
+                return functools.partial(self.jitted, **static)
+            self.sources.append("exported")
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+                tmp.write_bytes(exported.serialize())
+                os.replace(tmp, path)
+            except Exception as exc:  # noqa: BLE001 — a read-only cache, no flatbuffers: run without keeping it
+                _log.debug("%s: could not keep the exported program %s (%s)", self.fn.__qualname__, path, exc)
+
+        def run(*call_args):
+            return exported.call(*call_args)
+
+        # named as the function, so its XLA program (logs, cache entries) is named as the jit's
+        run.__name__ = run.__qualname__ = self.fn.__name__
+        return jax.jit(run, compiler_options=self.compiler_options or None)

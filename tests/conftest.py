@@ -25,3 +25,14 @@ import ringfit  # noqa: E402,F401  (enables jax_enable_x64)
 
 jax.config.update("jax_numpy_dtype_promotion", "standard")
 assert jax.config.jax_enable_x64, "importing ringfit must enable float64"
+
+
+@pytest.fixture(autouse=True)
+def _no_kept_programs(monkeypatch):
+    """In-process tests run the jitted programs themselves, not exported ones kept beside the compilation cache
+    (a test that calls ``ringfit.cli.main`` turns the cache on for its whole worker; the compile counts and
+    retrace checks of later tests are about the jits). tests/test_exported_programs.py turns them on where it
+    tests them; commands run as subprocesses keep them as users do."""
+    from ringfit import _cache
+
+    monkeypatch.setattr(_cache, "_kept_folder", lambda: None)

@@ -53,7 +53,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from ringfit._cache import QUICK_COMPILE
+from ringfit._cache import QUICK_COMPILE, ExportedJit
 from ringfit.errors import InputError
 from ringfit.fit.result import (BatchFitResult, FitResult, covariance_batch, covariance_from_jacobian, parameter_flags,
                                 solver_flags, solver_status)
@@ -384,9 +384,16 @@ _solve = functools.partial(jax.jit, static_argnames=_STATIC)(_solve_one)
 _solve_quick = functools.partial(jax.jit, static_argnames=_STATIC, compiler_options=QUICK_COMPILE)(_solve_one)
 
 
+#: The two solves as exported programs kept beside the compilation cache (:class:`ringfit._cache.ExportedJit`):
+#: a warm process deserialises them instead of tracing; without the cache, the jitted solves themselves.
+_solve_kept = ExportedJit(_solve_one, _solve)
+_solve_quick_kept = ExportedJit(_solve_one, _solve_quick, QUICK_COMPILE)
+
+
 def _solve_program(model):
-    """The jitted solve of ``model``: :data:`_solve_quick` where it asks for a quick compile, else :data:`_solve`."""
-    return _solve_quick if getattr(model, "compile_quick", False) else _solve
+    """The jitted solve of ``model``: :data:`_solve_quick` where it asks for a quick compile, else :data:`_solve`
+    (each kept as an exported program where the compilation cache is on)."""
+    return _solve_quick_kept if getattr(model, "compile_quick", False) else _solve_kept
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)

@@ -933,7 +933,6 @@ def line_problem(problem: GapProblem):
     """
     if "line_problem" in problem.meta:
         return problem.meta["line_problem"]
-    from scipy.optimize import linear_sum_assignment
 
     L = problem.meta.get("lines")
     rows = L.rows if L is not None else []
