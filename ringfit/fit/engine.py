@@ -431,8 +431,8 @@ def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, 
     # residuals, Jacobian and aux at the returned point from the solver's last accepted
     # linearisation: no further trace of the model
     info = sol.state.f_info
-    aux, jac_z = sol.state.aux
-    jac_u = jac_z / free.du_dz(z)[None, :]
+    aux = sol.state.aux[0]
+    jac_u = info.jac.as_matrix() * d[None, :] / free.du_dz(z)[None, :]
     return free.u_of(z), sol.result._value, sol.stats["num_steps"], info.residual, jac_u, aux
 
 
