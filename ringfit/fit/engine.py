@@ -236,7 +236,11 @@ class _Free(eqx.Module):
 def _weighted(z, model, data, theta0, free, prior_w, prior_mean):
     """Residual rows (data, then prior) and the model's aux at solver point z; theta0 has p + 1 entries."""
     u = free.u_of(z)
-    theta = theta0.at[free.index].set(free.theta_of(u))[:-1]
+    # θ: the free slots' values where a slot points at the parameter, else theta0 (the padding slots point
+    # past the last parameter): a gather, whose tangents are gathers too (a scatter here, batched over the
+    # Jacobian's k tangents, made the compiled solve larger)
+    hit = free.index[None, :] == jnp.arange(theta0.shape[0] - 1)[:, None]  # (p, K)
+    theta = jnp.where(hit.any(axis=1), free.theta_of(u)[jnp.argmax(hit, axis=1)], theta0[:-1])
     res, aux = model(theta, data)
     return jnp.concatenate([res, prior_w @ (u - prior_mean)]), aux
 
