@@ -570,8 +570,9 @@ def least_squares(
     args = (leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean)
     tol = (np.float64(rtol), np.float64(atol))
     out = _solve_program(model)(*args, np.int64(max_steps), *tol, model=model, treedef=treedef, method=method)
-    u_free, result, steps, res, jac, aux = out
-    u_free, res, jac = np.asarray(u_free)[: len(free)], np.asarray(res), np.asarray(jac)[:, : len(free)]
+    u_free, result, steps, res, jac = jax.device_get(out[:5])  # one transfer; the model's aux stays as it is
+    aux = out[5]
+    u_free, jac = u_free[: len(free)], jac[:, : len(free)]
     m = res.size - K
     res, jac = np.concatenate([res[:m], res[m:][: len(free)]]), np.concatenate([jac[:m], jac[m:][: len(free)]])
     status, message = solver_status(result)
