@@ -236,45 +236,32 @@ class _Free(eqx.Module):
 def _weighted(z, model, data, theta0, free, prior_w, prior_mean):
     """Residual rows (data, then prior) and the model's aux at solver point z; theta0 has p + 1 entries."""
     u = free.u_of(z)
-    theta = theta0.at[free.index].set(free.theta_of(u))[:-1]
+    # θ: the free slots' values where a slot points at the parameter, else theta0 (the padding slots point
+    # past the last parameter): a gather, whose tangents are gathers too (a scatter here, batched over the
+    # Jacobian's k tangents, made the compiled solve larger)
+    hit = free.index[None, :] == jnp.arange(theta0.shape[0] - 1)[:, None]  # (p, K)
+    theta = jnp.where(hit.any(axis=1), free.theta_of(u)[jnp.argmax(hit, axis=1)], theta0[:-1])
     res, aux = model(theta, data)
     return jnp.concatenate([res, prior_w @ (u - prior_mean)]), aux
 
 
-def _dense(model, data, theta0, free, prior_w, prior_mean):
-    """``(fn, linearise)``: ``fn(z) -> (residuals, aux)`` whose JVP is a dense product with the Jacobian of one
-    forward-mode pass, and ``linearise(z) -> (jacobian, (residuals, aux))``, that pass.
+def _linearisation(model, data, theta0, free, prior_w, prior_mean):
+    """``linearise(z) -> (residuals, (aux, jacobian))``: the weighted rows, the model's aux and the rows' dense
+    Jacobian in z from one forward-mode pass (primal, aux and k tangents; ``aux`` carries no tangent).
 
-    The model is traced once per solve: ``linearise`` is one inner ``jax.jit`` (primal, aux and k
-    tangents) that the primal of ``fn``, its JVP rule and the start's column norms all call (the
-    second and third calls, with the same shapes, reuse the first trace); the solver's further
-    Jacobian products are small matrix products. ``aux`` carries no tangent. The primal calls the
-    linearisation too: optimistix traces it for shapes only, since every solver step linearises.
+    This is the one place a solve evaluates the model: the solver's step calls it once per step
+    (:class:`_DenseSteps`), so the compiled solve holds one copy of the model.
     """
 
-    def both(z, data, theta0, free, prior_w, prior_mean):
+    def both(z):
         r, aux = _weighted(z, model, data, theta0, free, prior_w, prior_mean)
         return r, (r, aux)
 
-    lin = jax.jit(jax.jacfwd(both, has_aux=True))
-
     def linearise(z):
-        # one tracing context for every call (optimistix's own jit regions set the, empty, abstract mesh;
-        # the solve's outer region has none), so the second and third calls reuse the first trace
-        with jax.sharding.use_abstract_mesh(jax.sharding.get_abstract_mesh()):
-            return lin(z, data, theta0, free, prior_w, prior_mean)
+        jac, (res, aux) = jax.jacfwd(both, has_aux=True)(z)
+        return res, (aux, jac)
 
-    @jax.custom_jvp
-    def fn(z):
-        return linearise(z)[1]
-
-    @fn.defjvp
-    def fn_jvp(primals, tangents):
-        (z,), (dz,) = primals, tangents
-        jac, (res, aux) = linearise(z)
-        return (res, aux), (jac @ dz, jax.tree.map(jnp.zeros_like, aux))
-
-    return fn, linearise
+    return linearise
 
 
 #: Consecutive rejected steps after which a solve that has accepted at least two steps is at a minimum
@@ -282,25 +269,127 @@ def _dense(model, data, theta0, free, prior_w, prior_mean):
 STALL_STEPS = 4
 
 
-#: Diagonal of JᵀJ at the start in the solver's scaled variables (see :func:`_solve_one`).
+#: Diagonal of JᵀJ at the start in the solver's scaled variables (see :class:`_DenseSteps`).
 JTJ_DIAGONAL = 1e3
 #: Static cap on solver steps; the step limit of a call is traced (``least_squares(max_steps=…)``),
 #: so every limit shares one compiled solve.
 STEP_CAP = 100_000
 
 
-def _limited_terminate(done, result, state, args):
-    """Stop at the traced step limit ``args`` and, after two accepted steps, after STALL_STEPS rejections."""
+def _limited_terminate(done, result, state, max_steps):
+    """Stop at the traced step limit ``max_steps`` and, after two accepted steps, after STALL_STEPS rejections."""
     stalled = (state.num_accepted_steps >= 2) & (state.num_steps_since_acceptance >= STALL_STEPS)
-    limit = (state.num_steps >= jnp.maximum(args, 1)) & ~(done | stalled)
-    result = optx.RESULTS.where(limit & (args > 0), optx.RESULTS.nonlinear_max_steps_reached, result)
+    limit = (state.num_steps >= jnp.maximum(max_steps, 1)) & ~(done | stalled)
+    result = optx.RESULTS.where(limit & (max_steps > 0), optx.RESULTS.nonlinear_max_steps_reached, result)
     return done | stalled | limit, result
 
 
-class _LevenbergMarquardt(optx.LevenbergMarquardt):
-    """optimistix Levenberg–Marquardt with a traced step limit and a stop when it stalls at a minimum.
+class _DenseState(eqx.Module):
+    """optimistix's Gauss–Newton state (same fields, same meaning) plus the variable scaling ``scale`` (d)."""
 
-    - The step limit is ``args`` (a traced integer): reaching it without convergence
+    first_step: jax.Array
+    y_eval: jax.Array
+    search_state: object
+    f_info: optx.FunctionInfo.ResidualJac
+    aux: object
+    descent_state: object
+    terminate: jax.Array
+    result: optx.RESULTS
+    num_steps: jax.Array
+    num_accepted_steps: jax.Array
+    num_steps_since_acceptance: jax.Array
+    scale: jax.Array
+
+
+def _cauchy_termination(rtol, atol, norm, y, y_diff, f, f_diff):
+    """optimistix's Cauchy test: small differences in both y and f (relative ``rtol``, absolute ``atol``)."""
+    y_converged = norm(jnp.abs(y_diff) / (atol + rtol * jnp.abs(y))) < 1
+    f_converged = norm(jnp.abs(f_diff) / (atol + rtol * jnp.abs(f))) < 1
+    return y_converged & f_converged
+
+
+class _DenseSteps:
+    """The step of optimistix's Gauss–Newton family on a dense Jacobian, with Marquardt's scaling set in step one.
+
+    ``fn(s, (max_steps, d)) -> (residuals, (aux, J_z))`` evaluates the model at ``z = s / d`` and returns its
+    Jacobian in z (:func:`_linearisation`); the step builds the Jacobian in s, ``J_z / d``, as a matrix
+    operator, so every further product in the step (trust region, damped solve) is a small matrix product.
+    Otherwise the step is optimistix's ``AbstractGaussNewton.step`` (search, descent, Cauchy termination).
+
+    **Scaling** (``scaled``, Levenberg–Marquardt): the solver works on ``s = d·z`` with ``d`` ∝ the Jacobian's
+    column norms at the start (Marquardt's scaling, scipy's ``x_scale="jac"``): the damping then acts alike
+    on every direction; the diagonal of JᵀJ in s is :data:`JTJ_DIAGONAL`, so optimistix's initial damping
+    λ = 1 starts near Gauss–Newton (λ/diag = 1e-3). The solve starts at ``s = z0`` with ``d = 1``; the first
+    step's linearisation at z0 gives the norms, and the step then moves its start and that linearisation
+    to s (``s0 = d·z0``, ``J_z / d``) before its search and descent, which therefore see what a solve started
+    at ``d·z0`` with ``d`` known would see. One program, one linearisation per step, one copy of the model.
+    A step limit of 0 (evaluate only) keeps ``d = 1``. Gauss–Newton is invariant to the scaling: ``d = 1``.
+    """
+
+    scaled: ClassVar[bool] = False
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        del fn, args, options
+        f_info = optx.FunctionInfo.ResidualJac(jnp.zeros(f_struct.shape, f_struct.dtype),
+                                               lx.MatrixLinearOperator(jnp.zeros(f_struct.shape + y.shape, y.dtype),
+                                                                       tags))
+        return _DenseState(
+            first_step=jnp.array(True), y_eval=y, search_state=self.search.init(y, f_info), f_info=f_info,
+            aux=jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), aux_struct),
+            descent_state=self.descent.init(y, f_info), terminate=jnp.array(False), result=optx.RESULTS.successful,
+            num_steps=jnp.array(0), num_accepted_steps=jnp.array(0), num_steps_since_acceptance=jnp.array(0),
+            scale=jnp.ones_like(y))
+
+    def step(self, fn, y, args, options, state, tags):
+        max_steps = args[0]
+        res, fn_aux = fn(state.y_eval, (max_steps, state.scale))
+        jac_z = fn_aux[1]
+        if self.scaled:
+            norms = jnp.sqrt(jnp.sum(jac_z**2, axis=0))
+            fresh = jnp.where(norms > 0, norms, 1.0) / jnp.sqrt(JTJ_DIAGONAL)
+            scale = jnp.where(state.first_step & (max_steps > 0), fresh, state.scale)
+            # the first step: its start (y = y_eval = z0) moves to s0 = d·z0
+            y_eval = jnp.where(state.first_step, state.y_eval * scale, state.y_eval)
+            y = jnp.where(state.first_step, y * scale, y)
+        else:
+            scale, y_eval = state.scale, state.y_eval
+        f_eval_info = optx.FunctionInfo.ResidualJac(res, lx.MatrixLinearOperator(jac_z * (1.0 / scale)[None, :],
+                                                                                 tags))
+        step_size, accept, search_result, search_state = self.search.step(
+            state.first_step, y, y_eval, state.f_info, f_eval_info, state.search_state)
+        num_steps = state.num_steps + 1
+        num_accepted_steps = state.num_accepted_steps + jnp.where(accept, 1, 0)
+        num_steps_since_acceptance = jnp.where(accept, 0, state.num_steps_since_acceptance + 1)
+
+        def accepted(descent_state):
+            descent_state = self.descent.query(y_eval, f_eval_info, descent_state)
+            terminate = _cauchy_termination(self.rtol, self.atol, self.norm, y_eval, y_eval - y, f_eval_info.residual,
+                                            f_eval_info.residual - state.f_info.residual)
+            return y_eval, f_eval_info, fn_aux, descent_state, terminate
+
+        def rejected(descent_state):
+            return y, state.f_info, state.aux, descent_state, jnp.array(False)
+
+        y, f_info, aux, descent_state, terminate = jax.lax.cond(accept, accepted, rejected, state.descent_state)
+        y_descent, descent_result = self.descent.step(step_size, descent_state)
+        result = optx.RESULTS.where(search_result == optx.RESULTS.successful, descent_result, search_result)
+        prev_aux = jax.tree.map(lambda new, old: jnp.where(state.first_step, new, old), aux, state.aux)
+        state = _DenseState(
+            first_step=jnp.array(False), y_eval=y + y_descent, search_state=search_state, f_info=f_info, aux=aux,
+            descent_state=descent_state, terminate=terminate, result=result, num_steps=num_steps,
+            num_accepted_steps=num_accepted_steps, num_steps_since_acceptance=num_steps_since_acceptance,
+            scale=scale)
+        return y, state, prev_aux
+
+    def terminate(self, fn, y, args, options, state, tags):
+        return _limited_terminate(state.terminate, state.result, state, args[0])
+
+
+class _LevenbergMarquardt(_DenseSteps, optx.LevenbergMarquardt):
+    """optimistix Levenberg–Marquardt on a dense Jacobian (:class:`_DenseSteps`, with Marquardt's scaling),
+    with a traced step limit and a stop when it stalls at a minimum.
+
+    - The step limit is ``args[0]`` (a traced integer): reaching it without convergence
       reports ``nonlinear_max_steps_reached``, as optimistix's own ``max_steps`` does.
       A limit of 0 evaluates the residuals, Jacobian and aux at the start and stops
       (:func:`evaluate`).
@@ -312,17 +401,11 @@ class _LevenbergMarquardt(optx.LevenbergMarquardt):
       the last accepted point (reported as converged).
     """
 
-    def terminate(self, fn, y, args, options, state, tags):
-        done, result = super().terminate(fn, y, args, options, state, tags)
-        return _limited_terminate(done, result, state, args)
+    scaled: ClassVar[bool] = True
 
 
-class _GaussNewton(optx.GaussNewton):
-    """optimistix Gauss–Newton with the same traced step limit (every step is accepted)."""
-
-    def terminate(self, fn, y, args, options, state, tags):
-        done, result = super().terminate(fn, y, args, options, state, tags)
-        return _limited_terminate(done, result, state, args)
+class _GaussNewton(_DenseSteps, optx.GaussNewton):
+    """optimistix Gauss–Newton on a dense Jacobian with the same traced step limit (every step is accepted)."""
 
 
 #: Solvers of :func:`least_squares`: Levenberg–Marquardt (the default; trust region, robust from far
@@ -332,48 +415,29 @@ class _GaussNewton(optx.GaussNewton):
 SOLVERS = {"levenberg_marquardt": _LevenbergMarquardt, "gauss_newton": _GaussNewton}
 
 
-def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, norms=None, *, model,
-               treedef, method="levenberg_marquardt"):
+def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, *, model, treedef,
+               method="levenberg_marquardt"):
     """One fit (traced): ``data`` arrives as flat leaves (fast dispatch); ``max_steps`` and the tolerances are
     traced, so one compiled solve serves every step limit and tolerance, and with ``max_steps = 0`` every
     evaluation (:func:`linearize`, :func:`evaluate`).
 
-    ``norms`` ``(K,)``: the Jacobian's column norms at the start (in z), from which the solver's variable
-    scaling ``s = d·z`` follows (see below), given by the caller: :func:`least_squares` takes them from a
-    ``max_steps = 0`` call of this same program (its last output), so the compiled solve holds one
-    linearisation of the model, in the solver's loop, instead of two; ``None`` computes them here
-    (batched and chained solves). A call with ``max_steps = 0`` works on z itself (``d = 1``).
+    Levenberg–Marquardt works on ``s = d·z``, its scaling ``d`` set inside the first step
+    (:class:`_DenseSteps`); a call with ``max_steps = 0`` works on z itself (``d = 1``).
     """
     data = jax.tree.unflatten(treedef, leaves)
     free = _Free(*free_arrays)
-    fn, linearise = _dense(model, data, theta0, free, prior_w, prior_mean)
-    if norms is not None and method == "levenberg_marquardt":
-        d = jnp.where(max_steps > 0, jnp.where(norms > 0, norms, 1.0) / jnp.sqrt(JTJ_DIAGONAL), 1.0)
-    elif method == "levenberg_marquardt":
-        # the solver works on s = d·z with d ∝ the Jacobian column norms at the start (Marquardt's
-        # scaling, scipy's x_scale="jac"): the damping then acts alike on every direction; the diagonal
-        # of JᵀJ in s is JTJ_DIAGONAL, so optimistix's initial damping λ = 1 starts near Gauss–Newton
-        # (λ/diag = 1e-3) (a one-step evaluation needs no scaling: skip that linearisation).
-        # Gauss–Newton is invariant to the scaling: it works on z.
-        def column_norms(z):
-            return jnp.sqrt(jnp.sum(linearise(z)[0] ** 2, axis=0))
-
-        norms = jax.lax.cond(max_steps > 0, column_norms, jnp.ones_like, z0)
-        d = jnp.where(norms > 0, norms, 1.0) / jnp.sqrt(JTJ_DIAGONAL)
-    else:
-        d = jnp.ones_like(z0)
+    linearise = _linearisation(model, data, theta0, free, prior_w, prior_mean)
     solver = SOLVERS[method](rtol=rtol, atol=atol, linear_solver=lx.SVD())
-    sol = optx.least_squares(lambda s, _: fn(s / d), solver, z0 * d, args=max_steps, has_aux=True,
-                             max_steps=STEP_CAP, throw=False)
+    sol = optx.least_squares(lambda s, a: linearise(s / a[1]), solver, z0, args=(max_steps, jnp.ones_like(z0)),
+                             has_aux=True, max_steps=STEP_CAP, throw=False)
+    d = sol.state.scale
     z = sol.value / d
     # residuals, Jacobian and aux at the returned point from the solver's last accepted
     # linearisation: no further trace of the model
     info = sol.state.f_info
-    res, jac_s, aux = info.residual, info.jac.as_matrix(), sol.state.aux
-    jac_u = jac_s * d[None, :] / free.du_dz(z)[None, :]
-    # the column norms of the Jacobian in z at the returned point (with max_steps = 0: at the start, d = 1)
-    return (free.u_of(z), sol.result._value, sol.stats["num_steps"], res, jac_u, aux,
-            jnp.sqrt(jnp.sum((jac_s * d[None, :]) ** 2, axis=0)))
+    aux = sol.state.aux[0]
+    jac_u = info.jac.as_matrix() * d[None, :] / free.du_dz(z)[None, :]
+    return free.u_of(z), sol.result._value, sol.stats["num_steps"], info.residual, jac_u, aux
 
 
 _STATIC = ("model", "treedef", "method")
@@ -402,7 +466,7 @@ def _solve_batch(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps
     """B fits of one problem structure in one compiled region: data leaves, z0 and theta0 carry a leading axis B."""
     def one(lv, z, th):
         return _solve_one(lv, z, th, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, model=model,
-                          treedef=treedef, method=method)[:6]
+                          treedef=treedef, method=method)
 
     return jax.vmap(one)(leaves, z0, theta0)
 
@@ -418,7 +482,7 @@ def _solve_chain(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps
     def step(z_start, xs):
         lv, th = xs
         out = _solve_one(lv, z_start, th, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, model=model,
-                         treedef=treedef, method=method)[:6]
+                         treedef=treedef, method=method)
         z_end = jnp.where(free_arrays[4], jnp.arcsin(jnp.clip((out[0] - free_arrays[5]) / free_arrays[6], -1, 1)),
                           out[0])
         good = (out[1] == 0) & jnp.all(jnp.isfinite(z_end))
@@ -512,15 +576,10 @@ def least_squares(
         raise InputError(f"max_steps = {max_steps}: expected 1 … {STEP_CAP} (0: evaluate only)")
     args = (leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean)
     tol = (np.float64(rtol), np.float64(atol))
-    norms = np.ones(K)
-    solve = _solve_program(model)
-    if method == "levenberg_marquardt" and int(max_steps) > 0:
-        # Marquardt's scaling from the Jacobian at the start: the same compiled solve, evaluating only
-        # (as a NumPy array, as the first call's: one entry of the jit's dispatch cache)
-        norms = np.asarray(solve(*args, np.int64(0), *tol, norms, model=model, treedef=treedef, method=method)[6])
-    out = solve(*args, np.int64(max_steps), *tol, norms, model=model, treedef=treedef, method=method)
-    u_free, result, steps, res, jac, aux, _ = out
-    u_free, res, jac = np.asarray(u_free)[: len(free)], np.asarray(res), np.asarray(jac)[:, : len(free)]
+    out = _solve_program(model)(*args, np.int64(max_steps), *tol, model=model, treedef=treedef, method=method)
+    u_free, result, steps, res, jac = jax.device_get(out[:5])  # one transfer; the model's aux stays as it is
+    aux = out[5]
+    u_free, jac = u_free[: len(free)], jac[:, : len(free)]
     m = res.size - K
     res, jac = np.concatenate([res[:m], res[m:][: len(free)]]), np.concatenate([jac[:m], jac[m:][: len(free)]])
     status, message = solver_status(result)
@@ -760,10 +819,9 @@ def _linearize_all(problem: Problem, theta, free, pad_to):
     # the solve's own compiled program, evaluating only (no step): with the free set unbounded, z = u
     # (no sine transform), so its Jacobian is in u; no second program holding the model
     solve = _solve_program(problem.model)
-    _, _, _, res, jac, aux, _ = solve(leaves, u, np.append(theta, 0.0), fs.unbounded_arrays(), fs.prior_w,
-                                      fs.prior_mean, np.int64(0), np.float64(1e-10), np.float64(1e-10),
-                                      np.ones(fs.size), model=problem.model, treedef=treedef,
-                                      method="levenberg_marquardt")
+    _, _, _, res, jac, aux = solve(leaves, u, np.append(theta, 0.0), fs.unbounded_arrays(), fs.prior_w,
+                                   fs.prior_mean, np.int64(0), np.float64(1e-10), np.float64(1e-10),
+                                   model=problem.model, treedef=treedef, method="levenberg_marquardt")
     return fs, u, np.asarray(res), np.asarray(jac), aux
 
 

@@ -217,10 +217,14 @@ def fit_natural_frequencies(
                              np.concatenate([data.sigma_hz, np.full(pad, np.inf)]))
     problem = Problem(NaturalFrequencyResiduals(), arrays, RING_COORDS, prior=log_normal_prior(priors),
                       plausible=BOUNDS, data_label="these modes")
+    # free sets of up to the four eq. 18 parameters padded to four: the profile likelihood's refits (three
+    # free) share the four-parameter fit's compiled solve
+    pad_to = max(len(free), len(DEFAULT_FREE))
     if at_initial:
-        result = evaluate(problem, base, free, n_data=m)
+        result = evaluate(problem, base, free, n_data=m, pad_to=pad_to)
     else:
-        result = least_squares(problem, base, free, max_steps=max_steps, rtol=rtol, atol=atol, n_data=m)
+        result = least_squares(problem, base, free, max_steps=max_steps, rtol=rtol, atol=atol, n_data=m,
+                               pad_to=pad_to)
     model = np.asarray(result.extra.pop("aux"))[:m]
     result.residuals = result.residuals[:m]
     result.jacobian = np.concatenate([result.jacobian[:m], result.jacobian[m + pad:]])

@@ -8,6 +8,8 @@ approximation, in the log-parameter space the solver works in).
 
 from __future__ import annotations
 
+import functools
+
 import math
 from dataclasses import dataclass, field
 
@@ -221,16 +223,21 @@ def solver_status(result) -> tuple[str, str]:
     status is ``"converged"``, ``"max_steps_reached"``, ``"divergence"``,
     ``"nonfinite"`` or ``"failed"``; message is optimistix's explanation.
     """
+    successful, named, messages = _status_codes()
+    code = int(getattr(result, "_value", result))
+    if code == successful:
+        return "converged", "the solver met its tolerances"
+    return named.get(code, "failed"), messages[code]
+
+
+@functools.cache
+def _status_codes() -> tuple[int, dict[int, str], dict]:
+    """optimistix's code of success, the codes of the named failures, and every code's message (read once)."""
     import optimistix as optx
 
-    code = int(getattr(result, "_value", result))
-    if code == int(optx.RESULTS.successful._value):
-        return "converged", "the solver met its tolerances"
-    message = optx.RESULTS._index_to_message[code]
-    for name in ("nonlinear_max_steps_reached", "nonlinear_divergence", "nonfinite"):
-        if code == int(getattr(optx.RESULTS, name)._value):
-            return name.removeprefix("nonlinear_"), message
-    return "failed", message
+    named = {int(getattr(optx.RESULTS, name)._value): name.removeprefix("nonlinear_")
+             for name in ("nonlinear_max_steps_reached", "nonlinear_divergence", "nonfinite")}
+    return int(optx.RESULTS.successful._value), named, optx.RESULTS._index_to_message
 
 
 def solver_flags(status: str, message: str) -> list[str]:
