@@ -27,12 +27,16 @@ jax.config.update("jax_numpy_dtype_promotion", "standard")
 assert jax.config.jax_enable_x64, "importing ringfit must enable float64"
 
 
-@pytest.fixture(autouse=True)
-def _no_kept_programs(monkeypatch):
+@pytest.fixture(autouse=True, scope="session")
+def _no_kept_programs():
     """In-process tests run the jitted programs themselves, not exported ones kept beside the compilation cache
     (a test that calls ``ringfit.cli.main`` turns the cache on for its whole worker; the compile counts and
-    retrace checks of later tests are about the jits). tests/test_exported_programs.py turns them on where it
-    tests them; commands run as subprocesses keep them as users do."""
+    retrace checks of later tests are about the jits). Session-scoped, so that module fixtures — set up before
+    any function fixture — see it too (a module's fit made by a kept program and its refit by the jit would
+    count a trace). tests/test_exported_programs.py turns them on where it tests them; commands run as
+    subprocesses keep them as users do."""
     from ringfit import _cache
 
-    monkeypatch.setattr(_cache, "_kept_folder", lambda: None)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(_cache, "_kept_folder", lambda: None)
+        yield
