@@ -63,7 +63,7 @@ def run_demo(out: str | Path = "ringfit-demo", *, overwrite: bool = False, seed:
     from ringfit.io.files import check_output_path
     from ringfit.io.modes import read_mode_table
     from ringfit.io.tyre import read_tyre, write_tyre
-    from ringfit.physics.natural import natural_frequencies
+    from ringfit.physics.natural import natural_frequencies_jit as natural_frequencies
     from ringfit.report.html import write_report
 
     out = Path(out)

@@ -564,7 +564,7 @@ def natural_frequency_predictive(post: Posterior, n, level: float = 0.95, noise:
     i.e. where a new measurement should fall; without it the band is the model's credible band.
     """
     from ringfit.params import TyreGeometry
-    from ringfit.physics.natural import natural_frequencies
+    from ringfit.physics.natural import natural_frequencies_jit as natural_frequencies
 
     g = post.meta["geometry"]
     geometry = TyreGeometry(g["radius"], g["width"], g["pressure"])

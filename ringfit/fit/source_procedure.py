@@ -15,7 +15,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.modes import ModeTable
 from ringfit.params import RingParams, TyreGeometry
-from ringfit.physics.natural import modal_stiffness, natural_frequencies
+from ringfit.physics.natural import modal_stiffness_jit, natural_frequencies_jit
 
 
 @dataclass
@@ -54,10 +54,10 @@ def stiffness_from_three_modes(geometry: TyreGeometry, rho_a, n3, f3) -> np.ndar
     def col(**one):
         ring = RingParams(**{**unit, **one})
         geo0 = TyreGeometry(geometry.radius, geometry.width, zero)
-        return np.asarray(modal_stiffness(ring, geo0, n3))
+        return np.asarray(modal_stiffness_jit(ring, geo0, n3))
 
     A = np.stack([col(ei=1.0), col(kw=1.0), col(kv=1.0)], axis=1)  # (3, 3)
-    pressure_part = np.asarray(modal_stiffness(RingParams(**unit), geometry, n3))  # P n²(n²−1)
+    pressure_part = np.asarray(modal_stiffness_jit(RingParams(**unit), geometry, n3))  # P n²(n²−1)
     rho = np.atleast_1d(np.asarray(rho_a, dtype=float))
     rhs = rho[:, None] * (1 + n3**2) * w2 - pressure_part  # (g, 3)
     return np.linalg.solve(A, rhs.T).T
@@ -90,7 +90,7 @@ def source_study_fit(
         raise InputError("no ρA in the grid gives positive EI, k_w and k_v for the chosen modes")
     others = np.setdiff1d(np.arange(n.size), idx)
     rings = RingParams(rho_a=grid, ei=stiff[:, 0], kw=stiff[:, 1], kv=stiff[:, 2])
-    model = np.asarray(natural_frequencies(rings, geometry, n[:, None]))  # (m, g)
+    model = np.asarray(natural_frequencies_jit(rings, geometry, n[:, None]))  # (m, g)
     err = np.abs(model[others] - f[others, None]).sum(axis=0)
     err = np.where(ok, err, np.inf)
     best = int(np.argmin(err))
