@@ -52,6 +52,7 @@ import jax.numpy as jnp
 import lineax as lx
 import numpy as np
 import optimistix as optx
+from optimistix._misc import cauchy_termination  # the Cauchy test optimistix's own Gauss–Newton step uses
 
 from ringfit._cache import QUICK_COMPILE, ExportedJit
 from ringfit.errors import InputError
@@ -301,13 +302,6 @@ class _DenseState(eqx.Module):
     scale: jax.Array
 
 
-def _cauchy_termination(rtol, atol, norm, y, y_diff, f, f_diff):
-    """optimistix's Cauchy test: small differences in both y and f (relative ``rtol``, absolute ``atol``)."""
-    y_converged = norm(jnp.abs(y_diff) / (atol + rtol * jnp.abs(y))) < 1
-    f_converged = norm(jnp.abs(f_diff) / (atol + rtol * jnp.abs(f))) < 1
-    return y_converged & f_converged
-
-
 class _DenseSteps:
     """The step of optimistix's Gauss–Newton family on a dense Jacobian, with Marquardt's scaling set in step one.
 
@@ -363,7 +357,7 @@ class _DenseSteps:
 
         def accepted(descent_state):
             descent_state = self.descent.query(y_eval, f_eval_info, descent_state)
-            terminate = _cauchy_termination(self.rtol, self.atol, self.norm, y_eval, y_eval - y, f_eval_info.residual,
+            terminate = cauchy_termination(self.rtol, self.atol, self.norm, y_eval, y_eval - y, f_eval_info.residual,
                                             f_eval_info.residual - state.f_info.residual)
             return y_eval, f_eval_info, fn_aux, descent_state, terminate
 
