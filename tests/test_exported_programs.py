@@ -131,6 +131,17 @@ def test_a_kept_program_is_loaded_without_tracing(toy):
     assert program.sources[-1] == "exported" and len(list(folder.glob("*.bin"))) == 2
 
 
+def _assert_reexported(program, x, y, caplog, why):
+    """A fresh process's call ignores the kept entry (a debug line saying ``why``), exports the program again
+    and gives the right answer."""
+    _fresh(program)
+    with caplog.at_level(logging.DEBUG, logger="ringfit.cache"):
+        out = program(x, y, scale=2.0)
+    assert program.sources[-1] == "exported"
+    assert any(why in r.getMessage() for r in caplog.records)
+    np.testing.assert_allclose(out, _toy_expected(x, y, 2.0), rtol=1e-15)
+
+
 def test_a_corrupt_or_foreign_entry_is_ignored_and_written_again(toy, caplog):
     program, folder = toy
     x, y = _toy_args()
@@ -138,12 +149,7 @@ def test_a_corrupt_or_foreign_entry_is_ignored_and_written_again(toy, caplog):
     (entry,) = folder.glob("*.bin")
     # 1. garbage in the file
     entry.write_bytes(b"not a program" + entry.read_bytes()[:100])
-    _fresh(program)
-    with caplog.at_level(logging.DEBUG, logger="ringfit.cache"):
-        out = program(x, y, scale=2.0)
-    assert program.sources[-1] == "exported"
-    assert any("ignoring the exported program" in r.getMessage() for r in caplog.records)
-    np.testing.assert_allclose(out, _toy_expected(x, y, 2.0), rtol=1e-15)
+    _assert_reexported(program, x, y, caplog, "ignoring the exported program")
     _fresh(program)
     program(x, y, scale=2.0)
     assert program.sources[-1] == "loaded"  # written again, and readable
@@ -151,12 +157,7 @@ def test_a_corrupt_or_foreign_entry_is_ignored_and_written_again(toy, caplog):
     caplog.clear()
     program(*_toy_args(7), scale=2.0)
     entry.write_bytes(next(p for p in folder.glob("*.bin") if p != entry).read_bytes())
-    _fresh(program)
-    with caplog.at_level(logging.DEBUG, logger="ringfit.cache"):
-        out = program(x, y, scale=2.0)
-    assert program.sources[-1] == "exported"
-    assert any("not this call's" in r.getMessage() for r in caplog.records)
-    np.testing.assert_allclose(out, _toy_expected(x, y, 2.0), rtol=1e-15)
+    _assert_reexported(program, x, y, caplog, "not this call's")
 
 
 def test_without_the_cache_nothing_is_kept(tmp_path, monkeypatch):
