@@ -20,12 +20,77 @@ from pathlib import Path
 _SETTINGS = {"jax_persistent_cache_min_compile_time_secs": 0.0, "jax_persistent_cache_min_entry_size_bytes": 0}
 
 
-#: XLA options for programs a cold process compiles once and runs for milliseconds (the gap's damping
-#: refits, the static contact solve): the CPU backend's optimisation off (LLVM -O0) about halves their
-#: compile time; their run time, measured, is the same. Their answers agree with the optimised program's
-#: to rounding (5e-14 relative for the contact solve), which a fit can carry into its end point within its
-#: tolerances — so eq. 18's fit, whose weakly determined EI lands ~5e-8 apart, keeps the optimised program.
-QUICK_COMPILE = {"xla_backend_optimization_level": 0}
+#: XLA options of every program ringfit compiles itself (:func:`jit`, :class:`ExportedJit`): the CPU
+#: backend's classic fusion emitters instead of its newer MLIR ones. ringfit's programs are many small
+#: fusions (a solve's loop body, a model's Jacobian), which the newer emitters compile one LLVM module at a
+#: time: measured on one core, eq. 18's solve compiles in 0.65–0.9 s instead of 1.9–2.2 s and runs in
+#: 0.40 ms instead of 0.54 ms with an identical answer (every output bit equal); the diagnosis's frequency
+#: problem compiles in 4.1 s instead of 6.5 s. Other backends ignore the option; a jaxlib that does not
+#: know it compiles without it (:func:`compiler_options`).
+CPU_COMPILE = {"xla_cpu_use_fusion_emitters": False}
+
+#: For programs a cold process compiles once and whose run time is small beside their compile time (eq. 18's
+#: fit, the gap's mode-table refits, the static contact solve): also the CPU backend's optimisation off
+#: (LLVM -O0), which cuts their compile time by 2–3× again; eq. 18's fit and the contact solve run as fast,
+#: the mode-table refits ~1.6× slower (~0.4 s more in a diagnosis that compiles ~2.5 s less). Their
+#: answers agree with the optimised program's to rounding (5e-14 relative for the contact solve), which a
+#: fit carries into its end point within its tolerances (eq. 18's weakly determined EI lands ~5e-8 apart).
+QUICK_COMPILE = {**CPU_COMPILE, "xla_backend_optimization_level": 0}
+
+
+@functools.cache
+def _options_known(options: tuple) -> bool:
+    """Whether this jaxlib compiles with the XLA options ``options`` (``((name, value), …)``): one tiny compile,
+    once per process (and a hit of the compilation cache after the first process)."""
+    import jax
+    import numpy as np
+
+    try:
+        jax.jit(lambda x: x + 1.0, compiler_options=dict(options)).lower(np.float64(0.0)).compile()
+    except Exception as exc:  # noqa: BLE001 — "No such compile option" on a jaxlib without one of them
+        _log.debug("XLA options %r: %s: %s", options, type(exc).__name__, exc)
+        return False
+    return True
+
+
+def compiler_options(quick: bool = False) -> dict | None:
+    """:data:`QUICK_COMPILE` (``quick``) or :data:`CPU_COMPILE`, less any option this jaxlib does not know;
+    ``None`` where none is left."""
+    wanted = tuple(sorted((QUICK_COMPILE if quick else CPU_COMPILE).items()))
+    if _options_known(wanted):  # the usual case: every option known, one probe
+        return dict(wanted)
+    return {k: v for k, v in wanted if _options_known(((k, v),))} or None
+
+
+class jit:  # noqa: N801 — used as jax.jit is
+    """``jax.jit(fun, **kwargs)`` compiled with :func:`compiler_options` (``quick``: :data:`QUICK_COMPILE`).
+
+    The jitted function is made at the first call (or the first use of an attribute such as ``lower``),
+    so importing a module compiles and probes nothing. Use as ``jax.jit``:
+    ``functools.partial(jit, static_argnames=...)(fun)`` or ``@jit``.
+    """
+
+    def __init__(self, fun, *, quick: bool = False, **kwargs):
+        functools.update_wrapper(self, fun)
+        self._fun, self._quick, self._kwargs = fun, quick, kwargs
+        self._jitted = None
+
+    @property
+    def jitted(self):
+        """The ``jax.jit`` object (made on first use)."""
+        if self._jitted is None:
+            import jax
+
+            self._jitted = jax.jit(self._fun, compiler_options=compiler_options(self._quick), **self._kwargs)
+        return self._jitted
+
+    def __call__(self, *args, **kwargs):
+        return (self._jitted or self.jitted)(*args, **kwargs)
+
+    def __getattr__(self, name):  # lower, trace, _cache_size, … of the jitted function
+        if name.startswith("__") or name in ("_fun", "_quick", "_kwargs", "_jitted"):
+            raise AttributeError(name)
+        return getattr(self.jitted, name)
 
 
 def cache_directory(directory: str | os.PathLike | None = None) -> Path:
@@ -188,14 +253,14 @@ class ExportedJit:
     written again. Without the cache, or where a static argument has no stable description, it is
     the plain jitted function.
 
-    - ``fn``: the function (traced with ``static`` bound); ``jitted``: ``jax.jit`` of it with the same
-      static argument names and compiler options, used when no exported program applies;
-      ``compiler_options``: XLA options the exported program is compiled with (as the jit's).
+    - ``fn``: the function (traced with ``static`` bound); ``jitted``: the jitted function (:class:`jit`,
+      or ``jax.jit``) with the same static argument names, used when no exported program applies;
+      ``quick``: the exported program is compiled with :func:`compiler_options` of ``quick``, as ``jitted``
+      (a :class:`jit`) is.
     """
 
-    def __init__(self, fn, jitted, compiler_options=None):
-        self.fn, self.jitted = fn, jitted
-        self.compiler_options = dict(compiler_options or {})
+    def __init__(self, fn, jitted, quick: bool = False):
+        self.fn, self.jitted, self.quick = fn, jitted, quick
         self._programs: dict = {}
         #: how each program of this process was obtained: "loaded", "exported" or "jit" (tests, benchmarks)
         self.sources: list[str] = []
@@ -227,7 +292,7 @@ class ExportedJit:
             return functools.partial(self.jitted, **static)
         tree, avals = _signature(args)
         text = "\n".join([f"{self.fn.__module__}.{self.fn.__qualname__}", static_text, str(tree), repr(avals),
-                          repr(sorted(self.compiler_options.items())), _environment()])
+                          repr(sorted((compiler_options(self.quick) or {}).items())), _environment()])
         path = folder / EXPORT_FOLDER / f"{self.fn.__name__}-{hashlib.sha256(text.encode()).hexdigest()[:40]}.bin"
         exported = None
         if path.exists():
@@ -264,4 +329,4 @@ class ExportedJit:
 
         # named as the function, so its XLA program (logs, cache entries) is named as the jit's
         run.__name__ = run.__qualname__ = self.fn.__name__
-        return jax.jit(run, compiler_options=self.compiler_options or None)
+        return jax.jit(run, compiler_options=compiler_options(self.quick))

@@ -26,7 +26,7 @@ import pytest
 
 import ringfit  # noqa: F401  (float64)
 from ringfit import _cache
-from ringfit._cache import QUICK_COMPILE, ExportedJit, _describe, _Unstable
+from ringfit._cache import ExportedJit, _describe, _Unstable
 from ringfit.fit import engine
 from ringfit.fit.engine import LINEAR, AbstractResiduals, Coordinate, Problem, least_squares
 
@@ -61,7 +61,7 @@ def _closed_form(x, y, sigma):
 @pytest.fixture
 def kept(tmp_path, monkeypatch):
     """A fresh kept quick solve whose cache folder is ``tmp_path`` (JAX's own cache settings untouched)."""
-    program = ExportedJit(engine._solve_one, engine._solve_quick, QUICK_COMPILE)
+    program = ExportedJit(engine._solve_one, engine._solve_quick, quick=True)
     monkeypatch.setattr(engine, "_solve_quick_kept", program)
     monkeypatch.setattr(_cache, "_kept_folder", lambda: str(tmp_path))
     return program, tmp_path / _cache.EXPORT_FOLDER

@@ -54,7 +54,7 @@ import numpy as np
 import optimistix as optx
 from optimistix._misc import cauchy_termination  # the Cauchy test optimistix's own Gauss–Newton step uses
 
-from ringfit._cache import QUICK_COMPILE, ExportedJit
+from ringfit._cache import ExportedJit, jit
 from ringfit.errors import InputError
 from ringfit.fit.result import (BatchFitResult, FitResult, covariance_batch, covariance_from_jacobian, parameter_flags,
                                 solver_flags, solver_status)
@@ -436,16 +436,16 @@ def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, 
 
 _STATIC = ("model", "treedef", "method")
 #: The whole fit in one compiled region.
-_solve = functools.partial(jax.jit, static_argnames=_STATIC)(_solve_one)
+_solve = jit(_solve_one, static_argnames=_STATIC)
 #: The same solve compiled with :data:`ringfit._cache.QUICK_COMPILE` (the CPU backend's optimisation off:
 #: about half the compile time), for models with ``compile_quick`` (:class:`AbstractResiduals`).
-_solve_quick = functools.partial(jax.jit, static_argnames=_STATIC, compiler_options=QUICK_COMPILE)(_solve_one)
+_solve_quick = jit(_solve_one, quick=True, static_argnames=_STATIC)
 
 
 #: The two solves as exported programs kept beside the compilation cache (:class:`ringfit._cache.ExportedJit`):
 #: a warm process deserialises them instead of tracing; without the cache, the jitted solves themselves.
 _solve_kept = ExportedJit(_solve_one, _solve)
-_solve_quick_kept = ExportedJit(_solve_one, _solve_quick, QUICK_COMPILE)
+_solve_quick_kept = ExportedJit(_solve_one, _solve_quick, quick=True)
 
 
 def _solve_program(model):
@@ -454,7 +454,7 @@ def _solve_program(model):
     return _solve_quick_kept if getattr(model, "compile_quick", False) else _solve_kept
 
 
-@functools.partial(jax.jit, static_argnames=_STATIC)
+@functools.partial(jit, static_argnames=_STATIC)
 def _solve_batch(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, *, model, treedef,
                  method="levenberg_marquardt"):
     """B fits of one problem structure in one compiled region: data leaves, z0 and theta0 carry a leading axis B."""
@@ -465,7 +465,7 @@ def _solve_batch(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps
     return jax.vmap(one)(leaves, z0, theta0)
 
 
-@functools.partial(jax.jit, static_argnames=_STATIC)
+@functools.partial(jit, static_argnames=_STATIC)
 def _solve_chain(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, *, model, treedef,
                  method="levenberg_marquardt"):
     """B fits one after another in one compiled region (``lax.scan``), each started at the previous optimum.
@@ -718,7 +718,7 @@ def least_squares_batch(
                           aux=jax.tree.map(np.array, aux), n_data=rows)
 
 
-@functools.partial(jax.jit, static_argnames=("model", "treedef"))
+@functools.partial(jit, static_argnames=("model", "treedef"))
 def _batched_sum_of_squares(thetas, leaves, *, model, treedef):
     data = jax.tree.unflatten(treedef, leaves)
     return map_parameters(model, lambda th: jnp.sum(model(th, data)[0] ** 2), thetas)
@@ -832,7 +832,7 @@ def linearize(problem: Problem, theta, free: tuple[str, ...], *, pad_to: int | N
     return Linearization(res[:m], jac[:m, : len(fs.names)], aux, fs.names)
 
 
-@functools.partial(jax.jit, static_argnames=("model", "treedef"))
+@functools.partial(jit, static_argnames=("model", "treedef"))
 def _residuals_at(theta, leaves, *, model, treedef):
     return model(theta, jax.tree.unflatten(treedef, leaves))
 
@@ -844,7 +844,7 @@ def residuals(problem: Problem, theta) -> tuple[np.ndarray, object]:
     return np.asarray(res), aux
 
 
-@functools.partial(jax.jit, static_argnames=("model", "treedef"))
+@functools.partial(jit, static_argnames=("model", "treedef"))
 def _batched_residuals(thetas, leaves, *, model, treedef):
     data = jax.tree.unflatten(treedef, leaves)
     return map_parameters(model, lambda th: model(th, data)[0], thetas)
@@ -857,7 +857,7 @@ def residuals_batch(problem: Problem, thetas, chunk: int = 64) -> np.ndarray:
                            thetas, min(int(chunk), len(thetas)))
 
 
-@functools.partial(jax.jit, static_argnames=("model", "treedef"))
+@functools.partial(jit, static_argnames=("model", "treedef"))
 def _batched_log_probability(u, leaves, theta0, free_arrays, prior_w, prior_mean, lo, hi, inv_s2, *, model, treedef):
     """Log density ``(n,)`` of solver coordinates ``u`` ``(n, k)``, up to a constant."""
     data = jax.tree.unflatten(treedef, leaves)

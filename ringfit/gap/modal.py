@@ -78,7 +78,9 @@ from ringfit.gap.problem import GapProblem
 from ringfit.gap.rolling_rows import JOINT, assign_rolling_rows, joint_for
 from ringfit.io.modes import ModeTable
 from ringfit.params import RingParams, TyreGeometry
-from ringfit.physics.natural import cavity_frequency, natural_angular_frequencies
+from ringfit._cache import jit
+from ringfit.physics.natural import (cavity_frequency_jit, natural_angular_frequencies,
+                                     natural_frequencies_jit)
 
 FREQ_SIGMA_FLOOR_HZ = 0.02
 #: Relative floor: a frequency is rarely identified better than this.
@@ -316,7 +318,15 @@ def _static_contact(ring, geometry, load_n, drum_diameter_m, k_tread_sd):
     return out[0], 0.5 * abs(out[2] - out[1]), sols[0]
 
 
-@jax.jit
+@jit
+def _loaded_cavity_lines(f_a, split):
+    """The loaded cavity's pair at rest (fore-aft, vertical) [Hz] (docs/physics.md §6), in one compiled program."""
+    from ringfit.physics.cavity import loaded_cavity_lines
+
+    return loaded_cavity_lines(f_a, split)
+
+
+@jit
 def _cavity_split(solution, geometry):
     """W_2/h_c of a static contact solution (docs/physics.md §6 cavity_mode), in one compiled program."""
     from ringfit.physics.cavity import cavity_height, deflection_cos2
@@ -340,7 +350,7 @@ def _table_rows(tables, geometry, patches, spins, cavity_split=None):
 
     ``cavity_split``: per table W_2/h_c of the loaded cavity (docs/physics.md §6 cavity_mode), or None."""
     cavity = [float(f) for t in tables for f, k in zip(t.freq_hz, t.kind) if k == "acoustic"]
-    f_a = cavity[0] if cavity else float(jax.jit(cavity_frequency)(1))  # one program, not one per operation
+    f_a = cavity[0] if cavity else float(cavity_frequency_jit(1))  # one program, not one per operation
     rows = []
     damping_std = [t.extra_floats("damping_std_pct") for t in tables]
     wheels = [wheel_row(t.condition, str(t.source)) for t in tables]
@@ -373,11 +383,10 @@ def _row_cavity(table: ModeTable, f_a: float, contact: int, n: int, split) -> fl
         return 0.0  # no air in the cavity: cavity_mode does not act on this table
     if split is None or n != 1 or not contact:
         return f_a
-    from ringfit.physics.cavity import loaded_cavity_lines
 
     # the loaded cavity's pair at rest: fore-aft f_a sqrt(1 + e), vertical f_a sqrt(1 - e) (docs/physics.md §6);
     # one compiled program, not one per operation (a cold process compiles each)
-    fore_aft, vertical = jax.jit(loaded_cavity_lines)(f_a, split)
+    fore_aft, vertical = _loaded_cavity_lines(f_a, split)
     return float(vertical if contact == 1 else fore_aft)
 
 
@@ -448,7 +457,7 @@ def missing_n_lines(r: dict, ring, geometry) -> tuple[np.ndarray, str]:
     """The frequencies [Hz] of n = 1 … :data:`MATCH_N_MAX` in the model a row's condition computes (the loaded
     modes of its type at the computed patch, eq. 25/26 of its branch, else eq. 18), and the model's name."""
     from ringfit.physics.loaded import loaded_natural_frequencies
-    from ringfit.physics.natural import fixed_frame_frequencies, natural_frequencies, rotating_natural_frequencies
+    from ringfit.physics.natural import fixed_frame_frequencies, rotating_natural_frequencies
 
     n_all = np.arange(1, MATCH_N_MAX + 1, dtype=float)
     if r["contact"] and r["patch"] > 0:
@@ -458,7 +467,7 @@ def missing_n_lines(r: dict, ring, geometry) -> tuple[np.ndarray, str]:
         fn = fixed_frame_frequencies if r["fixed"] else rotating_natural_frequencies
         waves = np.abs(np.asarray(fn(ring, geometry, n_all, r["spin"])))
         return waves[:, 0 if r["branch"] == "backward" else 1], ("eq. 26" if r["fixed"] else "eq. 25")
-    return np.asarray(jax.jit(natural_frequencies)(ring, geometry, n_all)), "eq. 18"  # one program, not one per op
+    return np.asarray(natural_frequencies_jit(ring, geometry, n_all)), "eq. 18"  # one program, not one per op
 
 
 #: Two lines within this many σ of a row's frequency: its assignment is ambiguous (docs/formats.md §5).
@@ -757,7 +766,7 @@ def _usable(effects, mrows, domain_note):
     return tuple(usable), dropped
 
 
-@jax.jit
+@jit
 def _eq18_log_jacobian(log_base, ring, geometry, n):
     """∂f_n/∂log θ [Hz] of eq. 18 (docs/physics.md §2.1) w.r.t. the base ring parameters, rows ``n``."""
     from ringfit.physics.natural import natural_frequencies

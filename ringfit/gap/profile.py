@@ -56,6 +56,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ringfit._cache import jit
 from ringfit.errors import InputError
 from ringfit.gap.effects.base import Effect
 from ringfit.gap.problem import GapProblem
@@ -130,7 +131,7 @@ class ProfilePredictor(eqx.Module):
         return _channels(theta, data, self.base, self.effects, self.sizes, self.solver)
 
 
-@partial(jax.jit, static_argnames=("effects", "sizes", "solver", "base"))
+@partial(jit, static_argnames=("effects", "sizes", "solver", "base"))
 def profile_predict(theta, data: ProfileData, *, effects: tuple, sizes: tuple, solver: ContactSolver,
                     base: tuple = BASE):
     """Predicted rows ``(P·2·M,)`` [m/s²]: profiles × (radial, tangential) × grid angle.

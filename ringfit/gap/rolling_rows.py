@@ -59,6 +59,8 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.special import logsumexp
 
+from ringfit._cache import jit
+
 #: Harmonics |k| ≤ K of the Hill basis for the diagnosis's rolling rows (n ≤ 12 branches are
 #: kept). K = 24 keeps the 16 lowest modes of the Table 9 tyre (to 290 Hz; 4 kN, 60 km/h) within
 #: 3e-4 relative of K = 64, below the identification noise of rolling tables (tests/test_gap_rolling.py),
@@ -261,7 +263,7 @@ def _free_ring_program(fixed: bool):
     """eq. 26 (fixed observer) or eq. 25 (co-rotating sensor), jitted once per process."""
     from ringfit.physics.natural import fixed_frame_frequencies, rotating_natural_frequencies
 
-    return jax.jit(fixed_frame_frequencies if fixed else rotating_natural_frequencies)
+    return jit(fixed_frame_frequencies if fixed else rotating_natural_frequencies)
 
 
 def _free_ring_candidates(ring, geometry, omega: float, fixed: bool):

@@ -33,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ringfit._cache import QUICK_COMPILE
+from ringfit._cache import jit
 from ringfit.io.profiles import grid_angles_deg
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.operating import OperatingPoint
@@ -362,7 +362,7 @@ def belt_slope_grid(sol, geometry):
     return (dw - sol.v) / geometry.radius
 
 
-@functools.partial(jax.jit, static_argnums=1, compiler_options=QUICK_COMPILE)
+@functools.partial(jit, static_argnums=1, quick=True)
 def _solve_rolling_compiled(arrays, static):
     ring, geometry, operating, model, solver, extra_load = eqx.combine(arrays, static)
     return solve_rolling(ring, geometry, operating, model=model, solver=solver, extra_load=extra_load)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from ringfit._cache import jit
 from ringfit.params import RingParams, TyreGeometry
 
 TWO_PI = 2.0 * jnp.pi
@@ -254,5 +255,6 @@ def critical_speed(ring: RingParams, geometry: TyreGeometry, n_max: int = 60):
 #: jitted versions for calls from NumPy code (the fitters build their own jit regions): one compiled program
 #: per argument shape, where an eager call compiles each of its array operations separately (~1 s of a cold
 #: process for eq. 18's first evaluation, against ~0.2 s for the program).
-natural_frequencies_jit = jax.jit(natural_frequencies)
-modal_stiffness_jit = jax.jit(modal_stiffness)
+natural_frequencies_jit = jit(natural_frequencies)
+modal_stiffness_jit = jit(modal_stiffness)
+cavity_frequency_jit = jit(cavity_frequency)
