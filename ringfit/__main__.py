@@ -1,5 +1,3 @@
-import sys
+from ringfit.cli import run
 
-from ringfit.cli import main
-
-sys.exit(main())
+run()

@@ -23,7 +23,8 @@ coordinated — handed to :func:`least_squares`:
   correlated); its marginal over the free parameters enters as whitened residual
   rows ``W (u − mean)``.
 
-The solve is one ``eqx.filter_jit`` region: optimistix Levenberg–Marquardt (or,
+The solve is one jitted region (:class:`ringfit._cache.jit`, with XLA's compile options of
+:func:`ringfit._cache.compiler_options`): optimistix Levenberg–Marquardt (or,
 on request, undamped Gauss–Newton) with an SVD linear solve, the model linearised once per step by a forward-mode pass
 (primal and k tangents) whose Jacobian the solver then reuses as a dense matrix,
 and the final residuals, Jacobian and ``aux`` at the optimum. Everything after it
