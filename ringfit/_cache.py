@@ -92,6 +92,13 @@ class jit:  # noqa: N801 — used as jax.jit is
             raise AttributeError(name)
         return getattr(self.jitted, name)
 
+    def __reduce__(self):  # pickled as what it wraps (a batch task's function); the receiver compiles its own
+        return _rebuilt_jit, (self._fun, self._quick, self._kwargs)
+
+
+def _rebuilt_jit(fun, quick, kwargs):
+    return jit(fun, quick=quick, **kwargs)
+
 
 def cache_directory(directory: str | os.PathLike | None = None) -> Path:
     """The cache's directory: ``directory``, else ``$RINGFIT_CACHE_DIR``, else ``~/.cache/ringfit/jax``."""

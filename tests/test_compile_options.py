@@ -59,6 +59,16 @@ def test_a_jitted_function_keeps_its_name_doc_and_static_arguments():
     assert fn._cache_size() == 2  # a static argument is static
 
 
+def test_a_jitted_function_pickles_as_what_it_wraps():
+    import pickle
+
+    from ringfit.physics.natural import natural_frequencies, natural_frequencies_jit
+
+    natural_frequencies_jit.jitted  # made (a compiled function does not pickle)
+    again = pickle.loads(pickle.dumps(natural_frequencies_jit))
+    assert again._fun is natural_frequencies and again._jitted is None and again._quick is False
+
+
 def test_an_unknown_option_is_left_out_and_the_program_still_runs(monkeypatch, caplog):
     monkeypatch.setattr(_cache, "CPU_COMPILE", {**_cache.CPU_COMPILE, "xla_cpu_no_such_option_anywhere": True})
     _cache._options_known.cache_clear()
