@@ -6,7 +6,8 @@ Each command family lives in its own module here and adds its subcommands in
 
 Exit codes: 0 success, 1 the job ran but did not succeed (e.g. a fit that did
 not converge), 2 bad input (one line on stderr naming file/row/field/option;
-argparse's own errors are one line too). Warnings raised by the library go to
+argparse's own errors are one line too), 130 interrupted (Ctrl-C), 141 the
+reader of stdout went away (``ringfit … | head``; :func:`run`). Warnings raised by the library go to
 stderr as one ``WARNING:`` line each. ``ringfit --help`` imports no JAX. A
 command's output files appear together when it succeeds, or none does. Every command
 runs with JAX's persistent compilation cache on (:mod:`ringfit._cache`).
