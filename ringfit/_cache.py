@@ -26,7 +26,7 @@ _SETTINGS = {"jax_persistent_cache_min_compile_time_secs": 0.0, "jax_persistent_
 #: time: measured on one core, eq. 18's solve compiles in 0.65–0.9 s instead of 1.9–2.2 s and runs in
 #: 0.40 ms instead of 0.54 ms with an identical answer (every output bit equal); the diagnosis's frequency
 #: problem compiles in 4.1 s instead of 6.5 s. Other backends ignore the option; a jaxlib that does not
-#: know it compiles without it (:func:`compiler_options`).
+#: know it refuses the first program, which is then compiled without it (:func:`_refuse_option`).
 CPU_COMPILE = {"xla_cpu_use_fusion_emitters": False}
 
 #: For programs a cold process compiles once and whose run time is small beside their compile time (eq. 18's
@@ -38,35 +38,37 @@ CPU_COMPILE = {"xla_cpu_use_fusion_emitters": False}
 QUICK_COMPILE = {**CPU_COMPILE, "xla_backend_optimization_level": 0}
 
 
-@functools.cache
-def _options_known(options: tuple) -> bool:
-    """Whether this jaxlib compiles with the XLA options ``options`` (``((name, value), …)``): one tiny compile,
-    once per process (and a hit of the compilation cache after the first process)."""
-    import jax
-    import numpy as np
-
-    try:
-        jax.jit(lambda x: x + 1.0, compiler_options=dict(options)).lower(np.float64(0.0)).compile()
-    except Exception as exc:  # noqa: BLE001 — "No such compile option" on a jaxlib without one of them
-        _log.debug("XLA options %r: %s: %s", options, type(exc).__name__, exc)
-        return False
-    return True
+#: Options this jaxlib refused (``No such compile option``): left out of every later program.
+_REFUSED: set[str] = set()
 
 
 def compiler_options(quick: bool = False) -> dict | None:
-    """:data:`QUICK_COMPILE` (``quick``) or :data:`CPU_COMPILE`, less any option this jaxlib does not know;
+    """:data:`QUICK_COMPILE` (``quick``) or :data:`CPU_COMPILE`, less any option this jaxlib refused;
     ``None`` where none is left."""
-    wanted = tuple(sorted((QUICK_COMPILE if quick else CPU_COMPILE).items()))
-    if _options_known(wanted):  # the usual case: every option known, one probe
-        return dict(wanted)
-    return {k: v for k, v in wanted if _options_known(((k, v),))} or None
+    wanted = QUICK_COMPILE if quick else CPU_COMPILE
+    return {k: v for k, v in wanted.items() if k not in _REFUSED} or None
+
+
+def _refuse_option(exc: BaseException, quick: bool) -> bool:
+    """Whether ``exc`` is this jaxlib refusing one of the options a program was compiled with (named in its
+    message, e.g. ``No such compile option: 'xla_…'``); if so the option is left out from now on (a debug line
+    on ``ringfit.cache``). Programs are compiled with the options first and only fall back when refused, so
+    a jaxlib that knows them (the usual case) pays no probe."""
+    text = str(exc)
+    for name in compiler_options(quick) or {}:
+        if name in text:
+            _REFUSED.add(name)
+            _log.debug("XLA option %s left out: this jaxlib refused it (%s)", name, text.splitlines()[0][:200])
+            return True
+    return False
 
 
 class jit:  # noqa: N801 — used as jax.jit is
     """``jax.jit(fun, **kwargs)`` compiled with :func:`compiler_options` (``quick``: :data:`QUICK_COMPILE`).
 
     The jitted function is made at the first call (or the first use of an attribute such as ``lower``),
-    so importing a module compiles and probes nothing. Use as ``jax.jit``:
+    so importing a module compiles nothing; a call that this jaxlib refuses for an unknown option is made
+    again without it (:func:`_refuse_option`). Use as ``jax.jit``:
     ``functools.partial(jit, static_argnames=...)(fun)`` or ``@jit``.
     """
 
@@ -85,7 +87,13 @@ class jit:  # noqa: N801 — used as jax.jit is
         return self._jitted
 
     def __call__(self, *args, **kwargs):
-        return (self._jitted or self.jitted)(*args, **kwargs)
+        try:
+            return (self._jitted or self.jitted)(*args, **kwargs)
+        except Exception as exc:
+            if not _refuse_option(exc, self._quick):
+                raise
+            self._jitted = None  # made again without the refused option
+            return self(*args, **kwargs)
 
     def __getattr__(self, name):  # lower, trace, _cache_size, … of the jitted function
         if name.startswith("__") or name in ("_fun", "_quick", "_kwargs", "_jitted"):
@@ -283,7 +291,13 @@ class ExportedJit:
         program = self._programs.get(key)
         if program is None:
             program = self._programs[key] = self._program(Path(folder), args, static)
-        return program(*args)
+        try:
+            return program(*args)
+        except Exception as exc:
+            if not _refuse_option(exc, self.quick):
+                raise
+            del self._programs[key]  # made again without the refused option (its key names the options)
+            return self(*args, **static)
 
     def _program(self, folder: Path, args, static):
         import hashlib

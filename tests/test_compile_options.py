@@ -3,7 +3,8 @@
 - Every program ringfit compiles itself carries :data:`ringfit._cache.CPU_COMPILE` (the CPU backend's
   classic fusion emitters), the quick ones :data:`ringfit._cache.QUICK_COMPILE` too; the jitted function is
   made at its first use, never at import.
-- An option this jaxlib does not know is left out (a probe), and the program still compiles and runs.
+- An option this jaxlib refuses is left out from then on, and the program is compiled again without it and runs
+  (a plain program and a kept exported one).
 - The options change no answer beyond the fit's tolerance: eq. 18's fit of the bundled SSI table, compiled
   with them (quick) and by a plain ``jax.jit`` without any, against each other.
 """
@@ -70,21 +71,40 @@ def test_a_jitted_function_pickles_as_what_it_wraps():
 
 
 def test_an_unknown_option_is_left_out_and_the_program_still_runs(monkeypatch, caplog):
-    monkeypatch.setattr(_cache, "CPU_COMPILE", {**_cache.CPU_COMPILE, "xla_cpu_no_such_option_anywhere": True})
-    _cache._options_known.cache_clear()
-    try:
-        with caplog.at_level("DEBUG", logger="ringfit.cache"):
-            options = _cache.compiler_options()
-        assert "xla_cpu_no_such_option_anywhere" not in options
-        assert options == {"xla_cpu_use_fusion_emitters": False}
-        assert "xla_cpu_no_such_option_anywhere" in caplog.text  # said on the debug log
-        fn = _cache.jit(lambda x: x + 1.0)
+    bogus = "xla_cpu_no_such_option_anywhere"
+    monkeypatch.setattr(_cache, "CPU_COMPILE", {**_cache.CPU_COMPILE, bogus: True})
+    monkeypatch.setattr(_cache, "_REFUSED", set())
+    # a plain jax.jit with the unknown option is refused: that is what the wrapper must survive
+    with pytest.raises(Exception, match=bogus):
+        jax.jit(lambda x: x - 1.0, compiler_options={bogus: True})(1.0)
+    fn = _cache.jit(lambda x: x + 1.0)
+    assert bogus in _options_of(fn.lower(np.float64(1.0)))  # tried first: a jaxlib that knows it pays nothing
+    with caplog.at_level("DEBUG", logger="ringfit.cache"):
         assert float(fn(np.float64(1.0))) == 2.0
-        # and a plain jax.jit with the unknown option is refused: the probe is what keeps it out
-        with pytest.raises(Exception, match="xla_cpu_no_such_option_anywhere"):
-            jax.jit(lambda x: x - 1.0, compiler_options={"xla_cpu_no_such_option_anywhere": True})(1.0)
-    finally:
-        _cache._options_known.cache_clear()
+    assert _cache._REFUSED == {bogus} and bogus in caplog.text  # said on the debug log
+    assert _cache.compiler_options() == {"xla_cpu_use_fusion_emitters": False}
+    assert _options_of(fn.lower(np.float64(1.0))) == {"xla_cpu_use_fusion_emitters": False}
+    # an error of the program itself is not taken for a refused option
+    failing = _cache.jit(lambda x: x.undefined_attribute)
+    with pytest.raises(AttributeError):
+        failing(np.float64(1.0))
+
+
+def test_a_kept_program_survives_a_refused_option(monkeypatch, tmp_path):
+    bogus = "xla_cpu_no_such_option_anywhere"
+    monkeypatch.setattr(_cache, "CPU_COMPILE", {**_cache.CPU_COMPILE, bogus: True})
+    monkeypatch.setattr(_cache, "_REFUSED", set())
+    monkeypatch.setattr(_cache, "_kept_folder", lambda: str(tmp_path))
+
+    def double(x, *, k):
+        return k * x
+
+    kept = _cache.ExportedJit(double, _cache.jit(double, static_argnames="k"))
+    assert float(kept(np.float64(2.0), k=2)) == 4.0
+    assert _cache._REFUSED == {bogus}
+    # exported again under a key without the refused option, then kept in memory
+    assert kept.sources == ["exported", "exported"]
+    assert float(kept(np.float64(3.0), k=2)) == 6.0 and len(kept.sources) == 2
 
 
 def test_the_options_change_no_answer_beyond_the_fits_tolerance():
