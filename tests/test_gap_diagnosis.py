@@ -3,6 +3,7 @@
 import json
 import shutil
 
+import numpy as np
 import pytest
 
 from ringfit.cli import main
@@ -80,3 +81,28 @@ def test_cli_diagnose(tmp_path, capsys):
     assert main(["diagnose", str(folder), "--out", str(out), "--quiet"]) == 2  # exists, no --force
     assert main(["diagnose", str(tmp_path / "missing"), "--out", str(tmp_path / "y.json"), "--quiet"]) == 2
     assert main(["diagnose", str(folder), "--out", str(tmp_path / "z.json"), "--effects", "bogus", "--quiet"]) == 2
+
+
+def test_heldout_refits_that_stop_short_are_counted_and_reported(tmp_path):
+    """Held-out refits stopped by their step limit are counted (``heldout_refits``) and written to the JSON,
+    never used unsaid: with a limit of one step every fold's refit stops short; with the default none of the
+    baseline's does on a noise-only case."""
+    from ringfit.gap import diagnose
+    from ringfit.gap.case import read_case
+    from ringfit.gap.diagnosis import build_problems, resolve_effects
+    from ringfit.gap.ranking import fit_chain, heldout
+    from ringfit.synth.cases import make_case
+
+    make_case(tmp_path / "case", effect="none", seed=11)
+    prob = build_problems(read_case(tmp_path / "case"), resolve_effects("ground_contact"))[0]
+    base = fit_chain(prob, ())
+    folds = len(np.unique(prob.folds))
+    heldout(prob, base, max_steps=1)
+    assert base.extra["heldout_refits"] == {"folds": folds, "not_converged": folds}
+    heldout(prob, base)
+    assert base.extra["heldout_refits"] == {"folds": folds, "not_converged": 0}
+    d = diagnose(tmp_path / "case", effects=["ground_contact"], progress=False, null_draws=0)
+    part = d.content["parts"][0]
+    assert part["baseline"]["heldout_refits"]["folds"] >= 2
+    refitted = [c for c in part["candidates"] if not c.get("screened_out")]
+    assert all(c["heldout_refits"]["not_converged"] <= c["heldout_refits"]["folds"] for c in refitted)
