@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import scipy.linalg
 
 from ringfit.gap import effects as effect_library
 from ringfit.gap.localisation import localise
@@ -674,11 +675,7 @@ def _ring_from_free(modal_problems: list[GapProblem], tyre):
         sources["damping_ratio"] = "tyre.toml [ring]" if "damping_ratio" in tyre.ring_values else "Table 9 default"
     sources["k_tread"] = ("tyre.toml [ring]" if "k_tread" in tyre.ring_values else "Table 9 default") + \
         " (start of the fit)"
-    size = sum(b.shape[0] for b in blocks)  # block-diagonal (scipy.linalg would cost a cold process ~0.1 s)
-    cov, at = np.zeros((size, size)), 0
-    for b in blocks:
-        cov[at : at + b.shape[0], at : at + b.shape[0]] = b
-        at += b.shape[0]
+    cov = scipy.linalg.block_diag(*blocks)
     if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
         cov = np.eye(cov.shape[0]) * RING_PRIOR_SD_FALLBACK**2
     return tyre.ring.replace(**fitted), sources, {"names": tuple(names), "cov": cov}
@@ -723,7 +720,7 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
     t0 = time.perf_counter()
     # one BLAS thread: every solve here is small (eigen-solves of ≤ 100 × 100, least squares of ≤ a few
     # thousand rows × ≤ 12 columns), where threaded BLAS only synchronises (50× slower on a busy machine)
-    from ringfit.targets.threads import small_matrix_threads
+    from ringfit.targets.ssi import small_matrix_threads
 
     parts_ = []
     with small_matrix_threads():

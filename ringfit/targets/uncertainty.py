@@ -68,8 +68,7 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 
-from ringfit.targets.ssi import HankelFactors, PoleSet, discrete_poles
-from ringfit.targets.threads import small_matrix_threads
+from ringfit.targets.ssi import HankelFactors, PoleSet, discrete_poles, small_matrix_threads
 
 #: Most groups of sensor angles (replicates) of the jackknife.
 JACKKNIFE_GROUPS = 12
