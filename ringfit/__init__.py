@@ -49,16 +49,10 @@ module that defines each one is imported on first use.
 from __future__ import annotations
 
 import importlib
-import os
 import sys
 
 
-def _enable_x64() -> None:
-    if "jax" in sys.modules:
-        sys.modules["jax"].config.update("jax_enable_x64", True)
-    else:
-        os.environ["JAX_ENABLE_X64"] = "1"
-
+from ringfit._precision import enable_x64 as _enable_x64
 
 _enable_x64()
 

@@ -16,6 +16,10 @@ from __future__ import annotations
 import math
 from dataclasses import fields, replace
 
+from ringfit._precision import enable_x64
+
+enable_x64()  # before JAX loads: float64 even when ``ringfit`` itself is shadowed (ringfit._precision)
+
 import equinox as eqx
 import jax.numpy as jnp
 

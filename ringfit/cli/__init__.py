@@ -72,10 +72,16 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help, --version, or a one-line usage error (status 2)
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
     from ringfit._cache import enable_compilation_cache
+    from ringfit._precision import PrecisionError, require_x64
     from ringfit.errors import InputError
     from ringfit.io.files import outputs_committed_together
 
     enable_compilation_cache()  # every command: a second run skips XLA compilation (imports no JAX)
+    try:
+        require_x64(f"ringfit {args.command}")  # never compute in float32 (ringfit._precision)
+    except PrecisionError as exc:
+        print(f"ringfit {args.command}: error: {exc}", file=sys.stderr)
+        return 2
     together = outputs_committed_together() if args.command not in WRITES_AS_IT_GOES else contextlib.nullcontext()
     try:
         with warnings.catch_warnings(record=True) as caught:
@@ -85,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
                     status = args.run(args)
             finally:
                 _print_warnings(caught)
-    except InputError as exc:
+    except (InputError, PrecisionError) as exc:
         print(f"ringfit {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except CommandFailed as exc:

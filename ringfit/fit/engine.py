@@ -56,6 +56,7 @@ import optimistix as optx
 from optimistix._misc import cauchy_termination  # the Cauchy test optimistix's own Gauss–Newton step uses
 
 from ringfit._cache import ExportedJit, jit
+from ringfit._precision import require_x64
 from ringfit.errors import InputError
 from ringfit.fit.result import (BatchFitResult, FitResult, covariance_batch, covariance_from_jacobian, parameter_flags,
                                 solver_flags, solver_status)
@@ -556,6 +557,7 @@ def least_squares(
     optimum), the model's aux in ``extra["aux"]`` and ``problem``. Never raises on
     non-convergence: check ``converged``.
     """
+    require_x64("ringfit.fit.engine.least_squares")
     model, data, coords = problem.model, problem.data, problem.coords
     names = problem.names
     free = tuple(free)
@@ -670,6 +672,7 @@ def least_squares_batch(
     **Returns:** :class:`~ringfit.fit.result.BatchFitResult` (arrays with a leading axis B; no flag
     strings: check ``converged`` and ``at_bound``). Never raises on non-convergence.
     """
+    require_x64("ringfit.fit.engine.least_squares_batch")
     free = tuple(free)
     index, K, free_arrays, W, mean, lo_u, hi_u = _setup(problem, free, None)
     leaves, treedef = jax.tree.flatten(data)
@@ -745,6 +748,7 @@ def sum_of_squares_batch(problem: Problem, thetas, chunk: int = 64) -> np.ndarra
     Evaluated in chunks of exactly ``min(chunk, G)`` rows (the last padded), so one
     compilation serves every grid size.
     """
+    require_x64("ringfit.fit.engine.sum_of_squares_batch")
     leaves, treedef = jax.tree.flatten(problem.data)
     return in_fixed_chunks(lambda th: _batched_sum_of_squares(th, leaves, model=problem.model, treedef=treedef),
                            thetas, min(int(chunk), len(thetas)))
@@ -828,6 +832,7 @@ def linearize(problem: Problem, theta, free: tuple[str, ...], *, pad_to: int | N
     set so that chunks of several sizes share it. The Jacobian is with respect to the
     solver coordinates ``u`` of ``free`` (``∂r/∂ln θ`` for log parameters); prior rows are left out.
     """
+    require_x64("ringfit.fit.engine.linearize")
     fs, _, res, jac, aux = _linearize_all(problem, theta, free, pad_to)
     m = res.size - fs.size
     return Linearization(res[:m], jac[:m, : len(fs.names)], aux, fs.names)
@@ -840,6 +845,7 @@ def _residuals_at(theta, leaves, *, model, treedef):
 
 def residuals(problem: Problem, theta) -> tuple[np.ndarray, object]:
     """The model's weighted residual rows ``(m,)`` and aux at ``theta`` (natural units, ``(p,)``); no prior rows."""
+    require_x64("ringfit.fit.engine.residuals")
     leaves, treedef = jax.tree.flatten(problem.data)
     res, aux = _residuals_at(jnp.asarray(theta, dtype=jnp.float64), leaves, model=problem.model, treedef=treedef)
     return np.asarray(res), aux
@@ -853,6 +859,7 @@ def _batched_residuals(thetas, leaves, *, model, treedef):
 
 def residuals_batch(problem: Problem, thetas, chunk: int = 64) -> np.ndarray:
     """Weighted residual rows ``(G, m)`` for each parameter vector of ``thetas`` ``(G, p)``, in fixed chunks."""
+    require_x64("ringfit.fit.engine.residuals_batch")
     leaves, treedef = jax.tree.flatten(problem.data)
     return in_fixed_chunks(lambda th: _batched_residuals(th, leaves, model=problem.model, treedef=treedef),
                            thetas, min(int(chunk), len(thetas)))
@@ -886,6 +893,7 @@ def log_probability(problem: Problem, theta, free: tuple[str, ...], *, lo_u=None
     fixed parameters stay at ``theta``. One jitted, vmapped region; ``chunk`` evaluates in chunks of
     exactly that many rows (padded), so one compilation serves every batch size.
     """
+    require_x64("ringfit.fit.engine.log_probability")
     fs = free_set(problem, free)
     lo = fs.lo_u if lo_u is None else np.asarray(lo_u, dtype=np.float64)
     hi = fs.hi_u if hi_u is None else np.asarray(hi_u, dtype=np.float64)
@@ -914,6 +922,7 @@ def evaluate(problem: Problem, theta, free: tuple[str, ...], *, pad_to: int | No
     :func:`linearize` packed as a :class:`~ringfit.fit.result.FitResult` (``status`` ``"evaluated"``,
     no flags), for code that wants standard errors at given parameters.
     """
+    require_x64("ringfit.fit.engine.evaluate")
     fs, u, res, jac, aux = _linearize_all(problem, theta, free, pad_to)
     k = len(fs.names)
     m = res.size - fs.size

@@ -5,6 +5,10 @@ JSON of docs/formats.md §5), :func:`read_case` (docs/formats.md §6), the effec
 :mod:`ringfit.gap.effects`.
 """
 
+from ringfit._precision import enable_x64
+
+enable_x64()  # float64 even when ``ringfit`` itself is shadowed (ringfit._precision)
+
 from ringfit.gap.case import Case, read_case
 from ringfit.gap.diagnosis import Diagnosis, diagnose, read_diagnosis
 

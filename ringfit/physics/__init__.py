@@ -1,0 +1,5 @@
+"""ringfit.physics: JAX computes in float64 here, even when ``ringfit`` itself is shadowed (:mod:`ringfit._precision`)."""
+
+from ringfit._precision import enable_x64
+
+enable_x64()
