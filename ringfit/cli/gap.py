@@ -8,6 +8,9 @@ from __future__ import annotations
 
 from ringfit.cli._args import force_flag, integer, number, quiet_flag
 
+#: Draws per null distribution unless ``--null-draws`` says otherwise (what ``campaign`` runs).
+DEFAULT_NULL_DRAWS = 200
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -29,7 +32,8 @@ def register(subparsers) -> None:
     p.add_argument("--alpha", type=number("a significance level in (0, 0.5]", lo=0.0, hi=0.5, lo_open=True),
                    default=0.01, help="an accepted effect must beat chance (its null) at this level (default 0.01)")
     p.add_argument("--null-draws", type=integer("a count of null draws, 20 … 20000", lo=20, hi=20000),
-                   default=200, help="draws per null distribution (default 200; p is resolved to 1/(draws + 1))")
+                   default=DEFAULT_NULL_DRAWS,
+                   help=f"draws per null distribution (default {DEFAULT_NULL_DRAWS}; p is resolved to 1/(draws + 1))")
     p.add_argument("--tyre", default=None, metavar="TYRE.toml",
                    help="baseline ring as identified or fitted before (ringfit identify / fit), used as it is with "
                         "its [ring.covariance]: one ring per tyre (default: fit free.modes.csv)")

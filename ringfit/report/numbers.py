@@ -50,7 +50,8 @@ def fmt_value(value, sigma=None, digits: int = SIGMA_DIGITS) -> str:
     if not math.isfinite(value):
         return str(value)
     if sigma is None or not math.isfinite(float(sigma)) or float(sigma) <= 0:
-        return f"{value:.{DEFAULT_DIGITS}g}"
+        text = f"{value:#.{DEFAULT_DIGITS}g}"  # trailing zeros kept: they are significant digits
+        return text[:-1] if text.endswith(".") else text
     return _fixed(value, decimals(float(sigma), digits))
 
 
