@@ -308,3 +308,13 @@ def test_campaign_says_up_front_what_takes_long():
     assert text.startswith("work: 9 tasks (3 fit, 3 sample, 3 diagnose)")
     assert "3 posteriors (sample), each 32 walkers × 2000–20000 steps" in text
     assert "3 diagnoses" in text and "200 draws of each null" in text
+
+
+def test_diagnose_prints_each_chance_line_with_its_variant():
+    from ringfit.cli.gap import chance_lines
+
+    sentence = "data with no effect in it (the current model plus its noise) get -1 % ± 6 %; these get {} %: p = 0.005"
+    v = {"calibration": [
+        {"effect": "rotation", "variant": "fitted", "sentence": "rotation: " + sentence.format(50)},
+        {"effect": "rotation", "variant": "computed", "sentence": "rotation: " + sentence.format(43)}]}
+    assert chance_lines(v) == ["rotation (fitted): " + sentence.format(50), "rotation (computed): " + sentence.format(43)]

@@ -90,14 +90,24 @@ def run(args) -> int:
     v = diag.verdict
     print(f"verdict: {' + '.join(v['effects'])}"
           + (f" (held-out shrink {v['heldout_shrink_pct']:.0f} %)" if v["effect"] not in ("none", "unexplained") else ""))
-    for c in v.get("calibration", []):
-        print(f"  {c['sentence']}")
+    for line in chance_lines(v):
+        print(f"  {line}")
     st = (diag.content.get("baseline") or {}).get("rolling_structure")
     if st:  # the model structure the rolling rows were assigned to (docs/physics.md §6.4)
         print(f"  rolling rows assigned to {st['chosen']} (cost −2 ln L: "
               + ", ".join(f"{k} {val:.1f}" for k, val in st["cost"].items()) + ")")
     print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
     return 0
+
+
+def chance_lines(verdict: dict) -> list[str]:
+    """One line per accepted candidate tested against chance (``verdict.calibration``), each naming its
+    variant, so that a fitted and a computed candidate of the same effect read apart."""
+    out = []
+    for c in verdict.get("calibration", []):
+        text = c["sentence"].removeprefix(f"{c['effect']}: ")
+        out.append(f"{c['effect']}" + (f" ({c['variant']})" if c.get("variant") else "") + f": {text}")
+    return out
 
 
 def parse_effects(text: str | None) -> list[str] | None:
