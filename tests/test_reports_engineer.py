@@ -51,7 +51,8 @@ def _candidate(variant, shrink, observed, accepted=True, half_angle=11.657, sd=0
                                                                           "length_mm": length}}}},
         "accepted": accepted, "p_value": 0.00498,
         # a tie at the p floor: the parametric null (higher 95 % quantile) binds, the all-zero one does not
-        "null": {"parametric": _null(observed, 0.00498, 11.0, param), "random_line": _null(observed, 0.00498, 0.0, rline)},
+        "null": {"parametric": _null(observed, 0.00498, 11.0, param),
+                 "random_line": _null(observed, 0.00498, 0.0, rline)},
         "null_draws": {"parametric": param.tolist(), "random_line": rline.tolist()},
     }
 
@@ -317,4 +318,31 @@ def test_diagnose_prints_each_chance_line_with_its_variant():
     v = {"calibration": [
         {"effect": "rotation", "variant": "fitted", "sentence": "rotation: " + sentence.format(50)},
         {"effect": "rotation", "variant": "computed", "sentence": "rotation: " + sentence.format(43)}]}
-    assert chance_lines(v) == ["rotation (fitted): " + sentence.format(50), "rotation (computed): " + sentence.format(43)]
+    assert chance_lines(v) == ["rotation (fitted): " + sentence.format(50),
+                               "rotation (computed): " + sentence.format(43)]
+
+
+def test_profile_residual_figure_before_and_after_without_overlap():
+    from ringfit.report.gap_report import _profile_heldout_figure, _profile_residual_figure
+
+    P, M = 2, 24
+    angle = np.linspace(-90, 90, M)
+    y = np.concatenate([np.sin(np.radians(angle)) * (p + 1) * (c + 1) for p in range(P) for c in range(2)])
+    labels = {"profile": np.repeat(np.arange(P), 2 * M), "angle_deg": np.tile(angle, 2 * P),
+              "speed_kmh": np.repeat([30.0, 50.0], 2 * M)}
+    problem = SimpleNamespace(domain="profiles", unit="m/s^2", m=y.size, y=y, sigma=np.full(y.size, 0.1),
+                              sigma_heldout=None, labels=labels)
+    chain = _fit(y + 0.05, y + 0.07, ["sensor_tilt"])
+    summary = {"candidates": [{"effect": "sensor_tilt", "element": "sensor_tilt", "variant": "fitted",
+                               "accepted": True, "heldout_shrink_pct": 90.0}], "baseline": {}}
+    part = PartResult(problem=problem, baseline=_fit(0 * y, 0 * y), reference=None,
+                      fits={("sensor_tilt",): chain}, summary=summary, chain_fit=chain)
+    fig = _profile_residual_figure(part)
+    labels_drawn = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert labels_drawn == ["before: baseline", "after: + sensor_tilt"]
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    boxes = [ax.get_tightbbox(r) for ax in fig.axes]
+    assert len(boxes) == 4 and not [1 for i in range(4) for j in range(i + 1, 4) if boxes[i].overlaps(boxes[j])]
+    held = _profile_heldout_figure(part)
+    assert "sensor_tilt, held out" in [t.get_text() for t in held.axes[0].get_legend().get_texts()]

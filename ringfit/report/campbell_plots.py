@@ -7,8 +7,9 @@ prevailing travelling direction (the branches are tracked by shape, so a
 curve is one mode; in the sensor frame it is the branch's one principal line
 ω + kΩ). Its dominant order n at the highest speed labels it on the right
 edge, the labels spread so that none overlaps another (a thin leader joins a
-moved label to its curve); measured rows are marked by their match status. The legend (below the panel, so it hides no curve) names
-only the directions drawn in that panel.
+moved label to its curve); measured rows are marked by their match status.
+The legend (below the panel, so it hides no curve) names only the directions
+drawn in that panel.
 """
 
 from __future__ import annotations

@@ -239,7 +239,8 @@ def _modal_residual_figure(part):
     ax.set_xlabel("row (state, n, tag)")
     ax.set_ylabel("held-out residual / noise σ [–]")
     ax.legend(fontsize=7, ncols=2)
-    what = "damping ratio ζ" if prob.domain == "damping" else f"{PART_TITLE.get(prob.domain, prob.domain)} [{prob.unit}]"
+    what = ("damping ratio ζ" if prob.domain == "damping"
+            else f"{PART_TITLE.get(prob.domain, prob.domain)} [{prob.unit}]")
     ax.set_title(f"{what}: held-out residual per mode, before and after", fontsize=9)
     return fig
 
@@ -319,7 +320,8 @@ def _null_figure(cands: list, title: str):
         kind = binding_null(c) or next(iter(c["null_draws"]))
         s = c["null"][kind]
         d = 100 * np.asarray(c["null_draws"][kind], dtype=float)
-        ax.hist(d, bins=30, color=COLOURS["baseline"], alpha=0.7, label=f"{kind.replace('_', '-')} null, {s['draws']} draws")
+        ax.hist(d, bins=30, color=COLOURS["baseline"], alpha=0.7,
+                label=f"{kind.replace('_', '-')} null, {s['draws']} draws")
         ax.axvline(s["observed_pct"], color=COLOURS["accepted"] if c.get("accepted") else COLOURS["rejected"],
                    lw=2, label=f"observed {s['observed_pct']:.0f} %, p = {s['p_value']:.3g}")
         ax.axvline(s["q95_pct"], color="k", ls=":", lw=0.8, label=f"95 % of the null ({s['q95_pct']:.0f} %)")
@@ -341,29 +343,6 @@ def _null_figure(cands: list, title: str):
 
 def _figure(title: str, fig) -> str:
     return f'<figure><img src="{png_data_uri(fig)}" alt="{esc(title)}"><figcaption>{esc(title)}</figcaption></figure>'
-
-
-def figures(diag) -> list[tuple[str, str]]:
-    """``(title, data URI)`` of every figure of the report, in the report's order per part: residual before and
-    after, the nulls, the forest plot, held-out predicted vs measured."""
-    out = []
-    for part in diag.parts:
-        dom = part.problem.domain
-        name = PART_TITLE.get(dom, dom)
-        if dom == "profiles":
-            out.append(("profiles: residual vs angle before/after, per channel and speed",
-                        png_data_uri(_profile_residual_figure(part))))
-        else:
-            out.append((f"{name}: held-out residual per mode, before and after",
-                        png_data_uri(_modal_residual_figure(part))))
-        tested = _null_candidates(part.summary)
-        if tested:
-            t = f"{name}: held-out shrink against chance"
-            out.append((t, png_data_uri(_null_figure(tested, t))))
-        out.append((f"{name}: ranked candidates (forest plot)", png_data_uri(_forest_figure(part))))
-        out.append((f"{name}: held-out predicted vs measured",
-                    png_data_uri(_profile_heldout_figure(part) if dom == "profiles" else _modal_heldout_figure(part))))
-    return out
 
 
 # --------------------------------------------------------------------------- tables

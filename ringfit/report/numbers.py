@@ -73,8 +73,8 @@ def fmt_pm(value, sigma, unit: str = "", digits: int = SIGMA_DIGITS) -> str:
 
 def fmt_interval(median, lo, hi, digits: int = SIGMA_DIGITS) -> tuple[str, str, str]:
     """A median and its interval, all three to one decimal place: that of the interval's narrower half-width
-    (``digits`` significant digits; at least a tenth of the wider one), or finer where an end would otherwise keep fewer than ``digits``
-    significant digits (a skewed interval near zero: EI 0.251 (0.038 – 0.902)); at most 2 places finer."""
+    (``digits`` significant digits; at least a tenth of the wider one), or finer where an end would otherwise
+    keep fewer than ``digits`` significant digits (a skewed interval near zero: EI 0.251 (0.038 – 0.902)); at most 2 places finer."""
     median, lo, hi = float(median), float(lo), float(hi)
     h1, h2 = sorted((abs(median - lo), abs(hi - median)))
     half = max(h1, h2 / 10)  # a median at a bound of its interval (a parameter at its null) takes the other side
