@@ -391,14 +391,18 @@ def _params_text(candidate: dict) -> str:
     return "; ".join(out)
 
 
+def _pct(x) -> str:
+    return "—" if x is None else f"{x:.1f}"
+
+
 def _candidate_rows(pc: dict) -> list[list[str]]:
     out = []
     for x in pc["candidates"]:
         kind = binding_null(x)
         p = f"{x['p_value']:.3g} ({kind.replace('_', '-')})" if kind and x.get("p_value") is not None else ""
-        lo, hi = x["heldout_shrink_interval_pct"]
-        out.append([esc(x["effect"]), esc(x.get("variant", "")), f"{x['heldout_shrink_pct']:.1f}",
-                    f"{lo:.1f} – {hi:.1f}", esc(x["evidence"].get("delta_bic")), esc(p), _params_text(x),
+        lo, hi = x.get("heldout_shrink_interval_pct") or (None, None)
+        out.append([esc(x["effect"]), esc(x.get("variant", "")), _pct(x.get("heldout_shrink_pct")),
+                    f"{_pct(lo)} – {_pct(hi)}", esc(x["evidence"].get("delta_bic")), esc(p), _params_text(x),
                     "yes" if x.get("accepted") else esc("; ".join(x.get("rejected_because", []))
                                                         or ("screened out" if x.get("screened_out") else ""))])
     return out
