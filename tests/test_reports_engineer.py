@@ -189,7 +189,8 @@ def test_plus_minus_interval_and_damping():
     assert numbers.fmt_pm(146.0312, 0.043, "Hz") == "146.031 ± 0.043 Hz"
     assert numbers.fmt_interval(2.543, 2.457, 2.678) == ("2.543", "2.457", "2.678")
     assert numbers.fmt_interval(0.251, 0.038, 0.902) == ("0.251", "0.038", "0.902")  # the low end keeps 2 digits
-    assert numbers.fmt_interval(0.000137, 0.0, 136.3) == ("1e-04", "0", "136")  # at its bound: the other side
+    assert numbers.fmt_interval(0.000137, 0.0, 136.3) == ("0", "0", "136")  # at its bound: the other side
+    assert numbers.fmt_interval(1.2e-4, 0.0, 9.8e-4) == ("1.2e-04", "0", "9.8e-04")  # one notation for the three
     assert numbers.fmt_damping(math.log(0.0123)) == "1.23 %"
     assert numbers.damping_pct(math.log(0.05)) == pytest.approx(5.0, rel=1e-12)
 

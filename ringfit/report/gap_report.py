@@ -183,12 +183,14 @@ def _profile_panels(prob, ylabel: str, xlabel: str, draw):
 
 
 def _profile_residual_figure(part):
+    """Residual vs angle per channel and speed: before (the baseline) and after (the accepted chain, or else the
+    best candidate) only — dense curves, a third would hide the first."""
     prob = part.problem
-    fits = _fits_before_after(part)
+    fits = _fits_before_after(part)[:2]
 
     def draw(ax, angle, sl):
         for i, (name, fit, colour) in enumerate(fits):
-            ax.plot(angle, (prob.y - fit.extra["pred"])[sl], lw=0.6 if i == 0 else 0.8, color=colour, label=name)
+            ax.plot(angle, (prob.y - fit.extra["pred"])[sl], lw=0.7, color=colour, label=name, zorder=2 + i)
         ax.axhline(0.0, color="k", lw=0.4)
         sigma = float(prob.sigma[sl][0])
         ax.axhspan(-sigma, sigma, color=COLOURS["noise"], alpha=0.12, lw=0)

@@ -29,12 +29,20 @@ SCI_FROM = 1e5
 SCI_BELOW = 1e-3
 
 
-def _fixed(x: float, places: int) -> str:
-    """``x`` rounded to ``places`` decimals (negative: tens, hundreds …); in scientific notation, with the same
-    last digit, where plain digits would be long (≥ :data:`SCI_FROM` or < :data:`SCI_BELOW`)."""
-    ax = abs(x)
-    if ax >= SCI_FROM or 0 < ax < SCI_BELOW:
-        exp = math.floor(math.log10(ax))
+def _sci_exponent(ax: float) -> int | None:
+    """The power of ten a magnitude is written with, or ``None`` for plain digits."""
+    return math.floor(math.log10(ax)) if ax >= SCI_FROM or 0 < ax < SCI_BELOW else None
+
+
+def _fixed(x: float, places: int, exp: int | None | bool = True) -> str:
+    """``x`` rounded to ``places`` decimals (negative: tens, hundreds …). ``exp``: ``True`` — scientific notation,
+    with the same last digit, where plain digits would be long (≥ :data:`SCI_FROM` or < :data:`SCI_BELOW`);
+    an int — that power of ten (numbers written side by side share one); ``None`` — plain digits."""
+    if exp is True:
+        exp = _sci_exponent(abs(x))
+    if exp is not None:
+        if x == 0:
+            return "0"
         return f"{x / 10 ** exp:.{max(0, places + exp)}f}e{exp:+03d}"
     if places >= 0:
         return f"{x:.{places}f}"
@@ -83,7 +91,8 @@ def fmt_interval(median, lo, hi, digits: int = SIGMA_DIGITS) -> tuple[str, str, 
     places = decimals(half, digits)
     ends = [decimals(abs(x), digits) for x in (lo, hi) if math.isfinite(x) and x != 0]
     places = min(max([places] + ends), places + 2)
-    return _fixed(median, places), _fixed(lo, places), _fixed(hi, places)
+    exp = _sci_exponent(max(abs(median), abs(lo), abs(hi)))  # one notation and power of ten for the three
+    return _fixed(median, places, exp), _fixed(lo, places, exp), _fixed(hi, places, exp)
 
 
 def damping_pct(ln_ratio) -> float:
