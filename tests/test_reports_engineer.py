@@ -339,11 +339,14 @@ def test_profile_residual_figure_before_and_after_without_overlap():
     part = PartResult(problem=problem, baseline=_fit(0 * y, 0 * y), reference=None,
                       fits={("sensor_tilt",): chain}, summary=summary, chain_fit=chain)
     fig = _profile_residual_figure(part)
-    labels_drawn = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    labels_drawn = [t.get_text() for t in fig.legends[0].get_texts()]  # one legend, below the panels
     assert labels_drawn == ["before: baseline", "after: + sensor_tilt"]
     fig.canvas.draw()
     r = fig.canvas.get_renderer()
     boxes = [ax.get_tightbbox(r) for ax in fig.axes]
     assert len(boxes) == 4 and not [1 for i in range(4) for j in range(i + 1, 4) if boxes[i].overlaps(boxes[j])]
     held = _profile_heldout_figure(part)
-    assert "sensor_tilt, held out" in [t.get_text() for t in held.axes[0].get_legend().get_texts()]
+    assert "sensor_tilt, held out" in [t.get_text() for t in held.legends[0].get_texts()]
+    held.canvas.draw()
+    legend_top = held.legends[0].get_window_extent(held.canvas.get_renderer()).y1
+    assert all(legend_top <= ax.get_tightbbox(held.canvas.get_renderer()).y0 + 1 for ax in held.axes)

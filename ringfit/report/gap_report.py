@@ -182,6 +182,12 @@ def _profile_panels(prob, ylabel: str, xlabel: str, draw):
     return fig, axes
 
 
+def _legend_below(fig, ax) -> None:
+    """One legend for all panels, below them (it hides no curve)."""
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4), fontsize=7)
+
+
 def _profile_residual_figure(part):
     """Residual vs angle per channel and speed: before (the baseline) and after (the accepted chain, or else the
     best candidate) only — dense curves, a third would hide the first."""
@@ -196,7 +202,7 @@ def _profile_residual_figure(part):
         ax.axhspan(-sigma, sigma, color=COLOURS["noise"], alpha=0.12, lw=0)
 
     fig, axes = _profile_panels(prob, "residual [m/s²]", "angle from patch centre [deg]", draw)
-    axes[0, 0].legend(fontsize=6, loc="upper left")
+    _legend_below(fig, axes[0, 0])
     fig.suptitle("residual vs angle, before and after (measured − model; band = ±1 noise σ)", fontsize=9)
     return fig
 
@@ -215,7 +221,7 @@ def _profile_heldout_figure(part):
         ax.set_xlim(-60, 60)
 
     fig, axes = _profile_panels(prob, "acceleration [m/s²]", "angle [deg]", draw)
-    axes[0, 0].legend(fontsize=6, loc="lower left")
+    _legend_below(fig, axes[0, 0])
     fig.suptitle("held-out: each speed predicted by the fit to the other speeds (|angle| ≤ 60°)", fontsize=9)
     return fig
 
