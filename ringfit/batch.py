@@ -11,6 +11,13 @@ takes plain callables and knows nothing of the command line:
   tasks it needs first, the files it writes. :func:`run_tasks` submits them,
   shows a progress bar over tasks on stderr and returns one
   :class:`TaskResult` per task, in order, whatever happened to it.
+- **Progress inside a task.** A task's stdout and stderr are its log; the
+  latest line it prints (a command's own progress bar: a diagnosis's
+  candidates, a posterior's steps, ``identify``'s passes) is relayed to the
+  client at most every :data:`PROGRESS_EVERY_S` seconds (a Dask worker event
+  under :data:`PROGRESS_TOPIC`), where the bar names every running task, how
+  long it has run and its latest line; progress-bar redraws are left out of
+  the log.
 
 Workers done right:
 
@@ -163,6 +170,13 @@ class TaskResult:
 
 
 # ============================================================================ on the worker
+#: Dask event topic of the progress lines tasks relay to the client.
+PROGRESS_TOPIC = "ringfit-task-progress"
+#: Least seconds between two progress lines relayed from one task; the client's bar is redrawn as often.
+PROGRESS_EVERY_S = 2.0
+#: Longest progress line relayed (characters).
+PROGRESS_WIDTH = 90
+
 _TASK_LOCK = threading.Lock()
 _TASKS_RUN = 0
 _KINDS_RUN: dict[str, int] = {}
@@ -264,6 +278,93 @@ class _PeakMemory:
         return False
 
 
+_BAR_GLYPHS = re.compile(r"\|[^|]*\|")
+
+
+def progress_line(text: str) -> str:
+    """A progress line as relayed: one line, a tqdm bar's drawn part left out (``modes: rotation: 44% 4/9
+    [00:02<00:02, 2.42candidate/s]``), at most :data:`PROGRESS_WIDTH` characters."""
+    line = " ".join(_BAR_GLYPHS.sub(" ", text).split())
+    return line if len(line) <= PROGRESS_WIDTH else line[: PROGRESS_WIDTH - 1] + "…"
+
+
+class TaskStream(io.TextIOBase):
+    """A task's stdout and stderr: written to ``log``, except progress-bar redraws (text after a carriage
+    return); the latest line of either is passed to ``relay`` (at most every ``every_s`` seconds)."""
+
+    def __init__(self, log, relay: Callable[[str], Any] | None = None, every_s: float = PROGRESS_EVERY_S):
+        super().__init__()
+        self.log, self.relay, self.every_s = log, relay, every_s
+        self._last = -float("inf")
+        self._pending: str | None = None
+        self._timer: threading.Timer | None = None
+        self._lock = threading.Lock()
+
+    def writable(self) -> bool:
+        return True
+
+    def isatty(self) -> bool:
+        return False
+
+    def write(self, text: str) -> int:
+        if "\r" in text:  # a bar redrawing its line: relayed, not logged (what came before the first \r is)
+            head, _, _ = text.partition("\r")
+            if head.strip():
+                self.log.write(head)
+            self._relay(text.rsplit("\r", 1)[-1])
+        else:
+            self.log.write(text)
+            lines = [line for line in text.splitlines() if line.strip()]
+            if lines:
+                self._relay(lines[-1])
+        return len(text)
+
+    def _relay(self, line: str) -> None:
+        line = progress_line(line)
+        if self.relay is None or not line:
+            return
+        with self._lock:
+            self._pending = line
+            wait = self._last + self.every_s - time.monotonic()
+            if wait > 0:  # too soon: the newest line goes out when the interval is over (none is left stale)
+                if self._timer is None:
+                    self._timer = threading.Timer(wait, self._send)
+                    self._timer.daemon = True
+                    self._timer.start()
+                return
+        self._send()
+
+    def _send(self) -> None:
+        with self._lock:
+            line, self._pending, self._timer = self._pending, None, None
+            self._last = time.monotonic()
+        if line is None or self.relay is None:
+            return
+        try:
+            self.relay(line)
+        except Exception:  # noqa: BLE001 - progress is best effort: it never fails a task
+            self.relay = None
+
+    def close(self) -> None:
+        """Stop a pending relay (the task is over)."""
+        with self._lock:
+            if self._timer is not None:
+                self._timer.cancel()
+            self._timer, self._pending = None, None
+        super().close()
+
+
+def _worker_relay(name: str) -> Callable[[str], None] | None:
+    """Where a task on a Dask worker sends its progress lines (a worker event); ``None`` outside a worker."""
+    try:
+        from distributed import get_worker
+
+        worker = get_worker()
+    except (ImportError, ValueError):
+        return None
+    return lambda line: worker.log_event(PROGRESS_TOPIC, {"task": name, "line": line})
+
+
 def _one_line(text: str, limit: int = 400) -> str:
     line = " ".join(str(text).split())
     return line if len(line) <= limit else line[: limit - 1] + "…"
@@ -282,11 +383,12 @@ def execute(name: str, fn: Callable, args: tuple = (), outputs: tuple = (), kind
         _JaxCompiles.install()
         c0, s0 = _JaxCompiles.count, _JaxCompiles.seconds
         log = io.StringIO()
+        stream = TaskStream(log, _worker_relay(name))
         result = TaskResult(name, outputs=tuple(outputs), worker=f"{socket.gethostname()}:{os.getpid()}",
                             task_index=_TASKS_RUN, kind=kind, kind_index=_KINDS_RUN.get(kind, 0))
         result.started_at = time.time()
         t0, p0 = time.perf_counter(), time.process_time()
-        with _PeakMemory() as mem, contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
+        with _PeakMemory() as mem, contextlib.redirect_stdout(stream), contextlib.redirect_stderr(stream):
             try:
                 result.value = fn(*args)
             except TaskFailed as exc:
@@ -299,6 +401,7 @@ def execute(name: str, fn: Callable, args: tuple = (), outputs: tuple = (), kind
                 traceback.print_exc(file=log)
                 result.state, result.status = "failed", 1
                 result.error = _one_line(f"{type(exc).__name__}: {exc}")
+        stream.close()
         result.elapsed_s = time.perf_counter() - t0
         result.cpu_s = time.process_time() - p0
         result.rss_start_mb, result.peak_rss_mb = mem.start, mem.peak
@@ -590,7 +693,9 @@ def run_tasks(client, tasks: Sequence[Task], *, retries: int = 1, progress: bool
     - ``tasks``: :class:`Task` list; ``after`` names must come earlier in it.
     - ``retries``: Dask retries of a task whose *wrapper* raised (a task's own
       failure is a result, not retried; a dead worker is handled by the scheduler).
-    - ``progress``: a tqdm bar over tasks on stderr.
+    - ``progress``: a tqdm bar over tasks on stderr, naming each running task, how long it has run and the
+      latest line it printed (relayed from its worker, :class:`TaskStream`), redrawn every
+      :data:`PROGRESS_EVERY_S` seconds.
     - ``skip_existing``: a task whose ``outputs`` all exist is not run (``kept``).
     - ``max_in_flight``: tasks submitted at once (default: the cluster's
       worker threads, asked again as workers come and go).
@@ -624,13 +729,23 @@ def run_tasks(client, tasks: Sequence[Task], *, retries: int = 1, progress: bool
     keys: dict[str, str] = {}
     queue = distributed.as_completed()
     bar = tqdm(total=len(tasks), desc=description, unit="task", file=sys.stderr, disable=not progress)
+    started: dict[str, float] = {}  # running task -> when it was submitted (time.monotonic())
+    latest: dict[str, str] = {}  # task -> the latest progress line it relayed
+
+    def on_progress(event) -> None:
+        msg = event[1] if isinstance(event, tuple) else event
+        if isinstance(msg, dict) and msg.get("task") in started:
+            latest[msg["task"]] = str(msg.get("line", ""))
+
+    def redraw() -> None:
+        bar.set_postfix_str(running_status(started, latest, sum(not r.ok for r in done.values())))
 
     def finish(name: str, result: TaskResult) -> None:
         done[name] = result
+        started.pop(name, None)
+        latest.pop(name, None)
         bar.update(1)
-        failed = sum(not r.ok for r in done.values())
-        if failed:
-            bar.set_postfix_str(f"{failed} failed")
+        redraw()
 
     def slots() -> int:
         if max_in_flight is not None:
@@ -663,8 +778,19 @@ def run_tasks(client, tasks: Sequence[Task], *, retries: int = 1, progress: bool
             fut = client.submit(execute, name, task.fn, tuple(task.args), tuple(task.outputs), task.kind,
                                 key=f"ringfit-task-{_token()}", pure=False, retries=retries)
             keys[fut.key] = name
+            started[name] = time.monotonic()
             queue.add(fut)
 
+    stop = threading.Event()
+
+    def redraw_every() -> None:
+        while not stop.wait(PROGRESS_EVERY_S):
+            redraw()
+
+    if progress:
+        with contextlib.suppress(Exception):  # an old scheduler without events: the bar still counts tasks
+            client.subscribe_topic(PROGRESS_TOPIC, on_progress)
+        threading.Thread(target=redraw_every, name="ringfit-progress", daemon=True).start()
     try:
         launch()
         for fut in queue:
@@ -678,10 +804,32 @@ def run_tasks(client, tasks: Sequence[Task], *, retries: int = 1, progress: bool
             finish(name, result)
             launch()
     finally:
+        stop.set()
+        if progress:
+            with contextlib.suppress(Exception):
+                client.unsubscribe_topic(PROGRESS_TOPIC)
         bar.close()
     if pending:  # pragma: no cover - every task is settled or submitted once its needs are done
         raise RuntimeError(f"tasks never ran: {sorted(pending)}")
     return [done[t.name] for t in tasks]
+
+
+def _clock(seconds: float) -> str:
+    seconds = int(seconds)
+    return f"{seconds // 3600}h{seconds // 60 % 60:02d}m" if seconds >= 3600 else f"{seconds // 60}m{seconds % 60:02d}s"
+
+
+def running_status(started: dict, latest: dict, failed: int = 0, now: float | None = None, show: int = 2) -> str:
+    """The bar's postfix: the ``show`` longest-running tasks with their run time and latest progress line
+    (``tyre1/diagnose 12m03s [modes: rotation 4/9]; tyre2/identify 3m10s; +1 running``), then failures."""
+    now = time.monotonic() if now is None else now
+    order = sorted(started, key=lambda n: started[n])
+    parts = [f"{n} {_clock(now - started[n])}" + (f" [{latest[n]}]" if latest.get(n) else "") for n in order[:show]]
+    if len(order) > show:
+        parts.append(f"+{len(order) - show} running")
+    if failed:
+        parts.append(f"{failed} failed")
+    return "; ".join(parts)
 
 
 def _token() -> str:

@@ -7,6 +7,7 @@ are recomputed here from the raw draws in the posterior file.
 """
 
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -356,3 +357,26 @@ def test_outlier_test_is_calibrated_and_finds_a_planted_outlier():
     assert np.flatnonzero(d["outlier"]).tolist() == [7] and d["distance"][7] > d["threshold"]
     few = batch_distances(rng.normal(size=(k + 2, k)))
     assert not few["tested"] and np.isnan(few["distance"]).all()
+
+
+def _prints_progress(seconds):
+    """A task that draws a progress bar on stderr for a few seconds (as a diagnosis does)."""
+    import sys
+    import time
+
+    print("starting")
+    for i in range(4):
+        sys.stderr.write(f"\rnull draws: {50 * (i + 1)}/200")
+        sys.stderr.flush()
+        time.sleep(seconds / 4)
+    return 0
+
+
+@pytest.mark.slow  # a cluster and a task of 6 s
+def test_a_running_task_relays_its_progress_to_the_batch_bar(cluster, capsys):
+    """Issue 34: a long task is not a frozen bar: its latest line and its run time reach the client's bar."""
+    with open_client(cluster.scheduler_address) as client:
+        results = run_tasks(client, [Task("t1/diagnose", _prints_progress, (6.0,))], progress=True)
+    assert results[0].ok and results[0].log == "starting\n"  # bar redraws stay out of the task's log
+    err = capsys.readouterr().err
+    assert re.search(r"t1/diagnose 0m0\ds \[null draws: (50|100|150|200)/200\]", err), err[-500:]

@@ -63,3 +63,19 @@ def test_report_renders_in_chromium(report, tmp_path):
     assert pixels.shape[0] > 2000  # the full page, not an empty viewport
     assert pixels.std() > 0.05  # not blank
     assert (pixels.mean(axis=2) < 0.5).mean() > 0.01  # real ink on the page
+
+
+def test_report_names_its_input_by_file_name_and_has_units(report):
+    """Issue 34: a report sent to a colleague shows no folder of the sender; parameters carry their units;
+    measured frequencies are written to the digits their σ warrants."""
+    import re
+
+    html = report.read_text()
+    source = str(data_path("free-ssi.modes.csv"))
+    assert "/" in source and source not in html and "Data: free-ssi.modes.csv (" in html
+    header = re.search(r"<th[^>]*>parameter</th><th[^>]*>unit</th>", html)
+    assert header is not None
+    assert re.search(r"<td[^>]*>rho_a</td><td[^>]*>kg/m</td>", html)
+    assert re.search(r"<td[^>]*>kw</td><td[^>]*>N/m²</td>", html)
+    # n = 1 of the bundled table: 107.0 Hz with the default σ of 1 % (1.07 Hz) → one decimal, σ "1.1"
+    assert re.search(r"<td[^>]*>1</td><td[^>]*>107\.0</td><td[^>]*>1\.1</td>", html)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import io
 import re
 import sys
 from dataclasses import dataclass, field
@@ -49,8 +50,9 @@ OUTPUT_RULES: dict[str, OutputRule] = {
     "ssi": OutputRule((".records.npz", ".uff", ".unv"), ".modes.csv", (".modes.json",),
                       (("--workers", "1"), ("--quiet",))),
     "fit": OutputRule((".modes.csv",), ".fitted.tyre.toml", (), (("--tyre", "{dir}/tyre.toml"),)),
-    "sample": OutputRule((".modes.csv",), ".posterior.h5", (), (("--tyre", "{dir}/tyre.toml"), ("--quiet",))),
-    "diagnose": OutputRule((), ".diagnosis.json", (), (("--quiet",),)),
+    # the long commands keep their progress bars: the batch's bar relays each task's latest line
+    "sample": OutputRule((".modes.csv",), ".posterior.h5", (), (("--tyre", "{dir}/tyre.toml"),)),
+    "diagnose": OutputRule((), ".diagnosis.json", ()),
     "profile": OutputRule((".records.npz",), ".profile.csv", (".profile.json",), (("--quiet",),)),
     "estimate": OutputRule((".profile.csv", ".records.npz"), ".estimate.json", (),
                            (("--tyre", "{dir}/tyre.toml"), ("--quiet",))),
@@ -285,13 +287,29 @@ def _last_line(text: str) -> str:
     return lines[-1] if lines else ""
 
 
+class _Tee(io.StringIO):
+    """Keeps what is written (for the last error line) and passes it on at once to ``out``."""
+
+    def __init__(self, out):
+        super().__init__()
+        self.out = out
+
+    def write(self, text: str) -> int:
+        self.out.write(text)
+        return super().write(text)
+
+    def flush(self) -> None:
+        self.out.flush()
+
+
 def run_command(argv: list[str], cwd: str | None = None) -> int:
     """Run one ringfit command in this process, as the shell would (a batch task).
 
     **Arguments:** ``argv`` (without ``ringfit``); ``cwd``: the folder the
     batch was started in: relative paths in ``argv`` are read from there (the
     worker's file system must hold it under the same path). Its stdout and
-    stderr go to the caller's streams (the batch captures them).
+    stderr go to the caller's streams as they are written (the batch captures
+    them and relays its progress lines, :class:`ringfit.batch.TaskStream`).
 
     **Raises:** :class:`ringfit.batch.TaskFailed` with the command's last stderr
     line and its exit status when that status is not 0.
@@ -310,7 +328,7 @@ def run_command(argv: list[str], cwd: str | None = None) -> int:
         except OSError:
             raise TaskFailed(f"the batch's folder {cwd} is not on this worker (tasks send paths: the inputs "
                              "and DIR need a file system every worker sees)", status=2) from None
-    err = io.StringIO()
+    err = _Tee(sys.stderr)
     try:
         with contextlib.redirect_stderr(err):
             try:
@@ -320,7 +338,6 @@ def run_command(argv: list[str], cwd: str | None = None) -> int:
     finally:
         os.chdir(here)
     text = err.getvalue()
-    sys.stderr.write(text)
     if status:
         raise TaskFailed(_last_line(text) or f"`ringfit {argv[0]}` exited with status {status}", status)
     return 0
@@ -423,6 +440,8 @@ def run_batch(args) -> int:
     cwd = os.getcwd()
     tasks = [Task(plan.input, run_command, (plan.argv, cwd), outputs=tuple(plan.outputs), kind=args.batch_command)
              for plan in plans]
+    if not opts.quiet:
+        print("\n".join(work_summary(tasks)), file=sys.stderr)
     try:
         results, timing = _run(opts, tasks, (args.batch_command,), f"ringfit {args.batch_command}")
     except BaseException:
@@ -550,8 +569,9 @@ def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
     from ringfit.cli.identify import report_path as identify_report_path
 
     force = ["--force"] if opts.force else []
-    sample_opts = ["--walkers", str(opts.walkers), "--min-steps", str(opts.min_steps), "--max-steps",
-                   str(opts.max_steps), "--seed", str(opts.seed), "--prior", opts.prior, "--quiet"]
+    # the long steps (posteriors, identify, diagnose) keep their progress bars: the campaign's bar relays them
+    steps = ["--min-steps", str(opts.min_steps), "--max-steps", str(opts.max_steps), "--seed", str(opts.seed)]
+    sample_opts = ["--walkers", str(opts.walkers), *steps, "--prior", opts.prior]
     cwd = os.getcwd()
 
     def step(tyre: str, kind: str, argv: list[str], after: tuple, outputs: list) -> Task:
@@ -588,7 +608,7 @@ def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
             # loaded tables at a known load or profiles: the tyre is identified once from everything measured
             # (``ringfit identify``, its posterior included); every later step reads that tyre file
             tasks.append(step(name, "identify", ["identify", str(case), "--out", paths["fitted"], "--posterior",
-                                                 paths["posterior"], *sample_opts[2:-3], "--quiet", *force], after,
+                                                 paths["posterior"], *steps, *force], after,
                               [paths["fitted"], paths["posterior"], identify_report_path(Path(paths["fitted"]))]))
             paths["identified"] = True
             first = f"{name}/identify"
@@ -604,10 +624,37 @@ def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
         # one ring per tyre: the diagnosis takes the fitted tyre file as its baseline (not a refit of its own), so the
         # campaign table (read from that file) and the diagnosis agree by construction
         tasks.append(step(name, "diagnose", ["diagnose", str(case), "--out", paths["diagnosis"], "--tyre",
-                                             paths["fitted"], "--quiet", *diag_opts, *force], (first,),
+                                             paths["fitted"], *diag_opts, *force], (first,),
                           [paths["diagnosis"]]))
         layout[name] = paths
     return tasks, layout
+
+
+def work_summary(tasks, opts=None) -> list[str]:
+    """What a run will do and which of it takes long, said before any work: the tasks by kind and, for a
+    campaign (``opts`` with ``walkers``), the size of each posterior and of each diagnosis's null tests."""
+    from collections import Counter
+
+    from ringfit.cli.gap import DEFAULT_NULL_DRAWS
+
+    kinds = Counter(t.kind for t in tasks)
+    lines = [f"work: {len(tasks)} task{'s' if len(tasks) != 1 else ''} ("
+             + ", ".join(f"{n} {k}" for k, n in kinds.items()) + ")"]
+    if kinds.get("sample") and hasattr(opts, "walkers"):
+        n = kinds["sample"]
+        lines.append(f"  long: {n} posterior{'s' if n != 1 else ''} (sample), each {opts.walkers} walkers × "
+                     f"{opts.min_steps}–{opts.max_steps} steps, until the chain is 50 autocorrelation times long")
+    if kinds.get("identify") and hasattr(opts, "min_steps"):
+        n = kinds["identify"]
+        lines.append(f"  long: {n} joint identification{'s' if n != 1 else ''}, each a joint fit and its posterior "
+                     f"(2 walkers per free parameter × {opts.min_steps}–{opts.max_steps} steps)")
+    if kinds.get("diagnose"):
+        n = kinds["diagnose"]
+        lines.append(f"  long: {n} diagnos{'is' if n == 1 else 'es'}: every candidate effect refitted, then each round "
+                     f"with an accepted candidate tested against {DEFAULT_NULL_DRAWS} draws of each null "
+                     "(the whole selection redone per draw; minutes per folder)")
+    lines.append("  the bar names each running task, how long it has run and the latest line it printed")
+    return lines
 
 
 def _check_campaign_options(args) -> None:
@@ -642,6 +689,10 @@ def run_campaign(args) -> int:
     for path in (table_path, report_path):
         check_output_path(path, overwrite=rebuild)
     tasks, layout = plan_campaign(tyres, args.out, args)
+    if not args.quiet:
+        print(f"ringfit campaign: {len(tyres)} tyre folder{'s' if len(tyres) != 1 else ''} in {args.campaign}",
+              file=sys.stderr)
+        print("\n".join(work_summary(tasks, args)), file=sys.stderr)
     results, timing = _run(args, tasks, ("ssi", "fit", "sample", "identify", "diagnose"), "ringfit campaign")
 
     from ringfit.report.campaign import collect_campaign, write_campaign_csv, write_campaign_report

@@ -8,6 +8,9 @@ from __future__ import annotations
 
 from ringfit.cli._args import force_flag, integer, number, quiet_flag
 
+#: Draws per null distribution unless ``--null-draws`` says otherwise (what ``campaign`` runs).
+DEFAULT_NULL_DRAWS = 200
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -29,7 +32,8 @@ def register(subparsers) -> None:
     p.add_argument("--alpha", type=number("a significance level in (0, 0.5]", lo=0.0, hi=0.5, lo_open=True),
                    default=0.01, help="an accepted effect must beat chance (its null) at this level (default 0.01)")
     p.add_argument("--null-draws", type=integer("a count of null draws, 20 … 20000", lo=20, hi=20000),
-                   default=200, help="draws per null distribution (default 200; p is resolved to 1/(draws + 1))")
+                   default=DEFAULT_NULL_DRAWS,
+                   help=f"draws per null distribution (default {DEFAULT_NULL_DRAWS}; p is resolved to 1/(draws + 1))")
     p.add_argument("--tyre", default=None, metavar="TYRE.toml",
                    help="baseline ring as identified or fitted before (ringfit identify / fit), used as it is with "
                         "its [ring.covariance]: one ring per tyre (default: fit free.modes.csv)")
@@ -86,14 +90,24 @@ def run(args) -> int:
     v = diag.verdict
     print(f"verdict: {' + '.join(v['effects'])}"
           + (f" (held-out shrink {v['heldout_shrink_pct']:.0f} %)" if v["effect"] not in ("none", "unexplained") else ""))
-    for c in v.get("calibration", []):
-        print(f"  {c['sentence']}")
+    for line in chance_lines(v):
+        print(f"  {line}")
     st = (diag.content.get("baseline") or {}).get("rolling_structure")
     if st:  # the model structure the rolling rows were assigned to (docs/physics.md §6.4)
         print(f"  rolling rows assigned to {st['chosen']} (cost −2 ln L: "
               + ", ".join(f"{k} {val:.1f}" for k, val in st["cost"].items()) + ")")
     print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
     return 0
+
+
+def chance_lines(verdict: dict) -> list[str]:
+    """One line per accepted candidate tested against chance (``verdict.calibration``), each naming its
+    variant, so that a fitted and a computed candidate of the same effect read apart."""
+    out = []
+    for c in verdict.get("calibration", []):
+        text = c["sentence"].removeprefix(f"{c['effect']}: ")
+        out.append(f"{c['effect']}" + (f" ({c['variant']})" if c.get("variant") else "") + f": {text}")
+    return out
 
 
 def parse_effects(text: str | None) -> list[str] | None:

@@ -157,11 +157,17 @@ def _finish(args, result, plot) -> int:
 
         fig = plot(result)
         atomic_write(args.plot, lambda tmp: fig.savefig(tmp, format="png", dpi=120))
+    import numpy as np
+
+    from ringfit.report.numbers import fmt_pm, fmt_value
+
     t = result.table
     print(f"{len(t)} modes -> {args.out}" + ("" if t.condition.get("credible", True) else "  (NOT CREDIBLE: noise)"))
     for i in range(len(t)):
         n = "-" if t.n[i] < 0 else str(t.n[i])
-        print(f"  n={n:>2}  {t.kind[i]:<10}  {t.freq_hz[i]:8.2f} Hz ± {t.freq_std_hz[i]:.2f}  ζ = {t.damping_pct[i]:.2f} %")
+        sd = float(t.freq_std_hz[i])  # the frequency to the digits its σ warrants (report/numbers.py)
+        f = fmt_pm(t.freq_hz[i], sd, "Hz") if np.isfinite(sd) and sd > 0 else f"{fmt_value(t.freq_hz[i])} Hz"
+        print(f"  n={n:>2}  {t.kind[i]:<10}  {f:>20}  ζ = {t.damping_pct[i]:.2f} %")
         if t.kind[i] == "unclassified" and str(t.extra.get("reason", [""] * len(t))[i]):
             print(f"         ({t.extra['reason'][i]})")
     for note in t.condition.get("limits", []):

@@ -527,6 +527,8 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
         if not cur["excess"]:
             break
         if any(c["accepted"] or null_decides(c) for c in entries) and null_draws > 0:
+            if bar is not None:  # the longest step of a diagnosis: say so while it runs
+                bar.set_description(f"{problem.domain}: round {len(rounds)}: {null_draws} null draws")
             _calibrate(problem, part, chain, current, remaining, entries, alpha, null_draws, len(rounds))
         accepted = [c for c in entries if c["accepted"]]
         if not accepted:

@@ -30,6 +30,7 @@ from ringfit.io.files import csv_text
 from ringfit.report.figures import new_figure
 from ringfit.report.free_plots import LABELS
 from ringfit.report.html import esc, figure_html, fmt, html_document, table_html
+from ringfit.report.numbers import fmt_interval
 
 #: Family-wise false-flag rate of the outlier test (Bonferroni over the tyres).
 OUTLIER_ALPHA = 0.05
@@ -355,8 +356,11 @@ def build_campaign_report(campaign: Campaign, title: str = "ringfit campaign") -
                  esc(r["targets"])]
         for j in range(len(campaign.parameters)):
             m = campaign.median[i, j]
-            cells.append(f"{fmt(m)} ({fmt(campaign.lo[i, j])} – {fmt(campaign.hi[i, j])})" if np.isfinite(m)
-                         else "—")
+            if np.isfinite(m):  # to the digits the interval warrants (ringfit/report/numbers.py)
+                med, lo, hi = fmt_interval(m, campaign.lo[i, j], campaign.hi[i, j])
+                cells.append(f"{med} ({lo} – {hi})")
+            else:
+                cells.append("—")
         conv = r.get("sampler_converged")
         cells.append("—" if conv is None else "converged" if conv else "<b>short chain</b>")
         cells.append(esc(r.get("verdict") or "—"))

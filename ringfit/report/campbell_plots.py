@@ -8,6 +8,8 @@ curve is one mode; in the sensor frame it is the branch's one principal line
 ω + kΩ). Its dominant order n at the highest speed labels it on the right
 edge, the labels spread so that none overlaps another (a thin leader joins a
 moved label to its curve); measured rows are marked by their match status.
+The legend (below the panel, so it hides no curve) names only the directions
+drawn in that panel.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ def plot_campbell(diagram, path=None, *, frame: str = "fixed", match=None, title
     frame = frame_name(frame)
     rows = list(match.rows) if match is not None else []
     frames = [frame] + [f for f in ("fixed", "rotating") if f != frame and any(r["frame"] == f for r in rows)]
-    fig, axes = new_figure(1, len(frames), figsize=(6.5 * len(frames), 5.2), squeeze=False)
+    fig, axes = new_figure(1, len(frames), figsize=(6.5 * len(frames), 5.8), squeeze=False, layout="constrained")
     axes = axes[0]
     top = f_max or max([400.0] + [1.15 * r["freq_hz"] for r in rows])
     direction = diagram.branch_direction()
@@ -50,10 +52,12 @@ def plot_campbell(diagram, path=None, *, frame: str = "fixed", match=None, title
     for ax, fr in zip(axes, frames):
         f = diagram.frequencies(fr)
         labels = []
+        drawn = set()  # the directions with a curve in this panel: only those get a legend entry
         for b in range(diagram.branches):
             if np.nanmin(f[:, b]) > top:
                 continue
             colour = _DIRECTION_COLOUR[direction[b]]
+            drawn.add(direction[b])
             ax.plot(v, f[:, b], color=colour, lw=1.1, alpha=0.85, marker="_" if len(v) == 1 else None, ms=12)
             if bottom <= f[-1, b] <= top:
                 labels.append((float(f[-1, b]), f"{diagram.order[-1, b]}", colour))
@@ -72,14 +76,15 @@ def plot_campbell(diagram, path=None, *, frame: str = "fixed", match=None, title
                 ax.scatter([r["speed_kmh"] for r in sel], [r["freq_hz"] for r in sel], s=38, zorder=5,
                            edgecolor="white", linewidth=0.6, **style)
         for name, colour in _DIRECTION_COLOUR.items():
-            ax.plot([], [], color=colour, label=f"{name} branch")
+            if name in drawn:
+                ax.plot([], [], color=colour, lw=1.1, label=f"{name} branch")
         ax.set_xlim(v[0] - 1.0, x_right)
         ax.set_xlabel("speed [km/h]")
         ax.set_ylabel("frequency [Hz]")
         where = "fixed observer" if fr == "fixed" else "co-rotating sensor (each branch's principal line ω + kΩ)"
         ax.set_title(f"{where}", fontsize=10)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left")
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncols=3)  # below: no curve hidden
     road = "flat road" if diagram.drum_diameter_m is None else f"drum {diagram.drum_diameter_m:g} m"
     load = f"{diagram.load_n:g} N, {road}" if diagram.contact else "free spinning ring"
     fig.suptitle(title or f"Campbell diagram of the rolling tyre ({load}); labels: dominant order n", fontsize=11)

@@ -11,10 +11,11 @@ import base64
 import io
 
 
-def new_figure(nrows: int = 1, ncols: int = 1, *, figsize=(7, 4), **kwargs):
+def new_figure(nrows: int = 1, ncols: int = 1, *, figsize=(7, 4), layout=None, **kwargs):
     """``(fig, axes)`` on the Agg canvas; ``kwargs`` go to ``Figure.subplots``.
 
-    With ``nrows = ncols = 1`` and no extra kwargs, ``axes`` is a single Axes.
+    With ``nrows = ncols = 1`` and no extra kwargs, ``axes`` is a single Axes. ``layout="constrained"`` keeps
+    stacked panels' titles and axis labels apart (matplotlib's constrained layout).
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -22,7 +23,7 @@ def new_figure(nrows: int = 1, ncols: int = 1, *, figsize=(7, 4), **kwargs):
     height_ratios = kwargs.pop("height_ratios", None)
     if height_ratios is not None:
         kwargs["gridspec_kw"] = {"height_ratios": height_ratios}
-    fig = Figure(figsize=figsize, dpi=110)
+    fig = Figure(figsize=figsize, dpi=110, layout=layout)
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrows, ncols, **kwargs)
     return fig, axes

@@ -92,13 +92,16 @@ def corner_figure(samples, names, truths=None):
         scales.append("log" if k in LOG_AXES else "linear")
     size = 2.1 * len(names) + 0.8
     fig = blank_figure(figsize=(size, size))
-    corner.corner(samples, labels=labels, titles=titles, truths=truths, fig=fig, axes_scale=scales,
-                  quantiles=[0.025, 0.5, 0.975], show_titles=True, title_fmt=".3g", max_n_ticks=4,
-                  title_kwargs={"fontsize": 8}, label_kwargs={"fontsize": 9}, labelpad=0.12)
+    corner.corner(samples, labels=labels, truths=truths, fig=fig, axes_scale=scales,
+                  quantiles=[0.025, 0.5, 0.975], show_titles=False, max_n_ticks=4,
+                  label_kwargs={"fontsize": 9}, labelpad=0.12)
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     plain = FuncFormatter(lambda v, _: f"{v:.3g}")
     k = len(names)
+    for j, title in enumerate(titles):  # median and 95 % interval to the digits the interval warrants
+        lo, med, hi = np.quantile(samples[:, j], [0.025, 0.5, 0.975])
+        fig.axes[j * k + j].set_title(corner_title(title, med, lo, hi), fontsize=8)
     for idx, ax in enumerate(fig.axes[: k * k]):
         row, col = divmod(idx, k)
         for axis, scale, lim, shown in ((ax.xaxis, ax.get_xscale(), ax.get_xlim(), row == k - 1),
@@ -115,6 +118,19 @@ def corner_figure(samples, names, truths=None):
     return fig
 
 
+def corner_title(symbol: str, median: float, lo: float, hi: float) -> str:
+    """``"ρA = 2.543 (2.457 – 2.678)"``: the median and its 95 % interval, each to the decimal place of the
+    interval's narrower half-width's second significant digit (:func:`ringfit.report.numbers.fmt_interval`)."""
+    from ringfit.report.numbers import fmt_interval
+
+    m, a, b = fmt_interval(median, lo, hi)
+    return f"{symbol} = {m}\n({a} – {b})"
+
+
+#: Largest σ(log) a Fisher bar is drawn to; a longer bar is clipped there and marked with an arrow and its value.
+FISHER_CLIP = 1e3
+
+
 def identifiability_figure(ident, profile_name=None, prior=None):
     """Fisher eigen-spectrum (log-std per direction) and, if computed, a profile likelihood.
 
@@ -126,9 +142,17 @@ def identifiability_figure(ident, profile_name=None, prior=None):
     axes = np.atleast_1d(axes)
     ax = axes[0]
     k = len(ident.names)
-    s = np.minimum(ident.log_std, 1e3)
+    full = np.asarray(ident.log_std, dtype=float)
+    s = np.minimum(np.nan_to_num(full, nan=np.inf), FISHER_CLIP)
     ax.bar(np.arange(k), s, color=["C3" if x > 0.5 else "C0" for x in s])
     ax.set_yscale("log")
+    for i in np.flatnonzero(~(full < FISHER_CLIP)):  # clipped bars: an arrow past the top and the true value
+        value = "∞" if not np.isfinite(full[i]) else f"{full[i]:.2g}"
+        ax.annotate(f"σ = {value}\n(clipped)", xy=(i, FISHER_CLIP), xytext=(i, FISHER_CLIP * 8), ha="center",
+                    va="bottom", fontsize=7, arrowprops={"arrowstyle": "<|-", "color": "C3", "lw": 1.2},
+                    gid="clipped-bar")
+    if np.any(~(full < FISHER_CLIP)):
+        ax.set_ylim(top=FISHER_CLIP * 200)
     ax.axhline(0.5, color="0.4", ls="--", lw=0.8)
     ax.set_xticks(np.arange(k))
     ax.set_xticklabels(["\n".join(f"{v:+.2f} {nm}" for v, nm in zip(vec, ident.names) if abs(v) > 0.3)

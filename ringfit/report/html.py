@@ -68,6 +68,14 @@ def fmt(x, digits=4) -> str:
     return f"{x:.{digits}g}"
 
 
+def source_name(source) -> str:
+    """The input's file name as a report prints it: never the folders it sat in on the machine that made the
+    report (a report is sent to colleagues), so the last path component only; ``""`` for none."""
+    if not source:
+        return ""
+    return str(source).replace("\\", "/").rstrip("/").rsplit("/", 1)[-1]
+
+
 def write_report(posterior, path, *, overwrite: bool = False, inputs=()):
     """Write the free-tyre uncertainty report for a :class:`~ringfit.fit.posterior.Posterior`.
 
@@ -99,6 +107,7 @@ def build_free_report(post) -> str:
     from ringfit.fit.identifiability import Identifiability
     from ringfit.fit.posterior import natural_frequency_predictive
     from ringfit.report import free_plots
+    from ringfit.report.numbers import fmt_interval, fmt_sigma, fmt_value
 
     meta = post.meta
     missing = [k for k in ("data", "geometry", "lsq") if k not in meta]
@@ -127,7 +136,8 @@ def build_free_report(post) -> str:
     over = [
         f"<p>Tyre <b>{esc(geo.get('name') or '—')}</b>, R = {geo['radius']:.4g} m, "
         f"b = {geo['width']:.4g} m, p0 = {geo['pressure_bar']:.3g} bar. "
-        f"Data: {esc(meta.get('source') or 'mode table')} ({n.size} modes; σ: {esc(data['sigma_source'])}).</p>",
+        f"Data: {esc(source_name(meta.get('source')) or 'mode table')} ({n.size} modes; "
+        f"σ: {esc(data['sigma_source'])}).</p>",
         f"<p>Model: static inextensible ring, eq. 18 (docs/physics.md §2.1); free parameters: "
         f"{', '.join(esc(k) for k in free)}. Least squares with the stated prior: <b>{esc(lsq['status'])}</b> "
         f"after {lsq['iterations']} iterations, χ² = {lsq['chi2']:.3g} for {lsq['dof']} degrees of freedom, "
@@ -144,8 +154,12 @@ def build_free_report(post) -> str:
     for i in range(n.size):
         lo_i = float(np.interp(n[i], pred["n"], pred["lo"]))
         hi_i = float(np.interp(n[i], pred["n"], pred["hi"]))
-        mode_rows.append([f"{int(n[i])}", fmt(f[i]), fmt(sigma[i], 3), fmt(lsq_hz[i]), f"{lsq_hz[i] - f[i]:+.2f}",
-                          f"{lo_i:.1f} – {hi_i:.1f}", "yes" if lo_i <= f[i] <= hi_i else "<b>no</b>"])
+        s_i = float(sigma[i])  # every frequency of the row at the precision its σ warrants (one helper)
+        err = fmt_value(lsq_hz[i] - f[i], s_i)
+        mode_rows.append([f"{int(n[i])}", fmt_value(f[i], s_i), fmt_sigma(s_i), fmt_value(lsq_hz[i], s_i),
+                          err if err.startswith("-") else "+" + err,
+                          f"{fmt_value(lo_i, s_i)} – {fmt_value(hi_i, s_i)}",
+                          "yes" if lo_i <= f[i] <= hi_i else "<b>no</b>"])
     sections.append(("Data vs fit per mode", figure_html(fig, "measured vs fitted natural frequencies") +
                      table_html(["n", "measured [Hz]", "σ [Hz]", "least squares [Hz]", "error [Hz]",
                                  "95 % predictive [Hz]", "inside"], mode_rows)))
@@ -156,13 +170,16 @@ def build_free_report(post) -> str:
         pri_s = (f"log-normal, median {pri['median']:.3g}, σ_ln {pri['sigma_ln']:.2f}" if pri else
                  "flat in log θ within plausible bounds")
         no_prior = fmt(data_only["values"][k]) if data_only and k in data_only["values"] else "—"
-        prow.append([esc(k), fmt(lsq["values"][k]), fmt(lsq["stderr"][k], 3), fmt(r["median"]),
-                     f"{fmt(r['lo'])} – {fmt(r['hi'])}", no_prior, esc(pri_s)])
+        med, lo, hi = fmt_interval(r["median"], r["lo"], r["hi"])
+        se = lsq["stderr"][k]
+        prow.append([esc(k), esc(free_plots.UNITS.get(k, "")), fmt_value(lsq["values"][k], se), fmt_sigma(se),
+                     med, f"{lo} – {hi}", no_prior, esc(pri_s)])
     corr = np.corrcoef(post.log_samples.T)
     crow = [[esc(k)] + [f"{corr[i, j]:+.2f}" for j in range(len(free))] for i, k in enumerate(free)]
     src = "".join(f"<li><b>{esc(k)}</b>: {esc(v['source'])}</li>" for k, v in priors.items() if v.get("source"))
     sections.append(("Parameters", table_html(
-        ["parameter", "least squares", "std err", "posterior median", "95 % interval", "no-prior LSQ", "prior"],
+        ["parameter", "unit", "least squares", "std err", "posterior median", "95 % interval", "no-prior LSQ",
+         "prior"],
         prow) + "<p>Posterior correlation (log-parameters):</p>" + table_html([""] + list(free), crow) +
         (f"<p>Prior sources:</p><ul>{src}</ul>" if src else "")))
     fig = free_plots.corner_figure(post.samples, free)

@@ -12,6 +12,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from ringfit.report.numbers import fmt_value
+
+
+def _freq_text(t, i: int) -> str:
+    """Row ``i``'s frequency to the digits its ``freq_std_hz`` warrants (4 significant digits without one)."""
+    sd = None if t.freq_std_hz is None else float(t.freq_std_hz[i])
+    return fmt_value(t.freq_hz[i], sd if sd is not None and np.isfinite(sd) and sd > 0 else None)
+
 
 def _plt():
     import matplotlib
@@ -108,7 +116,7 @@ def plot_mac(result, *, ax=None):
     shapes = np.array([m.shape for m in result.modes])
     m = mac(shapes[:, None, :], shapes[None, :, :]) if len(shapes) else np.zeros((0, 0))
     im = ax.imshow(m, vmin=0, vmax=1, cmap="viridis", origin="upper")
-    ticks = [f"{_mode_label(t, i)} {t.freq_hz[i]:.0f}" for i in range(len(t))]
+    ticks = [f"{_mode_label(t, i)} {_freq_text(t, i)}" for i in range(len(t))]
     ax.set_xticks(range(len(t)), ticks, rotation=90, fontsize=6)
     ax.set_yticks(range(len(t)), ticks, fontsize=6)
     ax.set_xlabel("mode (n, frequency [Hz])")
@@ -191,7 +199,7 @@ def _shape_panels(result, fig, spec, *, rows=None, scale: float = 0.25, real: st
         ax.grid(alpha=0.3)
         ax.plot([0], [1 + 1.5 * scale], marker="v", color="k", ms=5, clip_on=False)  # the impact point
         kind = "acoustic" if t.kind[i] == "acoustic" else f"n = {t.n[i]}"
-        ax.set_title(f"{kind}, {t.freq_hz[i]:.1f} Hz", fontsize=8, pad=2)
+        ax.set_title(f"{kind}, {_freq_text(t, i)} Hz", fontsize=8, pad=2)
     fig.text(0.99, 0.005, "mode shapes around the tyre: sensor angle from the impact point (▼, 0°), anticlockwise; "
              "grey circle = undeformed tyre; blue = radial, red dashed = tangential; largest deflection = "
              f"{100 * scale:.0f} % of the radius (normalised shapes)", ha="right", va="bottom", fontsize=7,
