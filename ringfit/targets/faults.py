@@ -663,3 +663,189 @@ def trigger_rate_note(interval_s: float, fs_hz: float, condition: dict) -> str |
             f"one revolution of the {drum:g} m drum at speed_kmh = {speed:g} takes {1e3 * expected:.5g} ms: the "
             f"sampling rate (or the speed) contradicts the trigger spacing (they agree at "
             f"{fs_hz * interval_s / expected:.6g} Hz); every frequency found is off by {expected / interval_s:.4g}×")
+
+
+# --------------------------------------------------------------------------- timing faults: stalls and drift
+
+#: A stall is said once this share of a record set's samples repeats the frame before it.
+STALL_MIN_SHARE = 0.002
+#: Pooled ratio of the step after a stall to the typical step around it below which the repeats were inserted
+#: (the stream stalled and resumed where it was: delete them) and above which they replaced samples (the stream
+#: held its last value and lost what came meanwhile: bridge them); between :data:`STALL_RATIO` and its double the
+#: data cannot tell, and the table is not credible.
+STALL_RATIO = (1.35, 1.7)
+#: A record set whose share of stalled samples exceeds this is ruined: the table is not credible.
+STALL_RUINED = 0.25
+#: Half-width [samples] of the window over which the typical step beside a stall is taken.
+STALL_WINDOW = 16
+#: Degree of the polynomial trend (drift) fitted to each channel.
+DRIFT_DEGREE = 2
+#: A channel drifts when its fitted trend moves by more than this share of the channel's rms about the trend.
+DRIFT_REL = 0.25
+
+
+def stalled_frames(acc: np.ndarray) -> np.ndarray:
+    """Samples of one record that repeat the sample before exactly on every live axis: bool ``(samples,)``.
+
+    ``acc`` (axes, samples). A stream that stalls repeats the whole frame; an analog channel never does (a
+    quantised one can, where the signal is below a step of the converter: such a repeat is not counted unless
+    the step after it, on some axis, is at least 4 of that axis's smallest non-zero steps). Frames that read
+    exactly zero on every axis (a noise-free pre-trigger) are not stalls.
+    """
+    acc = np.asarray(acc, dtype=np.float64)
+    live = acc.std(axis=-1) > 0
+    if not live.any() or acc.shape[-1] < 3:
+        return np.zeros(acc.shape[-1], dtype=bool)
+    x = acc[live]
+    d = np.diff(x, axis=-1)
+    same = np.all(d == 0, axis=0) & np.any(x[:, 1:] != 0, axis=0)
+    if not same.any():
+        return np.zeros(acc.shape[-1], dtype=bool)
+    ad = np.abs(d)
+    q = np.array([row[row > 0].min() if (row > 0).any() else np.inf for row in ad])  # the converter's step
+    after = np.concatenate([ad[:, 1:], np.zeros((ad.shape[0], 1))], axis=1)  # the step after sample k+1
+    # the step that ends a run: the next one that is not zero
+    k = np.flatnonzero(same)
+    out = np.zeros(acc.shape[-1], dtype=bool)
+    run_start = 0
+    while run_start < k.size:
+        run_end = run_start
+        while run_end + 1 < k.size and k[run_end + 1] == k[run_end] + 1:
+            run_end += 1
+        last = k[run_end]
+        step = after[:, last] if last < ad.shape[1] else np.zeros(ad.shape[0])
+        if np.any(step >= 4 * q):
+            out[k[run_start:run_end + 1] + 1] = True
+        run_start = run_end + 1
+    return out
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``[(first, last)]`` of the runs of True in ``mask``."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist()))
+
+
+def stall_step_ratio(acc: np.ndarray, stalls: np.ndarray) -> float:
+    """Pooled over the stalls of the records: the step from a stall's held value to the sample after it,
+    divided by the typical step beside it (median over ±:data:`STALL_WINDOW` samples of the steps that are not
+    repeats), as ``Σ jump / Σ typical`` (the loud part of the decays carries the verdict).
+
+    ≈ 1 when the repeats were inserted (the stream resumed where it stopped), ≈ the run's length + 1 when they
+    replaced samples (the stream held its last value); nan without a stall that ends before the record does.
+    """
+    jump = typical = 0.0
+    for i in range(acc.shape[0]):
+        x = acc[i]
+        step = np.linalg.norm(np.diff(x, axis=-1), axis=0)  # step from sample k to k+1
+        mask = stalls[i]
+        for a, b in _runs(mask):
+            if b + 1 >= x.shape[-1]:
+                continue
+            lo, hi = max(a - 1 - STALL_WINDOW, 0), min(b + 1 + STALL_WINDOW, step.size)
+            near = [j for j in range(lo, hi) if not (mask[j] or (j + 1 < mask.size and mask[j + 1]))]
+            if not near:
+                continue
+            jump += float(step[b])
+            typical += float(np.median(step[near]))
+    return jump / typical if typical > 0 else float("nan")
+
+
+def repair_stalls(acc: np.ndarray, force: np.ndarray | None, fs_hz: float):
+    """Find stalls in impact records and mend them (module docstring of :func:`repair_timing`).
+
+    **Returns:** ``(acc, force, notes, credible)``; the arrays unchanged (and no note) without a stall.
+    """
+    r, a, s = acc.shape
+    stalls = np.stack([stalled_frames(acc[i]) for i in range(r)])
+    share = float(stalls.mean())
+    if share < STALL_MIN_SHARE:
+        return acc, force, [], True
+    ratio = stall_step_ratio(acc, stalls)
+    runs = sum(len(_runs(m)) for m in stalls)
+    bad = int(stalls.any(axis=1).sum())
+    what = (f"stalled stream: {int(stalls.sum())} of {stalls.size} samples ({100 * share:.1f} %) repeat the frame "
+            f"before them exactly on every axis, in {runs} run(s) in {bad} of {r} records (the step after a run is "
+            f"{ratio:.2f}× the typical step")
+    credible = share <= STALL_RUINED
+    if np.isfinite(ratio) and ratio < STALL_RATIO[0]:
+        keep = ~stalls
+        n = int(keep.sum(axis=1).min())
+        acc = np.stack([acc[i][:, keep[i]][:, :n] for i in range(r)])
+        if force is not None:
+            force = np.stack([force[i][keep[i]][:n] for i in range(r)])
+        what += (f": the stream resumed where it stopped); the repeats deleted (the time base restored) and the "
+                 f"records cut to a common {n} samples ({n / fs_hz:.3g} s)")
+    elif np.isfinite(ratio) and ratio > STALL_RATIO[1]:
+        acc = acc.copy()
+        force = None if force is None else force.copy()
+        for i in range(r):
+            segs = _runs(stalls[i])
+            for j in range(a):
+                acc[i, j] = bridge(acc[i, j], segs)
+            if force is not None:
+                force[i] = bridge(force[i], segs)
+        what += ": the stream held its last value and lost the samples meanwhile); the held samples bridged by " \
+                "straight lines"
+    else:
+        credible = False
+        what += ": whether the repeats were inserted or held the data cannot tell); left as they are"
+    if not credible:
+        what += "; the table is not credible (too much of the time base is unknown)" \
+            if share > STALL_RUINED else "; the table is not credible"
+    return acc, force, [what], credible
+
+
+def drift_trend(acc: np.ndarray, degree: int = DRIFT_DEGREE) -> np.ndarray:
+    """The least-squares polynomial trend of each channel, without its mean: same shape as ``acc``
+    (Legendre basis over the record; a decay's oscillation barely projects on it)."""
+    s = acc.shape[-1]
+    t = np.linspace(-1.0, 1.0, s)
+    basis = np.polynomial.legendre.legvander(t, degree)  # (samples, degree + 1)
+    coef, *_ = np.linalg.lstsq(basis, acc.reshape(-1, s).T, rcond=None)
+    return (basis[:, 1:] @ coef[1:]).T.reshape(acc.shape)  # the constant is the offset's (remove_offsets)
+
+
+def remove_drift(acc: np.ndarray, axes=None) -> tuple[np.ndarray, str | None]:
+    """Each channel's polynomial trend (:func:`drift_trend`) removed when some channel drifts (the trend moves by
+    more than :data:`DRIFT_REL` of its rms about the trend); then every channel is detrended alike.
+
+    **Returns:** ``(acc, note)``, ``acc`` unchanged and ``note`` None when nothing drifts.
+    """
+    acc = np.asarray(acc, dtype=np.float64)
+    if acc.shape[-1] < 4 * (DRIFT_DEGREE + 1):
+        return acc, None
+    trend = drift_trend(acc)
+    rest = acc - trend
+    spread = np.ptp(trend, axis=-1)
+    rms = np.std(rest, axis=-1)
+    drifts = spread > DRIFT_REL * np.maximum(rms, np.finfo(float).tiny)
+    if not drifts.any():
+        return acc, None
+    i = np.unravel_index(np.argmax(np.where(drifts, spread / np.maximum(rms, np.finfo(float).tiny), 0)), drifts.shape)
+    worst = float(spread[i] / max(rms[i], np.finfo(float).tiny))
+    return rest, (f"drift in {int(drifts.sum())} of {drifts.size} channels (a trend moving up to "
+                  f"{float(spread.max()):.3g} m/s² over the record, {worst:.3g}× the channel's rms about it): "
+                  f"removed (a polynomial trend of degree {DRIFT_DEGREE} fitted to each channel and subtracted)")
+
+
+def repair_timing(records):
+    """Timing faults of impact :class:`~ringfit.io.records.Records`, before anything else is done to them.
+
+    - **stalled stream**: runs of samples that repeat the frame before them exactly on every axis
+      (:func:`stalled_frames`). Whether the repeats were *inserted* (the stream stopped and resumed where it
+      was: every later sample is late by the run's length, every frequency read low) or *held* (the stream
+      kept its last value and lost what came meanwhile) the data tell by the step that ends each run
+      (:func:`stall_step_ratio`): inserted repeats are deleted (the time base is restored; the records are cut
+      to a common length), held ones bridged by straight lines. Where the step cannot tell
+      (:data:`STALL_RATIO`) or more than :data:`STALL_RUINED` of the samples stalled, the table is not
+      credible.
+
+    **Returns:** ``(records, notes, credible)``.
+    """
+    from dataclasses import replace
+
+    acc, force, notes, credible = repair_stalls(records.acc, records.force, records.fs_hz)
+    if notes:
+        records = replace(records, acc=acc, force=force)
+    return records, notes, credible

@@ -114,10 +114,12 @@ def frf_estimate(
 
     if records.force is None:
         raise InputError("FRF needs a force channel; use SSI for records without force", source=records.source)
-    from ringfit.targets.faults import repair_records
+    from ringfit.targets.faults import repair_records, repair_timing
 
     check_band(records, f_max_hz)
-    records, notes = clean_records(records, threshold)
+    records, notes, timing_ok = repair_timing(records)
+    records, cleaned = clean_records(records, threshold)
+    notes += cleaned
     records, use, found, lines = repair_records(records, threshold=threshold, f_max_hz=f_max_hz,
                                                 skip_s=pre_s + SKIP_AFTER_IMPACT_S)
     notes += found
@@ -166,7 +168,8 @@ def frf_estimate(
         kept[idx[~keep]] = False
         h1[g], coh[g] = h1_coherence(fspec[idx[keep]], aspec[idx[keep]])
     have = np.isin(np.arange(angles.size), inverse[usable])
-    return FRFEstimate(f, h1[have], coh[have], angles[have], tuple(records.axes), kept, notes, screen.credible,
+    return FRFEstimate(f, h1[have], coh[have], angles[have], tuple(records.axes), kept, notes,
+                       screen.credible and timing_ok,
                        lines_hz=lines, duration_s=records.n_samples / records.fs_hz)
 
 

@@ -77,7 +77,8 @@ class Decays:
     :class:`~ringfit.targets.quality.ChannelScreen` of the channels before
     the bad ones were left out (None when not screened), ``notes`` one-line
     findings of the pre-processing (offsets, channels left out, credibility), ``lines_hz`` the mains lines
-    notched (:func:`~ringfit.targets.faults.repair_records`), ``duration_s`` the records' length.
+    notched (:func:`~ringfit.targets.faults.repair_records`), ``duration_s`` the records' length, ``timing_ok``
+    False when a stalled stream could not be mended (:func:`~ringfit.targets.faults.repair_timing`).
     """
 
     y: np.ndarray
@@ -88,10 +89,11 @@ class Decays:
     notes: list = field(default_factory=list)
     lines_hz: list = field(default_factory=list)
     duration_s: float = float("inf")
+    timing_ok: bool = True
 
     @property
     def credible(self) -> bool:
-        return self.screen is None or bool(self.screen.credible)
+        return self.timing_ok and (self.screen is None or bool(self.screen.credible))
 
 
 #: Fewest free-decay samples (after alignment, decimation and the skip) an SSI run accepts.
@@ -122,10 +124,12 @@ def free_decays(
     """
     from ringfit.targets.quality import channel_labels, clean_records, screen_channels
 
-    from ringfit.targets.faults import repair_records
+    from ringfit.targets.faults import repair_records, repair_timing
 
     check_band(records, f_max_hz)
-    records, notes = clean_records(records, threshold)
+    records, notes, timing_ok = repair_timing(records)
+    records, cleaned = clean_records(records, threshold)
+    notes += cleaned
     records, use, found, lines = repair_records(records, threshold=threshold, f_max_hz=f_max_hz, skip_s=skip_s,
                                                 used_from_s=skip_s + delay_s)
     notes += found
@@ -161,7 +165,7 @@ def free_decays(
             raise InputError(str(exc), source=records.source) from None
         notes += found.notes
         y, angle, axis = y[found.keep], angle[found.keep], axis[found.keep]
-    return Decays(y, angle, axis, fs, found, notes, lines, records.n_samples / records.fs_hz)
+    return Decays(y, angle, axis, fs, found, notes, lines, records.n_samples / records.fs_hz, timing_ok)
 
 
 def prepare_decays(records: Records, **kwargs) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:

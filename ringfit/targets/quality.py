@@ -82,7 +82,8 @@ def remove_offsets(acc: np.ndarray, impact_index: np.ndarray | None = None) -> t
 
 
 def clean_records(records, threshold: float = 0.1):
-    """Offsets removed (:func:`remove_offsets`, pre-impact mean where the force shows the impact) and
+    """Drift removed (:func:`~ringfit.targets.faults.remove_drift`: a polynomial trend, where some channel
+    drifts), offsets removed (:func:`remove_offsets`, pre-impact mean where the force shows the impact) and
     axes that are flat on every record (a dead axis) left out.
 
     **Returns:** ``(records, notes)`` — new :class:`~ringfit.io.records.Records` and one-line notes.
@@ -91,9 +92,14 @@ def clean_records(records, threshold: float = 0.1):
 
     from ringfit.targets.preprocessing import impact_indices
 
+    from ringfit.targets.faults import remove_drift
+
     notes = []
     idx = impact_indices(records.force, threshold) if records.force is not None else None
-    acc, offsets = remove_offsets(records.acc, idx)
+    acc, drift = remove_drift(records.acc)
+    if drift:
+        notes.append(drift)
+    acc, offsets = remove_offsets(acc, idx)
     note = offset_note(offsets, acc)
     if note:
         notes.append(note)
