@@ -70,9 +70,13 @@ def _load_v5(path: Path) -> tuple[dict, list[str]]:
     import scipy.io
 
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
             raw = scipy.io.loadmat(str(path), squeeze_me=False, chars_as_strings=True, struct_as_record=True)
+        if any("Duplicate variable name" in str(w.message) for w in caught):
+            _refuse_duplicates(path)
+    except InputError:
+        raise
     except NotImplementedError:  # "Please use HDF reader for matlab v7.3 files"
         raise InputError("a MATLAB v7.3 file without its HDF5 signature; truncated or corrupted?", source=path) from None
     except Exception as exc:  # noqa: BLE001 - scipy raises assorted errors on bad files
@@ -92,6 +96,42 @@ def _load_v5(path: Path) -> tuple[dict, list[str]]:
         else:
             skipped.append(key)  # structs, complex, objects, sparse
     return out, skipped
+
+
+def _shown(value) -> str:
+    a = np.asarray(value)
+    if a.dtype.kind in "fiub" and a.size == 1:
+        return f"{a.reshape(()).item():g}" if a.dtype.kind == "f" else str(a.reshape(()).item())
+    if a.dtype.kind in "U":
+        return repr(" ".join(str(x) for x in a.ravel()))[:40]
+    return f"an array of shape {a.shape}"
+
+
+def _refuse_duplicates(path: Path) -> None:
+    """A v5 file that stores a variable twice (a concatenated save, ``save -append`` by hand): scipy keeps the
+    last, silently. Each variable's copies are read (``scipy.io.matlab.varmats_from_mat``); copies that differ
+    are refused, naming the variable and both values (which one holds, the file cannot tell)."""
+    import scipy.io
+    from scipy.io.matlab import varmats_from_mat
+
+    seen: dict[str, list] = {}
+    with open(path, "rb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for name, stream in varmats_from_mat(fh):
+            value = scipy.io.loadmat(stream, squeeze_me=False, chars_as_strings=True).get(name)
+            seen.setdefault(name, []).append(value)
+    for name, values in seen.items():
+        first = np.asarray(values[0])
+        for other in values[1:]:
+            other = np.asarray(other)
+            same = first.shape == other.shape and first.dtype.kind == other.dtype.kind and (
+                np.array_equal(first, other, equal_nan=first.dtype.kind == "f") if first.dtype != object
+                else first.tolist() == other.tolist())
+            if not same:
+                raise InputError(f"variable {name!r} is stored {len(values)} times with different values "
+                                 f"({', then '.join(_shown(v) for v in values)}; a concatenated save?): which one "
+                                 "holds the file cannot tell (scipy keeps the last); expected each variable once",
+                                 source=path)
 
 
 def _load_v73(path: Path) -> tuple[dict, list[str]]:

@@ -26,7 +26,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.records import MeasuredFRF, Records
 from ringfit.targets.decimation import decimate, decimation_factor
-from ringfit.targets.preprocessing import SKIP_AFTER_IMPACT_S, align_on_impact, check_band
+from ringfit.targets.preprocessing import SKIP_AFTER_IMPACT_S, align_on_impact, check_angles, check_band
 
 
 @dataclass
@@ -117,6 +117,7 @@ def frf_estimate(
     from ringfit.targets.faults import repair_records, repair_timing
 
     check_band(records, f_max_hz)
+    check_angles(records.sensor_angle_deg, records.source)
     records, notes, timing_ok = repair_timing(records)
     records, cleaned = clean_records(records, threshold)
     notes += cleaned
@@ -180,6 +181,7 @@ def frf_from_measured(m: MeasuredFRF, f_range: tuple[float, float] = (20.0, 400.
     a note says how many were); the band must lie inside the measured lines.
     """
     f = m.freq_hz
+    check_angles(m.sensor_angle_deg, m.source)
     if f_range[1] > f[-1] or f_range[0] < f[0]:
         raise InputError(f"band {f_range[0]:g}–{f_range[1]:g} Hz reaches beyond the measured lines "
                          f"{f[0]:g}–{f[-1]:g} Hz", source=m.source)

@@ -22,6 +22,7 @@ from ringfit.targets.decimation import decimate, decimation_factor
 from ringfit.targets.preprocessing import (
     SKIP_AFTER_IMPACT_S,
     align_on_impact,
+    check_angles,
     check_band,
     drop_after_impact,
     sync_by_group_velocity,
@@ -127,6 +128,7 @@ def free_decays(
     from ringfit.targets.faults import repair_records, repair_timing
 
     check_band(records, f_max_hz)
+    check_angles(records.sensor_angle_deg, records.source)
     records, notes, timing_ok = repair_timing(records)
     records, cleaned = clean_records(records, threshold)
     notes += cleaned

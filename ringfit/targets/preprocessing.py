@@ -36,6 +36,21 @@ def check_band(records: Records, f_max_hz: float) -> None:
                          f"{records.fs_hz / 2:g} Hz", source=records.source)
 
 
+def check_angles(angle_deg, source=None) -> None:
+    """The records must hold more than one sensor angle (modulo 360°): the circumferential order n of a mode is
+    read from how its shape changes round the tyre (docs/physics.md §3), and one angle cannot show that.
+
+    **Raises** :class:`InputError` naming the angle found.
+    """
+    a = np.asarray(angle_deg, dtype=np.float64)
+    found = np.unique(np.round(np.mod(a, 360.0), 9) % 360.0)
+    if a.size and found.size < 2:
+        raise InputError(f"every record ({a.size}) is at the one sensor angle {float(a[0]):g}°: the circumferential "
+                         "order n of a mode cannot be told from a single angle; expected records at several "
+                         "angles round the tyre (the sensor angles in the file, or angle_deg in the channel map)",
+                         source=source)
+
+
 def impact_indices(force: np.ndarray, threshold: float = 0.1) -> np.ndarray:
     """Index of the first sample with ``|F| ≥ threshold · max|F|`` in each record.
 
