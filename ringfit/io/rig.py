@@ -36,7 +36,7 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.io.channel_map import CONDITION_KEYS, ChannelMap, ChannelSpec, read_channel_map
-from ringfit.io.record_types import AXES, Records
+from ringfit.io.record_types import ANGLE_RANGE_DEG, AXES, Records
 from ringfit.io.rig_types import LazyData, RawChannel, RigFile, ScaledChannel
 from ringfit.io.uff import unit_scale
 
@@ -261,6 +261,10 @@ def records_from_rig(rig: RigFile, channels=None) -> Records:
         if ch.role == "acc" and ch.angle_deg is None:
             raise InputError(f"channel {ch.raw.name!r} has no sensor angle; give angle_deg in --channels MAP.toml (or "
                              "a sensor_angle_deg property)", source=rig.source)
+        lo, hi = ANGLE_RANGE_DEG
+        if ch.angle_deg is not None and not lo <= ch.angle_deg <= hi:
+            raise InputError(f"channel {ch.raw.name!r}: sensor angle {ch.angle_deg:g}°; expected an angle in "
+                             f"[{lo:g}, {hi:g}] degrees", source=rig.source)
         key = ch.record if ch.record is not None else (None if ch.angle_deg is None else f"{ch.angle_deg:.12g} deg")
         if key is None:
             raise InputError(f"channel {ch.raw.name!r}: no record and no sensor angle; give angle_deg (and record "

@@ -381,7 +381,7 @@ def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = 
             basis=shape[:, None].astype(complex), shape=shape.astype(complex), pole_index=np.zeros(0, int), n_orders=0,
         ))
     table, modes = mode_table(modes, angle, axis, f"frf-peak-picking-{indicator}", cavity_hz=cavity_hz,
-                              lines_hz=frf.lines_hz, duration_s=frf.duration_s)
+                              lines_hz=frf.lines_hz, duration_s=frf.duration_s, notes=frf.notes)
     limits = []
     if not (table.kind == "acoustic").any():
         limits.append("no acoustic (cavity) row: peak picking finds an acoustic mode only where its peak stands out "

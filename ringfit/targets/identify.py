@@ -196,7 +196,8 @@ def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, no
     otherwise it is ``unclassified`` and the reason says which evidence is missing. Any row on a mains line
     that was notched (``lines_hz``, :func:`~ringfit.targets.faults.on_notched_line`) is ``unclassified``.
 
-    **Returns:** ``(kind, reason)``, object arrays (rows,); reason ``""`` for classified rows.
+    **Returns:** ``(kind, reason)``, object arrays (rows,); reason ``""`` for structural rows only (an
+    ``acoustic`` row says what made it the cavity).
     """
     kind = np.where(not_ring, "unclassified", "structural").astype(object)
     reason = np.full(len(kind), "", dtype=object)
@@ -222,6 +223,8 @@ def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, no
             one = int(n[i]) == 1 and confidence[i] >= CAVITY_MIN_CONFIDENCE
             if near and one:
                 kind[i] = "acoustic"
+                reason[i] = (f"the cavity: not ring-like, {100 * off:+.1f} % from eq. 22's {cavity_hz:.2f} Hz "
+                             f"(tolerance ±{100 * tol:g} %) with the cavity's n = 1 pattern ({shape})")
                 continue
             if not near:
                 why.append(f"not the cavity: {100 * off:+.0f} % from eq. 22's {cavity_hz:.2f} Hz "
@@ -232,10 +235,33 @@ def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, no
     return kind, reason
 
 
+#: A row that is not ring-like within this relative distance of a structural row is the same mode found twice
+#: (its shape read through what the notch or the noise left, or a half of the double pole clustered apart): the
+#: split of a ring mode's double pole is well under it, the cavity and its nearest ring mode lie further apart.
+TWICE_TOL = 0.005
+
+
+def found_twice(freq_hz: np.ndarray, kind: np.ndarray, tol: float = TWICE_TOL) -> list[tuple[int, int]]:
+    """``[(row, structural_row)]``: each row that is not ``structural`` within ``tol`` (relative) of a structural
+    row, with the nearest such row."""
+    freq_hz = np.asarray(freq_hz, dtype=np.float64)
+    kind = np.asarray(kind, dtype=object)
+    st = np.flatnonzero(kind == "structural")
+    out = []
+    if not st.size:
+        return out
+    for i in np.flatnonzero(kind != "structural"):
+        off = np.abs(freq_hz[st] / freq_hz[i] - 1)
+        j = int(np.argmin(off))
+        if off[j] <= tol:
+            out.append((int(i), int(st[j])))
+    return out
+
+
 def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.ndarray, method: str,
                *, min_confidence: float = 0.5, poles: PoleSet | None = None,
                spurious_damping_factor: float = 1.5, cavity_hz: float | None = None, lines_hz=(),
-               duration_s: float = np.inf) -> tuple[ModeTable, list]:
+               duration_s: float = np.inf, notes: list | None = None) -> tuple[ModeTable, list]:
     """A :class:`ModeTable` (docs/formats.md §2) from physical modes: n from the shapes, kind, extras.
 
     With ``poles`` (SSI), modes with the same n within 1 % are first merged
@@ -247,7 +273,9 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     modes. A kept one is ``acoustic`` only with evidence, else
     ``unclassified`` with the reason (:func:`classify_rows`; ``cavity_hz``
     the cavity frequency of eq. 22 for the tyre, None: nothing is called acoustic; ``lines_hz`` the notched
-    mains lines and ``duration_s`` the records' length).
+    mains lines and ``duration_s`` the records' length). A row that is not ring-like within :data:`TWICE_TOL`
+    of a structural row is the same mode found twice (:func:`found_twice`): it is merged into the structural
+    row, and ``notes`` (when given) gets a line saying so.
 
     Extra columns: ``n_confidence``, ``split_hz``, ``travelling``, ``damping_std_pct``, ``reason``.
 
@@ -278,9 +306,19 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     ref = np.nanmedian(damping[~not_ring]) if (~not_ring).any() else np.inf
     keep = ~not_ring | ~(damping > spurious_damping_factor * ref)
     idx = np.flatnonzero(keep)
-    modes = [modes[i] for i in idx]
     kind, reason = classify_rows(n[idx], conf[idx], freq[idx], not_ring[idx], cavity_hz, lines_hz=lines_hz,
                                  duration_s=duration_s)
+    twice = found_twice(freq[idx], kind)
+    if twice:
+        if notes is not None:
+            shown = ", ".join(f"{freq[idx][i]:.2f} Hz ({kind[i]}) beside the n = {int(n[idx][j])} mode at "
+                              f"{freq[idx][j]:.2f} Hz" for i, j in twice[:4])
+            notes.append(f"{len(twice)} mode(s) found twice, once as a structural mode and once as a row that is not "
+                         f"ring-like within {100 * TWICE_TOL:g} % of it: {shown}; merged into the structural row")
+        drop = {i for i, _ in twice}
+        sel = np.array([i not in drop for i in range(idx.size)], dtype=bool)
+        idx, kind, reason = idx[sel], kind[sel], reason[sel]
+    modes = [modes[i] for i in idx]
     fmt = lambda x: f"{x:.6g}" if np.isfinite(x) else ""  # noqa: E731  (empty: unknown)
     table = ModeTable(
         freq_hz=freq[idx],
@@ -346,7 +384,7 @@ def ssi_modes(
     stab = stabilization_diagram(poles, pair_aware=pair_aware)
     modes = cluster_modes(poles, stab, f_range=f_range, min_share=min_share)
     table, modes = mode_table(modes, angle, axis, "ssi-cov", poles=poles, cavity_hz=cavity_hz,
-                               lines_hz=d.lines_hz, duration_s=d.duration_s)
+                               lines_hz=d.lines_hz, duration_s=d.duration_s, notes=d.notes)
     note_quality(table, d.notes, d.credible)
     unc = jackknife_modes(factors, poles, modes, angle_groups(angle)[0] if jackknife else np.zeros(0),
                           workers=default_workers() if workers is None else workers)
