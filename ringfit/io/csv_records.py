@@ -20,6 +20,7 @@ import csv
 import io
 import os
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -67,8 +68,13 @@ def read_csv_channels(path: str | os.PathLike) -> RigFile:
         raise InputError(f"row {start + 1}: the first row is numbers; expected a header row of channel names",
                          source=path)
     body = "\n".join(lines[start + 1:])
+    if not any(line.strip() and not line.lstrip().startswith("#") for line in lines[start + 1:]):
+        raise InputError(f"row {start + 1} is a header and no data rows follow; expected a time history (one row per "
+                         "sample)", source=path)
     try:
-        data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, dtype=np.float64, comments="#")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # loadtxt's own words name a StringIO, not the file
+            data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, dtype=np.float64, comments="#")
     except ValueError:
         data = None
     if data is None or data.shape[1] != len(names):
