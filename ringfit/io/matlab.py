@@ -143,6 +143,7 @@ def _load_v73(path: Path) -> tuple[dict, list[str]]:
             for key in f:
                 if key.startswith("#"):
                     continue  # '#refs#', '#subsystem#'
+                _check_link(f, key, path)
                 obj = f[key]
                 if not isinstance(obj, h5py.Dataset):
                     skipped.append(key)  # a struct is a group
@@ -161,6 +162,36 @@ def _load_v73(path: Path) -> tuple[dict, list[str]]:
     return out, skipped
 
 
+def _check_link(f, key: str, path: Path, depth: int = 0) -> None:
+    """Refuse a variable whose link leaves the file: an external link (to any file on the machine), or a soft
+    link that ends at one or at nothing. h5py would follow them."""
+    import h5py
+
+    link = f.get(key, getlink=True)
+    if isinstance(link, h5py.ExternalLink):
+        raise InputError(f"variable {key.lstrip('/')!r} is an external link to {link.filename!r}:{link.path}; "
+                         "refusing to follow data out of the file", source=path)
+    if isinstance(link, h5py.SoftLink):
+        target = link.path if link.path.startswith("/") else "/" + link.path
+        if depth > 16 or f.get(target, getlink=True) is None:
+            raise InputError(f"variable {key.lstrip('/')!r} is a soft link to {link.path!r}, which is not in the file; "
+                             "refusing to follow it", source=path)
+        _check_link(f, target, path, depth + 1)
+
+
+def _check_storage(ds, path: Path) -> None:
+    """Refuse a dataset whose data are stored outside the file: external raw storage or a virtual dataset
+    (whose sources may be any file)."""
+    name = ds.name.lstrip("/")
+    if ds.external:
+        raise InputError(f"variable {name!r} keeps its data in the external file {ds.external[0][0]!r}; refusing "
+                         "to read data from outside the file", source=path)
+    if ds.is_virtual:
+        files = sorted({str(v.file_name) for v in ds.virtual_sources()})
+        raise InputError(f"variable {name!r} is a virtual dataset drawing on {', '.join(files[:3])}; refusing to read "
+                         "data from outside the file", source=path)
+
+
 def _attr(obj, name) -> str:
     v = obj.attrs.get(name)
     if v is None:
@@ -170,6 +201,7 @@ def _attr(obj, name) -> str:
 
 def _v73_value(f, ds):
     """A v7.3 variable in MATLAB's own dimension order: numbers, or a list of names; None if unsupported."""
+    _check_storage(ds, Path(f.filename))
     cls = _attr(ds, "MATLAB_class")
     if ds.attrs.get("MATLAB_empty", 0):
         return np.zeros((0,))
