@@ -24,7 +24,8 @@ ANGLES = np.arange(16) * 22.5
 BAND = (20.0, 300.0)
 CAVITY = float(cavity_frequency(1))  # eq. 22, 218.75 Hz
 SAID = {"spikes": "with spikes", "clipped": "clipped (flat tops", "hum50": "mains hum (lines at 50, 100, 150 Hz",
-        "hum60": "mains hum (lines at 60, 120, 180 Hz", "dead": "dead (rms below", "flipped": "sign-flipped"}
+        "hum60": "mains hum (lines at 60, 120, 180 Hz", "dead": "dead (rms below", "flipped": "sign-flipped",
+        "stalled": "stalled stream", "held": "stalled stream", "drift": "drift in"}
 
 
 def _records(seed=2, n_values=range(1, 7), **kw):
