@@ -162,21 +162,22 @@ def _load_v73(path: Path) -> tuple[dict, list[str]]:
     return out, skipped
 
 
-def _check_link(f, key: str, path: Path, depth: int = 0) -> None:
+def _check_link(f, key: str, path: Path, depth: int = 0, via: str = "") -> None:
     """Refuse a variable whose link leaves the file: an external link (to any file on the machine), or a soft
     link that ends at one or at nothing. h5py would follow them."""
     import h5py
 
     link = f.get(key, getlink=True)
+    name = via or repr(key.lstrip("/"))
     if isinstance(link, h5py.ExternalLink):
-        raise InputError(f"variable {key.lstrip('/')!r} is an external link to {link.filename!r}:{link.path}; "
-                         "refusing to follow data out of the file", source=path)
+        raise InputError(f"variable {name} is an external link to {link.filename!r}:{link.path}; refusing to follow "
+                         "data out of the file", source=path)
     if isinstance(link, h5py.SoftLink):
         target = link.path if link.path.startswith("/") else "/" + link.path
+        here = f"{name} (a soft link to {link.path!r})"
         if depth > 16 or f.get(target, getlink=True) is None:
-            raise InputError(f"variable {key.lstrip('/')!r} is a soft link to {link.path!r}, which is not in the file; "
-                             "refusing to follow it", source=path)
-        _check_link(f, target, path, depth + 1)
+            raise InputError(f"variable {here} points at nothing in the file; refusing to follow it", source=path)
+        _check_link(f, target, path, depth + 1, via=here)
 
 
 def _check_storage(ds, path: Path) -> None:
