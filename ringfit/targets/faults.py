@@ -669,11 +669,13 @@ def trigger_rate_note(interval_s: float, fs_hz: float, condition: dict) -> str |
 
 #: A stall is said once this share of a record set's samples repeats the frame before it.
 STALL_MIN_SHARE = 0.002
-#: Pooled ratio of the step after a stall to the typical step around it below which the repeats were inserted
-#: (the stream stalled and resumed where it was: delete them) and above which they replaced samples (the stream
-#: held its last value and lost what came meanwhile: bridge them); between :data:`STALL_RATIO` and its double the
-#: data cannot tell, and the table is not credible.
-STALL_RATIO = (1.35, 1.7)
+#: The verdict of :func:`stall_verdict` below the first value: the repeats were inserted (the stream stalled and
+#: resumed where it was: delete them); above the second: they replaced samples (the stream held its last value
+#: and lost what came meanwhile: bridge them); between, the data cannot tell and the table is not credible.
+STALL_SPLIT = (0.35, 0.65)
+#: Least ratio of the typical step over a run's length + 1 samples to the one-sample step for the verdict to
+#: count (below it noise makes the steps and cannot tell inserted repeats from held ones).
+STALL_MIN_SPREAD = 1.2
 #: A record set whose share of stalled samples exceeds this is ruined: the table is not credible.
 STALL_RUINED = 0.25
 #: Half-width [samples] of the window over which the typical step beside a stall is taken.
@@ -689,8 +691,9 @@ def stalled_frames(acc: np.ndarray) -> np.ndarray:
 
     ``acc`` (axes, samples). A stream that stalls repeats the whole frame; an analog channel never does (a
     quantised one can, where the signal is below a step of the converter: such a repeat is not counted unless
-    the step after it, on some axis, is at least 4 of that axis's smallest non-zero steps). Frames that read
-    exactly zero on every axis (a noise-free pre-trigger) are not stalls.
+    the step after it, on some axis, is at least 4 of that axis's smallest non-zero steps, and a record set is
+    called stalled only with far more repeats than the converter makes by chance, :func:`chance_repeats`).
+    Frames that read exactly zero on every axis (a noise-free pre-trigger) are not stalls.
     """
     acc = np.asarray(acc, dtype=np.float64)
     live = acc.std(axis=-1) > 0
@@ -720,35 +723,72 @@ def stalled_frames(acc: np.ndarray) -> np.ndarray:
     return out
 
 
+def chance_repeats(acc: np.ndarray) -> float:
+    """How many frames of one record (axes, samples) would repeat the frame before exactly by chance on a
+    quantised converter: ``Σ_k Π_j min(1, q_j / (σ_jk √(2π)))`` with ``q_j`` the axis's smallest non-zero step
+    (the converter's step) and ``σ_jk`` the local spread of its steps (running median of ``|Δx|`` over
+    :data:`SPIKE_WINDOW` samples / 0.674). Float data (no quantisation) give ≈ 0."""
+    from scipy.ndimage import median_filter
+
+    acc = np.asarray(acc, dtype=np.float64)
+    live = acc.std(axis=-1) > 0
+    if not live.any() or acc.shape[-1] < 3:
+        return 0.0
+    ad = np.abs(np.diff(acc[live], axis=-1))
+    p = np.ones(ad.shape[1])
+    for row in ad:
+        pos = row[row > 0]
+        if not pos.size:
+            continue
+        q = float(pos.min())
+        sigma = median_filter(row, size=SPIKE_WINDOW, mode="nearest") / 0.674
+        with np.errstate(over="ignore"):  # a flat stretch: a repeat there is certain (1)
+            p *= np.minimum(1.0, q / np.maximum(sigma * np.sqrt(2 * np.pi), np.finfo(float).tiny))
+    return float(p.sum())
+
+
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """``[(first, last)]`` of the runs of True in ``mask``."""
     edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
     return list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist()))
 
 
-def stall_step_ratio(acc: np.ndarray, stalls: np.ndarray) -> float:
-    """Pooled over the stalls of the records: the step from a stall's held value to the sample after it,
-    divided by the typical step beside it (median over ±:data:`STALL_WINDOW` samples of the steps that are not
-    repeats), as ``Σ jump / Σ typical`` (the loud part of the decays carries the verdict).
+def stall_verdict(acc: np.ndarray, stalls: np.ndarray) -> tuple[float, float]:
+    """Were the repeats inserted or held? ``(u, spread)`` from the step that ends each run.
 
-    ≈ 1 when the repeats were inserted (the stream resumed where it stopped), ≈ the run's length + 1 when they
-    replaced samples (the stream held its last value); nan without a stall that ends before the record does.
+    Inserted repeats (the stream resumed where it stopped) end in an ordinary one-sample step; held ones (the
+    stream kept its last value and lost the samples meanwhile) in a step over the run's length + 1 samples.
+    Over the loudest quarter of the runs (by the typical step beside them: where the signal, not the noise,
+    makes the steps), with ``J`` the steps that end the runs, ``T₁`` the typical one-sample step and ``T_L`` the
+    typical step over L + 1 samples beside each run (medians over ±:data:`STALL_WINDOW` samples of steps
+    between samples that are not repeats), ``u = ln(ΣJ/ΣT₁) / ln(ΣT_L/ΣT₁)``: ≈ 0 inserted, ≈ 1 held.
+    ``spread = ΣT_L/ΣT₁``; near 1 (noise makes the steps) ``u`` tells nothing. nan, nan without a usable run.
     """
-    jump = typical = 0.0
+    jump, t1, tl = [], [], []
     for i in range(acc.shape[0]):
-        x = acc[i]
-        step = np.linalg.norm(np.diff(x, axis=-1), axis=0)  # step from sample k to k+1
-        mask = stalls[i]
+        x, mask = acc[i], stalls[i]
+        step = np.linalg.norm(np.diff(x, axis=-1), axis=0)  # step from sample k to k + 1
+        good = ~mask
         for a, b in _runs(mask):
             if b + 1 >= x.shape[-1]:
                 continue
-            lo, hi = max(a - 1 - STALL_WINDOW, 0), min(b + 1 + STALL_WINDOW, step.size)
-            near = [j for j in range(lo, hi) if not (mask[j] or (j + 1 < mask.size and mask[j + 1]))]
-            if not near:
+            length = b - a + 1
+            lo, hi = max(a - 1 - STALL_WINDOW, 0), min(b + 1 + STALL_WINDOW, x.shape[-1] - 1)
+            j1 = np.array([j for j in range(lo, hi) if good[j] and good[j + 1]], dtype=np.int64)
+            jl = np.array([j for j in range(lo, hi - length) if good[j] and good[j + length + 1]], dtype=np.int64)
+            if not (j1.size and jl.size):
                 continue
-            jump += float(step[b])
-            typical += float(np.median(step[near]))
-    return jump / typical if typical > 0 else float("nan")
+            jump.append(step[b])
+            t1.append(np.median(step[j1]))
+            tl.append(np.median(np.linalg.norm(x[:, jl + length + 1] - x[:, jl], axis=0)))
+    if not jump:
+        return float("nan"), float("nan")
+    jump, t1, tl = map(np.asarray, (jump, t1, tl))
+    loud = t1 >= np.quantile(t1, 0.75)
+    j, a, b = float(jump[loud].sum()), float(t1[loud].sum()), float(tl[loud].sum())
+    if not (j > 0 and a > 0 and b > a):
+        return float("nan"), b / a if a > 0 else float("nan")
+    return float(np.log(j / a) / np.log(b / a)), b / a
 
 
 def repair_stalls(acc: np.ndarray, force: np.ndarray | None, fs_hz: float):
@@ -761,14 +801,18 @@ def repair_stalls(acc: np.ndarray, force: np.ndarray | None, fs_hz: float):
     share = float(stalls.mean())
     if share < STALL_MIN_SHARE:
         return acc, force, [], True
-    ratio = stall_step_ratio(acc, stalls)
+    chance = sum(chance_repeats(acc[i]) for i in range(r))
+    if stalls.sum() <= 4 * chance + 5:  # no more repeats than a quantised converter makes by chance
+        return acc, force, [], True
+    u, spread = stall_verdict(acc, stalls)
     runs = sum(len(_runs(m)) for m in stalls)
     bad = int(stalls.any(axis=1).sum())
     what = (f"stalled stream: {int(stalls.sum())} of {stalls.size} samples ({100 * share:.1f} %) repeat the frame "
-            f"before them exactly on every axis, in {runs} run(s) in {bad} of {r} records (the step after a run is "
-            f"{ratio:.2f}× the typical step")
+            f"before them exactly on every axis, in {runs} run(s) in {bad} of {r} records (the steps that end the "
+            f"runs sit {u:.2f} of the way from a one-sample step to a step over the run")
     credible = share <= STALL_RUINED
-    if np.isfinite(ratio) and ratio < STALL_RATIO[0]:
+    tells = np.isfinite(u) and spread >= STALL_MIN_SPREAD
+    if tells and u < STALL_SPLIT[0]:
         keep = ~stalls
         n = int(keep.sum(axis=1).min())
         acc = np.stack([acc[i][:, keep[i]][:, :n] for i in range(r)])
@@ -776,7 +820,7 @@ def repair_stalls(acc: np.ndarray, force: np.ndarray | None, fs_hz: float):
             force = np.stack([force[i][keep[i]][:n] for i in range(r)])
         what += (f": the stream resumed where it stopped); the repeats deleted (the time base restored) and the "
                  f"records cut to a common {n} samples ({n / fs_hz:.3g} s)")
-    elif np.isfinite(ratio) and ratio > STALL_RATIO[1]:
+    elif tells and u > STALL_SPLIT[1]:
         acc = acc.copy()
         force = None if force is None else force.copy()
         for i in range(r):
@@ -836,10 +880,10 @@ def repair_timing(records):
       (:func:`stalled_frames`). Whether the repeats were *inserted* (the stream stopped and resumed where it
       was: every later sample is late by the run's length, every frequency read low) or *held* (the stream
       kept its last value and lost what came meanwhile) the data tell by the step that ends each run
-      (:func:`stall_step_ratio`): inserted repeats are deleted (the time base is restored; the records are cut
-      to a common length), held ones bridged by straight lines. Where the step cannot tell
-      (:data:`STALL_RATIO`) or more than :data:`STALL_RUINED` of the samples stalled, the table is not
-      credible.
+      (:func:`stall_verdict`): inserted repeats are deleted (the time base is restored; the records are cut
+      to a common length), held ones bridged by straight lines. Where the steps cannot tell
+      (:data:`STALL_SPLIT`, :data:`STALL_MIN_SPREAD`) or more than :data:`STALL_RUINED` of the samples
+      stalled, the table is not credible.
 
     **Returns:** ``(records, notes, credible)``.
     """
