@@ -963,6 +963,20 @@ issue34("ssi-csv-header-no-rows", ["ssi", "{d}/h.csv", *RIG34], setup=_write("h.
         check=_refused_naming("h.csv", "no data rows"), unchanged=True)
 
 
+def _drop_rows(every):
+    """``rec34.csv`` with every ``every``-th data row left out (a logger that drops samples; the time column says)."""
+    def setup(d: Path):
+        _rig_copy("csv")(d)
+        lines = (d / "rec34.csv").read_text().splitlines()
+        (d / "rec34.csv").write_text("\n".join(x for i, x in enumerate(lines) if i < 2 or i % every) + "\n")
+    return setup
+
+
+# dropped samples (the time column jumps): filled on the time grid, said and recorded
+issue34("frf-csv-dropped-rows", ["frf", "{d}/rec34.csv", "--channels", "{d}/rec34.toml", *RIG34], setup=_drop_rows(97),
+        check=_warned_and_recorded("dropped samples", "filled by straight lines"))
+
+
 def _mat73_leaving(how):
     """``ext.mat``: a MATLAB v7.3 file of the fixture records whose ``acc`` leaves the file (``how``: an external
     link, a soft link to an external link, a dangling soft link, external raw storage, a virtual dataset) pointing

@@ -117,3 +117,43 @@ def test_records_angle_out_of_range():
     r = _records()
     with pytest.raises(InputError, match="sensor_angle_deg' = 1e\\+300 at record 0"):
         Records(acc=r.acc, axes=r.axes, sensor_angle_deg=np.array([1e300, 0.0, 90.0, 180.0]), fs_hz=r.fs_hz)
+
+
+def _csv_with_rows(path, t, cols, names):
+    lines = ["time [s]," + ",".join(f"{n} [m/s^2]" for n in names)]
+    lines += [f"{float(a)!r}," + ",".join(f"{float(c[i])!r}" for c in cols) for i, a in enumerate(t)]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_csv_dropped_rows_filled_on_the_time_grid_and_said(tmp_path):
+    from ringfit.io.rig import read_rig_records
+    from ringfit.io.channel_map import ChannelMap, ChannelSpec
+
+    fs, n = 1000.0, 400
+    full_t = np.arange(n) / fs
+    x = np.sin(2 * np.pi * 37 * full_t)
+    y = np.cos(2 * np.pi * 53 * full_t)
+    drop = [100, 101, 250]  # rows lost: two in a row, then one
+    keep = np.setdiff1d(np.arange(n), drop)
+    _csv_with_rows(tmp_path / "d.csv", full_t[keep], [x[keep], y[keep]], ["a", "b"])
+    cmap = ChannelMap(channels={"a": ChannelSpec("a", "acc", axis="radial", angle_deg=0.0, unit="m/s^2"),
+                                "b": ChannelSpec("b", "acc", axis="radial", angle_deg=90.0, unit="m/s^2")})
+    rec = read_rig_records(tmp_path / "d.csv", cmap)
+    assert rec.fs_hz == pytest.approx(fs) and rec.n_samples == n
+    got = rec.acc[0, 0]
+    np.testing.assert_array_equal(got[keep], x[keep])
+    # the lost samples lie on the straight line between their neighbours (by hand)
+    assert got[100] == pytest.approx(x[99] + (x[102] - x[99]) / 3)
+    assert got[101] == pytest.approx(x[99] + 2 * (x[102] - x[99]) / 3)
+    assert got[250] == pytest.approx(0.5 * (x[249] + x[251]))
+    assert any("dropped samples" in s and "3 samples missing" in s for s in rec.notes)
+
+
+def test_csv_too_many_dropped_rows_refused(tmp_path):
+    from ringfit.io.csv_records import read_csv_channels
+
+    t = np.arange(400) / 1000.0
+    keep = np.setdiff1d(np.arange(400), np.arange(100, 120))  # 20 in a row
+    _csv_with_rows(tmp_path / "d.csv", t[keep], [np.sin(t[keep])], ["a"])
+    with pytest.raises(InputError, match="20 samples dropped in 1 gap"):
+        read_csv_channels(tmp_path / "d.csv")

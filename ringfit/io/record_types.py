@@ -46,6 +46,8 @@ class Records:
     - ``fs_hz``: sample rate [Hz].
     - ``force``: hammer force [N], shape ``(records, samples)``, or ``None``.
     - ``source``: where the records came from, for messages.
+    - ``notes``: one-line findings of the reader (dropped samples filled, …), carried into a mode table's
+      ``preprocessing`` list.
     """
 
     acc: np.ndarray
@@ -54,6 +56,7 @@ class Records:
     fs_hz: float
     force: np.ndarray | None = None
     source: str = field(default="<records>")
+    notes: list = field(default_factory=list, compare=False)
 
     def __post_init__(self):
         validate_records(self)

@@ -885,6 +885,9 @@ def repair_timing(records):
       (:data:`STALL_SPLIT`, :data:`STALL_MIN_SPREAD`) or more than :data:`STALL_RUINED` of the samples
       stalled, the table is not credible.
 
+    The reader's own findings (``records.notes``: dropped samples filled on the time grid, docs/formats.md
+    §17.3) come first in the notes.
+
     **Returns:** ``(records, notes, credible)``.
     """
     from dataclasses import replace
@@ -892,4 +895,4 @@ def repair_timing(records):
     acc, force, notes, credible = repair_stalls(records.acc, records.force, records.fs_hz)
     if notes:
         records = replace(records, acc=acc, force=force)
-    return records, notes, credible
+    return records, list(getattr(records, "notes", [])) + notes, credible
