@@ -11,10 +11,11 @@ import pytest
 from ringfit.errors import InputError
 from ringfit.params import table9
 from ringfit.synth.records import degrade, impact_records, ring_modes
-from ringfit.targets.faults import (STALL_MIN_SHARE, chance_repeats, remove_drift, repair_stalls, repair_timing,
+from ringfit.targets.faults import (chance_repeats, repair_stalls, repair_timing,
                                     stall_verdict, stalled_frames)
 from ringfit.targets.identify import classify_rows, found_twice
 from ringfit.targets.preprocessing import check_angles
+from ringfit.targets.quality import remove_drift
 
 
 def _decay(fs=3200.0, seconds=0.4, seed=0, axes=2):
@@ -171,3 +172,58 @@ def test_acoustic_rows_say_why():
                                  np.array([True, False]), 218.75)
     assert list(kind) == ["acoustic", "structural"]
     assert "cavity" in reason[0] and "+0.1 %" in reason[0] and reason[1] == ""
+
+
+def _drum_frames(idx, seconds=3.0):
+    from bad_input_cases import _drum_record
+    from ringfit.io.continuous import ContinuousRecord
+
+    rec = _drum_record(seconds=seconds)
+    return ContinuousRecord(acc=rec.acc[:, idx], axes=rec.axes, fs_hz=rec.fs_hz,
+                            encoder_angle_deg=rec.encoder_angle_deg[idx], hall=rec.hall[idx],
+                            hall_delay_s=rec.hall_delay_s, condition=rec.condition), rec.samples
+
+
+@pytest.mark.parametrize("how", ["clean", "inserted", "held", "dropped"])
+def test_profile_counts_the_time_a_faulty_stream_covers(how):
+    """A drum recording turning at 10 Hz (stated rotation_hz 10): stalls and dropped samples are said, the
+    rotation rate stays 10 Hz (not a false sampling-rate contradiction)."""
+    import warnings
+
+    from ringfit.targets.rolling_profile import rolling_profile
+
+    s = 6000
+    rng = np.random.default_rng(7)
+    if how == "inserted":
+        idx, k = [], 0
+        while len(idx) < s:
+            idx.append(k)
+            if rng.random() < 0.1 / 3:
+                idx += [k] * int(rng.integers(1, 6))
+            k += 1
+        idx = np.array(idx[:s])
+    elif how == "held":
+        idx, k = np.arange(s), 1
+        while k < s:
+            if rng.random() < 0.05:
+                run = int(rng.integers(1, 4))
+                idx[k:k + run] = idx[k - 1]
+                k += run
+            k += 1
+    elif how == "dropped":
+        idx = np.sort(rng.choice(s, int(0.95 * s), replace=False))
+    else:
+        idx = np.arange(s)
+    rec, n = _drum_frames(idx)
+    assert n == s
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        p = rolling_profile(rec, points=64)
+    said = [str(w.message) for w in caught]
+    assert p.rotation_hz == pytest.approx(10.0, rel=0.005)
+    assert not any("contradicts" in m for m in said)
+    if how == "clean":
+        assert not said
+    else:
+        word = {"inserted": "stalled stream", "held": "dropped", "dropped": "dropped"}[how]
+        assert len(said) == 1 and "timing faults" in said[0] and word in said[0]

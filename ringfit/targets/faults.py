@@ -680,10 +680,7 @@ STALL_MIN_SPREAD = 1.2
 STALL_RUINED = 0.25
 #: Half-width [samples] of the window over which the typical step beside a stall is taken.
 STALL_WINDOW = 16
-#: Degree of the polynomial trend (drift) fitted to each channel.
-DRIFT_DEGREE = 2
-#: A channel drifts when its fitted trend moves by more than this share of the channel's rms about the trend.
-DRIFT_REL = 0.25
+
 
 
 def stalled_frames(acc: np.ndarray) -> np.ndarray:
@@ -840,39 +837,6 @@ def repair_stalls(acc: np.ndarray, force: np.ndarray | None, fs_hz: float):
     return acc, force, [what], credible
 
 
-def drift_trend(acc: np.ndarray, degree: int = DRIFT_DEGREE) -> np.ndarray:
-    """The least-squares polynomial trend of each channel, without its mean: same shape as ``acc``
-    (Legendre basis over the record; a decay's oscillation barely projects on it)."""
-    s = acc.shape[-1]
-    t = np.linspace(-1.0, 1.0, s)
-    basis = np.polynomial.legendre.legvander(t, degree)  # (samples, degree + 1)
-    coef, *_ = np.linalg.lstsq(basis, acc.reshape(-1, s).T, rcond=None)
-    return (basis[:, 1:] @ coef[1:]).T.reshape(acc.shape)  # the constant is the offset's (remove_offsets)
-
-
-def remove_drift(acc: np.ndarray, axes=None) -> tuple[np.ndarray, str | None]:
-    """Each channel's polynomial trend (:func:`drift_trend`) removed when some channel drifts (the trend moves by
-    more than :data:`DRIFT_REL` of its rms about the trend); then every channel is detrended alike.
-
-    **Returns:** ``(acc, note)``, ``acc`` unchanged and ``note`` None when nothing drifts.
-    """
-    acc = np.asarray(acc, dtype=np.float64)
-    if acc.shape[-1] < 4 * (DRIFT_DEGREE + 1):
-        return acc, None
-    trend = drift_trend(acc)
-    rest = acc - trend
-    spread = np.ptp(trend, axis=-1)
-    rms = np.std(rest, axis=-1)
-    drifts = spread > DRIFT_REL * np.maximum(rms, np.finfo(float).tiny)
-    if not drifts.any():
-        return acc, None
-    i = np.unravel_index(np.argmax(np.where(drifts, spread / np.maximum(rms, np.finfo(float).tiny), 0)), drifts.shape)
-    worst = float(spread[i] / max(rms[i], np.finfo(float).tiny))
-    return rest, (f"drift in {int(drifts.sum())} of {drifts.size} channels (a trend moving up to "
-                  f"{float(spread.max()):.3g} m/s² over the record, {worst:.3g}× the channel's rms about it): "
-                  f"removed (a polynomial trend of degree {DRIFT_DEGREE} fitted to each channel and subtracted)")
-
-
 def repair_timing(records):
     """Timing faults of impact :class:`~ringfit.io.records.Records`, before anything else is done to them.
 
@@ -896,3 +860,73 @@ def repair_timing(records):
     if notes:
         records = replace(records, acc=acc, force=force)
     return records, list(getattr(records, "notes", [])) + notes, credible
+
+
+class EncoderTiming:
+    """Timing faults of a continuous recording, counted chunk by chunk from its unwrapped encoder angle and its
+    acceleration (:meth:`add`), said by :meth:`note`.
+
+    - **stalled** samples: the encoder's angle and every acceleration axis repeat the sample before exactly (the
+      stream repeated a frame; repeats a quantised converter makes by chance, :func:`chance_repeats`, allowed
+      four times over);
+    - **dropped** samples: the angle advances by ``k ≥ 2`` typical steps (the chunk's median step) at once,
+      ``k − 1`` samples lost, where the steps are steady (the 75th percentile within 1.2× the 10th: a coarse
+      encoder's steps alternate between multiples of its resolution and tell nothing).
+
+    A stream that held its value while it stalled shows both (the held run, then a jump over it), and the
+    count of samples the time really covers, ``samples − stalled + dropped``, is right either way.
+    """
+
+    def __init__(self):
+        self.samples = self.stalled = self.dropped = self.jumps = 0
+        self.chance = 0.0
+        self.prev = None  # (angle, acc frame) of the last sample of the previous chunk
+
+    def add(self, angle_deg: np.ndarray, acc: np.ndarray) -> None:
+        phi = np.asarray(angle_deg, dtype=np.float64)
+        x = np.asarray(acc, dtype=np.float64)
+        if self.prev is not None:
+            phi = np.concatenate([[self.prev[0]], phi])
+            x = np.concatenate([self.prev[1][:, None], x], axis=1)
+        self.samples += int(np.asarray(angle_deg).size)
+        self.prev = (float(phi[-1]), x[:, -1].copy())
+        if phi.size < 3:
+            return
+        d = np.diff(phi)
+        same = (d == 0) & np.all(np.diff(x, axis=1) == 0, axis=0)
+        self.stalled += int(same.sum())
+        self.chance += chance_repeats(np.vstack([x, phi[None]]))
+        ad = np.abs(d[d != 0])
+        if ad.size < 16:
+            return
+        lo, step, hi = np.quantile(ad, [0.1, 0.5, 0.75])
+        if hi > 1.2 * lo:  # a coarse (or unsteady) encoder: its steps vary too much to see a lost sample
+            return
+        k = np.rint(np.abs(d) / step)
+        jump = (k >= 2) & (np.abs(np.abs(d) - k * step) <= 0.25 * step) & (k <= 64)
+        self.jumps += int(jump.sum())
+        self.dropped += int(np.sum(k[jump] - 1))
+
+    @property
+    def stall_found(self) -> bool:
+        return self.stalled >= STALL_MIN_SHARE * max(self.samples, 1) and self.stalled > 4 * self.chance + 5
+
+    @property
+    def covered(self) -> int:
+        """Samples' worth of time the recording covers: ``samples − stalled + dropped`` (as found)."""
+        return self.samples - (self.stalled if self.stall_found else 0) + self.dropped
+
+    def note(self) -> str | None:
+        """One line when a stall or dropped samples were found, else None."""
+        parts = []
+        if self.stall_found:
+            parts.append(f"{self.stalled} samples repeat the frame before them exactly, the encoder's angle included "
+                         "(a stalled stream)")
+        if self.dropped:
+            parts.append(f"{self.dropped} samples dropped (the encoder advances by more than one step at once at "
+                         f"{self.jumps} place(s))")
+        if not parts:
+            return None
+        return (f"timing faults: {' and '.join(parts)}; the profile bins by the encoder's angle and is not moved, "
+                f"and the rotation rate is counted over the {self.covered} samples' time the recording really "
+                f"covers, not its {self.samples}")
