@@ -165,6 +165,7 @@ def test_found_twice_pairs_a_non_structural_row_with_its_structural_twin():
     freq = np.array([218.75, 227.70, 227.91, 258.98])
     kind = np.array(["acoustic", "acoustic", "structural", "structural"], dtype=object)
     assert found_twice(freq, kind) == [(1, 2)]  # 0.09 % apart; the cavity 4 % away is its own row
+    assert found_twice(freq, kind, skip=np.array([False, True, False, False])) == []  # a hum residue is not the mode
 
 
 def test_acoustic_rows_say_why():

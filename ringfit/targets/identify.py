@@ -241,16 +241,21 @@ def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, no
 TWICE_TOL = 0.005
 
 
-def found_twice(freq_hz: np.ndarray, kind: np.ndarray, tol: float = TWICE_TOL) -> list[tuple[int, int]]:
+def found_twice(freq_hz: np.ndarray, kind: np.ndarray, tol: float = TWICE_TOL,
+                skip: np.ndarray | None = None) -> list[tuple[int, int]]:
     """``[(row, structural_row)]``: each row that is not ``structural`` within ``tol`` (relative) of a structural
-    row, with the nearest such row."""
+    row, with the nearest such row; rows where ``skip`` is True (on a notched mains line: what the hum left,
+    not the mode) are not paired."""
     freq_hz = np.asarray(freq_hz, dtype=np.float64)
     kind = np.asarray(kind, dtype=object)
     st = np.flatnonzero(kind == "structural")
     out = []
     if not st.size:
         return out
-    for i in np.flatnonzero(kind != "structural"):
+    other = kind != "structural"
+    if skip is not None:
+        other &= ~np.asarray(skip, dtype=bool)
+    for i in np.flatnonzero(other):
         off = np.abs(freq_hz[st] / freq_hz[i] - 1)
         j = int(np.argmin(off))
         if off[j] <= tol:
@@ -308,7 +313,7 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     idx = np.flatnonzero(keep)
     kind, reason = classify_rows(n[idx], conf[idx], freq[idx], not_ring[idx], cavity_hz, lines_hz=lines_hz,
                                  duration_s=duration_s)
-    twice = found_twice(freq[idx], kind)
+    twice = found_twice(freq[idx], kind, skip=np.array([str(r).startswith("on the mains line") for r in reason]))
     if twice:
         if notes is not None:
             shown = ", ".join(f"{freq[idx][i]:.2f} Hz ({kind[i]}) beside the n = {int(n[idx][j])} mode at "
