@@ -897,6 +897,8 @@ for cmd in ("ssi", "frf"):
             check=_refused_naming("r34.records.npz", "one sensor angle 30°", "cannot be told"), unchanged=True)
     issue34(f"{cmd}-one-sensor-angle-mod-360", [cmd, *R34], setup=_ring_records(angles=[30.0, 390.0, -330.0]),
             check=_refused_naming("one sensor angle", "cannot be told"), unchanged=True)
+    issue34(f"{cmd}-two-sensor-angles", [cmd, *R34], setup=_ring_records(angles=[0.0, 90.0]),
+            check=_refused_naming("two sensor angles, 0° and 90°", "cannot be told"), unchanged=True)
 
 
 def _rig_copy(fmt, *, angle=None, edit=None):

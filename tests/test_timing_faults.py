@@ -157,8 +157,10 @@ def test_one_sensor_angle_refused(angles):
         check_angles(np.array(angles))
 
 
-def test_two_angles_pass():
-    check_angles(np.array([0.0, 0.0, 45.0]))
+def test_two_angles_refused_three_pass():
+    with pytest.raises(InputError, match="only two sensor angles, 0° and 45°"):
+        check_angles(np.array([0.0, 360.0, 45.0]))
+    check_angles(np.array([0.0, 0.0, 45.0, 90.0]))
 
 
 def test_found_twice_pairs_a_non_structural_row_with_its_structural_twin():
