@@ -895,7 +895,8 @@ class EncoderTiming:
         d = np.diff(phi)
         same = (d == 0) & np.all(np.diff(x, axis=1) == 0, axis=0)
         self.stalled += int(same.sum())
-        self.chance += chance_repeats(np.vstack([x, phi[None]]))
+        if same.sum() >= STALL_MIN_SHARE * d.size:  # the chance count costs a running median: only when it matters
+            self.chance += chance_repeats(np.vstack([x, phi[None]]))
         ad = np.abs(d[d != 0])
         if ad.size < 16:
             return
