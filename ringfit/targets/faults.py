@@ -45,6 +45,11 @@ one-line note for the sidecar's ``preprocessing`` list and a warning:
   repeats is the flipped one, and finds a flip with a single repeat or with
   every repeat of an angle flipped (a sensor mounted the other way round).
 
+Timing faults come before all of these: a stream that stalls (runs of frames repeated exactly; the repeats
+deleted where they were inserted, bridged where they were held: :func:`repair_timing`) and, in continuous
+recordings, stalls and dropped samples seen in the encoder's angle (:class:`EncoderTiming`); DC drift is taken
+out with the offsets (:func:`ringfit.targets.quality.remove_drift`).
+
 What is done: hum is notched; a dead, clipped or flipped channel of a record
 is left out of that record (the other repeats of its angle carry it, and
 without one the channel is lost, said so) — except a channel flipped against
