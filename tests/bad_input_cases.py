@@ -798,6 +798,231 @@ for cmd in ("frf", "ssi"):
                                        "turned round"))
 
 
+# issue 34 (readers and modal targets): contradictions the data reveal, timing faults, hostile rig files
+
+
+def issue34(id, argv, setup=None, names=(), **kw):
+    add(id, argv, setup, names, item=4, issue=34, **kw)
+
+
+def _ring_records(how=None, angles=None, seed=3):
+    """``r34.records.npz``: impact records of a ring (n = 1…6, 16 angles, two impacts each, 3.2 kHz, 0.4 s), with
+    one :func:`ringfit.synth.records.degrade` fault, or every record at the angles ``angles``."""
+    def setup(d: Path):
+        from dataclasses import replace
+
+        from ringfit.io.records import write_records
+        from ringfit.params import table9
+        from ringfit.synth.records import degrade, impact_records, ring_modes
+
+        geometry, ring = table9()
+        rec = impact_records(ring_modes(ring, geometry, n_values=range(1, 7), seed=1), np.arange(16) * 22.5,
+                             impacts_per_angle=2, fs_hz=3200.0, duration_s=0.4, seed=4)
+        if how is not None:
+            rec = degrade(rec, how, seed=seed)
+        if angles is not None:
+            rec = replace(rec, sensor_angle_deg=np.resize(np.asarray(angles, dtype=np.float64), rec.n_records))
+        write_records(rec, d / "r34.records.npz")
+    return setup
+
+
+def _truth_n():
+    from ringfit.params import table9
+    from ringfit.synth.records import ring_modes
+
+    geometry, ring = table9()
+    t = ring_modes(ring, geometry, n_values=range(1, 7), seed=1)
+    return [(int(n), float(f)) for n, k, f in zip(t.n, t.kind, t.freq_hz) if k == "structural"]
+
+
+def _mended(*parts, credible=True):
+    """Exit 0, the fault said in one WARNING line and in the sidecar's preprocessing, the table's credibility as
+    given, and (credible) every true ring mode n = 1…6 one structural row within 0.3 %."""
+    def check(status, err, out, d):
+        if not _warned_and_recorded(*parts)(status, err, out, d):
+            return False
+        from ringfit.io.modes import read_mode_table
+
+        table = read_mode_table(d / "out.modes.csv")
+        if table.condition.get("credible") is not credible:
+            return False
+        if not credible:
+            return True
+        for n, f in _truth_n():
+            rows = np.flatnonzero((table.n == n) & (table.kind == "structural"))
+            if rows.size != 1 or abs(table.freq_hz[rows[0]] / f - 1) > 0.003:
+                return False
+        return True
+    return check
+
+
+def _no_empty_reason_nor_twice(status, err, out, d):
+    """Exit 0; every row that is not structural has a reason; no two rows within 0.5 % of each other."""
+    from ringfit.io.modes import read_mode_table
+
+    if status != 0:
+        return False
+    table = read_mode_table(d / "out.modes.csv")
+    reason = table.extra.get("reason", np.full(len(table), "", dtype=object))
+    if any(k != "structural" and not str(r).strip() for k, r in zip(table.kind, reason)):
+        return False
+    f = np.sort(table.freq_hz)
+    return not np.any(np.diff(f) / f[1:] < 0.005)
+
+
+def _refused_naming(*parts):
+    """Exit 2 and one stderr line holding every one of ``parts`` (the case is also marked unchanged)."""
+    def check(status, err, out, d):
+        lines = error_lines(err)
+        return status == 2 and len(lines) == 1 and all(p in lines[0] for p in parts)
+    return check
+
+
+R34 = ["{d}/r34.records.npz", "--out", "{d}/out.modes.csv", "--band", "20:300"]
+for cmd in ("ssi", "frf"):
+    extra = ["--orders", "2:40", "--quiet"] if cmd == "ssi" else []
+    # a stream that stalls (10 % of the samples repeated, inserted: every later sample late) or holds its value
+    issue34(f"{cmd}-stalled-stream", [cmd, *R34, *extra], setup=_ring_records("stalled"),
+            check=_mended("stalled stream", "repeats deleted"), slow=cmd == "ssi")
+    issue34(f"{cmd}-held-stream", [cmd, *R34, *extra], setup=_ring_records("held"),
+            check=_mended("stalled stream", "bridged"), slow=cmd == "ssi")
+    # DC drift (a ramp on every channel): removed, not taken for noise
+    issue34(f"{cmd}-dc-drift", [cmd, *R34, *extra], setup=_ring_records("drift"), check=_mended("drift in"),
+            slow=cmd == "ssi")
+    # 60 Hz mains hum: no row without a reason unless structural, no mode twice
+    issue34(f"{cmd}-hum60-no-mode-twice", [cmd, *R34, *extra], setup=_ring_records("hum60"),
+            check=_no_empty_reason_nor_twice, slow=cmd == "ssi")
+    # every record at one sensor angle: n cannot be told; the angle named, not the model orders
+    issue34(f"{cmd}-one-sensor-angle", [cmd, *R34], setup=_ring_records(angles=[30.0]),
+            check=_refused_naming("r34.records.npz", "one sensor angle 30°", "cannot be told"), unchanged=True)
+    issue34(f"{cmd}-one-sensor-angle-mod-360", [cmd, *R34], setup=_ring_records(angles=[30.0, 390.0, -330.0]),
+            check=_refused_naming("one sensor angle", "cannot be told"), unchanged=True)
+    issue34(f"{cmd}-two-sensor-angles", [cmd, *R34], setup=_ring_records(angles=[0.0, 90.0]),
+            check=_refused_naming("two sensor angles, 0° and 90°", "cannot be told"), unchanged=True)
+
+
+def _rig_copy(fmt, *, angle=None, edit=None):
+    """``rec34.<fmt>``: the fixture records as a rig file (``tdms``, ``mat`` or ``csv`` with ``rec34.toml``), every
+    record at ``angle`` when given; ``edit(bytes) -> bytes`` changes the file (or, for csv, the map's text)."""
+    def setup(d: Path):
+        from dataclasses import replace
+
+        from ringfit.io.channel_map import write_channel_map
+        from ringfit.io.csv_records import write_csv_records
+        from ringfit.io.records import read_records, write_records
+
+        rec = read_records(d / "rec.records.npz")
+        if angle is not None:
+            rec = replace(rec, sensor_angle_deg=np.full(rec.n_records, float(angle)))
+        if fmt == "csv":
+            _, cmap = write_csv_records(rec, d / "rec34.csv")
+            write_channel_map(cmap, d / "rec34.toml")
+            if edit is not None:
+                (d / "rec34.toml").write_text(edit((d / "rec34.toml").read_text()))
+            return
+        write_records(rec, d / f"rec34.{fmt}")
+        if edit is not None:
+            (d / f"rec34.{fmt}").write_bytes(edit((d / f"rec34.{fmt}").read_bytes()))
+    return setup
+
+
+def _append_mat_scalar(name, value):
+    """A MATLAB v5 file with one more variable appended as a second save would (a concatenated file)."""
+    def edit(data: bytes) -> bytes:
+        import scipy.io
+
+        buf = io.BytesIO()
+        scipy.io.savemat(buf, {name: np.float64(value)}, format="5")
+        return data + buf.getvalue()[128:]  # without the second file's 128-byte header
+    return edit
+
+
+RIG34 = ["--out", "{d}/out.modes.csv"]
+# a v5 file holding fs_hz twice (6400 then 6000 in the issue; the fixture's 2560 then 2400 here)
+for cmd in ("ssi", "frf"):
+    issue34(f"{cmd}-mat-fs-stored-twice", [cmd, "{d}/rec34.mat", *RIG34],
+            setup=_rig_copy("mat", edit=_append_mat_scalar("fs_hz", 2400.0)),
+            check=_refused_naming("rec34.mat", "'fs_hz'", "2560", "2400"), unchanged=True)
+    # every TDMS group at one angle; a channel map giving every channel the same angle
+    issue34(f"{cmd}-tdms-one-sensor-angle", [cmd, "{d}/rec34.tdms", *RIG34], setup=_rig_copy("tdms", angle=45.0),
+            check=_refused_naming("rec34.tdms", "one sensor angle 45°"), unchanged=True)
+    issue34(f"{cmd}-channel-map-one-angle", [cmd, "{d}/rec34.csv", "--channels", "{d}/rec34.toml", *RIG34],
+            setup=_rig_copy("csv", angle=90.0), check=_refused_naming("rec34.csv", "one sensor angle 90°"),
+            unchanged=True)
+# a channel map angle of 1e300 (was LinAlgError in targets/shapes.py), a sensitivity of 1e-300
+issue34("ssi-channel-map-angle-1e300", ["ssi", "{d}/rec34.csv", "--channels", "{d}/rec34.toml", *RIG34],
+        setup=_rig_copy("csv", edit=lambda t: t.replace("angle_deg = 0.0", "angle_deg = 1e300", 1)),
+        check=_refused_naming("rec34.toml", "r000_radial", "angle_deg"), unchanged=True)
+issue34("frf-channel-map-sensitivity-1e-300", ["frf", "{d}/rec34.csv", "--channels", "{d}/rec34.toml", *RIG34],
+        setup=_rig_copy("csv", edit=lambda t: t.replace('unit = "m/s^2"', 'unit = "m/s^2"\nsensitivity = 1e-300', 1)),
+        check=_refused_naming("rec34.toml", "sensitivity"), unchanged=True)
+issue34("ssi-npz-angle-1e300", SSI, setup=_npz("rec.records.npz", sensor_angle_deg=np.array([1e300] + [45.0] * 7)),
+        check=_refused_naming("rec.records.npz", "sensor_angle_deg"), unchanged=True)
+# a TDMS file cut to 100 bytes: truncated, not "no numeric channels"; a CSV with a header and no rows
+issue34("ssi-tdms-cut-to-100-bytes", ["ssi", "{d}/rec34.tdms", *RIG34], setup=_rig_copy("tdms", edit=lambda b: b[:100]),
+        check=_refused_naming("rec34.tdms", "truncated"), unchanged=True)
+issue34("ssi-csv-header-no-rows", ["ssi", "{d}/h.csv", *RIG34], setup=_write("h.csv", "time [s],radial [g]\n"),
+        check=_refused_naming("h.csv", "no data rows"), unchanged=True)
+
+
+def _drop_rows(every):
+    """``rec34.csv`` with every ``every``-th data row left out (a logger that drops samples; the time column says)."""
+    def setup(d: Path):
+        _rig_copy("csv")(d)
+        lines = (d / "rec34.csv").read_text().splitlines()
+        (d / "rec34.csv").write_text("\n".join(x for i, x in enumerate(lines) if i < 2 or i % every) + "\n")
+    return setup
+
+
+# dropped samples (the time column jumps): filled on the time grid, said and recorded
+issue34("frf-csv-dropped-rows", ["frf", "{d}/rec34.csv", "--channels", "{d}/rec34.toml", *RIG34], setup=_drop_rows(97),
+        check=_warned_and_recorded("dropped samples", "filled by straight lines"))
+
+
+def _mat73_leaving(how):
+    """``ext.mat``: a MATLAB v7.3 file of the fixture records whose ``acc`` leaves the file (``how``: an external
+    link, a soft link to an external link, a dangling soft link, external raw storage, a virtual dataset) pointing
+    at ``secret.h5`` / ``secret.bin`` beside it."""
+    def setup(d: Path):
+        import h5py
+
+        base = _impact_records()
+        acc = np.asarray(base["acc"], dtype=np.float64).T.copy()  # MATLAB's column-major order on disk
+        with h5py.File(d / "secret.h5", "w") as s:
+            s["data"] = acc
+        acc.tofile(d / "secret.bin")
+        with h5py.File(d / "ext.mat", "w", userblock_size=512) as f:
+            for key in ("sensor_angle_deg", "fs_hz", "force"):
+                a = np.asarray(base[key], dtype=np.float64)
+                a = a.reshape(1, -1) if a.ndim == 1 else (a.reshape(1, 1) if a.ndim == 0 else a)
+                f.create_dataset(key, data=a.T).attrs["MATLAB_class"] = np.bytes_("double")
+            codes = np.array([[ord(c) for c in s.ljust(10)] for s in ("radial", "tangential")], dtype=np.uint16)
+            f.create_dataset("axes", data=codes.T).attrs["MATLAB_class"] = np.bytes_("char")
+            if how == "external-link":
+                f["acc"] = h5py.ExternalLink("secret.h5", "/data")
+            elif how == "soft-link-to-external":
+                f["acc"] = h5py.SoftLink("/zz")
+                f["zz"] = h5py.ExternalLink("secret.h5", "/data")
+            elif how == "dangling-soft-link":
+                f["acc"] = h5py.SoftLink("/nowhere")
+            elif how == "external-storage":
+                ds = f.create_dataset("acc", shape=acc.shape, dtype="<f8", external=[("secret.bin", 0, acc.nbytes)])
+                ds.attrs["MATLAB_class"] = np.bytes_("double")
+            elif how == "virtual":
+                layout = h5py.VirtualLayout(shape=acc.shape, dtype="<f8")
+                layout[...] = h5py.VirtualSource("secret.h5", "data", shape=acc.shape)
+                f.create_virtual_dataset("acc", layout).attrs["MATLAB_class"] = np.bytes_("double")
+        with open(d / "ext.mat", "r+b") as fh:
+            fh.write(b"MATLAB 7.3 MAT-file, HDF5 schema 1.00 .".ljust(116) + b"\x00" * 8 + b"\x00\x02IM")
+    return setup
+
+
+for how in ("external-link", "soft-link-to-external", "dangling-soft-link", "external-storage", "virtual"):
+    issue34(f"ssi-mat73-{how}", ["ssi", "{d}/ext.mat", *RIG34], setup=_mat73_leaving(how),
+            check=_refused_naming("ext.mat", "acc", "refusing"), unchanged=True)
+
+
+
 # ----------------------------------------------------------------------------- documented behaviour
 
 

@@ -1,7 +1,7 @@
 """Degraded channels never become modes (issue 23 item 2).
 
 Rig faults (``ringfit.synth.records.degrade``: spikes, clipping, 50/60 Hz mains hum, dead and sign-flipped
-channels) on small synthetic records with a known truth (n = 1…6 and the cavity): every true mode is kept, no
+channels; issue 34's stalled and held streams and DC drift) on small synthetic records with a known truth (n = 1…6 and the cavity): every true mode is kept, no
 row that is not in the truth comes out unflagged (a non-truth row is ``unclassified`` with a reason), and the
 fault is said in a warning and the sidecar's ``preprocessing`` list. The detectors are checked on their own
 against hand-made signals and, for false alarms and misses, on many random clean and faulty records.
@@ -24,7 +24,8 @@ ANGLES = np.arange(16) * 22.5
 BAND = (20.0, 300.0)
 CAVITY = float(cavity_frequency(1))  # eq. 22, 218.75 Hz
 SAID = {"spikes": "with spikes", "clipped": "clipped (flat tops", "hum50": "mains hum (lines at 50, 100, 150 Hz",
-        "hum60": "mains hum (lines at 60, 120, 180 Hz", "dead": "dead (rms below", "flipped": "sign-flipped"}
+        "hum60": "mains hum (lines at 60, 120, 180 Hz", "dead": "dead (rms below", "flipped": "sign-flipped",
+        "stalled": "stalled stream", "held": "stalled stream", "drift": "drift in"}
 
 
 def _records(seed=2, n_values=range(1, 7), **kw):

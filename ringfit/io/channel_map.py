@@ -29,12 +29,14 @@ from pathlib import Path
 
 from ringfit.errors import InputError
 from ringfit.io.files import existing_file
-from ringfit.io.record_types import AXES, CONDITION_KEYS
+from ringfit.io.record_types import ANGLE_RANGE_DEG, AXES, CONDITION_KEYS
 
 #: What a channel can be. ``pulses``: incremental encoder (0/1 levels); ``trigger``: the hall / cleat trigger.
 ROLES = ("acc", "force", "encoder", "pulses", "trigger", "ignore")
 #: Keys of one channel's table.
 CHANNEL_KEYS = ("role", "axis", "angle_deg", "record", "unit", "sensitivity")
+#: Magnitudes of ``sensitivity`` accepted (file value per unit): beyond them a unit slip or a corrupted map.
+SENSITIVITY_RANGE = (1e-9, 1e9)
 #: Top-level scalar keys.
 TOP_KEYS = ("fs_hz", "pulses_per_rev", "encoder_offset_deg", "hall_delay_s")
 #: File-level numbers a rig file may carry (TDMS root properties, MATLAB scalars): the top-level keys and the
@@ -142,12 +144,20 @@ def parse_channel_map(data: dict, *, source: str = "<channel map>") -> ChannelMa
             spec.unit = entry["unit"]
         if "angle_deg" in entry:
             spec.angle_deg = _number(entry["angle_deg"], f"{where}.angle_deg", source)
+            lo, hi = ANGLE_RANGE_DEG
+            if not lo <= spec.angle_deg <= hi:
+                raise InputError(f"{where}.angle_deg = {entry['angle_deg']!r}; expected an angle in [{lo:g}, {hi:g}] "
+                                 "degrees", source=source)
         if "record" in entry:
             if not isinstance(entry["record"], (str, int)) or isinstance(entry["record"], bool):
                 raise InputError(f"{where}.record = {entry['record']!r}; expected a name or number", source=source)
             spec.record = str(entry["record"])
         if "sensitivity" in entry:
             spec.sensitivity = _number(entry["sensitivity"], f"{where}.sensitivity", source, nonzero=True)
+            lo, hi = SENSITIVITY_RANGE
+            if not lo <= abs(spec.sensitivity) <= hi:
+                raise InputError(f"{where}.sensitivity = {entry['sensitivity']!r}; expected a magnitude in "
+                                 f"[{lo:g}, {hi:g}] (file value per unit; negative flips the sign)", source=source)
         channels[str(name)] = spec
     return ChannelMap(channels=channels, top=top, condition=condition, source=source)
 

@@ -20,6 +20,7 @@ import csv
 import io
 import os
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -67,8 +68,13 @@ def read_csv_channels(path: str | os.PathLike) -> RigFile:
         raise InputError(f"row {start + 1}: the first row is numbers; expected a header row of channel names",
                          source=path)
     body = "\n".join(lines[start + 1:])
+    if not any(line.strip() and not line.lstrip().startswith("#") for line in lines[start + 1:]):
+        raise InputError(f"row {start + 1} is a header and no data rows follow; expected a time history (one row per "
+                         "sample)", source=path)
     try:
-        data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, dtype=np.float64, comments="#")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # loadtxt's own words name a StringIO, not the file
+            data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, dtype=np.float64, comments="#")
     except ValueError:
         data = None
     if data is None or data.shape[1] != len(names):
@@ -84,7 +90,12 @@ def read_csv_channels(path: str | os.PathLike) -> RigFile:
     fs = None
     for j, (name, unit) in enumerate(zip(names, units)):
         if name.lower() in TIME_NAMES:
-            fs = _time_rate(data[:, j], unit, name, lines, start, path)
+            fs, gaps = _time_rate(data[:, j], unit, name, lines, start, path)
+            if gaps:
+                rig.gaps = [(i, m) for i, m, _ in gaps]
+                rig.notes.append(f"dropped samples: the time column {name!r} jumps by more than one step at "
+                                 f"{len(gaps)} row(s) (first at row {gaps[0][2]}): {sum(m for _, m, _ in gaps)} "
+                                 "samples missing, filled by straight lines on the even time grid")
             continue
         rig.channels.append(RawChannel(name=name, short=name, data=data[:, j].copy(), unit=unit))
     if fs is not None:
@@ -129,21 +140,37 @@ def _find_bad_row(lines, start, names, path):
                 raise InputError(f"row {n + 1}, column {name!r}: {c.strip()!r} is not a number", source=path) from None
 
 
-def _time_rate(t, unit, name, lines, start, path) -> float:
+#: Dropped samples (whole rows missing: the time column jumps by a whole number of steps) are filled when they
+#: are at most this share of the samples and no gap is longer than :data:`MAX_DROPPED_RUN` samples; more is refused.
+MAX_DROPPED_SHARE = 0.02
+MAX_DROPPED_RUN = 8
+
+
+def _time_rate(t, unit, name, lines, start, path):
+    """``(fs_hz, gaps)``: the rate of an evenly spaced time column, and its dropped samples as ``[(i, missing,
+    line)]`` — after data row ``i`` the column jumps by ``missing + 1`` steps (``line`` its line in the file)."""
     scale = _TIME_UNITS.get((unit or "s").strip().lower())
     if scale is None:
         raise InputError(f"column {name!r}: time unit {unit!r}; expected s or ms", source=path)
     t = t * scale
     d = np.diff(t)
-    step = (t[-1] - t[0]) / (t.size - 1)
+    step = float(np.median(d))
     if not step > 0:
         raise InputError(f"column {name!r}: time does not increase", source=path)
-    off = np.abs(d - step) > TIME_TOL * step
-    if off.any():
-        i = int(np.argmax(off)) + 1
-        raise InputError(f"row {_data_row(lines, start, i)}, column {name!r}: uneven time step {d[i - 1]:.6g} s "
-                         f"(mean {step:.6g} s); expected evenly sampled records", source=path)
-    return 1.0 / step
+    k = np.rint(d / step)
+    whole = (k >= 1) & (np.abs(d - k * step) <= TIME_TOL * k * step)
+    gaps = np.flatnonzero(whole & (k >= 2))
+    missing = int(np.sum(k[gaps] - 1))
+    if whole.all() and missing <= MAX_DROPPED_SHARE * t.size and (k[gaps] - 1 <= MAX_DROPPED_RUN).all():
+        return 1.0 / step, [(int(i), int(k[i] - 1), _data_row(lines, start, i + 1)) for i in gaps]
+    i = int(np.argmax(~whole | (k - 1 > MAX_DROPPED_RUN))) + 1 if not whole.all() or gaps.size else 1
+    if whole.all():
+        raise InputError(f"column {name!r}: {missing} samples dropped in {gaps.size} gap(s) (the longest "
+                         f"{int(k[gaps].max() - 1)} samples, first after row {_data_row(lines, start, int(gaps[0]))}); "
+                         f"expected at most {100 * MAX_DROPPED_SHARE:g} % of the samples, {MAX_DROPPED_RUN} in a row",
+                         source=path)
+    raise InputError(f"row {_data_row(lines, start, i)}, column {name!r}: uneven time step {d[i - 1]:.6g} s "
+                     f"(typical {step:.6g} s); expected evenly sampled records", source=path)
 
 
 def write_csv_records(records: Records, path: str | os.PathLike, *, overwrite: bool = False) -> tuple[Path, ChannelMap]:

@@ -70,9 +70,13 @@ def _load_v5(path: Path) -> tuple[dict, list[str]]:
     import scipy.io
 
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
             raw = scipy.io.loadmat(str(path), squeeze_me=False, chars_as_strings=True, struct_as_record=True)
+        if any("Duplicate variable name" in str(w.message) for w in caught):
+            _refuse_duplicates(path)
+    except InputError:
+        raise
     except NotImplementedError:  # "Please use HDF reader for matlab v7.3 files"
         raise InputError("a MATLAB v7.3 file without its HDF5 signature; truncated or corrupted?", source=path) from None
     except Exception as exc:  # noqa: BLE001 - scipy raises assorted errors on bad files
@@ -94,6 +98,42 @@ def _load_v5(path: Path) -> tuple[dict, list[str]]:
     return out, skipped
 
 
+def _shown(value) -> str:
+    a = np.asarray(value)
+    if a.dtype.kind in "fiub" and a.size == 1:
+        return f"{a.reshape(()).item():g}" if a.dtype.kind == "f" else str(a.reshape(()).item())
+    if a.dtype.kind in "U":
+        return repr(" ".join(str(x) for x in a.ravel()))[:40]
+    return f"an array of shape {a.shape}"
+
+
+def _refuse_duplicates(path: Path) -> None:
+    """A v5 file that stores a variable twice (a concatenated save, ``save -append`` by hand): scipy keeps the
+    last, silently. Each variable's copies are read (``scipy.io.matlab.varmats_from_mat``); copies that differ
+    are refused, naming the variable and both values (which one holds, the file cannot tell)."""
+    import scipy.io
+    from scipy.io.matlab import varmats_from_mat
+
+    seen: dict[str, list] = {}
+    with open(path, "rb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for name, stream in varmats_from_mat(fh):
+            value = scipy.io.loadmat(stream, squeeze_me=False, chars_as_strings=True).get(name)
+            seen.setdefault(name, []).append(value)
+    for name, values in seen.items():
+        first = np.asarray(values[0])
+        for other in values[1:]:
+            other = np.asarray(other)
+            same = first.shape == other.shape and first.dtype.kind == other.dtype.kind and (
+                np.array_equal(first, other, equal_nan=first.dtype.kind == "f") if first.dtype != object
+                else first.tolist() == other.tolist())
+            if not same:
+                raise InputError(f"variable {name!r} is stored {len(values)} times with different values "
+                                 f"({', then '.join(_shown(v) for v in values)}; a concatenated save?): which one "
+                                 "holds the file cannot tell (scipy keeps the last); expected each variable once",
+                                 source=path)
+
+
 def _load_v73(path: Path) -> tuple[dict, list[str]]:
     import h5py
 
@@ -103,6 +143,7 @@ def _load_v73(path: Path) -> tuple[dict, list[str]]:
             for key in f:
                 if key.startswith("#"):
                     continue  # '#refs#', '#subsystem#'
+                _check_link(f, key, path)
                 obj = f[key]
                 if not isinstance(obj, h5py.Dataset):
                     skipped.append(key)  # a struct is a group
@@ -121,6 +162,37 @@ def _load_v73(path: Path) -> tuple[dict, list[str]]:
     return out, skipped
 
 
+def _check_link(f, key: str, path: Path, depth: int = 0, via: str = "") -> None:
+    """Refuse a variable whose link leaves the file: an external link (to any file on the machine), or a soft
+    link that ends at one or at nothing. h5py would follow them."""
+    import h5py
+
+    link = f.get(key, getlink=True)
+    name = via or repr(key.lstrip("/"))
+    if isinstance(link, h5py.ExternalLink):
+        raise InputError(f"variable {name} is an external link to {link.filename!r}:{link.path}; refusing to follow "
+                         "data out of the file", source=path)
+    if isinstance(link, h5py.SoftLink):
+        target = link.path if link.path.startswith("/") else "/" + link.path
+        here = f"{name} (a soft link to {link.path!r})"
+        if depth > 16 or f.get(target, getlink=True) is None:
+            raise InputError(f"variable {here} points at nothing in the file; refusing to follow it", source=path)
+        _check_link(f, target, path, depth + 1, via=here)
+
+
+def _check_storage(ds, path: Path) -> None:
+    """Refuse a dataset whose data are stored outside the file: external raw storage or a virtual dataset
+    (whose sources may be any file)."""
+    name = ds.name.lstrip("/")
+    if ds.external:
+        raise InputError(f"variable {name!r} keeps its data in the external file {ds.external[0][0]!r}; refusing "
+                         "to read data from outside the file", source=path)
+    if ds.is_virtual:
+        files = sorted({str(v.file_name) for v in ds.virtual_sources()})
+        raise InputError(f"variable {name!r} is a virtual dataset drawing on {', '.join(files[:3])}; refusing to read "
+                         "data from outside the file", source=path)
+
+
 def _attr(obj, name) -> str:
     v = obj.attrs.get(name)
     if v is None:
@@ -130,6 +202,7 @@ def _attr(obj, name) -> str:
 
 def _v73_value(f, ds):
     """A v7.3 variable in MATLAB's own dimension order: numbers, or a list of names; None if unsupported."""
+    _check_storage(ds, Path(f.filename))
     cls = _attr(ds, "MATLAB_class")
     if ds.attrs.get("MATLAB_empty", 0):
         return np.zeros((0,))

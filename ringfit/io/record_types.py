@@ -28,6 +28,8 @@ MAX_FS_HZ = 1.0e7
 MAX_ACC_MS2 = 1.0e8
 #: Largest |force| accepted [N].
 MAX_FORCE_N = 1.0e7
+#: Sensor angles accepted [deg]: one turn either way of 0…360 (a wider value is a unit slip or a corrupted file).
+ANGLE_RANGE_DEG = (-360.0, 720.0)
 #: Largest |accelerance| accepted [m/s²/N].
 MAX_ACCELERANCE = 1.0e8
 
@@ -44,6 +46,8 @@ class Records:
     - ``fs_hz``: sample rate [Hz].
     - ``force``: hammer force [N], shape ``(records, samples)``, or ``None``.
     - ``source``: where the records came from, for messages.
+    - ``notes``: one-line findings of the reader (dropped samples filled, …), carried into a mode table's
+      ``preprocessing`` list.
     """
 
     acc: np.ndarray
@@ -52,6 +56,7 @@ class Records:
     fs_hz: float
     force: np.ndarray | None = None
     source: str = field(default="<records>")
+    notes: list = field(default_factory=list, compare=False)
 
     def __post_init__(self):
         validate_records(self)
@@ -119,6 +124,11 @@ def validate_records(rec: Records) -> Records:
         raise InputError("key 'sensor_angle_deg' is not numeric", source=src) from None
     if not np.isfinite(angle).all():
         raise InputError(f"key 'sensor_angle_deg' has a non-finite value at record {int(np.argmin(np.isfinite(angle)))}", source=src)
+    out = (angle < ANGLE_RANGE_DEG[0]) | (angle > ANGLE_RANGE_DEG[1])
+    if out.any():
+        i = int(np.argmax(out))
+        raise InputError(f"key 'sensor_angle_deg' = {angle[i]:g} at record {i}; expected an angle in "
+                         f"[{ANGLE_RANGE_DEG[0]:g}, {ANGLE_RANGE_DEG[1]:g}] degrees", source=src)
     fs = np.asarray(rec.fs_hz)
     if fs.size != 1:
         raise InputError(f"key 'fs_hz' has shape {fs.shape}; expected a scalar", source=src)
@@ -196,6 +206,10 @@ class MeasuredFRF:
         angle = np.asarray(self.sensor_angle_deg, dtype=np.float64)
         if angle.shape != (h.shape[0],) or not np.isfinite(angle).all():
             raise InputError(f"sensor angles of shape {angle.shape}; expected {h.shape[0]} finite angles", source=src)
+        if ((angle < ANGLE_RANGE_DEG[0]) | (angle > ANGLE_RANGE_DEG[1])).any():
+            bad = float(angle[(angle < ANGLE_RANGE_DEG[0]) | (angle > ANGLE_RANGE_DEG[1])][0])
+            raise InputError(f"sensor angle {bad:g}; expected angles in [{ANGLE_RANGE_DEG[0]:g}, "
+                             f"{ANGLE_RANGE_DEG[1]:g}] degrees", source=src)
         if self.coherence is not None:
             c = np.asarray(self.coherence, dtype=np.float64)
             if c.shape != h.shape or not np.isfinite(c).all() or (c < 0).any() or (c > 1 + 1e-9).any():

@@ -36,7 +36,7 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.io.channel_map import CONDITION_KEYS, ChannelMap, ChannelSpec, read_channel_map
-from ringfit.io.record_types import AXES, Records
+from ringfit.io.record_types import ANGLE_RANGE_DEG, AXES, Records
 from ringfit.io.rig_types import LazyData, RawChannel, RigFile, ScaledChannel
 from ringfit.io.uff import unit_scale
 
@@ -230,6 +230,28 @@ def _same_length(rig: RigFile, chans: list[_Channel]) -> int:
     return n
 
 
+def _fill_gaps(rig: RigFile, chans) -> None:
+    """Put the samples a reader found dropped (``rig.gaps``) back on the even time grid, in place: straight
+    lines for measured values, the encoder's angle unwrapped first, pulses and the trigger held (0/1 levels)."""
+    if not rig.gaps:
+        return
+    n = chans[0].data.size
+    idx = np.arange(n)
+    where = idx.copy()  # each kept sample's place on the full grid
+    for i, m in rig.gaps:
+        where[i + 1:] += m
+    grid = np.arange(int(where[-1]) + 1)
+    for ch in chans:
+        x = np.asarray(ch.data, dtype=np.float64)
+        if ch.role in ("pulses", "trigger"):
+            ch.data = x[np.searchsorted(where, grid, side="right") - 1]
+        elif ch.role == "encoder":
+            y = np.rad2deg(np.interp(grid, where, np.unwrap(np.deg2rad(x))))
+            ch.data = y % 360.0 if x.min() >= 0 and x.max() < 360.0 else y  # wrapped stays wrapped
+        else:
+            ch.data = np.interp(grid, where, x)
+
+
 def records_from_rig(rig: RigFile, channels=None) -> Records:
     """Impact :class:`Records` from a rig file (and a channel map path or :class:`ChannelMap`).
 
@@ -251,6 +273,7 @@ def records_from_rig(rig: RigFile, channels=None) -> Records:
     chans = _settle(rig, cmap)
     fs = _sample_rate(rig, cmap, chans)
     _same_length(rig, chans)
+    _fill_gaps(rig, chans)
     order: list[str] = []
     acc: dict[str, dict[str, _Channel]] = {}
     force: dict[str, _Channel] = {}
@@ -261,6 +284,10 @@ def records_from_rig(rig: RigFile, channels=None) -> Records:
         if ch.role == "acc" and ch.angle_deg is None:
             raise InputError(f"channel {ch.raw.name!r} has no sensor angle; give angle_deg in --channels MAP.toml (or "
                              "a sensor_angle_deg property)", source=rig.source)
+        lo, hi = ANGLE_RANGE_DEG
+        if ch.angle_deg is not None and not lo <= ch.angle_deg <= hi:
+            raise InputError(f"channel {ch.raw.name!r}: sensor angle {ch.angle_deg:g}°; expected an angle in "
+                             f"[{lo:g}, {hi:g}] degrees", source=rig.source)
         key = ch.record if ch.record is not None else (None if ch.angle_deg is None else f"{ch.angle_deg:.12g} deg")
         if key is None:
             raise InputError(f"channel {ch.raw.name!r}: no record and no sensor angle; give angle_deg (and record "
@@ -302,6 +329,7 @@ def records_from_rig(rig: RigFile, channels=None) -> Records:
         fs_hz=fs,
         force=np.stack([force[k].data for k in order]) if force else None,
         source=rig.source,
+        notes=list(rig.notes),
     )
 
 
@@ -339,6 +367,9 @@ def continuous_fields(rig: RigFile, channels=None) -> dict:
     chans = _settle(rig, cmap)
     fs = _sample_rate(rig, cmap, chans)
     _same_length(rig, chans)
+    _fill_gaps(rig, chans)
+    for note in rig.notes:  # a continuous recording has no mode table to carry them: said at once
+        warnings.warn(f"{rig.source}: {note}", RuntimeWarning, stacklevel=2)
     acc: dict[str, _Channel] = {}
     one: dict[str, _Channel] = {}
     for ch in chans:

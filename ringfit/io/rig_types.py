@@ -42,6 +42,11 @@ class RigFile:
     props: dict = field(default_factory=dict)
     #: ringfit's own key layout (docs/formats.md §4 / §9 keys), when the file holds it instead of channels.
     arrays: dict | None = None
+    #: Dropped samples the reader found (a time column's jumps): ``[(i, missing)]``, ``missing`` samples lost
+    #: after sample ``i`` of every channel; :mod:`ringfit.io.rig` fills them.
+    gaps: list = field(default_factory=list)
+    #: One-line notes of what the reader found and did (for the ``preprocessing`` list).
+    notes: list = field(default_factory=list)
 
     def close(self) -> None:
         """Close the file behind lazy channels (nothing to do for channels read whole)."""

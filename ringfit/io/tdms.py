@@ -84,32 +84,52 @@ class _TdmsData(LazyData):
 
     def read(self, start, stop):
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                return np.asarray(self.channel.read_data(offset=start, length=stop - start), dtype=np.float64)
+            out, cut = _quiet_nptdms(lambda: np.asarray(self.channel.read_data(offset=start, length=stop - start),
+                                                        dtype=np.float64))
         except Exception as exc:  # noqa: BLE001 - npTDMS raises assorted errors on bad data
             raise InputError(f"channel {self.name!r}: samples {start}…{stop - 1} unreadable "
                              f"({exc.__class__.__name__}); corrupted file?", source=self.source) from None
+        if cut:
+            raise InputError(f"channel {self.name!r}: the TDMS file is truncated ({cut[0].rstrip('.')}); refusing "
+                             "to read up to the cut", source=self.source)
+        return out
 
     def close(self):
         self.handle.close()
 
 
+#: npTDMS's words for a file that ends early (its log lines; it reads up to the cut and says only this).
+_CUT_WORDS = ("less data than expected", "not a multiple of the chunk", "metadata is incomplete")
+
+
 def _quiet_nptdms(fn):
-    """``fn()`` with npTDMS's log lines caught: InputError for a truncated file, not a partial read."""
+    """``fn()`` with npTDMS's log lines caught: InputError for a truncated file, not a partial read.
+
+    npTDMS gives each of its module loggers (``nptdms.reader``, ``nptdms.tdms_segment``, …) its own stderr
+    handler, so silencing the package logger is not enough: each one's handlers are swapped for the capture
+    while ``fn`` runs, and put back after.
+    """
     logged = _Capture()
-    logger = logging.getLogger("nptdms")
-    propagate = logger.propagate
-    logger.addHandler(logged)
-    logger.propagate = False  # npTDMS's log lines would break the one-line error
+    saved = []
+    names = ["nptdms"] + [n for n in list(logging.root.manager.loggerDict) if n.startswith("nptdms.")]
+    for name in names:
+        logger = logging.getLogger(name)
+        saved.append((logger, list(logger.handlers), logger.propagate))
+        for h in list(logger.handlers):
+            logger.removeHandler(h)
+        logger.addHandler(logged)
+        logger.propagate = False  # npTDMS's log lines would break the one-line error
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             out = fn()
     finally:
-        logger.removeHandler(logged)
-        logger.propagate = propagate
-    cut = [m for m in logged.messages if "less data than expected" in m or "not a multiple of the chunk" in m]
+        for logger, handlers, propagate in saved:
+            logger.removeHandler(logged)
+            for h in handlers:
+                logger.addHandler(h)
+            logger.propagate = propagate
+    cut = [m for m in logged.messages if any(w in m for w in _CUT_WORDS)]
     return out, cut
 
 
@@ -140,6 +160,8 @@ def read_tdms_channels(path: str | os.PathLike, *, lazy: bool = False) -> RigFil
                          source=path) from None
     if lazy:
         handle = _Handle(f)
+    if not cut and path.stat().st_size < 28:  # a segment's lead-in alone is 28 bytes ("TDSm", flags, version, …)
+        cut = [f"{path.stat().st_size} bytes, shorter than one segment's 28-byte lead-in"]
     if cut:  # npTDMS reads up to the cut; ringfit refuses it (as it refuses a truncated UFF file)
         if handle is not None:
             handle.close()

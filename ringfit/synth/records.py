@@ -220,7 +220,7 @@ def impact_records(
 
 
 #: Degradations :func:`degrade` applies (tests and benchmarks/bench_degraded.py).
-DEGRADATIONS = ("spikes", "clipped", "hum50", "hum60", "dead", "flipped")
+DEGRADATIONS = ("spikes", "clipped", "hum50", "hum60", "dead", "flipped", "stalled", "held", "drift")
 
 
 def degrade(records: Records, how: str, *, seed: int = 0, channels: int = 3) -> Records:
@@ -234,7 +234,14 @@ def degrade(records: Records, how: str, *, seed: int = 0, channels: int = 3) -> 
       and 8 % of the records' rms, its phase drifting from record to record, non-decaying;
     - ``dead``: ``channels`` channels reading only a little noise (an unplugged sensor);
     - ``flipped``: ``channels`` channels with the sign inverted (a sensor mounted the other way round, or a
-      negative sensitivity).
+      negative sensitivity);
+    - ``stalled``: a stream that stalls and resumes where it stopped — in every record runs of 1–5 copies of a
+      frame (every axis and the force) inserted, 10 % of the samples in all, the record cut back to its length
+      (every later sample is late);
+    - ``held``: a stream that holds its last value while it stalls and loses what came meanwhile — 10 % of the
+      samples of every record replaced by the frame before them (runs of 1–3; none within 8 samples of the
+      hammer's peak: a record whose hit was lost is no impact record);
+    - ``drift``: a DC drift on every channel, a ramp from 0 to ±1…3× the records' rms over the record.
 
     The channels are drawn at random, one repeat of an angle each where the records repeat an angle.
     """
@@ -267,6 +274,35 @@ def degrade(records: Records, how: str, *, seed: int = 0, channels: int = 3) -> 
     elif how == "flipped":
         for i, j in picks:
             acc[i, j] = -acc[i, j]
+    elif how in ("stalled", "held"):
+        force = None if records.force is None else records.force.copy()
+        for i in range(r):
+            if how == "stalled":
+                idx, k = [], 0
+                while len(idx) < s:
+                    idx.append(k)
+                    if rng.random() < 0.1 / 3:
+                        idx += [k] * int(rng.integers(1, 6))
+                    k = min(k + 1, s - 1)
+                idx = np.array(idx[:s])
+            else:
+                idx = np.arange(s)
+                hit = int(np.argmax(np.abs(records.force[i]))) if records.force is not None else -99
+                k = 1
+                while k < s:
+                    if rng.random() < 0.1 / 2 and abs(k - hit) > 8:  # a record whose hit was lost is no record
+                        run = int(rng.integers(1, 4))
+                        idx[k:k + run] = idx[k - 1]
+                        k += run
+                    k += 1
+            acc[i] = acc[i][:, idx]
+            if force is not None:
+                force[i] = force[i][idx]
+        from dataclasses import replace
+
+        return replace(records, acc=acc, force=force, source=f"{records.source} ({how})")
+    elif how == "drift":
+        acc += rng.choice([-1.0, 1.0], (r, a, 1)) * rng.uniform(1.0, 3.0, (r, a, 1)) * rms * (t / t[-1])
     else:
         raise ValueError(f"unknown degradation {how!r}; expected one of {DEGRADATIONS}")
     from dataclasses import replace

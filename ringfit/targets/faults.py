@@ -45,6 +45,11 @@ one-line note for the sidecar's ``preprocessing`` list and a warning:
   repeats is the flipped one, and finds a flip with a single repeat or with
   every repeat of an angle flipped (a sensor mounted the other way round).
 
+Timing faults come before all of these: a stream that stalls (runs of frames repeated exactly; the repeats
+deleted where they were inserted, bridged where they were held: :func:`repair_timing`) and, in continuous
+recordings, stalls and dropped samples seen in the encoder's angle (:class:`EncoderTiming`); DC drift is taken
+out with the offsets (:func:`ringfit.targets.quality.remove_drift`).
+
 What is done: hum is notched; a dead, clipped or flipped channel of a record
 is left out of that record (the other repeats of its angle carry it, and
 without one the channel is lost, said so) — except a channel flipped against
@@ -663,3 +668,271 @@ def trigger_rate_note(interval_s: float, fs_hz: float, condition: dict) -> str |
             f"one revolution of the {drum:g} m drum at speed_kmh = {speed:g} takes {1e3 * expected:.5g} ms: the "
             f"sampling rate (or the speed) contradicts the trigger spacing (they agree at "
             f"{fs_hz * interval_s / expected:.6g} Hz); every frequency found is off by {expected / interval_s:.4g}×")
+
+
+# --------------------------------------------------------------------------- timing faults: stalls and drift
+
+#: A stall is said once this share of a record set's samples repeats the frame before it.
+STALL_MIN_SHARE = 0.002
+#: The verdict of :func:`stall_verdict` below the first value: the repeats were inserted (the stream stalled and
+#: resumed where it was: delete them); above the second: they replaced samples (the stream held its last value
+#: and lost what came meanwhile: bridge them); between, the data cannot tell and the table is not credible.
+STALL_SPLIT = (0.35, 0.65)
+#: Least ratio of the typical step over a run's length + 1 samples to the one-sample step for the verdict to
+#: count (below it noise makes the steps and cannot tell inserted repeats from held ones).
+STALL_MIN_SPREAD = 1.2
+#: A record set whose share of stalled samples exceeds this is ruined: the table is not credible.
+STALL_RUINED = 0.25
+#: Half-width [samples] of the window over which the typical step beside a stall is taken.
+STALL_WINDOW = 16
+
+
+
+def stalled_frames(acc: np.ndarray) -> np.ndarray:
+    """Samples of one record that repeat the sample before exactly on every live axis: bool ``(samples,)``.
+
+    ``acc`` (axes, samples). A stream that stalls repeats the whole frame; an analog channel never does (a
+    quantised one can, where the signal is below a step of the converter: such a repeat is not counted unless
+    the step after it, on some axis, is at least 4 of that axis's smallest non-zero steps, and a record set is
+    called stalled only with far more repeats than the converter makes by chance, :func:`chance_repeats`).
+    Frames that read exactly zero on every axis (a noise-free pre-trigger) are not stalls.
+    """
+    acc = np.asarray(acc, dtype=np.float64)
+    live = acc.std(axis=-1) > 0
+    if not live.any() or acc.shape[-1] < 3:
+        return np.zeros(acc.shape[-1], dtype=bool)
+    x = acc[live]
+    d = np.diff(x, axis=-1)
+    same = np.all(d == 0, axis=0) & np.any(x[:, 1:] != 0, axis=0)
+    if not same.any():
+        return np.zeros(acc.shape[-1], dtype=bool)
+    ad = np.abs(d)
+    q = np.array([row[row > 0].min() if (row > 0).any() else np.inf for row in ad])  # the converter's step
+    after = np.concatenate([ad[:, 1:], np.zeros((ad.shape[0], 1))], axis=1)  # the step after sample k+1
+    # the step that ends a run: the next one that is not zero
+    k = np.flatnonzero(same)
+    out = np.zeros(acc.shape[-1], dtype=bool)
+    run_start = 0
+    while run_start < k.size:
+        run_end = run_start
+        while run_end + 1 < k.size and k[run_end + 1] == k[run_end] + 1:
+            run_end += 1
+        last = k[run_end]
+        step = after[:, last] if last < ad.shape[1] else np.zeros(ad.shape[0])
+        if np.any(step >= 4 * q):
+            out[k[run_start:run_end + 1] + 1] = True
+        run_start = run_end + 1
+    return out
+
+
+def chance_repeats(acc: np.ndarray) -> float:
+    """How many frames of one record (axes, samples) would repeat the frame before exactly by chance on a
+    quantised converter: ``Σ_k Π_j min(1, q_j / (σ_jk √(2π)))`` with ``q_j`` the axis's smallest non-zero step
+    (the converter's step) and ``σ_jk`` the local spread of its steps (running median of ``|Δx|`` over
+    :data:`SPIKE_WINDOW` samples / 0.674). Float data (no quantisation) give ≈ 0."""
+    from scipy.ndimage import median_filter
+
+    acc = np.asarray(acc, dtype=np.float64)
+    live = acc.std(axis=-1) > 0
+    if not live.any() or acc.shape[-1] < 3:
+        return 0.0
+    ad = np.abs(np.diff(acc[live], axis=-1))
+    p = np.ones(ad.shape[1])
+    for row in ad:
+        pos = row[row > 0]
+        if not pos.size:
+            continue
+        q = float(pos.min())
+        sigma = median_filter(row, size=SPIKE_WINDOW, mode="nearest") / 0.674
+        with np.errstate(over="ignore"):  # a flat stretch: a repeat there is certain (1)
+            p *= np.minimum(1.0, q / np.maximum(sigma * np.sqrt(2 * np.pi), np.finfo(float).tiny))
+    return float(p.sum())
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``[(first, last)]`` of the runs of True in ``mask``."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist()))
+
+
+def stall_verdict(acc: np.ndarray, stalls: np.ndarray) -> tuple[float, float]:
+    """Were the repeats inserted or held? ``(u, spread)`` from the step that ends each run.
+
+    Inserted repeats (the stream resumed where it stopped) end in an ordinary one-sample step; held ones (the
+    stream kept its last value and lost the samples meanwhile) in a step over the run's length + 1 samples.
+    Over the loudest quarter of the runs (by the typical step beside them: where the signal, not the noise,
+    makes the steps), with ``J`` the steps that end the runs, ``T₁`` the typical one-sample step and ``T_L`` the
+    typical step over L + 1 samples beside each run (medians over ±:data:`STALL_WINDOW` samples of steps
+    between samples that are not repeats), ``u = ln(ΣJ/ΣT₁) / ln(ΣT_L/ΣT₁)``: ≈ 0 inserted, ≈ 1 held.
+    ``spread = ΣT_L/ΣT₁``; near 1 (noise makes the steps) ``u`` tells nothing. nan, nan without a usable run.
+    """
+    jump, t1, tl = [], [], []
+    for i in range(acc.shape[0]):
+        x, mask = acc[i], stalls[i]
+        step = np.linalg.norm(np.diff(x, axis=-1), axis=0)  # step from sample k to k + 1
+        good = ~mask
+        for a, b in _runs(mask):
+            if b + 1 >= x.shape[-1]:
+                continue
+            length = b - a + 1
+            lo, hi = max(a - 1 - STALL_WINDOW, 0), min(b + 1 + STALL_WINDOW, x.shape[-1] - 1)
+            j1 = np.array([j for j in range(lo, hi) if good[j] and good[j + 1]], dtype=np.int64)
+            jl = np.array([j for j in range(lo, hi - length) if good[j] and good[j + length + 1]], dtype=np.int64)
+            if not (j1.size and jl.size):
+                continue
+            jump.append(step[b])
+            t1.append(np.median(step[j1]))
+            tl.append(np.median(np.linalg.norm(x[:, jl + length + 1] - x[:, jl], axis=0)))
+    if not jump:
+        return float("nan"), float("nan")
+    jump, t1, tl = map(np.asarray, (jump, t1, tl))
+    loud = t1 >= np.quantile(t1, 0.75)
+    j, a, b = float(jump[loud].sum()), float(t1[loud].sum()), float(tl[loud].sum())
+    if not (j > 0 and a > 0 and b > a):
+        return float("nan"), b / a if a > 0 else float("nan")
+    return float(np.log(j / a) / np.log(b / a)), b / a
+
+
+def repair_stalls(acc: np.ndarray, force: np.ndarray | None, fs_hz: float):
+    """Find stalls in impact records and mend them (module docstring of :func:`repair_timing`).
+
+    **Returns:** ``(acc, force, notes, credible)``; the arrays unchanged (and no note) without a stall.
+    """
+    r, a, s = acc.shape
+    stalls = np.stack([stalled_frames(acc[i]) for i in range(r)])
+    share = float(stalls.mean())
+    if share < STALL_MIN_SHARE:
+        return acc, force, [], True
+    chance = sum(chance_repeats(acc[i]) for i in range(r))
+    if stalls.sum() <= 4 * chance + 5:  # no more repeats than a quantised converter makes by chance
+        return acc, force, [], True
+    u, spread = stall_verdict(acc, stalls)
+    runs = sum(len(_runs(m)) for m in stalls)
+    bad = int(stalls.any(axis=1).sum())
+    what = (f"stalled stream: {int(stalls.sum())} of {stalls.size} samples ({100 * share:.1f} %) repeat the frame "
+            f"before them exactly on every axis, in {runs} run(s) in {bad} of {r} records (the steps that end the "
+            f"runs sit {u:.2f} of the way from a one-sample step to a step over the run")
+    credible = share <= STALL_RUINED
+    tells = np.isfinite(u) and spread >= STALL_MIN_SPREAD
+    if tells and u < STALL_SPLIT[0]:
+        keep = ~stalls
+        n = int(keep.sum(axis=1).min())
+        acc = np.stack([acc[i][:, keep[i]][:, :n] for i in range(r)])
+        if force is not None:
+            force = np.stack([force[i][keep[i]][:n] for i in range(r)])
+        what += (f": the stream resumed where it stopped); the repeats deleted (the time base restored) and the "
+                 f"records cut to a common {n} samples ({n / fs_hz:.3g} s)")
+    elif tells and u > STALL_SPLIT[1]:
+        acc = acc.copy()
+        force = None if force is None else force.copy()
+        for i in range(r):
+            segs = _runs(stalls[i])
+            for j in range(a):
+                acc[i, j] = bridge(acc[i, j], segs)
+            if force is not None:
+                force[i] = bridge(force[i], segs)
+        what += ": the stream held its last value and lost the samples meanwhile); the held samples bridged by " \
+                "straight lines"
+    else:
+        credible = False
+        what += ": whether the repeats were inserted or held the data cannot tell); left as they are"
+    if not credible:
+        what += "; the table is not credible (too much of the time base is unknown)" \
+            if share > STALL_RUINED else "; the table is not credible"
+    return acc, force, [what], credible
+
+
+def repair_timing(records):
+    """Timing faults of impact :class:`~ringfit.io.records.Records`, before anything else is done to them.
+
+    - **stalled stream**: runs of samples that repeat the frame before them exactly on every axis
+      (:func:`stalled_frames`). Whether the repeats were *inserted* (the stream stopped and resumed where it
+      was: every later sample is late by the run's length, every frequency read low) or *held* (the stream
+      kept its last value and lost what came meanwhile) the data tell by the step that ends each run
+      (:func:`stall_verdict`): inserted repeats are deleted (the time base is restored; the records are cut
+      to a common length), held ones bridged by straight lines. Where the steps cannot tell
+      (:data:`STALL_SPLIT`, :data:`STALL_MIN_SPREAD`) or more than :data:`STALL_RUINED` of the samples
+      stalled, the table is not credible.
+
+    The reader's own findings (``records.notes``: dropped samples filled on the time grid, docs/formats.md
+    §17.3) come first in the notes.
+
+    **Returns:** ``(records, notes, credible)``.
+    """
+    from dataclasses import replace
+
+    acc, force, notes, credible = repair_stalls(records.acc, records.force, records.fs_hz)
+    if notes:
+        records = replace(records, acc=acc, force=force)
+    return records, list(getattr(records, "notes", [])) + notes, credible
+
+
+class EncoderTiming:
+    """Timing faults of a continuous recording, counted chunk by chunk from its unwrapped encoder angle and its
+    acceleration (:meth:`add`), said by :meth:`note`.
+
+    - **stalled** samples: the encoder's angle and every acceleration axis repeat the sample before exactly (the
+      stream repeated a frame; repeats a quantised converter makes by chance, :func:`chance_repeats`, allowed
+      four times over);
+    - **dropped** samples: the angle advances by ``k ≥ 2`` typical steps (the chunk's median step) at once,
+      ``k − 1`` samples lost, where the steps are steady (the 75th percentile within 1.2× the 10th: a coarse
+      encoder's steps alternate between multiples of its resolution and tell nothing).
+
+    A stream that held its value while it stalled shows both (the held run, then a jump over it), and the
+    count of samples the time really covers, ``samples − stalled + dropped``, is right either way.
+    """
+
+    def __init__(self):
+        self.samples = self.stalled = self.dropped = self.jumps = 0
+        self.chance = 0.0
+        self.prev = None  # (angle, acc frame) of the last sample of the previous chunk
+
+    def add(self, angle_deg: np.ndarray, acc: np.ndarray) -> None:
+        phi = np.asarray(angle_deg, dtype=np.float64)
+        x = np.asarray(acc, dtype=np.float64)
+        if self.prev is not None:
+            phi = np.concatenate([[self.prev[0]], phi])
+            x = np.concatenate([self.prev[1][:, None], x], axis=1)
+        self.samples += int(np.asarray(angle_deg).size)
+        self.prev = (float(phi[-1]), x[:, -1].copy())
+        if phi.size < 3:
+            return
+        d = np.diff(phi)
+        same = (d == 0) & np.all(np.diff(x, axis=1) == 0, axis=0)
+        self.stalled += int(same.sum())
+        if same.sum() >= STALL_MIN_SHARE * d.size:  # the chance count costs a running median: only when it matters
+            self.chance += chance_repeats(np.vstack([x, phi[None]]))
+        ad = np.abs(d[d != 0])
+        if ad.size < 16:
+            return
+        lo, step, hi = np.quantile(ad, [0.1, 0.5, 0.75])
+        if hi > 1.2 * lo:  # a coarse (or unsteady) encoder: its steps vary too much to see a lost sample
+            return
+        k = np.rint(np.abs(d) / step)
+        jump = (k >= 2) & (np.abs(np.abs(d) - k * step) <= 0.25 * step) & (k <= 64)
+        self.jumps += int(jump.sum())
+        self.dropped += int(np.sum(k[jump] - 1))
+
+    @property
+    def stall_found(self) -> bool:
+        return self.stalled >= STALL_MIN_SHARE * max(self.samples, 1) and self.stalled > 4 * self.chance + 5
+
+    @property
+    def covered(self) -> int:
+        """Samples' worth of time the recording covers: ``samples − stalled + dropped`` (as found)."""
+        return self.samples - (self.stalled if self.stall_found else 0) + self.dropped
+
+    def note(self) -> str | None:
+        """One line when a stall or dropped samples were found, else None."""
+        parts = []
+        if self.stall_found:
+            parts.append(f"{self.stalled} samples repeat the frame before them exactly, the encoder's angle included "
+                         "(a stalled stream)")
+        if self.dropped:
+            parts.append(f"{self.dropped} samples dropped (the encoder advances by more than one step at once at "
+                         f"{self.jumps} place(s))")
+        if not parts:
+            return None
+        return (f"timing faults: {' and '.join(parts)}; the profile bins by the encoder's angle and is not moved, "
+                f"and the rotation rate is counted over the {self.covered} samples' time the recording really "
+                f"covers, not its {self.samples}")

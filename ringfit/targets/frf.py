@@ -26,7 +26,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.records import MeasuredFRF, Records
 from ringfit.targets.decimation import decimate, decimation_factor
-from ringfit.targets.preprocessing import SKIP_AFTER_IMPACT_S, align_on_impact, check_band
+from ringfit.targets.preprocessing import SKIP_AFTER_IMPACT_S, align_on_impact, check_angles, check_band
 
 
 @dataclass
@@ -114,10 +114,13 @@ def frf_estimate(
 
     if records.force is None:
         raise InputError("FRF needs a force channel; use SSI for records without force", source=records.source)
-    from ringfit.targets.faults import repair_records
+    from ringfit.targets.faults import repair_records, repair_timing
 
     check_band(records, f_max_hz)
-    records, notes = clean_records(records, threshold)
+    check_angles(records.sensor_angle_deg, records.source)
+    records, notes, timing_ok = repair_timing(records)
+    records, cleaned = clean_records(records, threshold)
+    notes += cleaned
     records, use, found, lines = repair_records(records, threshold=threshold, f_max_hz=f_max_hz,
                                                 skip_s=pre_s + SKIP_AFTER_IMPACT_S)
     notes += found
@@ -166,7 +169,8 @@ def frf_estimate(
         kept[idx[~keep]] = False
         h1[g], coh[g] = h1_coherence(fspec[idx[keep]], aspec[idx[keep]])
     have = np.isin(np.arange(angles.size), inverse[usable])
-    return FRFEstimate(f, h1[have], coh[have], angles[have], tuple(records.axes), kept, notes, screen.credible,
+    return FRFEstimate(f, h1[have], coh[have], angles[have], tuple(records.axes), kept, notes,
+                       screen.credible and timing_ok,
                        lines_hz=lines, duration_s=records.n_samples / records.fs_hz)
 
 
@@ -177,6 +181,7 @@ def frf_from_measured(m: MeasuredFRF, f_range: tuple[float, float] = (20.0, 400.
     a note says how many were); the band must lie inside the measured lines.
     """
     f = m.freq_hz
+    check_angles(m.sensor_angle_deg, m.source)
     if f_range[1] > f[-1] or f_range[0] < f[0]:
         raise InputError(f"band {f_range[0]:g}–{f_range[1]:g} Hz reaches beyond the measured lines "
                          f"{f[0]:g}–{f[-1]:g} Hz", source=m.source)
@@ -376,7 +381,7 @@ def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = 
             basis=shape[:, None].astype(complex), shape=shape.astype(complex), pole_index=np.zeros(0, int), n_orders=0,
         ))
     table, modes = mode_table(modes, angle, axis, f"frf-peak-picking-{indicator}", cavity_hz=cavity_hz,
-                              lines_hz=frf.lines_hz, duration_s=frf.duration_s)
+                              lines_hz=frf.lines_hz, duration_s=frf.duration_s, notes=frf.notes)
     limits = []
     if not (table.kind == "acoustic").any():
         limits.append("no acoustic (cavity) row: peak picking finds an acoustic mode only where its peak stands out "

@@ -22,6 +22,7 @@ from ringfit.targets.decimation import decimate, decimation_factor
 from ringfit.targets.preprocessing import (
     SKIP_AFTER_IMPACT_S,
     align_on_impact,
+    check_angles,
     check_band,
     drop_after_impact,
     sync_by_group_velocity,
@@ -77,7 +78,8 @@ class Decays:
     :class:`~ringfit.targets.quality.ChannelScreen` of the channels before
     the bad ones were left out (None when not screened), ``notes`` one-line
     findings of the pre-processing (offsets, channels left out, credibility), ``lines_hz`` the mains lines
-    notched (:func:`~ringfit.targets.faults.repair_records`), ``duration_s`` the records' length.
+    notched (:func:`~ringfit.targets.faults.repair_records`), ``duration_s`` the records' length, ``timing_ok``
+    False when a stalled stream could not be mended (:func:`~ringfit.targets.faults.repair_timing`).
     """
 
     y: np.ndarray
@@ -88,10 +90,11 @@ class Decays:
     notes: list = field(default_factory=list)
     lines_hz: list = field(default_factory=list)
     duration_s: float = float("inf")
+    timing_ok: bool = True
 
     @property
     def credible(self) -> bool:
-        return self.screen is None or bool(self.screen.credible)
+        return self.timing_ok and (self.screen is None or bool(self.screen.credible))
 
 
 #: Fewest free-decay samples (after alignment, decimation and the skip) an SSI run accepts.
@@ -122,10 +125,13 @@ def free_decays(
     """
     from ringfit.targets.quality import channel_labels, clean_records, screen_channels
 
-    from ringfit.targets.faults import repair_records
+    from ringfit.targets.faults import repair_records, repair_timing
 
     check_band(records, f_max_hz)
-    records, notes = clean_records(records, threshold)
+    check_angles(records.sensor_angle_deg, records.source)
+    records, notes, timing_ok = repair_timing(records)
+    records, cleaned = clean_records(records, threshold)
+    notes += cleaned
     records, use, found, lines = repair_records(records, threshold=threshold, f_max_hz=f_max_hz, skip_s=skip_s,
                                                 used_from_s=skip_s + delay_s)
     notes += found
@@ -161,7 +167,7 @@ def free_decays(
             raise InputError(str(exc), source=records.source) from None
         notes += found.notes
         y, angle, axis = y[found.keep], angle[found.keep], axis[found.keep]
-    return Decays(y, angle, axis, fs, found, notes, lines, records.n_samples / records.fs_hz)
+    return Decays(y, angle, axis, fs, found, notes, lines, records.n_samples / records.fs_hz, timing_ok)
 
 
 def prepare_decays(records: Records, **kwargs) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -190,7 +196,8 @@ def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, no
     otherwise it is ``unclassified`` and the reason says which evidence is missing. Any row on a mains line
     that was notched (``lines_hz``, :func:`~ringfit.targets.faults.on_notched_line`) is ``unclassified``.
 
-    **Returns:** ``(kind, reason)``, object arrays (rows,); reason ``""`` for classified rows.
+    **Returns:** ``(kind, reason)``, object arrays (rows,); reason ``""`` for structural rows only (an
+    ``acoustic`` row says what made it the cavity).
     """
     kind = np.where(not_ring, "unclassified", "structural").astype(object)
     reason = np.full(len(kind), "", dtype=object)
@@ -216,6 +223,8 @@ def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, no
             one = int(n[i]) == 1 and confidence[i] >= CAVITY_MIN_CONFIDENCE
             if near and one:
                 kind[i] = "acoustic"
+                reason[i] = (f"the cavity: not ring-like, {100 * off:+.1f} % from eq. 22's {cavity_hz:.2f} Hz "
+                             f"(tolerance ±{100 * tol:g} %) with the cavity's n = 1 pattern ({shape})")
                 continue
             if not near:
                 why.append(f"not the cavity: {100 * off:+.0f} % from eq. 22's {cavity_hz:.2f} Hz "
@@ -226,10 +235,38 @@ def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, no
     return kind, reason
 
 
+#: A row that is not ring-like within this relative distance of a structural row is the same mode found twice
+#: (its shape read through what the notch or the noise left, or a half of the double pole clustered apart): the
+#: split of a ring mode's double pole is well under it, the cavity and its nearest ring mode lie further apart.
+TWICE_TOL = 0.005
+
+
+def found_twice(freq_hz: np.ndarray, kind: np.ndarray, tol: float = TWICE_TOL,
+                skip: np.ndarray | None = None) -> list[tuple[int, int]]:
+    """``[(row, structural_row)]``: each row that is not ``structural`` within ``tol`` (relative) of a structural
+    row, with the nearest such row; rows where ``skip`` is True (on a notched mains line: what the hum left,
+    not the mode) are not paired."""
+    freq_hz = np.asarray(freq_hz, dtype=np.float64)
+    kind = np.asarray(kind, dtype=object)
+    st = np.flatnonzero(kind == "structural")
+    out = []
+    if not st.size:
+        return out
+    other = kind != "structural"
+    if skip is not None:
+        other &= ~np.asarray(skip, dtype=bool)
+    for i in np.flatnonzero(other):
+        off = np.abs(freq_hz[st] / freq_hz[i] - 1)
+        j = int(np.argmin(off))
+        if off[j] <= tol:
+            out.append((int(i), int(st[j])))
+    return out
+
+
 def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.ndarray, method: str,
                *, min_confidence: float = 0.5, poles: PoleSet | None = None,
                spurious_damping_factor: float = 1.5, cavity_hz: float | None = None, lines_hz=(),
-               duration_s: float = np.inf) -> tuple[ModeTable, list]:
+               duration_s: float = np.inf, notes: list | None = None) -> tuple[ModeTable, list]:
     """A :class:`ModeTable` (docs/formats.md §2) from physical modes: n from the shapes, kind, extras.
 
     With ``poles`` (SSI), modes with the same n within 1 % are first merged
@@ -241,7 +278,9 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     modes. A kept one is ``acoustic`` only with evidence, else
     ``unclassified`` with the reason (:func:`classify_rows`; ``cavity_hz``
     the cavity frequency of eq. 22 for the tyre, None: nothing is called acoustic; ``lines_hz`` the notched
-    mains lines and ``duration_s`` the records' length).
+    mains lines and ``duration_s`` the records' length). A row that is not ring-like within :data:`TWICE_TOL`
+    of a structural row is the same mode found twice (:func:`found_twice`): it is merged into the structural
+    row, and ``notes`` (when given) gets a line saying so.
 
     Extra columns: ``n_confidence``, ``split_hz``, ``travelling``, ``damping_std_pct``, ``reason``.
 
@@ -272,9 +311,19 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     ref = np.nanmedian(damping[~not_ring]) if (~not_ring).any() else np.inf
     keep = ~not_ring | ~(damping > spurious_damping_factor * ref)
     idx = np.flatnonzero(keep)
-    modes = [modes[i] for i in idx]
     kind, reason = classify_rows(n[idx], conf[idx], freq[idx], not_ring[idx], cavity_hz, lines_hz=lines_hz,
                                  duration_s=duration_s)
+    twice = found_twice(freq[idx], kind, skip=np.array([str(r).startswith("on the mains line") for r in reason]))
+    if twice:
+        if notes is not None:
+            shown = ", ".join(f"{freq[idx][i]:.2f} Hz ({kind[i]}) beside the n = {int(n[idx][j])} mode at "
+                              f"{freq[idx][j]:.2f} Hz" for i, j in twice[:4])
+            notes.append(f"{len(twice)} mode(s) found twice, once as a structural mode and once as a row that is not "
+                         f"ring-like within {100 * TWICE_TOL:g} % of it: {shown}; merged into the structural row")
+        drop = {i for i, _ in twice}
+        sel = np.array([i not in drop for i in range(idx.size)], dtype=bool)
+        idx, kind, reason = idx[sel], kind[sel], reason[sel]
+    modes = [modes[i] for i in idx]
     fmt = lambda x: f"{x:.6g}" if np.isfinite(x) else ""  # noqa: E731  (empty: unknown)
     table = ModeTable(
         freq_hz=freq[idx],
@@ -340,7 +389,7 @@ def ssi_modes(
     stab = stabilization_diagram(poles, pair_aware=pair_aware)
     modes = cluster_modes(poles, stab, f_range=f_range, min_share=min_share)
     table, modes = mode_table(modes, angle, axis, "ssi-cov", poles=poles, cavity_hz=cavity_hz,
-                               lines_hz=d.lines_hz, duration_s=d.duration_s)
+                               lines_hz=d.lines_hz, duration_s=d.duration_s, notes=d.notes)
     note_quality(table, d.notes, d.credible)
     unc = jackknife_modes(factors, poles, modes, angle_groups(angle)[0] if jackknife else np.zeros(0),
                           workers=default_workers() if workers is None else workers)

@@ -36,6 +36,26 @@ def check_band(records: Records, f_max_hz: float) -> None:
                          f"{records.fs_hz / 2:g} Hz", source=records.source)
 
 
+def check_angles(angle_deg, source=None) -> None:
+    """The records must hold at least three sensor angles (modulo 360°): the circumferential order n of a mode
+    is read from how its shape changes round the tyre, by harmonics up to (angles − 1)/2
+    (:func:`~ringfit.targets.shapes.max_harmonic`); with one or two angles every mode would read n = 0.
+
+    **Raises** :class:`InputError` naming the angles found.
+    """
+    a = np.asarray(angle_deg, dtype=np.float64)
+    found = np.unique(np.round(np.mod(a, 360.0), 9) % 360.0)
+    if not a.size or found.size >= 3:
+        return
+    tail = ("the circumferential order n of a mode cannot be told from {}; expected records at three or more "
+            "angles round the tyre (the sensor angles in the file, or angle_deg in the channel map)")
+    if found.size == 1:
+        raise InputError(f"every record ({a.size}) is at the one sensor angle {float(a[0]):g}°: "
+                         + tail.format("a single angle"), source=source)
+    raise InputError(f"the records ({a.size}) hold only two sensor angles, {found[0]:g}° and {found[1]:g}°: "
+                     + tail.format("two (every mode would read n = 0)"), source=source)
+
+
 def impact_indices(force: np.ndarray, threshold: float = 0.1) -> np.ndarray:
     """Index of the first sample with ``|F| ≥ threshold · max|F|`` in each record.
 

@@ -6,6 +6,8 @@ instead of the tyre, or the whole test drowns in noise. Left in, each turns
 into a silently wrong mode table (an offset of 100× the signal turns the
 shapes of half the modes into n = 0). This module handles each and says so:
 
+- :func:`remove_drift` — a DC drift (a ramp, a slow wander) taken for a polynomial trend of each channel and
+  subtracted where some channel drifts (left in, it swamps the late decay and the test reads as noise);
 - :func:`remove_offsets` — subtract each channel's offset, the mean of its
   samples before the impact when there are enough of them, else its mean
   over the record;
@@ -42,6 +44,10 @@ SCALE_LIMIT = 30.0
 MIN_PRE_SAMPLES = 32
 #: An offset is worth a note when it exceeds this fraction of the channel's standard deviation.
 NOTE_OFFSET = 0.5
+#: Degree of the polynomial trend (drift) fitted to each channel.
+DRIFT_DEGREE = 2
+#: A channel drifts when its fitted trend moves by more than this share of the channel's rms about the trend.
+DRIFT_REL = 0.25
 
 
 @dataclass
@@ -81,8 +87,42 @@ def remove_offsets(acc: np.ndarray, impact_index: np.ndarray | None = None) -> t
     return acc - offsets[..., None], offsets
 
 
+def drift_trend(acc: np.ndarray, degree: int = DRIFT_DEGREE) -> np.ndarray:
+    """The least-squares polynomial trend of each channel, without its mean: same shape as ``acc``
+    (Legendre basis over the record; a decay's oscillation barely projects on it)."""
+    s = acc.shape[-1]
+    t = np.linspace(-1.0, 1.0, s)
+    basis = np.polynomial.legendre.legvander(t, degree)  # (samples, degree + 1)
+    coef, *_ = np.linalg.lstsq(basis, acc.reshape(-1, s).T, rcond=None)
+    return (basis[:, 1:] @ coef[1:]).T.reshape(acc.shape)  # the constant is the offset's (remove_offsets)
+
+
+def remove_drift(acc: np.ndarray) -> tuple[np.ndarray, str | None]:
+    """Each channel's polynomial trend (:func:`drift_trend`) removed when some channel drifts (the trend moves by
+    more than :data:`DRIFT_REL` of its rms about the trend); then every channel is detrended alike.
+
+    **Returns:** ``(acc, note)``, ``acc`` unchanged and ``note`` None when nothing drifts.
+    """
+    acc = np.asarray(acc, dtype=np.float64)
+    if acc.shape[-1] < 4 * (DRIFT_DEGREE + 1):
+        return acc, None
+    trend = drift_trend(acc)
+    rest = acc - trend
+    spread = np.ptp(trend, axis=-1)
+    rms = np.std(rest, axis=-1)
+    drifts = spread > DRIFT_REL * np.maximum(rms, np.finfo(float).tiny)
+    if not drifts.any():
+        return acc, None
+    i = np.unravel_index(np.argmax(np.where(drifts, spread / np.maximum(rms, np.finfo(float).tiny), 0)), drifts.shape)
+    worst = float(spread[i] / max(rms[i], np.finfo(float).tiny))
+    return rest, (f"drift in {int(drifts.sum())} of {drifts.size} channels (a trend moving up to "
+                  f"{float(spread.max()):.3g} m/s² over the record, {worst:.3g}× the channel's rms about it): "
+                  f"removed (a polynomial trend of degree {DRIFT_DEGREE} fitted to each channel and subtracted)")
+
+
 def clean_records(records, threshold: float = 0.1):
-    """Offsets removed (:func:`remove_offsets`, pre-impact mean where the force shows the impact) and
+    """Drift removed (:func:`remove_drift`: a polynomial trend, where some channel
+    drifts), offsets removed (:func:`remove_offsets`, pre-impact mean where the force shows the impact) and
     axes that are flat on every record (a dead axis) left out.
 
     **Returns:** ``(records, notes)`` — new :class:`~ringfit.io.records.Records` and one-line notes.
@@ -93,7 +133,10 @@ def clean_records(records, threshold: float = 0.1):
 
     notes = []
     idx = impact_indices(records.force, threshold) if records.force is not None else None
-    acc, offsets = remove_offsets(records.acc, idx)
+    acc, drift = remove_drift(records.acc)
+    if drift:
+        notes.append(drift)
+    acc, offsets = remove_offsets(acc, idx)
     note = offset_note(offsets, acc)
     if note:
         notes.append(note)

@@ -169,9 +169,14 @@ def rolling_profile(
 
     from tqdm import tqdm
 
+    from ringfit.targets.faults import EncoderTiming
+
+    timing = EncoderTiming()
     bar = tqdm(total=record.samples, unit="sample", unit_scale=True, disable=not progress, desc="profile")
     for ch in record.chunks(chunk):
         phi = ch.angle_deg
+        if "encoder_angle_deg" in record._channels:  # an incremental encoder's angle is interpolated: no steps
+            timing.add(phi, ch.acc)
         if first_angle is None:
             first_angle = phi[0]
         last_angle = phi[-1]
@@ -223,13 +228,17 @@ def rolling_profile(
     with np.errstate(invalid="ignore", divide="ignore"):
         var = (s2 - nrev * mean**2) / (nrev - 1)
     spread = np.sqrt(np.clip(np.where(nrev > 1, var, np.nan), 0.0, None))
-    rotation_hz = total_rev / ((record.samples - 1) / record.fs_hz)
+    import warnings
+
+    said = timing.note()
+    samples = timing.covered if said else record.samples
+    rotation_hz = total_rev / ((samples - 1) / record.fs_hz)
     from ringfit.targets.faults import sample_rate_note
 
+    if said:
+        warnings.warn(f"{record.source}: {said}", RuntimeWarning, stacklevel=2)
     note = sample_rate_note(rotation_hz, record.fs_hz, dict(record.condition))
     if note:
-        import warnings
-
         warnings.warn(f"{record.source}: {note}", RuntimeWarning, stacklevel=2)
     return RollingProfile(
         angle_deg=grid_angles_deg(points),
