@@ -490,12 +490,50 @@ class Identification:
 
     def parameters(self) -> dict:
         """Per ring parameter: value, lo95, hi95, sd_ln (log parameters; 95 % interval e^{ln θ ± 1.96 σ},
-        :meth:`FitResult.interval <ringfit.fit.result.FitResult.interval>`)."""
+        :meth:`FitResult.interval <ringfit.fit.result.FitResult.interval>`).
+
+        A barely identified parameter (an interval reaching past the plausible range :data:`BOUNDS`, or no finite
+        σ at all) is a finding, not an error: its interval ends at the bound, ``to_bound`` names the end(s)
+        cut there (``"lo"``, ``"hi"``), and :meth:`barely_identified` says it in a flag line. Every number is
+        finite (``sd_ln`` is None when the data give no finite σ), so the report stays JSON."""
         out = {}
         for name in self.free:
             value, sd = self.fit.values[name], self.covariance.sd_ln(name)
-            out[name] = dict(value=value, lo95=value * math.exp(-Z95 * sd), hi95=value * math.exp(Z95 * sd), sd_ln=sd)
+            out[name] = log_interval(value, sd, BOUNDS.get(name))
         return out
+
+    def barely_identified(self) -> list[str]:
+        """One flag line per parameter whose 95 % interval reaches a bound of the plausible range."""
+        lines = []
+        for name, p in self.parameters().items():
+            if p.get("to_bound"):
+                lo, hi = BOUNDS[name]
+                sd = "no finite σ" if p["sd_ln"] is None else f"sd ln {p['sd_ln']:.3g}"
+                lines.append(f"{name} is barely identified by these measurements ({sd}): its 95 % interval "
+                             f"[{p['lo95']:.4g}, {p['hi95']:.4g}] runs to the plausible range's "
+                             f"{' and '.join({'lo': f'lower bound {lo:g}', 'hi': f'upper bound {hi:g}'}[e] for e in p['to_bound'])}; "
+                             "add measurements that pin it (loaded tables, profiles) or hold it at a known value")
+        return lines
+
+
+def log_interval(value: float, sd_ln, bounds: tuple[float, float] | None) -> dict:
+    """``value·e^{±1.96 sd_ln}`` computed in log space and cut at ``bounds`` (the plausible range): never an
+    overflow, never an infinity. ``to_bound``: the ends cut (``"lo"``, ``"hi"``); ``sd_ln`` None when not finite."""
+    lo_b, hi_b = bounds if bounds is not None else (0.0, math.inf)
+    finite_sd = sd_ln is not None and math.isfinite(sd_ln)
+    if not (finite_sd and value > 0 and math.isfinite(value)):
+        return dict(value=float(value) if math.isfinite(value) else None, lo95=lo_b, hi95=hi_b,
+                    sd_ln=float(sd_ln) if finite_sd else None, to_bound=["lo", "hi"])
+    ln_v, half = math.log(value), Z95 * sd_ln
+    lo, hi, cut = ln_v - half, ln_v + half, []
+    if bounds is not None and lo <= math.log(lo_b) + 1e-9:
+        lo, cut = min(math.log(lo_b), ln_v), cut + ["lo"]
+    if bounds is not None and hi >= math.log(hi_b) - 1e-9:
+        hi, cut = max(math.log(hi_b), ln_v), cut + ["hi"]
+    out = dict(value=value, lo95=math.exp(lo), hi95=math.exp(hi), sd_ln=float(sd_ln))
+    if cut:
+        out["to_bound"] = cut
+    return out
 
 
 def _hat_diagonal(J: np.ndarray) -> np.ndarray:
@@ -543,10 +581,21 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     model = JointResiduals(P, solver, ProfileModel(), k_top=0 if rows.profiles is None else rows.profiles["k_top"])
     slices = _slices(rows)
     scales = {b: 1.0 for b in slices}
+    prior = None
+    if rows.loaded is None and rows.profiles is None:
+        # a free tyre's frequencies hardly see EI (docs/physics.md §2.1: the bending term is ~10 % of the
+        # pressure term): without loaded tables or profiles the fit would chase it to a bound and not converge
+        from ringfit.fit.least_squares import log_normal_prior
+        from ringfit.fit.priors import PHYSICAL_PRIORS
+
+        prior = log_normal_prior({k: v for k, v in PHYSICAL_PRIORS.items() if k in free_ring})
+        notes.append("only free modes: EI is barely pinned by a free tyre's frequencies, so the belt-plate prior on "
+                     f"EI ({PHYSICAL_PRIORS['ei'].source}; `ringfit fit --prior physical`, its default) is used; "
+                     "add loaded tables or profiles to identify it from data")
     fit = None
     for passes in range(1, SCALE_PASSES + 1):
         data = _arrays(geometry, rows, solver)
-        problem = Problem(model, data, coords, plausible=BOUNDS, data_label="these measurements")
+        problem = Problem(model, data, coords, prior=prior, plausible=BOUNDS, data_label="these measurements")
         fit = least_squares(problem, theta, free, max_steps=max_steps, rtol=rtol, atol=atol)
         if progress:
             print(f"identify: pass {passes}: {fit.status} after {fit.iterations} steps, "
@@ -697,6 +746,7 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
     idx = [names.index(n) for n in free_ring]
     cov = cov_u[np.ix_(idx, idx)]
     cov = 0.5 * (cov + cov.T)
+    cov = cap_unbounded(cov, free_ring)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sd, sd)
@@ -717,18 +767,38 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
                           inputs, grid)
 
 
+def cap_unbounded(cov: np.ndarray, names) -> np.ndarray:
+    """The ring covariance (ln θ) with each parameter the data do not bound — a variance that is not finite or
+    whose 95 % interval is wider than the whole plausible range :data:`BOUNDS` — given that range's spread
+    instead: σ_ln = ln(hi/lo)/(2·1.96), uncorrelated with the rest. A parameter barely identified is then a
+    finite, readable ``[ring.covariance]`` entry whose interval runs to the bounds (docs/formats.md §18), not
+    an infinity that no reader accepts."""
+    cov = np.array(cov, dtype=np.float64)
+    for i, name in enumerate(names):
+        if name not in BOUNDS:
+            continue
+        lo, hi = BOUNDS[name]
+        cap = math.log(hi / lo) / (2.0 * Z95)
+        v = cov[i, i]
+        if not (math.isfinite(v) and v <= cap**2) or not np.all(np.isfinite(cov[i])):
+            cov[i, :] = 0.0
+            cov[:, i] = 0.0
+            cov[i, i] = cap**2
+    return cov
+
+
 def identification_report(ident: Identification) -> dict:
     """The ``NAME.identify.json`` content (docs/formats.md §18)."""
     fit = ident.fit
     names, corr = ident.correlation
-    return {
+    return _json_safe({
         "format": "ringfit-identify/1",
         "status": fit.status,
         "converged": bool(fit.converged),
         "message": fit.message,
         "iterations": int(fit.iterations),
         "passes": int(ident.passes),
-        "flags": list(fit.flags),
+        "flags": list(fit.flags) + ident.barely_identified(),
         "parameters": ident.parameters(),
         "blocks": ident.blocks,
         "correlation": {"names": list(names), "matrix": [[float(x) for x in row] for row in corr]},
@@ -736,8 +806,21 @@ def identification_report(ident: Identification) -> dict:
         **({"grid_check": ident.grid_check} if ident.grid_check is not None else {}),
         "files": [] if ident.inputs is None else ident.inputs.files,
         "notes": ident.notes,
-    }
+    })
 
 
-__all__ = ["identify", "read_identify_folder", "IdentifyInputs", "Identification", "identification_report",
+def _json_safe(x):
+    """``x`` with every non-finite float (a σ the data do not bound, a correlation of it) as None: strict JSON."""
+    if isinstance(x, dict):
+        return {k: _json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_safe(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(x) else None
+    if isinstance(x, np.ndarray):
+        return _json_safe(x.tolist())
+    return x
+
+
+__all__ = ["identify", "read_identify_folder", "log_interval", "IdentifyInputs", "Identification", "identification_report",
            "JointResiduals", "harmonic_rows", "standing_half_angle", "BLOCKS"]
