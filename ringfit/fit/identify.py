@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
@@ -55,6 +56,7 @@ from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_F
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
 from ringfit.fit.result import FitResult, covariance_from_jacobian
+from ringfit.io.conditions import check_profile_rotation, pressure_conflict, unique_inputs
 from ringfit.io.modes import ModeTable, read_mode_table
 from ringfit.io.tyre import RingCovariance, Tyre, read_tyre
 from ringfit.params import RingParams, TyreGeometry
@@ -140,9 +142,16 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
         raise InputError(f"state {free.state!r}: free.modes.csv must be the static, free tyre",
                          source=free_path.with_suffix(".json"))
     inputs = IdentifyInputs(folder, tyre, free)
-    for p in sorted(folder.glob("*.modes.csv")):
-        if p.name == "free.modes.csv":
-            continue
+    tyre_bar = float(tyre.geometry.pressure) / 1e5
+    _check_pressure(free.condition, tyre_bar, free_path.with_suffix(".json"))
+    # the same table or profile given twice (a copy, a symlink) is counted once: the data are not twice as sure
+    tables, notes = unique_inputs(_real_first(p for p in folder.glob("*.modes.csv") if p.name != "free.modes.csv"),
+                                  lambda p: p.with_suffix(".json"), "mode table")
+    profiles, more = unique_inputs(_real_first(folder.glob("*.profile.csv")), lambda p: p.with_suffix(".json"),
+                                   "profile")
+    for note in notes + more:
+        warnings.warn(note, stacklevel=2)
+    for p in tables:
         sidecar = p.with_suffix(".json")
         if not sidecar.exists():
             raise InputError(f"missing sidecar {sidecar.name}: its condition (state, load_n, speed_kmh) is needed",
@@ -166,8 +175,9 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
                              source=sidecar)
         if not (math.isfinite(load) and load > 0):
             raise InputError(f"load_n = {cond.get('load_n')!r}: expected a positive load [N]", source=sidecar)
+        _check_pressure(cond, tyre_bar, sidecar)
         inputs.loaded.append(table)
-    for p in sorted(folder.glob("*.profile.csv")):
+    for p in profiles:
         sidecar = p.with_suffix(".json")
         if not sidecar.exists():
             raise InputError(f"missing sidecar {sidecar.name} (speed_kmh, load_n; docs/formats.md §3)", source=p)
@@ -177,9 +187,27 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
             if v is None or not (math.isfinite(v) and v > 0):
                 raise InputError(f"missing or non-positive '{key}': a profile's {key} is needed to identify "
                                  "from it", source=sidecar)
+        _check_pressure(prof.condition, tyre_bar, sidecar)
+        prof, note = check_profile_rotation(prof, float(tyre.geometry.outer_radius))
+        if note:
+            warnings.warn(note, stacklevel=2)
         inputs.profiles.append(prof)
     inputs.profiles.sort(key=lambda pr: (float(pr.condition["load_n"]), float(pr.condition["speed_kmh"])))
     return inputs
+
+
+def _real_first(paths) -> list[Path]:
+    """Files before symlinks, then by name: of a file and a link to it, the file is the one kept."""
+    return sorted(paths, key=lambda p: (p.is_symlink(), p.name))
+
+
+def _check_pressure(cond: dict, tyre_bar: float, source) -> None:
+    """A measurement at another pressure than the tyre file's is refused: the ring identified is the tyre's at
+    its pressure, and the pressure changes the stiffness it is identified from (as ``fit-rolling`` refuses)."""
+    note = pressure_conflict(cond, tyre_bar)
+    if note:
+        raise InputError(f"{note}; identify measurements at one pressure, with that pressure in tyre.toml",
+                         source=source)
 
 
 # ----------------------------------------------------------------------------- the joint residual model

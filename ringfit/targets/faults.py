@@ -607,10 +607,8 @@ def on_notched_line(freq_hz: float, lines_hz, duration_s: float) -> float | None
     return None
 
 
-#: Rolling radii [m] a road tyre can have: an encoder rate that implies another contradicts the sampling rate.
-ROLLING_RADIUS_M = (0.15, 0.75)
-#: Relative disagreement between the encoder's rotation rate and the stated one that is called a contradiction.
-RATE_TOL = 0.02
+# the stated-condition tolerances are those of the one consistency layer (ringfit.io.conditions)
+from ringfit.io.conditions import RATE_TOL, ROLLING_RADIUS_M  # noqa: E402
 
 
 def sample_rate_note(rotation_hz: float, fs_hz: float, condition: dict) -> str | None:
