@@ -64,7 +64,8 @@ def run_identify(args) -> int:
     doc = identification_report(ident)
     _print(ident, doc)
     for note in ident.notes[len(inputs.skipped):]:
-        print(f"note: {note}")
+        if note not in ident.warned:  # those are WARNING lines on stderr
+            print(f"note: {note}")
     if not ident.converged:
         raise CommandFailed(f"the joint fit did not converge ({ident.fit.message}); nothing written")
     tyre = inputs.tyre.with_ring(ident.ring, covariance=ident.covariance)

@@ -422,7 +422,7 @@ def _loaded_rows(tables: list[ModeTable], ring: RingParams, geometry: TyreGeomet
         notes.append(f"{len(untagged)} loaded row(s) without a tag matched to the nearer branch at the start")
     given = all(np.isfinite(t.freq_std_hz).all() for t in tables)
     return dict(n=np.array(n), sin=np.array(sin), table=np.array(tab), freq=np.array(freq), sigma=np.array(sigma),
-                load=np.array(loads), drum=np.array(drums), given=given), notes
+                sigma0=np.array(sigma), load=np.array(loads), drum=np.array(drums), given=given), notes
 
 
 def _profile_rows(profiles, geometry, ring, solver) -> dict | None:
@@ -511,6 +511,8 @@ class Identification:
     passes: int
     inputs: IdentifyInputs | None = None
     grid_check: dict | None = None
+    #: the notes also given as warnings (a table's data contradicting its stated load: :func:`load_check`)
+    warned: list = field(default_factory=list)
 
     @property
     def converged(self) -> bool:
@@ -660,7 +662,76 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     # (θ holds EA = ∞ of the inextensible ring: only the free parameters need be finite)
     if all(math.isfinite(fit.values[n]) for n in fit.names) and (rows.loaded is not None or rows.profiles is not None):
         check = grid_check(fit, rows, geometry, solver, P)
-    return _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, check, widen)
+    warned = []
+    if rows.loaded is not None and all(math.isfinite(fit.values[n]) for n in fit.names):
+        warned = load_check(ring_from_vector(jnp.asarray(fit.theta)), geometry, rows.loaded,
+                            [t.source for t in inputs.loaded], solver)
+        for note in warned:
+            warnings.warn(note, stacklevel=2)
+    ident = _finish(fit, rows, slices, scales, free_ring, P, notes + warned, passes, inputs, check, widen)
+    ident.warned = warned
+    return ident
+
+
+#: Loads scanned per loaded table for its best-fit load, relative to its stated load_n (:func:`load_check`).
+LOAD_SCAN = (0.3, 3.0, 41)
+#: A table whose best-fit load differs from its stated load by more than this share, and fits there better by
+#: :data:`LOAD_F_RATIO` (the drop of χ² against the table's own residual variance), is said to contradict it.
+LOAD_SHARE_TOL = 0.15
+LOAD_F_RATIO = 9.0
+
+
+@eqx.filter_jit
+def _scan_loaded(ring, geometry, loads, roads, solver, n_harmonics):
+    def one(args):
+        fz, road = args
+        a = standing_half_angle(ring, geometry, fz, road, solver)
+        c, s = loaded_natural_frequencies(ring, geometry, a, n_harmonics)
+        return jnp.stack([c, s])
+
+    return serial_map(one, (loads, roads))
+
+
+def load_check(ring: RingParams, geometry: TyreGeometry, loaded: dict, sources, solver: ContactSolver) -> list[str]:
+    """What the loaded tables' own frequencies say of their stated ``load_n`` (one sentence per contradiction).
+
+    With the identified ring, each table's rows are compared with the loaded-mode model (docs/physics.md §6) at
+    loads from :data:`LOAD_SCAN` × its stated load; the load of least χ² (σ as stated, or the default relative σ)
+    is its best-fit load. A table whose best-fit load is more than :data:`LOAD_SHARE_TOL` off its stated one and
+    fits there better by an F ratio of :data:`LOAD_F_RATIO` — (χ²(stated) − χ²(best)) over the table's residual
+    variance at its best load — was not measured at the load its sidecar states (a 5000 N table labelled 3000 N
+    is absorbed by the block's σ scale otherwise, without a word)."""
+    stated = np.asarray(loaded["load"], dtype=np.float64)
+    T = stated.size
+    lo, hi, k = LOAD_SCAN
+    rel = np.geomspace(lo, hi, k)
+    loads = (stated[:, None] * rel[None, :]).ravel()
+    drums = np.repeat(np.asarray(loaded["drum"], dtype=np.float64), k)
+    roads = flat_or_drum(drums, loads.size)
+    freqs = np.asarray(_scan_loaded(ring, geometry, jnp.asarray(loads), roads, solver, LOADED_HARMONICS))
+    freqs = freqs.reshape(T, k, 2, -1)
+    sigma0 = loaded.get("sigma0", loaded["sigma"])
+    notes = []
+    for t in range(T):
+        sel = loaded["table"] == t
+        m = int(sel.sum())
+        if m < 3:
+            continue
+        model = freqs[t][:, loaded["sin"][sel], loaded["n"][sel]]  # (k, m)
+        chi2 = np.sum(((model - loaded["freq"][sel]) / sigma0[sel]) ** 2, axis=1)
+        if not np.all(np.isfinite(chi2)):
+            continue
+        j = int(np.argmin(chi2))
+        at = int(np.argmin(np.abs(rel - 1.0)))
+        best = float(loads.reshape(T, k)[t, j])
+        var = chi2[j] / max(m - 1, 1)
+        f_ratio = (chi2[at] - chi2[j]) / max(var, 1e-300)
+        if abs(best / stated[t] - 1.0) > LOAD_SHARE_TOL and f_ratio > LOAD_F_RATIO:
+            edge = " (the end of the scan)" if j in (0, k - 1) else ""
+            notes.append(f"{Path(str(sources[t])).name} states load_n = {stated[t]:g} N, but its frequencies fit the "
+                         f"identified ring best at about {best:.0f} N{edge} (χ² {chi2[at]:.3g} at the stated load, "
+                         f"{chi2[j]:.3g} there): it was not measured at the stated load — check its sidecar")
+    return notes
 
 
 def t_widening(dof: float) -> float:
