@@ -137,10 +137,15 @@ def _row(label, results, wall, serial_wall=None):
             f"{ok:>5}/{len(results)}")
 
 
+#: Fields of a diagnosis JSON that are not results: wall-clock and CPU times, and the baseline tyre file's path
+#: (each run's own output folder).
+VOLATILE = frozenset({"elapsed_s", "wall_s", "cpu_s", "baseline_tyre"})
+
+
 def _without_timing(x):
-    """A diagnosis JSON without its ``elapsed_s`` fields (wall-clock times, not results)."""
+    """A diagnosis JSON without its :data:`VOLATILE` fields (times and paths, not results)."""
     if isinstance(x, dict):
-        return {k: _without_timing(v) for k, v in x.items() if k != "elapsed_s"}
+        return {k: _without_timing(v) for k, v in x.items() if k not in VOLATILE}
     if isinstance(x, list):
         return [_without_timing(v) for v in x]
     return x
@@ -149,7 +154,7 @@ def _without_timing(x):
 def identical(layout_a: dict, layout_b: dict) -> tuple[int, int]:
     """(tyres whose fitted TOML, posterior draws and diagnosis JSON equal the other run's, tyres compared).
 
-    Fitted TOML: bytes; posterior: draws and metadata; diagnosis: the JSON less its ``elapsed_s`` timings.
+    Fitted TOML: bytes; posterior: draws and metadata; diagnosis: the JSON less its :data:`VOLATILE` fields.
     """
     import json
 
