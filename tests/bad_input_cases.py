@@ -94,7 +94,7 @@ def _drum_record(fs=2000.0, seconds=3.0, rotation_hz=10.0, drum_period_s=np.pi *
 
 
 PROFILE_SIDECAR = {"speed_kmh": 30.0, "load_n": 4000.0, "pressure_bar": 2.2, "revolutions": 26,
-                   "sample_rate_hz": 25600.0, "rotation_hz": 7.66}
+                   "sample_rate_hz": 25600.0, "rotation_hz": 4.29}
 
 
 def build_fixtures(folder: str | os.PathLike) -> Path:

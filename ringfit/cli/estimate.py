@@ -74,13 +74,9 @@ def run_estimate(args) -> int:
 
     from ringfit.fit.estimate import EstimateSettings, estimate_load, estimate_recording
     from ringfit.io.files import atomic_write_text
-    from ringfit.io.tyre import read_tyre
+    from ringfit.io.tyre import read_tyre, require_ring
 
-    tyre = read_tyre(args.tyre)
-    if not tyre.ring_values:
-        raise InputError("has no [ring]: the load estimate needs the tyre's identified ring (ringfit identify, or "
-                         "ringfit fit and fit-rolling); it does not fall back to the Table 9 values",
-                         source=args.tyre)
+    tyre = require_ring(read_tyre(args.tyre), "the load estimate needs the tyre's identified ring")
     _, note = tread_uncertainty(tyre, args.k_tread_sd)
     if note and not args.quiet:
         print(note)

@@ -145,9 +145,9 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
     tyre_bar = float(tyre.geometry.pressure) / 1e5
     _check_pressure(free.condition, tyre_bar, free_path.with_suffix(".json"))
     # the same table or profile given twice (a copy, a symlink) is counted once: the data are not twice as sure
-    tables, notes = unique_inputs(_real_first(p for p in folder.glob("*.modes.csv") if p.name != "free.modes.csv"),
+    tables, notes = unique_inputs((p for p in folder.glob("*.modes.csv") if p.name != "free.modes.csv"),
                                   lambda p: p.with_suffix(".json"), "mode table")
-    profiles, more = unique_inputs(_real_first(folder.glob("*.profile.csv")), lambda p: p.with_suffix(".json"),
+    profiles, more = unique_inputs(folder.glob("*.profile.csv"), lambda p: p.with_suffix(".json"),
                                    "profile")
     for note in notes + more:
         warnings.warn(note, stacklevel=2)
@@ -194,11 +194,6 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
         inputs.profiles.append(prof)
     inputs.profiles.sort(key=lambda pr: (float(pr.condition["load_n"]), float(pr.condition["speed_kmh"])))
     return inputs
-
-
-def _real_first(paths) -> list[Path]:
-    """Files before symlinks, then by name: of a file and a link to it, the file is the one kept."""
-    return sorted(paths, key=lambda p: (p.is_symlink(), p.name))
 
 
 def _check_pressure(cond: dict, tyre_bar: float, source) -> None:

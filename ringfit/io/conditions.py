@@ -170,14 +170,13 @@ def content_hash(path: str | os.PathLike) -> str:
     return h.hexdigest()
 
 
-def duplicate_inputs(paths) -> list[tuple[Path, Path, str]]:
-    """Inputs that are one file given twice: ``(kept, duplicate, how)`` per duplicate, the first kept.
-
-    Two paths are the same input when they resolve to the same file (symlinks followed) or their bytes are
-    equal (SHA-256)."""
-    seen: dict[object, Path] = {}
+def duplicate_inputs(paths) -> list[tuple[int, int, str]]:
+    """Inputs that are one file given twice: ``(kept, duplicate, how)`` indices into ``paths`` per duplicate, the
+    first kept. Two paths are the same input when they resolve to the same file (symlinks followed) or their
+    bytes are equal (SHA-256)."""
+    seen: dict[object, int] = {}
     out = []
-    for p in map(Path, paths):
+    for i, p in enumerate(map(Path, paths)):
         try:
             real = p.resolve()
         except OSError:
@@ -190,25 +189,28 @@ def duplicate_inputs(paths) -> list[tuple[Path, Path, str]]:
         if hit is None and digest is not None:
             hit, how = seen.get(("hash", digest)), "the same content (SHA-256)"
         if hit is not None:
-            out.append((hit, p, how))
+            out.append((hit, i, how))
             continue
-        seen[("path", real)] = p
+        seen[("path", real)] = i
         if digest is not None:
-            seen[("hash", digest)] = p
+            seen[("hash", digest)] = i
     return out
 
 
 def unique_inputs(paths, sidecar, what: str) -> tuple[list[Path], list[str]]:
-    """``paths`` with every duplicate (:func:`duplicate_inputs`) counted once, and one warning per duplicate.
+    """``paths`` (sorted by name) with every duplicate (:func:`duplicate_inputs`) counted once — a file kept before
+    a symlink to it — and one warning per duplicate.
 
     ``sidecar``: path → its sidecar path. A duplicate whose sidecar states another condition (the same readings
     said to be measured twice, under two conditions) is refused: InputError naming both files, since at most one
     of the two can be right."""
     import json
 
-    paths = [Path(p) for p in paths]
+    # of a file and a link to it, the file is the one kept; otherwise the first by name
+    paths = sorted((Path(p) for p in paths), key=lambda p: (p.is_symlink(), p.name))
     dropped, notes = set(), []
-    for kept, dup, how in duplicate_inputs(paths):
+    for k, d, how in duplicate_inputs(paths):
+        kept, dup = paths[k], paths[d]
         a, b = Path(sidecar(kept)), Path(sidecar(dup))
         try:
             ca = json.loads(a.read_text()) if a.is_file() else None
@@ -219,10 +221,12 @@ def unique_inputs(paths, sidecar, what: str) -> tuple[list[Path], list[str]]:
             raise InputError(f"holds {how} as {kept.name} but its sidecar {b.name} states another condition "
                              f"than {a.name} ({_diff(ca, cb)}): the same readings cannot be measured twice; "
                              f"remove one of them", source=dup)
-        dropped.add(dup)
-        notes.append(f"{dup.name} is {how} as {kept.name}: the same {what} given twice is counted once "
+        dropped.add(d)
+        notes.append(f"{dup} is {how} as {kept}: the same {what} given twice is counted once ({kept.name} used)"
+                     if dup.name == kept.name else
+                     f"{dup.name} is {how} as {kept.name}: the same {what} given twice is counted once "
                      f"({kept.name} used)")
-    return [p for p in paths if p not in dropped], notes
+    return sorted((p for i, p in enumerate(paths) if i not in dropped), key=lambda p: p.name), notes
 
 
 def _diff(a, b) -> str:
