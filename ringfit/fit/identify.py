@@ -344,8 +344,14 @@ def nuisance_names(P: int) -> tuple[str, ...]:
 
 
 def joint_coords(P: int) -> tuple[Coordinate, ...]:
-    """The joint fit's coordinates: the ring's (log), then per profile its angle offset (linear) and gain (log)."""
-    coords = list(RING_COORDS)
+    """The joint fit's coordinates: the ring's (log), then per profile its angle offset (linear) and gain (log).
+
+    The ring parameters the identification frees are held inside their plausible range :data:`BOUNDS` (the
+    engine's bounded transform): a parameter the data do not bound — k_tread from a loaded table that shows no
+    contact, EI from free modes alone — then stops at the range's edge, flagged there with its interval to the
+    bound, instead of running off towards 0 or ∞ until the solver's step limit."""
+    coords = [Coordinate(c.name, c.kind, c.center, c.scale, lo=BOUNDS[c.name][0], hi=BOUNDS[c.name][1])
+              if c.name in RING_FREE and c.name in BOUNDS else c for c in RING_COORDS]
     for i in range(P):
         coords.append(Coordinate(f"angle_offset_{i + 1}", LINEAR, scale=math.radians(1.0), lo=-OFFSET_BOUND,
                                  hi=OFFSET_BOUND))
