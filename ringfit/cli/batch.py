@@ -363,6 +363,14 @@ def _check_cluster_options(opts) -> None:
     if opts.scheduler and opts.dashboard:
         raise InputError("--dashboard starts the LocalCluster's dashboard; a --scheduler serves its own "
                          "(`dask scheduler --dashboard-address`)")
+    if opts.dashboard is not None:
+        import warnings
+
+        from ringfit.batch import check_dashboard_address
+
+        note = check_dashboard_address(opts.dashboard)
+        if note:
+            warnings.warn(note, stacklevel=2)
     opts.security_obj = None
     from ringfit.batch import check_scheduler_security
 
