@@ -561,7 +561,10 @@ def log_interval(value: float, sd_ln, bounds: tuple[float, float] | None) -> dic
         lo, cut = min(math.log(lo_b), ln_v), cut + ["lo"]
     if bounds is not None and hi >= math.log(hi_b) - 1e-9:
         hi, cut = max(math.log(hi_b), ln_v), cut + ["hi"]
-    out = dict(value=value, lo95=math.exp(lo), hi95=math.exp(hi), sd_ln=float(sd_ln))
+    # an end cut at a bound is that bound exactly (not e^{ln bound})
+    lo95 = lo_b if "lo" in cut and value >= lo_b else math.exp(lo)
+    hi95 = hi_b if "hi" in cut and value <= hi_b else math.exp(hi)
+    out = dict(value=value, lo95=lo95, hi95=hi95, sd_ln=float(sd_ln))
     if cut:
         out["to_bound"] = cut
     return out
@@ -874,16 +877,18 @@ def cap_unbounded(cov: np.ndarray, names) -> np.ndarray:
     finite, readable ``[ring.covariance]`` entry whose interval runs to the bounds (docs/formats.md §18), not
     an infinity that no reader accepts."""
     cov = np.array(cov, dtype=np.float64)
-    for i, name in enumerate(names):
-        if name not in BOUNDS:
-            continue
-        lo, hi = BOUNDS[name]
-        cap = math.log(hi / lo) / (2.0 * Z95)
-        v = cov[i, i]
-        if not (math.isfinite(v) and v <= cap**2) or not np.all(np.isfinite(cov[i])):
+    caps = {i: math.log(BOUNDS[n][1] / BOUNDS[n][0]) / (2.0 * Z95) for i, n in enumerate(names) if n in BOUNDS}
+    wide = [i for i, c in caps.items() if not (math.isfinite(cov[i, i]) and cov[i, i] <= c**2)]
+    for i in wide:
+        cov[i, :] = 0.0
+        cov[:, i] = 0.0
+    for i in caps:  # a correlation the others cannot carry (not finite) leaves them unbounded too
+        if i not in wide and not np.all(np.isfinite(cov[i])):
+            wide.append(i)
             cov[i, :] = 0.0
             cov[:, i] = 0.0
-            cov[i, i] = cap**2
+    for i in wide:
+        cov[i, i] = caps[i] ** 2
     return cov
 
 
