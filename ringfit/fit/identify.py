@@ -562,8 +562,8 @@ def log_interval(value: float, sd_ln, bounds: tuple[float, float] | None) -> dic
     if bounds is not None and hi >= math.log(hi_b) - 1e-9:
         hi, cut = max(math.log(hi_b), ln_v), cut + ["hi"]
     # an end cut at a bound is that bound exactly (not e^{ln bound})
-    lo95 = lo_b if "lo" in cut and value >= lo_b else math.exp(lo)
-    hi95 = hi_b if "hi" in cut and value <= hi_b else math.exp(hi)
+    lo95 = (lo_b if value >= lo_b else value) if "lo" in cut else math.exp(lo)
+    hi95 = (hi_b if value <= hi_b else value) if "hi" in cut else math.exp(hi)
     out = dict(value=value, lo95=lo95, hi95=hi95, sd_ln=float(sd_ln))
     if cut:
         out["to_bound"] = cut
