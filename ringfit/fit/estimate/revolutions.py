@@ -124,8 +124,8 @@ def first_rotation_hz(record, samples: int = 1 << 18) -> float:
     return float(rate)
 
 
-def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progress: bool = False
-                          ) -> RecordingRevolutions:
+def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progress: bool = False,
+                          geometry: TyreGeometry | None = None) -> RecordingRevolutions:
     """Walk a continuous recording once (bounded memory): every whole revolution's radial reading on
     the angle grid (:func:`ringfit.targets.rolling_profile.revolution_grids`, M = the power of two at or
     above the samples per revolution, so that every sample takes part), its harmonics 2…k_max, and
@@ -209,6 +209,17 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     note = sample_rate_note(float(np.mean(rate)), record.fs_hz, dict(record.condition))
     if note:
         warnings.warn(f"{record.source}: {note}", RuntimeWarning, stacklevel=2)
+    elif record.has_encoder and geometry is not None:
+        # the stated speed against the encoder's rotation for this tyre's radius (ringfit.io.conditions); the
+        # encoder's rate is what the estimate uses
+        from ringfit.io.conditions import rotation_speed_conflict
+
+        clash = rotation_speed_conflict({"rotation_hz": float(np.mean(rate)),
+                                         "speed_kmh": record.condition.get("speed_kmh")},
+                                        float(geometry.outer_radius))
+        if clash:
+            warnings.warn(f"{record.source}: the encoder's {clash}; "
+                          "the encoder's rate is used", RuntimeWarning, stacklevel=2)
     cond = {k: float(record.condition[k]) for k in ("speed_kmh", "pressure_bar", "drum_diameter_m")
             if record.condition.get(k) is not None}
     cond.update(revolutions=R, sample_rate_hz=float(record.fs_hz), rotation_hz=float(np.mean(rate)),
@@ -392,7 +403,7 @@ def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
 
     **Returns:** ``(LoadEstimate, RevolutionEstimates or None)``.
     """
-    data = recording_revolutions(record, k_max=settings.k_max, progress=progress)
+    data = recording_revolutions(record, k_max=settings.k_max, progress=progress, geometry=geometry)
     rate = float(np.mean(data.rotation_hz))
     reference = estimate_load(data.profile, geometry, ring, settings=settings, k_tread_in_file=k_tread_in_file,
                               omega=2 * math.pi * rate, omega_source=data.rotation_source,
