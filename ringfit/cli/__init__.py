@@ -110,8 +110,8 @@ def _ctrl_c_recorded():
     (:func:`ringfit.io.files.mark_interrupted`), so that a KeyboardInterrupt swallowed on its way up — raised
     inside a garbage-collector callback such as JAX's ``_xla_gc_callback``, where Python only prints "Exception
     ignored" — still stops the command before any output is committed, with exit status 130. The record is
-    cleared when an outermost command starts (a batch task run in-process keeps its batch's); the handler is
-    installed only in the main thread and restored afterwards."""
+    cleared when an outermost command starts and ends (a batch task run in-process keeps its batch's); the
+    handler is installed only in the main thread and restored afterwards."""
     import signal
     import threading
 
@@ -137,6 +137,8 @@ def _ctrl_c_recorded():
         _DEPTH[0] -= 1
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
+        if outer:  # the command is over (its status says the interrupt): a caller's own writes go on
+            files._INTERRUPTED = False
 
 
 def run() -> None:

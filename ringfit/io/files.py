@@ -106,7 +106,7 @@ def write_failed(path: str | os.PathLike, exc: OSError) -> InputError:
     return InputError(f"could not be written ({why}); nothing was written", source=path)
 
 
-#: Set by the command line's SIGINT handler (:func:`mark_interrupted`), cleared when a command starts: a Ctrl-C whose
+#: Set by the command line's SIGINT handler (:func:`mark_interrupted`) for the length of a command: a Ctrl-C whose
 #: KeyboardInterrupt was swallowed on its way up (raised inside a garbage-collector callback — JAX's
 #: ``_xla_gc_callback`` — Python prints "Exception ignored" and goes on) still stops every commit.
 _INTERRUPTED = False
