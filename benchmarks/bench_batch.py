@@ -3,9 +3,9 @@
 Each tyre is a case folder from :func:`ringfit.synth.cases.make_case` (free,
 loaded and spinning mode tables; a hidden effect drawn at random); one tyre's
 free frequencies are raised by 8 % so the campaign report has an outlier to
-find. The work per tyre is what ``ringfit campaign`` runs: ``ringfit fit`` →
-``ringfit sample`` (small sampler: 16 walkers × STEPS steps) and
-``ringfit diagnose``, i.e. 3 tasks per tyre.
+find. The work per tyre is what ``ringfit campaign`` runs: its loaded tables make it
+``ringfit identify`` with its posterior (STEPS steps), then ``ringfit diagnose`` (a tyre
+with a free table only: ``ringfit fit`` → ``ringfit sample``, 16 walkers × STEPS steps).
 
 - **serial**: the same commands one after another in this process
   (``ringfit.batch.execute``, which is what a worker runs).
@@ -201,8 +201,9 @@ def main() -> None:
     failures = bc.Failures()
     t0 = time.perf_counter()
     tyres = make_tyres(root / "campaign", args.tyres)
-    print(f"{args.tyres} synthetic tyres written in {time.perf_counter() - t0:.1f} s; 3 tasks per tyre "
-          f"(fit, sample {args.steps} steps × 16 walkers, diagnose)")
+    print(f"{args.tyres} synthetic tyres written in {time.perf_counter() - t0:.1f} s; the tasks `ringfit campaign` "
+          f"plans per tyre (identify with its posterior, or fit and sample; {args.steps} sampler steps; then "
+          "diagnose)")
 
     serial = {}
     for label in ("cold", "warm"):
@@ -231,7 +232,8 @@ def main() -> None:
     print()
     work = sum(r.elapsed_s for r in serial["warm"][0])
     work_cpu = sum(r.cpu_s for r in serial["warm"][0])
-    per_task = {k: np.mean([r.elapsed_s for r in serial["warm"][0] if r.kind == k]) for k in ("fit", "sample", "diagnose")}
+    kinds = [k for k in ("ssi", "identify", "fit", "sample", "diagnose") if any(r.kind == k for r in serial["warm"][0])]
+    per_task = {k: np.mean([r.elapsed_s for r in serial["warm"][0] if r.kind == k]) for k in kinds}
     print(f"work per tyre (serial, warm): {work / args.tyres:.2f} s wall ({work_cpu / args.tyres:.2f} s CPU) = "
           + " + ".join(f"{k} {v:.2f} s" for k, v in per_task.items()))
     for w, run in runs.items():
