@@ -94,8 +94,7 @@ def run_roll(args) -> int:
         note = rotation_speed_conflict(dict(rotation_hz=args.rotation_hz, speed_kmh=args.speed),
                                        float(tyre.geometry.outer_radius))
         if note:
-            raise InputError("--rotation-hz and --speed: " + note.replace("rotation_hz = ", "").replace(
-                "speed_kmh = ", ""))
+            raise InputError(note.replace("rotation_hz = ", "--rotation-hz ").replace("speed_kmh = ", "--speed "))
     solver = ContactSolver(n_grid=args.grid)
     grid, sol = simulate_profile(tyre.ring, tyre.geometry, speed_kmh=args.speed, load_n=args.load,
                                  rotation_hz=args.rotation_hz, drum_diameter_m=args.drum, solver=solver,
