@@ -870,6 +870,23 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
                           inputs, grid)
 
 
+#: A frequency block whose rows scatter more than this many times their σ (stated, or the default relative σ) is
+#: flagged: its σ scale absorbs a misfit — a model that lacks an effect, or a stated condition that is wrong.
+SCALE_FLAG = 3.0
+
+
+def scale_flags(blocks: dict) -> list[str]:
+    """One flag per frequency block (free or loaded modes) whose σ scale exceeds :data:`SCALE_FLAG`."""
+    out = []
+    for name in ("free modes", "loaded modes"):
+        b = blocks.get(name)
+        if b is not None and b["sigma_scale"] > SCALE_FLAG:
+            out.append(f"the {name} scatter {b['sigma_scale']:.3g}× their σ (the block's σ scale): the model lacks "
+                       "an effect these data show, or a stated condition (load, speed, rotation, pressure) is "
+                       "wrong; the intervals are widened by it, not explained")
+    return out
+
+
 def cap_unbounded(cov: np.ndarray, names) -> np.ndarray:
     """The ring covariance (ln θ) with each parameter the data do not bound — a variance that is not finite or
     whose 95 % interval is wider than the whole plausible range :data:`BOUNDS` — given that range's spread
@@ -903,7 +920,7 @@ def identification_report(ident: Identification) -> dict:
         "message": fit.message,
         "iterations": int(fit.iterations),
         "passes": int(ident.passes),
-        "flags": list(fit.flags) + ident.barely_identified(),
+        "flags": list(fit.flags) + ident.barely_identified() + scale_flags(ident.blocks),
         "parameters": ident.parameters(),
         "blocks": ident.blocks,
         "correlation": {"names": list(names), "matrix": [[float(x) for x in row] for row in corr]},
