@@ -5,7 +5,10 @@
 ``*.profile.csv`` a rolling profile (its sidecar is required), every
 ``*.records.npz`` optional raw records (listed, not used by the diagnosis).
 Errors are :class:`~ringfit.errors.InputError` with one line naming the
-missing or bad file.
+missing or bad file. Stated conditions are checked on reading (:mod:`ringfit.io.conditions`,
+docs/formats.md §6): a duplicate table or profile is counted once, a table whose ``rotation_hz`` and
+``speed_kmh`` contradict is refused, a profile's contradiction is settled by its contact patch or refused,
+and a measurement at another pressure than the tyre file's is a warning.
 """
 
 from __future__ import annotations
