@@ -851,10 +851,11 @@ def _warned_status0(*parts):
 
 IDENTIFY = ["identify", "{d}/case", "--out", "{d}/id.tyre.toml", "--quiet"]
 # a profile whose rotation_hz contradicts its speed_kmh and whose readings (noise: no contact patch) cannot tell
-issue34("identify-rotation-contradicts-speed-no-patch", IDENTIFY,
-        setup=_case_profile("noise", source="noise", rotation_hz=12.0), names=("rotation_hz = 12",))
-issue34("diagnose-rotation-contradicts-speed-no-patch", DIAG,
-        setup=_case_profile("noise", source="noise", rotation_hz=12.0), names=("rotation_hz = 12",))
+NO_PATCH = dict(source="noise", speed_kmh=80.0, rotation_hz=30.0)
+issue34("identify-rotation-contradicts-speed-no-patch", IDENTIFY, setup=_case_profile("noise", **NO_PATCH),
+        names=("rotation_hz = 30",))
+issue34("diagnose-rotation-contradicts-speed-no-patch", DIAG, setup=_case_profile("noise", **NO_PATCH),
+        names=("rotation_hz = 30",))
 # a rolling table whose rotation_hz contradicts its speed_kmh (no data can tell which): refused where it is read
 issue34("diagnose-rolling-table-rotation-contradicts-speed", DIAG, setup=_rolling_case(_set("rotation_hz", 12.0)),
         names=("rotation_hz = 12",))

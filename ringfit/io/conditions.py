@@ -9,7 +9,7 @@ every command (identify, diagnose and campaign case folders, fit-rolling, estima
   outer radius R + τ (R_e = R_out − δ/3, δ the deflection: a few per cent below R_out);
 - :func:`patch_drop_omega`: what a profile itself says of Ω — on the road the sensor runs straight through the
   contact patch, so its radial reading drops there by about Ω²·R from the centripetal level outside
-  (docs/physics.md §4.6); :data:`PATCH_DROP_SHARE` brackets drop/(Ω² R_out) over loads, speeds and drums;
+  (docs/physics.md §5); :data:`PATCH_DROP_SHARE` brackets drop/(Ω² R_out) over loads, drums and grids;
 - :func:`check_profile_rotation`: the two together for a profile — a contradiction the profile's own patch
   resolves is a ``WARNING`` and the value the data support is used; one it does not resolve is refused
   (exit 2: no answer can be right until the sidecar is corrected);
@@ -41,10 +41,14 @@ RATE_TOL = 0.02
 #: R_e / R_out a rolling tyre can have (R_e = R_out − δ/3; δ up to ~45 % of R_out would be a flat tyre): a
 #: ``speed_kmh`` and ``rotation_hz`` whose ratio implies a radius outside this share of R_out contradict.
 ROLLING_RADIUS_SHARE = (0.85, 1.0 + RATE_TOL)
-#: drop / (Ω² R_out) of a rolling profile's radial reading (outside the patch minus its centre): 0.67–0.80 on
-#: a flat road (synthetic profiles at 3–5 kN, 30–70 km/h), more on a drum (the patch curves the other way);
-#: a stated Ω outside this bracket is not the one the profile was read at.
-PATCH_DROP_SHARE = (0.4, 1.6)
+#: drop / (Ω² R_out) of a rolling profile's radial reading (:func:`patch_drop_omega`): 0.50 at 1.5 kN, 0.72 at
+#: 4 kN on a flat road, 0.96 on a 1.22 m drum, 1.53 at 9 kN on a 0.5 m drum (the patch curves the other way),
+#: the same from 64 to 1024 angles (``ringfit roll`` profiles of Table 9's tyre); a stated Ω outside this bracket
+#: is not the one the profile was read at. Its width (6.7×, Ω 2.6×) makes a wrong pick impossible: a smaller
+#: contradiction fits both and is refused.
+PATCH_DROP_SHARE = (0.3, 2.0)
+#: The patch floor is looked for within this angle of the patch centre [deg].
+PATCH_WINDOW_DEG = 10.0
 #: Relative difference of a measurement's pressure from the tyre file's that is called a contradiction.
 PRESSURE_TOL = 0.05
 KMH = 1.0 / 3.6
@@ -78,18 +82,18 @@ def rotation_speed_conflict(condition: dict, outer_radius_m: float) -> str | Non
 
 
 def patch_drop_omega(angle_deg: np.ndarray, radial_ms2: np.ndarray) -> float | None:
-    """The radial reading's drop into the contact patch [m/s²]: the median outside (|φ| > 90°) less the
-    median at the patch centre (|φ| within max(2°, 1.5 spacings)); None when either is empty."""
+    """The radial reading's drop into the contact patch [m/s²]: the median outside (|φ| > 90°) less the patch's
+    floor (the 10th percentile within ±:data:`PATCH_WINDOW_DEG` of its centre, below the edges' peaks); None
+    when either is empty."""
     angle = np.asarray(angle_deg, dtype=np.float64)
     radial = np.asarray(radial_ms2, dtype=np.float64)
     if angle.size < 8:
         return None
-    spacing = 360.0 / angle.size
-    centre = np.abs(angle) <= max(2.0, 1.5 * spacing)
+    centre = np.abs(angle) <= PATCH_WINDOW_DEG
     outside = np.abs(angle) > 90.0
     if not centre.any() or not outside.any():
         return None
-    return float(np.median(radial[outside]) - np.median(radial[centre]))
+    return float(np.median(radial[outside]) - np.percentile(radial[centre], 10))
 
 
 def _data_agree(drop: float, omega: float, outer_radius_m: float) -> bool:
