@@ -177,18 +177,30 @@ def content_hash(path: str | os.PathLike) -> str:
 def duplicate_inputs(paths) -> list[tuple[int, int, str]]:
     """Inputs that are one file given twice: ``(kept, duplicate, how)`` indices into ``paths`` per duplicate, the
     first kept. Two paths are the same input when they resolve to the same file (symlinks followed) or their
-    bytes are equal (SHA-256)."""
+    bytes are equal (SHA-256; only files of equal size are read, so a batch of large recordings is not)."""
+    paths = [Path(p) for p in paths]
+
+    def size(p):
+        try:
+            return p.stat().st_size if p.is_file() else None
+        except OSError:
+            return None
+
+    sizes = [size(p) for p in paths]
+    shared = {n for n in sizes if n is not None and sizes.count(n) > 1}  # only files of equal size are hashed
     seen: dict[object, int] = {}
     out = []
-    for i, p in enumerate(map(Path, paths)):
+    for i, p in enumerate(paths):
         try:
             real = p.resolve()
         except OSError:
             real = p
-        try:
-            digest = content_hash(p)
-        except OSError:
-            digest = None
+        digest = None
+        if sizes[i] in shared:
+            try:
+                digest = content_hash(p)
+            except OSError:
+                digest = None
         hit, how = seen.get(("path", real)), "the same file (its resolved path)"
         if hit is None and digest is not None:
             hit, how = seen.get(("hash", digest)), "the same content (SHA-256)"
