@@ -30,6 +30,12 @@ covariance by Student's t_ν (:func:`t_widening`), and the model's own discretis
 loaded-mode basis) is checked once at the optimum (:func:`grid_check`, refined ×2) and carried into the
 covariance as a rank-one term.
 
+Stated conditions are checked on reading (:mod:`ringfit.io.conditions`: duplicates counted once, another
+pressure refused, a profile's rotation against its speed) and, after the fit, each loaded table's load
+against its own frequencies (:func:`load_check`). The freed ring parameters stay inside their plausible range
+(:func:`joint_coords`): one the data do not bound is reported at the edge, its interval cut there
+(:func:`log_interval`, :func:`cap_unbounded`), never an overflow or a non-finite number.
+
 The result is a :class:`~ringfit.fit.result.FitResult` of the final pass (covariance in the
 solver coordinates, ln θ for positive parameters) plus, in :class:`Identification`, the Fisher
 information of each block per parameter and the posterior correlation left among the ring
