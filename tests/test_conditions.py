@@ -150,3 +150,48 @@ def test_cleat_ringing_windows_by_hand():
     # times: [0.0, 0.025, 0.05, 0.075] and [0.1, 0.125, 0.15, 0.175]; ringing [0.02, 0.06) and [0.12, 0.16)
     expected = np.array([[True, False, False, True], [True, False, False, True]])
     np.testing.assert_array_equal(quiet, expected)
+
+
+@pytest.mark.slow
+def test_the_patch_never_picks_the_wrong_rotation_over_many_operating_points():
+    """Profiles of the rolling model (docs/physics.md §4–§5) at 16 random operating points — load 1.5–9 kN, speed
+    20–110 km/h, flat road or a 0.5–2 m drum, 64–1024 angles, 1 % noise — with rotation_hz or speed_kmh wrong by a
+    random factor 1.2–4: the contradiction is settled for the right value or refused, never for the wrong one,
+    and one of 2.7× or more (Ω² 7×) is always settled."""
+    from dataclasses import replace
+
+    from ringfit.io.profiles import band_limited_resample, grid_angles_deg
+    from ringfit.params import table9
+    from ringfit.physics.profile import simulate_profile
+
+    geometry, ring = table9()
+    rng = np.random.default_rng(34)
+    outcomes = {"right": 0, "refused": 0, "wrong": 0}
+    for _ in range(16):
+        load, speed = rng.uniform(1500, 9000), rng.uniform(20, 110)
+        drum = None if rng.random() < 0.5 else float(rng.uniform(0.5, 2.0))
+        points = int(rng.choice([64, 128, 512, 1024]))
+        grid = simulate_profile(ring, geometry, speed_kmh=speed, load_n=load, drum_diameter_m=drum)
+        radial = band_limited_resample(grid.channels, points)[0]
+        radial = radial + 0.01 * np.std(radial) * rng.standard_normal(points)
+        true_rot = float(grid.condition["rotation_hz"])
+        base = Profile(grid_angles_deg(points), radial, np.zeros(points), source="p.profile.csv",
+                       condition={"speed_kmh": speed, "rotation_hz": true_rot, "pressure_bar": 2.2})
+        assert check_profile_rotation(base, float(geometry.outer_radius))[1] is None  # the truth agrees with itself
+        for wrong in ("rotation_hz", "speed_kmh"):
+            factor = float(rng.uniform(1.2, 4.0)) ** (1 if rng.random() < 0.5 else -1)
+            cond = dict(base.condition, **{wrong: base.condition[wrong] * factor})
+            prof = replace(base, condition=cond)
+            if rotation_speed_conflict(cond, float(geometry.outer_radius)) is None:
+                continue  # within the rolling radius's tolerance: no contradiction to settle
+            try:
+                out, _ = check_profile_rotation(prof, float(geometry.outer_radius))
+            except InputError:
+                outcomes["refused"] += 1
+                assert max(factor, 1 / factor) < 2.7, (load, speed, drum, points, wrong, factor)
+                continue
+            kept_rotation = "rotation_hz" in out.condition
+            right = kept_rotation == (wrong == "speed_kmh")
+            outcomes["right" if right else "wrong"] += 1
+    assert outcomes["wrong"] == 0, outcomes
+    assert outcomes["right"] >= 20, outcomes  # 27 of 32 settled, 5 refused (factors below 2.7)
