@@ -230,12 +230,33 @@ def _commit(staged) -> None:
     except KeyboardInterrupt:
         _discard(staged)
         raise
-    for i, (tmp, dest) in enumerate(staged):
-        try:
-            os.replace(tmp, dest)
-        except OSError as exc:
-            _discard(staged[i:])
-            raise write_failed(dest, exc) from None
+    with _sigint_held():  # a Ctrl-C during the renames waits for their end: all of them, or (before) none
+        for i, (tmp, dest) in enumerate(staged):
+            try:
+                os.replace(tmp, dest)
+            except OSError as exc:
+                _discard(staged[i:])
+                raise write_failed(dest, exc) from None
+
+
+@contextlib.contextmanager
+def _sigint_held():
+    """SIGINT blocked for this thread inside the block (delivered when it ends), where the platform allows."""
+    import signal
+
+    mask = getattr(signal, "pthread_sigmask", None)
+    if mask is None:
+        yield
+        return
+    try:
+        old = mask(signal.SIG_BLOCK, {signal.SIGINT})
+    except (OSError, ValueError):
+        yield
+        return
+    try:
+        yield
+    finally:
+        mask(signal.SIG_SETMASK, old)
 
 
 def check_output_paths(
