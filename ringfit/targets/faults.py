@@ -60,6 +60,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ringfit.io.conditions import RATE_TOL, ROLLING_RADIUS_M
 from ringfit.targets.preprocessing import SKIP_AFTER_IMPACT_S
 
 #: A channel whose rms is below this share of its axis's median rms over the records is dead.
@@ -607,8 +608,8 @@ def on_notched_line(freq_hz: float, lines_hz, duration_s: float) -> float | None
     return None
 
 
-# the stated-condition tolerances are those of the one consistency layer (ringfit.io.conditions)
-from ringfit.io.conditions import RATE_TOL, ROLLING_RADIUS_M  # noqa: E402
+# ROLLING_RADIUS_M (the rolling radii a road tyre can have) and RATE_TOL (the relative disagreement of two rates
+# called a contradiction) are the one consistency layer's (ringfit.io.conditions), imported above
 
 
 def sample_rate_note(rotation_hz: float, fs_hz: float, condition: dict) -> str | None:
