@@ -546,9 +546,9 @@ class Identification:
             if p.get("to_bound"):
                 lo, hi = BOUNDS[name]
                 sd = "no finite σ" if p["sd_ln"] is None else f"sd ln {p['sd_ln']:.3g}"
+                ends = " and ".join({"lo": f"lower bound {lo:g}", "hi": f"upper bound {hi:g}"}[e] for e in p["to_bound"])
                 lines.append(f"{name} is barely identified by these measurements ({sd}): its 95 % interval "
-                             f"[{p['lo95']:.4g}, {p['hi95']:.4g}] runs to the plausible range's "
-                             f"{' and '.join({'lo': f'lower bound {lo:g}', 'hi': f'upper bound {hi:g}'}[e] for e in p['to_bound'])}; "
+                             f"[{p['lo95']:.4g}, {p['hi95']:.4g}] runs to the plausible range's {ends}; "
                              "add measurements that pin it (loaded tables, profiles) or hold it at a known value")
         return lines
 
@@ -950,5 +950,6 @@ def _json_safe(x):
     return x
 
 
-__all__ = ["identify", "read_identify_folder", "log_interval", "IdentifyInputs", "Identification", "identification_report",
+__all__ = ["identify", "read_identify_folder", "log_interval", "cap_unbounded", "load_check", "IdentifyInputs",
+           "Identification", "identification_report",
            "JointResiduals", "harmonic_rows", "standing_half_angle", "BLOCKS"]

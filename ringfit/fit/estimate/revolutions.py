@@ -188,13 +188,14 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     if hits is not None:
         arrivals_s, quiet_s = hits
         if count[1].min() < 2:
-            warnings.warn(f"{record.source}: {arrivals_s.size} cleat hits (hall channel): their ringing ({quiet_s:.3g} s "
-                          "after each) leaves some angles without 2 quiet revolutions, so the hits stay in the "
-                          "averaged profile and bias the estimate", RuntimeWarning, stacklevel=2)
+            warnings.warn(f"{record.source}: {arrivals_s.size} cleat hits (hall channel): their ringing "
+                          f"({quiet_s:.3g} s after each) leaves some angles without 2 quiet revolutions, so the hits "
+                          "stay in the averaged profile and bias the estimate", RuntimeWarning, stacklevel=2)
         else:
             use = 1
             warnings.warn(f"{record.source}: {arrivals_s.size} cleat hits (hall channel): the {quiet_s:.3g} s after "
-                          f"each ({100 * QUIET_SHARE:g} % of the drum period, what `ringfit cleat` leaves out of its baseline) "
+                          f"each ({100 * QUIET_SHARE:g} % of the drum period, what `ringfit cleat` leaves out of "
+                          "its baseline) "
                           f"are left out of the averaged profile ({100 * (1 - count[1].mean() / R):.0f} % of its "
                           "samples); the per-revolution estimates keep them", RuntimeWarning, stacklevel=2)
     s1, s2, sd, count, pairs = s1[use], s2[use], sd[use], count[use], pairs[use]
