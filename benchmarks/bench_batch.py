@@ -3,9 +3,9 @@
 Each tyre is a case folder from :func:`ringfit.synth.cases.make_case` (free,
 loaded and spinning mode tables; a hidden effect drawn at random); one tyre's
 free frequencies are raised by 8 % so the campaign report has an outlier to
-find. The work per tyre is what ``ringfit campaign`` runs: ``ringfit fit`` →
-``ringfit sample`` (small sampler: 16 walkers × STEPS steps) and
-``ringfit diagnose``, i.e. 3 tasks per tyre.
+find. The work per tyre is what ``ringfit campaign`` runs: its loaded tables make it
+``ringfit identify`` with its posterior (STEPS steps), then ``ringfit diagnose`` (a tyre
+with a free table only: ``ringfit fit`` → ``ringfit sample``, 16 walkers × STEPS steps).
 
 - **serial**: the same commands one after another in this process
   (``ringfit.batch.execute``, which is what a worker runs).
@@ -137,10 +137,15 @@ def _row(label, results, wall, serial_wall=None):
             f"{ok:>5}/{len(results)}")
 
 
+#: Fields of a diagnosis JSON that are not results: wall-clock and CPU times, and the baseline tyre file's path
+#: (each run's own output folder).
+VOLATILE = frozenset({"elapsed_s", "wall_s", "cpu_s", "baseline_tyre"})
+
+
 def _without_timing(x):
-    """A diagnosis JSON without its ``elapsed_s`` fields (wall-clock times, not results)."""
+    """A diagnosis JSON without its :data:`VOLATILE` fields (times and paths, not results)."""
     if isinstance(x, dict):
-        return {k: _without_timing(v) for k, v in x.items() if k != "elapsed_s"}
+        return {k: _without_timing(v) for k, v in x.items() if k not in VOLATILE}
     if isinstance(x, list):
         return [_without_timing(v) for v in x]
     return x
@@ -149,7 +154,7 @@ def _without_timing(x):
 def identical(layout_a: dict, layout_b: dict) -> tuple[int, int]:
     """(tyres whose fitted TOML, posterior draws and diagnosis JSON equal the other run's, tyres compared).
 
-    Fitted TOML: bytes; posterior: draws and metadata; diagnosis: the JSON less its ``elapsed_s`` timings.
+    Fitted TOML: bytes; posterior: draws and metadata; diagnosis: the JSON less its :data:`VOLATILE` fields.
     """
     import json
 
@@ -196,8 +201,9 @@ def main() -> None:
     failures = bc.Failures()
     t0 = time.perf_counter()
     tyres = make_tyres(root / "campaign", args.tyres)
-    print(f"{args.tyres} synthetic tyres written in {time.perf_counter() - t0:.1f} s; 3 tasks per tyre "
-          f"(fit, sample {args.steps} steps × 16 walkers, diagnose)")
+    print(f"{args.tyres} synthetic tyres written in {time.perf_counter() - t0:.1f} s; the tasks `ringfit campaign` "
+          f"plans per tyre (identify with its posterior, or fit and sample; {args.steps} sampler steps; then "
+          "diagnose)")
 
     serial = {}
     for label in ("cold", "warm"):
@@ -226,7 +232,8 @@ def main() -> None:
     print()
     work = sum(r.elapsed_s for r in serial["warm"][0])
     work_cpu = sum(r.cpu_s for r in serial["warm"][0])
-    per_task = {k: np.mean([r.elapsed_s for r in serial["warm"][0] if r.kind == k]) for k in ("fit", "sample", "diagnose")}
+    kinds = [k for k in ("ssi", "identify", "fit", "sample", "diagnose") if any(r.kind == k for r in serial["warm"][0])]
+    per_task = {k: np.mean([r.elapsed_s for r in serial["warm"][0] if r.kind == k]) for k in kinds}
     print(f"work per tyre (serial, warm): {work / args.tyres:.2f} s wall ({work_cpu / args.tyres:.2f} s CPU) = "
           + " + ".join(f"{k} {v:.2f} s" for k, v in per_task.items()))
     for w, run in runs.items():

@@ -571,6 +571,44 @@ def _is_ip(host) -> bool:
     return True
 
 
+def check_dashboard_address(address: str) -> str | None:
+    """``--dashboard``: ``[HOST]:PORT`` (or a bare PORT) Dask can serve its dashboard on; InputError naming the
+    option otherwise (before any cluster starts). **Returns** a warning when it is reachable from other machines:
+    a wildcard host (empty, ``0.0.0.0``, ``::``) opens every interface; any other non-loopback host, that one."""
+    import ipaddress
+
+    from ringfit.errors import InputError
+
+    def bad(why):
+        return InputError(f"--dashboard {address!r}: {why}; expected HOST:PORT such as 127.0.0.1:8787")
+
+    text = str(address).strip()
+    if not text or any(c.isspace() for c in text):
+        raise bad("not an address")
+    host, sep, port = text.rpartition(":")
+    if not sep:
+        host, port = "", text
+    if not port.isdigit() or not 0 < int(port) < 65536:
+        raise bad(f"port {port!r} is not a number in 1..65535")
+    if host and not (_HOST.match(host) or _is_ip(host)):
+        raise bad(f"{host!r} is not a host name or IP address")
+    bare = host.strip("[]")
+    if bare in ("", "0.0.0.0", "::", "*"):
+        return (f"--dashboard {address}: the dashboard opens on every network interface, so anyone who can reach "
+                f"this machine on port {port} sees the tasks, their arguments and paths; use 127.0.0.1:{port} to "
+                "keep it on this machine")
+    if bare == "localhost":
+        return None
+    try:
+        loopback = ipaddress.ip_address(bare).is_loopback
+    except ValueError:
+        loopback = False  # a host name: reachable where that name resolves
+    if not loopback:
+        return (f"--dashboard {address}: the dashboard opens on {host}, reachable from other machines on port "
+                f"{port}; use 127.0.0.1:{port} to keep it on this machine")
+    return None
+
+
 def check_scheduler_address(address: str) -> None:
     """``address`` is a scheduler address Dask can dial (``tcp://HOST:PORT``, ``tls://…``, ``inproc://…``; the
     scheme defaults to tcp): :class:`~ringfit.errors.InputError` naming ``--scheduler`` otherwise, before any

@@ -94,7 +94,7 @@ def _drum_record(fs=2000.0, seconds=3.0, rotation_hz=10.0, drum_period_s=np.pi *
 
 
 PROFILE_SIDECAR = {"speed_kmh": 30.0, "load_n": 4000.0, "pressure_bar": 2.2, "revolutions": 26,
-                   "sample_rate_hz": 25600.0, "rotation_hz": 7.66}
+                   "sample_rate_hz": 25600.0, "rotation_hz": 4.29}
 
 
 def build_fixtures(folder: str | os.PathLike) -> Path:
@@ -1021,6 +1021,102 @@ for how in ("external-link", "soft-link-to-external", "dangling-soft-link", "ext
     issue34(f"ssi-mat73-{how}", ["ssi", "{d}/ext.mat", *RIG34], setup=_mat73_leaving(how),
             check=_refused_naming("ext.mat", "acc", "refusing"), unchanged=True)
 
+
+# ----------------------------------------------------------------------------- issue 34: stated conditions
+
+
+def issue34_stated(id, argv, setup=None, names=(), **kw):
+    add(id, argv, setup, names, item=kw.pop("item", 1), issue=34, **kw)
+
+
+def _case_profile(name="run1", source="run1", **edits):
+    """The fixture case folder with a copy of the fixture profile ``source`` as ``name``, its sidecar edited."""
+    def setup(d: Path):
+        cond = dict(PROFILE_SIDECAR, **edits)
+        shutil.copy(d / f"{source}.profile.csv", d / "case" / f"{name}.profile.csv")
+        (d / "case" / f"{name}.profile.json").write_text(json.dumps(cond))
+    return setup
+
+
+def _no_ring(d: Path):
+    (d / "noring.toml").write_text("[tyre]\nradius_m = 0.296\nwidth_m = 0.152\npressure_bar = 2.2\n")
+
+
+def _json_strict(path):
+    def ok(d):
+        try:
+            json.loads((d / path).read_text(), parse_constant=lambda c: (_ for _ in ()).throw(ValueError(c)))
+        except (OSError, ValueError):
+            return False
+        return True
+    return ok
+
+
+def _identified(*parts, report="id.identify.json"):
+    """Exit 0, a strict-JSON report, and every one of ``parts`` on stdout or stderr."""
+    def check(status, err, out, d):
+        return status == 0 and _json_strict(report)(d) and all(p in out + err for p in parts)
+    return check
+
+
+def _warned_status0(*parts):
+    def check(status, err, out, d):
+        return status == 0 and any(line.startswith("WARNING:") and all(p in line for p in parts)
+                                   for line in error_lines(err))
+    return check
+
+
+IDENTIFY = ["identify", "{d}/case", "--out", "{d}/id.tyre.toml", "--quiet"]
+# a profile whose rotation_hz contradicts its speed_kmh and whose readings (noise: no contact patch) cannot tell
+NO_PATCH = dict(source="noise", speed_kmh=80.0, rotation_hz=30.0)
+issue34_stated("identify-rotation-contradicts-speed-no-patch", IDENTIFY, setup=_case_profile("noise", **NO_PATCH),
+        names=("rotation_hz = 30",))
+issue34_stated("diagnose-rotation-contradicts-speed-no-patch", DIAG, setup=_case_profile("noise", **NO_PATCH),
+        names=("rotation_hz = 30",))
+# a rolling table whose rotation_hz contradicts its speed_kmh (no data can tell which): refused where it is read
+issue34_stated("diagnose-rolling-table-rotation-contradicts-speed", DIAG, setup=_rolling_case(_set("rotation_hz", 12.0)),
+        names=("rotation_hz = 12",))
+issue34_stated("campbell-table-rotation-contradicts-speed", CAMPBELL + ["--modes", "{d}/roll40.modes.csv"],
+        setup=_rolling_case(_set("rotation_hz", 12.0)), names=("rotation_hz = 12",))
+issue34_stated("roll-rotation-contradicts-speed", ROLL + ["--rotation-hz", "12"], names=("--rotation-hz",))
+# a profile at another pressure than the tyre file's
+issue34_stated("identify-profile-at-another-pressure", IDENTIFY, setup=_case_profile(pressure_bar=3.5),
+        names=("pressure_bar = 3.5",), item=2)
+issue34_stated("fit-rolling-profile-at-another-pressure", FITROLL, setup=_write("run1.profile.json", json.dumps(
+    dict(PROFILE_SIDECAR, pressure_bar=3.5))), names=("pressure_bar = 3.5",), item=2)
+# the same readings under two stated conditions (a copy whose sidecar says another load)
+issue34_stated("identify-same-profile-two-loads", IDENTIFY,
+        setup=_both(_case_profile(), _case_profile("copy", load_n=5000.0)), names=("copy.profile.csv",), item=2)
+issue34_stated("diagnose-same-profile-two-loads", DIAG,
+        setup=_both(_case_profile(), _case_profile("copy", load_n=5000.0)), names=("copy.profile.csv",), item=2)
+# a tyre file without [ring]: roll, fit-rolling and campbell refuse it as estimate does
+for cmd, argv in (("roll", ROLL), ("fit-rolling", FITROLL), ("campbell", CAMPBELL)):
+    issue34_stated(f"{cmd}-tyre-without-ring", [("{d}/noring.toml" if a == "{d}/tyre.toml" else a) for a in argv],
+            setup=_no_ring, names=("[ring]",), item=8)
+# estimate given a mode table: says it expects a profile or a recording
+issue34_stated("estimate-given-a-mode-table", ["estimate", "{d}/free.modes.csv", "--tyre", "{d}/tyre.toml", "--out",
+                                        "{d}/out.estimate.json"], names=("is a mode table",), item=11)
+# --dashboard that is not an address: one line, before any cluster starts
+issue34_stated("batch-dashboard-not-an-address", BATCH_FIT + ["--dashboard", "not an address", "--", "--tyre",
+                                                       "{d}/tyre.toml"], names=("--dashboard",), item=10)
+# documented: a free table alone (the bundled free-ssi table), and a 1-row table, identify with flags, strict JSON
+issue34_stated("identify-free-table-only", IDENTIFY, check=_identified("EI is barely pinned"), item=9)
+issue34_stated("identify-one-row-free-table", IDENTIFY,
+        setup=_write("case/free.modes.csv", "n,a,tag,kind,freq_hz,freq_std_hz,damping_pct\n1,0,,structural,107.0,,12.46\n"),
+        check=_identified("barely identified", "to the plausible bound"), item=9)
+# documented: a profile whose rotation_hz contradicts its speed_kmh, told by its own contact patch: warned, and read
+# at the speed's rotation
+issue34_stated("fit-rolling-rotation-contradicts-speed-patch-tells", FITROLL + ["--grid", "128", "--free", "k_tread"],
+        setup=_write("run1.profile.json", json.dumps(dict(PROFILE_SIDECAR, rotation_hz=12.0))),
+        check=lambda status, err, out, d: status in (0, 1) and _warned_status0("rotation_hz = 12", "as speed_kmh says")(
+            0, err, out, d), slow=True)
+# documented: --dashboard on every interface is said; frf takes --quiet; cleat's old --channels N still works
+issue34_stated("batch-dashboard-every-interface", BATCH_FIT + ["--dashboard", "0.0.0.0:8799", "--dry-run", "--", "--tyre",
+                                                        "{d}/tyre.toml"],
+        check=_warned_status0("every network interface"), item=10)
+issue34_stated("frf-quiet", FRF + ["--quiet"], check=lambda status, err, out, d: status == 0, item=11)
+issue34_stated("cleat-old-channels-count", CLEAT + ["--ssi", "{d}/c.modes.csv", "--channels", "8"],
+        check=_warned_status0("--ssi-channels 8"), item=11, slow=True)
 
 
 # ----------------------------------------------------------------------------- documented behaviour

@@ -251,7 +251,7 @@ def test_cli_profile_and_cleat(tmp_path, bench, record):
     assert main(["profile", str(roll_path), "--out", str(prof), "--quiet"]) == 2  # exists: refused
     out, modes = tmp_path / "field.npz", tmp_path / "modes.csv"
     code = main(["cleat", str(rec_path), "--sectors", str(SECTORS), "--duration", str(DURATION), "--out", str(out),
-                 "--baseline", str(prof), "--ssi", str(modes), "--channels", "32", "--quiet"])
+                 "--baseline", str(prof), "--ssi", str(modes), "--ssi-channels", "32", "--quiet"])
     assert code == 0
     table = read_mode_table(modes)
     assert table.condition["state"] == "rolling" and len(table) >= 10

@@ -88,7 +88,10 @@ def test_case_example_with_an_effect(tmp_path, capsys):
     assert main(["example", "case", "--out", str(out), "--effect", "wheel_suspension", "--quiet"]) == 0
     side = json.loads((out / "case" / "suspended.modes.json").read_text())
     assert side["fixture"] == "suspension" and side["wheel_mass_kg"] > 0
-    assert "wheel_suspension" in (out / "README.md").read_text()
+    readme = (out / "README.md").read_text()
+    assert "wheel_suspension" in readme
+    # a README states only what its data determine: the modal case's tables do not carry k_tread (issue 34)
+    assert "k_tread =" not in readme and "k_tread is not stated" in readme
     assert main(["example", "case", "--out", str(tmp_path / "b"), "--effect", "belt_wear"]) == 2
     assert "--effect" in capsys.readouterr().err
     assert main(["example", "records", "--out", str(tmp_path / "c"), "--effect", "none"]) == 2

@@ -276,9 +276,9 @@ def test_profile_from_tdms_and_csv_equals_npz(drum, tmp_path):
     for name in ("tdms", "csv"):
         got = np.loadtxt(outs[name], delimiter=",", skiprows=1, comments="#")
         np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-6 * np.abs(ref).max())
-    # cleat reads the TDMS recording with --channel-map (its --channels is the SSI channel count)
+    # cleat reads the TDMS recording with --channels MAP.toml, as the other commands do
     fields = {}
-    for name, path, extra in (("npz", d / "d.records.npz", []), ("tdms", tdms, ["--channel-map", str(cmap)])):
+    for name, path, extra in (("npz", d / "d.records.npz", []), ("tdms", tdms, ["--channels", str(cmap)])):
         fields[name] = tmp_path / f"{name}.field.npz"
         assert main(["cleat", str(path), "--out", str(fields[name]), "--sectors", "16", "--duration", "0.05",
                      "--no-baseline", "--quiet", *extra]) == 0

@@ -83,24 +83,68 @@ def main(argv: list[str] | None = None) -> int:
         print(f"ringfit {args.command}: error: {exc}", file=sys.stderr)
         return 2
     together = outputs_committed_together() if args.command not in WRITES_AS_IT_GOES else contextlib.nullcontext()
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            try:
-                with together:
-                    status = args.run(args)
-            finally:
-                _print_warnings(caught)
-    except (InputError, PrecisionError) as exc:
-        print(f"ringfit {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except CommandFailed as exc:
-        print(f"ringfit {args.command}: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print(f"ringfit {args.command}: interrupted", file=sys.stderr)
-        return 130
+    with _ctrl_c_recorded():
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                try:
+                    with together:
+                        status = args.run(args)
+                finally:
+                    _print_warnings(caught)
+            from ringfit.io.files import check_not_interrupted
+
+            check_not_interrupted()  # a Ctrl-C swallowed on its way up still ends the command with 130
+        except (InputError, PrecisionError) as exc:
+            print(f"ringfit {args.command}: error: {exc}", file=sys.stderr)
+            return 2
+        except CommandFailed as exc:
+            print(f"ringfit {args.command}: {exc}", file=sys.stderr)
+            return 1
+        except KeyboardInterrupt:
+            print(f"ringfit {args.command}: interrupted", file=sys.stderr)
+            return 130
     return int(status or 0)
+
+
+_DEPTH = [0]
+
+
+@contextlib.contextmanager
+def _ctrl_c_recorded():
+    """SIGINT both raises KeyboardInterrupt (as Python's own handler does) and records itself
+    (:func:`ringfit.io.files.mark_interrupted`), so that a KeyboardInterrupt swallowed on its way up — raised
+    inside a garbage-collector callback such as JAX's ``_xla_gc_callback``, where Python only prints "Exception
+    ignored" — still stops the command before any output is committed, with exit status 130. The record is
+    cleared when an outermost command starts and ends (a batch task run in-process keeps its batch's); the
+    handler is installed only in the main thread and restored afterwards."""
+    import signal
+    import threading
+
+    from ringfit.io import files
+
+    outer = _DEPTH[0] == 0
+    if outer:
+        files._INTERRUPTED = False
+    previous = None
+    if outer and threading.current_thread() is threading.main_thread():
+        def on_sigint(signum, frame):
+            files.mark_interrupted()
+            raise KeyboardInterrupt
+
+        try:
+            previous = signal.signal(signal.SIGINT, on_sigint)
+        except (ValueError, OSError):
+            previous = None
+    _DEPTH[0] += 1
+    try:
+        yield
+    finally:
+        _DEPTH[0] -= 1
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+        if outer:  # the command is over (its status says the interrupt): a caller's own writes go on
+            files._INTERRUPTED = False
 
 
 def run() -> None:

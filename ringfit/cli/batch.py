@@ -239,6 +239,11 @@ def plan_batch(command: str, inputs: list[str], out_dir, extra: list[str] = (), 
                 raise InputError(f"unknown placeholder {token} in {a!r}; known: {', '.join(PLACEHOLDERS)}")
     if len(set(map(str, inputs))) != len(inputs):
         raise InputError("an input is given twice")
+    from ringfit.io.conditions import duplicate_inputs
+
+    for kept, dup, how in duplicate_inputs(inputs):  # a symlink or a copy of another input: its data twice
+        raise InputError(f"is {how} as {inputs[kept]}: an input is given twice (its results would be counted twice)",
+                         source=inputs[dup])
     for option in rule.defaults:
         if not _has_option(extra, option[0]):
             extra += list(option)
@@ -380,6 +385,14 @@ def _check_cluster_options(opts) -> None:
     if opts.scheduler and opts.dashboard:
         raise InputError("--dashboard starts the LocalCluster's dashboard; a --scheduler serves its own "
                          "(`dask scheduler --dashboard-address`)")
+    if opts.dashboard is not None:
+        import warnings
+
+        from ringfit.batch import check_dashboard_address
+
+        note = check_dashboard_address(opts.dashboard)
+        if note:
+            warnings.warn(note, stacklevel=2)
     opts.security_obj = None
     from ringfit.batch import check_scheduler_security
 
@@ -534,7 +547,18 @@ def campaign_tyres(folder: Path) -> list[Path]:
     tyres = sorted(p for p in folder.iterdir() if p.is_dir() and (p / "tyre.toml").exists())
     if not tyres:
         raise InputError("holds no case folder (a sub-folder with tyre.toml, docs/formats.md §6)", source=folder)
-    return tyres
+    # a symlink to another tyre's folder is that tyre twice: counted once (the folder itself kept)
+    import warnings
+
+    real = {}
+    for p in sorted(tyres, key=lambda p: (p.is_symlink(), p.name)):
+        r = p.resolve()
+        if r in real:
+            warnings.warn(f"{p.name} is the same folder as {real[r].name} (a symlink): that tyre is counted once "
+                          f"({real[r].name} used)", stacklevel=2)
+        else:
+            real[r] = p
+    return sorted(real.values())
 
 
 #: Free-tyre records a campaign turns into targets by SSI, first found wins (docs/formats.md §13).

@@ -38,9 +38,9 @@ def register(sub) -> None:
                                    "cleat's arrival (hall pulses), the no-cleat reading subtracted at the same angle.")
     c.add_argument("record", help="continuous *.records.npz with encoder and hall, or a .tdms/.mat/.csv rig file "
                                   "(docs/formats.md §17)")
-    c.add_argument("--channel-map", dest="channel_map", default=None, metavar="MAP.toml",
+    c.add_argument("--channels", "--channel-map", dest="channel_map", default=None, metavar="MAP.toml",
                    help="TDMS/.mat/CSV only: channel map naming the acceleration, encoder and trigger (hall) "
-                        "channels (docs/formats.md §17.4; --channels is the SSI channel count here)")
+                        "channels (docs/formats.md §17.4), as in profile, ssi and estimate")
     c.add_argument("--out", required=True, help="output FIELD.npz")
     c.add_argument("--sectors", type=integer("a whole number of sectors in 4..65536", lo=4, hi=1 << 16), default=512,
                    help="sectors around the tyre (default 512)")
@@ -55,8 +55,8 @@ def register(sub) -> None:
     c.add_argument("--snapshots", default=None, metavar="S.png", help="write a multi-panel figure of instants")
     c.add_argument("--coverage-plot", default=None, metavar="C.png", help="write the coverage figure (fig. 23)")
     c.add_argument("--ssi", default=None, metavar="MODES.csv", help="identify the rolling-tyre modes, write a mode table")
-    c.add_argument("--channels", type=integer("a whole number of channels in 2..4096", lo=2, hi=4096), default=128,
-                   help="sectors used as SSI channels (default 128)")
+    c.add_argument("--ssi-channels", type=integer("a whole number of channels in 2..4096", lo=2, hi=4096),
+                   default=None, metavar="N", help="sectors used as SSI channels (default 128)")
     c.add_argument("--f-max", type=number("a frequency in Hz > 0", lo=0.0, hi=1e6, lo_open=True), default=400.0,
                    help="top of the SSI band [Hz] (default 400)")
     c.add_argument("--skip", type=number("a finite number of seconds >= 0", lo=0.0, hi=1e3), default=None, metavar="S",
@@ -98,7 +98,35 @@ def np_median(x) -> float:
     return float(np.nanmedian(x))
 
 
+#: SSI channels of ``cleat --ssi`` when --ssi-channels is not given.
+SSI_CHANNELS = 128
+
+
+def _ssi_channels(args) -> None:
+    """``--channels N`` (a whole number) is the old spelling of ``--ssi-channels N``: accepted with a warning;
+    ``--channels MAP.toml`` is the channel map, as in every other command."""
+    import warnings
+
+    text = args.channel_map
+    if text is not None and str(text).strip().isdigit():
+        from ringfit.errors import InputError
+
+        n = int(str(text).strip())
+        if args.ssi_channels is not None:
+            raise InputError(f"--channels {n} and --ssi-channels {args.ssi_channels}: --channels names the channel "
+                             "map; give the SSI channel count once, as --ssi-channels")
+        if not 2 <= n <= 4096:
+            raise InputError(f"--channels {n}: expected a whole number of SSI channels in 2..4096 (now "
+                             "--ssi-channels)")
+        warnings.warn(f"--channels {n} as the SSI channel count is deprecated: --ssi-channels {n} (--channels "
+                      "MAP.toml is the channel map, as in the other commands)", stacklevel=2)
+        args.channel_map, args.ssi_channels = None, n
+    if args.ssi_channels is None:
+        args.ssi_channels = SSI_CHANNELS
+
+
 def run_cleat(args: argparse.Namespace) -> int:
+    _ssi_channels(args)
     from ringfit.io.continuous import read_continuous
     from ringfit.io.files import check_output_paths
     from ringfit.io.modes import sidecar_path
@@ -139,7 +167,7 @@ def run_cleat(args: argparse.Namespace) -> int:
         from ringfit.io.modes import write_mode_table
         from ringfit.targets.rolling_modes import identify_rolling_modes
 
-        modes = identify_rolling_modes(field, channels=args.channels, f_max=args.f_max, skip_s=args.skip,
+        modes = identify_rolling_modes(field, channels=args.ssi_channels, f_max=args.f_max, skip_s=args.skip,
                                        progress=not args.quiet)
         table, flags = _label_modes(modes.table, field, args, channels=len(modes.channel_deg))
         write_mode_table(table, args.ssi, overwrite=args.force)

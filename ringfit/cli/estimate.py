@@ -74,13 +74,9 @@ def run_estimate(args) -> int:
 
     from ringfit.fit.estimate import EstimateSettings, estimate_load, estimate_recording
     from ringfit.io.files import atomic_write_text
-    from ringfit.io.tyre import read_tyre
+    from ringfit.io.tyre import read_tyre, require_ring
 
-    tyre = read_tyre(args.tyre)
-    if not tyre.ring_values:
-        raise InputError("has no [ring]: the load estimate needs the tyre's identified ring (ringfit identify, or "
-                         "ringfit fit and fit-rolling); it does not fall back to the Table 9 values",
-                         source=args.tyre)
+    tyre = require_ring(read_tyre(args.tyre), "the load estimate needs the tyre's identified ring")
     _, note = tread_uncertainty(tyre, args.k_tread_sd)
     if note and not args.quiet:
         print(note)
@@ -92,6 +88,14 @@ def run_estimate(args) -> int:
         from ringfit.io.profiles import read_profile
 
         profile = read_profile(args.input)
+        # rotation_hz against speed_kmh, judged by the profile's own patch (ringfit.io.conditions)
+        from ringfit.io.conditions import check_profile_rotation
+
+        profile, note = check_profile_rotation(profile, float(tyre.geometry.outer_radius))
+        if note:
+            import warnings
+
+            warnings.warn(note, stacklevel=2)
         est = estimate_load(profile, tyre.geometry, tyre.ring, settings=settings, k_tread_in_file=k_in_file,
                             ring_covariance=tyre.covariance)
     else:
@@ -157,6 +161,10 @@ def _input_kind(path: Path) -> str:
     from ringfit.io.profiles import sidecar_path
 
     name = path.name.lower()
+    if name.endswith(".csv") and (name.endswith(".modes.csv") or _looks_like_mode_table(path)):
+        raise InputError("is a mode table (docs/formats.md §2: n, freq_hz, …); estimate reads the rolling tyre's "
+                         "readings: a *.profile.csv (docs/formats.md §3) or a continuous recording (*.records.npz, "
+                         ".tdms, .mat, .csv)", source=path)
     if name.endswith(".csv"):
         # a profile has its JSON sidecar (docs/formats.md §3); any other CSV is a recording (§17.3)
         return "profile" if name.endswith(".profile.csv") or sidecar_path(path).exists() else "recording"
@@ -164,6 +172,19 @@ def _input_kind(path: Path) -> str:
         return "recording"
     raise InputError("expected a *.profile.csv, a continuous *.records.npz or a .tdms/.mat/.csv recording",
                      source=path)
+
+
+def _looks_like_mode_table(path: Path) -> bool:
+    """A CSV whose header names a mode table's columns (``freq_hz`` and ``n``; docs/formats.md §2)."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            for line in f:
+                if line.strip() and not line.lstrip().startswith("#"):
+                    cols = {c.strip().strip('"').lower() for c in line.split(",")}
+                    return "freq_hz" in cols and "n" in cols
+    except OSError:
+        return False
+    return False
 
 
 def _print_estimate(est) -> None:

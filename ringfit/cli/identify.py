@@ -63,6 +63,9 @@ def run_identify(args) -> int:
     ident = identify(inputs, progress=not args.quiet)
     doc = identification_report(ident)
     _print(ident, doc)
+    for note in ident.notes[len(inputs.skipped):]:
+        if note not in ident.warned:  # those are WARNING lines on stderr
+            print(f"note: {note}")
     if not ident.converged:
         raise CommandFailed(f"the joint fit did not converge ({ident.fit.message}); nothing written")
     tyre = inputs.tyre.with_ring(ident.ring, covariance=ident.covariance)
@@ -108,17 +111,23 @@ def _posterior_summary(posterior) -> dict:
 def _print(ident, doc) -> None:
     print(f"joint fit: {doc['status']} after {doc['iterations']} steps ({doc['passes']} noise passes)")
     print(f"{'parameter':16s} {'value':>12s} {'95 % interval':>27s} {'sd ln':>8s}")
+
+    def g(x, width, prec, kind="g"):
+        return f"{'—':>{width}s}" if x is None else f"{x:{width}.{prec}{kind}}"
+
     for name, p in doc["parameters"].items():
-        print(f"{name:16s} {p['value']:12.5g} [{p['lo95']:12.5g}, {p['hi95']:12.5g}] {p['sd_ln']:8.3g}")
+        mark = "  (to the plausible bound)" if p.get("to_bound") else ""
+        print(f"{name:16s} {g(p['value'], 12, 5)} [{g(p['lo95'], 12, 5)}, {g(p['hi95'], 12, 5)}] "
+              f"{g(p['sd_ln'], 8, 3)}{mark}")
     names = list(doc["parameters"])
     print("Fisher information share per block (which data pin which parameter):")
     print(f"{'block':14s} {'rows':>5s} {'σ scale':>8s} " + " ".join(f"{n[:8]:>8s}" for n in names))
     for b, v in doc["blocks"].items():
-        print(f"{b:14s} {v['rows']:5d} {v['sigma_scale']:8.3g} "
-              + " ".join(f"{v['fisher_share'].get(n, 0.0):8.3f}" for n in names))
+        print(f"{b:14s} {v['rows']:5d} {g(v['sigma_scale'], 8, 3)} "
+              + " ".join(g(v['fisher_share'].get(n, 0.0), 8, 3, 'f') for n in names))
     corr = doc["correlation"]["matrix"]
     strong = [(names[i], names[j], corr[i][j]) for i in range(len(names)) for j in range(i)
-              if math.isfinite(corr[i][j]) and abs(corr[i][j]) > 0.9]
+              if corr[i][j] is not None and math.isfinite(corr[i][j]) and abs(corr[i][j]) > 0.9]
     for a, b, c in strong:
         print(f"posterior correlation {a}–{b}: {c:+.3f}")
     for flag in doc["flags"]:

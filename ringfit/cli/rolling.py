@@ -83,11 +83,18 @@ def run_roll(args) -> int:
     import numpy as np
 
     from ringfit.io.profiles import Profile, band_limited_resample, grid_angles_deg, write_profile
-    from ringfit.io.tyre import read_tyre
+    from ringfit.io.tyre import read_tyre, require_ring
     from ringfit.physics.contact import ContactSolver, contact_length, patch_edges
     from ringfit.physics.profile import simulate_profile
 
-    tyre = read_tyre(args.tyre)
+    tyre = require_ring(read_tyre(args.tyre), "the rolling simulation needs the tyre's ring")
+    if args.rotation_hz is not None:  # the two stated rates must describe one rolling tyre (ringfit.io.conditions)
+        from ringfit.io.conditions import rotation_speed_conflict
+
+        note = rotation_speed_conflict(dict(rotation_hz=args.rotation_hz, speed_kmh=args.speed),
+                                       float(tyre.geometry.outer_radius))
+        if note:
+            raise InputError(note.replace("rotation_hz = ", "--rotation-hz ").replace("speed_kmh = ", "--speed "))
     solver = ContactSolver(n_grid=args.grid)
     grid, sol = simulate_profile(tyre.ring, tyre.geometry, speed_kmh=args.speed, load_n=args.load,
                                  rotation_hz=args.rotation_hz, drum_diameter_m=args.drum, solver=solver,
@@ -159,18 +166,31 @@ def run_fit_rolling(args) -> int:
     import math
 
     from ringfit.fit.rolling import ANGLE_OFFSET, check_rolling_free, fit_rolling, fitted_ring
-    from ringfit.io.profiles import read_profile
-    from ringfit.io.tyre import read_tyre, write_tyre
+    import warnings
+
+    from ringfit.io.conditions import check_profile_rotation, pressure_conflict, unique_inputs
+    from ringfit.io.profiles import read_profile, sidecar_path
+    from ringfit.io.tyre import read_tyre, require_ring, write_tyre
     from ringfit.physics.contact import ContactSolver
 
     check_rolling_free(free)
-    tyre = read_tyre(args.tyre)
-    profiles = [read_profile(p) for p in args.profiles]
-    for p in profiles:
-        pb = float(p.condition["pressure_bar"])
-        if abs(pb - float(tyre.geometry.pressure) / 1e5) > 0.05 * pb:
-            raise InputError(f"pressure_bar = {pb:g} differs from the tyre file's "
-                             f"{float(tyre.geometry.pressure) / 1e5:g} bar", source=p.source)
+    tyre = require_ring(read_tyre(args.tyre), "fit-rolling keeps the ring's other parameters from the tyre file")
+    # the same profile given twice counts once; a profile's stated conditions checked (ringfit.io.conditions)
+    paths, notes = unique_inputs(args.profiles, sidecar_path, "profile")
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
+    keep = list(paths)  # in the order given, each once
+    args.profiles = [p for p in args.profiles if p in keep and not keep.remove(p)]
+    profiles = []
+    for path in args.profiles:
+        p = read_profile(path)
+        note = pressure_conflict(p.condition, float(tyre.geometry.pressure) / 1e5)
+        if note:
+            raise InputError(note, source=sidecar_path(path))
+        p, note = check_profile_rotation(p, float(tyre.geometry.outer_radius))
+        if note:
+            warnings.warn(note, stacklevel=2)
+        profiles.append(p)
     result = fit_rolling(profiles, tyre.geometry, tyre.ring, free=free, solver=ContactSolver(n_grid=args.grid))
     print(result.summary())
     for src, speed, (om, how) in zip(args.profiles, result.extra["speed_kmh"],

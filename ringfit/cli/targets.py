@@ -130,6 +130,7 @@ def register(sub) -> None:
                    help="peak-picking curve: per circumferential harmonic (default) or the summed FRF power (source)")
     p.add_argument("--min-coherence", type=number("a coherence in [0, 1]", lo=0.0, hi=1.0), default=0.9,
                    help="impact rejection target (default 0.9)")
+    quiet_flag(p)  # frf draws no bar, but every command takes --quiet (a script passes it to all)
     p.set_defaults(run=run_frf)
 
 

@@ -30,6 +30,12 @@ covariance by Student's t_ν (:func:`t_widening`), and the model's own discretis
 loaded-mode basis) is checked once at the optimum (:func:`grid_check`, refined ×2) and carried into the
 covariance as a rank-one term.
 
+Stated conditions are checked on reading (:mod:`ringfit.io.conditions`: duplicates counted once, another
+pressure refused, a profile's rotation against its speed) and, after the fit, each loaded table's load
+against its own frequencies (:func:`load_check`). The freed ring parameters stay inside their plausible range
+(:func:`joint_coords`): one the data do not bound is reported at the edge, its interval cut there
+(:func:`log_interval`, :func:`cap_unbounded`), never an overflow or a non-finite number.
+
 The result is a :class:`~ringfit.fit.result.FitResult` of the final pass (covariance in the
 solver coordinates, ln θ for positive parameters) plus, in :class:`Identification`, the Fisher
 information of each block per parameter and the posterior correlation left among the ring
@@ -40,6 +46,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
@@ -55,6 +62,7 @@ from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_F
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
 from ringfit.fit.result import FitResult, covariance_from_jacobian
+from ringfit.io.conditions import check_profile_rotation, pressure_conflict, unique_inputs
 from ringfit.io.modes import ModeTable, read_mode_table
 from ringfit.io.tyre import RingCovariance, Tyre, read_tyre
 from ringfit.params import RingParams, TyreGeometry
@@ -140,9 +148,16 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
         raise InputError(f"state {free.state!r}: free.modes.csv must be the static, free tyre",
                          source=free_path.with_suffix(".json"))
     inputs = IdentifyInputs(folder, tyre, free)
-    for p in sorted(folder.glob("*.modes.csv")):
-        if p.name == "free.modes.csv":
-            continue
+    tyre_bar = float(tyre.geometry.pressure) / 1e5
+    _check_pressure(free.condition, tyre_bar, free_path.with_suffix(".json"))
+    # the same table or profile given twice (a copy, a symlink) is counted once: the data are not twice as sure
+    tables, notes = unique_inputs((p for p in folder.glob("*.modes.csv") if p.name != "free.modes.csv"),
+                                  lambda p: p.with_suffix(".json"), "mode table")
+    profiles, more = unique_inputs(folder.glob("*.profile.csv"), lambda p: p.with_suffix(".json"),
+                                   "profile")
+    for note in notes + more:
+        warnings.warn(note, stacklevel=2)
+    for p in tables:
         sidecar = p.with_suffix(".json")
         if not sidecar.exists():
             raise InputError(f"missing sidecar {sidecar.name}: its condition (state, load_n, speed_kmh) is needed",
@@ -166,8 +181,9 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
                              source=sidecar)
         if not (math.isfinite(load) and load > 0):
             raise InputError(f"load_n = {cond.get('load_n')!r}: expected a positive load [N]", source=sidecar)
+        _check_pressure(cond, tyre_bar, sidecar)
         inputs.loaded.append(table)
-    for p in sorted(folder.glob("*.profile.csv")):
+    for p in profiles:
         sidecar = p.with_suffix(".json")
         if not sidecar.exists():
             raise InputError(f"missing sidecar {sidecar.name} (speed_kmh, load_n; docs/formats.md §3)", source=p)
@@ -177,9 +193,22 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
             if v is None or not (math.isfinite(v) and v > 0):
                 raise InputError(f"missing or non-positive '{key}': a profile's {key} is needed to identify "
                                  "from it", source=sidecar)
+        _check_pressure(prof.condition, tyre_bar, sidecar)
+        prof, note = check_profile_rotation(prof, float(tyre.geometry.outer_radius))
+        if note:
+            warnings.warn(note, stacklevel=2)
         inputs.profiles.append(prof)
     inputs.profiles.sort(key=lambda pr: (float(pr.condition["load_n"]), float(pr.condition["speed_kmh"])))
     return inputs
+
+
+def _check_pressure(cond: dict, tyre_bar: float, source) -> None:
+    """A measurement at another pressure than the tyre file's is refused: the ring identified is the tyre's at
+    its pressure, and the pressure changes the stiffness it is identified from (as ``fit-rolling`` refuses)."""
+    note = pressure_conflict(cond, tyre_bar)
+    if note:
+        raise InputError(f"{note}; identify measurements at one pressure, with that pressure in tyre.toml",
+                         source=source)
 
 
 # ----------------------------------------------------------------------------- the joint residual model
@@ -321,8 +350,14 @@ def nuisance_names(P: int) -> tuple[str, ...]:
 
 
 def joint_coords(P: int) -> tuple[Coordinate, ...]:
-    """The joint fit's coordinates: the ring's (log), then per profile its angle offset (linear) and gain (log)."""
-    coords = list(RING_COORDS)
+    """The joint fit's coordinates: the ring's (log), then per profile its angle offset (linear) and gain (log).
+
+    The ring parameters the identification frees are held inside their plausible range :data:`BOUNDS` (the
+    engine's bounded transform): a parameter the data do not bound — k_tread from a loaded table that shows no
+    contact, EI from free modes alone — then stops at the range's edge, flagged there with its interval to the
+    bound, instead of running off towards 0 or ∞ until the solver's step limit."""
+    coords = [Coordinate(c.name, c.kind, c.center, c.scale, lo=BOUNDS[c.name][0], hi=BOUNDS[c.name][1])
+              if c.name in RING_FREE and c.name in BOUNDS else c for c in RING_COORDS]
     for i in range(P):
         coords.append(Coordinate(f"angle_offset_{i + 1}", LINEAR, scale=math.radians(1.0), lo=-OFFSET_BOUND,
                                  hi=OFFSET_BOUND))
@@ -394,7 +429,7 @@ def _loaded_rows(tables: list[ModeTable], ring: RingParams, geometry: TyreGeomet
         notes.append(f"{len(untagged)} loaded row(s) without a tag matched to the nearer branch at the start")
     given = all(np.isfinite(t.freq_std_hz).all() for t in tables)
     return dict(n=np.array(n), sin=np.array(sin), table=np.array(tab), freq=np.array(freq), sigma=np.array(sigma),
-                load=np.array(loads), drum=np.array(drums), given=given), notes
+                sigma0=np.array(sigma), load=np.array(loads), drum=np.array(drums), given=given), notes
 
 
 def _profile_rows(profiles, geometry, ring, solver) -> dict | None:
@@ -483,6 +518,8 @@ class Identification:
     passes: int
     inputs: IdentifyInputs | None = None
     grid_check: dict | None = None
+    #: the notes also given as warnings (a table's data contradicting its stated load: :func:`load_check`)
+    warned: list = field(default_factory=list)
 
     @property
     def converged(self) -> bool:
@@ -490,12 +527,53 @@ class Identification:
 
     def parameters(self) -> dict:
         """Per ring parameter: value, lo95, hi95, sd_ln (log parameters; 95 % interval e^{ln θ ± 1.96 σ},
-        :meth:`FitResult.interval <ringfit.fit.result.FitResult.interval>`)."""
+        :meth:`FitResult.interval <ringfit.fit.result.FitResult.interval>`).
+
+        A barely identified parameter (an interval reaching past the plausible range :data:`BOUNDS`, or no finite
+        σ at all) is a finding, not an error: its interval ends at the bound, ``to_bound`` names the end(s)
+        cut there (``"lo"``, ``"hi"``), and :meth:`barely_identified` says it in a flag line. Every number is
+        finite (``sd_ln`` is None when the data give no finite σ), so the report stays JSON."""
         out = {}
         for name in self.free:
             value, sd = self.fit.values[name], self.covariance.sd_ln(name)
-            out[name] = dict(value=value, lo95=value * math.exp(-Z95 * sd), hi95=value * math.exp(Z95 * sd), sd_ln=sd)
+            out[name] = log_interval(value, sd, BOUNDS.get(name))
         return out
+
+    def barely_identified(self) -> list[str]:
+        """One flag line per parameter whose 95 % interval reaches a bound of the plausible range."""
+        lines = []
+        for name, p in self.parameters().items():
+            if p.get("to_bound"):
+                lo, hi = BOUNDS[name]
+                sd = "no finite σ" if p["sd_ln"] is None else f"sd ln {p['sd_ln']:.3g}"
+                ends = " and ".join({"lo": f"lower bound {lo:g}", "hi": f"upper bound {hi:g}"}[e] for e in p["to_bound"])
+                lines.append(f"{name} is barely identified by these measurements ({sd}): its 95 % interval "
+                             f"[{p['lo95']:.4g}, {p['hi95']:.4g}] runs to the plausible range's {ends}; "
+                             "add measurements that pin it (loaded tables, profiles) or hold it at a known value")
+        return lines
+
+
+def log_interval(value: float, sd_ln, bounds: tuple[float, float] | None) -> dict:
+    """``value·e^{±1.96 sd_ln}`` computed in log space and cut at ``bounds`` (the plausible range): never an
+    overflow, never an infinity. ``to_bound``: the ends cut (``"lo"``, ``"hi"``); ``sd_ln`` None when not finite."""
+    lo_b, hi_b = bounds if bounds is not None else (0.0, math.inf)
+    finite_sd = sd_ln is not None and math.isfinite(sd_ln)
+    if not (finite_sd and value > 0 and math.isfinite(value)):
+        return dict(value=float(value) if math.isfinite(value) else None, lo95=lo_b, hi95=hi_b,
+                    sd_ln=float(sd_ln) if finite_sd else None, to_bound=["lo", "hi"])
+    ln_v, half = math.log(value), Z95 * sd_ln
+    lo, hi, cut = ln_v - half, ln_v + half, []
+    if bounds is not None and lo <= math.log(lo_b) + 1e-9:
+        lo, cut = min(math.log(lo_b), ln_v), cut + ["lo"]
+    if bounds is not None and hi >= math.log(hi_b) - 1e-9:
+        hi, cut = max(math.log(hi_b), ln_v), cut + ["hi"]
+    # an end cut at a bound is that bound exactly (not e^{ln bound})
+    lo95 = (lo_b if value >= lo_b else value) if "lo" in cut else math.exp(lo)
+    hi95 = (hi_b if value <= hi_b else value) if "hi" in cut else math.exp(hi)
+    out = dict(value=value, lo95=lo95, hi95=hi95, sd_ln=float(sd_ln))
+    if cut:
+        out["to_bound"] = cut
+    return out
 
 
 def _hat_diagonal(J: np.ndarray) -> np.ndarray:
@@ -543,10 +621,21 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     model = JointResiduals(P, solver, ProfileModel(), k_top=0 if rows.profiles is None else rows.profiles["k_top"])
     slices = _slices(rows)
     scales = {b: 1.0 for b in slices}
+    prior = None
+    if rows.loaded is None and rows.profiles is None:
+        # a free tyre's frequencies hardly see EI (docs/physics.md §2.1: the bending term is ~10 % of the
+        # pressure term): without loaded tables or profiles the fit would chase it to a bound and not converge
+        from ringfit.fit.least_squares import log_normal_prior
+        from ringfit.fit.priors import PHYSICAL_PRIORS
+
+        prior = log_normal_prior({k: v for k, v in PHYSICAL_PRIORS.items() if k in free_ring})
+        notes.append("only free modes: EI is barely pinned by a free tyre's frequencies, so the belt-plate prior on "
+                     f"EI ({PHYSICAL_PRIORS['ei'].source}; `ringfit fit --prior physical`, its default) is used; "
+                     "add loaded tables or profiles to identify it from data")
     fit = None
     for passes in range(1, SCALE_PASSES + 1):
         data = _arrays(geometry, rows, solver)
-        problem = Problem(model, data, coords, plausible=BOUNDS, data_label="these measurements")
+        problem = Problem(model, data, coords, prior=prior, plausible=BOUNDS, data_label="these measurements")
         fit = least_squares(problem, theta, free, max_steps=max_steps, rtol=rtol, atol=atol)
         if progress:
             print(f"identify: pass {passes}: {fit.status} after {fit.iterations} steps, "
@@ -583,7 +672,76 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     # (θ holds EA = ∞ of the inextensible ring: only the free parameters need be finite)
     if all(math.isfinite(fit.values[n]) for n in fit.names) and (rows.loaded is not None or rows.profiles is not None):
         check = grid_check(fit, rows, geometry, solver, P)
-    return _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, check, widen)
+    warned = []
+    if rows.loaded is not None and all(math.isfinite(fit.values[n]) for n in fit.names):
+        warned = load_check(ring_from_vector(jnp.asarray(fit.theta)), geometry, rows.loaded,
+                            [t.source for t in inputs.loaded], solver)
+        for note in warned:
+            warnings.warn(note, stacklevel=2)
+    ident = _finish(fit, rows, slices, scales, free_ring, P, notes + warned, passes, inputs, check, widen)
+    ident.warned = warned
+    return ident
+
+
+#: Loads scanned per loaded table for its best-fit load, relative to its stated load_n (:func:`load_check`).
+LOAD_SCAN = (0.3, 3.0, 41)
+#: A table whose best-fit load differs from its stated load by more than this share, and fits there better by
+#: :data:`LOAD_F_RATIO` (the drop of χ² against the table's own residual variance), is said to contradict it.
+LOAD_SHARE_TOL = 0.15
+LOAD_F_RATIO = 9.0
+
+
+@eqx.filter_jit
+def _scan_loaded(ring, geometry, loads, roads, solver, n_harmonics):
+    def one(args):
+        fz, road = args
+        a = standing_half_angle(ring, geometry, fz, road, solver)
+        c, s = loaded_natural_frequencies(ring, geometry, a, n_harmonics)
+        return jnp.stack([c, s])
+
+    return serial_map(one, (loads, roads))
+
+
+def load_check(ring: RingParams, geometry: TyreGeometry, loaded: dict, sources, solver: ContactSolver) -> list[str]:
+    """What the loaded tables' own frequencies say of their stated ``load_n`` (one sentence per contradiction).
+
+    With the identified ring, each table's rows are compared with the loaded-mode model (docs/physics.md §6) at
+    loads from :data:`LOAD_SCAN` × its stated load; the load of least χ² (σ as stated, or the default relative σ)
+    is its best-fit load. A table whose best-fit load is more than :data:`LOAD_SHARE_TOL` off its stated one and
+    fits there better by an F ratio of :data:`LOAD_F_RATIO` — (χ²(stated) − χ²(best)) over the table's residual
+    variance at its best load — was not measured at the load its sidecar states (a 5000 N table labelled 3000 N
+    is absorbed by the block's σ scale otherwise, without a word)."""
+    stated = np.asarray(loaded["load"], dtype=np.float64)
+    T = stated.size
+    lo, hi, k = LOAD_SCAN
+    rel = np.geomspace(lo, hi, k)
+    loads = (stated[:, None] * rel[None, :]).ravel()
+    drums = np.repeat(np.asarray(loaded["drum"], dtype=np.float64), k)
+    roads = flat_or_drum(drums, loads.size)
+    freqs = np.asarray(_scan_loaded(ring, geometry, jnp.asarray(loads), roads, solver, LOADED_HARMONICS))
+    freqs = freqs.reshape(T, k, 2, -1)
+    sigma0 = loaded.get("sigma0", loaded["sigma"])
+    notes = []
+    for t in range(T):
+        sel = loaded["table"] == t
+        m = int(sel.sum())
+        if m < 3:
+            continue
+        model = freqs[t][:, loaded["sin"][sel], loaded["n"][sel]]  # (k, m)
+        chi2 = np.sum(((model - loaded["freq"][sel]) / sigma0[sel]) ** 2, axis=1)
+        if not np.all(np.isfinite(chi2)):
+            continue
+        j = int(np.argmin(chi2))
+        at = int(np.argmin(np.abs(rel - 1.0)))
+        best = float(loads.reshape(T, k)[t, j])
+        var = chi2[j] / max(m - 1, 1)
+        f_ratio = (chi2[at] - chi2[j]) / max(var, 1e-300)
+        if abs(best / stated[t] - 1.0) > LOAD_SHARE_TOL and f_ratio > LOAD_F_RATIO:
+            edge = " (the end of the scan)" if j in (0, k - 1) else ""
+            notes.append(f"{Path(str(sources[t])).name} states load_n = {stated[t]:g} N, but its frequencies fit the "
+                         f"identified ring best at about {best:.0f} N{edge} (χ² {chi2[at]:.3g} at the stated load, "
+                         f"{chi2[j]:.3g} there): it was not measured at the stated load — check its sidecar")
+    return notes
 
 
 def t_widening(dof: float) -> float:
@@ -697,6 +855,7 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
     idx = [names.index(n) for n in free_ring]
     cov = cov_u[np.ix_(idx, idx)]
     cov = 0.5 * (cov + cov.T)
+    cov = cap_unbounded(cov, free_ring)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sd, sd)
@@ -717,18 +876,57 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
                           inputs, grid)
 
 
+#: A frequency block whose rows scatter more than this many times their σ (stated, or the default relative σ) is
+#: flagged: its σ scale absorbs a misfit — a model that lacks an effect, or a stated condition that is wrong.
+SCALE_FLAG = 3.0
+
+
+def scale_flags(blocks: dict) -> list[str]:
+    """One flag per frequency block (free or loaded modes) whose σ scale exceeds :data:`SCALE_FLAG`."""
+    out = []
+    for name in ("free modes", "loaded modes"):
+        b = blocks.get(name)
+        if b is not None and b["sigma_scale"] > SCALE_FLAG:
+            out.append(f"the {name} scatter {b['sigma_scale']:.3g}× their σ (the block's σ scale): the model lacks "
+                       "an effect these data show, or a stated condition (load, speed, rotation, pressure) is "
+                       "wrong; the intervals are widened by it, not explained")
+    return out
+
+
+def cap_unbounded(cov: np.ndarray, names) -> np.ndarray:
+    """The ring covariance (ln θ) with each parameter the data do not bound — a variance that is not finite or
+    whose 95 % interval is wider than the whole plausible range :data:`BOUNDS` — given that range's spread
+    instead: σ_ln = ln(hi/lo)/(2·1.96), uncorrelated with the rest. A parameter barely identified is then a
+    finite, readable ``[ring.covariance]`` entry whose interval runs to the bounds (docs/formats.md §18), not
+    an infinity that no reader accepts."""
+    cov = np.array(cov, dtype=np.float64)
+    caps = {i: math.log(BOUNDS[n][1] / BOUNDS[n][0]) / (2.0 * Z95) for i, n in enumerate(names) if n in BOUNDS}
+    wide = [i for i, c in caps.items() if not (math.isfinite(cov[i, i]) and cov[i, i] <= c**2)]
+    for i in wide:
+        cov[i, :] = 0.0
+        cov[:, i] = 0.0
+    for i in caps:  # a correlation the others cannot carry (not finite) leaves them unbounded too
+        if i not in wide and not np.all(np.isfinite(cov[i])):
+            wide.append(i)
+            cov[i, :] = 0.0
+            cov[:, i] = 0.0
+    for i in wide:
+        cov[i, i] = caps[i] ** 2
+    return cov
+
+
 def identification_report(ident: Identification) -> dict:
     """The ``NAME.identify.json`` content (docs/formats.md §18)."""
     fit = ident.fit
     names, corr = ident.correlation
-    return {
+    return _json_safe({
         "format": "ringfit-identify/1",
         "status": fit.status,
         "converged": bool(fit.converged),
         "message": fit.message,
         "iterations": int(fit.iterations),
         "passes": int(ident.passes),
-        "flags": list(fit.flags),
+        "flags": list(fit.flags) + ident.barely_identified() + scale_flags(ident.blocks),
         "parameters": ident.parameters(),
         "blocks": ident.blocks,
         "correlation": {"names": list(names), "matrix": [[float(x) for x in row] for row in corr]},
@@ -736,8 +934,22 @@ def identification_report(ident: Identification) -> dict:
         **({"grid_check": ident.grid_check} if ident.grid_check is not None else {}),
         "files": [] if ident.inputs is None else ident.inputs.files,
         "notes": ident.notes,
-    }
+    })
 
 
-__all__ = ["identify", "read_identify_folder", "IdentifyInputs", "Identification", "identification_report",
+def _json_safe(x):
+    """``x`` with every non-finite float (a σ the data do not bound, a correlation of it) as None: strict JSON."""
+    if isinstance(x, dict):
+        return {k: _json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_safe(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(x) else None
+    if isinstance(x, np.ndarray):
+        return _json_safe(x.tolist())
+    return x
+
+
+__all__ = ["identify", "read_identify_folder", "log_interval", "cap_unbounded", "load_check", "IdentifyInputs",
+           "Identification", "identification_report",
            "JointResiduals", "harmonic_rows", "standing_half_angle", "BLOCKS"]

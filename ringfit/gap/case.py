@@ -5,16 +5,21 @@
 ``*.profile.csv`` a rolling profile (its sidecar is required), every
 ``*.records.npz`` optional raw records (listed, not used by the diagnosis).
 Errors are :class:`~ringfit.errors.InputError` with one line naming the
-missing or bad file.
+missing or bad file. Stated conditions are checked on reading (:mod:`ringfit.io.conditions`,
+docs/formats.md §6): a duplicate table or profile is counted once, a table whose ``rotation_hz`` and
+``speed_kmh`` contradict is refused, a profile's contradiction is settled by its contact patch or refused,
+and a measurement at another pressure than the tyre file's is a warning.
 """
 
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ringfit.errors import InputError
+from ringfit.io.conditions import check_profile_rotation, check_table_rotation, pressure_conflict, unique_inputs
 from ringfit.io.modes import ModeTable, check_test_condition, read_mode_table
 from ringfit.io.tyre import Tyre, read_tyre
 
@@ -66,17 +71,25 @@ def read_case(folder: str | os.PathLike) -> Case:
         raise InputError("needs at least 4 structural modes with an assigned n to fit the ring "
                          "(rho_a, EI, kw, kv)", source=free_path)
     tests = []
-    for p in sorted(folder.glob("*.modes.csv")):
-        if p.name == "free.modes.csv":
-            continue
+    outer = float(tyre.geometry.outer_radius)
+    tyre_bar = float(tyre.geometry.pressure) / 1e5
+    # the same table or profile given twice (a copy, a symlink) is counted once (docs/formats.md §6)
+    table_paths, notes = unique_inputs((p for p in folder.glob("*.modes.csv") if p.name != "free.modes.csv"),
+                                       lambda p: p.with_suffix(".json"), "mode table")
+    profile_paths, more = unique_inputs(folder.glob("*.profile.csv"), lambda p: p.with_suffix(".json"),
+                                        "profile")
+    for note in notes + more:
+        warnings.warn(note, stacklevel=2)
+    for p in table_paths:
         if not p.with_suffix(".json").exists():
             raise InputError(f"missing sidecar {p.with_suffix('.json').name}: a test mode table needs its "
                              "condition (state, load_n, speed_kmh/rotation_hz, frame; docs/formats.md §2)", source=p)
         table = read_mode_table(p)
         check_test_condition(table.condition, source=p.with_suffix(".json"))
+        check_table_rotation(table.condition, outer, source=p.with_suffix(".json"))
+        _warn_pressure(table.condition, tyre_bar, p)
         tests.append(table)
     profiles = []
-    profile_paths = sorted(folder.glob("*.profile.csv"))
     if profile_paths:
         try:
             from ringfit.io.profiles import read_profile
@@ -86,10 +99,23 @@ def read_case(folder: str | os.PathLike) -> Case:
             if not p.with_suffix(".json").exists():
                 raise InputError(f"missing sidecar {p.with_suffix('.json').name} (speed_kmh, load_n, ...; "
                                  "docs/formats.md §3)", source=p)
-            profiles.append(read_profile(p))
+            prof = read_profile(p)
+            _warn_pressure(prof.condition, tyre_bar, p)
+            prof, note = check_profile_rotation(prof, outer)
+            if note:
+                warnings.warn(note, stacklevel=2)
+            profiles.append(prof)
         profiles.sort(key=lambda pr: float(_condition(pr).get("speed_kmh", 0.0)))
     records = sorted(folder.glob("*.records.npz"))
     return Case(folder=folder, tyre=tyre, free=free, tests=tests, profiles=profiles, records=records)
+
+
+def _warn_pressure(cond: dict, tyre_bar: float, path: Path) -> None:
+    """A measurement at another pressure than the tyre file's: said, since the diagnosis models it at the tyre's."""
+    note = pressure_conflict(cond, tyre_bar)
+    if note:
+        warnings.warn(f"{path.name}: {note}; the diagnosis uses it as if measured at the tyre file's "
+                      f"{tyre_bar:g} bar", stacklevel=3)
 
 
 def _condition(profile) -> dict:

@@ -106,6 +106,81 @@ def write_failed(path: str | os.PathLike, exc: OSError) -> InputError:
     return InputError(f"could not be written ({why}); nothing was written", source=path)
 
 
+#: Set by the command line's SIGINT handler (:func:`mark_interrupted`) for the length of a command: a Ctrl-C whose
+#: KeyboardInterrupt was swallowed on its way up (raised inside a garbage-collector callback — JAX's
+#: ``_xla_gc_callback`` — Python prints "Exception ignored" and goes on) still stops every commit.
+_INTERRUPTED = False
+
+
+def mark_interrupted() -> None:
+    """Record a Ctrl-C: from now on no output is committed (:func:`check_not_interrupted`)."""
+    global _INTERRUPTED
+    _INTERRUPTED = True
+
+
+def interrupted() -> bool:
+    """Whether a Ctrl-C was received in this process (:func:`mark_interrupted`)."""
+    return _INTERRUPTED
+
+
+def check_not_interrupted() -> None:
+    """Raise KeyboardInterrupt when a Ctrl-C was received, even one swallowed since: called before any output is
+    renamed into place, so that an interrupted command never replaces its outputs."""
+    if _INTERRUPTED:
+        raise KeyboardInterrupt
+
+
+#: Temporary files of :func:`atomic_write`: ``.NAME.rf<pid>.<random>.tmp`` beside the output (hidden, the writing
+#: process's id in the name so that a later run can tell its own stale ones from a live writer's).
+_TMP_TAG = "rf"
+#: A temporary file of the older naming (``.NAME.<random>.tmp``, no process id) older than this [s] is stale.
+LEGACY_TMP_AGE_S = 600.0
+
+
+def clean_stale_temps(path: str | os.PathLike) -> list[Path]:
+    """Remove the temporary files :func:`atomic_write` left beside ``path`` in an earlier run that was killed
+    (SIGKILL, power loss) between writing and renaming: those whose writing process is gone (or of the older
+    naming, older than :data:`LEGACY_TMP_AGE_S`). Only files of our own naming for this output's name are
+    touched. Returns those removed."""
+    import re
+    import time
+
+    path = Path(path)
+    stem = re.escape(path.name[:64])
+    ours = re.compile(rf"^\.{stem}\.{_TMP_TAG}(\d+)\.[A-Za-z0-9_]{{8}}\.tmp$")
+    legacy = re.compile(rf"^\.{stem}\.[A-Za-z0-9_]{{8}}\.tmp$")
+    removed = []
+    try:
+        entries = list(os.scandir(path.parent))
+    except OSError:
+        return removed
+    now = time.time()
+    for e in entries:
+        m = ours.match(e.name)
+        stale = False
+        if m is not None:
+            pid = int(m.group(1))
+            stale = pid != os.getpid() and not _alive(pid)
+        elif legacy.match(e.name):
+            with contextlib.suppress(OSError):
+                stale = now - e.stat(follow_symlinks=False).st_mtime > LEGACY_TMP_AGE_S
+        if stale and e.is_file(follow_symlinks=False):
+            with contextlib.suppress(OSError):
+                os.unlink(e.path)
+                removed.append(Path(e.path))
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True  # someone else's live process
+    return True
+
+
 #: Files staged by :func:`atomic_write` inside :func:`outputs_committed_together`: [(tmp, destination)].
 _STAGED: contextvars.ContextVar[list | None] = contextvars.ContextVar("ringfit_staged_outputs", default=None)
 
@@ -150,12 +225,38 @@ def _discard(staged) -> None:
 
 
 def _commit(staged) -> None:
-    for i, (tmp, dest) in enumerate(staged):
-        try:
-            os.replace(tmp, dest)
-        except OSError as exc:
-            _discard(staged[i:])
-            raise write_failed(dest, exc) from None
+    try:
+        check_not_interrupted()
+    except KeyboardInterrupt:
+        _discard(staged)
+        raise
+    with _sigint_held():  # a Ctrl-C during the renames waits for their end: all of them, or (before) none
+        for i, (tmp, dest) in enumerate(staged):
+            try:
+                os.replace(tmp, dest)
+            except OSError as exc:
+                _discard(staged[i:])
+                raise write_failed(dest, exc) from None
+
+
+@contextlib.contextmanager
+def _sigint_held():
+    """SIGINT blocked for this thread inside the block (delivered when it ends), where the platform allows."""
+    import signal
+
+    mask = getattr(signal, "pthread_sigmask", None)
+    if mask is None:
+        yield
+        return
+    try:
+        old = mask(signal.SIG_BLOCK, {signal.SIGINT})
+    except (OSError, ValueError):
+        yield
+        return
+    try:
+        yield
+    finally:
+        mask(signal.SIG_SETMASK, old)
 
 
 def check_output_paths(
@@ -177,8 +278,10 @@ def check_output_paths(
 def atomic_write(path: str | os.PathLike, write: Callable[[Path], None]) -> Path:
     """Call ``write(tmp_path)`` then rename ``tmp_path`` onto ``path``; clean up on failure."""
     path = Path(path)
+    check_not_interrupted()
+    clean_stale_temps(path)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:64]}.", suffix=".tmp", dir=path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:64]}.{_TMP_TAG}{os.getpid()}.", suffix=".tmp", dir=path.parent)
     except OSError as exc:
         raise write_failed(path, exc) from None
     os.close(fd)
@@ -190,6 +293,7 @@ def atomic_write(path: str | os.PathLike, write: Callable[[Path], None]) -> Path
             write(tmp)
             os.chmod(tmp, 0o666 & ~_umask())
             if staged is None:
+                check_not_interrupted()
                 os.replace(tmp, path)
             else:
                 for k, (old_tmp, dest) in enumerate(staged):  # a second write of the same output replaces the first

@@ -90,6 +90,16 @@ class Tyre:
         return Tyre(self.geometry, values, dict(self.extra), self.source, covariance)
 
 
+def require_ring(tyre: Tyre, needs: str) -> Tyre:
+    """``tyre`` when its file has a ``[ring]``; else InputError naming the file: a command that simulates or
+    fits from the ring never falls back silently to the source study's Table 9 values. ``needs``: what the
+    command needs the ring for ("the load estimate needs the tyre's identified ring")."""
+    if not tyre.ring_values:
+        raise InputError(f"has no [ring]: {needs} (ringfit identify, or ringfit fit and fit-rolling); it does not "
+                         "fall back to the Table 9 values", source=tyre.source or None)
+    return tyre
+
+
 def _number(table: dict, key: str, where: str) -> float:
     """``table[key]`` as a float inside :data:`RANGES` [key]; InputError naming ``[where] key`` otherwise."""
     value = table[key]

@@ -329,14 +329,26 @@ rolling acceleration profile per speed (`run*.profile.csv` + sidecar) at {ring['
 
 
 
-def _truth_and_try(label, mag: str) -> str:
-    """The README's hidden truth and the command to try, shared by the modal and the profile case."""
+def _truth_and_try(label, mag: str, *, k_tread_carried: bool = True) -> str:
+    """The README's hidden truth and the command to try, shared by the modal and the profile case.
+
+    A README states only what its data determine: ``k_tread_carried`` False (the modal case, whose loaded
+    tables take a patch half-angle drawn apart from k_tread and load_n) leaves k_tread out, and says why."""
     ring = label.ring
+    if k_tread_carried:
+        tread = f", k_tread = {ring['k_tread']:.4g} N/m²."
+    else:
+        half = label.magnitude.get("half_angle_deg")
+        tread = (".\n- k_tread is not stated: these data do not determine it. The loaded tables were computed "
+                 + (f"with a contact patch of half-angle {half:.4g}° drawn at random, not solved from their load_n "
+                    "with the tread stiffness, so identifying k_tread from load_n would not recover a true value."
+                    if half is not None else "without ground contact (the injected effect is not the contact).")
+                 )
     return f"""## The truth (kept out of the case folder)
 
 - injected effect: **{label.effect}** ({mag}); the diagnosis should answer `{label.expected_verdict}`;
 - the ring: ρA = {ring['rho_a']:.4g} kg/m, EI = {ring['ei']:.4g} N m², k_w = {ring['kw']:.4g} N/m²,
-  k_v = {ring['kv']:.4g} N/m², k_tread = {ring['k_tread']:.4g} N/m².
+  k_v = {ring['kv']:.4g} N/m²{tread}
 
 ## Try
 
@@ -362,7 +374,7 @@ Written by `ringfit example case`. `case/` is a case folder (docs/formats.md §6
 to) and test tables of the loaded and the spinning tyre{" and of the free tyre on the bench's suspension (suspended.modes.csv, its sidecar stating the fixture)" if effect == "wheel_suspension" else ""}, with relative frequency noise
 {100 * label.noise['relative']:.2g} % ({label.noise['colour']}).
 
-{_truth_and_try(label, mag)}""")
+{_truth_and_try(label, mag, k_tread_carried=False)}""")
 
 
 def _identify(folder: Path, progress: bool) -> None:

@@ -71,6 +71,11 @@ class CleatArrivals:
         return float(np.median(np.diff(np.unwrap(np.radians(self.sensor_angle_deg)))) % (2 * np.pi) * 180 / np.pi)
 
 
+#: The share of the drum period after each cleat hit whose readings its ringing spoils: left out of a baseline
+#: profile (:func:`angle_time_field`'s default ``quiet_after_s``) and of ``ringfit estimate``'s averaged profile.
+QUIET_SHARE = 0.7
+
+
 def detect_cleat_arrivals(
     record: ContinuousRecord,
     *,
@@ -449,7 +454,7 @@ def angle_time_field(
     if isinstance(baseline, str):
         if baseline != "auto":
             raise InputError(f"baseline {baseline!r}; expected 'auto', a profile or None")
-        quiet = 0.7 * period if quiet_after_s is None else float(quiet_after_s)
+        quiet = QUIET_SHARE * period if quiet_after_s is None else float(quiet_after_s)
         if quiet >= period:
             raise InputError(f"quiet_after_s = {quiet:g} s leaves no quiet samples (drum period {period:g} s)")
         rev_hz_guess = record.condition.get("rotation_hz")

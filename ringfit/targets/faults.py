@@ -65,6 +65,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ringfit.io.conditions import RATE_TOL, ROLLING_RADIUS_M
 from ringfit.targets.preprocessing import SKIP_AFTER_IMPACT_S
 
 #: A channel whose rms is below this share of its axis's median rms over the records is dead.
@@ -612,10 +613,8 @@ def on_notched_line(freq_hz: float, lines_hz, duration_s: float) -> float | None
     return None
 
 
-#: Rolling radii [m] a road tyre can have: an encoder rate that implies another contradicts the sampling rate.
-ROLLING_RADIUS_M = (0.15, 0.75)
-#: Relative disagreement between the encoder's rotation rate and the stated one that is called a contradiction.
-RATE_TOL = 0.02
+# ROLLING_RADIUS_M (the rolling radii a road tyre can have) and RATE_TOL (the relative disagreement of two rates
+# called a contradiction) are the one consistency layer's (ringfit.io.conditions), imported above
 
 
 def sample_rate_note(rotation_hz: float, fs_hz: float, condition: dict) -> str | None:

@@ -25,6 +25,7 @@ from ringfit.io.profiles import grid_angles_deg
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import as_traced
 from ringfit.physics.profile import flat_or_drum
+from ringfit.targets.cleat import QUIET_SHARE
 
 #: Revolutions fitted in one call of the engine (one compiled vmap or scan; the last batch is padded).
 #: 16 is the fastest on a CPU (benchmarks/bench_estimate.py); an accelerator wants more.
@@ -109,6 +110,7 @@ class RecordingRevolutions:
     k_max: int
     noise: np.ndarray | None = None
     rotation_source: str = "encoder (mean over the recording)"
+    noise_source: str = "differences of successive revolutions / √(2·revolutions), in the fitted band"
 
 
 def first_rotation_hz(record, samples: int = 1 << 18) -> float:
@@ -122,8 +124,8 @@ def first_rotation_hz(record, samples: int = 1 << 18) -> float:
     return float(rate)
 
 
-def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progress: bool = False
-                          ) -> RecordingRevolutions:
+def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progress: bool = False,
+                          geometry: TyreGeometry | None = None) -> RecordingRevolutions:
     """Walk a continuous recording once (bounded memory): every whole revolution's radial reading on
     the angle grid (:func:`ringfit.targets.rolling_profile.revolution_grids`, M = the power of two at or
     above the samples per revolution, so that every sample takes part), its harmonics 2…k_max, and
@@ -155,8 +157,11 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
         raise InputError(f"{spr:.0f} samples per revolution are too few to resolve harmonic {k_max} "
                          f"(need ≥ {4 * (k_max + 2)})", source=record.source)
     points = int(min(4096, max(128, 2 ** math.ceil(math.log2(spr)))))
+    hits = cleat_windows(record, progress=progress)
     rows, rev, t_s, rate = [], [], [], []
-    s1, s2, sd = np.zeros(points), np.zeros(points), np.zeros(points)
+    # sums over revolutions per angle [0] of every revolution, [1] of those read outside a cleat hit's ringing
+    s1, s2, sd = np.zeros((2, points)), np.zeros((2, points)), np.zeros((2, points))
+    count, pairs = np.zeros((2, points)), np.zeros((2, points))
     previous = None
     for block in revolution_grids(record, points=points, axes=("radial",), passages=passages, progress=progress):
         values = block.values[0]
@@ -164,25 +169,58 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
         rev.append(block.revolution)
         t_s.append(block.t_s)
         rate.append(block.rotation_hz)
-        s1 += values.sum(axis=0)
-        s2 += (values**2).sum(axis=0)
-        chain = values if previous is None else np.concatenate([previous, values])
-        sd += (np.diff(chain, axis=0) ** 2).sum(axis=0)
-        previous = values[-1:]
+        quiet = np.ones(values.shape) if hits is None else _quiet(block, points, *hits).astype(np.float64)
+        chain = values if previous is None else np.concatenate([previous[0], values])
+        for i, w in enumerate((np.ones(values.shape), quiet)):
+            s1[i] += (w * values).sum(axis=0)
+            s2[i] += (w * values**2).sum(axis=0)
+            count[i] += w.sum(axis=0)
+            q = w if previous is None else np.concatenate([previous[1 + i], w])
+            both = q[1:] * q[:-1]
+            sd[i] += (both * np.diff(chain, axis=0) ** 2).sum(axis=0)
+            pairs[i] += both.sum(axis=0)
+        previous = (values[-1:], np.ones((1, points)), quiet[-1:])
     R = int(sum(r.size for r in rev))
     if R < 2:
         raise InputError(f"{R} whole revolution(s) in the recording; the estimate needs at least 2",
                          source=record.source)
-    mean = s1 / R
-    spread = np.sqrt(np.clip((s2 - R * mean**2) / (R - 1), 0.0, None))
-    # noise of one revolution from successive differences: blind to a load that changes slowly or in steps
-    noise = np.sqrt(sd / (2 * (R - 1)))
+    use = 0
+    if hits is not None:
+        arrivals_s, quiet_s = hits
+        if count[1].min() < 2:
+            warnings.warn(f"{record.source}: {arrivals_s.size} cleat hits (hall channel): their ringing "
+                          f"({quiet_s:.3g} s after each) leaves some angles without 2 quiet revolutions, so the hits "
+                          "stay in the averaged profile and bias the estimate", RuntimeWarning, stacklevel=2)
+        else:
+            use = 1
+            warnings.warn(f"{record.source}: {arrivals_s.size} cleat hits (hall channel): the {quiet_s:.3g} s after "
+                          f"each ({100 * QUIET_SHARE:g} % of the drum period, what `ringfit cleat` leaves out of "
+                          "its baseline) "
+                          f"are left out of the averaged profile ({100 * (1 - count[1].mean() / R):.0f} % of its "
+                          "samples); the per-revolution estimates keep them", RuntimeWarning, stacklevel=2)
+    s1, s2, sd, count, pairs = s1[use], s2[use], sd[use], count[use], pairs[use]
+    mean = s1 / count
+    spread = np.sqrt(np.clip((s2 - count * mean**2) / np.maximum(count - 1, 1), 0.0, None))
+    # noise of one revolution from successive differences: blind to a load that changes slowly or in steps; where
+    # no two successive revolutions are both quiet at an angle (a cleat hit every ~2 revolutions), their spread
+    noise = np.where(pairs >= 1, np.sqrt(sd / (2 * np.maximum(pairs, 1))), spread)
     rate = np.concatenate(rate)
     from ringfit.targets.faults import sample_rate_note
 
     note = sample_rate_note(float(np.mean(rate)), record.fs_hz, dict(record.condition))
     if note:
         warnings.warn(f"{record.source}: {note}", RuntimeWarning, stacklevel=2)
+    elif record.has_encoder and geometry is not None:
+        # the stated speed against the encoder's rotation for this tyre's radius (ringfit.io.conditions); the
+        # encoder's rate is what the estimate uses
+        from ringfit.io.conditions import rotation_speed_conflict
+
+        clash = rotation_speed_conflict({"rotation_hz": float(np.mean(rate)),
+                                         "speed_kmh": record.condition.get("speed_kmh")},
+                                        float(geometry.outer_radius))
+        if clash:
+            warnings.warn(f"{record.source}: the encoder's {clash}; "
+                          "the encoder's rate is used", RuntimeWarning, stacklevel=2)
     cond = {k: float(record.condition[k]) for k in ("speed_kmh", "pressure_bar", "drum_diameter_m")
             if record.condition.get(k) is not None}
     cond.update(revolutions=R, sample_rate_hz=float(record.fs_hz), rotation_hz=float(np.mean(rate)),
@@ -193,7 +231,33 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     k = np.arange(2, k_max + 1)
     return RecordingRevolutions(rows=np.concatenate(rows), revolution=np.concatenate(rev), t_s=np.concatenate(t_s),
                                 rotation_hz=rate, profile=profile, response=np.sinc(k / spr) ** 2, k_max=k_max,
-                                noise=noise / math.sqrt(R), rotation_source=source)
+                                noise=noise / np.sqrt(count), rotation_source=source,
+                                **({} if use == 0 else {"noise_source": "the quiet revolutions (cleat hits left out): "
+                                    "their successive differences, or their spread where no two successive ones are "
+                                    "quiet, / √(revolutions), in the fitted band"}))
+
+
+def cleat_windows(record, *, progress: bool = False):
+    """``(arrivals_s, quiet_s)`` of a recording with a cleat trigger (hall channel): the arrival times [s from the
+    first sample] and how long after each its ringing spoils the reading (:data:`ringfit.targets.cleat.QUIET_SHARE`
+    of the drum period, what ``ringfit cleat`` leaves out by default); None without a hall channel."""
+    if not getattr(record, "has_hall", False):
+        return None
+    from ringfit.targets.cleat import detect_cleat_arrivals
+
+    arrivals = detect_cleat_arrivals(record, progress=progress)
+    return np.asarray(arrivals.sample, dtype=np.float64) / float(record.fs_hz), QUIET_SHARE * float(arrivals.interval_s)
+
+
+def _quiet(block, points: int, arrivals_s: np.ndarray, quiet_s: float) -> np.ndarray:
+    """``(r, M)``: True where a revolution's grid angle was read outside every cleat hit's ringing window (and
+    before the first hit). Grid angle j of a revolution is read at about t_mid + (j/M − ½)/rate (its angle is
+    linear in time over one revolution)."""
+    j = np.arange(points) / points - 0.5
+    t = block.t_s[:, None] + j[None, :] / block.rotation_hz[:, None]
+    k = np.searchsorted(arrivals_s, t, side="right") - 1
+    tau = np.where(k >= 0, t - arrivals_s[np.maximum(k, 0)], np.inf)
+    return tau >= quiet_s
 
 
 def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ring: RingParams, *,
@@ -340,12 +404,12 @@ def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
 
     **Returns:** ``(LoadEstimate, RevolutionEstimates or None)``.
     """
-    data = recording_revolutions(record, k_max=settings.k_max, progress=progress)
+    data = recording_revolutions(record, k_max=settings.k_max, progress=progress, geometry=geometry)
     rate = float(np.mean(data.rotation_hz))
     reference = estimate_load(data.profile, geometry, ring, settings=settings, k_tread_in_file=k_tread_in_file,
                               omega=2 * math.pi * rate, omega_source=data.rotation_source,
                               response=data.response, noise_per_angle=data.noise,
-                              noise_source="differences of successive revolutions / √(2·revolutions), in the fitted band",
+                              noise_source=data.noise_source,
                               ring_covariance=ring_covariance)
     revs = None
     if per_revolution:
