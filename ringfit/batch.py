@@ -301,12 +301,15 @@ class TaskStream(io.TextIOBase):
         self._lock = threading.Lock()
 
     def writable(self) -> bool:
+        """Always writable (a text stream a task's prints and progress bars go to)."""
         return True
 
     def isatty(self) -> bool:
+        """Not a terminal: progress bars draw plain lines, which this stream relays."""
         return False
 
     def write(self, text: str) -> int:
+        """Log ``text`` and relay its latest complete line (a bar's redraw after ``\\r`` is relayed only)."""
         if "\r" in text:  # a bar redrawing its line: relayed, not logged (what came before the first \r is)
             head, _, _ = text.partition("\r")
             if head.strip():

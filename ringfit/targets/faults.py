@@ -887,6 +887,7 @@ class EncoderTiming:
         self.prev = None  # (angle, acc frame) of the last sample of the previous chunk
 
     def add(self, angle_deg: np.ndarray, acc: np.ndarray) -> None:
+        """Take the next chunk of a continuous recording (encoder angle in degrees, ``(k, 3)`` acceleration)."""
         phi = np.asarray(angle_deg, dtype=np.float64)
         x = np.asarray(acc, dtype=np.float64)
         if self.prev is not None:
