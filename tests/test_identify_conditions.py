@@ -103,12 +103,21 @@ def test_estimate_leaves_the_cleat_hits_out(tmp_path, capsys):
           "k_tread_n_per_m2 = %r\n" % tuple(float(getattr(ring, k)) for k in
                                              ("rho_a", "ei", "kw", "kv", "damping_ratio", "k_tread")))
     out = tmp_path / "e.json"
-    assert main(["estimate", str(rec), "--tyre", str(tyre), "--out", str(out), "--quiet"]) == 0
+    revs = tmp_path / "revs.csv"
+    assert main(["estimate", str(rec), "--tyre", str(tyre), "--out", str(out), "--per-revolution", str(revs),
+                 "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "cleat hits (hall channel)" in err and "left out of the averaged profile" in err
     est = json.loads(out.read_text())["load_n"]
     assert abs(est["value"] / bench.load_n - 1) < 0.01  # it was 2.2 % low with the hits in
     assert est["lo"] <= bench.load_n <= est["hi"]
+    # every revolution's share of ringing is said: the ringing lasts 0.7 of the 1.958-revolution drum period, so a
+    # revolution holds at least 1 - 0.3 × 1.958 = 0.41 of it
+    import csv
+
+    rows = list(csv.DictReader(revs.open()))
+    share = [float(r["cleat_share"]) for r in rows]
+    assert len(share) > 20 and all(0.0 <= x <= 1.0 for x in share) and min(share) > 0.2
 
 
 def test_the_load_check_over_many_tyres(tmp_path):

@@ -63,6 +63,8 @@ class RevolutionEstimates:
     iterations: np.ndarray
     feature_load_n: np.ndarray
     window_deg: float = 0.0
+    #: recordings with a cleat trigger: ``(R,)`` share of each revolution's angles read in a hit's ringing
+    cleat_share: np.ndarray | None = None
 
     #: Columns of the per-revolution CSV (docs/formats.md §7), in order.
     COLUMNS = ("revolution", "t_s", "rotation_hz", "load_n", "lo", "hi", "patch_length_mm", "gain",
@@ -76,7 +78,8 @@ class RevolutionEstimates:
         return {"revolution": self.revolution, "t_s": self.t_s, "rotation_hz": self.rotation_hz,
                 "load_n": self.load_n, "lo": self.lo, "hi": self.hi, "patch_length_mm": self.length_mm,
                 "gain": self.gain, "angle_offset_deg": self.angle_offset_deg, "rms_ms2": self.rms,
-                "converged": self.converged.astype(int), "feature_load_n": self.feature_load_n}
+                "converged": self.converged.astype(int), "feature_load_n": self.feature_load_n,
+                **({} if self.cleat_share is None else {"cleat_share": self.cleat_share})}
 
     def summary(self) -> dict:
         """Counts and the load's range over the revolutions (for the JSON)."""
@@ -110,6 +113,8 @@ class RecordingRevolutions:
     k_max: int
     noise: np.ndarray | None = None
     rotation_source: str = "encoder (mean over the recording)"
+    #: with a cleat trigger: ``(R,)`` share of each revolution's angles read in a hit's ringing (else None)
+    cleat_share: np.ndarray | None = None
     noise_source: str = "differences of successive revolutions / √(2·revolutions), in the fitted band"
 
 
@@ -158,7 +163,7 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
                          f"(need ≥ {4 * (k_max + 2)})", source=record.source)
     points = int(min(4096, max(128, 2 ** math.ceil(math.log2(spr)))))
     hits = cleat_windows(record, progress=progress)
-    rows, rev, t_s, rate = [], [], [], []
+    rows, rev, t_s, rate, hit = [], [], [], [], []
     # sums over revolutions per angle [0] of every revolution, [1] of those read outside a cleat hit's ringing
     s1, s2, sd = np.zeros((2, points)), np.zeros((2, points)), np.zeros((2, points))
     count, pairs = np.zeros((2, points)), np.zeros((2, points))
@@ -170,6 +175,7 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
         t_s.append(block.t_s)
         rate.append(block.rotation_hz)
         quiet = np.ones(values.shape) if hits is None else _quiet(block, points, *hits).astype(np.float64)
+        hit.append(1.0 - quiet.mean(axis=1))
         chain = values if previous is None else np.concatenate([previous[0], values])
         for i, w in enumerate((np.ones(values.shape), quiet)):
             s1[i] += (w * values).sum(axis=0)
@@ -197,7 +203,8 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
                           f"each ({100 * QUIET_SHARE:g} % of the drum period, what `ringfit cleat` leaves out of "
                           "its baseline) "
                           f"are left out of the averaged profile ({100 * (1 - count[1].mean() / R):.0f} % of its "
-                          "samples); the per-revolution estimates keep them", RuntimeWarning, stacklevel=2)
+                          "samples); the per-revolution estimates keep them (their cleat_share says how much)",
+                          RuntimeWarning, stacklevel=2)
     s1, s2, sd, count, pairs = s1[use], s2[use], sd[use], count[use], pairs[use]
     mean = s1 / count
     spread = np.sqrt(np.clip((s2 - count * mean**2) / np.maximum(count - 1, 1), 0.0, None))
@@ -232,6 +239,7 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     return RecordingRevolutions(rows=np.concatenate(rows), revolution=np.concatenate(rev), t_s=np.concatenate(t_s),
                                 rotation_hz=rate, profile=profile, response=np.sinc(k / spr) ** 2, k_max=k_max,
                                 noise=noise / np.sqrt(count), rotation_source=source,
+                                cleat_share=None if hits is None else np.concatenate(hit),
                                 **({} if use == 0 else {"noise_source": "the quiet revolutions (cleat hits left out): "
                                     "their successive differences, or their spread where no two successive ones are "
                                     "quiet, / √(revolutions), in the fitted band"}))
@@ -387,7 +395,7 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
         revolution=data.revolution, t_s=data.t_s, rotation_hz=data.rotation_hz, load_n=cat["load"], lo=cat["lo"],
         hi=cat["hi"], length_mm=np.asarray(reference.curves.patch_at(cat["load"])["length_mm"]), gain=cat["gain"],
         angle_offset_deg=cat["offset"], rms=cat["rms"], converged=cat["ok"], iterations=cat["iterations"],
-        feature_load_n=reference.curves.load_from_spacing(spacing), window_deg=window)
+        feature_load_n=reference.curves.load_from_spacing(spacing), window_deg=window, cleat_share=data.cleat_share)
 
 
 def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
