@@ -239,15 +239,21 @@ def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, no
 #: (its shape read through what the notch or the noise left, or a half of the double pole clustered apart): the
 #: split of a ring mode's double pole is well under it, the cavity and its nearest ring mode lie further apart.
 TWICE_TOL = 0.005
+#: ... or within 3 σ of the two rows' frequencies (their spread over the model orders), up to this: the distance
+#: within which two rows of the same n are the two halves of one double pole
+#: (:func:`~ringfit.targets.clustering.merge_pairs`).
+TWICE_CAP = 0.01
 
 
 def found_twice(freq_hz: np.ndarray, kind: np.ndarray, tol: float = TWICE_TOL,
-                skip: np.ndarray | None = None) -> list[tuple[int, int]]:
+                skip: np.ndarray | None = None, freq_std_hz: np.ndarray | None = None,
+                cap: float = TWICE_CAP) -> list[tuple[int, int]]:
     """``[(row, structural_row)]``: each row that is not ``structural`` within ``tol`` (relative) of a structural
-    row, with the nearest such row; rows where ``skip`` is True (on a notched mains line: what the hum left,
-    not the mode) are not paired."""
+    row — or within 3 σ of the two (``freq_std_hz``), up to ``cap`` — with the nearest such row; rows where
+    ``skip`` is True (on a notched mains line: what the hum left, not the mode) are not paired."""
     freq_hz = np.asarray(freq_hz, dtype=np.float64)
     kind = np.asarray(kind, dtype=object)
+    std = np.zeros_like(freq_hz) if freq_std_hz is None else np.nan_to_num(np.asarray(freq_std_hz, np.float64))
     st = np.flatnonzero(kind == "structural")
     out = []
     if not st.size:
@@ -257,8 +263,9 @@ def found_twice(freq_hz: np.ndarray, kind: np.ndarray, tol: float = TWICE_TOL,
         other &= ~np.asarray(skip, dtype=bool)
     for i in np.flatnonzero(other):
         off = np.abs(freq_hz[st] / freq_hz[i] - 1)
-        j = int(np.argmin(off))
-        if off[j] <= tol:
+        allowed = np.minimum(cap, np.maximum(tol, 3 * np.hypot(std[i], std[st]) / freq_hz[i]))
+        j = int(np.argmin(off / allowed))
+        if off[j] <= allowed[j]:
             out.append((int(i), int(st[j])))
     return out
 
@@ -278,20 +285,39 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     modes. A kept one is ``acoustic`` only with evidence, else
     ``unclassified`` with the reason (:func:`classify_rows`; ``cavity_hz``
     the cavity frequency of eq. 22 for the tyre, None: nothing is called acoustic; ``lines_hz`` the notched
-    mains lines and ``duration_s`` the records' length). A row that is not ring-like within :data:`TWICE_TOL`
-    of a structural row is the same mode found twice (:func:`found_twice`): it is merged into the structural
-    row, and ``notes`` (when given) gets a line saying so.
+    mains lines and ``duration_s`` the records' length). Before any row is classified, a row that is not
+    ring-like within :data:`TWICE_TOL` (or 3 σ, up to :data:`TWICE_CAP`) of a ring-like row, and not on a
+    notched mains line, is the other half of that mode's double pole whatever n its shape reads
+    (:func:`found_twice`): its poles are merged into the ring-like row
+    (:func:`~ringfit.targets.clustering.merge_twins`), and ``notes`` (when given) gets a line saying so.
 
     Extra columns: ``n_confidence``, ``split_hz``, ``travelling``, ``damping_std_pct``, ``reason``.
 
     **Returns:** ``(table, modes)`` with ``modes`` in table order.
     """
+    from ringfit.targets.clustering import merge_pairs, merge_twins
+    from ringfit.targets.faults import on_notched_line
+
     modes = list(modes)
     n = np.array([mode_number(m.basis, angle_rad, axis)[0] for m in modes], dtype=np.int64)
     if poles is not None:
-        from ringfit.targets.clustering import merge_pairs
-
         modes, n = merge_pairs(poles, modes, n)
+    # the two halves of one double pole whose second half's shape reads another n (issue 34): one row, before
+    # anything is classified (a half read as n = 1 near the cavity frequency must not become an acoustic row)
+    conf = np.array([mode_number(m.basis, angle_rad, axis)[1] for m in modes])
+    freq = np.array([m.freq_hz for m in modes])
+    not_ring = acoustic_candidates(n, conf, freq, min_confidence)
+    on_line = np.array([on_notched_line(float(f), lines_hz, duration_s) is not None for f in freq], dtype=bool)
+    twice = found_twice(freq, np.where(not_ring | on_line, "other", "structural"), skip=on_line,
+                        freq_std_hz=np.array([m.freq_std_hz for m in modes]))
+    if twice:
+        if notes is not None:
+            shown = ", ".join(f"{freq[i]:.2f} Hz (not ring-like, its shape reads n = {int(n[i])}) beside the "
+                              f"n = {int(n[j])} mode at {freq[j]:.2f} Hz" for i, j in twice[:4])
+            notes.append(f"{len(twice)} mode(s) found twice, once as a structural mode and once as a row that is not "
+                         f"ring-like within {100 * TWICE_TOL:g} % of it (or 3 σ of the two, up to "
+                         f"{100 * TWICE_CAP:g} %): {shown}; merged into the structural row (one double pole)")
+        modes, n = merge_twins(poles, modes, n, twice)
     conf, trav = [], []
     for m in modes:
         k, c = mode_number(m.basis, angle_rad, axis)
@@ -313,16 +339,6 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     idx = np.flatnonzero(keep)
     kind, reason = classify_rows(n[idx], conf[idx], freq[idx], not_ring[idx], cavity_hz, lines_hz=lines_hz,
                                  duration_s=duration_s)
-    twice = found_twice(freq[idx], kind, skip=np.array([str(r).startswith("on the mains line") for r in reason]))
-    if twice:
-        if notes is not None:
-            shown = ", ".join(f"{freq[idx][i]:.2f} Hz ({kind[i]}) beside the n = {int(n[idx][j])} mode at "
-                              f"{freq[idx][j]:.2f} Hz" for i, j in twice[:4])
-            notes.append(f"{len(twice)} mode(s) found twice, once as a structural mode and once as a row that is not "
-                         f"ring-like within {100 * TWICE_TOL:g} % of it: {shown}; merged into the structural row")
-        drop = {i for i, _ in twice}
-        sel = np.array([i not in drop for i in range(idx.size)], dtype=bool)
-        idx, kind, reason = idx[sel], kind[sel], reason[sel]
     modes = [modes[i] for i in idx]
     fmt = lambda x: f"{x:.6g}" if np.isfinite(x) else ""  # noqa: E731  (empty: unknown)
     table = ModeTable(
