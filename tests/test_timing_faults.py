@@ -232,7 +232,7 @@ def test_profile_counts_the_time_a_faulty_stream_covers(how):
         assert len(said) == 1 and "timing faults" in said[0] and word in said[0]
 
 
-def _twin_case(twin_n, twin_hz=227.70, half_hz=228.16, orders=(10, 12, 14, 16)):
+def _twin_case(twin_n, twin_hz=227.70, half_hz=228.16, orders=(10, 12, 14, 16), twin_zeta=0.025):
     """Hand-made SSI poles at 16 radial angles: ring modes n = 1…5 (109.9…198.3 Hz), 6 and 7 (259.0 Hz), the cavity (an
     n = 1 pattern at 218.75 Hz, lightly damped), and the n = 6 double pole resolved at every order into a half
     with the n = 6 shape at ``half_hz`` and a half whose shape reads as n = ``twin_n`` (what a notch or noise
@@ -250,7 +250,7 @@ def _twin_case(twin_n, twin_hz=227.70, half_hz=228.16, orders=(10, 12, 14, 16)):
 
     members = [(109.9, 0.025, 1, 0.0), (125.2, 0.025, 2, 0.0), (145.9, 0.025, 3, 0.0), (170.8, 0.025, 4, 0.0),
                (198.3, 0.025, 5, 0.0), (218.75, 0.007, 1, 0.0), (half_hz, 0.025, 6, 0.0),
-               (twin_hz, 0.025, twin_n, 0.35), (259.0, 0.025, 7, 0.0)]
+               (twin_hz, twin_zeta, twin_n, 0.35), (259.0, 0.025, 7, 0.0)]
     order, f, z, phi, group = [], [], [], [], []
     for g, (fm, zm, k, weak6) in enumerate(members):
         for o in orders:
@@ -301,3 +301,15 @@ def test_a_twin_outside_the_fixed_tolerance_but_within_the_modes_spread_is_merge
     table, _ = mode_table(modes, th, axis, "ssi-cov", poles=poles, cavity_hz=218.75, notes=[])
     near = np.flatnonzero(np.abs(table.freq_hz / 227.4 - 1) < 0.01)
     assert near.size == 1 and table.kind[near[0]] == "structural" and table.n[near[0]] == 6
+
+
+def test_a_lightly_damped_row_beside_a_mode_is_dropped_not_averaged_in():
+    """A not-ring-like row at 0.1 % of the n = 6 mode but damped 0.4 % against its 2.5 % (what a notch leaves of
+    a hum line, not the pair's other half) is still no second row, and its poles do not move the mode."""
+    from ringfit.targets.identify import mode_table
+
+    poles, modes, th, axis = _twin_case(1, twin_zeta=0.004)
+    table, _ = mode_table(modes, th, axis, "ssi-cov", poles=poles, cavity_hz=218.75, notes=[])
+    near = np.flatnonzero(np.abs(table.freq_hz / 228.0 - 1) < 0.01)
+    assert near.size == 1 and table.n[near[0]] == 6
+    assert abs(table.freq_hz[near[0]] - 228.16) < 0.01 and abs(table.damping_pct[near[0]] - 2.5) < 0.01

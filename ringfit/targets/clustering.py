@@ -144,18 +144,26 @@ def merge_pairs(poles: PoleSet, modes: list[PhysicalMode], n: np.ndarray, pair_t
     return modes, np.asarray(n, dtype=np.int64)
 
 
+#: The two halves of a double pole merged by :func:`merge_twins` have dampings within this factor of each other.
+TWIN_DAMPING = 2.0
+
+
 def merge_twins(poles: PoleSet | None, modes: list[PhysicalMode], n: np.ndarray,
                 pairs: list[tuple[int, int]]) -> tuple[list[PhysicalMode], np.ndarray]:
     """Merge each ``(twin, into)`` of ``pairs``: the twin, a row that is not ring-like at the frequency of the
     ring-like row ``into``, is the other half of its double pole whose shape reads another n. With ``poles``
     (SSI) the halves' poles are summarised together (the frequency is the pair's centre, the split theirs) and
-    the merged mode keeps ``into``'s shape basis (hence its n); without (FRF peaks) the twin is dropped.
+    the merged mode keeps ``into``'s shape basis (hence its n); without (FRF peaks), or when the twin's damping
+    is not within a factor :data:`TWIN_DAMPING` of the mode's (the two halves of a double pole share their
+    damping; a lightly damped hum residue beside a mode does not), the twin is dropped and its poles with it.
 
     **Returns:** ``(modes, n)`` after merging, in the order of ``modes``.
     """
     twins: dict[int, list[int]] = {}
     for i, j in pairs:
-        twins.setdefault(int(j), []).append(int(i))
+        zi, zj = modes[int(i)].damping, modes[int(j)].damping
+        if zi > 0 and zj > 0 and 1 / TWIN_DAMPING <= zi / zj <= TWIN_DAMPING:
+            twins.setdefault(int(j), []).append(int(i))
     drop = {int(i) for i, _ in pairs}
     modes = list(modes)
     if poles is not None:
