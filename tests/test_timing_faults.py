@@ -313,3 +313,18 @@ def test_a_lightly_damped_row_beside_a_mode_is_dropped_not_averaged_in():
     near = np.flatnonzero(np.abs(table.freq_hz / 228.0 - 1) < 0.01)
     assert near.size == 1 and table.n[near[0]] == 6
     assert abs(table.freq_hz[near[0]] - 228.16) < 0.01 and abs(table.damping_pct[near[0]] - 2.5) < 0.01
+
+
+def test_a_ring_mode_read_as_n1_near_the_cavity_is_not_called_acoustic():
+    """The n = 6 mode whose only row reads n = 1 (the hum left its shape so) 4 % from eq. 22's cavity frequency:
+    damped like the ring (2.5 %), it is not the air (the cavity row, 0.7 %, stays acoustic); it is unclassified
+    and says why."""
+    from ringfit.targets.identify import mode_table
+
+    poles, modes, th, axis = _twin_case(1)
+    del modes[6]  # the half with the n = 6 shape: never clustered
+    table, _ = mode_table(modes, th, axis, "ssi-cov", poles=poles, cavity_hz=218.75, notes=[])
+    i = int(np.argmin(np.abs(table.freq_hz - 227.70)))
+    assert abs(table.freq_hz[i] - 227.70) < 0.01 and table.kind[i] == "unclassified"
+    assert "damped like the ring (2.50 %" in table.extra["reason"][i]
+    assert list(table.freq_hz[table.kind == "acoustic"].round(2)) == [218.75]
