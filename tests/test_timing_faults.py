@@ -233,10 +233,10 @@ def test_profile_counts_the_time_a_faulty_stream_covers(how):
 
 
 def _twin_case(twin_n, twin_hz=227.70, half_hz=228.16, orders=(10, 12, 14, 16), twin_zeta=0.025):
-    """Hand-made SSI poles at 16 radial angles: ring modes n = 1…5 (109.9…198.3 Hz), 6 and 7 (259.0 Hz), the cavity (an
-    n = 1 pattern at 218.75 Hz, lightly damped), and the n = 6 double pole resolved at every order into a half
-    with the n = 6 shape at ``half_hz`` and a half whose shape reads as n = ``twin_n`` (what a notch or noise
-    left of it) at ``twin_hz``: the pair's centre is their mean."""
+    """Hand-made SSI poles at 16 radial angles: ring modes n = 1…5 (109.9…198.3 Hz), 6 and 7 (259.0 Hz), the
+    cavity (an n = 1 pattern at 218.75 Hz, lightly damped), and the n = 6 double pole resolved at every order
+    into a half with the n = 6 shape at ``half_hz`` and a half whose shape reads as n = ``twin_n`` (what a
+    notch or noise left of it) at ``twin_hz``, damped ``twin_zeta``: the pair's centre is their mean."""
     from ringfit.targets.clustering import summarize
     from ringfit.targets.ssi import PoleSet
 
