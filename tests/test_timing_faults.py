@@ -230,3 +230,101 @@ def test_profile_counts_the_time_a_faulty_stream_covers(how):
     else:
         word = {"inserted": "stalled stream", "held": "dropped", "dropped": "dropped"}[how]
         assert len(said) == 1 and "timing faults" in said[0] and word in said[0]
+
+
+def _twin_case(twin_n, twin_hz=227.70, half_hz=228.16, orders=(10, 12, 14, 16), twin_zeta=0.025):
+    """Hand-made SSI poles at 16 radial angles: ring modes n = 1…5 (109.9…198.3 Hz), 6 and 7 (259.0 Hz), the
+    cavity (an n = 1 pattern at 218.75 Hz, lightly damped), and the n = 6 double pole resolved at every order
+    into a half with the n = 6 shape at ``half_hz`` and a half whose shape reads as n = ``twin_n`` (what a
+    notch or noise left of it) at ``twin_hz``, damped ``twin_zeta``: the pair's centre is their mean."""
+    from ringfit.targets.clustering import summarize
+    from ringfit.targets.ssi import PoleSet
+
+    th = np.arange(16) * 2 * np.pi / 16
+    axis = np.full(16, "radial", dtype=object)
+    rng = np.random.default_rng(5)
+
+    def shape(k, weak6=0.0):
+        v = np.cos(k * th + 0.3) + weak6 * np.cos(6 * th) + 0.02 * rng.standard_normal(16)
+        return v / np.linalg.norm(v)
+
+    members = [(109.9, 0.025, 1, 0.0), (125.2, 0.025, 2, 0.0), (145.9, 0.025, 3, 0.0), (170.8, 0.025, 4, 0.0),
+               (198.3, 0.025, 5, 0.0), (218.75, 0.007, 1, 0.0), (half_hz, 0.025, 6, 0.0),
+               (twin_hz, twin_zeta, twin_n, 0.35), (259.0, 0.025, 7, 0.0)]
+    order, f, z, phi, group = [], [], [], [], []
+    for g, (fm, zm, k, weak6) in enumerate(members):
+        for o in orders:
+            order.append(o), f.append(fm * (1 + 1e-5 * rng.standard_normal())), z.append(zm)
+            phi.append(shape(k, weak6).astype(complex)), group.append(g)
+    f, z = np.array(f), np.array(z)
+    lam = -z * 2 * np.pi * f + 1j * 2 * np.pi * f * np.sqrt(1 - z**2)
+    poles = PoleSet(order=np.array(order), freq_hz=f, damping=z, lam=lam, shape=np.array(phi),
+                    orders=np.array(orders), singular_values=np.ones(4))
+    group = np.array(group)
+    modes = [summarize(poles, np.flatnonzero(group == g)) for g in range(len(members))]
+    return poles, modes, th, axis
+
+
+@pytest.mark.parametrize("twin_n", [1, 6, 7])
+def test_a_double_pole_is_one_row_whatever_n_its_twin_reads(twin_n):
+    """Issue 34 item 7: the two halves of the n = 6 double pole, one read as n = 1 (near the cavity frequency:
+    it passed for the cavity), as n = 7 (a tie in the ring's order with n = 6 itself) or as n = 6, make one structural row at the pair's centre with its split; the
+    cavity 4 % away stays its own acoustic row."""
+    from ringfit.targets.identify import mode_table
+
+    poles, modes, th, axis = _twin_case(twin_n)
+    notes = []
+    table, _ = mode_table(modes, th, axis, "ssi-cov", poles=poles, cavity_hz=218.75, notes=notes)
+    near = np.flatnonzero(np.abs(table.freq_hz / 227.93 - 1) < 0.01)
+    assert near.size == 1, list(zip(table.kind, table.freq_hz))
+    i = int(near[0])
+    assert table.kind[i] == "structural" and table.n[i] == 6
+    assert abs(table.freq_hz[i] - (227.70 + 228.16) / 2) < 0.01  # the pair's centre, not one half
+    assert abs(float(table.extra["split_hz"][i]) - 0.46) < 0.01
+    assert list(table.n[table.kind == "structural"]) == [1, 2, 3, 4, 5, 6, 7]
+    cav = np.flatnonzero(table.kind == "acoustic")
+    assert cav.size == 1 and abs(table.freq_hz[cav[0]] - 218.75) < 0.01
+    assert any("found twice" in s and "227.70" in s for s in notes) == (twin_n != 6)
+
+
+def test_a_twin_outside_the_fixed_tolerance_but_within_the_modes_spread_is_merged():
+    """A twin 0.7 % from its half (beyond TWICE_TOL) whose own frequencies spread over the orders by more than
+    that is still the same double pole (the pole's own uncertainty), never a second row."""
+    from ringfit.targets.identify import mode_table
+
+    poles, modes, th, axis = _twin_case(1, twin_hz=226.55, half_hz=228.16)
+    twin = modes[7].pole_index
+    poles.freq_hz[twin] += np.array([-0.8, 0.8, -0.8, 0.8])  # σ over the orders ≈ 0.9 Hz
+    from ringfit.targets.clustering import summarize
+
+    modes[7] = summarize(poles, twin)
+    table, _ = mode_table(modes, th, axis, "ssi-cov", poles=poles, cavity_hz=218.75, notes=[])
+    near = np.flatnonzero(np.abs(table.freq_hz / 227.4 - 1) < 0.01)
+    assert near.size == 1 and table.kind[near[0]] == "structural" and table.n[near[0]] == 6
+
+
+def test_a_lightly_damped_row_beside_a_mode_is_dropped_not_averaged_in():
+    """A not-ring-like row at 0.1 % of the n = 6 mode but damped 0.4 % against its 2.5 % (what a notch leaves of
+    a hum line, not the pair's other half) is still no second row, and its poles do not move the mode."""
+    from ringfit.targets.identify import mode_table
+
+    poles, modes, th, axis = _twin_case(1, twin_zeta=0.004)
+    table, _ = mode_table(modes, th, axis, "ssi-cov", poles=poles, cavity_hz=218.75, notes=[])
+    near = np.flatnonzero(np.abs(table.freq_hz / 228.0 - 1) < 0.01)
+    assert near.size == 1 and table.n[near[0]] == 6
+    assert abs(table.freq_hz[near[0]] - 228.16) < 0.01 and abs(table.damping_pct[near[0]] - 2.5) < 0.01
+
+
+def test_a_ring_mode_read_as_n1_near_the_cavity_is_not_called_acoustic():
+    """The n = 6 mode whose only row reads n = 1 (the hum left its shape so) 4 % from eq. 22's cavity frequency:
+    damped like the ring (2.5 %), it is not the air (the cavity row, 0.7 %, stays acoustic); it is unclassified
+    and says why."""
+    from ringfit.targets.identify import mode_table
+
+    poles, modes, th, axis = _twin_case(1)
+    del modes[6]  # the half with the n = 6 shape: never clustered
+    table, _ = mode_table(modes, th, axis, "ssi-cov", poles=poles, cavity_hz=218.75, notes=[])
+    i = int(np.argmin(np.abs(table.freq_hz - 227.70)))
+    assert abs(table.freq_hz[i] - 227.70) < 0.01 and table.kind[i] == "unclassified"
+    assert "damped like the ring (2.50 %" in table.extra["reason"][i]
+    assert list(table.freq_hz[table.kind == "acoustic"].round(2)) == [218.75]

@@ -11,7 +11,9 @@ Rule (documented, deterministic):
    shapes and stay apart; the two poles of a double pole are joined through
    the mixed shapes the pair shows at the orders that do not resolve it, and
    pairs that are resolved at every order are merged afterwards by n
-   (:func:`merge_pairs`, which needs the sensor angles).
+   (:func:`merge_pairs`, which needs the sensor angles); a half whose shape
+   reads another n (what a notch or the noise left of it) is merged into the
+   ring-like half at its frequency (:func:`merge_twins`).
 3. A group is a mode if it has poles in at least ``min_share`` of the model
    orders that can hold a mode: the orders of the sweep from the lowest one
    with any stable pole in the band upwards. A physical mode, once the model
@@ -29,7 +31,7 @@ Rule (documented, deterministic):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -140,3 +142,33 @@ def merge_pairs(poles: PoleSet, modes: list[PhysicalMode], n: np.ndarray, pair_t
             if merged:
                 break
     return modes, np.asarray(n, dtype=np.int64)
+
+
+#: The two halves of a double pole merged by :func:`merge_twins` have dampings within this factor of each other.
+TWIN_DAMPING = 2.0
+
+
+def merge_twins(poles: PoleSet | None, modes: list[PhysicalMode], n: np.ndarray,
+                pairs: list[tuple[int, int]]) -> tuple[list[PhysicalMode], np.ndarray]:
+    """Merge each ``(twin, into)`` of ``pairs``: the twin, a row that is not ring-like at the frequency of the
+    ring-like row ``into``, is the other half of its double pole whose shape reads another n. With ``poles``
+    (SSI) the halves' poles are summarised together (the frequency is the pair's centre, the split theirs) and
+    the merged mode keeps ``into``'s shape basis (hence its n); without (FRF peaks), or when the twin's damping
+    is not within a factor :data:`TWIN_DAMPING` of the mode's (the two halves of a double pole share their
+    damping; a lightly damped hum residue beside a mode does not), the twin is dropped and its poles with it.
+
+    **Returns:** ``(modes, n)`` after merging, in the order of ``modes``.
+    """
+    twins: dict[int, list[int]] = {}
+    for i, j in pairs:
+        zi, zj = modes[int(i)].damping, modes[int(j)].damping
+        if zi > 0 and zj > 0 and 1 / TWIN_DAMPING <= zi / zj <= TWIN_DAMPING:
+            twins.setdefault(int(j), []).append(int(i))
+    drop = {int(i) for i, _ in pairs}
+    modes = list(modes)
+    if poles is not None:
+        for j, ii in twins.items():
+            union = np.concatenate([modes[j].pole_index, *(modes[i].pole_index for i in ii)])
+            modes[j] = replace(summarize(poles, union), basis=modes[j].basis, shape=modes[j].shape)
+    keep = [k for k in range(len(modes)) if k not in drop]
+    return [modes[k] for k in keep], np.asarray(n, dtype=np.int64)[keep]

@@ -83,8 +83,11 @@ IMPACT_GUARD_S = 0.005
 #: Mains frequencies [Hz] and their relative tolerance.
 MAINS_HZ = (50.0, 60.0)
 MAINS_TOL = 0.004
-#: A hum line stands this many times above the median power around it (±15 Hz).
+#: A hum line stands this many times above the median power around it (±HUM_AROUND_HZ, or beyond the main
+#: lobe out to twice its width where the late half is short: 0.19 s of a 0.4-s record has a 13 Hz lobe, and
+#: ±15 Hz beyond it held 3 bins, too few to judge, so the hum of short records was never found).
 HUM_RATIO = 50.0
+HUM_AROUND_HZ = 15.0
 #: A hum line keeps its amplitude over the late half within this factor.
 HUM_STEADY = 1.6
 #: A hum line's amplitude is at least this share of the rms of the late half (weaker lines do not matter).
@@ -226,7 +229,7 @@ def hum_lines(x: np.ndarray, fs_hz: float, start: int, f_top_hz: float) -> list[
             k = near[np.argmax(p[near])]
             if k in (near[0], near[-1]) or not p[k - 1] <= p[k] >= p[k + 1]:
                 continue  # the slope of something else, not a line here
-            ring = (np.abs(f - f[k]) <= 15.0) & (np.abs(f - f[k]) > width)
+            ring = (np.abs(f - f[k]) <= max(HUM_AROUND_HZ, 2 * width)) & (np.abs(f - f[k]) > width)
             if ring.sum() >= 8 and p[k] >= HUM_RATIO * np.median(p[ring]):
                 cands.append((float(p[k]), int(k), fh))
     picked = []  # (frequency of the peak bin, nominal harmonic)

@@ -185,15 +185,24 @@ CAVITY_TOL = 0.08
 CAVITY_MIN_CONFIDENCE = 0.5
 
 
+#: An acoustic row is lighter damped than the rubber: its damping below this share of the ring-like rows' median
+#: (the air's losses are the walls'; the example's cavity 0.7 % against 2.5 %). A ring mode whose shape the hum
+#: left reading n = 1 near the cavity frequency keeps the ring's damping (2.4 % against 2.5 %).
+AIR_DAMPING_SHARE = 0.75
+
+
 def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, not_ring: np.ndarray,
-                  cavity_hz: float | None, tol: float = CAVITY_TOL, lines_hz=(), duration_s: float = np.inf
+                  cavity_hz: float | None, tol: float = CAVITY_TOL, lines_hz=(), duration_s: float = np.inf,
+                  damping: np.ndarray | None = None, ring_damping: float = np.nan
                   ) -> tuple[np.ndarray, np.ndarray]:
     """``structural``, ``acoustic`` or ``unclassified`` for each row, and the reason of each unclassified one.
 
     A row that is ring-like (``not_ring`` False) is ``structural``. A row that is not is ``acoustic`` only with
     evidence: its frequency within ``tol`` of the cavity frequency ``cavity_hz`` (eq. 22, docs/physics.md §3.6)
-    AND an n = 1-like shape (dominant harmonic 1 holding at least :data:`CAVITY_MIN_CONFIDENCE` of the power);
-    otherwise it is ``unclassified`` and the reason says which evidence is missing. Any row on a mains line
+    AND an n = 1-like shape (dominant harmonic 1 holding at least :data:`CAVITY_MIN_CONFIDENCE` of the power)
+    AND, given ``damping`` (rows,) and the ring-like rows' median ``ring_damping``, lighter damped than the
+    rubber (below :data:`AIR_DAMPING_SHARE` of it); otherwise it is ``unclassified`` and the reason says which
+    evidence is missing. Any row on a mains line
     that was notched (``lines_hz``, :func:`~ringfit.targets.faults.on_notched_line`) is ``unclassified``.
 
     **Returns:** ``(kind, reason)``, object arrays (rows,); reason ``""`` for structural rows only (an
@@ -221,10 +230,19 @@ def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, no
             off = freq_hz[i] / cavity_hz - 1
             near = abs(off) <= tol
             one = int(n[i]) == 1 and confidence[i] >= CAVITY_MIN_CONFIDENCE
-            if near and one:
+            light = (damping is None or not np.isfinite(ring_damping) or ring_damping <= 0
+                     or damping[i] < AIR_DAMPING_SHARE * ring_damping)
+            if near and one and not light:
+                why.append(f"damped like the ring ({100 * damping[i]:.2f} % against the ring modes' median "
+                           f"{100 * ring_damping:.2f} %; the air is lighter damped than "
+                           f"{100 * AIR_DAMPING_SHARE:g} % of it): not the cavity")
+            if near and one and light:
                 kind[i] = "acoustic"
                 reason[i] = (f"the cavity: not ring-like, {100 * off:+.1f} % from eq. 22's {cavity_hz:.2f} Hz "
-                             f"(tolerance ±{100 * tol:g} %) with the cavity's n = 1 pattern ({shape})")
+                             f"(tolerance ±{100 * tol:g} %) with the cavity's n = 1 pattern ({shape})"
+                             + (f", lighter damped than the ring ({100 * damping[i]:.2f} % against "
+                                f"{100 * ring_damping:.2f} %)" if damping is not None and np.isfinite(ring_damping)
+                                and ring_damping > 0 else ""))
                 continue
             if not near:
                 why.append(f"not the cavity: {100 * off:+.0f} % from eq. 22's {cavity_hz:.2f} Hz "
@@ -239,15 +257,21 @@ def classify_rows(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, no
 #: (its shape read through what the notch or the noise left, or a half of the double pole clustered apart): the
 #: split of a ring mode's double pole is well under it, the cavity and its nearest ring mode lie further apart.
 TWICE_TOL = 0.005
+#: ... or within 3 σ of the two rows' frequencies (their spread over the model orders), up to this: the distance
+#: within which two rows of the same n are the two halves of one double pole
+#: (:func:`~ringfit.targets.clustering.merge_pairs`).
+TWICE_CAP = 0.01
 
 
 def found_twice(freq_hz: np.ndarray, kind: np.ndarray, tol: float = TWICE_TOL,
-                skip: np.ndarray | None = None) -> list[tuple[int, int]]:
+                skip: np.ndarray | None = None, freq_std_hz: np.ndarray | None = None,
+                cap: float = TWICE_CAP) -> list[tuple[int, int]]:
     """``[(row, structural_row)]``: each row that is not ``structural`` within ``tol`` (relative) of a structural
-    row, with the nearest such row; rows where ``skip`` is True (on a notched mains line: what the hum left,
-    not the mode) are not paired."""
+    row — or within 3 σ of the two (``freq_std_hz``), up to ``cap`` — with the nearest such row; rows where
+    ``skip`` is True (on a notched mains line: what the hum left, not the mode) are not paired."""
     freq_hz = np.asarray(freq_hz, dtype=np.float64)
     kind = np.asarray(kind, dtype=object)
+    std = np.zeros_like(freq_hz) if freq_std_hz is None else np.nan_to_num(np.asarray(freq_std_hz, np.float64))
     st = np.flatnonzero(kind == "structural")
     out = []
     if not st.size:
@@ -257,8 +281,9 @@ def found_twice(freq_hz: np.ndarray, kind: np.ndarray, tol: float = TWICE_TOL,
         other &= ~np.asarray(skip, dtype=bool)
     for i in np.flatnonzero(other):
         off = np.abs(freq_hz[st] / freq_hz[i] - 1)
-        j = int(np.argmin(off))
-        if off[j] <= tol:
+        allowed = np.minimum(cap, np.maximum(tol, 3 * np.hypot(std[i], std[st]) / freq_hz[i]))
+        j = int(np.argmin(off / allowed))
+        if off[j] <= allowed[j]:
             out.append((int(i), int(st[j])))
     return out
 
@@ -278,20 +303,39 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     modes. A kept one is ``acoustic`` only with evidence, else
     ``unclassified`` with the reason (:func:`classify_rows`; ``cavity_hz``
     the cavity frequency of eq. 22 for the tyre, None: nothing is called acoustic; ``lines_hz`` the notched
-    mains lines and ``duration_s`` the records' length). A row that is not ring-like within :data:`TWICE_TOL`
-    of a structural row is the same mode found twice (:func:`found_twice`): it is merged into the structural
-    row, and ``notes`` (when given) gets a line saying so.
+    mains lines and ``duration_s`` the records' length). Before any row is classified, a row that is not
+    ring-like within :data:`TWICE_TOL` (or 3 σ, up to :data:`TWICE_CAP`) of a ring-like row, and not on a
+    notched mains line, is the other half of that mode's double pole whatever n its shape reads
+    (:func:`found_twice`): its poles are merged into the ring-like row
+    (:func:`~ringfit.targets.clustering.merge_twins`), and ``notes`` (when given) gets a line saying so.
 
     Extra columns: ``n_confidence``, ``split_hz``, ``travelling``, ``damping_std_pct``, ``reason``.
 
     **Returns:** ``(table, modes)`` with ``modes`` in table order.
     """
+    from ringfit.targets.clustering import merge_pairs, merge_twins
+    from ringfit.targets.faults import on_notched_line
+
     modes = list(modes)
     n = np.array([mode_number(m.basis, angle_rad, axis)[0] for m in modes], dtype=np.int64)
     if poles is not None:
-        from ringfit.targets.clustering import merge_pairs
-
         modes, n = merge_pairs(poles, modes, n)
+    # the two halves of one double pole whose second half's shape reads another n (issue 34): one row, before
+    # anything is classified (a half read as n = 1 near the cavity frequency must not become an acoustic row)
+    conf = np.array([mode_number(m.basis, angle_rad, axis)[1] for m in modes])
+    freq = np.array([m.freq_hz for m in modes])
+    not_ring = acoustic_candidates(n, conf, freq, min_confidence)
+    on_line = np.array([on_notched_line(float(f), lines_hz, duration_s) is not None for f in freq], dtype=bool)
+    twice = found_twice(freq, np.where(not_ring | on_line, "other", "structural"), skip=on_line,
+                        freq_std_hz=np.array([m.freq_std_hz for m in modes]))
+    if twice:
+        if notes is not None:
+            shown = ", ".join(f"{freq[i]:.2f} Hz (not ring-like, its shape reads n = {int(n[i])}) beside the "
+                              f"n = {int(n[j])} mode at {freq[j]:.2f} Hz" for i, j in twice[:4])
+            notes.append(f"{len(twice)} mode(s) found twice, once as a structural mode and once as a row that is not "
+                         f"ring-like within {100 * TWICE_TOL:g} % of it (or 3 σ of the two, up to "
+                         f"{100 * TWICE_CAP:g} %): {shown}; merged into the structural row (one double pole)")
+        modes, n = merge_twins(poles, modes, n, twice)
     conf, trav = [], []
     for m in modes:
         k, c = mode_number(m.basis, angle_rad, axis)
@@ -312,17 +356,7 @@ def mode_table(modes: Sequence[PhysicalMode], angle_rad: np.ndarray, axis: np.nd
     keep = ~not_ring | ~(damping > spurious_damping_factor * ref)
     idx = np.flatnonzero(keep)
     kind, reason = classify_rows(n[idx], conf[idx], freq[idx], not_ring[idx], cavity_hz, lines_hz=lines_hz,
-                                 duration_s=duration_s)
-    twice = found_twice(freq[idx], kind, skip=np.array([str(r).startswith("on the mains line") for r in reason]))
-    if twice:
-        if notes is not None:
-            shown = ", ".join(f"{freq[idx][i]:.2f} Hz ({kind[i]}) beside the n = {int(n[idx][j])} mode at "
-                              f"{freq[idx][j]:.2f} Hz" for i, j in twice[:4])
-            notes.append(f"{len(twice)} mode(s) found twice, once as a structural mode and once as a row that is not "
-                         f"ring-like within {100 * TWICE_TOL:g} % of it: {shown}; merged into the structural row")
-        drop = {i for i, _ in twice}
-        sel = np.array([i not in drop for i in range(idx.size)], dtype=bool)
-        idx, kind, reason = idx[sel], kind[sel], reason[sel]
+                                 duration_s=duration_s, damping=damping[idx], ring_damping=float(ref))
     modes = [modes[i] for i in idx]
     fmt = lambda x: f"{x:.6g}" if np.isfinite(x) else ""  # noqa: E731  (empty: unknown)
     table = ModeTable(

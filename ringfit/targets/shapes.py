@@ -143,7 +143,9 @@ def acoustic_candidates(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarr
     A mode is flagged when its dominant harmonic is weak (``confidence <
     min_confidence``) or when its n breaks the ring's order: among the
     confident modes sorted by frequency, the longest subsequence with
-    non-decreasing n (n ≥ 1) is the ring; the others are flagged.
+    non-decreasing n (n ≥ 1) is the ring; the others are flagged. Of equally long subsequences the one with
+    the larger summed confidence is the ring (a half of a double pole whose shape reads the next n, a little
+    below its mode, would otherwise tie with the mode itself).
 
     **Returns:** bool array (modes,).
     """
@@ -151,17 +153,18 @@ def acoustic_candidates(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarr
     conf = np.asarray(confidence)
     flag = conf < min_confidence
     idx = np.flatnonzero(~flag & (n >= 1))
-    idx = idx[np.argsort(np.asarray(freq_hz)[idx])]
+    idx = idx[np.argsort(np.asarray(freq_hz)[idx], kind="stable")]
     seq = n[idx]
     if seq.size:
         best = np.ones(seq.size, int)
+        score = conf[idx].astype(np.float64)
         prev = np.full(seq.size, -1)
         for i in range(seq.size):
             for j in range(i):
-                if seq[j] <= seq[i] and best[j] + 1 > best[i]:
-                    best[i], prev[i] = best[j] + 1, j
+                if seq[j] <= seq[i] and (best[j] + 1, score[j] + conf[idx[i]]) > (best[i], score[i]):
+                    best[i], score[i], prev[i] = best[j] + 1, score[j] + conf[idx[i]], j
         keep = set()
-        i = int(np.argmax(best))
+        i = max(range(seq.size), key=lambda k: (best[k], score[k]))
         while i >= 0:
             keep.add(int(idx[i]))
             i = int(prev[i])
