@@ -135,6 +135,8 @@ class NullResult:
     observed: dict
     p: dict
     note: str
+    #: what else the null's draws did (the random-line null: labels its assignments overrode per draw)
+    extra: dict = None
 
     @property
     def draws(self) -> int:
@@ -150,7 +152,8 @@ class NullResult:
                 "mean_pct": round(100 * float(np.mean(self.t_null)), 2),
                 "sd_pct": round(100 * float(np.std(self.t_null)), 2),
                 "observed_pct": round(100 * self.observed[element], 2),
-                "p_value": p, "p_mc_error": round(math.sqrt(p * (1 - p) / self.draws), 4)}
+                "p_value": p, "p_mc_error": round(math.sqrt(p * (1 - p) / self.draws), 4),
+                **({"labels_overridden_in_draws": self.extra} if self.extra else {})}
 
 
 def _p_values(t_null: np.ndarray, observed: dict) -> dict:
@@ -259,6 +262,8 @@ def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, dr
     s_ho = np.broadcast_to(sig, (draws, m)).copy()
     base_sigma = problem.meta.get("sigma_matched", problem.sigma)
     loaded_draws = None
+    overridden = np.zeros(draws, dtype=int)
+    labelled = 0
     for g in groups:
         rows = g["rows"]
         if frequencies is not None:
@@ -275,6 +280,9 @@ def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, dr
             for where, ix in swaps:
                 idx[:, where] = ix
             s = g["sigma"](f, s, idx[:, rows], loaded_draws)
+            if "overrides" in g:
+                overridden += g["overrides"](idx[:, rows], loaded_draws)
+                labelled += g.get("labelled_rows", 0)
         else:
             idx[:, rows] = g["assign"](f)
             if "hz" in g:  # two lines within reach → the mixture, as in the measured table
@@ -295,14 +303,21 @@ def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, dr
         ss_o = sum_of_squares(problem, heldout_linear(lin, y, 1.0 / problem.sigma**2, folds), sig)[0]
         observed[el] = float(1.0 - ss_o / max(ss_base_obs, 1e-300))
     n_rows = int(sum(g["rows"].size for g in groups))
-    kind = (f"random-line: the {n_rows} rows matched by frequency redrawn uniformly over their table's span and "
-            "matched by the diagnosis's rule; labelled test rows drawn from the baseline")
+    kind = (f"random-line: the {n_rows} rows whose line the data choose (no label, or a label the assignment may "
+            "override) redrawn uniformly over their table's span, labels kept, and matched by the diagnosis's "
+            "rule; rows pinned by their labels drawn from the baseline")
     if loaded_draws is not None:
         kind += (f"; the rolling rows' model structure chosen per draw by the same rule as the measured rows "
                  f"(the rolling, loaded model in {int(np.sum(loaded_draws))} of {draws} draws, else the free "
                  "spinning ring)")
+    extra = {}
+    if labelled:
+        extra = {"labelled_rows": labelled, "overridden_median": float(np.median(overridden)),
+                 "overridden_q05": float(np.quantile(overridden, 0.05)),
+                 "overridden_q95": float(np.quantile(overridden, 0.95))}
     return NullResult(kind, t_null, observed, _p_values(t_null, observed),
-                      "held-out shrink of the chain plus the best candidate over the baseline (linearised refits)")
+                      "held-out shrink of the chain plus the best candidate over the baseline (linearised refits)",
+                      extra)
 
 
 def verdict_sentence(effect: str, null: NullResult, element: str, alpha: float) -> str:
