@@ -670,6 +670,7 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
                                          cavity_hz=cavity_hz, table_patch=[p[0] for p in patches], rolling=rolling)
     if choice is not None:  # the model structure the rolling rows were assigned to (docs/formats.md §5)
         problems[0].meta["rolling_structure"] = choice.record()
+        problems[0].meta["label_counts"] = label_counts(tables, rows, rolling_records, choice)
     _ambiguity(problems[0], rows, choice)
     problems[0].meta.update(table_names=[table_label(t, i) for i, t in enumerate(tables)], patches=patches,
                             spins=spins, outer_radius_m=float(geometry.outer_radius))
@@ -763,7 +764,8 @@ def _usable(effects, mrows, domain_note):
         if mask is None:
             dropped[e.name] = "does not act on mode tables"
         elif not np.any(mask):
-            dropped[e.name] = domain_note
+            # the damping problem's note stays its own; the frequency problem says what would make the effect apply
+            dropped[e.name] = e.applies_when if e.applies_when and domain_note.startswith("no row") else domain_note
         else:
             usable.append(e)
     return tuple(usable), dropped
@@ -790,7 +792,7 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
     n = np.array([r["n"] for r in rows], dtype=float)
     ref = np.array([r["reference"] for r in rows])
     std = np.array([r["std"] for r in rows])
-    usable, dropped = _usable(effects, mrows, "no row of these mode tables is affected (no loaded/spinning table)")
+    usable, dropped = _usable(effects, mrows, "no row of these mode tables is affected")
     sizes = tuple(len(e.params_for("modes")) for e in usable)
     # --- noise
     spread = _identification_spread(tables)
@@ -1086,7 +1088,7 @@ def _rolling_group(choice, rows, matchable, extra, m):
         for b in range(f.shape[0]):
             ri, ci = linear_sum_assignment(np.minimum(c[b], 1e6))
             col[b, ri] = ci
-        return starts[None, :] + col
+        return np.broadcast_to(starts, col.shape) + col
 
     def draw(rng, B):
         # per table, uniform over its span at its row count (sorted, as a table lists its rows)
@@ -1134,8 +1136,41 @@ def _rolling_group(choice, rows, matchable, extra, m):
             col += k
         return total
 
+    def permuted(rng, B, y):
+        """The label-permutation test's draws: the measured frequencies ``y`` ``(m,)`` kept, the labels of each
+        table's rows shuffled among them (B permutations); the structure chosen and the rows assigned again with
+        the shuffled labels' penalties. **Returns** ``(idx (B, r), swaps, loaded (B,))`` as :func:`choose`."""
+        perms = []
+        pens = {name: {} for name in (LOADED, FREE)}
+        for s_ in segments:
+            k = s_["rows"].size
+            perms.append(np.argsort(rng.random((B, k)), axis=1))
+        for t, tb in choice.tables.items():
+            for name in (LOADED, FREE):
+                pens[name][t] = np.broadcast_to(np.asarray(tb["pen"][name], dtype=np.float64),
+                                                (B,) + np.shape(tb["pen"][name])).copy()
+        for s_, perm in zip(segments, perms):
+            tb = choice.tables[s_["table"]]
+            pos = {int(j): k for k, j in enumerate(tb["rows"])}
+            where = np.array([pos[int(j)] for j in s_["rows"]])
+            for name in (LOADED, FREE):
+                pens[name][s_["table"]][:, where] = s_[name][3][perm]
+        loaded = choice.choose({t: np.broadcast_to(y[tb["rows"]], (B, tb["rows"].size))
+                                for t, tb in choice.tables.items()}, pens)
+        out = []
+        for s_, perm in zip(segments, perms):
+            f = np.broadcast_to(y[s_["rows"]], perm.shape)
+            res = []
+            for name in (LOADED, FREE):
+                starts, hz, cost, pen = s_[name]
+                res.append(hungarian(f, s_["std"], starts[perm], hz, cost, pen[perm]))
+            out.append(np.where(loaded[:, None], res[0], res[1]))
+        same = loaded if chosen == LOADED else ~loaded
+        lab = np.where(same[:, None], labelled[None, :], swapped[None, :])
+        return np.concatenate(out, axis=1), [(labelled, lab)], loaded
+
     return dict(kind="rolling tables", table=segments[0]["table"], rows=all_rows, draw=draw, choose=choose,
-                sigma=sigma, chosen=chosen, overrides=overrides,
+                sigma=sigma, chosen=chosen, overrides=overrides, permuted=permuted,
                 labelled_rows=int(sum(1 for j in all_rows if _has_label(rows[j]))))
 
 
@@ -1147,3 +1182,18 @@ LABEL_OVERRIDE = 2.0
 def _has_label(r: dict) -> bool:
     """Whether a row came with any label (n, tag or branch)."""
     return r.get("label_n", r["n"]) >= 0 or bool(r["tag"]) or bool(r["branch"])
+
+
+def label_counts(tables, rows, records, choice) -> dict:
+    """Per rolling table, the labels its assignment kept and overrode (docs/formats.md §5 ``verdict.labels``):
+    ``{table name: {"rows", "labelled", "kept", "overridden", "unlabelled"}}``. A label is overridden when the
+    row's line contradicts it (its n, branch, or a tag whose symmetry the line does not share: the matching's
+    ``label_conflicts``)."""
+    out = {}
+    for t in sorted(choice.tables):
+        js = [j for j, r in enumerate(rows) if r["table"] == t and r.get("rolling_matched")]
+        lab = [j for j in js if _has_label(rows[j])]
+        over = [j for j in lab if (records or {}).get(j, {}).get("label_conflicts")]
+        out[table_label(tables[t], t)] = {"rows": len(js), "labelled": len(lab), "kept": len(lab) - len(over),
+                                          "overridden": len(over), "unlabelled": len(js) - len(lab)}
+    return out

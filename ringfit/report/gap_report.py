@@ -350,6 +350,9 @@ def write_gap_report(diag, path: str | os.PathLike, *, overwrite: bool = False) 
         costs = ", ".join(f"{esc(name.get(k, k))} {v}" for k, v in st["cost"].items())
         summary += (f"<p><b>Rolling rows</b> assigned to {esc(name.get(st['chosen'], st['chosen']))}, chosen by "
                     f"their lines' fit (cost −2 ln L, lower wins: {costs}).</p>")
+    lab = c["verdict"].get("labels")
+    if lab:  # labels are evidence: kept, overridden, and whether shuffled labels fit as well (docs/formats.md §5)
+        summary += f"<p><b>Labels:</b> {esc(lab['sentence'])}.</p>"
     summary += _drift_html(b.get("drift"))
     cal = c["verdict"].get("calibration") or []
     if cal:
