@@ -176,17 +176,54 @@ def _phase_randomised(res: np.ndarray, series, rng, B: int) -> np.ndarray:
     return out
 
 
+#: The rig's nuisances the profile baseline does not model, carried by the nuisance null of profiles
+#: (:func:`parametric_null` ``nuisances=True``): a per-revolution gain that drifts linearly over the session (runs
+#: in speed order) by up to this much end to end, either sign (a slow sensor/DAQ gain drift: 1–4 %) …
+GAIN_DRIFT_MAX = 0.04
+#: … and a per-run angle jitter of this σ [deg] (the recorded angle's trigger uncertainty between runs).
+ANGLE_JITTER_DEG = 0.2
+
+
+def _nuisances(problem: GapProblem, pred: np.ndarray, rng, B: int) -> np.ndarray:
+    """``(B, m)`` the current prediction as the rig's nuisances move it per draw: a gain ``1 + d·(rank − ½)`` per
+    run (rank 0 … 1 in speed order, d uniform in ±:data:`GAIN_DRIFT_MAX`) and a shift of each run by a random angle
+    (σ :data:`ANGLE_JITTER_DEG`, the prediction's angular derivative, spectral, per run and channel)."""
+    lab = problem.labels
+    prof = np.asarray(lab["profile"])
+    series = np.asarray(lab["series"])
+    P = int(prof.max()) + 1
+    speeds = np.array([float(np.asarray(lab["speed_kmh"])[prof == p][0]) for p in range(P)])
+    rank = np.argsort(np.argsort(speeds, kind="stable"), kind="stable") / max(P - 1, 1)
+    d = rng.uniform(-GAIN_DRIFT_MAX, GAIN_DRIFT_MAX, (B, 1))
+    gain = 1.0 + d * (rank[None, :] - 0.5)  # (B, P)
+    jitter = np.radians(ANGLE_JITTER_DEG) * rng.standard_normal((B, P))
+    deriv = np.empty_like(pred)
+    for s_ in np.unique(series):
+        sel = np.flatnonzero(series == s_)
+        x = pred[sel]
+        k = np.fft.rfftfreq(x.size, d=1.0 / x.size)  # revolution harmonics
+        deriv[sel] = np.fft.irfft(1j * k * np.fft.rfft(x), n=x.size)  # d/dφ, φ over one revolution (2π)
+    return gain[:, prof] * pred[None, :] + jitter[:, prof] * deriv[None, :]
+
+
 def parametric_null(problem: GapProblem, current, fits: dict, chain: tuple, elements, draws: int = DRAWS,
-                    seed: int = 0) -> NullResult:
+                    seed: int = 0, nuisances: bool = False) -> NullResult:
     """The parametric null of one round (module docstring): data from ``current`` (the fit of ``chain``), the
-    candidates ``elements`` (each fitted in ``fits[chain + parts(element)]``) refitted linearly."""
+    candidates ``elements`` (each fitted in ``fits[chain + parts(element)]``) refitted linearly. ``nuisances``
+    (profiles): the current model moved by the rig's nuisances per draw (:func:`_nuisances`: gain drift over the
+    session, angle jitter per run) before the phase-randomised residual (coloured, heteroscedastic per run and
+    channel as measured) is added — the null the rule where the null decides instead of a bar is judged by."""
     rng = np.random.default_rng(seed)
     y = problem.y
     m = problem.m
     pred = np.asarray(current.extra["pred"])
     if problem.domain == "profiles":
-        ystar = pred[None, :] + _phase_randomised(y - pred, np.asarray(problem.labels["series"]), rng, draws)
-        kind = "parametric: the current model plus its residual phase-randomised per run and channel"
+        base = _nuisances(problem, pred, rng, draws) if nuisances else pred[None, :]
+        ystar = base + _phase_randomised(y - pred, np.asarray(problem.labels["series"]), rng, draws)
+        kind = ("parametric: the current model plus its residual phase-randomised per run and channel"
+                + (f"; with the rig's nuisances: a gain drifting by up to ±{100 * GAIN_DRIFT_MAX:g} % over the "
+                   f"session (runs in speed order) and a per-run angle jitter of {ANGLE_JITTER_DEG:g} deg"
+                   if nuisances else ""))
     else:
         ref = problem.meta.get("reference_mask")
         redraw = np.ones(m, dtype=bool) if ref is None else ~np.asarray(ref, dtype=bool)

@@ -405,22 +405,31 @@ def _calibrate(problem, part, chain, current, remaining, entries, alpha, draws, 
         rl = random_line_null(problem, part.fits, chain, elements, draws, seed=100 + round_no)
         if rl is not None:
             nulls.append(rl)
+    # where the null decides instead of a bar (profiles), it must carry the rig's nuisances the baseline does not
+    # model (gain drift over the session, angle jitter; docs/physics.md §6.4): a third null for those candidates
+    rig = None
+    if problem.domain == "profiles" and any(null_decides(c) for c in entries):
+        rig = parametric_null(problem, current, part.fits, chain, elements, draws, seed=200 + round_no, nuisances=True)
     timing = {"wall_s": round(time.perf_counter() - t0, 3), "cpu_s": round(time.process_time() - c0, 3)}
+
+    def name(n):
+        return ("random_line" if n.kind.startswith("random-line") else
+                "parametric_rig_nuisances" if n is rig else "parametric")
+
     for c in entries:
         pending = null_decides(c)
         if not (c["accepted"] or pending) or c["element"] not in elements:
             continue
         el = c["element"]
         c["null_elapsed"] = timing
+        mine = nulls + ([rig] if pending and rig is not None else [])
         # the binding null: the larger p; on a tie (both at their floor 1/(N+1)) the stricter one, whose
         # 95 % quantile is higher, so the sentence quotes the null that would have refused first
-        worst = max(nulls, key=lambda n: (n.p[el], n.summary(el)["q95_pct"]))
+        worst = max(mine, key=lambda n: (n.p[el], n.summary(el)["q95_pct"]))
         c["p_value"] = round(worst.p[el], 5)
-        c["null"] = {("random_line" if n.kind.startswith("random-line") else "parametric"): n.summary(el)
-                     for n in nulls}
+        c["null"] = {name(n): n.summary(el) for n in mine}
         c["null_sentence"] = verdict_sentence(c["effect"], worst, el, alpha)
-        c["null_draws"] = {("random_line" if n.kind.startswith("random-line") else "parametric"): n.t_null.tolist()
-                           for n in nulls}
+        c["null_draws"] = {name(n): n.t_null.tolist() for n in mine}
         if not worst.p[el] < alpha:
             c["accepted"] = False
             c.setdefault("rejected_because", []).append(
