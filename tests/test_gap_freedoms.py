@@ -213,3 +213,33 @@ def test_an_implausible_extensibility_is_not_a_finding(tmp_path):
         p = c["params"]["compliance_per_mn"]
         if p.get("implausible"):
             assert any("physical range" in w for w in c["rejected_because"])
+
+
+@pytest.mark.slow
+def test_a_table_whose_every_row_is_an_outlier_gets_no_effect(tmp_path):
+    """Huber weights and named outliers, worst case: every test row moved by ±6 % (random signs) from a noise-only
+    case's truth — each an outlier far beyond the noise. No effect explains random signs; the residual is not
+    noise: unexplained, with the outliers named."""
+    from ringfit.gap import diagnose
+    from ringfit.synth.cases import make_case
+
+    make_case(tmp_path / "o", "none", seed=1003)
+    rng = np.random.default_rng(5)
+    for p in sorted((tmp_path / "o").glob("*.modes.csv")):
+        if p.name == "free.modes.csv":
+            continue
+        lines = p.read_text().splitlines()
+        head = lines[0].split(",")
+        fi, ki = head.index("freq_hz"), head.index("kind")
+        out = [lines[0]]
+        for line in lines[1:]:
+            cells = line.split(",")
+            if line.strip() and cells[ki] == "structural":
+                cells[fi] = f"{float(cells[fi]) * (1 + 0.06 * rng.choice([-1.0, 1.0])):.5f}"
+            out.append(",".join(cells))
+        p.write_text("\n".join(out) + "\n")
+    d = diagnose(tmp_path / "o", progress=False)
+    v = d.content["verdict"]
+    assert _structural(d.content) == [], v["effects"]
+    assert v["effects"] == ["unexplained"]
+    assert len(v.get("outliers", [])) >= 5
