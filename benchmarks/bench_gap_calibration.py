@@ -37,7 +37,8 @@ cases of ``bench_gap_rolling.py``) twice in the same process, interleaved — wi
 detections the calibration keeps (target ≥ 95 %).
 
 Run: ``python benchmarks/bench_gap_calibration.py [--folders N] [--kinds a,b] [--power N] [--alpha A]
-[--draws D] [--seed-offset S]`` (``--folders`` = ``--per-kind``: null folders per kind; the full size is 100). Figures are refused when any diagnosis failed.
+[--draws D] [--seed-offset S] [--show FOLDER]`` (``--folders`` = ``--per-kind``: null folders per kind; the full size
+is 100; ``--show``: one folder's verdict with every null and the label counts, e.g. the real rolling folder). Figures are refused when any diagnosis failed.
 """
 
 from __future__ import annotations
@@ -71,6 +72,9 @@ def _args(argv):
     p.add_argument("--alpha", type=bc.number("a level in (0, 0.5)", 0.0, 0.5, lo_open=True), default=0.01)
     p.add_argument("--draws", type=bc.count("a number of null draws", 20, 20000), default=200)
     p.add_argument("--seed-offset", type=bc.count("a seed offset", 0, 10**6), default=0)
+    p.add_argument("--show", metavar="FOLDER", default=None,
+                   help="diagnose one case folder (e.g. the source study's real free + rolling tables) and print its "
+                        "verdict with every null's distribution and the label-override counts, then stop")
     a = p.parse_args(argv)
     if a.quick:
         a.per_kind, a.power = 5, 0
@@ -209,9 +213,44 @@ def accepted_effects(content: dict) -> list[str]:
     return eff
 
 
+def show(folder: str, alpha: float, draws: int) -> int:
+    """One folder's verdict with every null's distribution and the labels kept/overridden (issue 30 item 5)."""
+    from ringfit.gap import diagnose
+
+    d, t = bc.timed(diagnose, folder, progress=False, alpha=alpha, null_draws=draws)
+    c = d.content
+    v = c["verdict"]
+    print(f"{folder}: verdict {' + '.join(v['effects'])} (held-out shrink {v.get('heldout_shrink_pct')} %; "
+          f"{t.wall:.1f} s wall, {t.cpu:.1f} s CPU)")
+    if v.get("nearest"):
+        print(f"  nearest candidate: {v['nearest']}")
+    st = c["baseline"].get("rolling_structure")
+    if st:
+        print(f"  structure: {st['chosen']} (cost {st['cost']}, tolerance % {st['tolerance_pct']})")
+    lab = v.get("labels")
+    if lab:
+        print(f"  labels: {lab['sentence']}")
+        for name, n in lab["tables"].items():
+            print(f"    {name}: {n}")
+    for x in v.get("calibration", []):
+        print(f"  accepted: {x['sentence']}")
+    print("\n| candidate | held-out shrink % | accepted | null | median % | q95 % | mean ± sd % | observed % | p |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for x in c["candidates"]:
+        for kind, n in (x.get("null") or {}).items():
+            print(f"| {x['element']} | {x['heldout_shrink_pct']} | {x.get('accepted')} | {kind} | {n['median_pct']} | "
+                  f"{n['q95_pct']} | {n['mean_pct']} ± {n['sd_pct']} | {n['observed_pct']} | {n['p_value']:.3g} |")
+            if n.get("labels_overridden_in_draws"):
+                print(f"|  |  |  | (labels overridden in the draws) | {n['labels_overridden_in_draws']} |  |  |  |  |")
+    return 0
+
+
 def main(argv=None) -> int:
     args = _args(sys.argv[1:] if argv is None else argv)
     import ringfit  # noqa: F401
+
+    if args.show:
+        return show(args.show, args.alpha, args.draws)
     from ringfit.gap import diagnose
     from ringfit.synth.cases import make_case, make_profile_case
 
