@@ -6,7 +6,7 @@ JSON of docs/formats.md §5; progress goes to stderr while candidates are fitted
 
 from __future__ import annotations
 
-from ringfit.cli._args import force_flag, integer, number, quiet_flag
+from ringfit.cli._args import force_flag, number, quiet_flag
 
 
 def register(subparsers) -> None:
