@@ -379,8 +379,8 @@ def label_permutation_test(problem: GapProblem, draws: int = DRAWS, seed: int = 
         return None
     rng = np.random.default_rng(seed)
     y = problem.y
-    idx, _, loaded = g["permuted"](rng, draws, y)
-    kept_null = g["labelled_rows"] - g["overrides"](idx, loaded)
+    _, _, _, over = g["permuted"](rng, draws, y)
+    kept_null = g["labelled_rows"] - over  # each draw's own (shuffled) labels kept
     idx_obs, _, loaded_obs = g["choose"](np.asarray(y, dtype=np.float64)[None, :])
     kept = int(g["labelled_rows"] - g["overrides"](idx_obs, loaded_obs)[0])
     p = float((1 + np.sum(kept_null >= kept)) / (draws + 1))

@@ -1122,16 +1122,22 @@ def _rolling_group(choice, rows, matchable, extra, m):
             col += k
         return out
 
-    def overrides(idx_rows, loaded):
-        """``(B,)`` labels the drawn assignment overrode (the null's count beside the measured one)."""
+    def overrides(idx_rows, loaded, perms=None):
+        """``(B,)`` labels the drawn assignment overrode (the null's count beside the measured one); ``perms``: per
+        segment ``(B, k)`` the label permutation the draws were assigned with (the label-permutation test)."""
         total, col = np.zeros(idx_rows.shape[0], dtype=int), 0
-        for sg in segments:
+        for si, sg in enumerate(segments):
             k = sg["rows"].size
             sl = slice(col, col + k)
             for name, on in ((LOADED, loaded), (FREE, ~loaded)):
                 starts, hz, _, pen = sg[name]
-                ix = np.clip(idx_rows[:, sl] - starts[None, :], 0, hz.size - 1)
-                bad = np.take_along_axis(np.broadcast_to(pen, (ix.shape[0],) + pen.shape), ix[..., None], -1)[..., 0]
+                if perms is None:
+                    start_b = np.broadcast_to(starts, (idx_rows.shape[0], k))
+                    pen_b = np.broadcast_to(pen, (idx_rows.shape[0],) + pen.shape)
+                else:
+                    start_b, pen_b = starts[perms[si]], pen[perms[si]]
+                ix = np.clip(idx_rows[:, sl] - start_b, 0, hz.size - 1)
+                bad = np.take_along_axis(pen_b, ix[..., None], -1)[..., 0]
                 total += np.where(on, np.sum(bad > LABEL_OVERRIDE, axis=1), 0)
             col += k
         return total
@@ -1139,7 +1145,8 @@ def _rolling_group(choice, rows, matchable, extra, m):
     def permuted(rng, B, y):
         """The label-permutation test's draws: the measured frequencies ``y`` ``(m,)`` kept, the labels of each
         table's rows shuffled among them (B permutations); the structure chosen and the rows assigned again with
-        the shuffled labels' penalties. **Returns** ``(idx (B, r), swaps, loaded (B,))`` as :func:`choose`."""
+        the shuffled labels' penalties. **Returns** ``(idx (B, r), swaps, loaded (B,), overridden (B,))``: as
+        :func:`choose`, and the shuffled labels each draw's assignment overrode."""
         perms = []
         pens = {name: {} for name in (LOADED, FREE)}
         for s_ in segments:
@@ -1167,7 +1174,8 @@ def _rolling_group(choice, rows, matchable, extra, m):
             out.append(np.where(loaded[:, None], res[0], res[1]))
         same = loaded if chosen == LOADED else ~loaded
         lab = np.where(same[:, None], labelled[None, :], swapped[None, :])
-        return np.concatenate(out, axis=1), [(labelled, lab)], loaded
+        idx = np.concatenate(out, axis=1)
+        return idx, [(labelled, lab)], loaded, overrides(idx, loaded, perms)
 
     return dict(kind="rolling tables", table=segments[0]["table"], rows=all_rows, draw=draw, choose=choose,
                 sigma=sigma, chosen=chosen, overrides=overrides, permuted=permuted,
