@@ -20,13 +20,22 @@ null draws (Monte-Carlo error √(p(1−p)/N) reported), and stands only when p 
   table is held as measured: it is the baseline's data), the current residual
   phase-randomised per run and channel for profiles (its spectrum kept: coloured noise stays
   coloured). The candidates' statistics are those of linearised refits (below).
-- **random-line** (mode tables whose rows were matched by frequency, i.e. without n): those
-  rows' frequencies are redrawn uniformly over their table's span at its row count and
-  matched by the diagnosis's own rule (the rolling tables: the model structure — rolling, loaded
-  model or free spinning ring — chosen again for every draw by the rule that chose it for the
-  measured rows, then one assignment per table by cost on that structure's lines at the computed
-  condition; other tables: the nearest mode of
-  the model their condition computes); labelled test rows are drawn from the baseline. Its
+- **random-line** (mode tables with rows whose line the data choose: rows without n, and every
+  matched row of a rolling table, whose n, tag or branch the assignment may override at a finite
+  penalty): those rows' frequencies are redrawn uniformly over their table's span at its row count,
+  **their labels kept as given**, and matched by the diagnosis's own rule (the rolling tables: the
+  model structure — rolling, loaded model or free spinning ring — chosen again for every draw by
+  the rule that chose it for the measured rows, τ maximised per draw, with the rows' label
+  penalties, then one assignment per table by cost — z², line weight, label penalties — on that
+  structure's lines at the computed condition; other tables: the nearest mode of the model their
+  condition computes); rows pinned to one line by their labels are drawn from the baseline. The
+  labels each draw overrode are counted beside the measured count.
+- **rig nuisances** (profiles, for a candidate the null accepts in place of the shrink bar): the
+  parametric null with the current model moved per draw by a gain drifting over the session and
+  a per-run angle jitter (:func:`_nuisances`).
+
+Beside the nulls, :func:`label_permutation_test` asks whether the labels of rolling tables carry
+information the model agrees with (labels shuffled among each table's rows, frequencies kept). Its
   statistic is the total shrink of the chain so far plus each candidate against the baseline,
   so a chain of two effects is judged as a whole.
 
