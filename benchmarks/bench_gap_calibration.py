@@ -14,13 +14,31 @@ and counts how often any effect is accepted, per kind of folder, with the rate's
 - ``profile-noise``: ``make_profile_case(effect="none")`` — noise-only rolling profiles (white, pink,
   red and band noise at 0.05–3 m/s²).
 
+Issue 30 (every freedom the diagnosis uses, labels included):
+
+- ``rolling-labelled``: the real free table beside three rolling tables shaped like the source study's
+  (20/40/60 km/h, 4 kN, rotating frame, 12/13/12 rows) whose rows carry n and tag labels in the source
+  study's order (``vert``/``hort`` n = 1, then ``extr``/``0`` for n = 2 …) but frequencies drawn uniformly over
+  the span (75–485 Hz): the issue's reproduction (before: ``ground_contact + rotation`` at 91–98 %, p = 0.005);
+- ``rolling-half-labelled``: the same with every other row's labels removed;
+- ``rolling-tags-only``: the same with tags but no n;
+- ``rolling-mixed-frames``: labelled random tables, the 40 km/h one in the fixed frame;
+- ``rolling-permuted``: the *model's* rolling tables (``make_rolling_case``: frequencies of the rolling, loaded
+  tyre, an effect is in them) with their labels shuffled among each table's rows. An effect may rightly be
+  accepted here; what is counted is the label-permutation test calling these shuffled labels informative
+  (p < α: a false "the labels carry information");
+- ``profile-nuisance``: noise-only profiles (``make_profile_case(effect="none")``) with the rig's nuisances
+  added: a per-revolution gain drifting 1–4 % over the session (runs in speed order, either sign), a per-run
+  angle jitter (σ 0.2°), AR(2) noise (poles 0.9 and 0.5) and 1/f noise, heteroscedastic by run and channel.
+
 With ``--power`` it also diagnoses effect cases (every injected effect of ``bench_gap.py`` and the rolling
 cases of ``bench_gap_rolling.py``) twice in the same process, interleaved — with the calibration
 (``--alpha``) and without it (``null_draws=0``, the rule alone) — and prints the share of the rule's
 detections the calibration keeps (target ≥ 95 %).
 
-Run: ``python benchmarks/bench_gap_calibration.py [--per-kind N] [--kinds a,b] [--power N] [--alpha A]
-[--draws D] [--seed-offset S]``. Figures are refused when any diagnosis failed.
+Run: ``python benchmarks/bench_gap_calibration.py [--folders N] [--kinds a,b] [--power N] [--alpha A]
+[--draws D] [--seed-offset S] [--show FOLDER]`` (``--folders`` = ``--per-kind``: null folders per kind; the full size
+is 100; ``--show``: one folder's verdict with every null and the label counts, e.g. the real rolling folder). Figures are refused when any diagnosis failed.
 """
 
 from __future__ import annotations
@@ -36,18 +54,27 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common as bc  # noqa: E402
 
-KINDS = ("rolling-random", "loaded-random", "modal-noise", "profile-noise")
+KINDS = ("rolling-random", "loaded-random", "modal-noise", "profile-noise", "rolling-labelled",
+         "rolling-half-labelled", "rolling-tags-only", "rolling-mixed-frames", "rolling-permuted", "profile-nuisance")
+#: the source study's label order on a rolling table (n, tag)
+LABELS = [(1, "vert"), (1, "hort"), (2, "extr"), (2, "0"), (3, "extr"), (3, "0"), (4, "extr"), (4, "0"),
+          (5, "extr"), (5, "0"), (6, "extr"), (6, "0"), (7, "extr")]
+LABELLED_COUNTS = (12, 13, 12)
 HEADER = "n,a,tag,kind,freq_hz,freq_std_hz,damping_pct,branch"
 
 
 def _args(argv):
     p = bc.parser(__doc__.split("\n")[0], quick_help="5 folders per kind, no power table (a smoke run)")
-    p.add_argument("--per-kind", type=bc.count("a number of null folders per kind"), default=100)
+    p.add_argument("--per-kind", "--folders", dest="per_kind", type=bc.count("a number of null folders per kind"),
+                   default=100)
     p.add_argument("--kinds", type=bc.choices_list(KINDS, "kinds"), default=list(KINDS))
     p.add_argument("--power", type=bc.count("a number of effect cases per effect (0: none)", 0), default=0)
     p.add_argument("--alpha", type=bc.number("a level in (0, 0.5)", 0.0, 0.5, lo_open=True), default=0.01)
     p.add_argument("--draws", type=bc.count("a number of null draws", 20, 20000), default=200)
     p.add_argument("--seed-offset", type=bc.count("a seed offset", 0, 10**6), default=0)
+    p.add_argument("--show", metavar="FOLDER", default=None,
+                   help="diagnose one case folder (e.g. the source study's real free + rolling tables) and print its "
+                        "verdict with every null's distribution and the label-override counts, then stop")
     a = p.parse_args(argv)
     if a.quick:
         a.per_kind, a.power = 5, 0
@@ -76,6 +103,81 @@ def rolling_random(out: Path, seed: int, counts) -> None:
         _table(out, f"roll{v}", np.sort(rng.uniform(75, 485, m)), [""] * m,
                {"state": "rolling", "load_n": 4000.0, "speed_kmh": float(v), "pressure_bar": 2.2, "frame": "rotating"},
                rng)
+
+
+def rolling_labelled(out: Path, seed: int, mode: str = "full") -> None:
+    """Random frequencies with the source study's labels (``mode``: ``full``, ``half`` — every other row
+    unlabelled —, ``tags`` — tags without n —, ``mixed`` — the 40 km/h table in the fixed frame)."""
+    _copy_free(out)
+    rng = np.random.default_rng(seed)
+    for v, m in zip((20, 40, 60), LABELLED_COUNTS):
+        f = np.sort(rng.uniform(75, 485, m))
+        rows = []
+        for i, (x, (n, t)) in enumerate(zip(f, LABELS)):
+            if mode == "half" and i % 2:
+                n, t = "", ""
+            elif mode == "tags":
+                n = ""
+            rows.append(f"{n},0,{t},structural,{x:.4f},,{rng.uniform(2, 8):.2f},")
+        (out / f"roll{v}.modes.csv").write_text("\n".join([HEADER] + rows) + "\n")
+        frame = "fixed" if mode == "mixed" and v == 40 else "rotating"
+        (out / f"roll{v}.modes.json").write_text(json.dumps(
+            {"state": "rolling", "load_n": 4000.0, "speed_kmh": float(v), "pressure_bar": 2.2, "frame": frame}))
+
+
+def rolling_permuted(out: Path, seed: int) -> None:
+    """``make_rolling_case`` (contact) with the labels (n, tag, branch) shuffled among each rolling table's rows."""
+    from ringfit.synth.cases import make_rolling_case
+
+    make_rolling_case(out, contact=True, seed=seed)
+    rng = np.random.default_rng(10**6 + seed)
+    for p in sorted(out.glob("*.modes.csv")):
+        if p.name == "free.modes.csv":
+            continue
+        lines = p.read_text().splitlines()
+        head = lines[0].split(",")
+        rows = [line.split(",") for line in lines[1:] if line.strip()]
+        cols = [head.index(c) for c in ("n", "tag", "branch") if c in head]
+        struct = [i for i, r in enumerate(rows) if r[head.index("kind")] == "structural"]
+        labels = [[rows[i][c] for c in cols] for i in struct]
+        order = rng.permutation(len(struct))
+        for i, j in zip(struct, order):
+            for c, v in zip(cols, labels[j]):
+                rows[i][c] = v
+        p.write_text("\n".join([lines[0]] + [",".join(r) for r in rows]) + "\n")
+
+
+def _ar2(rng, n: int, a1: float = 1.4, a2: float = -0.45) -> np.ndarray:
+    """Periodic-ish AR(2) noise (poles 0.9 and 0.5), unit σ."""
+    e = rng.standard_normal(n + 200)
+    x = np.zeros_like(e)
+    for i in range(2, e.size):
+        x[i] = a1 * x[i - 1] + a2 * x[i - 2] + e[i]
+    x = x[200:]
+    return x / np.std(x)
+
+
+def profile_nuisance(out: Path, seed: int) -> None:
+    """``make_profile_case(effect="none")`` with the rig's nuisances added (module docstring)."""
+    from ringfit.io.profiles import Profile, read_profile, write_profile
+    from ringfit.synth.cases import coloured_noise, make_profile_case
+
+    make_profile_case(out, effect="none", seed=seed)
+    rng = np.random.default_rng(2 * 10**6 + seed)
+    runs = sorted(out.glob("*.profile.csv"))
+    profiles = [read_profile(p) for p in runs]
+    order = np.argsort(np.argsort([float(p.condition["speed_kmh"]) for p in profiles]))
+    drift = rng.uniform(0.01, 0.04) * rng.choice([-1.0, 1.0])
+    for path, prof, rank in zip(runs, profiles, order):
+        gain = 1.0 + drift * rank / max(len(runs) - 1, 1)
+        n = len(prof)
+        jitter = rng.normal(0.0, 0.2)  # deg: the run's angle origin moves
+        chans = []
+        for ch in (prof.acc_radial_ms2, prof.acc_tangential_ms2):
+            x = np.interp(prof.angle_deg + jitter, prof.angle_deg, ch, period=360.0)
+            level = float(np.std(ch)) * rng.uniform(2e-4, 2e-3)  # heteroscedastic: per run and channel
+            chans.append(gain * x + level * (_ar2(rng, n) + coloured_noise(rng, n, 1.0, "pink")))
+        write_profile(Profile(prof.angle_deg, chans[0], chans[1], condition=prof.condition), path, overwrite=True)
 
 
 def loaded_random(out: Path, seed: int) -> None:
@@ -111,9 +213,44 @@ def accepted_effects(content: dict) -> list[str]:
     return eff
 
 
+def show(folder: str, alpha: float, draws: int) -> int:
+    """One folder's verdict with every null's distribution and the labels kept/overridden (issue 30 item 5)."""
+    from ringfit.gap import diagnose
+
+    d, t = bc.timed(diagnose, folder, progress=False, alpha=alpha, null_draws=draws)
+    c = d.content
+    v = c["verdict"]
+    print(f"{folder}: verdict {' + '.join(v['effects'])} (held-out shrink {v.get('heldout_shrink_pct')} %; "
+          f"{t.wall:.1f} s wall, {t.cpu:.1f} s CPU)")
+    if v.get("nearest"):
+        print(f"  nearest candidate: {v['nearest']}")
+    st = c["baseline"].get("rolling_structure")
+    if st:
+        print(f"  structure: {st['chosen']} (cost {st['cost']}, tolerance % {st['tolerance_pct']})")
+    lab = v.get("labels")
+    if lab:
+        print(f"  labels: {lab['sentence']}")
+        for name, n in lab["tables"].items():
+            print(f"    {name}: {n}")
+    for x in v.get("calibration", []):
+        print(f"  accepted: {x['sentence']}")
+    print("\n| candidate | held-out shrink % | accepted | null | median % | q95 % | mean ± sd % | observed % | p |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for x in c["candidates"]:
+        for kind, n in (x.get("null") or {}).items():
+            print(f"| {x['element']} | {x['heldout_shrink_pct']} | {x.get('accepted')} | {kind} | {n['median_pct']} | "
+                  f"{n['q95_pct']} | {n['mean_pct']} ± {n['sd_pct']} | {n['observed_pct']} | {n['p_value']:.3g} |")
+            if n.get("labels_overridden_in_draws"):
+                print(f"|  |  |  | (labels overridden in the draws) | {n['labels_overridden_in_draws']} |  |  |  |  |")
+    return 0
+
+
 def main(argv=None) -> int:
     args = _args(sys.argv[1:] if argv is None else argv)
     import ringfit  # noqa: F401
+
+    if args.show:
+        return show(args.show, args.alpha, args.draws)
     from ringfit.gap import diagnose
     from ringfit.synth.cases import make_case, make_profile_case
 
@@ -136,14 +273,25 @@ def main(argv=None) -> int:
                     loaded_random(folder, seed)
                 elif kind == "modal-noise":
                     make_case(folder, effect="none", seed=seed)
-                else:
+                elif kind == "profile-noise":
                     make_profile_case(folder, effect="none", seed=seed)
+                elif kind.startswith("rolling-") and kind != "rolling-permuted":
+                    rolling_labelled(folder, seed, {"rolling-labelled": "full", "rolling-half-labelled": "half",
+                                                    "rolling-tags-only": "tags",
+                                                    "rolling-mixed-frames": "mixed"}[kind])
+                elif kind == "rolling-permuted":
+                    rolling_permuted(folder, seed)
+                else:
+                    profile_nuisance(folder, seed)
                 try:
                     d, t = bc.timed(diagnose, folder, progress=False, alpha=args.alpha, null_draws=args.draws)
                 except Exception as exc:  # noqa: BLE001 - counted and reported: no figures then
                     failures.add(f"{kind} seed {seed}", f"{type(exc).__name__}: {exc}")
                     continue
                 eff = accepted_effects(d.content)
+                if kind == "rolling-permuted":  # the false claim counted here: shuffled labels called informative
+                    perm = (d.content["verdict"].get("labels") or {}).get("permutation") or {}
+                    eff = ["labels informative"] if perm.get("p_value", 1.0) < args.alpha else []
                 rows.append((eff, t.wall, t.cpu))
                 print(f"  {kind:15s} seed {seed:5d}: {' + '.join(d.content['verdict']['effects']):40s} "
                       f"{'FALSE ACCEPT ' + '+'.join(eff) if eff else ''} ({rows[-1][1]:.1f} s wall, "
@@ -160,6 +308,7 @@ def main(argv=None) -> int:
         k = sum(1 for e, _, _ in rows if e)
         lo, hi = clopper_pearson(k, n)
         ok = "met" if k / n <= target else "NOT met"
+        ok = ok if n >= 100 else ok + f" (n = {n} < 100: indicative)"
         print(f"| {kind} | {n} | {k} | {100 * k / n:.1f} % | {100 * lo:.1f} … {100 * hi:.1f} % | {ok} | "
               f"{np.median([w for _, w, _ in rows]):.1f} s / {np.median([c for _, _, c in rows]):.1f} s |")
     if args.power:

@@ -6,7 +6,7 @@ JSON of docs/formats.md §5; progress goes to stderr while candidates are fitted
 
 from __future__ import annotations
 
-from ringfit.cli._args import force_flag, integer, number, quiet_flag
+from ringfit.cli._args import force_flag, number, quiet_flag
 
 #: Draws per null distribution unless ``--null-draws`` says otherwise (what ``campaign`` runs).
 DEFAULT_NULL_DRAWS = 200
@@ -31,9 +31,9 @@ def register(subparsers) -> None:
                    help="profile noise σ [m/s²] instead of estimating it")
     p.add_argument("--alpha", type=number("a significance level in (0, 0.5]", lo=0.0, hi=0.5, lo_open=True),
                    default=0.01, help="an accepted effect must beat chance (its null) at this level (default 0.01)")
-    p.add_argument("--null-draws", type=integer("a count of null draws, 20 … 20000", lo=20, hi=20000),
-                   default=DEFAULT_NULL_DRAWS,
-                   help=f"draws per null distribution (default {DEFAULT_NULL_DRAWS}; p is resolved to 1/(draws + 1))")
+    p.add_argument("--null-draws", type=_null_draws, default=DEFAULT_NULL_DRAWS,
+                   help=f"draws per null distribution (default {DEFAULT_NULL_DRAWS}; p is resolved to 1/(draws + 1)); "
+                        "0: no null, the rule's fixed bars alone decide (docs/physics.md §6.4; not recommended)")
     p.add_argument("--tyre", default=None, metavar="TYRE.toml",
                    help="baseline ring as identified or fitted before (ringfit identify / fit), used as it is with "
                         "its [ring.covariance]: one ring per tyre (default: fit free.modes.csv)")
@@ -127,3 +127,16 @@ def parse_effects(text: str | None) -> list[str] | None:
     if unknown:
         raise InputError(f"unknown effect(s) {unknown}; known: {', '.join(available())}", source="--effects")
     return effects
+
+
+def _null_draws(text: str) -> int:
+    """``--null-draws``: 0 (no null: the fixed bars of the rule stand, docs/physics.md §6.4) or 20 … 20000."""
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        value = None
+    if value is None or not (value == 0 or 20 <= value <= 20000):
+        raise argparse.ArgumentTypeError(f"expected 0 (no null) or a count of null draws, 20 … 20000; got {text!r}")
+    return value

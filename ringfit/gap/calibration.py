@@ -20,13 +20,22 @@ null draws (Monte-Carlo error √(p(1−p)/N) reported), and stands only when p 
   table is held as measured: it is the baseline's data), the current residual
   phase-randomised per run and channel for profiles (its spectrum kept: coloured noise stays
   coloured). The candidates' statistics are those of linearised refits (below).
-- **random-line** (mode tables whose rows were matched by frequency, i.e. without n): those
-  rows' frequencies are redrawn uniformly over their table's span at its row count and
-  matched by the diagnosis's own rule (the rolling tables: the model structure — rolling, loaded
-  model or free spinning ring — chosen again for every draw by the rule that chose it for the
-  measured rows, then one assignment per table by cost on that structure's lines at the computed
-  condition; other tables: the nearest mode of
-  the model their condition computes); labelled test rows are drawn from the baseline. Its
+- **random-line** (mode tables with rows whose line the data choose: rows without n, and every
+  matched row of a rolling table, whose n, tag or branch the assignment may override at a finite
+  penalty): those rows' frequencies are redrawn uniformly over their table's span at its row count,
+  **their labels kept as given**, and matched by the diagnosis's own rule (the rolling tables: the
+  model structure — rolling, loaded model or free spinning ring — chosen again for every draw by
+  the rule that chose it for the measured rows, τ maximised per draw, with the rows' label
+  penalties, then one assignment per table by cost — z², line weight, label penalties — on that
+  structure's lines at the computed condition; other tables: the nearest mode of the model their
+  condition computes); rows pinned to one line by their labels are drawn from the baseline. The
+  labels each draw overrode are counted beside the measured count.
+- **rig nuisances** (profiles, for a candidate the null accepts in place of the shrink bar): the
+  parametric null with the current model moved per draw by a gain drifting over the session and
+  a per-run angle jitter (:func:`_nuisances`).
+
+Beside the nulls, :func:`label_permutation_test` asks whether the labels of rolling tables carry
+information the model agrees with (labels shuffled among each table's rows, frequencies kept). Its
   statistic is the total shrink of the chain so far plus each candidate against the baseline,
   so a chain of two effects is judged as a whole.
 
@@ -135,6 +144,8 @@ class NullResult:
     observed: dict
     p: dict
     note: str
+    #: what else the null's draws did (the random-line null: labels its assignments overrode per draw)
+    extra: dict = None
 
     @property
     def draws(self) -> int:
@@ -150,7 +161,8 @@ class NullResult:
                 "mean_pct": round(100 * float(np.mean(self.t_null)), 2),
                 "sd_pct": round(100 * float(np.std(self.t_null)), 2),
                 "observed_pct": round(100 * self.observed[element], 2),
-                "p_value": p, "p_mc_error": round(math.sqrt(p * (1 - p) / self.draws), 4)}
+                "p_value": p, "p_mc_error": round(math.sqrt(p * (1 - p) / self.draws), 4),
+                **({"labels_overridden_in_draws": self.extra} if self.extra else {})}
 
 
 def _p_values(t_null: np.ndarray, observed: dict) -> dict:
@@ -173,17 +185,54 @@ def _phase_randomised(res: np.ndarray, series, rng, B: int) -> np.ndarray:
     return out
 
 
+#: The rig's nuisances the profile baseline does not model, carried by the nuisance null of profiles
+#: (:func:`parametric_null` ``nuisances=True``): a per-revolution gain that drifts linearly over the session (runs
+#: in speed order) by up to this much end to end, either sign (a slow sensor/DAQ gain drift: 1–4 %) …
+GAIN_DRIFT_MAX = 0.04
+#: … and a per-run angle jitter of this σ [deg] (the recorded angle's trigger uncertainty between runs).
+ANGLE_JITTER_DEG = 0.2
+
+
+def _nuisances(problem: GapProblem, pred: np.ndarray, rng, B: int) -> np.ndarray:
+    """``(B, m)`` the current prediction as the rig's nuisances move it per draw: a gain ``1 + d·(rank − ½)`` per
+    run (rank 0 … 1 in speed order, d uniform in ±:data:`GAIN_DRIFT_MAX`) and a shift of each run by a random angle
+    (σ :data:`ANGLE_JITTER_DEG`, the prediction's angular derivative, spectral, per run and channel)."""
+    lab = problem.labels
+    prof = np.asarray(lab["profile"])
+    series = np.asarray(lab["series"])
+    P = int(prof.max()) + 1
+    speeds = np.array([float(np.asarray(lab["speed_kmh"])[prof == p][0]) for p in range(P)])
+    rank = np.argsort(np.argsort(speeds, kind="stable"), kind="stable") / max(P - 1, 1)
+    d = rng.uniform(-GAIN_DRIFT_MAX, GAIN_DRIFT_MAX, (B, 1))
+    gain = 1.0 + d * (rank[None, :] - 0.5)  # (B, P)
+    jitter = np.radians(ANGLE_JITTER_DEG) * rng.standard_normal((B, P))
+    deriv = np.empty_like(pred)
+    for s_ in np.unique(series):
+        sel = np.flatnonzero(series == s_)
+        x = pred[sel]
+        k = np.fft.rfftfreq(x.size, d=1.0 / x.size)  # revolution harmonics
+        deriv[sel] = np.fft.irfft(1j * k * np.fft.rfft(x), n=x.size)  # d/dφ, φ over one revolution (2π)
+    return gain[:, prof] * pred[None, :] + jitter[:, prof] * deriv[None, :]
+
+
 def parametric_null(problem: GapProblem, current, fits: dict, chain: tuple, elements, draws: int = DRAWS,
-                    seed: int = 0) -> NullResult:
+                    seed: int = 0, nuisances: bool = False) -> NullResult:
     """The parametric null of one round (module docstring): data from ``current`` (the fit of ``chain``), the
-    candidates ``elements`` (each fitted in ``fits[chain + parts(element)]``) refitted linearly."""
+    candidates ``elements`` (each fitted in ``fits[chain + parts(element)]``) refitted linearly. ``nuisances``
+    (profiles): the current model moved by the rig's nuisances per draw (:func:`_nuisances`: gain drift over the
+    session, angle jitter per run) before the phase-randomised residual (coloured, heteroscedastic per run and
+    channel as measured) is added — the null the rule where the null decides instead of a bar is judged by."""
     rng = np.random.default_rng(seed)
     y = problem.y
     m = problem.m
     pred = np.asarray(current.extra["pred"])
     if problem.domain == "profiles":
-        ystar = pred[None, :] + _phase_randomised(y - pred, np.asarray(problem.labels["series"]), rng, draws)
-        kind = "parametric: the current model plus its residual phase-randomised per run and channel"
+        base = _nuisances(problem, pred, rng, draws) if nuisances else pred[None, :]
+        ystar = base + _phase_randomised(y - pred, np.asarray(problem.labels["series"]), rng, draws)
+        kind = ("parametric: the current model plus its residual phase-randomised per run and channel"
+                + (f"; with the rig's nuisances: a gain drifting by up to ±{100 * GAIN_DRIFT_MAX:g} % over the "
+                   f"session (runs in speed order) and a per-run angle jitter of {ANGLE_JITTER_DEG:g} deg"
+                   if nuisances else ""))
     else:
         ref = problem.meta.get("reference_mask")
         redraw = np.ones(m, dtype=bool) if ref is None else ~np.asarray(ref, dtype=bool)
@@ -259,6 +308,8 @@ def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, dr
     s_ho = np.broadcast_to(sig, (draws, m)).copy()
     base_sigma = problem.meta.get("sigma_matched", problem.sigma)
     loaded_draws = None
+    overridden = np.zeros(draws, dtype=int)
+    labelled = 0
     for g in groups:
         rows = g["rows"]
         if frequencies is not None:
@@ -275,6 +326,9 @@ def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, dr
             for where, ix in swaps:
                 idx[:, where] = ix
             s = g["sigma"](f, s, idx[:, rows], loaded_draws)
+            if "overrides" in g:
+                overridden += g["overrides"](idx[:, rows], loaded_draws)
+                labelled += g.get("labelled_rows", 0)
         else:
             idx[:, rows] = g["assign"](f)
             if "hz" in g:  # two lines within reach → the mixture, as in the measured table
@@ -295,14 +349,56 @@ def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, dr
         ss_o = sum_of_squares(problem, heldout_linear(lin, y, 1.0 / problem.sigma**2, folds), sig)[0]
         observed[el] = float(1.0 - ss_o / max(ss_base_obs, 1e-300))
     n_rows = int(sum(g["rows"].size for g in groups))
-    kind = (f"random-line: the {n_rows} rows matched by frequency redrawn uniformly over their table's span and "
-            "matched by the diagnosis's rule; labelled test rows drawn from the baseline")
+    kind = (f"random-line: the {n_rows} rows whose line the data choose (no label, or a label the assignment may "
+            "override) redrawn uniformly over their table's span, labels kept, and matched by the diagnosis's "
+            "rule; rows pinned by their labels drawn from the baseline")
     if loaded_draws is not None:
         kind += (f"; the rolling rows' model structure chosen per draw by the same rule as the measured rows "
                  f"(the rolling, loaded model in {int(np.sum(loaded_draws))} of {draws} draws, else the free "
                  "spinning ring)")
+    extra = {}
+    if labelled:
+        extra = {"labelled_rows": labelled, "overridden_median": float(np.median(overridden)),
+                 "overridden_q05": float(np.quantile(overridden, 0.05)),
+                 "overridden_q95": float(np.quantile(overridden, 0.95))}
     return NullResult(kind, t_null, observed, _p_values(t_null, observed),
-                      "held-out shrink of the chain plus the best candidate over the baseline (linearised refits)")
+                      "held-out shrink of the chain plus the best candidate over the baseline (linearised refits)",
+                      extra)
+
+
+def label_permutation_test(problem: GapProblem, draws: int = DRAWS, seed: int = 2) -> dict | None:
+    """The label-permutation test (docs/physics.md §6.4, docs/formats.md §5 ``verdict.labels``): do the labels of
+    the rolling tables carry information the model agrees with? The measured frequencies are kept; the labels (n,
+    tag, branch) of each rolling table's rows are shuffled among them, and the whole assignment is repeated exactly
+    as for the measured rows (the model structure chosen with the shuffled labels' penalties, its τ maximised, then
+    the Hungarian assignment). Statistic: the number of labels the assignment keeps (its line agrees with them);
+    ``p = (1 + #{kept* ≥ kept})/(N + 1)`` — small when the model agrees with the labels as given far more often
+    than with the same labels put on other rows. (The held-out shrink against the baseline is not the statistic
+    here: the baseline reads the labels too, so shuffled labels make the baseline worse rather than the candidates
+    better; and the candidates' own held-out fit favours whichever assignment takes the nearest lines, which shuffled
+    labels, all overridden, do.) ``None`` where no rolling table's rows carry labels the assignment may override."""
+    from ringfit.gap.modal import line_problem
+
+    setup = line_problem(problem)
+    if setup is None:
+        return None
+    _, groups, _ = setup
+    g = next((g for g in groups if "permuted" in g), None)
+    if g is None or not g.get("labelled_rows"):
+        return None
+    rng = np.random.default_rng(seed)
+    y = problem.y
+    _, _, _, over = g["permuted"](rng, draws, y)
+    kept_null = g["labelled_rows"] - over  # each draw's own (shuffled) labels kept
+    idx_obs, _, loaded_obs = g["choose"](np.asarray(y, dtype=np.float64)[None, :])
+    kept = int(g["labelled_rows"] - g["overrides"](idx_obs, loaded_obs)[0])
+    p = float((1 + np.sum(kept_null >= kept)) / (draws + 1))
+    return {"draws": int(draws), "labelled_rows": int(g["labelled_rows"]),
+            "statistic": "labels the assignment keeps, with the labels as given against the labels shuffled among "
+                         "each rolling table's rows (frequencies kept, the structure choice and assignment repeated)",
+            "observed_kept": kept, "null_kept_median": float(np.median(kept_null)),
+            "null_kept_q95": float(np.quantile(kept_null, 0.95)),
+            "p_value": round(p, 5), "p_mc_error": round(math.sqrt(p * (1 - p) / draws), 4)}
 
 
 def verdict_sentence(effect: str, null: NullResult, element: str, alpha: float) -> str:
@@ -317,4 +413,4 @@ def verdict_sentence(effect: str, null: NullResult, element: str, alpha: float) 
 
 
 __all__ = ["ALPHA", "DRAWS", "Linearised", "linearise", "heldout_linear", "sum_of_squares", "candidate_shrinks", "NullResult",
-           "parametric_null", "random_line_null", "verdict_sentence"]
+           "parametric_null", "random_line_null", "label_permutation_test", "verdict_sentence"]

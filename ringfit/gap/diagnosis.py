@@ -159,8 +159,11 @@ def _candidate_entry(problem: GapProblem, element: str, fit: FitResult, current:
             se = float(cond_sd.get(p.name, 0.0)) if computed else fit.stderr[names[i]]
             plo, phi = v - 1.959964 * se, v + 1.959964 * se
             key = p.name if len(parts(element)) == 1 else f"{name}.{p.name}"
+            a, b = p.physical_range
             params[key] = {"value": _r(v, 6), "lo": _r(max(plo, p.lo), 6), "hi": _r(min(phi, p.hi), 6),
                            "null": p.null, "unit": p.unit, "excludes_null": bool(abs(v - p.null) > 1.959964 * se),
+                           "physical_range": [a, b],
+                           **({"implausible": True} if not computed and not (a - 1e-12 <= v <= b + 1e-12) else {}),
                            **({"fixed_by": "the measured condition"} if computed else {}),
                            **_physical(problem, name, p.name, v, se)}
     partners = tuple(sorted(partners))
@@ -402,22 +405,31 @@ def _calibrate(problem, part, chain, current, remaining, entries, alpha, draws, 
         rl = random_line_null(problem, part.fits, chain, elements, draws, seed=100 + round_no)
         if rl is not None:
             nulls.append(rl)
+    # where the null decides instead of a bar (profiles), it must carry the rig's nuisances the baseline does not
+    # model (gain drift over the session, angle jitter; docs/physics.md §6.4): a third null for those candidates
+    rig = None
+    if problem.domain == "profiles" and any(null_decides(c) for c in entries):
+        rig = parametric_null(problem, current, part.fits, chain, elements, draws, seed=200 + round_no, nuisances=True)
     timing = {"wall_s": round(time.perf_counter() - t0, 3), "cpu_s": round(time.process_time() - c0, 3)}
+
+    def name(n):
+        return ("random_line" if n.kind.startswith("random-line") else
+                "parametric_rig_nuisances" if n is rig else "parametric")
+
     for c in entries:
         pending = null_decides(c)
         if not (c["accepted"] or pending) or c["element"] not in elements:
             continue
         el = c["element"]
         c["null_elapsed"] = timing
+        mine = nulls + ([rig] if pending and rig is not None else [])
         # the binding null: the larger p; on a tie (both at their floor 1/(N+1)) the stricter one, whose
         # 95 % quantile is higher, so the sentence quotes the null that would have refused first
-        worst = max(nulls, key=lambda n: (n.p[el], n.summary(el)["q95_pct"]))
+        worst = max(mine, key=lambda n: (n.p[el], n.summary(el)["q95_pct"]))
         c["p_value"] = round(worst.p[el], 5)
-        c["null"] = {("random_line" if n.kind.startswith("random-line") else "parametric"): n.summary(el)
-                     for n in nulls}
+        c["null"] = {name(n): n.summary(el) for n in mine}
         c["null_sentence"] = verdict_sentence(c["effect"], worst, el, alpha)
-        c["null_draws"] = {("random_line" if n.kind.startswith("random-line") else "parametric"): n.t_null.tolist()
-                           for n in nulls}
+        c["null_draws"] = {name(n): n.t_null.tolist() for n in mine}
         if not worst.p[el] < alpha:
             c["accepted"] = False
             c.setdefault("rejected_because", []).append(
@@ -427,6 +439,53 @@ def _calibrate(problem, part, chain, current, remaining, entries, alpha, draws, 
             c["null_overruled"] = c.pop("rejected_because")
             c["null_sentence"] += (" — the null test decides instead of the fixed shrink bar or its bootstrap bound "
                                    "(verdict.null_decides)")
+
+
+def _nearest(rounds, chain) -> dict:
+    """An ``unexplained`` verdict's nearest candidate (docs/formats.md §5 ``verdict.nearest``): the refitted candidate
+    of the last round with the largest held-out shrink, and why it was refused; ``{}`` otherwise."""
+    if chain[-1:] != ("unexplained",) or not rounds:
+        return {}
+    tried = [c for c in rounds[-1] if not c.get("screened_out") and c.get("heldout_shrink_pct") is not None]
+    if not tried:
+        return {}
+    c = max(tried, key=lambda c: c["heldout_shrink_pct"])
+    return {"effect": c["effect"], "element": c["element"], "heldout_shrink_pct": c["heldout_shrink_pct"],
+            "rejected_because": c.get("rejected_because", [])}
+
+
+def _labels_evidence(problem, part, rounds, alpha, draws) -> dict:
+    """``verdict.labels`` (docs/formats.md §5): per rolling table the labels the assignment kept and overrode, the
+    label-permutation test of the first round's best refitted candidate
+    (:func:`ringfit.gap.calibration.label_permutation_test`) and a sentence; ``{}`` without rolling tables.
+    ``rests_on``: the clause an accepted verdict's sentence gets when its rows' labels were overridden."""
+    counts = problem.meta.get("label_counts")
+    if problem.domain != "modes" or not counts:
+        return {}
+    labelled = sum(v["labelled"] for v in counts.values())
+    over = sum(v["overridden"] for v in counts.values())
+    out = {"tables": counts, "labelled": labelled, "kept": labelled - over, "overridden": over}
+    if labelled and draws > 0:
+        from ringfit.gap.calibration import label_permutation_test
+
+        perm = label_permutation_test(problem, draws)
+        if perm is not None:
+            out["permutation"] = perm
+    perm = out.get("permutation")
+    said = f"the assignment kept {labelled - over} of {labelled} labels of the rolling tables and overrode {over}"
+    if perm is not None:
+        agree = perm["p_value"] < alpha
+        said += (f"; label permutation: shuffled labels keep {perm['null_kept_median']:g} (median), these keep "
+                 f"{perm['observed_kept']}: p = {perm['p_value']:.3g} over {perm['draws']} shuffles — "
+                 + ("the labels carry information the model agrees with" if agree else
+                    "inconclusive: the labels carry no information the model agrees with"))
+    out["sentence"] = said
+    if over:
+        out["rests_on"] = (f"; it rests on rows whose labels the assignment overrode ({over} of {labelled} labels)"
+                           + ("" if perm is None or perm["p_value"] < alpha else
+                              ", and shuffled labels fit as well (the labels carry no information the model agrees "
+                              "with)"))
+    return out
 
 
 def _computed_first(problem, part, chain, accepted, entries, alpha) -> str:
@@ -532,7 +591,9 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
             _calibrate(problem, part, chain, current, remaining, entries, alpha, null_draws, len(rounds))
         accepted = [c for c in entries if c["accepted"]]
         if not accepted:
-            if cur["structured"]:
+            # `none` only when the residual is noise: a residual that fails the noise test with nothing to explain
+            # it is `unexplained` (once an effect was found, the structured level decides whether a gap remains)
+            if cur["structured"] or not chain:
                 chain = chain + ("unexplained",)
             break
         best = _computed_first(problem, part, chain, accepted, entries, alpha)
@@ -554,8 +615,9 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
         cur = _structure(problem, current_ho)
     part.chain_fit = current
     effects_list = [effect_of(c) for c in chain] or ["none"]
+    labels = _labels_evidence(problem, part, rounds, alpha, null_draws)
     calibrated = [{"effect": c["effect"], "variant": c["variant"], "p_value": c["p_value"],
-                   "sentence": c.get("null_sentence", "")}
+                   "sentence": c.get("null_sentence", "") + (labels.get("rests_on", "") if labels else "")}
                   for r in rounds for c in r if c.get("accepted") and "p_value" in c]
     ss_f = float(np.sum(problem.standardised(y - current_ho, heldout=True) ** 2))
     names = _row_names(problem)
@@ -564,10 +626,13 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
     explains = [names[i] for i in range(len(names)) if abs(zb[i]) > 2 and abs(zf[i]) <= 2]
     leaves = [names[i] for i in range(len(names)) if abs(zf[i]) > 2]
     outliers = [names[i] for i in range(len(names)) if abs(raw[i]) > OUTLIER_Z]
+    nearest = _nearest(rounds, chain)
     verdict = {"effect": effects_list[0], "effects": effects_list,
+               **({"nearest": nearest} if nearest else {}),
                "variants": [_variant(c) for c in chain if c != "unexplained"],
                **({"simplified": simplified} if simplified else {}),
                "alpha": alpha, "null_draws": int(null_draws), "calibration": calibrated,
+               **({"labels": {k: v for k, v in labels.items() if k != "rests_on"}} if labels else {}),
                "heldout_shrink_pct": _r(100.0 * (1.0 - ss_f / ss_b), 2) if effects_list[0] not in
                ("none", "unexplained") and ss_b > 0 else 0.0,
                **({"explains": explains, "leaves": leaves, "outliers": outliers} if names else {}),

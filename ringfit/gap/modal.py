@@ -653,6 +653,9 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
     rows, cavity_hz = _table_rows(tables, geometry, patches, spins, splits)
     for r in rows:  # rows whose n (and type) the table leaves to matching by frequency: the random-line null's rows
         r["matchable"] = (not r["reference"]) and r["n"] < 0
+        # the labels as the table gave them (the assignment of a rolling table may override them: the random-line
+        # null re-assigns such rows with these labels and their penalties, calibration.py)
+        r["label_n"], r["label_contact"], r["label_patch"] = r["n"], r["contact"], r["patch"]
     rolling, rolling_notes, rolling_records, choice = assign_rolling_rows(tables, rows, ring_ref, geometry, patches)
     if rolling is not None:
         for ti, note in rolling.notes.items():
@@ -667,6 +670,7 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
                                          cavity_hz=cavity_hz, table_patch=[p[0] for p in patches], rolling=rolling)
     if choice is not None:  # the model structure the rolling rows were assigned to (docs/formats.md §5)
         problems[0].meta["rolling_structure"] = choice.record()
+        problems[0].meta["label_counts"] = label_counts(tables, rows, rolling_records, choice)
     _ambiguity(problems[0], rows, choice)
     problems[0].meta.update(table_names=[table_label(t, i) for i, t in enumerate(tables)], patches=patches,
                             spins=spins, outer_radius_m=float(geometry.outer_radius))
@@ -760,7 +764,8 @@ def _usable(effects, mrows, domain_note):
         if mask is None:
             dropped[e.name] = "does not act on mode tables"
         elif not np.any(mask):
-            dropped[e.name] = domain_note
+            # the damping problem's note stays its own; the frequency problem says what would make the effect apply
+            dropped[e.name] = e.applies_when if e.applies_when and domain_note.startswith("no row") else domain_note
         else:
             usable.append(e)
     return tuple(usable), dropped
@@ -787,7 +792,7 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
     n = np.array([r["n"] for r in rows], dtype=float)
     ref = np.array([r["reference"] for r in rows])
     std = np.array([r["std"] for r in rows])
-    usable, dropped = _usable(effects, mrows, "no row of these mode tables is affected (no loaded/spinning table)")
+    usable, dropped = _usable(effects, mrows, "no row of these mode tables is affected")
     sizes = tuple(len(e.params_for("modes")) for e in usable)
     # --- noise
     spread = _identification_spread(tables)
@@ -946,7 +951,7 @@ def line_problem(problem: GapProblem):
     L = problem.meta.get("lines")
     rows = L.rows if L is not None else []
     m = len(rows)
-    matchable = [j for j, r in enumerate(rows) if r.get("matchable")]
+    matchable = [j for j, r in enumerate(rows) if r.get("matchable") or _label_free(r, L.rolling_lines)]
     if not matchable:
         problem.meta["line_problem"] = None
         return None
@@ -989,15 +994,48 @@ def line_problem(problem: GapProblem):
     return problem.meta["line_problem"]
 
 
+def _label_free(r: dict, choice) -> bool:
+    """Whether the data choose a row's line although the table may label it: a structural row of a rolling table
+    assigned by the matching cost, where a contradicted label costs a finite penalty (``ringfit campbell``'s
+    :data:`~ringfit.gap.campbell.LABEL_PENALTY`) — the assignment may override its n, tag or branch. Such a row
+    is redrawn by the random-line null like a row without labels (its labels kept, docs/physics.md §6.4)."""
+    return bool(choice is not None and r.get("rolling_matched") and r["table"] in choice.tables)
+
+
+def _line_row(r: dict, name: str, ln: dict) -> dict:
+    """The row ``r`` (labels as the table gave them) assigned to the line ``ln`` of structure ``name``: the fields
+    the measured assignment gives it (:func:`ringfit.gap.rolling_rows.assign_rolling_rows`) — the line's mode,
+    sensor line, n, wave and loaded-mode type, except where the row's own label says otherwise (a given n stays
+    the row's n; a given branch its wave; a given tag its loaded-mode type)."""
+    from ringfit.gap.rolling_rows import LOADED
+
+    f = dict(ln["fields"])
+    n0 = r.get("label_n", r["n"])
+    if n0 >= 1:
+        f["n"] = n0
+    if name == LOADED:
+        if r["branch"]:
+            f["wave"] = ""
+        c0 = r.get("label_contact", 0)
+        if c0:
+            f["contact"], f["patch"] = c0, r.get("label_patch", f["patch"])
+    return {**r, **f, "freq": ln["hz"], "matchable": False, "line_hz": ln["hz"]}
+
+
 def _rolling_group(choice, rows, matchable, extra, m):
-    """The random-line null's group of the rolling tables' rows matched by frequency (:func:`line_problem`): the
-    model structure chosen per draw by the case's own rule (:class:`ringfit.gap.rolling_rows.StructureChoice`,
-    from every structural row of the rolling tables: the drawn rows and the labelled rows as drawn), then one
-    assignment per table under that structure by the matching cost of ``ringfit campbell`` (Hungarian). Adds to
-    ``extra`` one line-problem row per line of either structure, and per labelled rolling row its copy with the
-    other structure's assignment (swapped in on draws that choose the other structure). ``None`` without such rows."""
+    """The random-line null's group of the rolling tables' rows whose line the data choose (:func:`line_problem`):
+    rows without labels and rows whose labels the assignment may override (:func:`_label_free`: every matched row
+    of a rolling table), redrawn uniformly over their table's span with their labels kept. The model structure is
+    chosen per draw by the case's own rule (:class:`ringfit.gap.rolling_rows.StructureChoice`, its τ maximised per
+    draw, the rows' label penalties included), then one assignment per table under that structure by the matching
+    cost of ``ringfit campbell`` (Hungarian; z² + the line's weight cost + the row's label penalties, τ of the
+    measured assignment). Adds to ``extra`` one line-problem row per line of either structure and per distinct
+    label set of a table's rows (the prediction of a labelled row on a line depends on its labels), and per other
+    labelled rolling row its copy with the other structure's assignment (swapped in on draws that choose the other
+    structure). ``None`` without such rows."""
     from scipy.optimize import linear_sum_assignment
 
+    from ringfit.gap.campbell import MODEL_TOLERANCE
     from ringfit.gap.rolling_rows import FREE, LOADED
 
     per_table: dict = {}
@@ -1007,36 +1045,50 @@ def _rolling_group(choice, rows, matchable, extra, m):
     if not per_table:
         return None
     chosen = choice.chosen
-    segments = []  # per table: its rows, and per structure (start, hz, sigma, cost) of its line rows
+    segments = []  # per table: its rows, and per structure (start per row, hz, sigma, cost, penalties) of its lines
     for t, js in per_table.items():
+        tb = choice.tables[t]
+        pos = {int(j): k for k, j in enumerate(tb["rows"])}
+        where = np.array([pos[j] for j in js])
         mine = [r["freq"] for r in rows if r["table"] == t]  # the table's span, as every random-line draw
-        seg = {"table": t, "rows": np.asarray(js), "lo": min(mine), "hi": max(mine)}
+        seg = {"table": t, "rows": np.asarray(js), "lo": min(mine), "hi": max(mine), "std": tb["std"][where]}
         for name in (LOADED, FREE):
             lines = choice.lines[name][t]
-            start = m + len(extra)
-            extra += [{**rows[js[0]], **ln["fields"], "freq": ln["hz"], "tag": "", "branch": "", "matchable": False,
-                       "line_hz": ln["hz"]} for ln in lines]
-            seg[name] = (start, np.array([ln["hz"] for ln in lines]), np.array([ln["sigma"] for ln in lines]),
-                         np.array([ln["cost"] for ln in lines]))
+            starts, by_key = [], {}
+            for j in js:
+                r = rows[j]
+                key = (r.get("label_n", r["n"]), r.get("label_contact", 0), r["branch"], r["tag"])
+                if key not in by_key:
+                    by_key[key] = m + len(extra)
+                    extra.extend(_line_row(r, name, ln) for ln in lines)
+                starts.append(by_key[key])
+            hz = np.array([ln["hz"] for ln in lines])
+            seg[name] = (np.asarray(starts), hz, np.array([ln["cost"] for ln in lines]),
+                         np.asarray(tb["pen"][name], dtype=np.float64)[where])
         segments.append(seg)
-    # labelled rows of the rolling tables: their assignment under the structure the measured rows did not choose
+    # labelled rows of the rolling tables the groups leave alone: their assignment under the structure the
+    # measured rows did not choose
+    in_groups = {int(j) for s in segments for j in s["rows"]}
     other = FREE if chosen == LOADED else LOADED
     labelled, swapped = [], []
     for j, r in enumerate(rows):
-        if "structure_fields" in r and not r.get("matchable"):
+        if "structure_fields" in r and j not in in_groups:
             labelled.append(j)
             swapped.append(m + len(extra))
             extra.append({**r, **r["structure_fields"][other], "matchable": False})
     labelled, swapped = np.asarray(labelled, dtype=int), np.asarray(swapped, dtype=int)
     all_rows = np.concatenate([s["rows"] for s in segments])
 
-    def hungarian(f, start, hz, sg, cost):
-        c = ((f[..., None] - hz) / sg) ** 2 + cost  # (B, r, lines)
-        out = start + np.argmin(c, axis=-1)  # rows the assignment leaves without a line: their nearest
+    def hungarian(f, std, starts, hz, cost, pen):
+        # the matching's cost (ringfit.gap.campbell._score): z² at τ = MODEL_TOLERANCE, + the line's weight cost,
+        # + the row's label penalties on that line
+        sg = np.sqrt(std[:, None] ** 2 + (MODEL_TOLERANCE * hz[None, :]) ** 2)  # (r, L)
+        c = ((f[..., None] - hz) / sg) ** 2 + cost + pen  # (B, r, L)
+        col = np.argmin(c, axis=-1)  # rows the assignment leaves without a line: their nearest
         for b in range(f.shape[0]):
             ri, ci = linear_sum_assignment(np.minimum(c[b], 1e6))
-            out[b, ri] = start + ci
-        return out
+            col[b, ri] = ci
+        return np.broadcast_to(starts, col.shape) + col
 
     def draw(rng, B):
         # per table, uniform over its span at its row count (sorted, as a table lists its rows)
@@ -1049,7 +1101,8 @@ def _rolling_group(choice, rows, matchable, extra, m):
         out = []
         for s in segments:
             f = ystar[:, s["rows"]]
-            out.append(np.where(loaded[:, None], hungarian(f, *s[LOADED]), hungarian(f, *s[FREE])))
+            out.append(np.where(loaded[:, None], hungarian(f, s["std"], *s[LOADED]),
+                                hungarian(f, s["std"], *s[FREE])))
         same = loaded if chosen == LOADED else ~loaded
         lab = np.where(same[:, None], labelled[None, :], swapped[None, :])
         return np.concatenate(out, axis=1), [(labelled, lab)], loaded
@@ -1062,13 +1115,93 @@ def _rolling_group(choice, rows, matchable, extra, m):
             sl = slice(col, col + k)
             res = []
             for name in (LOADED, FREE):
-                start, hz, _, _ = sg[name]
-                ix = np.clip(idx_rows[:, sl] - start, 0, hz.size - 1)
+                starts, hz, _, _ = sg[name]
+                ix = np.clip(idx_rows[:, sl] - starts[None, :], 0, hz.size - 1)
                 res.append(mixture_sigma(f[:, sl], out[:, sl], hz[ix], hz)[0])
             out[:, sl] = np.where(loaded[:, None], res[0], res[1])
             col += k
         return out
 
-    return dict(kind="rolling tables", table=segments[0]["table"], rows=all_rows, draw=draw, choose=choose,
-                sigma=sigma, chosen=chosen)
+    def overrides(idx_rows, loaded, perms=None):
+        """``(B,)`` labels the drawn assignment overrode (the null's count beside the measured one); ``perms``: per
+        segment ``(B, k)`` the label permutation the draws were assigned with (the label-permutation test)."""
+        total, col = np.zeros(idx_rows.shape[0], dtype=int), 0
+        for si, sg in enumerate(segments):
+            k = sg["rows"].size
+            sl = slice(col, col + k)
+            for name, on in ((LOADED, loaded), (FREE, ~loaded)):
+                starts, hz, _, pen = sg[name]
+                if perms is None:
+                    start_b = np.broadcast_to(starts, (idx_rows.shape[0], k))
+                    pen_b = np.broadcast_to(pen, (idx_rows.shape[0],) + pen.shape)
+                else:
+                    start_b, pen_b = starts[perms[si]], pen[perms[si]]
+                ix = np.clip(idx_rows[:, sl] - start_b, 0, hz.size - 1)
+                bad = np.take_along_axis(pen_b, ix[..., None], -1)[..., 0]
+                total += np.where(on, np.sum(bad > LABEL_OVERRIDE, axis=1), 0)
+            col += k
+        return total
 
+    def permuted(rng, B, y):
+        """The label-permutation test's draws: the measured frequencies ``y`` ``(m,)`` kept, the labels of each
+        table's rows shuffled among them (B permutations); the structure chosen and the rows assigned again with
+        the shuffled labels' penalties. **Returns** ``(idx (B, r), swaps, loaded (B,), overridden (B,))``: as
+        :func:`choose`, and the shuffled labels each draw's assignment overrode."""
+        perms = []
+        pens = {name: {} for name in (LOADED, FREE)}
+        for s_ in segments:
+            k = s_["rows"].size
+            perms.append(np.argsort(rng.random((B, k)), axis=1))
+        for t, tb in choice.tables.items():
+            for name in (LOADED, FREE):
+                pens[name][t] = np.broadcast_to(np.asarray(tb["pen"][name], dtype=np.float64),
+                                                (B,) + np.shape(tb["pen"][name])).copy()
+        for s_, perm in zip(segments, perms):
+            tb = choice.tables[s_["table"]]
+            pos = {int(j): k for k, j in enumerate(tb["rows"])}
+            where = np.array([pos[int(j)] for j in s_["rows"]])
+            for name in (LOADED, FREE):
+                pens[name][s_["table"]][:, where] = s_[name][3][perm]
+        loaded = choice.choose({t: np.broadcast_to(y[tb["rows"]], (B, tb["rows"].size))
+                                for t, tb in choice.tables.items()}, pens)
+        out = []
+        for s_, perm in zip(segments, perms):
+            f = np.broadcast_to(y[s_["rows"]], perm.shape)
+            res = []
+            for name in (LOADED, FREE):
+                starts, hz, cost, pen = s_[name]
+                res.append(hungarian(f, s_["std"], starts[perm], hz, cost, pen[perm]))
+            out.append(np.where(loaded[:, None], res[0], res[1]))
+        same = loaded if chosen == LOADED else ~loaded
+        lab = np.where(same[:, None], labelled[None, :], swapped[None, :])
+        idx = np.concatenate(out, axis=1)
+        return idx, [(labelled, lab)], loaded, overrides(idx, loaded, perms)
+
+    return dict(kind="rolling tables", table=segments[0]["table"], rows=all_rows, draw=draw, choose=choose,
+                sigma=sigma, chosen=chosen, overrides=overrides, permuted=permuted,
+                labelled_rows=int(sum(1 for j in all_rows if _has_label(rows[j]))))
+
+
+#: A label penalty above this on the assigned line counts as an overridden label (half of ``ringfit campbell``'s
+#: LABEL_PENALTY: a contradicted n or branch, or a tag whose symmetry share is over 1/2).
+LABEL_OVERRIDE = 2.0
+
+
+def _has_label(r: dict) -> bool:
+    """Whether a row came with any label (n, tag or branch)."""
+    return r.get("label_n", r["n"]) >= 0 or bool(r["tag"]) or bool(r["branch"])
+
+
+def label_counts(tables, rows, records, choice) -> dict:
+    """Per rolling table, the labels its assignment kept and overrode (docs/formats.md §5 ``verdict.labels``):
+    ``{table name: {"rows", "labelled", "kept", "overridden", "unlabelled"}}``. A label is overridden when the
+    row's line contradicts it (its n, branch, or a tag whose symmetry the line does not share: the matching's
+    ``label_conflicts``)."""
+    out = {}
+    for t in sorted(choice.tables):
+        js = [j for j, r in enumerate(rows) if r["table"] == t and r.get("rolling_matched")]
+        lab = [j for j in js if _has_label(rows[j])]
+        over = [j for j in lab if (records or {}).get(j, {}).get("label_conflicts")]
+        out[table_label(tables[t], t)] = {"rows": len(js), "labelled": len(lab), "kept": len(lab) - len(over),
+                                          "overridden": len(over), "unlabelled": len(js) - len(lab)}
+    return out

@@ -230,7 +230,7 @@ def _loaded_option(r: dict, rec: dict, patch: float):
     record = {"structure": LOADED, "model_branch": rec["model_branch"], "model_n": rec["model_n"],
               "model_direction": rec["model_direction"], "model_tag": rec["model_tag"],
               "model_k": rec["model_k"], "frame": rec["frame"], "model_hz": _num(rec["model_hz"]),
-              "z": _num(rec["z"]), "status": rec["status"]}
+              "z": _num(rec["z"]), "status": rec["status"], "label_conflicts": rec.get("label_conflicts", "")}
     note = f"rolling model: {rec['note']}".rstrip(".")
     if shared:
         note += "; " + shared
@@ -246,7 +246,7 @@ def _free_option(a):
     record = {"structure": FREE, "model_branch": None, "model_n": c.n, "model_direction": c.direction,
               "model_tag": "", "model_k": c.k, "frame": "fixed" if c.k is None else "rotating",
               "model_hz": _num(c.hz), "z": _num(z), "status": "matched" if abs(z) <= 3 and not bad else
-              ("label_conflict" if abs(z) <= 3 else "unexplained")}
+              ("label_conflict" if abs(z) <= 3 else "unexplained"), "label_conflicts": ",".join(bad)}
     note = (f"free spinning ring: the {c.direction} wave n={c.n} at {c.hz:.1f} Hz (z = {z:+.1f}); n and wave from "
             "the matched wave (one assignment, shared by the baseline and every candidate)")
     return {**f, "line_hz": float(c.hz)}, record, note
@@ -305,7 +305,7 @@ def structure_loglik(f, std, hz, weight, pen, lo: float, hi: float) -> np.ndarra
     background = np.log(BACKGROUND / span)
     if not np.any(keep):
         return np.full((f.shape[0], len(TOLERANCE_GRID)), f.shape[1] * background)
-    hz, w, pen = hz[keep], weight[keep], np.asarray(pen, dtype=np.float64)[:, keep]
+    hz, w, pen = hz[keep], weight[keep], np.asarray(pen, dtype=np.float64)[..., keep]  # (r, L) or (B, r, L)
     log_prior = np.log(w / np.sum(w))  # (L,)
     out = []
     for tau in TOLERANCE_GRID:
@@ -329,16 +329,18 @@ class StructureChoice:
     lines: dict
     tables: dict
 
-    def costs(self, freqs: dict | None = None) -> dict:
+    def costs(self, freqs: dict | None = None, pens: dict | None = None) -> dict:
         """``{structure: (B,) cost}``, cost = −2 × the log-likelihood of :func:`structure_loglik` summed over the
         rolling tables and maximised over τ (one τ per structure and case); ``freqs`` ``{table: (B, r)}`` (default:
-        the measured rows, B = 1)."""
+        the measured rows, B = 1); ``pens`` ``{structure: {table: (B, r, L)}}`` label penalties per draw (the
+        label-permutation test's shuffled labels; default: the table's own)."""
         out, tau = {}, {}
         for name in (LOADED, FREE):
             total = 0.0
             for ti, tb in self.tables.items():
                 f = tb["freq"][None, :] if freqs is None else freqs[ti]
-                total = total + structure_loglik(f, tb["std"], tb["hz"][name], tb["weight"][name], tb["pen"][name],
+                pen = tb["pen"][name] if pens is None else pens[name][ti]
+                total = total + structure_loglik(f, tb["std"], tb["hz"][name], tb["weight"][name], pen,
                                                  tb["lo"], tb["hi"])
             total = np.atleast_2d(total)
             out[name] = -2.0 * np.max(total, axis=-1)
@@ -346,9 +348,9 @@ class StructureChoice:
         self._tau = tau
         return out
 
-    def choose(self, freqs: dict | None = None) -> np.ndarray:
+    def choose(self, freqs: dict | None = None, pens: dict | None = None) -> np.ndarray:
         """``(B,)`` True where the rolling, loaded model is chosen (its cost not above the free ring's)."""
-        c = self.costs(freqs)
+        c = self.costs(freqs, pens)
         return c[LOADED] <= c[FREE]
 
     @property

@@ -77,6 +77,14 @@ Among accepted candidates the best is the largest held-out shrink.
 **Greedy chain**: the best is added, the rest are refitted on top of it, and
 so on while the residual stays structured. If a structured residual remains
 and nothing is accepted, ``unexplained`` closes the chain.
+
+**``none`` only when the residual is noise.** Where the baseline's held-out residual fails the noise test
+(excess) and no candidate is accepted — every one screened out, refused, or implausible — the verdict is
+``unexplained`` (``verdict.nearest`` names the refitted candidate that came closest), never ``none``.
+
+**Implausible parameters are not findings** (condition 5): a fitted effect parameter outside its physical
+range (:attr:`ringfit.gap.effects.base.Parameter.plausible`, e.g. ``ring_extensibility``'s EA below 10⁶ N where
+a belt's is ~10⁸ N) refuses the candidate.
 """
 
 from __future__ import annotations
@@ -133,7 +141,11 @@ RULES = {
                f"profiles - <= {100 * MAX_DRIFT_RELATIVE:.0f}% relative (parameters with an independent prior: "
                f"Mahalanobis D^2 <= chi2_k({PRIOR_REGION}) or <= that of the baseline fit); the shrink bar and its "
                f"bootstrap bound are heuristics: a candidate failing only them, with heldout shrink >= "
-               f"{MIN_HELDOUT_SHRINK_FLOOR_PCT}%, is decided by its calibrated null (accepted when p < alpha)"),
+               f"{MIN_HELDOUT_SHRINK_FLOOR_PCT}%, is decided by its calibrated null (accepted when p < alpha); "
+               "every fitted effect parameter inside its physical range (an implausible value is not a finding)"),
+    "none": ("'none' only when the held-out residual passes the noise test; a residual that fails it with no "
+             "candidate accepted (screened out, refused or implausible) is 'unexplained', verdict.nearest naming "
+             "the candidate that came closest"),
     "best": ("largest heldout shrink among accepted (a computed variant first on a tie); greedy chain while the "
              f"residual stays structured; then each fitted element of the chain is replaced by its computed variant "
              f"when the chain's held-out shrink drops by <= {PREFER_COMPUTED_PTS:g} points (all at once first)"),
@@ -217,6 +229,11 @@ def acceptance(candidate: dict, bars: bool = True) -> tuple[bool, list[str]]:
     if not dbic <= MAX_DELTA_BIC:
         why.append(f"delta BIC {dbic:.1f} > {MAX_DELTA_BIC}")
     params = candidate.get("params", {})
+    for k, p in params.items():  # implausible parameters are not findings (docs/physics.md §6.4)
+        if p.get("implausible"):
+            a, b = p.get("physical_range", (math.nan, math.nan))
+            why.append(f"{k} = {p['value']:.4g} {p.get('unit', '')} lies outside its physical range "
+                       f"[{a:g}, {b:g}]: not a finding")
     if not any(p.get("excludes_null") for p in params.values()):
         why.append("no parameter interval excludes its null value")
     elif "+" in candidate.get("effect", ""):  # a composite stands only if every part does

@@ -507,6 +507,15 @@ def _verdict_section(c: dict, diag) -> list[tuple[str, str]]:
         effs = " + ".join(dv.get("effects", []))
         body += (f"<p>Damping (judged apart): {esc(effs)}"
                  + (f" — {esc(dv['note'])}" if dv.get("note") else "") + ".</p>")
+    near = v.get("nearest")
+    if near:  # an unexplained verdict names the candidate that came closest (docs/formats.md §5 verdict.nearest)
+        why = "; ".join(near.get("rejected_because") or [])
+        body += (f"<p>Nearest candidate: {esc(near.get('effect'))} (held-out shrink "
+                 f"{esc(_pct(near.get('heldout_shrink_pct')))} %" + (f"; not accepted: {esc(why)}" if why else "")
+                 + ").</p>")
+    lab = v.get("labels")
+    if lab and lab.get("sentence"):  # labels are evidence: kept, overridden, permutation test (§5 verdict.labels)
+        body += f"<p><b>Labels:</b> {esc(lab['sentence'])}.</p>"
     pd = (c["baseline"].get("drift") or {}).get("prior_distance") or {}
     if pd.get("outside"):
         body += f'<div class="flag">{_drift_html(c["baseline"]["drift"])}</div>'

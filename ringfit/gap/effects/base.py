@@ -36,6 +36,9 @@ class Parameter:
       when the contact patch is computed from the table's load); an effect whose every
       parameter has one is also tried as a *computed* candidate — a prediction with no
       free parameter. ``None`` = the parameter can only be fitted.
+    - ``plausible``: the parameter's physical range ``(low, high)`` (docs/physics.md §6.4, *implausible
+      parameters*): a fitted value outside it is not a finding (the candidate is refused, the case is
+      ``unexplained`` with the candidate named nearest). ``None`` = the refit's bounds ``(lo, hi)``.
     """
 
     name: str
@@ -47,6 +50,12 @@ class Parameter:
     prior: tuple[float, float] | None = None
     description: str = ""
     condition: float | None = None
+    plausible: tuple[float, float] | None = None
+
+    @property
+    def physical_range(self) -> tuple[float, float]:
+        """``plausible`` or the refit's bounds."""
+        return self.plausible if self.plausible is not None else (self.lo, self.hi)
 
     def __post_init__(self):
         if not (self.lo <= self.null <= self.hi and self.lo <= self.start <= self.hi and self.lo < self.hi):
@@ -79,6 +88,9 @@ class Effect:
     #: baseline parameters the effect legitimately re-balances (e.g. the intercept ζ0 of a
     #: damping slope); they are left out of the drift guard of :mod:`ringfit.gap.verdict`
     baseline_partners: tuple[str, ...] = ()
+    #: what in the data makes the effect act on mode-table rows (the ``not_applicable`` note of a diagnosis whose
+    #: tables give it no row, docs/formats.md §5); "" = the generic note
+    applies_when: str = ""
 
     # ---------------------------------------------------------------- helpers
     def params_for(self, domain: str) -> tuple[Parameter, ...]:

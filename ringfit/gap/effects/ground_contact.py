@@ -30,9 +30,12 @@ class GroundContact(Effect):
 
     name = "ground_contact"
     summary = "tread springs in the contact patch stiffen the cos-type (extr) modes of the loaded tyre"
+    applies_when = "no loaded or rolling table (sidecar `state: loaded`/`rolling` with `load_n` > 0) with rows it can move"
     parameters = (
         Parameter("patch_scale", "-", null=0.0, lo=0.0, hi=3.0, start=1.0, condition=1.0,
-                  description="contact half-angle / the half-angle the table's load gives in the contact solve"),
+                  description="contact half-angle / the half-angle the table's load gives in the contact solve",
+                  # the contact solve's half-angle is known to a factor ~1.5 (k_trd, the sidewall); 0.4 … 2.5
+                  plausible=(0.4, 2.5)),
     )
 
     def modal_mask(self, rows):

@@ -32,7 +32,9 @@ class RingExtensibility(Effect):
     summary = "a finite membrane stiffness EA of the belt lowers the flexural modes"
     parameters = (
         Parameter("compliance_per_mn", "1/MN", null=0.0, lo=0.0, hi=50.0, start=2.0,
-                  description="1e6 N / EA (10 = EA of 1e5 N)"),
+                  description="1e6 N / EA (10 = EA of 1e5 N)",
+                  # a belt's membrane stiffness EA is ~1e8 N (steel belts and plies); EA < 1e6 N is no belt
+                  plausible=(0.0, 1.0)),
     )
 
     def profile_model(self, values, model):

@@ -41,9 +41,12 @@ class Rotation(Effect):
 
     name = "rotation"
     summary = "a spinning ring: Coriolis splitting of backward/forward waves and centrifugal tension"
+    applies_when = "no spinning table (sidecar `rotation_hz` or `speed_kmh` > 0) with a row that has a `branch` or a line of the rolling model"
     parameters = (
         Parameter("speed_gain", "-", null=0.0, lo=0.0, hi=2.0, start=1.0, condition=1.0,
-                  description="wheel speed seen by the modes / the table's wheel speed (eq. 25/26)"),
+                  description="wheel speed seen by the modes / the table's wheel speed (eq. 25/26)",
+                  # the modes see the wheel's speed to within the rolling radius and the belt's slip: 0.5 … 1.5
+                  plausible=(0.5, 1.5)),
     )
     profile_parameters = (
         Parameter("chi_deficit", "-", null=0.0, lo=0.0, hi=1.0, start=0.3,

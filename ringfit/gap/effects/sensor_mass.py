@@ -43,7 +43,9 @@ class SensorMass(Effect):
     summary = "the added mass of the accelerometer and its mount lowers the modes it sits on"
     parameters = (
         Parameter("mass_kg", "kg", null=0.0, lo=0.0, hi=0.3, start=0.02,
-                  description="sensor + mount mass m_s"),
+                  description="sensor + mount mass m_s",
+                  # an in-tyre sensor with its mount and glue: up to ~150 g (a TPMS unit is 30–50 g)
+                  plausible=(0.0, 0.15)),
     )
 
     profile_parameters = (

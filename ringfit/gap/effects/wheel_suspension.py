@@ -43,6 +43,7 @@ class WheelSuspension(Effect):
 
     name = "wheel_suspension"
     summary = "the wheel moves on its suspension: the n = 1 (translation) and n = 0 (torsion) modes shift and split"
+    applies_when = "no table has the sidecar key `fixture: suspension` (docs/formats.md §2): the wheel on its suspension acts only on the n <= 1 rows and the loaded rows of such a table"
     parameters = (
         Parameter("compliance_scale", "-", null=0.0, lo=0.0, hi=20.0, start=1.0, condition=1.0,
                   description="the fixture's compliances 1/k over those its sidecar states (0: rim fixed)"),
