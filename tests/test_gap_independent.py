@@ -1,5 +1,6 @@
 """Power on cases ringfit did not simulate (issue 30 item 9): the independent FD-ring generators of
 benchmarks/_independent_effects.py, one small case per family whose miss was fixed in an effect module.
+All slow on the shared machine (dense eigen-solves of the FD ring: ~30 s each under load).
 
 The generators' truths are written apart from ringfit's model (dense FD ring, its own eigen-solves and contact
 loop); the expected values below are the generators' hidden answers, never the diagnosis's output.
@@ -15,6 +16,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 
+@pytest.mark.slow
 def test_fd_ring_free_modes_match_eq18():
     """The independent FD ring (energy-form bending and membrane, no locking under the EA penalty) against eq. 18
     written out here (docs/physics.md §2.1): relative error < 2e-5 for n = 1…8 on 384 points."""
@@ -29,6 +31,7 @@ def test_fd_ring_free_modes_match_eq18():
     np.testing.assert_allclose(f, eq18, rtol=2e-5)
 
 
+@pytest.mark.slow
 def test_fd_point_mass_is_rayleigh():
     """A point mass at φ = 0 lowers the cos-type mode by ≈ √(M_n/(M_n + m)), M_n = πRρA(1 + 1/n²) (Rayleigh,
     docs/physics.md §6 sensor_mass), and leaves the sin-type n ≥ 2 modes within 0.01 %."""
