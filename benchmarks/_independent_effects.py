@@ -82,14 +82,16 @@ def _hilbert(n):
     return np.real(np.fft.ifft(s[:, None] * np.fft.fft(np.eye(n), axis=0), axis=0))
 
 
-def fd_operator(p, g, n, *, omega=0.0, eta=0.0, viscous_c=0.0, eta_slope=0.0, chi=1.0, ea=EA_INEXTENSIBLE,
+def fd_operator(p, g, n, *, omega=0.0, eta=0.0, viscous_c=0.0, eta_slope=0.0, eta_order2=0.0, chi=1.0,
+                ea=EA_INEXTENSIBLE,
                 order=4, diff=None):
     """The steady rolling ring's operator L [w; v] = [q_w; q_v] of docs/physics.md §4.1 by central differences
     (2n × 2n, real): elastic part K_el (EI, the pressure term P = p0 b/R, k_w, k_v), membrane part (EA/R² − ρAΩ²),
     the (1−χ)ρAΩ² centrifugal term; damping in the φ domain: hysteretic η·H·K_el (H the Hilbert matrix: i sign(n)
     on harmonic n, §4.2's iη s_n K_n^c), viscous c_w = c_v = c as cΩ d/dφ on both equations (§4.2's i nΩ c), and a
     loss factor growing with the harmonic's frequency |n|Ω (§6 wave_damping's η1|n|Ω/ω_ref, ω_ref = 2π·100 Hz) as
-    (η1 Ω/ω_ref)·d/dφ·K_el (the FD derivative, not the spectral n)."""
+    (η1 Ω/ω_ref)·d/dφ·K_el (the FD derivative, not the spectral n); and a hysteretic loss growing with the square of
+    the order, η(n) = η0 + η2 (n/10)², as η2/100·H·(−d²/dφ²)·K_el — a form neither of wave_damping's two has."""
     d1, d2, d3, d4 = diff if diff is not None else _fd(n, order)
     eye, zero = np.eye(n), np.zeros((n, n))
     R = g["R"]
@@ -111,6 +113,9 @@ def fd_operator(p, g, n, *, omega=0.0, eta=0.0, viscous_c=0.0, eta_slope=0.0, ch
         L = L + eta * np.vstack([H @ K_el[:n], H @ K_el[n:]])
     if viscous_c:
         L = L + viscous_c * omega * np.kron(np.eye(2), d1)
+    if eta_order2:
+        H2 = _hilbert(n) @ (-d2) / 100.0
+        L = L + eta_order2 * np.vstack([H2 @ K_el[:n], H2 @ K_el[n:]])
     if eta_slope:
         L = L + eta_slope * omega / (2 * np.pi * 100.0) * np.vstack([d1 @ K_el[:n], d1 @ K_el[n:]])
     return L
@@ -160,7 +165,8 @@ def fd_modes(p, g, *, n=384, patch=0.0, point_mass=0.0, n_max=10):
     return out
 
 
-def fd_static(p, g, load, *, n=512, omega=0.0, eta=0.0, viscous_c=0.0, eta_slope=0.0, chi=1.0, tread_shear=None,
+def fd_static(p, g, load, *, n=512, omega=0.0, eta=0.0, viscous_c=0.0, eta_slope=0.0, eta_order2=0.0, chi=1.0,
+              tread_shear=None,
               window_deg=40.0, shear_iterations=80, relax=0.5):
     """The steady rolling (or standing) ring on a flat road by FD: docs/physics.md §4.1 (operator of
     :func:`fd_operator`), §4.3 (radial tread springs, s = H/cos φ, Fz = R∫p cos φ imposed) by an active-set loop;
@@ -176,7 +182,8 @@ def fd_static(p, g, load, *, n=512, omega=0.0, eta=0.0, viscous_c=0.0, eta_slope
     phi = -np.pi + h * np.arange(n)
     diff = _fd(n)
     d1 = diff[0]
-    L = fd_operator(p, g, n, omega=omega, eta=eta, viscous_c=viscous_c, eta_slope=eta_slope, chi=chi, diff=diff)
+    L = fd_operator(p, g, n, omega=omega, eta=eta, viscous_c=viscous_c, eta_slope=eta_slope, eta_order2=eta_order2,
+                    chi=chi, diff=diff)
     lu = sla.lu_factor(L)
     win = np.flatnonzero(np.abs(phi) <= math.radians(window_deg))
     rhs = np.zeros((2 * n, win.size))
@@ -467,12 +474,16 @@ def _profile_case(folder, seed, family):
         magnitude.update(k_x=float(rng.uniform(8e6, 40e6)), mu=float(rng.uniform(0.7, 1.2)))
         kw_solve["tread_shear"] = (magnitude["k_x"], magnitude["mu"])
     elif family == "wave_damping":
-        if seed % 2 == 0:
+        form = seed % 3  # three forms of loss growing with the harmonic's order, in turn
+        if form == 0:  # viscous material damping (docs/physics.md §4.2)
             magnitude["viscous_c"] = float(rng.uniform(400.0, 1200.0))
             kw_solve["viscous_c"] = magnitude["viscous_c"]
-        else:
+        elif form == 1:  # hysteretic loss growing linearly with the harmonic's frequency (§6 wave_damping)
             magnitude["eta_slope"] = float(rng.uniform(0.05, 0.15))
             kw_solve["eta_slope"] = magnitude["eta_slope"]
+        else:  # hysteretic loss growing with the square of the order: η0 + η2 (n/10)²
+            magnitude["eta_order2"] = float(rng.uniform(0.03, 0.1))
+            kw_solve["eta_order2"] = magnitude["eta_order2"]
     elif family == "rotation":
         magnitude["chi"] = float(rng.uniform(0.1, 0.6))
         kw_solve["chi"] = magnitude["chi"]
