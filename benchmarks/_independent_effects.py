@@ -360,6 +360,25 @@ def _cavity_pencil(w0, wa, n, p, g, area):
 
 
 def _modal_case(folder, seed, family, loaded_only=False):
+    """A mode-table case (docs/formats.md §6): ``tyre.toml`` (Table 9, not the truth), ``free.modes.csv`` (the FD
+    ring's free modes, n = 1…8–10, relative noise σ 0.05–0.2 %, damping ζ0 with 8 % scatter, an acoustic row when
+    the family is cavity_mode or by chance) and one test table:
+
+    - ``none_modes``: a second free table (the same ring, fresh noise); expected verdict `none`.
+    - ``ground_contact``: ``loaded.modes.csv`` at 4000 N, rows n = 1…6–8 tagged vert/extr (cos-type) and hort/0
+      (sin-type): the FD ring's modes with radial tread springs k_trd on the nodes of the patch, the patch from
+      the FD static contact solve (:func:`fd_static`, :func:`fd_modes`; docs/physics.md §6 ground_contact —
+      ringfit solves the loaded modes in a truncated Fourier basis, this in the FD grid's symmetry subspaces).
+    - ``cavity_mode``: the same loaded table, every row (and, unless ``loaded_only``, every free row: the air is
+      there in every state) coupled with the cavity's acoustic mode of its n through :func:`_cavity_pencil` (a 2-DOF
+      eigenproblem, not ringfit's closed root); n = 1 rows of the loaded table meet the lines the flat splits,
+      f_cav √(1 ∓ W_2/h_c) (vertical / fore-aft), W_2 from the FD static deflection (docs/physics.md §6
+      cavity_mode); A_c 0.008–0.02 m², f_cav 215–232 Hz given as the free table's acoustic row. The truth holds
+      ground_contact too: the expected effect is cavity_mode, ground_contact is not an extra.
+    - ``sensor_mass``: ``sensor.modes.csv``, a free test table of the ring carrying a 30–120 g point mass at φ = 0
+      (both directions) that the free table does not carry: the cos-type FD modes with the mass in the mass matrix
+      (the sensor sits at their antinode; docs/physics.md §6 sensor_mass, whose Rayleigh quotient ringfit uses).
+    """
     rng = np.random.default_rng(seed)
     folder = _new(folder)
     geometry, p, g = _truth_ring(rng)
@@ -454,6 +473,23 @@ FD_POINTS = 1024
 
 
 def _profile_case(folder, seed, family):
+    """A profile case (docs/formats.md §6): ``tyre.toml`` (Table 9), ``free.modes.csv`` (the FD ring's free modes,
+    noisy, damping ζ0 0.015–0.035) and four profiles at ≈ 20/30/40/60 km/h, load 3.5–4.5 kN, flat road, the rim
+    encoder's rotation_hz given (Ω from R_e = R_out − δ_z/3 of the FD standing solution, docs/physics.md §4.3). Each
+    reading: the FD steady rolling ring (:func:`fd_static`: hysteretic loss η0 = 2ζ0 as a Hilbert matrix, the truth's
+    ring ±6 %, k_trd ±15 % more) on 1024 points, the sensor chain of :func:`fd_reading`, resampled band-limited to
+    360–1024 angles, white noise 0.2–1.5 m/s² at 40 km/h growing ∝ speed. Families:
+
+    - ``none_profiles``: nothing more; expected `none`.
+    - ``tread_shear``: the brush with the lever iterated to its fixed point (k_x 8–40 MN/m², μ 0.7–1.2).
+    - ``wave_damping``: by seed mod 3, viscous material damping c = c_w = c_v 400–1200 N s/m² (docs/physics.md §4.2),
+      a hysteretic loss growing linearly with the harmonic's frequency (η1 0.05–0.15 per 100 Hz, §6 wave_damping's
+      first form, by FD derivative), or one growing with the square of the order, η0 + η2 (n/10)², η2 0.03–0.1
+      (neither of ringfit's two forms).
+    - ``gravity`` (gain 0.95–1.05 g), ``sensor_tilt`` (γ 0.5–1, e 1–6 mm), ``iepe_highpass`` (first order,
+      0.8–3 Hz, filtered in time over repeated revolutions): docs/physics.md §5 layers 1–5, in :func:`fd_reading`.
+    - ``rotation``: χ 0.1–0.6, the (1−χ)ρAΩ² term of §4.1 in the FD operator.
+    """
     from ringfit.io.profiles import Profile, band_limited_resample, grid_angles_deg, resample_profile, write_profile
 
     rng = np.random.default_rng(seed)
