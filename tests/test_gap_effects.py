@@ -1,5 +1,6 @@
 """Every effect at its null gives back the baseline exactly; effects match independent formulas off the null."""
 
+import dataclasses
 import math
 
 import jax.numpy as jnp
@@ -88,10 +89,16 @@ def test_sensor_mass_rayleigh_and_cavity_veering():
     g, r = table9()
     rows = _rows()
     omega = natural_angular_frequencies(r, g, rows.n)
-    o2, _ = lib.get("sensor_mass").modal(jnp.asarray([0.003]), omega, jnp.zeros_like(omega), rows, r, g)
+    # sensor_mass acts on test tables only: the reference rows (all of _rows()) are left alone ...
+    o1, _ = lib.get("sensor_mass").modal(jnp.asarray([0.003]), omega, jnp.zeros_like(omega), rows, r, g)
+    np.testing.assert_array_equal(np.asarray(o1), np.asarray(omega))
+    # ... and a test row is lowered by the Rayleigh factor
+    test_rows = dataclasses.replace(rows, reference=jnp.zeros_like(rows.reference))
+    o2, _ = lib.get("sensor_mass").modal(jnp.asarray([0.003]), omega, jnp.zeros_like(omega), test_rows, r, g)
     rel = np.asarray(o2)[3] / np.asarray(omega)[3] - 1.0  # n = 3
     expect = -0.003 / (2 * math.pi * g.radius * r.rho_a * (1 + 1 / 9))  # docs/physics.md §6, first order
     assert rel == pytest.approx(expect, rel=0.01)
+    assert not lib.get("sensor_mass").modal_mask(rows).any() and lib.get("sensor_mass").modal_mask(test_rows)[:12].all()
     # cavity: 2-dof pencil solved with numpy.roots (independent form) for n = 1
     o3, _ = lib.get("cavity_mode").modal(jnp.asarray([1 / 0.015]), omega, jnp.zeros_like(omega), rows, r, g)
     m = 2 * r.rho_a

@@ -4,7 +4,14 @@ Modal data: the mode a single sensor sees has its antinode at the sensor,
 so its modal mass grows by m_s (Rayleigh): ``ω' = ω √(M_n/(M_n + m_s))`` with
 ``M_n = πRρA(1 + 1/n²)`` (n ≥ 1; rigid rotation n = 0: ``2πRρA``). About
 −0.06 % for 3 g: a large shrink attributed to it is suspicious. Parameter
-``mass_kg`` (null 0).
+``mass_kg`` (null 0): the mass a test table carries *beyond the reference state*, so it acts on the rows of
+test tables only, never on ``free.modes.csv`` (``rows.reference``). The ring is fitted to the reference table:
+a mass glued on for that measurement too is already in the fitted ρA (its Rayleigh factor is ρA's own
+``1 + 1/n²`` pattern), and what a test table can show is the difference. Applied to the reference rows as well,
+the refit (where the ring answers to the reference rows alone, :class:`ringfit.gap.modal.ModalPredictor`) lets
+the ring undo the mass there while the mass answers to the test rows with the ring held: a 44 g sensor present
+only in the test table then fits at 20 g with an interval reaching 0 (issue 30 item 9, the independent
+``sensor_mass`` cases of ``benchmarks/_independent_effects.py``).
 
 Rolling profiles: mass loading of the belt at the sensor, revolution harmonic
 k seen at ω = kΩ through ``Z/(Z + iωm_s)`` with the belt's wave impedance
@@ -57,11 +64,12 @@ class SensorMass(Effect):
         return model.with_channel_filter(MassLoading(values[0]))
 
     def modal_mask(self, rows):
-        return np.asarray(rows.is_freq) > 0
+        return (np.asarray(rows.is_freq) > 0) & (np.asarray(rows.reference) == 0)
 
     def modal(self, values, omega, zeta, rows, ring, geometry):
         modal_mass = ring_modal_mass(ring, geometry, rows.n)  # M_n [kg], docs/physics.md §6
-        return omega * jnp.sqrt(modal_mass / (modal_mass + values[0])), zeta
+        loaded = omega * jnp.sqrt(modal_mass / (modal_mass + values[0]))
+        return jnp.where(rows.reference > 0, omega, loaded), zeta  # test tables only (module docstring)
 
 
 EFFECT = register(SensorMass())
