@@ -91,10 +91,9 @@ def test_the_joint_programs_hold_no_batched_lapack_call():
                                 method="levenberg_marquardt").as_text()
     assert "lapack_dgetrf_ffi" in solve  # the contact solves are in it
     assert batched_lapack_calls(solve) == []
-    walkers = np.tile(z0, (6, 1))
-    logp = engine._batched_log_probability.lower(
-        walkers, leaves, np.append(theta, 0.0), fs.unbounded_arrays(), fs.prior_w, fs.prior_mean,
-        np.full(fs.size, -np.inf), np.full(fs.size, np.inf), 1.0, model=problem.model, treedef=treedef).as_text()
+    walkers = np.tile(z0[: len(free)], (6, 1))
+    kernel, consts = engine.log_density(problem, theta, free)
+    logp = engine._batched_log_probability.lower(walkers, consts, kernel=kernel).as_text()
     assert "lapack_dgetrf_ffi" in logp
     assert batched_lapack_calls(logp) == []
 

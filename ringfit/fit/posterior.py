@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ringfit.fit.engine import LOG, free_set, log_probability
+from ringfit.fit.engine import LOG, free_set, log_density, log_probability
 from ringfit.params import RingParams
 
 #: Stop when the chain is longer than this many integrated autocorrelation times.
@@ -81,6 +81,10 @@ class Posterior:
     centers: tuple[float, ...] = ()
     scales: tuple[float, ...] = ()
     meta: dict = field(default_factory=dict)
+    sampler: str = "emcee"
+    chains: int = 1
+    shift_u: np.ndarray | None = None
+    seed: int = 0
 
     @property
     def steps(self) -> int:
@@ -93,8 +97,16 @@ class Posterior:
 
     @property
     def log_samples(self) -> np.ndarray:
-        """``(draws, k)`` flattened draws of the solver coordinates after burn-in and thinning."""
-        return self.chain[self.burn :: self.thin].reshape(-1, len(self.names))
+        """``(draws, k)`` flattened draws of the solver coordinates after burn-in and thinning.
+
+        With ``shift_u`` (one systematic direction δu, identify's grid check, docs/physics.md §12.3) each draw
+        is moved by ε δu, ε ~ N(0, 1) drawn once per draw from ``seed``: the posterior convolved with the
+        discretisation's doubt, as the least-squares covariance adds δu δuᵀ."""
+        u = self.chain[self.burn :: self.thin].reshape(-1, len(self.names))
+        if self.shift_u is not None and np.any(self.shift_u != 0):
+            eps = np.random.default_rng([int(self.seed), 7919]).standard_normal(u.shape[0])
+            u = u + eps[:, None] * np.asarray(self.shift_u)[None, :]
+        return u
 
     @property
     def samples(self) -> np.ndarray:
@@ -189,6 +201,7 @@ class Posterior:
             coords = {"mode": np.arange(observed["freq_hz"].size), "n": ("mode", np.asarray(data["n"]))}
             dims = {"freq_hz": ["mode"]}
         attrs = dict(source="ringfit", format=FORMAT, burn=int(self.burn), thin=int(self.thin),
+                     sampler=self.sampler, ensembles=int(self.chains),
                      tau=np.asarray(self.tau, dtype=np.float64), converged=int(self.converged),
                      acceptance_mean=float(np.mean(self.acceptance)))
         idata = az.from_dict(posterior=posterior, sample_stats=sample_stats, observed_data=observed,
@@ -237,9 +250,11 @@ class Posterior:
             h5.create_dataset("log_prob", data=self.log_prob, compression="gzip")
             h5.create_dataset("acceptance", data=self.acceptance)
             h5.create_dataset("tau", data=self.tau)
+            if self.shift_u is not None:
+                h5.create_dataset("shift_u", data=np.asarray(self.shift_u, dtype=np.float64))
             head = dict(names=list(self.names), kinds=list(self.kinds), centers=list(self.centers),
                         scales=list(self.scales), values0=self.values0, burn=self.burn, thin=self.thin,
-                        meta=self.meta)
+                        sampler=self.sampler, chains=int(self.chains), seed=int(self.seed), meta=self.meta)
             h5.attrs["meta"] = json.dumps(head, default=_json_default, allow_nan=True)
         image = buf.getvalue()
         return atomic_write(path, lambda tmp: tmp.write_bytes(image))
@@ -288,6 +303,7 @@ def load_posterior(path) -> Posterior:
                 raise InputError(f"not a ringfit posterior (format {fmt!r})", source=path)
             head = json.loads(h5.attrs["meta"])
             arrays = {k: np.asarray(h5[k][()], dtype=np.float64) for k in ("chain", "log_prob", "acceptance", "tau")}
+            shift = np.asarray(h5["shift_u"][()], dtype=np.float64) if "shift_u" in h5 else None
         if fmt == "ringfit-posterior/1":  # every free parameter a logarithm; problem details at the top level
             meta = {k: head[k] for k in ("data", "geometry", "priors", "source", "lsq") if k in head}
             head = dict(head, kinds=["log"] * len(head["names"]), centers=[], scales=[], meta=meta)
@@ -298,11 +314,13 @@ def load_posterior(path) -> Posterior:
         post = Posterior(names=tuple(str(n) for n in head["names"]), kinds=tuple(head["kinds"]),
                          values0=dict(head["values0"]), burn=int(head["burn"]), thin=int(head["thin"]),
                          centers=tuple(head["centers"]) or (0.0,) * k, scales=tuple(head["scales"]) or (1.0,) * k,
-                         meta=meta, **arrays)
+                         meta=meta, sampler=str(head.get("sampler", "emcee")), chains=int(head.get("chains", 1)),
+                         seed=int(head.get("seed", 0)), shift_u=shift, **arrays)
         steps, walkers, kk = post.chain.shape
         if (kk != k or len(post.kinds) != k or len(post.centers) != k or len(post.scales) != k
                 or post.log_prob.shape != (steps, walkers) or post.acceptance.shape != (walkers,)
-                or post.tau.shape != (k,) or not 0 <= post.burn < steps or post.thin < 1):
+                or post.tau.shape != (k,) or not 0 <= post.burn < steps or post.thin < 1
+                or post.chains < 1 or walkers % post.chains or (shift is not None and shift.shape != (k,))):
             raise ValueError("arrays and metadata of inconsistent shapes")
     except InputError:
         raise
@@ -406,42 +424,72 @@ def _advance(sampler, state, stop, bar, interrupted, min_steps, max_steps):
     return state
 
 
-def log_probability_function(result, bounds: dict | None = None, chunk: int | None = None):
-    """``(n, k) -> (n,)`` NumPy log-posterior of a fit's free parameters (see the module docstring).
-
-    **Arguments:** ``result`` — a FitResult of the engine; ``bounds`` — name -> (lo, hi)
-    natural-unit bounds that replace or add to the coordinates' bounds and the problem's
-    plausible ranges; ``chunk`` — evaluate in chunks of exactly this many rows (padded),
-    so one compilation serves every batch size.
-
-    **Returns:** ``(log_prob_fn, lo_u (k,), hi_u (k,))``.
-    """
+def _support(result, bounds: dict | None = None):
+    """``(lo_u, hi_u)`` ``(k,)``: the free coordinates' bounds, replaced or narrowed by ``bounds`` (natural units)
+    and the problem's plausible ranges (see :func:`log_probability_function`)."""
     problem = result.problem
-    free = tuple(result.names)
-    fs = free_set(problem, free)
+    fs = free_set(problem, tuple(result.names))
     lo, hi = fs.lo_u.copy(), fs.hi_u.copy()
     coords = [problem.coords[i] for i in fs.index]
     for j, c in enumerate(coords):
         rng = (bounds or {}).get(c.name) or (problem.plausible or {}).get(c.name)
         if rng is not None:
             lo[j], hi[j] = c.to_u(rng[0]) if c.kind != LOG or rng[0] > 0 else -np.inf, c.to_u(rng[1])
-    log_prob = log_probability(problem, result.theta, free, lo_u=lo, hi_u=hi,
-                               sigma_scale=float(result.extra.get("sigma_scale", 1.0)), chunk=chunk)
+    return lo, hi
+
+
+def log_probability_function(result, bounds: dict | None = None, chunk: int | None = None, row_scale=None):
+    """``(n, k) -> (n,)`` NumPy log-posterior of a fit's free parameters (see the module docstring).
+
+    **Arguments:** ``result`` — a FitResult of the engine; ``bounds`` — name -> (lo, hi)
+    natural-unit bounds that replace or add to the coordinates' bounds and the problem's
+    plausible ranges; ``chunk`` — evaluate in chunks of exactly this many rows (padded),
+    so one compilation serves every batch size; ``row_scale`` — ``(m,)`` per-row widening
+    of the rows' σ (:func:`ringfit.fit.engine.log_density`).
+
+    **Returns:** ``(log_prob_fn, lo_u (k,), hi_u (k,))``.
+    """
+    lo, hi = _support(result, bounds)
+    log_prob = log_probability(result.problem, result.theta, tuple(result.names), lo_u=lo, hi_u=hi,
+                               sigma_scale=float(result.extra.get("sigma_scale", 1.0)), chunk=chunk,
+                               row_scale=row_scale)
     return log_prob, lo, hi
+
+
+def log_density_function(result, bounds: dict | None = None, row_scale=None):
+    """The same density as :func:`log_probability_function`, traceable: ``(kernel, consts, lo_u, hi_u)``
+    (:func:`ringfit.fit.engine.log_density`), for the compiled sampler."""
+    lo, hi = _support(result, bounds)
+    kernel, consts = log_density(result.problem, result.theta, tuple(result.names), lo_u=lo, hi_u=hi,
+                                 sigma_scale=float(result.extra.get("sigma_scale", 1.0)), row_scale=row_scale)
+    return kernel, consts, lo, hi
+
+
+#: The samplers of :func:`sample`: the compiled stretch move (:mod:`ringfit.fit.ensemble`, the default) and
+#: emcee's (the reference; same algorithm, driven from Python one step at a time).
+SAMPLERS = ("compiled", "emcee")
+#: Independent ensembles the compiled sampler runs side by side by default.
+DEFAULT_CHAINS = 1
 
 
 def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int = 20000, check_every: int = 1000,
            seed: int = 0, progress: bool = True, bounds: dict | None = None, spread: float = 0.1,
-           meta: dict | None = None) -> "Posterior":
-    """Sample the posterior of a least-squares fit's free parameters with emcee.
+           meta: dict | None = None, sampler: str = "compiled", chains: int = DEFAULT_CHAINS, row_scale=None,
+           shift_u=None) -> "Posterior":
+    """Sample the posterior of a least-squares fit's free parameters with the affine-invariant stretch move.
 
     **Arguments:** ``result`` — a :class:`~ringfit.fit.result.FitResult` of the engine;
-    ``walkers`` (≥ 2k, even); ``min_steps``/``max_steps`` — chain length bounds (the chain
-    stops once longer than :data:`TAU_FACTOR` τ); ``check_every`` — steps between τ checks;
-    ``seed``; ``progress`` — tqdm bar on stderr; ``bounds`` — see
+    ``walkers`` (≥ 2k, even; per ensemble); ``min_steps``/``max_steps`` — chain length bounds (the chain
+    stops once longer than :data:`TAU_FACTOR` τ); ``check_every`` — steps between τ checks (the compiled
+    sampler's block); ``seed``; ``progress`` — tqdm bar on stderr; ``bounds`` — see
     :func:`log_probability_function`; ``spread`` — walkers start at the optimum plus
     ``spread`` × its standard error (in u, at most 0.1) times a standard normal draw;
-    ``meta`` — kept with the draws (saved by :meth:`Posterior.save`).
+    ``meta`` — kept with the draws (saved by :meth:`Posterior.save`); ``sampler`` — ``"compiled"``
+    (:func:`ringfit.fit.ensemble.run_compiled`, the default) or ``"emcee"`` (the reference backend);
+    ``chains`` — independent ensembles of ``walkers`` run side by side (compiled sampler only; the
+    posterior's walker axis holds them one after another); ``row_scale`` — ``(m,)`` widening of the rows' σ
+    (identify's Student-t widening); ``shift_u`` — ``(k,)`` one systematic direction in u (identify's grid
+    check) convolved into the draws (:attr:`Posterior.log_samples`).
 
     **Returns:** :class:`Posterior`. Warns (``RuntimeWarning``) when the chain did not reach
     :data:`TAU_FACTOR` autocorrelation times by ``max_steps``.
@@ -450,31 +498,49 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
 
     free = tuple(result.names)
     k = len(free)
+    if sampler not in SAMPLERS:
+        raise InputError(f"sampler {sampler!r}: expected one of {', '.join(SAMPLERS)}")
     if walkers < 2 * k or walkers % 2:
-        raise InputError(f"walkers = {walkers}: emcee needs an even number of at least {2 * k} (2 × {k} parameters)")
+        raise InputError(f"walkers = {walkers}: the stretch move needs an even number of at least {2 * k} "
+                         f"(2 × {k} parameters)")
     if not 1 <= min_steps <= max_steps:
         raise InputError(f"chain length: need 1 <= min_steps ({min_steps}) <= max_steps ({max_steps})")
+    chains = 1 if sampler == "emcee" else int(chains)
+    if chains < 1:
+        raise InputError(f"chains = {chains}: expected at least 1")
     problem = result.problem
-    log_prob, lo, hi = log_probability_function(result, bounds, chunk=walkers // 2)
+    lo, hi = _support(result, bounds)
     coords = [problem.coordinate(n) for n in free]
     y_opt = np.array([c.to_u(result.values[n]) for c, n in zip(coords, free)])
     width = np.where(np.isfinite(hi - lo), hi - lo, np.inf)
     y_opt = np.clip(y_opt, lo + np.minimum(0.05, 0.01 * width), hi - np.minimum(0.05, 0.01 * width))
     step = np.sqrt(np.clip(np.diag(result.covariance_log), 1e-8, 0.01))
     rng = np.random.default_rng(seed)
-    p0 = y_opt + spread * step * rng.standard_normal((walkers, k))
+    p0 = y_opt + spread * step * rng.standard_normal((chains, walkers, k))
     p0 = np.clip(p0, lo + 1e-9 * np.minimum(width, 1.0), hi - 1e-9 * np.minimum(width, 1.0))
-    sampler, tau = run_ensemble(log_prob, p0, min_steps=min_steps, max_steps=max_steps, check_every=check_every,
+    if sampler == "emcee":
+        log_prob, _, _ = log_probability_function(result, bounds, chunk=walkers // 2, row_scale=row_scale)
+        ens, tau = run_ensemble(log_prob, p0[0], min_steps=min_steps, max_steps=max_steps, check_every=check_every,
                                 seed=int(rng.integers(2**31)), progress=progress)
-    chain = sampler.get_chain()
+        chain, log_p, acceptance = ens.get_chain(), ens.get_log_prob(), ens.acceptance_fraction
+    else:
+        from ringfit.fit.ensemble import run_compiled
+
+        kernel, consts, _, _ = log_density_function(result, bounds, row_scale=row_scale)
+        with _interrupt_between_steps() as interrupted:
+            run = run_compiled(kernel, consts, p0, min_steps=min_steps, max_steps=max_steps, block=check_every,
+                               seed=int(rng.integers(2**31)), tau_factor=TAU_FACTOR, progress=progress,
+                               interrupted=interrupted)
+        chain, log_p, acceptance, tau = run.chain, run.log_prob, run.acceptance, run.tau
     tmax = float(np.max(tau)) if np.all(np.isfinite(tau)) else chain.shape[0] / 10
     burn = int(min(2 * tmax, chain.shape[0] // 2))
     thin = max(1, int(tmax / 2))
     post = Posterior(
         names=free, kinds=tuple(c.kind for c in coords), values0=dict(result.values), chain=chain,
-        log_prob=sampler.get_log_prob(), acceptance=sampler.acceptance_fraction, tau=np.asarray(tau),
+        log_prob=log_p, acceptance=np.asarray(acceptance), tau=np.asarray(tau),
         burn=burn, thin=thin, centers=tuple(c.center for c in coords), scales=tuple(c.scale for c in coords),
-        meta=dict(meta or {}),
+        meta=dict(meta or {}), sampler=sampler, chains=chains,
+        shift_u=None if shift_u is None else np.asarray(shift_u, dtype=np.float64), seed=int(seed),
     )
     if not post.converged:
         warnings.warn(
