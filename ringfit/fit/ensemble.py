@@ -146,8 +146,9 @@ def run_compiled(kernel, consts, p0, *, min_steps: int, max_steps: int, block: i
     p0 = np.asarray(p0, dtype=np.float64)
     C, W, k = p0.shape
     block = int(max(1, block))
-    key = jax.random.PRNGKey(int(seed))
-    x = jnp.asarray(p0)
+    # host arrays in, host arrays back: every block sees the same argument types (one executable)
+    key = np.asarray(jax.random.PRNGKey(int(seed)))
+    x = p0
     chains, lps = [], []
     accepted = np.zeros((C, W))
     done = 0
@@ -160,7 +161,7 @@ def run_compiled(kernel, consts, p0, *, min_steps: int, max_steps: int, block: i
     try:
         while done < max_steps:
             xs, lp, acc, key = _block(x, key, consts, kernel=kernel, steps=block)
-            xs, lp = np.asarray(xs), np.asarray(lp)
+            xs, lp, key = np.asarray(xs), np.asarray(lp), np.asarray(key)
             x = xs[-1]
             chains.append(xs.reshape(block, C * W, k))
             lps.append(lp.reshape(block, C * W))

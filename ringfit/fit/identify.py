@@ -483,6 +483,18 @@ class Identification:
     passes: int
     inputs: IdentifyInputs | None = None
     grid_check: dict | None = None
+    #: ``(m,)`` per data row: its block's Student-t widening (:func:`t_widening`), 1 elsewhere
+    row_scale: np.ndarray | None = None
+    #: ``(k,)`` the grid check's move δu (solver coordinates of ``fit.names``), None when not run
+    shift_u: np.ndarray | None = None
+    #: the block of each data row, in order: name → slice of ``fit.residuals``
+    slices: dict | None = None
+
+    def posterior_likelihood(self) -> dict:
+        """What :func:`ringfit.fit.posterior.sample` needs to sample the noise model of the intervals
+        (docs/physics.md §12.3): ``row_scale`` (the t-widening per row) and ``shift_u`` (the grid check's
+        systematic direction, convolved into the draws)."""
+        return dict(row_scale=self.row_scale, shift_u=self.shift_u)
 
     @property
     def converged(self) -> bool:
@@ -680,8 +692,13 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
             Jw[slices[b]] /= w  # the block's σ times t_ν/z (t_widening)
         cov_u = covariance_from_jacobian(Jw)
     grid = None
+    row_scale = np.ones(r.size)
+    for b, w in (widen or {}).items():
+        row_scale[slices[b]] = w
+    shift_u = None
     if check is not None and np.all(np.isfinite(check["shift_u"])):
         du = check["shift_u"]
+        shift_u = np.asarray(du, dtype=np.float64)
         cov_u = cov_u + np.outer(du, du)  # the discretisation's move: one systematic direction (grid_check)
         grid = dict(grid=check["grid"], loaded_harmonics=check["loaded_harmonics"],
                     shift={n: float(x) for n, x in zip(names, du)})
@@ -714,7 +731,7 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
                               gain=fit.values[g], gain_sd=fit.values[g] * math.sqrt(max(cov_u[ig, ig], 0.0))))
     ring = RingParams(**{n: fit.values[n] for n in RING_FIELDS})
     return Identification(fit, ring, free_ring, blocks, (free_ring, corr), covariance, nuisances, notes, passes,
-                          inputs, grid)
+                          inputs, grid, row_scale, shift_u, dict(slices))
 
 
 def identification_report(ident: Identification) -> dict:

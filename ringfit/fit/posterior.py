@@ -571,6 +571,8 @@ def sample_posterior(
     progress: bool = True,
     lsq=None,
     data_only=None,
+    sampler: str = "compiled",
+    chains: int = DEFAULT_CHAINS,
 ) -> Posterior:
     """Posterior of ring parameters given measured natural frequencies (eq. 18, docs/physics.md §2.1).
 
@@ -619,7 +621,7 @@ def sample_posterior(
         identifiability=data_only[1].to_record(),
     )
     return sample(lsq, walkers=walkers, min_steps=min_steps, max_steps=max_steps, check_every=check_every, seed=seed,
-                  progress=progress, meta=meta)
+                  progress=progress, meta=meta, sampler=sampler, chains=chains)
 
 
 def natural_frequency_predictive(post: Posterior, n, level: float = 0.95, noise: bool = True, seed: int = 0):

@@ -185,7 +185,9 @@ def build_free_report(post) -> str:
             for k, t, rh, es in zip(free, diag["tau"], diag["rhat"], diag["ess"])]
     fig = free_plots.trace_figure(post.chain, free, burn=post.burn)
     sections.append(("Sampler diagnostics", (
-        f"<p>emcee ensemble sampler, {diag['walkers']} walkers × {diag['steps']} steps; mean acceptance "
+        f"<p>{'compiled' if post.sampler == 'compiled' else 'emcee'} affine-invariant ensemble sampler "
+        f"(stretch move), {diag['walkers']} walkers"
+        f"{f' in {post.chains} ensembles' if post.chains > 1 else ''} × {diag['steps']} steps; mean acceptance "
         f"{diag['acceptance_mean']:.2f}; burn-in {post.burn}, thinning {post.thin}; "
         f"{post.samples.shape[0]} draws kept. R̂ treats walkers as chains (split R̂, arviz).</p>" +
         table_html(["parameter", "τ [steps]", "steps / τ", "R̂", "ESS"], drow) +
