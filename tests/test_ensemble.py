@@ -92,7 +92,7 @@ def test_several_ensembles_are_independent_and_agree():
 def test_one_program_across_blocks_seeds_and_data(monkeypatch):
     """The block program is traced once for every block of a run, every seed and every data set of the same
     structure (eqx.debug.assert_max_traces), and a second run compiles nothing new."""
-    traced = jit(eqx.debug.assert_max_traces(ensemble._block._fun, max_traces=1), quick=True,
+    traced = jit(eqx.debug.assert_max_traces(ensemble._block._fun, max_traces=1), quick="balanced",
                  static_argnames=("kernel", "steps", "a"))
     monkeypatch.setattr(ensemble, "_block", traced)
     for seed, shift in ((0, 0.0), (1, 0.2), (2, -0.1)):

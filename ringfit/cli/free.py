@@ -197,6 +197,22 @@ def _print_posterior(post) -> None:
     print(f"{'parameter':<12}{'median':>13}{'95 % interval':>30}{'R-hat':>8}")
     for row, rh in zip(post.summary_table(), d["rhat"]):
         print(f"{row['name']:<12}{row['median']:>13.5g}{row['lo']:>15.5g} – {row['hi']:<12.5g}{rh:>8.3f}")
+    print_predictive_check(post)
+
+
+#: A posterior predictive p-value below this is flagged in the printout.
+PPC_FLAG = 0.01
+
+
+def print_predictive_check(post) -> None:
+    """One line per measured table: its χ², rows and posterior predictive p-value (docs/physics.md §12.4)."""
+    ppc = post.meta.get("predictive_check") or {}
+    if not ppc:
+        return
+    print("posterior predictive check (p-value of each table's χ²):")
+    for name, c in ppc.items():
+        note = "  <- the model does not reproduce this table's scatter" if c["p_value"] < PPC_FLAG else ""
+        print(f"  {name:<32s} χ² {c['chi2_median']:9.4g} over {c['rows']:4d} rows  p = {c['p_value']:.3g}{note}")
 
 
 def run_report(args) -> int:

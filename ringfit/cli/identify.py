@@ -86,6 +86,7 @@ def run_identify(args) -> int:
                            spread=0.25, meta={"model": "identify", "folder": str(folder)}, sampler=args.sampler,
                            chains=args.chains, **ident.posterior_likelihood())
         doc["posterior"] = {"file": args.posterior.name, **_posterior_summary(posterior)}
+        _print_predictive(posterior)
     write_tyre(tyre, args.out, overwrite=args.force)
     atomic_write_text(report, json.dumps(doc, indent=1, allow_nan=False, default=_json_default) + "\n")
     print(f"wrote {args.out}")
@@ -104,8 +105,18 @@ def _json_default(x):
 
 
 def _posterior_summary(posterior) -> dict:
-    return {"parameters": {row["name"]: dict(median=row["median"], lo95=row["lo"], hi95=row["hi"])
-                           for row in posterior.summary_table(0.95)}}
+    return {"sampler": posterior.sampler, "steps": int(posterior.steps), "converged": bool(posterior.converged),
+            "parameters": {row["name"]: dict(median=row["median"], lo95=row["lo"], hi95=row["hi"])
+                           for row in posterior.summary_table(0.95)},
+            "predictive_check": {name: {k: (v if not isinstance(v, float) or math.isfinite(v) else None)
+                                        for k, v in c.items()}
+                                 for name, c in posterior.meta.get("predictive_check", {}).items()}}
+
+
+def _print_predictive(posterior) -> None:
+    from ringfit.cli.free import print_predictive_check
+
+    print_predictive_check(posterior)
 
 
 def _print(ident, doc) -> None:

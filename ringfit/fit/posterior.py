@@ -465,6 +465,68 @@ def log_density_function(result, bounds: dict | None = None, row_scale=None):
     return kernel, consts, lo, hi
 
 
+#: Posterior draws the predictive check evaluates the model at (at most; every kept draw when fewer).
+PPC_DRAWS = 400
+
+
+def predictive_check(result, u_draws: np.ndarray, blocks: dict | None = None, row_scale=None,
+                     draws: int = PPC_DRAWS, seed: int = 0, log_prob=None) -> dict:
+    """Posterior predictive p-value of each measured table's χ² (docs/physics.md §12.4).
+
+    For each of up to ``draws`` posterior draws θ_i (``u_draws`` ``(n, k)``, solver coordinates of the fit's
+    free parameters), the table's χ²_obs(θ_i) = Σ r²/(s² c²) over its rows (the likelihood's own rows: ``s`` the
+    fit's σ scale, ``c`` = ``row_scale``); data replicated from the same draw, y_rep = model(θ_i) + σ ε, give
+    χ²_rep ~ χ²_m exactly, so the p-value ``P(χ²_rep ≥ χ²_obs)`` is the mean over draws of the χ²_m survival
+    function at χ²_obs(θ_i) (the replication integrated out, not simulated). Small p: the model cannot
+    reproduce that table's scatter — read its intervals with care.
+
+    **Arguments:** ``result`` — the engine's FitResult the posterior was sampled from; ``blocks`` — table
+    name → row indices (a slice or an index array) of the problem's data rows (default: one block of every row,
+    named after the problem's ``data_label``); ``log_prob`` — ``(n,)`` the draws' log densities: with one block
+    of every row its χ² is read from them (``−2 log p`` less the prior rows), no model evaluation.
+
+    **Returns:** name → ``dict(rows, chi2_median, p_value)``.
+    """
+    from scipy.stats import chi2 as chi2_dist
+
+    from ringfit.fit.engine import residuals_batch
+
+    problem = result.problem
+    u = np.asarray(u_draws, dtype=np.float64)
+    pick = np.random.default_rng(seed).choice(u.shape[0], draws, replace=False) if u.shape[0] > draws else None
+    if pick is not None:
+        u = u[pick]
+    fs = free_set(problem, tuple(result.names))
+    blocks = blocks or {problem.data_label: slice(None)}
+    m_all = int(np.size(result.residuals))
+    whole = len(blocks) == 1 and all(isinstance(b, slice) and b == slice(None) for b in blocks.values())
+    if whole and log_prob is not None:
+        # one block of every row: χ²/s² (row-widened) = −2 log p − |W (u − mean)|², already evaluated by the sampler
+        lp = np.asarray(log_prob, dtype=np.float64)
+        lp = lp[pick] if pick is not None else lp
+        k = u.shape[1]
+        du = np.concatenate([u, np.zeros((u.shape[0], fs.size - k))], axis=1) - fs.prior_mean[None, :]
+        c2_all = -2.0 * lp - np.sum((du @ fs.prior_w.T) ** 2, axis=1)
+        z2 = None
+    else:
+        thetas = np.repeat(np.asarray(result.theta, dtype=np.float64)[None], u.shape[0], axis=0)
+        for j, i in enumerate(fs.index):
+            thetas[:, i] = problem.coords[i].from_u(u[:, j])
+        r = residuals_batch(problem, thetas, chunk=min(64, u.shape[0]))  # (n, m)
+        s = float(result.extra.get("sigma_scale", 1.0))
+        z2 = r**2 / s**2
+        if row_scale is not None:
+            z2 = z2 / np.asarray(row_scale, dtype=np.float64)[None, :] ** 2
+    out = {}
+    for name, rows in blocks.items():
+        c2 = c2_all if z2 is None else z2[:, rows].sum(axis=1)
+        m = m_all if z2 is None else int(z2[0, rows].size)
+        ok = np.isfinite(c2)
+        p = float(np.mean(chi2_dist.sf(c2[ok], m))) if ok.any() and m > 0 else math.nan
+        out[str(name)] = dict(rows=m, chi2_median=float(np.median(c2[ok])) if ok.any() else math.nan, p_value=p)
+    return out
+
+
 #: The samplers of :func:`sample`: the compiled stretch move (:mod:`ringfit.fit.ensemble`, the default) and
 #: emcee's (the reference; same algorithm, driven from Python one step at a time).
 SAMPLERS = ("compiled", "emcee")
@@ -475,7 +537,7 @@ DEFAULT_CHAINS = 1
 def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int = 20000, check_every: int = 1000,
            seed: int = 0, progress: bool = True, bounds: dict | None = None, spread: float = 0.1,
            meta: dict | None = None, sampler: str = "compiled", chains: int = DEFAULT_CHAINS, row_scale=None,
-           shift_u=None) -> "Posterior":
+           shift_u=None, tables: dict | None = None) -> "Posterior":
     """Sample the posterior of a least-squares fit's free parameters with the affine-invariant stretch move.
 
     **Arguments:** ``result`` — a :class:`~ringfit.fit.result.FitResult` of the engine;
@@ -489,7 +551,9 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
     ``chains`` — independent ensembles of ``walkers`` run side by side (compiled sampler only; the
     posterior's walker axis holds them one after another); ``row_scale`` — ``(m,)`` widening of the rows' σ
     (identify's Student-t widening); ``shift_u`` — ``(k,)`` one systematic direction in u (identify's grid
-    check) convolved into the draws (:attr:`Posterior.log_samples`).
+    check) convolved into the draws (:attr:`Posterior.log_samples`); ``tables`` — name → data rows of each
+    measured table for the posterior predictive check (:func:`predictive_check`, kept in
+    ``meta["predictive_check"]``; default one block of every row).
 
     **Returns:** :class:`Posterior`. Warns (``RuntimeWarning``) when the chain did not reach
     :data:`TAU_FACTOR` autocorrelation times by ``max_steps``.
@@ -542,6 +606,9 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
         meta=dict(meta or {}), sampler=sampler, chains=chains,
         shift_u=None if shift_u is None else np.asarray(shift_u, dtype=np.float64), seed=int(seed),
     )
+    post.meta["predictive_check"] = predictive_check(result, post.chain[post.burn :: post.thin].reshape(-1, k),
+                                                     tables, row_scale=row_scale, seed=seed,
+                                                     log_prob=post.log_prob[post.burn :: post.thin].reshape(-1))
     if not post.converged:
         warnings.warn(
             f"posterior chain of {post.steps} steps is only {post.steps / max(tmax, 1e-9):.1f} autocorrelation "
@@ -621,7 +688,8 @@ def sample_posterior(
         identifiability=data_only[1].to_record(),
     )
     return sample(lsq, walkers=walkers, min_steps=min_steps, max_steps=max_steps, check_every=check_every, seed=seed,
-                  progress=progress, meta=meta, sampler=sampler, chains=chains)
+                  progress=progress, meta=meta, sampler=sampler, chains=chains,
+                  tables={Path(str(table.source)).name or "modes": slice(None)})
 
 
 def natural_frequency_predictive(post: Posterior, n, level: float = 0.95, noise: bool = True, seed: int = 0):
@@ -646,5 +714,5 @@ def natural_frequency_predictive(post: Posterior, n, level: float = 0.95, noise:
     return dict(n=n, lo=q[0], median=q[1], hi=q[2])
 
 
-__all__ = ["Posterior", "sample", "sample_posterior", "run_ensemble", "load_posterior", "log_probability_function",
+__all__ = ["Posterior", "sample", "predictive_check", "SAMPLERS", "sample_posterior", "run_ensemble", "load_posterior", "log_probability_function",
            "natural_frequency_predictive", "TAU_FACTOR"]
