@@ -1,19 +1,22 @@
-"""The one posterior of ringfit: emcee on any problem of the least-squares engine.
+"""The one posterior of ringfit: the affine-invariant ensemble sampler on any problem of the least-squares engine.
 
 :func:`sample` takes a :class:`~ringfit.fit.result.FitResult` of
 :func:`ringfit.fit.engine.least_squares` and samples its free parameters in the
-solver coordinates ``u`` (log for positive parameters, scaled for linear ones):
+solver coordinates ``u`` (log for positive parameters, scaled for linear ones; docs/physics.md §12):
 
 - likelihood ``−½ Σ r²`` of the problem's weighted residuals (divided by the
-  fit's residual σ when the problem's ``sigma`` is ``"estimate"``);
+  fit's residual σ when the problem's ``sigma`` is ``"estimate"``, and by a per-row widening
+  ``row_scale`` where given: identify's Student-t widening);
 - prior: the problem's Gaussian prior on ``u``, flat elsewhere, truncated to the
   coordinates' bounds and the problem's plausible ranges;
-- ``emcee.EnsembleSampler(vectorize=True)`` on one jitted, vmapped log-probability
-  evaluated in fixed chunks of half the walkers (emcee's moves evaluate half the
-  ensemble at a time): one compilation per problem structure;
+- sampler (``sampler=``): ``"compiled"`` (default) — Goodman & Weare's stretch move as one compiled
+  program per block of steps (:mod:`ringfit.fit.ensemble`), several independent ensembles batched
+  (``chains``); ``"emcee"`` — the same move by ``emcee.EnsembleSampler(vectorize=True)`` on one jitted,
+  vmapped log-probability evaluated in fixed chunks of half the walkers, the reference;
 - walkers start in a small ball around the least-squares optimum; the chain grows
   in blocks until it is longer than :data:`TAU_FACTOR` integrated autocorrelation
-  times (or ``max_steps``, with a warning).
+  times (or ``max_steps``, with a warning);
+- a posterior predictive check of every measured table's χ² (:func:`predictive_check`).
 
 :class:`Posterior` holds the draws and diagnostics (arviz R̂ and ESS) and saves to
 HDF5 with whatever the problem wants kept beside them (``meta``), so that a report
