@@ -139,6 +139,7 @@ def coverage_identify(n: int, sampler: str, seed0: int = 100) -> tuple[list[str]
                           check_every=250, seed=i, progress=False, spread=0.25, **ident.posterior_likelihood())
             s = post.log_samples
             ring_truth = truth["ring"] if "ring" in truth else truth
+            case = []
             for j, name in enumerate(post.names):
                 if name not in ident.free or name not in ring_truth:
                     continue
@@ -150,6 +151,10 @@ def coverage_identify(n: int, sampler: str, seed0: int = 100) -> tuple[list[str]
                     hits[lv] += inside
                     per_param.setdefault(name, {x: 0 for x in LEVELS})
                     per_param[name][lv] += inside
+                lo, hi = np.percentile(s[:, j], [2.5, 97.5])
+                case.append(f"{name} {'in' if lo <= t <= hi else 'OUT'}")
+            print(f"   case {i + 1}/{n}: {post.steps} steps, τ max {np.max(post.tau):.0f}; 95 %: {', '.join(case)}",
+                  flush=True)
     line, ok = coverage_line("all ring", hits, max(count, 1))
     lines = [f"2. `identify --posterior` ({sampler}): {n} joint cases (free + loaded + profiles), {count} parameter "
              f"intervals, {skipped} case(s) not converged; {clock.wall:.0f} s wall, {clock.cpu:.0f} s CPU", line]
