@@ -595,7 +595,8 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
 
         kernel, consts, _, _ = log_density_function(result, bounds, row_scale=row_scale)
         with _interrupt_between_steps() as interrupted:
-            run = run_compiled(kernel, consts, p0, min_steps=min_steps, max_steps=max_steps, block=check_every,
+            run = run_compiled(kernel, consts, p0, min_steps=min_steps, max_steps=max_steps,
+                               block=min(check_every, max_steps),
                                seed=int(rng.integers(2**31)), tau_factor=TAU_FACTOR, progress=progress,
                                interrupted=interrupted)
         chain, log_p, acceptance, tau = run.chain, run.log_prob, run.acceptance, run.tau
