@@ -14,6 +14,15 @@ and end (targets from issues 2 and 11 in brackets):
    script that imports JAX and optimistix and solves the same fit cold  [< 2.5 s]
 5. the XLA programs a cold `ringfit fit` compiles (JAX_LOG_COMPILES=1, empty cache) vs the bare
    script's: the issue counted 19, 18 of them small eager ops
+6. the posterior of the bundled free table, warm, both samplers in the same run (issue 32): the compiled
+   stretch move (ringfit.fit.ensemble) against emcee's, 32 walkers from the same start until 50 τ; bulk ESS
+   (arviz, the smallest over the parameters) per CPU-second, wall beside CPU, and both posteriors' medians
+   and sd  [ratio ≥ 15×, ≥ 1,000 ESS per CPU-second]
+7. cold `ringfit sample` from the shell (empty compilation cache), compiled sampler against
+   `--sampler emcee`  [no slower]
+
+Run it on one core for the issue's figures: `taskset -c 0 python benchmarks/bench_fit.py` (the first line
+says how many cores the process may use).
 
 `--quick` shortens 3 to 1000 steps (a smoke run; its figure is not the target's).
 """
@@ -68,17 +77,8 @@ def compiled_programs(stderr: str) -> list[str]:
     return re.findall(r"Finished XLA compilation of (\S+) in", stderr)
 
 
-def main(argv=None):
-    ap = bc.parser(__doc__.splitlines()[0], quick_help="1000 posterior steps instead of 5000, 1 repeat (smoke run)")
-    ap.add_argument("--repeats", type=bc.count("a number of runs", 1, 100), default=3,
-                    help="runs per figure; min / median / max is printed (default 3)")
-    args = ap.parse_args(argv)
-    reps = 1 if args.quick else args.repeats
-    bc.start(f"bench_fit: min / median / max over {reps} interleaved run(s)" + (" [--quick]" if args.quick else ""))
-    failures = bc.Failures()
-
-    geo, ring = table9()
-    table = read_mode_table(MODES)
+def the_fit_figures(args, reps, failures, geo, ring, table):
+    """Figures 1–5."""
     n = jnp.arange(1.0, 10.0)
     f = jnp.asarray(table.freq_hz[:9])
     sigma = 0.01 * f
@@ -201,7 +201,87 @@ def main(argv=None):
           f"script: {len(bare_programs)} ({summary(bare_programs)}). The small ones are compiled while the "
           f"solve is traced, inside equinox/lineax/optimistix (enum comparisons and RESULTS.promote), "
           f"the same in both.")
+
+
+def main(argv=None):
+    ap = bc.parser(__doc__.splitlines()[0], quick_help="1000 posterior steps instead of 5000, 1 repeat (smoke run)")
+    ap.add_argument("--repeats", type=bc.count("a number of runs", 1, 100), default=3,
+                    help="runs per figure; min / median / max is printed (default 3)")
+    ap.add_argument("--samplers-only", action="store_true", help="only figures 6 and 7 (the two samplers)")
+    args = ap.parse_args(argv)
+    reps = 1 if args.quick else args.repeats
+    bc.start(f"bench_fit: min / median / max over {reps} interleaved run(s)" + (" [--quick]" if args.quick else "")
+             + f"; {bc.usable_cores()} usable core(s)")
+    failures = bc.Failures()
+    geo, ring = table9()
+    table = read_mode_table(MODES)
+    fit = fit_natural_frequencies(table, geo, ring, prior="physical")
+    if not args.samplers_only:
+        the_fit_figures(args, reps, failures, geo, ring, table)
+    lines = samplers(fit, reps, failures)
+    failures.refuse()
+    for line in lines:
+        print(line)
     bc.finish()
+
+
+def samplers(fit, reps, failures) -> list[str]:
+    """Figures 6 and 7: the compiled sampler against emcee's, warm and cold."""
+    # --- 6. the two samplers, warm, same run
+    from ringfit.fit.posterior import sample
+
+    def sampled(name):
+        def run():
+            with bc.Clock() as c:
+                p = sample(fit, sampler=name, walkers=32, min_steps=2000, max_steps=20000, seed=3, progress=False)
+            ess = float(np.min(p.ess()))
+            ok = p.converged and np.isfinite(ess)
+            posts[name] = p
+            return bc.Sample(c.wall, c.cpu, ok, "" if ok else "not converged"), ess
+        return run
+
+    posts, ess6 = {}, {"compiled": [], "emcee": []}
+    for name in ("compiled", "emcee"):
+        sampled(name)()  # compile both first
+    runs6 = {"compiled": [], "emcee": []}
+    for _ in range(reps):
+        for name in ("compiled", "emcee"):
+            sm, e = sampled(name)()
+            failures.check(sm.ok, f"6. {name} posterior", sm.detail)
+            runs6[name].append(sm)
+            ess6[name].append(e)
+    per_cpu = {k: [e / r.cpu for e, r in zip(ess6[k], runs6[k])] for k in runs6}
+    per_wall = {k: [e / r.wall for e, r in zip(ess6[k], runs6[k])] for k in runs6}
+    ratio = [a / b for a, b in zip(per_cpu["compiled"], per_cpu["emcee"])]
+    lines6 = [f"6. posterior of the bundled free table, warm, 32 walkers until 50 τ: compiled "
+              f"{bc.span(per_cpu['compiled'], fmt='{:.0f}')} ESS per CPU-second (per wall-second "
+              f"{bc.span(per_wall['compiled'], fmt='{:.0f}')}; {both(runs6['compiled'])}), emcee "
+              f"{bc.span(per_cpu['emcee'], fmt='{:.0f}')} per CPU-second (per wall-second "
+              f"{bc.span(per_wall['emcee'], fmt='{:.0f}')}; {both(runs6['emcee'])}); ratio "
+              f"{bc.span(ratio, fmt='{:.1f}')}× (targets ≥ 15×, ≥ 1,000 ESS per CPU-second)"]
+    for name in ("compiled", "emcee"):
+        p = posts[name]
+        rows = ", ".join(f"{r['name']} {r['median']:.4g} ± {r['sd']:.3g}" for r in p.summary_table())
+        lines6.append(f"   {name:8s} median ± sd: {rows} ({p.steps} steps, τ max {np.max(p.tau):.0f})")
+
+    # --- 7. cold `ringfit sample`, both samplers
+    sample_exe = [sys.executable, "-m", "ringfit", "sample", str(MODES), "--tyre", str(TYRE), "--quiet", "--out"]
+    with tempfile.TemporaryDirectory() as d:
+        count7 = iter(range(10**6))
+
+        def cold_sample(extra):
+            def run():
+                i = next(count7)
+                env = dict(os.environ, RINGFIT_CACHE_DIR=str(Path(d) / f"cache-{i}"))
+                return bc.run_process(sample_exe + [str(Path(d) / f"p{i}.h5"), *extra], env)
+            return run
+
+        runs7 = bc.interleaved({"compiled": cold_sample([]), "emcee": cold_sample(["--sampler", "emcee"])}, reps,
+                               failures)
+    lines6.append(f"7. cold `ringfit sample` (empty compilation cache): compiled {both(runs7['compiled'])}; "
+                  f"--sampler emcee {both(runs7['emcee'])} (CPU ratio {bc.ratio_span(runs7['compiled'], runs7['emcee'])}"
+                  f"; target ≤ 1)")
+    return lines6
 
 
 if __name__ == "__main__":

@@ -102,7 +102,7 @@ def run_demo(out: str | Path = "ringfit-demo", *, overwrite: bool = False, seed:
     say(f"   ρA = {float(r.rho_a):.4g} kg/m, EI = {float(r.ei):.4g} N m², kw = {float(r.kw):.4g} N/m², "
         f"kv = {float(r.kv):.4g} N/m²  (Table 9: 2.715, 0.9426, 1.294e6, 1.161e6)")
 
-    say("\n4. Posterior (emcee, until the chain is 50 autocorrelation times long):", flush=True)
+    say("\n4. Posterior (compiled ensemble sampler, until the chain is 50 autocorrelation times long):", flush=True)
     post = sample_posterior(table, tyre.geometry, tyre.ring, prior="physical", seed=seed, progress=progress,
                             lsq=lsq, data_only=(free_fit, ident))
     for row in post.summary_table():

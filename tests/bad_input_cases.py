@@ -610,6 +610,24 @@ def _ctrl_c_while_sampling(after_calls=20):
     return during
 
 
+def _ctrl_c_while_compiled_sampling(after_calls=1):
+    """SIGINT delivered while the compiled sampler runs a block (it is read when the block returns)."""
+    def during(d: Path):
+        import ringfit.fit.ensemble as ensemble
+
+        real = ensemble._block
+        calls = [0]
+
+        def block(*a, **k):
+            calls[0] += 1
+            if calls[0] == after_calls:
+                signal.raise_signal(signal.SIGINT)
+            return real(*a, **k)
+
+        return _patched(ensemble, "_block", block)
+    return during
+
+
 def _refused_after_work(names):
     """Exit 2, the last stderr line the error naming one of ``names``, the other lines ``WARNING:`` lines
     (a command that ran before its output failed may have warned), no traceback, no file written or changed."""
@@ -702,8 +720,10 @@ issue23("sample-disk-full", _replace_out(SAMPLE, "{d}/full/post_out.h5") + ["--m
 issue23("ssi-plot-disk-full", SSI + ["--plot", "{d}/full/stab.png", "--quiet"], setup=_mkdir("full"),
         during=_writes_fail("full", errno.ENOSPC), check=_refused_after_work(("stab.png",)), unchanged=True, slow=True)
 # Ctrl-C in sample: the one-line message only (no emcee traceback), exit 130, nothing written
-issue23("sample-ctrl-c", SAMPLE + ["--quiet"], during=_ctrl_c_while_sampling(), check=_interrupted, unchanged=True,
-        slow=True)
+issue23("sample-ctrl-c", SAMPLE + ["--quiet", "--sampler", "emcee"], during=_ctrl_c_while_sampling(),
+        check=_interrupted, unchanged=True, slow=True)
+issue23("sample-ctrl-c-compiled", SAMPLE + ["--quiet"], during=_ctrl_c_while_compiled_sampling(), check=_interrupted,
+        unchanged=True, slow=True)
 # silent: a rolling table whose sidecar has no state, says free with a load, or has load_n 0
 for tag, edit, key in (("no-state", _drop("state"), "'state'"), ("free-with-load", _set("state", "free"), "'state'"),
                        ("load-0", _set("load_n", 0), "'load_n'")):

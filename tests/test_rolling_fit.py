@@ -117,9 +117,11 @@ def test_bad_requests_are_input_errors(profiles):
 
 @pytest.mark.slow
 def test_posterior_brackets_truth(fit4):
-    before = compilations(engine._batched_log_probability)
+    from ringfit.fit import ensemble
+
+    before = compilations(ensemble._block)
     post = sample_rolling_posterior(fit4, walkers=8, steps=120, seed=1)
-    assert compilations(engine._batched_log_probability) <= before + 1  # all walkers, then halves: one
+    assert compilations(ensemble._block) <= before + 1  # one block program
     row = next(r for r in post.summary_table(level=0.6827) if r["name"] == "k_tread")
     lo, med, hi = row["lo"], row["median"], row["hi"]
     assert lo < med < hi

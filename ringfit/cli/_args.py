@@ -70,3 +70,12 @@ def quiet_flag(p: argparse.ArgumentParser) -> None:
 def force_flag(p: argparse.ArgumentParser) -> None:
     """``--force``: replace existing outputs (inputs are never replaced)."""
     p.add_argument("--force", action="store_true", help="replace existing outputs (never an input)")
+
+
+def sampler_flags(p: argparse.ArgumentParser) -> None:
+    """``--sampler {compiled,emcee}`` and ``--chains N`` of the commands that sample a posterior."""
+    p.add_argument("--sampler", choices=("compiled", "emcee"), default="compiled",
+                   help="'compiled': the stretch move as one compiled program per block of steps (default); "
+                        "'emcee': the same move driven by emcee, one step at a time (the reference)")
+    p.add_argument("--chains", type=integer("a whole number of chains >= 1", lo=1), default=1,
+                   help="independent ensembles sampled side by side by the compiled sampler (default 1)")

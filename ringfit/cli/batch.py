@@ -160,7 +160,7 @@ def register(sub) -> None:
     c.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created if absent)")
     _cluster_options(c)
     # the same limits as `ringfit sample`'s options: a campaign refuses before any work what its samples would
-    c.add_argument("--walkers", type=integer("a whole number of walkers >= 2", lo=2), default=32, help="emcee walkers of `ringfit sample` (default 32)")
+    c.add_argument("--walkers", type=integer("a whole number of walkers >= 2", lo=2), default=32, help="walkers of `ringfit sample` (default 32)")
     steps = integer("a whole number of steps >= 100", lo=100)
     c.add_argument("--min-steps", type=steps, default=2000, help="`ringfit sample --min-steps` (default 2000)")
     c.add_argument("--max-steps", type=steps, default=20000, help="`ringfit sample --max-steps` (default 20000)")
@@ -691,7 +691,7 @@ def _check_campaign_options(args) -> None:
         raise InputError(f"--max-steps {args.max_steps} is below --min-steps {args.min_steps}")
     k = len(DEFAULT_FREE.split(","))
     if args.walkers % 2 or args.walkers < 2 * k:
-        raise InputError(f"--walkers {args.walkers}: emcee needs an even number of at least {2 * k} "
+        raise InputError(f"--walkers {args.walkers}: the stretch move needs an even number of at least {2 * k} "
                          f"(2 × {k} free parameters of the campaign's fits)")
     parse_effects(args.effects)
 

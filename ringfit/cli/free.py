@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ringfit.cli._args import force_flag, integer, number, quiet_flag
+from ringfit.cli._args import force_flag, integer, number, quiet_flag, sampler_flags
 
 DEFAULT_FREE = "rho_a,ei,kw,kv"
 
@@ -23,13 +23,16 @@ def register(sub) -> None:
     p.add_argument("--max-steps", dest="fit_max_steps", default=None, help=argparse.SUPPRESS)
     p.set_defaults(run=run_fit)
 
-    p = sub.add_parser("sample", help="emcee posterior of the ring parameters",
-                       description="Sample the posterior with emcee until the chain exceeds 50 autocorrelation "
-                                   "times (or --max-steps), and save the draws to HDF5 for `ringfit report`.")
+    p = sub.add_parser("sample", help="posterior of the ring parameters (compiled ensemble sampler)",
+                       description="Sample the posterior with the affine-invariant stretch move (compiled; "
+                                   "`--sampler emcee` for the emcee reference) until the chain exceeds 50 "
+                                   "autocorrelation times (or --max-steps), and save the draws to HDF5 for "
+                                   "`ringfit report`.")
     _common(p)
     p.add_argument("--out", required=True, type=Path, help="output posterior file (HDF5, e.g. POSTERIOR.h5)")
     p.add_argument("--walkers", type=integer("a whole number of walkers >= 2", lo=2), default=32,
-                   help="emcee walkers; at least twice the number of free parameters (default 32)")
+                   help="walkers per ensemble; at least twice the number of free parameters (default 32)")
+    sampler_flags(p)
     p.add_argument("--min-steps", type=integer("a whole number of steps >= 100", lo=100), default=2000,
                    help="chain steps run before the first convergence check (default 2000)")
     p.add_argument("--max-steps", type=integer("a whole number of steps >= 100", lo=100), default=20000,
@@ -174,7 +177,8 @@ def run_sample(args) -> int:
         warnings.simplefilter("always", RuntimeWarning)
         post = sample_posterior(table, tyre.geometry, tyre.ring, free=free, prior=args.prior, modes=modes,
                                 default_relative_std=rel, walkers=args.walkers, min_steps=args.min_steps,
-                                max_steps=args.max_steps, seed=args.seed, progress=not args.quiet)
+                                max_steps=args.max_steps, seed=args.seed, progress=not args.quiet,
+                                sampler=args.sampler, chains=args.chains)
     for w in caught:
         print(f"WARNING: {w.message}", file=sys.stderr)
     _print_posterior(post)
@@ -188,10 +192,27 @@ def run_sample(args) -> int:
 
 def _print_posterior(post) -> None:
     d = post.diagnostics()
-    print(f"posterior: {d['verdict']}; acceptance {d['acceptance_mean']:.2f}")
+    print(f"posterior ({post.sampler} sampler, {d['walkers']} walkers): {d['verdict']}; "
+          f"acceptance {d['acceptance_mean']:.2f}")
     print(f"{'parameter':<12}{'median':>13}{'95 % interval':>30}{'R-hat':>8}")
     for row, rh in zip(post.summary_table(), d["rhat"]):
         print(f"{row['name']:<12}{row['median']:>13.5g}{row['lo']:>15.5g} – {row['hi']:<12.5g}{rh:>8.3f}")
+    print_predictive_check(post)
+
+
+#: A posterior predictive p-value below this is flagged in the printout.
+PPC_FLAG = 0.01
+
+
+def print_predictive_check(post) -> None:
+    """One line per measured table: its χ², rows and posterior predictive p-value (docs/physics.md §12.4)."""
+    ppc = post.meta.get("predictive_check") or {}
+    if not ppc:
+        return
+    print("posterior predictive check (p-value of each table's χ²):")
+    for name, c in ppc.items():
+        note = "  <- the model does not reproduce this table's scatter" if c["p_value"] < PPC_FLAG else ""
+        print(f"  {name:<32s} χ² {c['chi2_median']:9.4g} over {c['rows']:4d} rows  p = {c['p_value']:.3g}{note}")
 
 
 def run_report(args) -> int:

@@ -6,7 +6,7 @@ import json
 import math
 from pathlib import Path
 
-from ringfit.cli._args import force_flag, integer, quiet_flag
+from ringfit.cli._args import force_flag, integer, quiet_flag, sampler_flags
 
 
 def register(sub) -> None:
@@ -22,9 +22,11 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, type=Path, help="output tyre TOML (NAME.tyre.toml); NAME.identify.json "
                                                            "is written beside it")
     p.add_argument("--posterior", type=Path, default=None, metavar="NAME.h5",
-                   help="also sample the joint posterior with emcee and save it (HDF5)")
+                   help="also sample the joint posterior (compiled ensemble sampler; the same noise model as "
+                        "the intervals) and save it (HDF5)")
     p.add_argument("--walkers", type=integer("an even number of walkers >= 2", lo=2), default=None,
-                   help="emcee walkers (default: 2 × the free parameters)")
+                   help="walkers per ensemble (default: 2 × the free parameters)")
+    sampler_flags(p)
     p.add_argument("--min-steps", type=integer("a whole number of steps >= 100", lo=100), default=500,
                    help="posterior chain steps before the first convergence check (default 500)")
     p.add_argument("--max-steps", type=integer("a whole number of steps >= 100", lo=100), default=5000,
@@ -80,12 +82,14 @@ def run_identify(args) -> int:
         k = len(ident.fit.names)
         walkers = args.walkers or 2 * k
         if walkers < 2 * k or walkers % 2:
-            raise InputError(f"--walkers {walkers}: emcee needs an even number of at least {2 * k} "
+            raise InputError(f"--walkers {walkers}: the stretch move needs an even number of at least {2 * k} "
                              f"(2 × {k} free parameters)")
         posterior = sample(ident.fit, walkers=walkers, min_steps=args.min_steps, max_steps=args.max_steps,
                            check_every=max(100, args.min_steps // 2), seed=args.seed, progress=not args.quiet,
-                           spread=0.25, meta={"model": "identify", "folder": str(folder)})
+                           spread=0.25, meta={"model": "identify", "folder": str(folder)}, sampler=args.sampler,
+                           chains=args.chains, **ident.posterior_likelihood())
         doc["posterior"] = {"file": args.posterior.name, **_posterior_summary(posterior)}
+        _print_predictive(posterior)
     write_tyre(tyre, args.out, overwrite=args.force)
     atomic_write_text(report, json.dumps(doc, indent=1, allow_nan=False, default=_json_default) + "\n")
     print(f"wrote {args.out}")
@@ -104,8 +108,18 @@ def _json_default(x):
 
 
 def _posterior_summary(posterior) -> dict:
-    return {"parameters": {row["name"]: dict(median=row["median"], lo95=row["lo"], hi95=row["hi"])
-                           for row in posterior.summary_table(0.95)}}
+    return {"sampler": posterior.sampler, "steps": int(posterior.steps), "converged": bool(posterior.converged),
+            "parameters": {row["name"]: dict(median=row["median"], lo95=row["lo"], hi95=row["hi"])
+                           for row in posterior.summary_table(0.95)},
+            "predictive_check": {name: {k: (v if not isinstance(v, float) or math.isfinite(v) else None)
+                                        for k, v in c.items()}
+                                 for name, c in posterior.meta.get("predictive_check", {}).items()}}
+
+
+def _print_predictive(posterior) -> None:
+    from ringfit.cli.free import print_predictive_check
+
+    print_predictive_check(posterior)
 
 
 def _print(ident, doc) -> None:

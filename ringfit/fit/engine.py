@@ -865,48 +865,83 @@ def residuals_batch(problem: Problem, thetas, chunk: int = 64) -> np.ndarray:
                            thetas, min(int(chunk), len(thetas)))
 
 
-@functools.partial(jit, static_argnames=("model", "treedef"))
-def _batched_log_probability(u, leaves, theta0, free_arrays, prior_w, prior_mean, lo, hi, inv_s2, *, model, treedef):
-    """Log density ``(n,)`` of solver coordinates ``u`` ``(n, k)``, up to a constant."""
-    data = jax.tree.unflatten(treedef, leaves)
-    free = _Free(*free_arrays)
-    k = u.shape[1]
+@dataclass(frozen=True)
+class DensityKernel:
+    """The log density of a problem's free parameters as a traceable function: ``kernel(u, consts) -> (n,)``.
 
-    def one(ui):
-        r, _ = _weighted(ui, model, data, theta0, free, prior_w, prior_mean)
-        m = r.shape[0] - k
-        value = -0.5 * (inv_s2 * jnp.sum(r[:m] ** 2) + jnp.sum(r[m:] ** 2))
-        inside = jnp.all((ui >= lo) & (ui <= hi))
-        value = jnp.where(inside, value, -jnp.inf)
-        return jnp.where(jnp.isnan(value), -jnp.inf, value)
+    Hashable (the model and the data's tree structure), so it is a static argument of a compiled program
+    (:func:`log_probability`'s, the ensemble sampler's, :mod:`ringfit.fit.ensemble`) while ``consts`` (the
+    data, the fixed parameters, prior rows, bounds, row weights: :func:`log_density`) are traced: one
+    compilation per problem structure, whatever the data. Batches over ``u`` ``(n, k)`` are vmapped, or
+    serial for ``model.serial_batches`` (:func:`map_parameters`).
+    """
 
-    return map_parameters(model, one, u)
+    model: AbstractResiduals
+    treedef: object
+
+    def __call__(self, u, consts):
+        leaves, theta0, free_arrays, prior_w, prior_mean, lo, hi, inv_s2 = consts
+        data = jax.tree.unflatten(self.treedef, leaves)
+        free = _Free(*free_arrays)
+        k = u.shape[1]
+
+        def one(ui):
+            r, _ = _weighted(ui, self.model, data, theta0, free, prior_w, prior_mean)
+            m = r.shape[0] - k
+            value = -0.5 * (jnp.sum(inv_s2 * r[:m] ** 2) + jnp.sum(r[m:] ** 2))
+            inside = jnp.all((ui >= lo) & (ui <= hi))
+            value = jnp.where(inside, value, -jnp.inf)
+            return jnp.where(jnp.isnan(value), -jnp.inf, value)
+
+        return map_parameters(self.model, one, u)
 
 
-def log_probability(problem: Problem, theta, free: tuple[str, ...], *, lo_u=None, hi_u=None,
-                    sigma_scale: float = 1.0, chunk: int | None = None):
-    """``u (n, k) -> (n,)``: the log posterior density of the free parameters' solver coordinates.
+def log_density(problem: Problem, theta, free: tuple[str, ...], *, lo_u=None, hi_u=None,
+                sigma_scale: float = 1.0, row_scale=None) -> tuple[DensityKernel, tuple]:
+    """``(kernel, consts)``: the log posterior density of the free parameters' solver coordinates, traceable.
 
-    ``−½ (Σ r²/s² + prior rows²)`` with ``r`` the model's weighted rows and ``s`` = ``sigma_scale``
-    (the fit's residual σ when the problem's ``sigma`` is ``"estimate"``); ``−inf`` outside
-    ``[lo_u, hi_u]`` (default: the coordinates' bounds) or where the model is not finite. The
-    fixed parameters stay at ``theta``. One jitted, vmapped region; ``chunk`` evaluates in chunks of
-    exactly that many rows (padded), so one compilation serves every batch size.
+    ``kernel(u (n, k), consts) -> (n,)`` is ``−½ (Σ_i r_i²/(s² c_i²) + prior rows²)`` with ``r`` the model's
+    weighted rows, ``s`` = ``sigma_scale`` (the fit's residual σ when the problem's ``sigma`` is
+    ``"estimate"``) and ``c`` = ``row_scale`` (``(m,)`` per-row widening of the σ, e.g. identify's Student-t
+    widening per block; default 1); ``−inf`` outside ``[lo_u, hi_u]`` (default: the coordinates' bounds) or
+    where the model is not finite. The fixed parameters stay at ``theta``. The density is over u itself (no
+    sine transform of bounded coordinates). ``consts`` is a tuple of arrays (traced by whatever compiles the
+    kernel).
     """
     require_x64("ringfit.fit.engine.log_probability")
     fs = free_set(problem, free)
     lo = fs.lo_u if lo_u is None else np.asarray(lo_u, dtype=np.float64)
     hi = fs.hi_u if hi_u is None else np.asarray(hi_u, dtype=np.float64)
-    # the density is over u itself: no sine transform of bounded coordinates
     free_arrays = tuple(jnp.asarray(a) for a in fs.unbounded_arrays())
     leaves, treedef = jax.tree.flatten(problem.data)
+    inv_s2 = 1.0 / float(sigma_scale) ** 2
+    if row_scale is not None:
+        inv_s2 = inv_s2 / np.asarray(row_scale, dtype=np.float64) ** 2
     consts = (tuple(jnp.asarray(x) for x in leaves), jnp.asarray(np.append(np.asarray(theta, np.float64), 0.0)),
               free_arrays, jnp.asarray(fs.prior_w), jnp.asarray(fs.prior_mean), jnp.asarray(lo), jnp.asarray(hi),
-              jnp.asarray(1.0 / float(sigma_scale) ** 2))
+              jnp.asarray(inv_s2, dtype=jnp.float64))
+    return DensityKernel(problem.model, treedef), consts
+
+
+@functools.partial(jit, static_argnames=("kernel",))
+def _batched_log_probability(u, consts, *, kernel):
+    """Log density ``(n,)`` of solver coordinates ``u`` ``(n, k)``, up to a constant."""
+    return kernel(u, consts)
+
+
+def log_probability(problem: Problem, theta, free: tuple[str, ...], *, lo_u=None, hi_u=None,
+                    sigma_scale: float = 1.0, chunk: int | None = None, row_scale=None):
+    """``u (n, k) -> (n,)``: the log posterior density of the free parameters' solver coordinates (NumPy).
+
+    :func:`log_density` (see there for ``lo_u``, ``hi_u``, ``sigma_scale``, ``row_scale``) as one jitted,
+    vmapped region; ``chunk`` evaluates in chunks of exactly that many rows (padded), so one compilation
+    serves every batch size.
+    """
+    kernel, consts = log_density(problem, theta, free, lo_u=lo_u, hi_u=hi_u, sigma_scale=sigma_scale,
+                                 row_scale=row_scale)
 
     def evaluate_u(u):
-        return np.asarray(_batched_log_probability(u, *consts, model=problem.model, treedef=treedef),
-                          dtype=np.float64)
+        return np.asarray(_batched_log_probability(u, consts, kernel=kernel), dtype=np.float64)
 
     def log_prob(u):
         u = np.asarray(u, dtype=np.float64)
@@ -936,4 +971,4 @@ def evaluate(problem: Problem, theta, free: tuple[str, ...], *, pad_to: int | No
 
 
 __all__ = ["least_squares", "least_squares_batch", "SOLVERS", "evaluate", "sum_of_squares_batch", "linearize",
-           "Linearization", "residuals", "residuals_batch", "log_probability", "free_set", "FreeSet", "in_fixed_chunks", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]
+           "Linearization", "residuals", "residuals_batch", "log_probability", "log_density", "DensityKernel", "free_set", "FreeSet", "in_fixed_chunks", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]

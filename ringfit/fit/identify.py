@@ -518,8 +518,23 @@ class Identification:
     passes: int
     inputs: IdentifyInputs | None = None
     grid_check: dict | None = None
+    #: ``(m,)`` per data row: its block's Student-t widening (:func:`t_widening`), 1 elsewhere
+    row_scale: np.ndarray | None = None
+    #: ``(k,)`` the grid check's move δu (solver coordinates of ``fit.names``), None when not run
+    shift_u: np.ndarray | None = None
+    #: the block of each data row, in order: name → slice of ``fit.residuals``
+    slices: dict | None = None
+    #: each measured table's rows (file name, with " damping" for the free table's damping rows) → row indices
+    tables: dict | None = None
+
     #: the notes also given as warnings (a table's data contradicting its stated load: :func:`load_check`)
     warned: list = field(default_factory=list)
+
+    def posterior_likelihood(self) -> dict:
+        """What :func:`ringfit.fit.posterior.sample` needs to sample the noise model of the intervals
+        (docs/physics.md §12.3): ``row_scale`` (the t-widening per row) and ``shift_u`` (the grid check's
+        systematic direction, convolved into the draws)."""
+        return dict(row_scale=self.row_scale, shift_u=self.shift_u, tables=self.tables)
 
     @property
     def converged(self) -> bool:
@@ -838,8 +853,13 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
             Jw[slices[b]] /= w  # the block's σ times t_ν/z (t_widening)
         cov_u = covariance_from_jacobian(Jw)
     grid = None
+    row_scale = np.ones(r.size)
+    for b, w in (widen or {}).items():
+        row_scale[slices[b]] = w
+    shift_u = None
     if check is not None and np.all(np.isfinite(check["shift_u"])):
         du = check["shift_u"]
+        shift_u = np.asarray(du, dtype=np.float64)
         cov_u = cov_u + np.outer(du, du)  # the discretisation's move: one systematic direction (grid_check)
         grid = dict(grid=check["grid"], loaded_harmonics=check["loaded_harmonics"],
                     shift={n: float(x) for n, x in zip(names, du)})
@@ -873,7 +893,34 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
                               gain=fit.values[g], gain_sd=fit.values[g] * math.sqrt(max(cov_u[ig, ig], 0.0))))
     ring = RingParams(**{n: fit.values[n] for n in RING_FIELDS})
     return Identification(fit, ring, free_ring, blocks, (free_ring, corr), covariance, nuisances, notes, passes,
-                          inputs, grid)
+                          inputs, grid, row_scale, shift_u, dict(slices), _table_rows(rows, slices, inputs, P))
+
+
+def _table_rows(rows: _Rows, slices: dict, inputs, P: int) -> dict:
+    """Each measured table's row indices (for the posterior predictive check): the free table's frequencies and
+    damping, each loaded table, each profile; named after their files."""
+    def name(obj, fallback):
+        src = getattr(obj, "source", None) if obj is not None else None
+        return Path(str(src)).name if src else fallback
+
+    free = None if inputs is None else inputs.free
+    out = {name(free, "free.modes.csv"): np.arange(slices["free modes"].start, slices["free modes"].stop)}
+    if "free damping" in slices:
+        sl = slices["free damping"]
+        out[name(free, "free.modes.csv") + " damping"] = np.arange(sl.start, sl.stop)
+    if "loaded modes" in slices:
+        start = slices["loaded modes"].start
+        for t in range(len(rows.loaded["load"])):
+            idx = start + np.flatnonzero(rows.loaded["table"] == t)
+            if idx.size:
+                out[name(inputs.loaded[t] if inputs else None, f"loaded table {t + 1}")] = idx
+    if "profiles" in slices:
+        sl = slices["profiles"]
+        per = (sl.stop - sl.start) // max(P, 1)
+        for i in range(P):
+            out[Path(str(rows.profiles["sources"][i])).name or f"profile {i + 1}"] = np.arange(sl.start + i * per,
+                                                                                              sl.start + (i + 1) * per)
+    return out
 
 
 #: A frequency block whose rows scatter more than this many times their σ (stated, or the default relative σ) is

@@ -1,19 +1,22 @@
-"""The one posterior of ringfit: emcee on any problem of the least-squares engine.
+"""The one posterior of ringfit: the affine-invariant ensemble sampler on any problem of the least-squares engine.
 
 :func:`sample` takes a :class:`~ringfit.fit.result.FitResult` of
 :func:`ringfit.fit.engine.least_squares` and samples its free parameters in the
-solver coordinates ``u`` (log for positive parameters, scaled for linear ones):
+solver coordinates ``u`` (log for positive parameters, scaled for linear ones; docs/physics.md §12):
 
 - likelihood ``−½ Σ r²`` of the problem's weighted residuals (divided by the
-  fit's residual σ when the problem's ``sigma`` is ``"estimate"``);
+  fit's residual σ when the problem's ``sigma`` is ``"estimate"``, and by a per-row widening
+  ``row_scale`` where given: identify's Student-t widening);
 - prior: the problem's Gaussian prior on ``u``, flat elsewhere, truncated to the
   coordinates' bounds and the problem's plausible ranges;
-- ``emcee.EnsembleSampler(vectorize=True)`` on one jitted, vmapped log-probability
-  evaluated in fixed chunks of half the walkers (emcee's moves evaluate half the
-  ensemble at a time): one compilation per problem structure;
+- sampler (``sampler=``): ``"compiled"`` (default) — Goodman & Weare's stretch move as one compiled
+  program per block of steps (:mod:`ringfit.fit.ensemble`), several independent ensembles batched
+  (``chains``); ``"emcee"`` — the same move by ``emcee.EnsembleSampler(vectorize=True)`` on one jitted,
+  vmapped log-probability evaluated in fixed chunks of half the walkers, the reference;
 - walkers start in a small ball around the least-squares optimum; the chain grows
   in blocks until it is longer than :data:`TAU_FACTOR` integrated autocorrelation
-  times (or ``max_steps``, with a warning).
+  times (or ``max_steps``, with a warning);
+- a posterior predictive check of every measured table's χ² (:func:`predictive_check`).
 
 :class:`Posterior` holds the draws and diagnostics (arviz R̂ and ESS) and saves to
 HDF5 with whatever the problem wants kept beside them (``meta``), so that a report
@@ -35,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ringfit.fit.engine import LOG, free_set, log_probability
+from ringfit.fit.engine import LOG, free_set, log_density, log_probability
 from ringfit.params import RingParams
 
 #: Stop when the chain is longer than this many integrated autocorrelation times.
@@ -81,6 +84,10 @@ class Posterior:
     centers: tuple[float, ...] = ()
     scales: tuple[float, ...] = ()
     meta: dict = field(default_factory=dict)
+    sampler: str = "emcee"
+    chains: int = 1
+    shift_u: np.ndarray | None = None
+    seed: int = 0
 
     @property
     def steps(self) -> int:
@@ -93,8 +100,16 @@ class Posterior:
 
     @property
     def log_samples(self) -> np.ndarray:
-        """``(draws, k)`` flattened draws of the solver coordinates after burn-in and thinning."""
-        return self.chain[self.burn :: self.thin].reshape(-1, len(self.names))
+        """``(draws, k)`` flattened draws of the solver coordinates after burn-in and thinning.
+
+        With ``shift_u`` (one systematic direction δu, identify's grid check, docs/physics.md §12.3) each draw
+        is moved by ε δu, ε ~ N(0, 1) drawn once per draw from ``seed``: the posterior convolved with the
+        discretisation's doubt, as the least-squares covariance adds δu δuᵀ."""
+        u = self.chain[self.burn :: self.thin].reshape(-1, len(self.names))
+        if self.shift_u is not None and np.any(self.shift_u != 0):
+            eps = np.random.default_rng([int(self.seed), 7919]).standard_normal(u.shape[0])
+            u = u + eps[:, None] * np.asarray(self.shift_u)[None, :]
+        return u
 
     @property
     def samples(self) -> np.ndarray:
@@ -189,6 +204,7 @@ class Posterior:
             coords = {"mode": np.arange(observed["freq_hz"].size), "n": ("mode", np.asarray(data["n"]))}
             dims = {"freq_hz": ["mode"]}
         attrs = dict(source="ringfit", format=FORMAT, burn=int(self.burn), thin=int(self.thin),
+                     sampler=self.sampler, ensembles=int(self.chains),
                      tau=np.asarray(self.tau, dtype=np.float64), converged=int(self.converged),
                      acceptance_mean=float(np.mean(self.acceptance)))
         idata = az.from_dict(posterior=posterior, sample_stats=sample_stats, observed_data=observed,
@@ -237,9 +253,11 @@ class Posterior:
             h5.create_dataset("log_prob", data=self.log_prob, compression="gzip")
             h5.create_dataset("acceptance", data=self.acceptance)
             h5.create_dataset("tau", data=self.tau)
+            if self.shift_u is not None:
+                h5.create_dataset("shift_u", data=np.asarray(self.shift_u, dtype=np.float64))
             head = dict(names=list(self.names), kinds=list(self.kinds), centers=list(self.centers),
                         scales=list(self.scales), values0=self.values0, burn=self.burn, thin=self.thin,
-                        meta=self.meta)
+                        sampler=self.sampler, chains=int(self.chains), seed=int(self.seed), meta=self.meta)
             h5.attrs["meta"] = json.dumps(head, default=_json_default, allow_nan=True)
         image = buf.getvalue()
         return atomic_write(path, lambda tmp: tmp.write_bytes(image))
@@ -288,6 +306,7 @@ def load_posterior(path) -> Posterior:
                 raise InputError(f"not a ringfit posterior (format {fmt!r})", source=path)
             head = json.loads(h5.attrs["meta"])
             arrays = {k: np.asarray(h5[k][()], dtype=np.float64) for k in ("chain", "log_prob", "acceptance", "tau")}
+            shift = np.asarray(h5["shift_u"][()], dtype=np.float64) if "shift_u" in h5 else None
         if fmt == "ringfit-posterior/1":  # every free parameter a logarithm; problem details at the top level
             meta = {k: head[k] for k in ("data", "geometry", "priors", "source", "lsq") if k in head}
             head = dict(head, kinds=["log"] * len(head["names"]), centers=[], scales=[], meta=meta)
@@ -298,11 +317,13 @@ def load_posterior(path) -> Posterior:
         post = Posterior(names=tuple(str(n) for n in head["names"]), kinds=tuple(head["kinds"]),
                          values0=dict(head["values0"]), burn=int(head["burn"]), thin=int(head["thin"]),
                          centers=tuple(head["centers"]) or (0.0,) * k, scales=tuple(head["scales"]) or (1.0,) * k,
-                         meta=meta, **arrays)
+                         meta=meta, sampler=str(head.get("sampler", "emcee")), chains=int(head.get("chains", 1)),
+                         seed=int(head.get("seed", 0)), shift_u=shift, **arrays)
         steps, walkers, kk = post.chain.shape
         if (kk != k or len(post.kinds) != k or len(post.centers) != k or len(post.scales) != k
                 or post.log_prob.shape != (steps, walkers) or post.acceptance.shape != (walkers,)
-                or post.tau.shape != (k,) or not 0 <= post.burn < steps or post.thin < 1):
+                or post.tau.shape != (k,) or not 0 <= post.burn < steps or post.thin < 1
+                or post.chains < 1 or walkers % post.chains or (shift is not None and shift.shape != (k,))):
             raise ValueError("arrays and metadata of inconsistent shapes")
     except InputError:
         raise
@@ -406,42 +427,136 @@ def _advance(sampler, state, stop, bar, interrupted, min_steps, max_steps):
     return state
 
 
-def log_probability_function(result, bounds: dict | None = None, chunk: int | None = None):
-    """``(n, k) -> (n,)`` NumPy log-posterior of a fit's free parameters (see the module docstring).
-
-    **Arguments:** ``result`` — a FitResult of the engine; ``bounds`` — name -> (lo, hi)
-    natural-unit bounds that replace or add to the coordinates' bounds and the problem's
-    plausible ranges; ``chunk`` — evaluate in chunks of exactly this many rows (padded),
-    so one compilation serves every batch size.
-
-    **Returns:** ``(log_prob_fn, lo_u (k,), hi_u (k,))``.
-    """
+def _support(result, bounds: dict | None = None):
+    """``(lo_u, hi_u)`` ``(k,)``: the free coordinates' bounds, replaced or narrowed by ``bounds`` (natural units)
+    and the problem's plausible ranges (see :func:`log_probability_function`)."""
     problem = result.problem
-    free = tuple(result.names)
-    fs = free_set(problem, free)
+    fs = free_set(problem, tuple(result.names))
     lo, hi = fs.lo_u.copy(), fs.hi_u.copy()
     coords = [problem.coords[i] for i in fs.index]
     for j, c in enumerate(coords):
         rng = (bounds or {}).get(c.name) or (problem.plausible or {}).get(c.name)
         if rng is not None:
             lo[j], hi[j] = c.to_u(rng[0]) if c.kind != LOG or rng[0] > 0 else -np.inf, c.to_u(rng[1])
-    log_prob = log_probability(problem, result.theta, free, lo_u=lo, hi_u=hi,
-                               sigma_scale=float(result.extra.get("sigma_scale", 1.0)), chunk=chunk)
+    return lo, hi
+
+
+def log_probability_function(result, bounds: dict | None = None, chunk: int | None = None, row_scale=None):
+    """``(n, k) -> (n,)`` NumPy log-posterior of a fit's free parameters (see the module docstring).
+
+    **Arguments:** ``result`` — a FitResult of the engine; ``bounds`` — name -> (lo, hi)
+    natural-unit bounds that replace or add to the coordinates' bounds and the problem's
+    plausible ranges; ``chunk`` — evaluate in chunks of exactly this many rows (padded),
+    so one compilation serves every batch size; ``row_scale`` — ``(m,)`` per-row widening
+    of the rows' σ (:func:`ringfit.fit.engine.log_density`).
+
+    **Returns:** ``(log_prob_fn, lo_u (k,), hi_u (k,))``.
+    """
+    lo, hi = _support(result, bounds)
+    log_prob = log_probability(result.problem, result.theta, tuple(result.names), lo_u=lo, hi_u=hi,
+                               sigma_scale=float(result.extra.get("sigma_scale", 1.0)), chunk=chunk,
+                               row_scale=row_scale)
     return log_prob, lo, hi
+
+
+def log_density_function(result, bounds: dict | None = None, row_scale=None):
+    """The same density as :func:`log_probability_function`, traceable: ``(kernel, consts, lo_u, hi_u)``
+    (:func:`ringfit.fit.engine.log_density`), for the compiled sampler."""
+    lo, hi = _support(result, bounds)
+    kernel, consts = log_density(result.problem, result.theta, tuple(result.names), lo_u=lo, hi_u=hi,
+                                 sigma_scale=float(result.extra.get("sigma_scale", 1.0)), row_scale=row_scale)
+    return kernel, consts, lo, hi
+
+
+#: Posterior draws the predictive check evaluates the model at (at most; every kept draw when fewer).
+PPC_DRAWS = 400
+
+
+def predictive_check(result, u_draws: np.ndarray, blocks: dict | None = None, row_scale=None,
+                     draws: int = PPC_DRAWS, seed: int = 0, log_prob=None) -> dict:
+    """Posterior predictive p-value of each measured table's χ² (docs/physics.md §12.4).
+
+    For each of up to ``draws`` posterior draws θ_i (``u_draws`` ``(n, k)``, solver coordinates of the fit's
+    free parameters), the table's χ²_obs(θ_i) = Σ r²/(s² c²) over its rows (the likelihood's own rows: ``s`` the
+    fit's σ scale, ``c`` = ``row_scale``); data replicated from the same draw, y_rep = model(θ_i) + σ ε, give
+    χ²_rep ~ χ²_m exactly, so the p-value ``P(χ²_rep ≥ χ²_obs)`` is the mean over draws of the χ²_m survival
+    function at χ²_obs(θ_i) (the replication integrated out, not simulated). Small p: the model cannot
+    reproduce that table's scatter — read its intervals with care.
+
+    **Arguments:** ``result`` — the engine's FitResult the posterior was sampled from; ``blocks`` — table
+    name → row indices (a slice or an index array) of the problem's data rows (default: one block of every row,
+    named after the problem's ``data_label``); ``log_prob`` — ``(n,)`` the draws' log densities: with one block
+    of every row its χ² is read from them (``−2 log p`` less the prior rows), no model evaluation.
+
+    **Returns:** name → ``dict(rows, chi2_median, p_value)``.
+    """
+    from scipy.stats import chi2 as chi2_dist
+
+    from ringfit.fit.engine import residuals_batch
+
+    problem = result.problem
+    u = np.asarray(u_draws, dtype=np.float64)
+    pick = np.random.default_rng(seed).choice(u.shape[0], draws, replace=False) if u.shape[0] > draws else None
+    if pick is not None:
+        u = u[pick]
+    fs = free_set(problem, tuple(result.names))
+    blocks = blocks or {problem.data_label: slice(None)}
+    m_all = int(np.size(result.residuals))
+    whole = len(blocks) == 1 and all(isinstance(b, slice) and b == slice(None) for b in blocks.values())
+    if whole and log_prob is not None:
+        # one block of every row: χ²/s² (row-widened) = −2 log p − |W (u − mean)|², already evaluated by the sampler
+        lp = np.asarray(log_prob, dtype=np.float64)
+        lp = lp[pick] if pick is not None else lp
+        k = u.shape[1]
+        du = np.concatenate([u, np.zeros((u.shape[0], fs.size - k))], axis=1) - fs.prior_mean[None, :]
+        c2_all = -2.0 * lp - np.sum((du @ fs.prior_w.T) ** 2, axis=1)
+        z2 = None
+    else:
+        thetas = np.repeat(np.asarray(result.theta, dtype=np.float64)[None], u.shape[0], axis=0)
+        for j, i in enumerate(fs.index):
+            thetas[:, i] = problem.coords[i].from_u(u[:, j])
+        r = residuals_batch(problem, thetas, chunk=min(64, u.shape[0]))  # (n, m)
+        s = float(result.extra.get("sigma_scale", 1.0))
+        z2 = r**2 / s**2
+        if row_scale is not None:
+            z2 = z2 / np.asarray(row_scale, dtype=np.float64)[None, :] ** 2
+    out = {}
+    for name, rows in blocks.items():
+        c2 = c2_all if z2 is None else z2[:, rows].sum(axis=1)
+        m = m_all if z2 is None else int(z2[0, rows].size)
+        ok = np.isfinite(c2)
+        p = float(np.mean(chi2_dist.sf(c2[ok], m))) if ok.any() and m > 0 else math.nan
+        out[str(name)] = dict(rows=m, chi2_median=float(np.median(c2[ok])) if ok.any() else math.nan, p_value=p)
+    return out
+
+
+#: The samplers of :func:`sample`: the compiled stretch move (:mod:`ringfit.fit.ensemble`, the default) and
+#: emcee's (the reference; same algorithm, driven from Python one step at a time).
+SAMPLERS = ("compiled", "emcee")
+#: Independent ensembles the compiled sampler runs side by side by default.
+DEFAULT_CHAINS = 1
 
 
 def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int = 20000, check_every: int = 1000,
            seed: int = 0, progress: bool = True, bounds: dict | None = None, spread: float = 0.1,
-           meta: dict | None = None) -> "Posterior":
-    """Sample the posterior of a least-squares fit's free parameters with emcee.
+           meta: dict | None = None, sampler: str = "compiled", chains: int = DEFAULT_CHAINS, row_scale=None,
+           shift_u=None, tables: dict | None = None) -> "Posterior":
+    """Sample the posterior of a least-squares fit's free parameters with the affine-invariant stretch move.
 
     **Arguments:** ``result`` — a :class:`~ringfit.fit.result.FitResult` of the engine;
-    ``walkers`` (≥ 2k, even); ``min_steps``/``max_steps`` — chain length bounds (the chain
-    stops once longer than :data:`TAU_FACTOR` τ); ``check_every`` — steps between τ checks;
-    ``seed``; ``progress`` — tqdm bar on stderr; ``bounds`` — see
+    ``walkers`` (≥ 2k, even; per ensemble); ``min_steps``/``max_steps`` — chain length bounds (the chain
+    stops once longer than :data:`TAU_FACTOR` τ); ``check_every`` — steps between τ checks (the compiled
+    sampler's block); ``seed``; ``progress`` — tqdm bar on stderr; ``bounds`` — see
     :func:`log_probability_function`; ``spread`` — walkers start at the optimum plus
     ``spread`` × its standard error (in u, at most 0.1) times a standard normal draw;
-    ``meta`` — kept with the draws (saved by :meth:`Posterior.save`).
+    ``meta`` — kept with the draws (saved by :meth:`Posterior.save`); ``sampler`` — ``"compiled"``
+    (:func:`ringfit.fit.ensemble.run_compiled`, the default) or ``"emcee"`` (the reference backend);
+    ``chains`` — independent ensembles of ``walkers`` run side by side (compiled sampler only; the
+    posterior's walker axis holds them one after another); ``row_scale`` — ``(m,)`` widening of the rows' σ
+    (identify's Student-t widening); ``shift_u`` — ``(k,)`` one systematic direction in u (identify's grid
+    check) convolved into the draws (:attr:`Posterior.log_samples`); ``tables`` — name → data rows of each
+    measured table for the posterior predictive check (:func:`predictive_check`, kept in
+    ``meta["predictive_check"]``; default one block of every row).
 
     **Returns:** :class:`Posterior`. Warns (``RuntimeWarning``) when the chain did not reach
     :data:`TAU_FACTOR` autocorrelation times by ``max_steps``.
@@ -450,32 +565,54 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
 
     free = tuple(result.names)
     k = len(free)
+    if sampler not in SAMPLERS:
+        raise InputError(f"sampler {sampler!r}: expected one of {', '.join(SAMPLERS)}")
     if walkers < 2 * k or walkers % 2:
-        raise InputError(f"walkers = {walkers}: emcee needs an even number of at least {2 * k} (2 × {k} parameters)")
+        raise InputError(f"walkers = {walkers}: the stretch move needs an even number of at least {2 * k} "
+                         f"(2 × {k} parameters)")
     if not 1 <= min_steps <= max_steps:
         raise InputError(f"chain length: need 1 <= min_steps ({min_steps}) <= max_steps ({max_steps})")
+    chains = 1 if sampler == "emcee" else int(chains)
+    if chains < 1:
+        raise InputError(f"chains = {chains}: expected at least 1")
     problem = result.problem
-    log_prob, lo, hi = log_probability_function(result, bounds, chunk=walkers // 2)
+    lo, hi = _support(result, bounds)
     coords = [problem.coordinate(n) for n in free]
     y_opt = np.array([c.to_u(result.values[n]) for c, n in zip(coords, free)])
     width = np.where(np.isfinite(hi - lo), hi - lo, np.inf)
     y_opt = np.clip(y_opt, lo + np.minimum(0.05, 0.01 * width), hi - np.minimum(0.05, 0.01 * width))
     step = np.sqrt(np.clip(np.diag(result.covariance_log), 1e-8, 0.01))
     rng = np.random.default_rng(seed)
-    p0 = y_opt + spread * step * rng.standard_normal((walkers, k))
+    p0 = y_opt + spread * step * rng.standard_normal((chains, walkers, k))
     p0 = np.clip(p0, lo + 1e-9 * np.minimum(width, 1.0), hi - 1e-9 * np.minimum(width, 1.0))
-    sampler, tau = run_ensemble(log_prob, p0, min_steps=min_steps, max_steps=max_steps, check_every=check_every,
+    if sampler == "emcee":
+        log_prob, _, _ = log_probability_function(result, bounds, chunk=walkers // 2, row_scale=row_scale)
+        ens, tau = run_ensemble(log_prob, p0[0], min_steps=min_steps, max_steps=max_steps, check_every=check_every,
                                 seed=int(rng.integers(2**31)), progress=progress)
-    chain = sampler.get_chain()
+        chain, log_p, acceptance = ens.get_chain(), ens.get_log_prob(), ens.acceptance_fraction
+    else:
+        from ringfit.fit.ensemble import run_compiled
+
+        kernel, consts, _, _ = log_density_function(result, bounds, row_scale=row_scale)
+        with _interrupt_between_steps() as interrupted:
+            run = run_compiled(kernel, consts, p0, min_steps=min_steps, max_steps=max_steps,
+                               block=min(check_every, max_steps),
+                               seed=int(rng.integers(2**31)), tau_factor=TAU_FACTOR, progress=progress,
+                               interrupted=interrupted)
+        chain, log_p, acceptance, tau = run.chain, run.log_prob, run.acceptance, run.tau
     tmax = float(np.max(tau)) if np.all(np.isfinite(tau)) else chain.shape[0] / 10
     burn = int(min(2 * tmax, chain.shape[0] // 2))
     thin = max(1, int(tmax / 2))
     post = Posterior(
         names=free, kinds=tuple(c.kind for c in coords), values0=dict(result.values), chain=chain,
-        log_prob=sampler.get_log_prob(), acceptance=sampler.acceptance_fraction, tau=np.asarray(tau),
+        log_prob=log_p, acceptance=np.asarray(acceptance), tau=np.asarray(tau),
         burn=burn, thin=thin, centers=tuple(c.center for c in coords), scales=tuple(c.scale for c in coords),
-        meta=dict(meta or {}),
+        meta=dict(meta or {}), sampler=sampler, chains=chains,
+        shift_u=None if shift_u is None else np.asarray(shift_u, dtype=np.float64), seed=int(seed),
     )
+    post.meta["predictive_check"] = predictive_check(result, post.chain[post.burn :: post.thin].reshape(-1, k),
+                                                     tables, row_scale=row_scale, seed=seed,
+                                                     log_prob=post.log_prob[post.burn :: post.thin].reshape(-1))
     if not post.converged:
         warnings.warn(
             f"posterior chain of {post.steps} steps is only {post.steps / max(tmax, 1e-9):.1f} autocorrelation "
@@ -505,6 +642,8 @@ def sample_posterior(
     progress: bool = True,
     lsq=None,
     data_only=None,
+    sampler: str = "compiled",
+    chains: int = DEFAULT_CHAINS,
 ) -> Posterior:
     """Posterior of ring parameters given measured natural frequencies (eq. 18, docs/physics.md §2.1).
 
@@ -553,7 +692,8 @@ def sample_posterior(
         identifiability=data_only[1].to_record(),
     )
     return sample(lsq, walkers=walkers, min_steps=min_steps, max_steps=max_steps, check_every=check_every, seed=seed,
-                  progress=progress, meta=meta)
+                  progress=progress, meta=meta, sampler=sampler, chains=chains,
+                  tables={Path(str(table.source)).name or "modes": slice(None)})
 
 
 def natural_frequency_predictive(post: Posterior, n, level: float = 0.95, noise: bool = True, seed: int = 0):
@@ -578,5 +718,5 @@ def natural_frequency_predictive(post: Posterior, n, level: float = 0.95, noise:
     return dict(n=n, lo=q[0], median=q[1], hi=q[2])
 
 
-__all__ = ["Posterior", "sample", "sample_posterior", "run_ensemble", "load_posterior", "log_probability_function",
+__all__ = ["Posterior", "sample", "predictive_check", "SAMPLERS", "sample_posterior", "run_ensemble", "load_posterior", "log_probability_function",
            "natural_frequency_predictive", "TAU_FACTOR"]

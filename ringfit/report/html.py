@@ -202,10 +202,23 @@ def build_free_report(post) -> str:
             for k, t, rh, es in zip(free, diag["tau"], diag["rhat"], diag["ess"])]
     fig = free_plots.trace_figure(post.chain, free, burn=post.burn)
     sections.append(("Sampler diagnostics", (
-        f"<p>emcee ensemble sampler, {diag['walkers']} walkers × {diag['steps']} steps; mean acceptance "
+        f"<p>{'compiled' if post.sampler == 'compiled' else 'emcee'} affine-invariant ensemble sampler "
+        f"(stretch move), {diag['walkers']} walkers"
+        f"{f' in {post.chains} ensembles' if post.chains > 1 else ''} × {diag['steps']} steps; mean acceptance "
         f"{diag['acceptance_mean']:.2f}; burn-in {post.burn}, thinning {post.thin}; "
         f"{post.samples.shape[0]} draws kept. R̂ treats walkers as chains (split R̂, arviz).</p>" +
         table_html(["parameter", "τ [steps]", "steps / τ", "R̂", "ESS"], drow) +
         figure_html(fig, "walker traces"))))
+    ppc = post.meta.get("predictive_check") or {}
+    if ppc:
+        prow = [[esc(name), str(c["rows"]), fmt(c["chi2_median"]), f"{c['p_value']:.3g}",
+                 "the model does not reproduce this table's scatter" if c["p_value"] < 0.01 else "ok"]
+                for name, c in ppc.items()]
+        sections.append(("Posterior predictive check", (
+            "<p>Per measured table, the χ² of its rows at the posterior draws against data replicated from the "
+            "same draws (χ²_rep ~ χ² with as many degrees of freedom as rows): the p-value P(χ²_rep ≥ χ²_obs), "
+            "averaged over the draws (docs/physics.md §12.4). A small p-value says the model cannot fit that "
+            "table: read its intervals with care.</p>" +
+            table_html(["table", "rows", "χ² (posterior median)", "p-value", "verdict"], prow))))
     title = "ringfit — free-tyre ring fit and uncertainty"
     return html_document(title, sections, subtitle="Gong flexible ring, eq. 18 of the source study")

@@ -1,0 +1,189 @@
+"""Simulation-based calibration of ringfit's posteriors (issue 32): do the intervals cover what they claim?
+
+Run: python benchmarks/bench_posterior_calibration.py [--n 200] [--n-identify 0] [--sampler compiled]
+
+1. `sample` (eq. 18, docs/physics.md §2.1, §12): ``--n`` synthetic tyres drawn from the prior the sampler uses
+   — log-normal on ρA, EI, k_w, k_v around Table 9 (σ_ln 0.1, 0.7, 0.3, 0.3) — each through the same noise
+   model as the data (the bundled free table's modes n = 1 … 9, each frequency with its stated σ = 0.5 % of
+   f, Gaussian), then least squares and the posterior (32 walkers until 50 τ). Per parameter: the rank of the
+   truth among L = 99 effectively independent draws (one per walker per τ, evenly chosen) and a χ² test of
+   uniformity over 10 bins [p > 0.05 per parameter; with 4 parameters, one below 0.05 by chance has
+   probability 19 %: the verdict is also given at Bonferroni's 0.05/4]; the coverage of the central 50/90/95 %
+   intervals with Clopper–Pearson 95 % bounds [nominal inside].
+2. `identify --posterior` (docs/physics.md §11–12): ``--n-identify`` joint cases (free + loaded + profiles at
+   known load, ringfit.synth.make_identify_case: tyres drawn at random, noise as the case writes it) — the
+   joint problem's prior is flat, so a rank test is not defined: the coverage of the 50/90/95 % posterior
+   intervals of every ring parameter, pooled over cases, with Clopper–Pearson bounds. Each case costs an
+   identification and a posterior of a model with contact solves (about a minute of CPU); the default is 0.
+
+CPU time beside wall time; the load average at the start and end.
+"""
+
+import math
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _common as bc  # noqa: E402
+
+import ringfit  # noqa: F401,E402  (float64)
+from ringfit.fit.least_squares import fit_natural_frequencies  # noqa: E402
+from ringfit.fit.posterior import sample  # noqa: E402
+from ringfit.io.modes import ModeTable  # noqa: E402
+from ringfit.params import table9  # noqa: E402
+from ringfit.physics.natural import natural_frequencies_jit  # noqa: E402
+
+FREE = ("rho_a", "ei", "kw", "kv")
+SIGMA_LN = {"rho_a": 0.1, "ei": 0.7, "kw": 0.3, "kv": 0.3}
+REL_STD = 0.005
+N = np.arange(1, 10)
+LEVELS = (0.5, 0.9, 0.95)
+RANK_DRAWS = 99
+
+
+def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    a = 1 - level
+    lo = stats.beta.ppf(a / 2, k, n - k + 1) if k > 0 else 0.0
+    hi = stats.beta.ppf(1 - a / 2, k + 1, n - k) if k < n else 1.0
+    return float(lo), float(hi)
+
+
+def rank_draws(post, rng) -> np.ndarray:
+    """``(L, k)`` effectively independent draws: thinned to one per τ after burn-in, L chosen evenly at random."""
+    step = max(1, int(math.ceil(np.max(post.tau))))
+    u = post.chain[post.burn :: step].reshape(-1, len(post.names))
+    pick = rng.choice(u.shape[0], RANK_DRAWS, replace=u.shape[0] < RANK_DRAWS)
+    return u[pick]
+
+
+def coverage_line(label, hits, n) -> tuple[str, bool]:
+    parts, ok = [], True
+    for level in LEVELS:
+        k = int(hits[level])
+        lo, hi = clopper_pearson(k, n)
+        inside = lo <= level <= hi
+        ok &= inside
+        parts.append(f"{level:.0%}: {k}/{n} = {k / n:.3f} [{lo:.3f}, {hi:.3f}]{'' if inside else ' MISS'}")
+    return f"   {label:14s} coverage " + "; ".join(parts), ok
+
+
+def sbc_sample(n: int, sampler: str, seed: int = 0) -> tuple[list[str], bool]:
+    geo, ring = table9()
+    median = {k: getattr(ring, k) for k in FREE}
+    prior = {k: (median[k], SIGMA_LN[k]) for k in FREE}
+    rng = np.random.default_rng(seed)
+    ranks = np.zeros((n, len(FREE)), dtype=int)
+    hits = {k: {lv: 0 for lv in LEVELS} for k in FREE}
+    bad = 0
+    with bc.Clock() as clock:
+        for i in range(n):
+            truth = {k: median[k] * math.exp(SIGMA_LN[k] * rng.standard_normal()) for k in FREE}
+            tr = ring.replace(**truth)
+            f = np.asarray(natural_frequencies_jit(tr, geo, N.astype(float)))
+            sd = REL_STD * f
+            table = ModeTable(freq_hz=f + sd * rng.standard_normal(f.size), n=N, freq_std_hz=sd)
+            lsq = fit_natural_frequencies(table, geo, ring, free=FREE, prior=prior)
+            post = sample(lsq, sampler=sampler, walkers=32, min_steps=2000, max_steps=20000, seed=i, progress=False)
+            bad += not (lsq.converged and post.converged)
+            u = rank_draws(post, rng)
+            t = np.log([truth[k] for k in post.names])
+            ranks[i] = np.sum(u < t[None, :], axis=0)
+            s = post.log_samples
+            for j, k in enumerate(post.names):
+                for lv in LEVELS:
+                    lo, hi = np.percentile(s[:, j], [50 * (1 - lv), 50 * (1 + lv)])
+                    hits[k][lv] += lo <= t[j] <= hi
+    lines = [f"1. `sample` ({sampler}): {n} tyres from the prior, eq. 18 modes n = 1…9 with σ = {REL_STD:.1%} of f; "
+             f"{clock.wall:.0f} s wall, {clock.cpu:.0f} s CPU ({clock.cpu / n:.2f} s CPU per tyre); "
+             f"{bad} fit(s) or chain(s) not converged"]
+    ok_all, ok_bonf, ok_ks = True, True, True
+    for j, k in enumerate(FREE):
+        counts = np.histogram(ranks[:, j], bins=10, range=(0, RANK_DRAWS + 1))[0]
+        p = float(stats.chisquare(counts).pvalue)
+        p_ks = float(stats.kstest((ranks[:, j] + rng.uniform(size=n)) / (RANK_DRAWS + 1), "uniform").pvalue)
+        ok_all &= p > 0.05
+        ok_bonf &= p > 0.05 / len(FREE)
+        ok_ks &= p_ks > 0.05
+        line, cov_ok = coverage_line(k, hits[k], n)
+        ok_all &= cov_ok
+        ok_bonf &= cov_ok
+        lines.append(f"   {k:14s} rank χ² (10 bins) p = {p:.3f}, KS p = {p_ks:.3f}; bins {counts.tolist()}")
+        lines.append(line)
+    lines.append(f"   verdict (rank uniformity by the χ² test): every p > 0.05 and every coverage inside its "
+                 f"Clopper–Pearson interval: {'PASS' if ok_all else 'FAIL'}; with Bonferroni over the "
+                 f"{len(FREE)} parameters (p > {0.05 / len(FREE):.4f}): {'PASS' if ok_bonf else 'FAIL'}; KS p "
+                 f"> 0.05 for every parameter: {'PASS' if ok_ks else 'FAIL'}")
+    return lines, ok_bonf
+
+
+def coverage_identify(n: int, sampler: str, seed0: int = 100) -> tuple[list[str], bool]:
+    from ringfit.fit.identify import identify, read_identify_folder
+    from ringfit.synth.identify import make_identify_case
+
+    hits, count, skipped = {lv: 0 for lv in LEVELS}, 0, 0
+    per_param = {}
+    with bc.Clock() as clock, tempfile.TemporaryDirectory() as d:
+        for i in range(n):
+            folder = Path(d) / f"c{i}"
+            truth = make_identify_case(folder, seed=seed0 + i)
+            ident = identify(read_identify_folder(folder))
+            if not ident.converged:
+                skipped += 1
+                continue
+            k = len(ident.fit.names)
+            post = sample(ident.fit, sampler=sampler, walkers=2 * k, min_steps=500, max_steps=3000,
+                          check_every=250, seed=i, progress=False, spread=0.25, **ident.posterior_likelihood())
+            s = post.log_samples
+            ring_truth = truth["ring"] if "ring" in truth else truth
+            case = []
+            for j, name in enumerate(post.names):
+                if name not in ident.free or name not in ring_truth:
+                    continue
+                t = math.log(float(ring_truth[name]))
+                count += 1
+                for lv in LEVELS:
+                    lo, hi = np.percentile(s[:, j], [50 * (1 - lv), 50 * (1 + lv)])
+                    inside = lo <= t <= hi
+                    hits[lv] += inside
+                    per_param.setdefault(name, {x: 0 for x in LEVELS})
+                    per_param[name][lv] += inside
+                lo, hi = np.percentile(s[:, j], [2.5, 97.5])
+                case.append(f"{name} {'in' if lo <= t <= hi else 'OUT'}")
+            print(f"   case {i + 1}/{n}: {post.steps} steps, τ max {np.max(post.tau):.0f}; 95 %: {', '.join(case)}",
+                  flush=True)
+    line, ok = coverage_line("all ring", hits, max(count, 1))
+    lines = [f"2. `identify --posterior` ({sampler}): {n} joint cases (free + loaded + profiles), {count} parameter "
+             f"intervals, {skipped} case(s) not converged; {clock.wall:.0f} s wall, {clock.cpu:.0f} s CPU", line]
+    lines.append("   per parameter (95 %): " + ", ".join(f"{k} {v[0.95]}/{n - skipped}" for k, v in per_param.items()))
+    return lines, ok
+
+
+def main(argv=None):
+    ap = bc.parser(__doc__.splitlines()[0], quick_help="20 tyres, no identify cases (a smoke run)")
+    ap.add_argument("--n", type=bc.count("a number of tyres", 1, 100_000), default=200,
+                    help="synthetic tyres for `sample` (default 200)")
+    ap.add_argument("--n-identify", type=bc.count("a number of cases", 0, 10_000, ), default=0,
+                    help="joint cases for `identify --posterior` (default 0; about a minute of CPU each)")
+    ap.add_argument("--sampler", choices=("compiled", "emcee"), default="compiled")
+    ap.add_argument("--seed", type=bc.count("a whole number >= 0", 0, 2**31), default=0,
+                    help="seed of the synthetic tyres (default 0)")
+    args = ap.parse_args(argv)
+    n = 20 if args.quick else args.n
+    bc.start(f"bench_posterior_calibration: {n} tyres for sample, {args.n_identify} joint cases for identify"
+             + (" [--quick]" if args.quick else ""))
+    lines, ok = sbc_sample(n, args.sampler, seed=args.seed)
+    for line in lines:
+        print(line, flush=True)
+    if args.n_identify:
+        more, ok2 = coverage_identify(args.n_identify, args.sampler, seed0=100 + 1000 * args.seed)
+        for line in more:
+            print(line, flush=True)
+    bc.finish()
+
+
+if __name__ == "__main__":
+    main()
