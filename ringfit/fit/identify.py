@@ -62,7 +62,7 @@ from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_F
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
 from ringfit.fit.result import FitResult, covariance_from_jacobian
-from ringfit.io.conditions import check_profile_rotation, pressure_conflict, unique_inputs
+from ringfit.io.conditions import case_inputs, check_profile_rotation, pressure_conflict
 from ringfit.io.modes import ModeTable, read_mode_table
 from ringfit.io.tyre import RingCovariance, Tyre, read_tyre
 from ringfit.params import RingParams, TyreGeometry
@@ -151,12 +151,7 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
     tyre_bar = float(tyre.geometry.pressure) / 1e5
     _check_pressure(free.condition, tyre_bar, free_path.with_suffix(".json"))
     # the same table or profile given twice (a copy, a symlink) is counted once: the data are not twice as sure
-    tables, notes = unique_inputs((p for p in folder.glob("*.modes.csv") if p.name != "free.modes.csv"),
-                                  lambda p: p.with_suffix(".json"), "mode table")
-    profiles, more = unique_inputs(folder.glob("*.profile.csv"), lambda p: p.with_suffix(".json"),
-                                   "profile")
-    for note in notes + more:
-        warnings.warn(note, stacklevel=2)
+    tables, profiles = case_inputs(folder)
     for p in tables:
         sidecar = p.with_suffix(".json")
         if not sidecar.exists():

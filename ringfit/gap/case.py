@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ringfit.errors import InputError
-from ringfit.io.conditions import check_profile_rotation, check_table_rotation, pressure_conflict, unique_inputs
+from ringfit.io.conditions import case_inputs, check_profile_rotation, check_table_rotation, pressure_conflict
 from ringfit.io.modes import ModeTable, check_test_condition, read_mode_table
 from ringfit.io.tyre import Tyre, read_tyre
 
@@ -74,12 +74,7 @@ def read_case(folder: str | os.PathLike) -> Case:
     outer = float(tyre.geometry.outer_radius)
     tyre_bar = float(tyre.geometry.pressure) / 1e5
     # the same table or profile given twice (a copy, a symlink) is counted once (docs/formats.md §6)
-    table_paths, notes = unique_inputs((p for p in folder.glob("*.modes.csv") if p.name != "free.modes.csv"),
-                                       lambda p: p.with_suffix(".json"), "mode table")
-    profile_paths, more = unique_inputs(folder.glob("*.profile.csv"), lambda p: p.with_suffix(".json"),
-                                        "profile")
-    for note in notes + more:
-        warnings.warn(note, stacklevel=2)
+    table_paths, profile_paths = case_inputs(folder)
     for p in table_paths:
         if not p.with_suffix(".json").exists():
             raise InputError(f"missing sidecar {p.with_suffix('.json').name}: a test mode table needs its "

@@ -255,3 +255,19 @@ def _diff(a, b) -> str:
 __all__ = ["rotation_speed_conflict", "patch_drop_omega", "check_profile_rotation", "check_table_rotation",
            "pressure_conflict", "duplicate_inputs", "unique_inputs", "content_hash", "ROLLING_RADIUS_M", "RATE_TOL",
            "ROLLING_RADIUS_SHARE", "PATCH_DROP_SHARE", "PRESSURE_TOL"]
+
+
+def case_inputs(folder) -> tuple[list[Path], list[Path]]:
+    """A case folder's test mode tables (``*.modes.csv`` but ``free.modes.csv``) and profiles (``*.profile.csv``),
+    sorted by name, each counted once (:func:`unique_inputs`: a copy or a symlink of another is warned about and
+    left out; the same readings under two stated conditions are refused). The one rule of ``diagnose``,
+    ``campaign`` and ``identify`` for which files of a folder are data (docs/formats.md §6)."""
+    import warnings
+
+    folder = Path(folder)
+    tables, notes = unique_inputs((p for p in folder.glob("*.modes.csv") if p.name != "free.modes.csv"),
+                                  lambda p: p.with_suffix(".json"), "mode table")
+    profiles, more = unique_inputs(folder.glob("*.profile.csv"), lambda p: p.with_suffix(".json"), "profile")
+    for note in notes + more:
+        warnings.warn(note, stacklevel=3)
+    return tables, profiles
