@@ -268,12 +268,16 @@ def test_campaign_table_and_report_from_the_saved_files(cluster, tmp_path, capsy
         with __import__("h5py").File(out / tyre / "posterior.h5") as h5:  # the draws, read independently
             chain = h5["chain"][()]
             meta = __import__("json").loads(h5.attrs["meta"])
+            shift = h5["shift_u"][()] if "shift_u" in h5 else None
         names = meta["names"]
         assert set(meta["kinds"]) == {"log"}  # the chain holds log-parameters (docs/formats.md §11)
         # tyreA: the free-mode fit's four parameters; tyreB: the identification's six (k_tread from the loaded table)
         assert len(names) == (4 if tyre == "tyreA" else 6)
         assert (out / tyre / "fitted.identify.json").exists() == (tyre == "tyreB")
-        draws = np.exp(chain[meta["burn"]::meta["thin"]].reshape(-1, len(names)))
+        u = chain[meta["burn"]::meta["thin"]].reshape(-1, len(names))
+        if shift is not None:  # docs/formats.md §11: each kept draw moves by ε δu, ε from the generator [seed, 7919]
+            u = u + np.random.default_rng([int(meta.get("seed", 0)), 7919]).standard_normal(u.shape[0])[:, None] * shift
+        draws = np.exp(u)
         for j, name in enumerate(names):
             key = {"rho_a": "rho_a_kg_per_m", "ei": "ei_n_m2", "kw": "kw_n_per_m2", "kv": "kv_n_per_m2",
                    "k_tread": "k_tread_n_per_m2", "damping_ratio": "damping_ratio"}[name]

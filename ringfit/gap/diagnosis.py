@@ -593,7 +593,7 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
         if not accepted:
             # `none` only when the residual is noise: a residual that fails the noise test with nothing to explain
             # it is `unexplained` (once an effect was found, the structured level decides whether a gap remains)
-            if cur["structured"] or not chain:
+            if cur["structured"] or (not chain and cur["material"]):
                 chain = chain + ("unexplained",)
             break
         best = _computed_first(problem, part, chain, accepted, entries, alpha)

@@ -79,8 +79,11 @@ so on while the residual stays structured. If a structured residual remains
 and nothing is accepted, ``unexplained`` closes the chain.
 
 **``none`` only when the residual is noise.** Where the baseline's held-out residual fails the noise test
-(excess) and no candidate is accepted — every one screened out, refused, or implausible — the verdict is
-``unexplained`` (``verdict.nearest`` names the refitted candidate that came closest), never ``none``.
+with a material excess (``material``: reduced χ² without its largest row ≥ :data:`CHI2_RED_MATERIAL`, the
+share an accepted effect must remove, at p < :data:`P_NOISE`) and no candidate is accepted — every one
+screened out, refused, or implausible — the verdict is ``unexplained`` (``verdict.nearest`` names the refitted
+candidate that came closest), never ``none``. A smaller excess is below what any candidate could be accepted
+for, and the estimated noise level's own error produces such excesses in noise alone: ``none``.
 
 **Implausible parameters are not findings** (condition 5): a fitted effect parameter outside its physical
 range (:attr:`ringfit.gap.effects.base.Parameter.plausible`, e.g. ``ring_extensibility``'s EA below 10⁶ N where
@@ -101,6 +104,12 @@ P_NOISE = 1e-3
 MIN_HELDOUT_SHRINK_PCT = 19.0
 #: The smallest held-out shrink the null may accept: 5 % of the SS (2.5 % of the RMS), a shrink worth reporting.
 MIN_HELDOUT_SHRINK_FLOOR_PCT = 5.0
+#: A held-out residual carries a *material* gap when, beyond noise, it holds at least the share of its SS that an
+#: accepted effect must remove (:data:`MIN_HELDOUT_SHRINK_PCT`): reduced χ² ≥ 1/(1 − 0.19) ≈ 1.235 (the ideal
+#: shrink 1 − 1/χ²_red reaching the bar). Below it a residual that fails the noise test (the noise level is
+#: estimated, so its χ² p-value is optimistic on long series) is no gap any candidate could be accepted for:
+#: ``none``. A pure-noise profile case of an independent simulator read χ²_red 1.106 at p = 5e-4.
+CHI2_RED_MATERIAL = 1.0 / (1.0 - MIN_HELDOUT_SHRINK_PCT / 100.0)
 #: Lower end of its 95 % bootstrap interval: 9.75 % of the SS is 5 % of the RMS.
 MIN_HELDOUT_SHRINK_LO_PCT = 9.75
 MAX_DELTA_BIC = -10.0
@@ -143,9 +152,10 @@ RULES = {
                f"bootstrap bound are heuristics: a candidate failing only them, with heldout shrink >= "
                f"{MIN_HELDOUT_SHRINK_FLOOR_PCT}%, is decided by its calibrated null (accepted when p < alpha); "
                "every fitted effect parameter inside its physical range (an implausible value is not a finding)"),
-    "none": ("'none' only when the held-out residual passes the noise test; a residual that fails it with no "
-             "candidate accepted (screened out, refused or implausible) is 'unexplained', verdict.nearest naming "
-             "the candidate that came closest"),
+    "none": ("'none' only when the held-out residual is noise; a residual that fails the noise test with a "
+             f"material excess (reduced chi2 without its largest row >= {CHI2_RED_MATERIAL:.3f}, the share an "
+             "accepted effect must remove) and no candidate accepted (screened out, refused or implausible) is "
+             "'unexplained', verdict.nearest naming the candidate that came closest"),
     "best": ("largest heldout shrink among accepted (a computed variant first on a tie); greedy chain while the "
              f"residual stays structured; then each fitted element of the chain is replaced by its computed variant "
              f"when the chain's held-out shrink drops by <= {PREFER_COMPUTED_PTS:g} points (all at once first)"),
@@ -160,7 +170,7 @@ def residual_test(z, groups, series=None, series_dof=None, p_try: float = P_NOIS
 
     ``groups`` (m,) labels; ``series`` (m,) labels of noise series (default: each row its own)
     with ``series_dof`` {label: effective dof ν} (default: rows). **Returns** ``{"reduced_chi2",
-    "p", "group", "dof", "excess", "structured"}`` (see the module docstring).
+    "p", "group", "dof", "excess", "material", "structured"}`` (see the module docstring).
     """
     import numpy as np
 
@@ -191,6 +201,7 @@ def residual_test(z, groups, series=None, series_dof=None, p_try: float = P_NOIS
         out = {"reduced_chi2": red, "p": p, "group": str(g), "dof": dof,
                "reduced_chi2_without_largest_row": red_t,
                "excess": bool(p < p_try / len(names)),
+               "material": bool(red_t >= CHI2_RED_MATERIAL and p_t < P_NOISE / len(names)),
                "structured": bool(red_t >= CHI2_RED_STRUCTURED and p_t < P_NOISE / len(names))}
         if best is None or (out["structured"], out["excess"], red) > (best["structured"], best["excess"],
                                                                       best["reduced_chi2"]):
