@@ -81,6 +81,7 @@ from ringfit.params import RingParams, TyreGeometry
 from ringfit._cache import jit
 from ringfit.physics.natural import (cavity_frequency_jit, natural_angular_frequencies,
                                      natural_frequencies_jit)
+from ringfit.units import KMH
 
 FREQ_SIGMA_FLOOR_HZ = 0.02
 #: Relative floor: a frequency is rarely identified better than this.
@@ -103,7 +104,6 @@ K_TREAD_FITTED_SD = 0.1
 DEFAULT_K_TREAD = 19e6
 #: Baseline parameters of the frequency side: the ring of eq. 18 (``ringfit fit``'s default free set).
 BASE = ("rho_a", "ei", "kw", "kv")
-KMH = 1.0 / 3.6
 #: Effect parameters a chain frees at most besides the baseline (the refit's padded free-set size).
 MAX_CHAIN_PARAMETERS = 4
 #: Rows are padded to a multiple of this (dummy rows, weight 0, dropped from every output), so one

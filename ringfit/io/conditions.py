@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
+from ringfit.units import KMH
 
 #: Rolling radii [m] a road tyre can have: an encoder rate that implies another contradicts the sampling rate.
 ROLLING_RADIUS_M = (0.15, 0.75)
@@ -51,7 +52,6 @@ PATCH_DROP_SHARE = (0.3, 2.0)
 PATCH_WINDOW_DEG = 10.0
 #: Relative difference of a measurement's pressure from the tyre file's that is called a contradiction.
 PRESSURE_TOL = 0.05
-KMH = 1.0 / 3.6
 
 
 def _positive(condition: dict, key: str) -> float | None:

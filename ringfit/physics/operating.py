@@ -15,7 +15,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-KMH = 1.0 / 3.6  # m/s per km/h
+from ringfit.units import KMH  # m/s per km/h (re-exported here)
 
 
 class AbstractRoad(eqx.Module):

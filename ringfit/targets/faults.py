@@ -67,6 +67,7 @@ import numpy as np
 
 from ringfit.io.conditions import RATE_TOL, ROLLING_RADIUS_M
 from ringfit.targets.preprocessing import SKIP_AFTER_IMPACT_S
+from ringfit.units import KMH
 
 #: A channel whose rms is below this share of its axis's median rms over the records is dead.
 DEAD_REL = 1e-2
@@ -641,7 +642,7 @@ def sample_rate_note(rotation_hz: float, fs_hz: float, condition: dict) -> str |
         return None
     speed = float(condition.get("speed_kmh") or 0.0)
     if speed > 0:
-        radius = speed / 3.6 / (2 * np.pi * rotation_hz)
+        radius = speed * KMH / (2 * np.pi * rotation_hz)
         lo, hi = ROLLING_RADIUS_M
         if not lo <= radius <= hi:
             return (f"the encoder turns {rotation_hz:.4g} times a second at the stated sampling rate {fs_hz:g} Hz, "
@@ -663,7 +664,7 @@ def trigger_rate_note(interval_s: float, fs_hz: float, condition: dict) -> str |
     speed = float(condition.get("speed_kmh") or 0.0)
     if not (drum > 0 and speed > 0 and np.isfinite(interval_s) and interval_s > 0):
         return None
-    expected = np.pi * drum / (speed / 3.6)
+    expected = np.pi * drum / (speed * KMH)
     if abs(interval_s / expected - 1) <= RATE_TOL:
         return None
     return (f"the cleat trigger fires every {1e3 * interval_s:.5g} ms at the stated sampling rate {fs_hz:g} Hz, but "
