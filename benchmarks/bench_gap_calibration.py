@@ -127,24 +127,11 @@ def rolling_labelled(out: Path, seed: int, mode: str = "full") -> None:
 
 def rolling_permuted(out: Path, seed: int) -> None:
     """``make_rolling_case`` (contact) with the labels (n, tag, branch) shuffled among each rolling table's rows."""
-    from ringfit.synth.cases import make_rolling_case
+    from ringfit.synth.cases import make_rolling_case, relabel_rolling_tables
 
     make_rolling_case(out, contact=True, seed=seed)
     rng = np.random.default_rng(10**6 + seed)
-    for p in sorted(out.glob("*.modes.csv")):
-        if p.name == "free.modes.csv":
-            continue
-        lines = p.read_text().splitlines()
-        head = lines[0].split(",")
-        rows = [line.split(",") for line in lines[1:] if line.strip()]
-        cols = [head.index(c) for c in ("n", "tag", "branch") if c in head]
-        struct = [i for i, r in enumerate(rows) if r[head.index("kind")] == "structural"]
-        labels = [[rows[i][c] for c in cols] for i in struct]
-        order = rng.permutation(len(struct))
-        for i, j in zip(struct, order):
-            for c, v in zip(cols, labels[j]):
-                rows[i][c] = v
-        p.write_text("\n".join([lines[0]] + [",".join(r) for r in rows]) + "\n")
+    relabel_rolling_tables(out, rng.permutation)
 
 
 def _ar2(rng, n: int, a1: float = 1.4, a2: float = -0.45) -> np.ndarray:

@@ -49,19 +49,9 @@ def labelled_random_folder(out: Path, seed: int, counts=(12, 13, 12)) -> Path:
 def _reverse_labels(folder: Path) -> None:
     """The labels (n, tag, branch) of every rolling table's structural rows in reverse order: the lowest mode
     carries the highest mode's label (labels that are all wrong, and against the model's order)."""
-    for p in folder.glob("*.modes.csv"):
-        if p.name == "free.modes.csv":
-            continue
-        lines = p.read_text().splitlines()
-        head = lines[0].split(",")
-        rows = [line.split(",") for line in lines[1:] if line.strip()]
-        cols = [head.index(c) for c in ("n", "tag", "branch") if c in head]
-        struct = [i for i, r in enumerate(rows) if r[head.index("kind")] == "structural"]
-        labels = [[rows[i][c] for c in cols] for i in struct]
-        for i, lab in zip(struct, labels[::-1]):
-            for c, v in zip(cols, lab):
-                rows[i][c] = v
-        p.write_text("\n".join([lines[0]] + [",".join(r) for r in rows]) + "\n")
+    from ringfit.synth.cases import relabel_rolling_tables
+
+    relabel_rolling_tables(folder, lambda m: np.arange(m)[::-1])
 
 
 def _structural(content) -> list[str]:

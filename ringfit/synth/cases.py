@@ -432,6 +432,26 @@ def make_rolling_case(folder: str | os.PathLike, contact: bool = True, seed: int
                      ring=ring.as_dict(), seed=seed)
 
 
+def relabel_rolling_tables(folder: str | os.PathLike, order) -> None:
+    """Move the labels (``n``, ``tag``, ``branch``) among the structural rows of every rolling table of a case
+    folder (every ``*.modes.csv`` but ``free.modes.csv``), frequencies kept: row i gets the labels of row
+    ``order(m)[i]`` of its table's m structural rows (a permutation: shuffled, reversed, …). For the
+    diagnosis's label tests (labels that carry no information, or that are all wrong)."""
+    for p in sorted(Path(folder).glob("*.modes.csv")):
+        if p.name == "free.modes.csv":
+            continue
+        lines = p.read_text().splitlines()
+        head = lines[0].split(",")
+        rows = [line.split(",") for line in lines[1:] if line.strip()]
+        cols = [head.index(c) for c in ("n", "tag", "branch") if c in head]
+        struct = [i for i, r in enumerate(rows) if r[head.index("kind")] == "structural"]
+        labels = [[rows[i][c] for c in cols] for i in struct]
+        for i, j in zip(struct, order(len(struct))):
+            for c, v in zip(cols, labels[j]):
+                rows[i][c] = v
+        p.write_text("\n".join([lines[0]] + [",".join(r) for r in rows]) + "\n")
+
+
 def write_label(label: CaseLabel, path: str | os.PathLike) -> None:
     """Write a label as JSON (keep it outside the case folder)."""
     Path(path).write_text(json.dumps(label.__dict__, indent=1))
