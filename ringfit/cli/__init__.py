@@ -125,7 +125,7 @@ def _ctrl_c_recorded():
 
     outer = _DEPTH[0] == 0
     if outer:
-        files._INTERRUPTED = False
+        files.clear_interrupted()
     previous = None
     if outer and threading.current_thread() is threading.main_thread():
         def on_sigint(signum, frame):
@@ -144,7 +144,7 @@ def _ctrl_c_recorded():
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
         if outer:  # the command is over (its status says the interrupt): a caller's own writes go on
-            files._INTERRUPTED = False
+            files.clear_interrupted()
 
 
 def run() -> None:

@@ -118,9 +118,10 @@ def mark_interrupted() -> None:
     _INTERRUPTED = True
 
 
-def interrupted() -> bool:
-    """Whether a Ctrl-C was received in this process (:func:`mark_interrupted`)."""
-    return _INTERRUPTED
+def clear_interrupted() -> None:
+    """Forget a recorded Ctrl-C (an outermost command starts or ends: its exit status has said it)."""
+    global _INTERRUPTED
+    _INTERRUPTED = False
 
 
 def check_not_interrupted() -> None:
