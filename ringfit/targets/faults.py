@@ -779,8 +779,10 @@ def stall_verdict(acc: np.ndarray, stalls: np.ndarray) -> tuple[float, float]:
                 continue
             length = b - a + 1
             lo, hi = max(a - 1 - STALL_WINDOW, 0), min(b + 1 + STALL_WINDOW, x.shape[-1] - 1)
-            j1 = np.array([j for j in range(lo, hi) if good[j] and good[j + 1]], dtype=np.int64)
-            jl = np.array([j for j in range(lo, hi - length) if good[j] and good[j + length + 1]], dtype=np.int64)
+            j1 = np.arange(lo, hi)
+            j1 = j1[good[j1] & good[j1 + 1]]
+            jl = np.arange(lo, max(hi - length, lo))
+            jl = jl[good[jl] & good[jl + length + 1]]
             if not (j1.size and jl.size):
                 continue
             jump.append(step[b])
