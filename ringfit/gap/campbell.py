@@ -195,6 +195,17 @@ def _sigma(f_pred: float, std: float, tol: float) -> float:
     return math.sqrt(sd**2 + (tol * f_pred) ** 2)
 
 
+def matching_cost(f, std, hz, line_cost, pen, tol: float = MODEL_TOLERANCE) -> np.ndarray:
+    """The matching's cost of rows at ``f`` (σ ``std``, NaN as 0) on lines at ``hz`` (broadcast: e.g. ``f``
+    ``(B, r, 1)``, ``std`` ``(r, 1)``, ``hz`` ``(L,)``): z² with σ = √(std² + (τ f̂)²), plus each line's weight cost
+    −2 ln w (``line_cost``) and the row's label penalties on it (``pen``) — :func:`_score` for many rows, lines
+    and draws at once (the diagnosis's random-line null re-assigns with it, ``ringfit.gap.modal``)."""
+    sd = np.nan_to_num(np.asarray(std, dtype=np.float64))
+    hz = np.asarray(hz, dtype=np.float64)
+    z = (np.asarray(f, dtype=np.float64) - hz) / np.sqrt(sd**2 + (tol * hz) ** 2)
+    return z * z + line_cost + pen
+
+
 def _row_labels(table: ModeTable, i: int) -> dict:
     n = int(table.n[i])
     tag = table.tag[i]

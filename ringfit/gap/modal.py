@@ -1035,7 +1035,7 @@ def _rolling_group(choice, rows, matchable, extra, m):
     structure). ``None`` without such rows."""
     from scipy.optimize import linear_sum_assignment
 
-    from ringfit.gap.campbell import MODEL_TOLERANCE
+    from ringfit.gap.campbell import matching_cost
     from ringfit.gap.rolling_rows import FREE, LOADED
 
     per_table: dict = {}
@@ -1080,10 +1080,7 @@ def _rolling_group(choice, rows, matchable, extra, m):
     all_rows = np.concatenate([s["rows"] for s in segments])
 
     def hungarian(f, std, starts, hz, cost, pen):
-        # the matching's cost (ringfit.gap.campbell._score): z² at τ = MODEL_TOLERANCE, + the line's weight cost,
-        # + the row's label penalties on that line
-        sg = np.sqrt(std[:, None] ** 2 + (MODEL_TOLERANCE * hz[None, :]) ** 2)  # (r, L)
-        c = ((f[..., None] - hz) / sg) ** 2 + cost + pen  # (B, r, L)
+        c = matching_cost(f[..., None], std[:, None], hz, cost, pen)  # (B, r, L): ringfit campbell's cost
         col = np.argmin(c, axis=-1)  # rows the assignment leaves without a line: their nearest
         for b in range(f.shape[0]):
             ri, ci = linear_sum_assignment(np.minimum(c[b], 1e6))
