@@ -908,7 +908,7 @@ def log_density(problem: Problem, theta, free: tuple[str, ...], *, lo_u=None, hi
     sine transform of bounded coordinates). ``consts`` is a tuple of arrays (traced by whatever compiles the
     kernel).
     """
-    require_x64("ringfit.fit.engine.log_probability")
+    require_x64("ringfit.fit.engine.log_density")
     fs = free_set(problem, free)
     lo = fs.lo_u if lo_u is None else np.asarray(lo_u, dtype=np.float64)
     hi = fs.hi_u if hi_u is None else np.asarray(hi_u, dtype=np.float64)
