@@ -109,7 +109,7 @@ def run_campbell(args) -> int:
 
     from ringfit.gap.campbell import MATCH_COLUMNS, match_rows_table, match_tables
     from ringfit.io.modes import check_test_condition, read_mode_table
-    from ringfit.io.conditions import check_table_rotation, pressure_conflict
+    from ringfit.io.conditions import check_stated
     from ringfit.io.tyre import read_tyre, require_ring
     from ringfit.physics.campbell import CAMPBELL_COLUMNS, campbell_diagram
 
@@ -117,13 +117,12 @@ def run_campbell(args) -> int:
     tables = [read_mode_table(m) for m in args.modes]
     for m, t in zip(args.modes, tables):  # before the diagram's work: a sidecar whose condition cannot be modelled
         check_test_condition(t.condition, source=sidecar_path(m))
-        check_table_rotation(t.condition, float(tyre.geometry.outer_radius), source=sidecar_path(m))
-        note = pressure_conflict(t.condition, float(tyre.geometry.pressure) / 1e5)
-        if note:
+        _, notes = check_stated(t, tyre.geometry, source=sidecar_path(m), other_pressure="warn",
+                                used_as="its rows are matched to branches as if measured")
+        for note in notes:
             import warnings
 
-            warnings.warn(f"{Path(m).name}: {note}; its rows are matched to branches at the tyre file's pressure",
-                          stacklevel=2)
+            warnings.warn(note, stacklevel=2)
     ring, geometry = tyre.ring, tyre.geometry
     if tyre.covariance is not None:
         print("note: the branches are the nominal ring's; the tyre file's [ring.covariance] is not propagated into "

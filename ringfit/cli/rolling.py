@@ -157,7 +157,6 @@ def _print_ring_band(tyre, args, solver, omega: float) -> None:
 
 def run_fit_rolling(args) -> int:
     from ringfit.cli import CommandFailed
-    from ringfit.errors import InputError
     from ringfit.io.files import check_output_paths
 
     free = tuple(x.strip() for x in args.free.split(",") if x.strip())
@@ -168,7 +167,7 @@ def run_fit_rolling(args) -> int:
     from ringfit.fit.rolling import ANGLE_OFFSET, check_rolling_free, fit_rolling, fitted_ring
     import warnings
 
-    from ringfit.io.conditions import check_profile_rotation, pressure_conflict, unique_inputs
+    from ringfit.io.conditions import check_stated, unique_inputs
     from ringfit.io.profiles import read_profile, sidecar_path
     from ringfit.io.tyre import read_tyre, require_ring, write_tyre
     from ringfit.physics.contact import ContactSolver
@@ -184,11 +183,8 @@ def run_fit_rolling(args) -> int:
     profiles = []
     for path in args.profiles:
         p = read_profile(path)
-        note = pressure_conflict(p.condition, float(tyre.geometry.pressure) / 1e5)
-        if note:
-            raise InputError(note, source=sidecar_path(path))
-        p, note = check_profile_rotation(p, float(tyre.geometry.outer_radius))
-        if note:
+        p, notes = check_stated(p, tyre.geometry, source=sidecar_path(path), other_pressure="refuse")
+        for note in notes:
             warnings.warn(note, stacklevel=2)
         profiles.append(p)
     result = fit_rolling(profiles, tyre.geometry, tyre.ring, free=free, solver=ContactSolver(n_grid=args.grid))

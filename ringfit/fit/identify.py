@@ -62,7 +62,7 @@ from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_F
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
 from ringfit.fit.result import FitResult, covariance_from_jacobian
-from ringfit.io.conditions import case_inputs, check_profile_rotation, pressure_conflict
+from ringfit.io.conditions import case_inputs, check_stated, pressure_conflict
 from ringfit.io.modes import ModeTable, read_mode_table
 from ringfit.io.tyre import RingCovariance, Tyre, read_tyre
 from ringfit.params import RingParams, TyreGeometry
@@ -188,9 +188,8 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
             if v is None or not (math.isfinite(v) and v > 0):
                 raise InputError(f"missing or non-positive '{key}': a profile's {key} is needed to identify "
                                  "from it", source=sidecar)
-        _check_pressure(prof.condition, tyre_bar, sidecar)
-        prof, note = check_profile_rotation(prof, float(tyre.geometry.outer_radius))
-        if note:
+        prof, notes = check_stated(prof, tyre.geometry, source=sidecar, other_pressure="refuse")
+        for note in notes:
             warnings.warn(note, stacklevel=2)
         inputs.profiles.append(prof)
     inputs.profiles.sort(key=lambda pr: (float(pr.condition["load_n"]), float(pr.condition["speed_kmh"])))

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ringfit.errors import InputError
-from ringfit.io.conditions import case_inputs, check_profile_rotation, check_table_rotation, pressure_conflict
+from ringfit.io.conditions import case_inputs, check_stated
 from ringfit.io.modes import ModeTable, check_test_condition, read_mode_table
 from ringfit.io.tyre import Tyre, read_tyre
 
@@ -71,8 +71,6 @@ def read_case(folder: str | os.PathLike) -> Case:
         raise InputError("needs at least 4 structural modes with an assigned n to fit the ring "
                          "(rho_a, EI, kw, kv)", source=free_path)
     tests = []
-    outer = float(tyre.geometry.outer_radius)
-    tyre_bar = float(tyre.geometry.pressure) / 1e5
     # the same table or profile given twice (a copy, a symlink) is counted once (docs/formats.md §6)
     table_paths, profile_paths = case_inputs(folder)
     for p in table_paths:
@@ -81,8 +79,10 @@ def read_case(folder: str | os.PathLike) -> Case:
                              "condition (state, load_n, speed_kmh/rotation_hz, frame; docs/formats.md §2)", source=p)
         table = read_mode_table(p)
         check_test_condition(table.condition, source=p.with_suffix(".json"))
-        check_table_rotation(table.condition, outer, source=p.with_suffix(".json"))
-        _warn_pressure(table.condition, tyre_bar, p)
+        table, notes = check_stated(table, tyre.geometry, source=p.with_suffix(".json"), other_pressure="warn",
+                                    used_as=USED_AS)
+        for note in notes:
+            warnings.warn(note, stacklevel=2)
         tests.append(table)
     profiles = []
     if profile_paths:
@@ -95,9 +95,9 @@ def read_case(folder: str | os.PathLike) -> Case:
                 raise InputError(f"missing sidecar {p.with_suffix('.json').name} (speed_kmh, load_n, ...; "
                                  "docs/formats.md §3)", source=p)
             prof = read_profile(p)
-            _warn_pressure(prof.condition, tyre_bar, p)
-            prof, note = check_profile_rotation(prof, outer)
-            if note:
+            prof, notes = check_stated(prof, tyre.geometry, source=p.with_suffix(".json"), other_pressure="warn",
+                                       used_as=USED_AS)
+            for note in notes:
                 warnings.warn(note, stacklevel=2)
             profiles.append(prof)
         profiles.sort(key=lambda pr: float(_condition(pr).get("speed_kmh", 0.0)))
@@ -105,12 +105,8 @@ def read_case(folder: str | os.PathLike) -> Case:
     return Case(folder=folder, tyre=tyre, free=free, tests=tests, profiles=profiles, records=records)
 
 
-def _warn_pressure(cond: dict, tyre_bar: float, path: Path) -> None:
-    """A measurement at another pressure than the tyre file's: said, since the diagnosis models it at the tyre's."""
-    note = pressure_conflict(cond, tyre_bar)
-    if note:
-        warnings.warn(f"{path.name}: {note}; the diagnosis uses it as if measured at the tyre file's "
-                      f"{tyre_bar:g} bar", stacklevel=3)
+#: How the diagnosis uses a measurement at another pressure than the tyre file's (its warning says so).
+USED_AS = "the diagnosis uses it as if measured"
 
 
 def _condition(profile) -> dict:

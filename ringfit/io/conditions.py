@@ -158,6 +158,35 @@ def pressure_conflict(condition: dict, tyre_pressure_bar: float) -> str | None:
             f"{100 * PRESSURE_TOL:g} %): the ring's stiffness depends on the pressure (docs/physics.md §1)")
 
 
+def check_stated(item, geometry, *, source, other_pressure: str, used_as: str = "") -> tuple[object, list[str]]:
+    """A measurement's stated condition checked against the tyre file's geometry — its pressure
+    (:func:`pressure_conflict`) and its rotation against its speed (a profile, which has its radial reading:
+    :func:`check_profile_rotation`; a mode table: :func:`check_table_rotation`) — the one rule every command that
+    reads a measured table or profile beside a tyre file applies.
+
+    ``other_pressure``: ``"refuse"`` (InputError: the command fits the tyre's stiffness, which the pressure sets)
+    or ``"warn"`` (a warning that the measurement is used ``used_as`` at the tyre file's pressure).
+    **Returns** ``(item, warnings)``: the item as it is to be used (a profile's contradicting ``rotation_hz``
+    dropped where its patch says so) and the warning lines, for the caller to issue."""
+    notes = []
+    tyre_bar = float(geometry.pressure) / 1e5
+    note = pressure_conflict(item.condition, tyre_bar)
+    if note and other_pressure == "refuse":
+        raise InputError(f"{note}; use measurements at the tyre file's pressure (or a tyre file at theirs)",
+                         source=source)
+    if note:
+        name = Path(str(getattr(item, "source", None) or source)).name
+        notes.append(f"{name}: {note}; {used_as or 'it is used'} at the tyre file's "
+                     f"{tyre_bar:g} bar")
+    outer = float(geometry.outer_radius)
+    if hasattr(item, "acc_radial_ms2"):
+        item, rot = check_profile_rotation(item, outer)
+        notes += [rot] if rot else []
+    else:
+        check_table_rotation(item.condition, outer, source=source)
+    return item, notes
+
+
 def _sidecar(source) -> str | None:
     if not source:
         return None
