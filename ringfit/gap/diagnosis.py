@@ -787,7 +787,7 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
     t0 = time.perf_counter()
     # one BLAS thread: every solve here is small (eigen-solves of ≤ 100 × 100, least squares of ≤ a few
     # thousand rows × ≤ 12 columns), where threaded BLAS only synchronises (50× slower on a busy machine)
-    from ringfit.targets.ssi import small_matrix_threads
+    from ringfit._threads import small_matrix_threads
 
     parts_ = []
     with small_matrix_threads():

@@ -233,7 +233,7 @@ def campbell_diagram(
     import jax
 
     from ringfit.physics.rolling_modes import DEFAULT_HARMONICS, campbell_modes_jit
-    from ringfit.targets.ssi import small_matrix_threads
+    from ringfit._threads import small_matrix_threads
 
     K = DEFAULT_HARMONICS if harmonics is None else int(harmonics)
     if n_max < 1 or 2 * n_max > K:

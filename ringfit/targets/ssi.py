@@ -34,7 +34,6 @@ merges several setups (records) that share reference channels.
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 from dataclasses import dataclass
 from typing import Sequence
@@ -42,6 +41,7 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 
+from ringfit._threads import small_matrix_threads
 from ringfit.errors import InputError
 
 
@@ -343,24 +343,6 @@ def _column_blocks(workers: int):
 def _lu_normalise(a: np.ndarray) -> np.ndarray:
     """A well-conditioned basis of the column space of ``a`` (rows, k): the permuted unit-lower L of ``a = P L U``."""
     return scipy.linalg.lu(a, permute_l=True, check_finite=False, overwrite_a=True)[0]
-
-
-def small_matrix_threads():
-    """Context manager: one BLAS thread for loops of small dense problems (eig of ≤ 200 × 200).
-
-    Multi-threaded BLAS on matrices this small only adds synchronisation; on
-    a loaded machine it made the order sweep 30× slower. One
-    ``threadpoolctl.ThreadpoolController`` is kept (finding the BLAS
-    libraries costs ~1 ms; setting the limit ~20 µs).
-    """
-    return _blas_controller().limit(limits=1, user_api="blas")
-
-
-@functools.lru_cache(maxsize=1)
-def _blas_controller():
-    from threadpoolctl import ThreadpoolController
-
-    return ThreadpoolController()
 
 
 def poles_from_svd(
