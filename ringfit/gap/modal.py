@@ -74,7 +74,7 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.gap.effects.base import Effect
-from ringfit.gap.problem import GapProblem
+from ringfit.gap.problem import UNSET, GapProblem, ProblemMeta
 from ringfit.gap.rolling_rows import JOINT, assign_rolling_rows, joint_for
 from ringfit.io.modes import ModeTable
 from ringfit.params import RingParams, TyreGeometry
@@ -494,7 +494,7 @@ def _ambiguity(problem: GapProblem, rows, choice):
     (of the model structure the case chose, :class:`ringfit.gap.rolling_rows.StructureChoice`): the data cannot
     decide between the two, so the row carries the two-line mixture (equal weights) in moment form —
     the matched line's prediction with σ² widened by (Δ/2)², Δ the lines' spacing — instead of a free choice."""
-    problem.meta["sigma_matched"] = problem.sigma.copy()  # before any widening (the random-line null widens alike)
+    problem.meta.sigma_matched = problem.sigma.copy()  # before any widening (the random-line null widens alike)
     if choice is None:
         return
     line_sets = choice.lines[choice.chosen]
@@ -666,14 +666,15 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
         match_notes[j] = "; ".join(x for x in (note, match_notes.get(j)) if x)
     problems = [_frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_rel, sigma_method,
                                    match_notes, patches, conditions, effects, noise, rolling, rolling_records)]
-    problems[0].meta["lines"] = LineSets(rows=rows, rolling_lines=choice, row_lines=row_lines,
+    problems[0].meta.lines = LineSets(rows=rows, rolling_lines=choice, row_lines=row_lines,
                                          cavity_hz=cavity_hz, table_patch=[p[0] for p in patches], rolling=rolling)
     if choice is not None:  # the model structure the rolling rows were assigned to (docs/formats.md §5)
-        problems[0].meta["rolling_structure"] = choice.record()
-        problems[0].meta["label_counts"] = label_counts(tables, rows, rolling_records, choice)
+        problems[0].meta.rolling_structure = choice.record()
+        problems[0].meta.label_counts = label_counts(tables, rows, rolling_records, choice)
     _ambiguity(problems[0], rows, choice)
-    problems[0].meta.update(table_names=[table_label(t, i) for i, t in enumerate(tables)], patches=patches,
-                            spins=spins, outer_radius_m=float(geometry.outer_radius))
+    meta = problems[0].meta
+    meta.table_names, meta.patches = [table_label(t, i) for i, t in enumerate(tables)], patches
+    meta.spins, meta.outer_radius_m = spins, float(geometry.outer_radius)
     damp = [r for r in rows if math.isfinite(r["damping"]) and r["damping"] > 0]
     if len(damp) >= 4:
         problems.append(_damping_problem(tables, damp, cavity_hz, geometry, ring_ref, effects, noise))
@@ -846,12 +847,11 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
         "predictions of the free-table fit", labels=meta_labels, base=BASE, base_values=prior_mean.copy(),
         base_prior_sd=prior_sd, effects=usable, data=data, noise_method="; ".join(notes),
         baseline_model="eq18-free (ringfit fit on free.modes.csv)", not_applicable=dropped,
-        meta={"reference_mask": ref, "block": 1, "tangents": len(BASE) + MAX_CHAIN_PARAMETERS,
-              "padded_rows": int(data.rows.n.shape[0]), "files": [str(t.source).rsplit("/", 1)[-1] for t in tables],
-              "reference_fit": fit.to_record(sigma_rel=sigma_rel, sigma_method=sigma_method),
-              "conditions": {table_label(t, i): c for i, (t, c) in enumerate(zip(tables, conditions)) if c},
-              "reference_result": fit,
-              "condition_sd": _condition_sd(patches)},
+        meta=ProblemMeta(reference_mask=ref, block=1, tangents=len(BASE) + MAX_CHAIN_PARAMETERS,
+                         padded_rows=int(data.rows.n.shape[0]), files=[str(t.source).rsplit("/", 1)[-1] for t in tables],
+                         reference_fit=fit.to_record(sigma_rel=sigma_rel, sigma_method=sigma_method),
+                         conditions={table_label(t, i): c for i, (t, c) in enumerate(zip(tables, conditions)) if c},
+                         reference_result=fit, condition_sd=_condition_sd(patches)),
         base_prior_mean=prior_mean,
         predictor=ModalPredictor(effects=usable, base=BASE, sizes=sizes,
                                  joint=joint_for(usable, sizes, len(BASE), rolling_tables(rows))),
@@ -920,8 +920,8 @@ def _damping_problem(tables, rows, cavity_hz, geometry, ring_ref, effects, noise
                     measured_freq=np.array([r["freq"] for r in rows])),
         base=base, base_values=levels, base_prior_sd=np.full(len(base), np.inf), effects=usable, data=data,
         noise_method="; ".join(notes), baseline_model="one damping ratio per table", not_applicable=dropped,
-        meta={"block": 1, "tangents": len(base) + MAX_CHAIN_PARAMETERS, "padded_rows": int(data.rows.n.shape[0]),
-              "files": [str(tables[t].source).rsplit("/", 1)[-1] for t in table_ids], "tables": table_ids},
+        meta=ProblemMeta(block=1, tangents=len(base) + MAX_CHAIN_PARAMETERS, padded_rows=int(data.rows.n.shape[0]),
+                         files=[str(tables[t].source).rsplit("/", 1)[-1] for t in table_ids], tables=table_ids),
         predictor=DampingPredictor(effects=usable, base=base, sizes=sizes),
         robust=np.ones(m, dtype=bool), huber=HUBER,
     )
@@ -945,15 +945,15 @@ def line_problem(problem: GapProblem):
     cost of ``ringfit campbell``; the nearest line elsewhere); ``spans`` — ``{table: (lowest, highest)}``
     measured frequency. Cached in ``problem.meta``.
     """
-    if "line_problem" in problem.meta:
-        return problem.meta["line_problem"]
+    if problem.meta.line_problem is not UNSET:
+        return problem.meta.line_problem
 
-    L = problem.meta.get("lines")
+    L = problem.meta.lines
     rows = L.rows if L is not None else []
     m = len(rows)
     matchable = [j for j, r in enumerate(rows) if r.get("matchable") or _label_free(r, L.rolling_lines)]
     if not matchable:
-        problem.meta["line_problem"] = None
+        problem.meta.line_problem = None
         return None
     spans = {t: (min(r["freq"] for r in rows if r["table"] == t), max(r["freq"] for r in rows if r["table"] == t))
              for t in {rows[j]["table"] for j in matchable}}
@@ -971,7 +971,7 @@ def line_problem(problem: GapProblem):
         groups.append(dict(kind="nearest", table=rows[j]["table"], rows=np.asarray([j]),
                            assign=lambda f, hz=hz, start=start: start + np.argmin(np.abs(f[..., None] - hz), axis=-1)))
     if not groups:
-        problem.meta["line_problem"] = None
+        problem.meta.line_problem = None
         return None
     every = list(rows) + extra
     mrows = _rows_module(every, 1.0, L.cavity_hz, L.table_patch, L.rolling)
@@ -989,9 +989,9 @@ def line_problem(problem: GapProblem):
         problem, y=y, sigma=np.concatenate([problem.sigma, TEST_SIGMA_FLOOR_REL * y[m:]]),
         robust=np.concatenate([np.asarray(problem.robust, dtype=bool), np.ones(M - m, dtype=bool)]),
         scale=np.ones(M), folds=np.zeros(M, dtype=int), data=data, predictor=predictor, sigma_heldout=None,
-        meta={**problem.meta, "padded_rows": int(data.rows.n.shape[0]), "line_problem": None})
-    problem.meta["line_problem"] = (lp, groups, spans)
-    return problem.meta["line_problem"]
+        meta=dataclasses.replace(problem.meta, padded_rows=int(data.rows.n.shape[0]), line_problem=None))
+    problem.meta.line_problem = (lp, groups, spans)
+    return problem.meta.line_problem
 
 
 def _label_free(r: dict, choice) -> bool:
