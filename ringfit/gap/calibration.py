@@ -288,7 +288,7 @@ def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, dr
     ``frequencies``: optional ``f(rows) -> (draws, len(rows))`` giving the drawn frequencies of a group of rows
     instead of uniform draws (a test feeds the measured ones back: the null's statistic must then equal the
     observed one)."""
-    from ringfit.gap.modal import line_problem, mixture_sigma
+    from ringfit.gap.modal_lines import line_problem, mixture_sigma
 
     setup = line_problem(problem)
     if setup is None:
@@ -377,7 +377,7 @@ def label_permutation_test(problem: GapProblem, draws: int = DRAWS, seed: int = 
     here: the baseline reads the labels too, so shuffled labels make the baseline worse rather than the candidates
     better; and the candidates' own held-out fit favours whichever assignment takes the nearest lines, which shuffled
     labels, all overridden, do.) ``None`` where no rolling table's rows carry labels the assignment may override."""
-    from ringfit.gap.modal import line_problem
+    from ringfit.gap.modal_lines import line_problem
 
     setup = line_problem(problem)
     if setup is None:

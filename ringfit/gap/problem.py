@@ -20,7 +20,7 @@ import numpy as np
 
 from ringfit.gap.effects.base import Effect, Parameter
 
-#: :attr:`ProblemMeta.line_problem` before :func:`ringfit.gap.modal.line_problem` has looked (``None`` = looked, none).
+#: :attr:`ProblemMeta.line_problem` before :func:`ringfit.gap.modal_lines.line_problem` has looked (``None`` = looked, none).
 UNSET = object()
 
 
