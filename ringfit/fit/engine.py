@@ -45,7 +45,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, Literal, get_args
 
 import equinox as eqx
 import jax
@@ -62,6 +62,10 @@ from ringfit.fit.result import (BatchFitResult, FitResult, covariance_batch, cov
                                 solver_flags, solver_status)
 
 LOG, LINEAR = "log", "linear"
+#: How a problem's σ is known (:class:`Problem`).
+SigmaMode = Literal["fixed", "estimate", "inflate"]
+#: The solvers of :func:`least_squares` (:data:`ringfit.fit._steps.SOLVERS`).
+SolverMethod = Literal["levenberg_marquardt", "gauss_newton"]
 
 
 @dataclass(frozen=True)
@@ -199,9 +203,13 @@ class Problem:
     data: object
     coords: tuple[Coordinate, ...]
     prior: GaussianPrior | None = None
-    sigma: str = "fixed"
+    sigma: SigmaMode = "fixed"
     plausible: dict | None = None
     data_label: str = "these data"
+
+    def __post_init__(self):
+        if self.sigma not in get_args(SigmaMode):
+            raise ValueError(f"Problem(sigma={self.sigma!r}): expected one of {list(get_args(SigmaMode))}")
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -393,7 +401,7 @@ def least_squares(
     atol: float = 1e-10,
     n_data: int | None = None,
     pad_to: int | None = None,
-    method: str = "levenberg_marquardt",
+    method: SolverMethod = "levenberg_marquardt",
 ) -> FitResult:
     """Weighted least squares of ``problem`` over the ``free`` parameters (see the module docstring).
 
@@ -498,7 +506,7 @@ def least_squares_batch(
     atol: float = 1e-10,
     n_data: int | None = None,
     warm_start: bool = False,
-    method: str = "levenberg_marquardt",
+    method: SolverMethod = "levenberg_marquardt",
 ) -> BatchFitResult:
     """B fits of one problem structure in one compiled region: vmapped, or one after another warm-started.
 

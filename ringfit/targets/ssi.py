@@ -36,7 +36,7 @@ from __future__ import annotations
 import contextlib
 import os
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Literal, Sequence
 
 import numpy as np
 import scipy.linalg
@@ -248,11 +248,15 @@ class BlockHankelOperator:
         return block_hankel(self._cov, self.p, self.q)
 
 
+#: How :func:`truncated_svd` factors the block Hankel matrix.
+SvdMethod = Literal["randomized", "svds", "full"]
+
+
 def truncated_svd(
     h,
     rank: int,
     *,
-    method: str = "randomized",
+    method: SvdMethod = "randomized",
     n_iter: int = 2,
     oversample: int | None = None,
     seed: int = 0,
@@ -512,7 +516,7 @@ def ssi_cov(
     orders: Sequence[int] = range(2, 161, 2),
     block_rows: int | None = None,
     refs: np.ndarray | None = None,
-    svd_method: str = "randomized",
+    svd_method: SvdMethod = "randomized",
     max_damping: float = 0.3,
     unbiased: bool = True,
     progress: bool = False,
@@ -560,7 +564,7 @@ class HankelFactors:
 
 
 def ssi_cov_factors(y: np.ndarray, fs_hz: float, *, orders: Sequence[int] = range(2, 161, 2),
-                    block_rows: int | None = None, refs: np.ndarray | None = None, svd_method: str = "randomized",
+                    block_rows: int | None = None, refs: np.ndarray | None = None, svd_method: SvdMethod = "randomized",
                     max_damping: float = 0.3, unbiased: bool = True, progress: bool = False,
                     workers: int | None = None) -> tuple[PoleSet, HankelFactors]:
     """:func:`ssi_cov`, also returning the SVD factors of H (:class:`HankelFactors`) for re-identifications.
@@ -602,7 +606,7 @@ def poles_from_hankel(
     orders: Sequence[int],
     dt: float,
     *,
-    svd_method: str = "randomized",
+    svd_method: SvdMethod = "randomized",
     max_damping: float = 0.3,
     progress: bool = False,
     workers: int | None = None,
@@ -703,7 +707,7 @@ def ssi_cov_multi_setup(
     *,
     orders: Sequence[int] = range(2, 161, 2),
     block_rows: int | None = None,
-    svd_method: str = "randomized",
+    svd_method: SvdMethod = "randomized",
     max_damping: float = 0.3,
     progress: bool = False,
     workers: int | None = None,
