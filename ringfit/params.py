@@ -116,6 +116,44 @@ class RingParams(eqx.Module):
         return {f.name: float(getattr(self, f.name)) for f in fields(self)}
 
 
+class TyreLaws(eqx.Module):
+    """How the reference tyre (its ``TyreGeometry`` and ``RingParams``, which hold at the tyre file's pressure
+    p_ref = ``geometry.pressure`` and tread depth d_ref) changes with its state (docs/physics.md §13; the
+    tyre file's keys, docs/formats.md §1).
+
+    **Fields** (SI; traced, so that identify can fit them):
+
+    - ``tread_depth_ref``: d_ref [m], the tread depth at which ``[ring]`` and ``tread_thickness`` hold.
+    - ``tread_density``: ρ_t [kg/m³] of the tread rubber; ``land_ratio``: λ, the rubber share of the footprint.
+    - ``k_x``: the tread's longitudinal (brush) stiffness per unit length [N/m²]; ``friction``: μ of the tips.
+    - ``kw_share``, ``kv_share``, ``k_tread_share``: the pressure-proportional shares s of k_w, k_v, k_trd.
+
+    **Static flags**: ``has_tread_depth`` (the file gives ``tread_depth_mm``: the tread law applies and a
+    depth can be estimated), ``has_brush`` (the file gives ``kx_n_per_m2``: drive/brake can be modelled).
+    Defaults: no laws (every share 0, no brush, no tread law) — the reference tyre at every state but load.
+    """
+
+    tread_depth_ref: float = 0.008
+    tread_density: float = 1100.0
+    land_ratio: float = 0.7
+    k_x: float = 0.0
+    friction: float = 1.0
+    kw_share: float = 0.0
+    kv_share: float = 0.0
+    k_tread_share: float = 0.0
+    has_tread_depth: bool = eqx.field(static=True, default=False)
+    has_brush: bool = eqx.field(static=True, default=False)
+
+    def replace(self, **changes) -> "TyreLaws":
+        """A copy with some fields changed (``dataclasses.replace``)."""
+        return replace(self, **changes)
+
+    @property
+    def has_pressure_law(self) -> bool:
+        """Whether any ring parameter scales with pressure (beyond the pretension p·b·R, which always does)."""
+        return any(float(getattr(self, k)) != 0.0 for k in ("kw_share", "kv_share", "k_tread_share"))
+
+
 def table9() -> tuple[TyreGeometry, RingParams]:
     """The source study's Table 9 tyre (docs/physics.md §1), from the bundled ``table9.tyre.toml``.
 

@@ -29,7 +29,7 @@ from pathlib import Path
 
 from ringfit.errors import InputError
 from ringfit.io.files import existing_file
-from ringfit.io.record_types import ANGLE_RANGE_DEG, AXES, CONDITION_KEYS
+from ringfit.io.record_types import ANGLE_RANGE_DEG, AXES, CONDITION_KEYS, SIGNED_CONDITION_KEYS
 
 #: What a channel can be. ``pulses``: incremental encoder (0/1 levels); ``trigger``: the hall / cleat trigger.
 ROLES = ("acc", "force", "encoder", "pulses", "trigger", "ignore")
@@ -111,7 +111,7 @@ def parse_channel_map(data: dict, *, source: str = "<channel map>") -> ChannelMa
         raise InputError("'condition' must be a table [condition]", source=source)
     condition = {k: (_number(v, f"condition.{k}", source) if k in CONDITION_KEYS else v) for k, v in condition.items()}
     for k in CONDITION_KEYS:
-        if k in condition and condition[k] < 0:
+        if k in condition and condition[k] < 0 and k not in SIGNED_CONDITION_KEYS:
             raise InputError(f"condition.{k} = {condition[k]!r}; expected a value >= 0", source=source)
     table = data.get("channels", {})
     if not isinstance(table, dict) or not (table or top or condition):

@@ -33,6 +33,8 @@ CONDITION_RANGES: dict[str, tuple[float, float]] = {
     "drum_diameter_m": (0.0, 100.0),
     "revolutions": (1.0, 1.0e9),
     "sample_rate_hz": (0.0, 1.0e8),
+    "torque_nm": (-1.0e5, 1.0e5),
+    "tread_depth_mm": (0.0, 50.0),
 }
 
 #: What a value outside CONDITION_RANGES probably is, for the message.

@@ -158,7 +158,8 @@ def pressure_conflict(condition: dict, tyre_pressure_bar: float) -> str | None:
             f"{100 * PRESSURE_TOL:g} %): the ring's stiffness depends on the pressure (docs/physics.md §1)")
 
 
-def check_stated(item, geometry, *, source, other_pressure: str, used_as: str = "") -> tuple[object, list[str]]:
+def check_stated(item, geometry, *, source, other_pressure: str, used_as: str = "",
+                 pressure_law: bool = False) -> tuple[object, list[str]]:
     """A measurement's stated condition checked against the tyre file's geometry — its pressure
     (:func:`pressure_conflict`) and its rotation against its speed (a profile, which has its radial reading:
     :func:`check_profile_rotation`; a mode table: :func:`check_table_rotation`) — the one rule every command that
@@ -166,11 +167,14 @@ def check_stated(item, geometry, *, source, other_pressure: str, used_as: str = 
 
     ``other_pressure``: ``"refuse"`` (InputError: the command fits the tyre's stiffness, which the pressure sets)
     or ``"warn"`` (a warning that the measurement is used ``used_as`` at the tyre file's pressure).
+    ``pressure_law``: the tyre file has the pressure law (``[ring.pressure]``, docs/physics.md §13.1): the model
+    carries the ring to the measurement's pressure, so another pressure is accepted without a word (the rule:
+    refuse or warn only where the model would use the tyre file's pressure for it).
     **Returns** ``(item, warnings)``: the item as it is to be used (a profile's contradicting ``rotation_hz``
     dropped where its patch says so) and the warning lines, for the caller to issue."""
     notes = []
     tyre_bar = float(geometry.pressure) / 1e5
-    note = pressure_conflict(item.condition, tyre_bar)
+    note = None if pressure_law else pressure_conflict(item.condition, tyre_bar)
     if note and other_pressure == "refuse":
         raise InputError(f"{note}; use measurements at the tyre file's pressure (or a tyre file at theirs)",
                          source=source)

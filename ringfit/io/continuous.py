@@ -32,7 +32,7 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.io.files import atomic_write, check_output_path, existing_file
-from ringfit.io.record_types import CONDITION_KEYS
+from ringfit.io.record_types import CONDITION_KEYS, SIGNED_CONDITION_KEYS
 
 KIND = "continuous"
 AXES = ("radial", "tangential", "lateral")
@@ -419,7 +419,7 @@ def _validate(rec: ContinuousRecord) -> None:
     for k, v in (rec.condition or {}).items():
         if k in CONDITION_KEYS:
             v = _scalar(v, k, src)
-            if v < 0:
+            if v < 0 and k not in SIGNED_CONDITION_KEYS:
                 raise InputError(f"key '{k}' = {v!r}; expected a value >= 0", source=src)
         cond[k] = v
     rec.condition = cond

@@ -36,10 +36,14 @@ from ringfit.io.files import atomic_write, check_output_path, read_text_file
 #: Columns of docs/formats.md §3, in the order ringfit writes them.
 COLUMNS = ("angle_deg", "acc_radial_ms2", "acc_tangential_ms2")
 #: Sidecar fields every profile must have, and the optional ones (docs/formats.md §3).
-REQUIRED_FIELDS = ("speed_kmh", "pressure_bar")
+REQUIRED_FIELDS = ("speed_kmh",)
 #: load_n is needed by every command but ``ringfit estimate`` (which estimates it): :attr:`Profile.load_n`
 #: raises then. revolutions and sample_rate_hz describe the averaging; ringfit uses them only when present.
-OPTIONAL_FIELDS = ("load_n", "rotation_hz", "drum_diameter_m", "revolutions", "sample_rate_hz")
+#: pressure_bar, torque_nm (axle torque, + driving) and tread_depth_mm state the tyre's state where it is known
+#: (docs/physics.md §13); a profile whose state is hidden states none of them (nor load_n), and a command that
+#: needs the pressure takes the tyre file's.
+OPTIONAL_FIELDS = ("load_n", "pressure_bar", "rotation_hz", "drum_diameter_m", "revolutions", "sample_rate_hz",
+                   "torque_nm", "tread_depth_mm")
 #: Fewest angle samples accepted per revolution.
 MIN_POINTS = 16
 #: A spacing larger than this multiple of the median spacing is a gap.
@@ -218,7 +222,7 @@ def validate_condition(doc, *, source: str = "<sidecar>") -> dict:
         if key not in doc:
             continue
         check_condition_field(doc, key, source=source)
-        if key not in ("speed_kmh", "revolutions"):  # the others must be > 0
+        if key not in ("speed_kmh", "revolutions", "torque_nm"):  # the others must be > 0 (the torque is signed)
             number_in_range(doc[key], key, 0.0, None, lo_open=True, source=source)
     return doc
 

@@ -18,7 +18,9 @@ from ringfit.errors import InputError
 
 #: Optional scalar keys describing the test condition (same names as the profile sidecar, docs/formats.md §3),
 #: shared by continuous recordings and rig files.
-CONDITION_KEYS = ("speed_kmh", "load_n", "pressure_bar", "drum_diameter_m", "rotation_hz")
+CONDITION_KEYS = ("speed_kmh", "load_n", "pressure_bar", "drum_diameter_m", "rotation_hz", "torque_nm", "tread_depth_mm")
+#: Condition keys that may be negative (the axle torque: + driving, − braking; docs/physics.md §13).
+SIGNED_CONDITION_KEYS = ("torque_nm",)
 
 #: Allowed sensor axes (docs/formats.md §4). Sign convention of ``radial``: positive toward the wheel centre.
 AXES = ("radial", "tangential", "lateral")

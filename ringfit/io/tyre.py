@@ -22,12 +22,17 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.checks import MAX_PRESSURE_BAR
 from ringfit.io.files import atomic_write_text, check_output_path
-from ringfit.params import BAR, RING_PARAMETERS, RingParams, TyreGeometry
+from ringfit.params import BAR, RING_PARAMETERS, RingParams, TyreGeometry, TyreLaws
 
 _TYRE_KEYS = {"radius_m": "radius", "width_m": "width", "tread_thickness_m": "tread_thickness",
               "tread_rib_width_m": "tread_rib_width"}
 #: Keys of the [tyre] table.
-TYRE_KEYS = ("name", "radius_m", "width_m", "pressure_bar", "tread_thickness_m", "tread_rib_width_m")
+TYRE_KEYS = ("name", "radius_m", "width_m", "pressure_bar", "tread_thickness_m", "tread_rib_width_m",
+             "tread_depth_mm", "tread_density_kg_m3", "tread_land_ratio")
+#: The state laws' keys (docs/formats.md §1, docs/physics.md §13): in [tyre], in [ring] and in [ring.pressure].
+STATE_TYRE_KEYS = ("tread_depth_mm", "tread_density_kg_m3", "tread_land_ratio")
+STATE_RING_KEYS = ("kx_n_per_m2", "friction")
+PRESSURE_KEYS = ("kw_share", "kv_share", "k_tread_share")
 #: Top-level tables of a tyre file; ``meta`` is free-form (notes, provenance).
 TABLES = ("tyre", "ring", "meta")
 
@@ -48,7 +53,14 @@ RANGES: dict[str, tuple[float, float]] = {
     "k_tread_n_per_m2": (1.0, 1e12),
     "ea_n": (1.0, 1e13),
     "chi": (-1.0, 2.0),
+    "tread_depth_mm": (0.0, 50.0),
+    "tread_density_kg_m3": (100.0, 5000.0),
+    "tread_land_ratio": (0.0, 1.0),
+    "kx_n_per_m2": (1.0, 1e12),
+    "friction": (0.0, 10.0),
 }
+#: Range [lo, hi] (both included) of a pressure share of ``[ring.pressure]`` (docs/formats.md §1).
+SHARE_RANGE = (0.0, 1.0)
 
 #: Defaults used when [ring] lacks a value that a model needs (Table 9 of the seed).
 RING_DEFAULTS = dict(rho_a=2.715, ei=0.9426, kw=1.294e6, kv=1.161e6, damping_ratio=0.025, k_tread=19.0e6)
@@ -63,6 +75,8 @@ class Tyre:
       (``rho_a``, ``ei``, ``kw``, ``kv``, ``damping_ratio``, ``k_tread``, ``ea``, ``chi``), SI.
     - ``extra``: every other table/key of the file, kept for writing back.
     - ``covariance``: the ``[ring.covariance]`` (:class:`RingCovariance`) when the file has one.
+    - ``state_values``: the state laws' keys present in the file (docs/physics.md §13), by TOML key
+      (:data:`STATE_TYRE_KEYS`, :data:`STATE_RING_KEYS`, :data:`PRESSURE_KEYS`), as written (mm, bar …).
     """
 
     geometry: TyreGeometry
@@ -70,6 +84,31 @@ class Tyre:
     extra: dict = field(default_factory=dict)
     source: str = ""
     covariance: "RingCovariance | None" = None
+    state_values: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def laws(self) -> TyreLaws:
+        """The state laws (:class:`~ringfit.params.TyreLaws`, SI) of the file's keys; defaults for the rest."""
+        v = self.state_values
+        kw = {}
+        if "tread_depth_mm" in v:
+            kw.update(tread_depth_ref=v["tread_depth_mm"] * 1e-3, has_tread_depth=True)
+        if "kx_n_per_m2" in v:
+            kw.update(k_x=v["kx_n_per_m2"], has_brush=True)
+        for key, attr in (("tread_density_kg_m3", "tread_density"), ("tread_land_ratio", "land_ratio"),
+                          ("friction", "friction"), ("kw_share", "kw_share"), ("kv_share", "kv_share"),
+                          ("k_tread_share", "k_tread_share")):
+            if key in v:
+                kw[attr] = v[key]
+        return TyreLaws(**kw)
+
+    def with_state_values(self, **values) -> "Tyre":
+        """A copy with state-law keys (TOML names, e.g. ``kx_n_per_m2=15e6``, ``kw_share=0.5``) set."""
+        unknown = set(values) - set(STATE_TYRE_KEYS + STATE_RING_KEYS + PRESSURE_KEYS)
+        if unknown:
+            raise KeyError(f"unknown state key(s) {sorted(unknown)}")
+        return Tyre(self.geometry, dict(self.ring_values), dict(self.extra), self.source, self.covariance,
+                    {**self.state_values, **{k: float(x) for k, x in values.items()}})
 
     @property
     def ring(self) -> RingParams:
@@ -87,7 +126,7 @@ class Tyre:
         values = dict(self.ring_values)
         values.update({k: d[k] for k in names})
         # a covariance belongs to the values it was identified with: new values drop it unless given
-        return Tyre(self.geometry, values, dict(self.extra), self.source, covariance)
+        return Tyre(self.geometry, values, dict(self.extra), self.source, covariance, dict(self.state_values))
 
 
 def require_ring(tyre: Tyre, needs: str) -> Tyre:
@@ -198,6 +237,13 @@ def _parse(doc: dict, source: str) -> Tyre:
         except OverflowError:
             pass
     kw = {attr: _number(tyre, key, "tyre") for key, attr in _TYRE_KEYS.items() if key in tyre}
+    state_values = {key: _number(tyre, key, "tyre") for key in STATE_TYRE_KEYS if key in tyre}
+    if "tread_depth_mm" in state_values:
+        tau_mm = 1e3 * kw.get("tread_thickness", TyreGeometry.tread_thickness)
+        if state_values["tread_depth_mm"] >= tau_mm:
+            raise InputError(f"[tyre] tread_depth_mm = {state_values['tread_depth_mm']:g} is not below the tread "
+                             f"thickness {tau_mm:g} mm (tread_thickness_m): the depth is the grooves' part of the "
+                             "tread (docs/physics.md §13.3)")
     pressure_bar = _number(tyre, "pressure_bar", "tyre")
     name = tyre.get("name", "")
     if not isinstance(name, str):
@@ -209,16 +255,41 @@ def _parse(doc: dict, source: str) -> Tyre:
     ring_values = {}
     covariance = None
     for key in ring_table:
-        if key == "covariance":
+        if key in ("covariance", "pressure"):
+            continue
+        if key in STATE_RING_KEYS:
+            state_values[key] = _number(ring_table, key, "ring")
             continue
         if key not in by_key:
-            raise _unknown(key, list(by_key) + ["covariance"], "key in [ring]")
+            raise _unknown(key, list(by_key) + list(STATE_RING_KEYS) + ["covariance", "pressure"], "key in [ring]")
         ring_values[by_key[key]] = _number(ring_table, key, "ring")
     if "covariance" in ring_table:
         covariance = _covariance(ring_table["covariance"], ring_values)
+    if "pressure" in ring_table:
+        state_values.update(_pressure_laws(ring_table["pressure"]))
     extra = {"tyre": {}, "ring": {}}
     extra.update(doc)  # [meta]
-    return Tyre(geometry, ring_values, extra, source, covariance)
+    return Tyre(geometry, ring_values, extra, source, covariance, state_values)
+
+
+def _pressure_laws(table) -> dict:
+    """``[ring.pressure]``: the pressure shares s of k_w, k_v, k_trd (docs/physics.md §13.1), each in [0, 1]."""
+    where = "[ring.pressure]"
+    if not isinstance(table, dict):
+        raise InputError(f"ring.pressure = {_show(table)}: expected a [ring.pressure] table "
+                         f"({', '.join(PRESSURE_KEYS)})")
+    out = {}
+    for key, value in table.items():
+        if key not in PRESSURE_KEYS:
+            raise _unknown(key, PRESSURE_KEYS, f"key in {where}")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+            raise InputError(f"{where} {key} = {_show(value)}: expected a finite number")
+        x = float(value)
+        if not SHARE_RANGE[0] <= x <= SHARE_RANGE[1]:
+            raise InputError(f"{where} {key} = {x:g}: expected a share in [{SHARE_RANGE[0]:g}, {SHARE_RANGE[1]:g}] "
+                             "(the part of the stiffness proportional to the pressure, docs/formats.md §1)")
+        out[key] = x
+    return out
 
 
 #: Positive ring parameters a ``[ring.covariance]`` may name (it is a covariance of their logarithms).
@@ -309,9 +380,14 @@ def write_tyre(tyre: Tyre, path: str | os.PathLike, *, overwrite: bool = False) 
     )
     if float(g.tread_rib_width) > 0:
         tyre_table["tread_rib_width_m"] = float(g.tread_rib_width)
+    sv = tyre.state_values
+    tyre_table.update({k: float(sv[k]) for k in STATE_TYRE_KEYS if k in sv})
     tyre_table.update(tyre.extra.get("tyre", {}))
     ring_table = {RING_PARAMETERS[k][1]: float(v) for k, v in tyre.ring_values.items() if math.isfinite(v)}
+    ring_table.update({k: float(sv[k]) for k in STATE_RING_KEYS if k in sv})
     ring_table.update(tyre.extra.get("ring", {}))
+    if any(k in sv for k in PRESSURE_KEYS):
+        ring_table["pressure"] = {k: float(sv[k]) for k in PRESSURE_KEYS if k in sv}
     if tyre.covariance is not None:
         ring_table["covariance"] = tyre.covariance.table()
     doc = {"tyre": tyre_table, "ring": ring_table}

@@ -278,17 +278,31 @@ class BrushShearLoad(eqx.Module):
     on the belt through the lever τ, a moment ``m = −τ q_x cos(φ − ψ)`` per unit length whose virtual
     work ``∫ m δψ R dφ`` gives the loads ``q_w += −m′/R``, ``q_v += −m/R`` (docs/physics.md §6
     ``tread_shear``, the lever).
+
+    Drive and brake (docs/physics.md §13): ``r_road`` [m], the road length per radian of wheel rotation
+    (V/Ω), given instead of the free-rolling one; or ``slip`` κ, with ``r_road = r_free/(1 + κ)`` and r_free
+    the free-rolling radius of the same tips (κ > 0 driving). Both None (the default): free rolling.
     """
 
     k_x: float
     mu: float = FRICTION
     lever: bool = eqx.field(static=True, default=False)
+    r_road: object = None
+    slip: object = None
 
-    def __call__(self, sol, ring, geometry):
+    def tips(self, sol, ring, geometry) -> "BrushTips":
+        """The tip forces q_x [N/m] on the grid and the radii of the brush at a radial contact solution.
+
+        Free rolling (``r_road`` and ``slip`` None): the road moves R_e = r_free per radian, the root of the
+        clipped tips' torque (:func:`free_rolling_radius`). Driven or braked (docs/physics.md §13): the road
+        moves ``r_road`` per radian when given, else ``r_free/(1 + slip)`` (slip ratio κ = r_free/r_road − 1,
+        SAE: κ > 0 driving); the tips stick at the leading edge and are clipped at μp as before.
+        """
         phi = sol.phi
         p = sol.pressure
         inside = jax.lax.stop_gradient(p > 0)
         x_b = (geometry.outer_radius + sol.w) * jnp.sin(phi) + sol.v * jnp.cos(phi)
+        tau = psi = None
         if self.lever:  # the element normal to the belt, exactly: its tip at (R + w) sin φ + v cos φ + τ sin(φ − ψ)
             tau = geometry.outer_radius - geometry.radius
             psi = belt_slope_grid(sol, geometry)
@@ -304,17 +318,54 @@ class BrushShearLoad(eqx.Module):
         s = phi - (phi[first - 1] + t * (phi[first] - phi[first - 1]))
         D = x_b - (x_b[first - 1] + t * (x_b[first] - x_b[first - 1]))
         lim = self.mu * p
-        r_e = free_rolling_radius(D, s, jnp.cos(phi), self.k_x, lim, inside)
-        q_x = -self.k_x * (D - r_e * s)
+        r_free = free_rolling_radius(D, s, jnp.cos(phi), self.k_x, lim, inside)
+        if self.r_road is not None:
+            r_road = self.r_road
+        elif self.slip is not None:
+            r_road = r_free / (1.0 + self.slip)
+        else:
+            r_road = r_free
+        q_x = -self.k_x * (D - r_road * s)
         q_x = jnp.where(inside, jnp.clip(q_x, -lim, lim), 0.0)
+        return BrushTips(q_x=q_x, r_free=r_free, r_road=r_road, tau=tau, psi=psi)
+
+    def loads(self, tips: "BrushTips", sol, geometry):
+        """``(q_w, q_v)`` [N/m] of the tip forces on the belt (with the lever's moment when ``lever``)."""
+        phi = sol.phi
+        q_x = tips.q_x
         q_w, q_v = q_x * jnp.sin(phi), q_x * jnp.cos(phi)
         if self.lever:
-            m = -tau * q_x * jnp.cos(phi - psi)  # q_x ∂x_tip/∂ψ
+            m = -tips.tau * q_x * jnp.cos(phi - tips.psi)  # q_x ∂x_tip/∂ψ
             dphi = phi[1] - phi[0]
             dm = (jnp.roll(m, -1) - jnp.roll(m, 1)) / (2.0 * dphi)  # m is continuous: |q_x| ≤ μp → 0 at the edges
             q_w = q_w - dm / geometry.radius
             q_v = q_v - m / geometry.radius
         return q_w, q_v
+
+    def __call__(self, sol, ring, geometry):
+        return self.loads(self.tips(sol, ring, geometry), sol, geometry)
+
+
+class BrushTips(eqx.Module):
+    """The brush's tips at a radial contact solution (:meth:`BrushShearLoad.tips`).
+
+    - ``q_x``: tip force on the tyre per unit centreline length, along x̂ (rearward +) [N/m], ``(M,)``.
+    - ``r_free``: free-rolling road length per radian [m] (the clipped tips drive no torque).
+    - ``r_road``: the road length per radian used [m] (= ``r_free`` in free rolling).
+    - ``tau``, ``psi``: the lever τ [m] and the belt slope ψ [rad] (None without the lever).
+    """
+
+    q_x: jax.Array
+    r_free: jax.Array
+    r_road: jax.Array
+    tau: object = None
+    psi: object = None
+
+    def fx(self, sol, geometry):
+        """Fx = −R Σ q_x Δφ [N]: the tips' net force on the tyre along the direction of travel (driving +,
+        docs/physics.md §13)."""
+        dphi = sol.phi[1] - sol.phi[0]
+        return -geometry.radius * dphi * jnp.sum(self.q_x)
 
 
 def free_rolling_radius(D, s, c, k_x, lim, inside, steps: int = 60):
@@ -407,7 +458,7 @@ def contact_length(solution: RollingSolution):
 
 
 __all__ = [
-    "BrushShearLoad", "FRICTION", "free_rolling_radius",
+    "BrushShearLoad", "BrushTips", "FRICTION", "free_rolling_radius",
     "ContactSolver", "RollingSolution", "tread_pressure", "circulant_block", "solve_rolling",
     "solve_rolling_jit", "as_traced", "patch_edges", "contact_length",
 ]

@@ -135,9 +135,21 @@ def rolling_state(model: ProfileModel, ring: RingParams, geometry: TyreGeometry,
 
     ``ring`` is the ring *after* the model's changes (:meth:`ProfileModel.ring`).
     """
+    _, sol, channels = rolling_passes(model, ring, geometry, operating, solver)
+    return sol, channels
+
+
+def rolling_passes(model: ProfileModel, ring: RingParams, geometry: TyreGeometry, operating: OperatingPoint,
+                   solver: ContactSolver) -> tuple[RollingSolution, RollingSolution, jax.Array]:
+    """:func:`rolling_state` with the first (radial) pass: ``(first, solution, channels)``.
+
+    With load hooks, ``first`` is the contact solution the hooks' loads were computed from (what a brush's
+    tip forces, slip and free-rolling radius are read on, docs/physics.md §13); without, it is the solution.
+    """
     ring_model = model.operator_model()
     if not model.load_hooks:
         sol = solve_rolling(ring, geometry, operating, model=ring_model, solver=solver)
+        first = sol
     else:
         M = solver.n_grid
 
@@ -150,8 +162,9 @@ def rolling_state(model: ProfileModel, ring: RingParams, geometry: TyreGeometry,
 
         zero = (jnp.zeros(M), jnp.zeros(M))
         _, sols = jax.lax.scan(step, zero, None, length=2)
+        first = jax.tree.map(lambda x: x[0], sols)
         sol = jax.tree.map(lambda x: x[1], sols)
-    return sol, jnp.stack(sensor_signals(sol, geometry, model.sensor))
+    return first, sol, jnp.stack(sensor_signals(sol, geometry, model.sensor))
 
 
 def spectral_stage(model: ProfileModel, channels, ring, geometry, omega, band, offset):
@@ -281,5 +294,5 @@ def simulate_profile(
     return (profile, sol) if with_solution else profile
 
 
-__all__ = ["ProfileModel", "profile_channels", "simulate_profile", "effective_rolling_radius", "rolling_state", "spectral_stage", "FlatOrDrum",
+__all__ = ["ProfileModel", "profile_channels", "simulate_profile", "effective_rolling_radius", "rolling_state", "rolling_passes", "spectral_stage", "FlatOrDrum",
            "flat_or_drum", "full_band", "COMPLIANCE_FLOOR"]

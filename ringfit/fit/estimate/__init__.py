@@ -77,6 +77,7 @@ previous one).
 | :mod:`~ringfit.fit.estimate.curves` | the model at a grid of loads (patch and edge-peak spacing against load) |
 | :mod:`~ringfit.fit.estimate.load` | the estimate of one profile (:func:`estimate_load`, :class:`LoadEstimate`) |
 | :mod:`~ringfit.fit.estimate.revolutions` | a continuous recording, averaged and revolution by revolution |
+| :mod:`~ringfit.fit.estimate.state` | the tyre's state (load, pressure, slip and Fx, tread depth, speed), per revolution, its Fisher information (docs/physics.md §13) |
 """
 
 from ringfit.fit.estimate.harmonics import (NOISE_SMOOTHING, band_signal, grid_signal, harmonic_amplitudes,
@@ -91,10 +92,14 @@ from ringfit.fit.estimate.load import (DEFAULT_K_TREAD_SD, MODEL_FLOOR, OFFSET_W
 from ringfit.fit.estimate.revolutions import (REVOLUTION_BATCH, REVOLUTION_MAX_STEPS, REVOLUTION_TOL,
                                               RecordingRevolutions, RevolutionEstimates, estimate_recording,
                                               estimate_revolutions, first_rotation_hz, recording_revolutions)
+from ringfit.fit.estimate.state import (QUANTITIES, STATE_PARAMETERS, StateEstimate, StateFisher, StateRevolutions,
+                                        estimate_state, state_fisher, state_problem, state_revolutions)
 
 __all__ = [
     "estimate_load", "estimate_revolutions", "estimate_recording", "recording_revolutions", "RevolutionEstimates",
     "RecordingRevolutions", "LoadEstimate", "EstimateSettings", "EstimateResiduals", "EstimateArrays", "estimate_problem",
     "load_curves", "LoadCurves", "feature_estimate", "FeatureEstimate", "edge_peaks", "harmonic_amplitudes",
     "harmonic_rows", "band_signal", "PARAMETERS", "COORDS", "LOAD_RANGE", "DEFAULT_K_TREAD_SD",
+    "estimate_state", "state_revolutions", "state_fisher", "state_problem", "StateEstimate", "StateRevolutions",
+    "StateFisher", "QUANTITIES", "STATE_PARAMETERS",
 ]

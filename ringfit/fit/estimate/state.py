@@ -1,0 +1,642 @@
+"""The tyre's state from the one accelerometer: load, pressure, slip and longitudinal force, tread depth, speed
+(docs/physics.md §13.4–13.5; docs/formats.md §7.1).
+
+A problem on the one engine (:mod:`ringfit.fit.engine`), like :mod:`ringfit.fit.estimate.problem`:
+
+- θ = :data:`STATE_PARAMETERS` (load Fz [N], pressure p [Pa], slip κ, tread depth d [m], gain, angle offset
+  [rad], high-pass corner [Hz], tilt γ); positive ones in log coordinates (:data:`STATE_COORDS`);
+- rows: the radial **and** tangential revolution harmonics 2…k_max of
+  :func:`ringfit.physics.profile.profile_channels` at :func:`ringfit.physics.state.state_profile`'s model
+  (:class:`StateResiduals` on :class:`StateArrays`), each channel whitened by its own residual spectrum;
+- :func:`estimate_state` — one profile (two passes, started from :func:`~ringfit.fit.estimate.load.estimate_load`),
+  :class:`StateEstimate` with 95 % intervals (the tyre's ``[ring.covariance]`` carried in), the correlation,
+  and the quantities the data cannot tell apart;
+- :func:`state_revolutions` — every revolution of a recording by one linearised Gauss–Newton step from the
+  averaged profile's fit (the Jacobian once), :class:`StateRevolutions`;
+- :func:`state_fisher` — the per-revolution Fisher information of every state quantity at a noise level.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.special import ndtri
+
+from ringfit.errors import InputError
+from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares, linearize
+from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows, smoothed_noise
+from ringfit.fit.estimate.load import LoadEstimate, estimate_load
+from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
+                                          TILT_PRIOR, EstimateSettings)
+from ringfit.params import BAR, RingParams, TyreGeometry, TyreLaws
+from ringfit.physics.contact import ContactSolver, as_traced
+from ringfit.physics.operating import KMH
+from ringfit.physics.profile import FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels
+from ringfit.physics.state import QUANTITY_NAMES, TyreState, state_profile, state_solution
+
+PRESSURE, SLIP, TREAD = "pressure_pa", "slip", "tread_depth_m"
+#: θ of the state estimate, in order.
+STATE_PARAMETERS = (LOAD, PRESSURE, SLIP, TREAD, GAIN, ANGLE_OFFSET, CORNER, TILT)
+#: The state's own parameters (the rest are the sensor's nuisances).
+STATE_NAMES = (LOAD, PRESSURE, SLIP, TREAD)
+#: Plausible pressures [Pa] (0.3–8 bar), slips, tread depths [m].
+PRESSURE_RANGE = (0.3 * BAR, 8.0 * BAR)
+SLIP_RANGE = (-0.3, 0.3)
+TREAD_RANGE = (0.2e-3, 30e-3)
+#: Weak priors [A] (docs/physics.md §13.4): σ of ln p about the tyre file's p_ref, σ of κ about 0, σ of ln d
+#: about d_ref. A quantity whose posterior σ reaches :data:`UNTOLD_SHARE` of its prior's is "not told".
+PRESSURE_PRIOR_SD = 0.3
+SLIP_PRIOR_SD = 0.05
+TREAD_PRIOR_SD = 0.5
+UNTOLD_SHARE = 0.9
+#: Correlation above which two quantities are reported as not told apart.
+RIDGE_CORRELATION = 0.95
+
+STATE_COORDS = (
+    Coordinate(LOAD, LOG, lo=LOAD_RANGE[0], hi=LOAD_RANGE[1]),
+    Coordinate(PRESSURE, LOG, lo=PRESSURE_RANGE[0], hi=PRESSURE_RANGE[1]),
+    Coordinate(SLIP, LINEAR, scale=0.01, lo=SLIP_RANGE[0], hi=SLIP_RANGE[1]),
+    Coordinate(TREAD, LOG, lo=TREAD_RANGE[0], hi=TREAD_RANGE[1]),
+    Coordinate(GAIN, LOG, lo=GAIN_RANGE[0], hi=GAIN_RANGE[1]),
+    Coordinate(ANGLE_OFFSET, LINEAR, scale=math.radians(1.0)),
+    Coordinate(CORNER, LOG),
+    Coordinate(TILT, LINEAR, scale=0.1),
+)
+
+#: Reported quantities: key → (unit, scale from SI, what) — the state, then the derived ones (docs/formats.md §7.1).
+QUANTITIES = {
+    "load_n": ("N", 1.0, "vertical load Fz"),
+    "pressure_bar": ("bar", 1.0 / BAR, "inflation pressure"),
+    "slip": ("-", 1.0, "longitudinal slip ratio κ = r_free/r_road − 1 (+ driving)"),
+    "fx_n": ("N", 1.0, "longitudinal force Fx (+ driving)"),
+    "torque_nm": ("N m", 1.0, "axle torque T = Fx·H (+ driving)"),
+    "tread_depth_mm": ("mm", 1e3, "tread depth"),
+    "speed_kmh": ("km/h", 1.0 / KMH, "speed V = Ω·r_road"),
+    "rolling_radius_m": ("m", 1.0, "effective rolling radius r_road = V/Ω"),
+    "free_rolling_radius_m": ("m", 1.0, "free-rolling radius r_free"),
+    "axle_height_m": ("m", 1.0, "axle height H"),
+    "patch_length_mm": ("mm", 1e3, "contact patch length"),
+}
+#: The quantities whose correlation is reported.
+CORRELATED = ("load_n", "pressure_bar", "slip", "fx_n", "tread_depth_mm", "speed_kmh")
+
+
+class StateArrays(eqx.Module):
+    """Data of one state estimate (leading axis P = 1 profile; a batch adds an axis in front).
+
+    ``geometry``, ``ring``, ``laws``: the reference tyre; ``omega`` ``(P,)`` Ω [rad/s]; ``roads``; ``response``
+    ``(P, K)`` the acquisition's gain on harmonics 2…k_max; ``measured`` ``(P, 4K)`` rows radial (Re, Im) then
+    tangential (Re, Im) [m/s²]; ``weight`` ``(P, 4K)`` 1/σ per row.
+    """
+
+    geometry: TyreGeometry
+    ring: RingParams
+    laws: TyreLaws
+    omega: jax.Array
+    roads: FlatOrDrum
+    response: jax.Array
+    measured: jax.Array
+    weight: jax.Array
+
+
+def state_of(theta, omega) -> TyreState:
+    """The :class:`~ringfit.physics.state.TyreState` of θ (:data:`STATE_PARAMETERS`) at Ω."""
+    return TyreState(load=theta[0], pressure=theta[1], tread_depth=theta[3], slip=theta[2], omega=omega)
+
+
+class StateResiduals(AbstractResiduals):
+    """``weight·(model − measured)`` of both channels' harmonics k_min…k_max; aux: the model rows ``(P, 4K)``."""
+
+    profile: ProfileModel = eqx.field(static=True)
+    solver: ContactSolver = eqx.field(static=True)
+    k_min: int = eqx.field(static=True)
+    k_max: int = eqx.field(static=True)
+
+    def rows(self, theta, data: StateArrays):
+        gain, offset, corner, tilt = theta[4], theta[5], theta[6], theta[7]
+        base = self.profile.with_sensor(corner_hz=corner, tilt_gain=tilt)
+        model, ring, geometry = state_profile(data.geometry, data.ring, data.laws, state_of(theta, data.omega[0]),
+                                              model=base)
+        P = data.omega.shape[0]
+        ch = gain * profile_channels(model, ring, geometry, data.omega, jnp.full(P, theta[0]), data.roads,
+                                     full_band(P, self.solver.n_grid), offset, self.solver)
+        amp = harmonic_amplitudes(ch, self.k_min, self.k_max) * data.response[:, None, :]
+        return jnp.concatenate([harmonic_rows(amp[:, 0]), harmonic_rows(amp[:, 1])], axis=-1)
+
+    def __call__(self, theta, data: StateArrays):
+        rows = self.rows(theta, data)
+        return ((rows - data.measured) * data.weight).ravel(), rows
+
+
+class StateRingResiduals(AbstractResiduals):
+    """:class:`StateResiduals` with ring parameters appended to θ (for the ``[ring.covariance]`` propagation)."""
+
+    base: StateResiduals
+    ring_names: tuple = eqx.field(static=True)
+
+    def __call__(self, theta, data: StateArrays):
+        n = len(STATE_PARAMETERS)
+        ring = data.ring.replace(**{name: theta[n + i] for i, name in enumerate(self.ring_names)})
+        return self.base(theta[:n], eqx.tree_at(lambda a: a.ring, data, ring))
+
+
+def state_problem(arrays: StateArrays, settings: EstimateSettings, k_max: int, prior: GaussianPrior | None = None,
+                  sigma: str = "estimate") -> Problem:
+    """The engine :class:`~ringfit.fit.engine.Problem` of a state estimate."""
+    residuals = StateResiduals(settings.profile_model(), settings.solver, 2, int(k_max))
+    return Problem(residuals, as_traced(arrays), STATE_COORDS, prior=prior, sigma=sigma,
+                   plausible={LOAD: LOAD_RANGE}, data_label="this profile")
+
+
+def state_priors(geometry: TyreGeometry, laws: TyreLaws) -> dict:
+    """``name -> (mean, sd)`` in solver coordinates: §13.4's weak priors and §10's nuisance priors."""
+    tilt = STATE_COORDS[STATE_PARAMETERS.index(TILT)]
+    slip = STATE_COORDS[STATE_PARAMETERS.index(SLIP)]
+    return {PRESSURE: (math.log(float(geometry.pressure)), PRESSURE_PRIOR_SD),
+            SLIP: (0.0, SLIP_PRIOR_SD / slip.scale),
+            TREAD: (math.log(float(laws.tread_depth_ref)), TREAD_PRIOR_SD),
+            CORNER: (math.log(CORNER_PRIOR[0]), CORNER_PRIOR[1]),
+            TILT: ((TILT_PRIOR[0] - tilt.center) / tilt.scale, TILT_PRIOR[1] / tilt.scale)}
+
+
+def free_parameters(laws: TyreLaws, fixed: dict) -> tuple[str, ...]:
+    """The θ names fitted: every one but those ``fixed`` and those the tyre has no law for (κ without a brush,
+    d without a tread law)."""
+    held = set(fixed)
+    if not laws.has_brush:
+        held.add(SLIP)
+    if not laws.has_tread_depth:
+        held.add(TREAD)
+    return tuple(n for n in STATE_PARAMETERS if n not in held)
+
+
+# --------------------------------------------------------------------------- derived quantities
+
+def _quantity_vector(theta, ring_ln, geometry, ring, laws, omega, road, names, solver, model):
+    """The reported quantities (SI, :data:`QUANTITIES` order) at θ and ln of the ring parameters ``names``."""
+    ring = ring.replace(**{n: jnp.exp(ring_ln[i]) for i, n in enumerate(names)})
+    _, _, q = state_solution(geometry, ring, laws, state_of(theta, omega), model=model, solver=solver, road=road)
+    return jnp.stack([theta[0], theta[1], q.slip, q.fx, q.torque, theta[3], q.speed, q.r_road, q.r_free,
+                      q.axle_height, q.patch_length])
+
+
+@eqx.filter_jit
+def _quantities_and_jacobian(theta, ring_ln, geometry, ring, laws, omega, road, names, solver, model):
+    f = lambda t, r: _quantity_vector(t, r, geometry, ring, laws, omega, road, names, solver, model)  # noqa: E731
+    value = f(theta, ring_ln)
+    jt, jr = jax.jacfwd(f, argnums=(0, 1))(theta, ring_ln)
+    return value, jt, jr
+
+
+def state_quantities(theta, geometry, ring, laws, omega, road=None, *, ring_names=(), settings=EstimateSettings()):
+    """The reported quantities at θ (SI, :data:`QUANTITIES` order), their Jacobian in θ (natural units) and in ln
+    of ``ring_names``: ``(value (Q,), d/dθ (Q, 8), d/dln q (Q, r))``. One compiled program per structure."""
+    from ringfit.physics.operating import FlatRoad
+
+    names = tuple(ring_names)
+    ring_ln = np.log([float(getattr(ring, n)) for n in names]) if names else np.zeros(0)
+    v, jt, jr = _quantities_and_jacobian(np.asarray(theta, dtype=np.float64), ring_ln,
+                                         *as_traced((geometry, ring, laws)), np.float64(omega),
+                                         as_traced(road or FlatRoad()), names, settings.solver,
+                                         settings.profile_model())
+    return np.asarray(v), np.asarray(jt), np.asarray(jr)
+
+
+def _du_dtheta(theta) -> np.ndarray:
+    """dθ/du per parameter (θ for a log coordinate, its scale for a linear one)."""
+    return np.array([t if c.kind == LOG else c.scale for c, t in zip(STATE_COORDS, theta)])
+
+
+# --------------------------------------------------------------------------- one profile
+
+@dataclass
+class StateEstimate:
+    """The state from one profile (docs/formats.md §7.1).
+
+    - ``quantities``: key of :data:`QUANTITIES` → ``{value, lo, hi, sd, unit, status}`` in the file's units
+      (``status`` "estimated", "fixed" (held at a stated value or the tyre file's law is missing) or
+      "not told" (the data do not bound it: its interval is its prior's)); intervals carry the ring's covariance.
+    - ``correlation``: ``{names, matrix}`` of :data:`CORRELATED` (the estimated ones).
+    - ``untold``: sentences naming what the data could not tell (apart).
+    - ``status``, ``converged``, ``rms`` ``{radial, tangential}`` [m/s²], ``flags``; ``nuisances``.
+    - ``fit``: the engine's :class:`~ringfit.fit.result.FitResult`; ``load``: the load estimate that started it.
+    - ``theta``, ``cov_u``: θ (natural) and the covariance of the free parameters' solver coordinates;
+      ``gradient_u`` ``(Q, k)``: d quantity/du; ``ring_sd`` ``(Q,)`` the ring's part of each σ (SI).
+    """
+
+    quantities: dict
+    correlation: dict
+    untold: list
+    status: str
+    converged: bool
+    rms: dict
+    flags: list
+    nuisances: dict
+    fit: object = None
+    load: LoadEstimate | None = None
+    theta: np.ndarray | None = None
+    cov_u: np.ndarray | None = None
+    gradient_u: np.ndarray | None = None
+    ring_sd: np.ndarray | None = None
+    omega: float = 0.0
+    k_max: int = 0
+    fixed: dict = field(default_factory=dict)
+
+    def value(self, key: str) -> float:
+        return float(self.quantities[key]["value"])
+
+    def to_record(self) -> dict:
+        """The ``state`` object of docs/formats.md §7.1."""
+        return {"quantities": self.quantities, "correlation": self.correlation, "not_told_apart": list(self.untold),
+                "fit": {"status": self.status, "converged": self.converged, "rms_ms2": self.rms,
+                        "channels": ["radial", "tangential"], "harmonics": [2, self.k_max], "flags": list(self.flags)},
+                "nuisances": self.nuisances}
+
+
+def profile_rows(profile, n_grid: int, k_max: int) -> np.ndarray:
+    """Rows ``(4K,)`` radial (Re, Im) then tangential (Re, Im) of harmonics 2…k_max of a profile."""
+    from ringfit.io.profiles import resample_profile
+
+    grid = resample_profile(profile, n_grid)
+    return np.concatenate([harmonic_rows(harmonic_amplitudes(grid[i], 2, k_max)) for i in (0, 1)])
+
+
+def channel_weights(resid_rows: np.ndarray) -> np.ndarray:
+    """1/σ per row ``(4K,)`` [s²/m] from residual rows: each channel's smoothed spectrum (:func:`smoothed_noise`).
+
+    Absolute (not normalised): the rows are then in units of their noise, as the priors are (§13.4)."""
+    half = resid_rows.shape[-1] // 2
+    sigma = np.concatenate([smoothed_noise(resid_rows[..., :half]), smoothed_noise(resid_rows[..., half:])], axis=-1)
+    return 1.0 / sigma
+
+
+def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *,
+                   settings: EstimateSettings = EstimateSettings(), fixed: dict | None = None,
+                   omega: float | None = None, omega_source: str | None = None, response=None, ring_covariance=None,
+                   load: LoadEstimate | None = None, k_tread_in_file: bool = True) -> StateEstimate:
+    """The tyre's state from one rolling profile (docs/physics.md §13.4; docs/formats.md §3 → §7.1).
+
+    **Arguments:** ``profile`` (both channels; its sidecar's load and pressure are not used unless ``fixed``
+    says so), the reference tyre ``geometry``, ``ring``, ``laws``; ``fixed``: θ names → natural values held
+    (``{"pressure_pa": 2.4e5}``); ``omega``/``omega_source``, ``response`` (``(K,)`` the acquisition's gain) as
+    for :func:`~ringfit.fit.estimate.load.estimate_load`; ``ring_covariance``: the tyre file's, carried into every
+    interval; ``load``: a load estimate of the same profile to start from (default: computed).
+
+    **Returns:** :class:`StateEstimate`. Never raises on non-convergence (check ``converged``).
+    """
+    fixed = dict(fixed or {})
+    for name in fixed:
+        if name not in STATE_NAMES:
+            raise ValueError(f"cannot fix {name!r}; expected one of {STATE_NAMES}")
+    if np.allclose(profile.acc_tangential_ms2, 0.0):
+        raise InputError("the tangential channel is all zeros: the state estimate reads both channels "
+                         "(the load alone: ringfit estimate without --state)", source=profile.source or None)
+    if load is None:
+        load = estimate_load(profile, geometry, ring, settings=dataclasses.replace(settings, grid_check=False),
+                             k_tread_in_file=k_tread_in_file, omega=omega, omega_source=omega_source,
+                             response=response)
+    omega = load.omega
+    k_max = load.k_max
+    K = k_max - 1
+    resp = np.ones(K) if response is None else np.asarray(response, dtype=np.float64)[:K]
+    measured = profile_rows(profile, settings.n_grid, k_max)
+    arrays = StateArrays(geometry=geometry, ring=ring, laws=laws, omega=np.array([omega]),
+                         roads=flat_or_drum(load.drum_diameter_m, 1), response=resp[None], measured=measured[None],
+                         weight=np.ones((1, 4 * K)))
+    free = free_parameters(laws, fixed)
+    entries = {k: v for k, v in state_priors(geometry, laws).items() if k in free}
+    prior = GaussianPrior.independent(entries)
+    # the first pass's rows are not in units of their noise (unknown yet): the state's priors would weigh
+    # arbitrarily against them, so it has the nuisances' priors only
+    prior0 = GaussianPrior.independent({k: v for k, v in entries.items() if k in (CORNER, TILT)})
+    nv = load.fit.values
+    start = {LOAD: load.load_n, PRESSURE: float(geometry.pressure), SLIP: 0.0, TREAD: float(laws.tread_depth_ref),
+             GAIN: nv[GAIN], ANGLE_OFFSET: nv[ANGLE_OFFSET], CORNER: max(nv[CORNER], 1e-3), TILT: nv[TILT]}
+    start.update(fixed)
+    theta0 = np.array([start[n] for n in STATE_PARAMETERS])
+    # first pass: each channel's rows scaled by its RMS (the tangential reading is ~5× smaller than the radial)
+    half = 2 * K
+    scale = np.array([np.sqrt(np.mean(measured[:half] ** 2)), np.sqrt(np.mean(measured[half:] ** 2))])
+    w0 = np.concatenate([np.full(half, 1 / scale[0]), np.full(half, 1 / scale[1])])
+    arrays = eqx.tree_at(lambda a: a.weight, arrays, (w0 / w0.mean())[None])
+    opts = dict(max_steps=settings.max_steps, rtol=settings.rtol, atol=settings.atol)
+    first = least_squares(state_problem(arrays, settings, k_max, prior0), theta0, free, **opts)
+    # second pass: whiten each channel's residual spectrum
+    weight = channel_weights(np.asarray(first.extra["aux"])[0] - measured)
+    arrays = eqx.tree_at(lambda a: a.weight, arrays, weight[None])
+    problem = state_problem(arrays, settings, k_max, prior)
+    fit = least_squares(problem, first.theta, free, **opts)
+    return _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fixed, ring_covariance, measured,
+                         prior, k_max)
+
+
+def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fixed, ring_covariance, measured, prior,
+                  k_max) -> StateEstimate:
+    free = tuple(fit.names)
+    theta = np.asarray(fit.theta, dtype=np.float64)
+    finite = bool(np.all(np.isfinite(theta)))
+    names = ()
+    if ring_covariance is not None:
+        fields_ = {f.name for f in dataclasses.fields(RingParams)}
+        names = tuple(n for n in ring_covariance.names if n in fields_)
+    road = problem.data.roads
+    from ringfit.physics.operating import Drum, FlatRoad
+
+    drum = load.drum_diameter_m
+    road1 = Drum(float(drum)) if drum else FlatRoad()
+    value, jt, jr = state_quantities(theta, geometry, ring, laws, omega, road1, ring_names=names, settings=settings)
+    idx = [STATE_PARAMETERS.index(n) for n in free]
+    G = jt[:, idx] * _du_dtheta(theta)[idx][None, :]  # d quantity / du_free
+    cov = np.asarray(fit.covariance_log)
+    var = np.einsum("qi,ij,qj->q", G, cov, G)
+    ring_sd = np.zeros(len(value))
+    if names and finite:
+        # the ring's covariance: û moves with ln q by −(JᵀJ)⁻¹ Jᵀ ∂r/∂ln q (the rows the solver minimised), and
+        # the quantities depend on the ring directly too (docs/physics.md §13.4, as §10)
+        sens = Problem(StateRingResiduals(problem.model, names), problem.data,
+                       tuple(problem.coords) + tuple(Coordinate(n, LOG) for n in names), prior=problem.prior,
+                       sigma=problem.sigma)
+        lin = linearize(sens, np.concatenate([theta, [float(getattr(ring, n)) for n in names]]), names)
+        m = fit.residuals.size
+        J = np.asarray(fit.jacobian).copy()
+        J[:m] *= float(fit.extra["sigma_scale"])
+        Jq = np.zeros((J.shape[0], len(names)))
+        Jq[:m] = lin.jacobian
+        du_dq = -np.linalg.pinv(J.T @ J) @ (J.T @ Jq)
+        total = G @ du_dq + jr
+        idx_c = [ring_covariance.names.index(n) for n in names]
+        sigma_q = np.asarray(ring_covariance.ln)[np.ix_(idx_c, idx_c)]
+        ring_var = np.einsum("qi,ij,qj->q", total, sigma_q, total)
+        ring_sd = np.sqrt(np.maximum(ring_var, 0.0))
+        var = var + ring_var
+    sd = np.sqrt(np.maximum(var, 0.0))
+    z = float(ndtri(0.975))
+    # which quantities are held, which not told
+    prior_sd = {PRESSURE: PRESSURE_PRIOR_SD, SLIP: SLIP_PRIOR_SD / 0.01, TREAD: TREAD_PRIOR_SD}
+    held = {LOAD: LOAD not in free, PRESSURE: PRESSURE not in free, SLIP: SLIP not in free, TREAD: TREAD not in free}
+    untold_param = {}
+    for n, psd in prior_sd.items():
+        if n in free:
+            i = free.index(n)
+            untold_param[n] = math.sqrt(max(cov[i, i], 0.0)) >= UNTOLD_SHARE * psd
+    keys = list(QUANTITIES)
+    source_of = {"load_n": LOAD, "pressure_bar": PRESSURE, "slip": SLIP, "fx_n": SLIP, "torque_nm": SLIP,
+                 "tread_depth_mm": TREAD}
+    quantities = {}
+    for q, key in enumerate(keys):
+        unit, scale, what = QUANTITIES[key]
+        v = float(value[q])
+        param = source_of.get(key)
+        if param is not None and held[param]:
+            status = "fixed"
+        elif param is not None and untold_param.get(param, False):
+            status = "not told"
+        else:
+            status = "estimated"
+        lo, hi = v - z * sd[q], v + z * sd[q]
+        if key in ("load_n", "pressure_bar", "tread_depth_mm") and v > 0:  # log-normal in the log coordinates
+            s = sd[q] / v
+            lo, hi = v * math.exp(-z * s), v * math.exp(z * s)
+        quantities[key] = {"value": v * scale, "lo": lo * scale, "hi": hi * scale, "sd": float(sd[q]) * scale,
+                           "unit": unit, "status": status, "what": what,
+                           **({"ring_sd": float(ring_sd[q]) * scale} if names else {})}
+    # correlation of the quantities (from the statistical covariance and the ring's, together)
+    sel = [keys.index(k) for k in CORRELATED if quantities[k]["status"] != "fixed" and sd[keys.index(k)] > 0]
+    cq = G[sel] @ cov @ G[sel].T
+    if names and finite:
+        cq = cq + total[sel] @ sigma_q @ total[sel].T
+    d = np.sqrt(np.maximum(np.diag(cq), 1e-300))
+    corr = cq / np.outer(d, d)
+    corr_names = [keys[i] for i in sel]
+    untold = []
+    for key in keys:
+        if quantities[key]["status"] == "not told":
+            untold.append(f"{key}: the data do not bound it — its interval is as wide as its prior "
+                          f"(docs/physics.md §13.4); the value is the prior's, not a measurement")
+    for a in range(len(sel)):
+        for b in range(a + 1, len(sel)):
+            if abs(corr[a, b]) > RIDGE_CORRELATION:
+                untold.append(f"{corr_names[a]} and {corr_names[b]} are not told apart (correlation "
+                              f"{corr[a, b]:+.3f}): their intervals are along the ridge (marginal)")
+    # fit quality per channel
+    model_rows = np.asarray(fit.extra["aux"])[0]
+    resid = model_rows - measured
+    half = resid.size // 2
+    rms = {"radial": float(np.sqrt(0.5 * np.sum(resid[:half] ** 2))),
+           "tangential": float(np.sqrt(0.5 * np.sum(resid[half:] ** 2)))}
+    at_bound = [n for n in fit.extra["at_bound"] if n in STATE_NAMES or n == GAIN]
+    converged = bool(fit.converged and finite and not at_bound)
+    flags = [f for f in fit.flags if "solver did not converge" in f or any(f.startswith(n) for n in STATE_NAMES)]
+    nuisances = {}
+    for n, key, s in ((GAIN, "gain", 1.0), (ANGLE_OFFSET, "angle_offset_deg", 180 / math.pi), (CORNER, "corner_hz", 1.0),
+                      (TILT, "tilt_gain", 1.0)):
+        nuisances[key] = {"value": float(fit.values[n]) * s, "stderr": float(fit.stderr.get(n, math.nan)) * s}
+    return StateEstimate(quantities=quantities, correlation={"names": corr_names, "matrix": corr.tolist()},
+                         untold=untold, status=fit.status, converged=converged, rms=rms, flags=flags,
+                         nuisances=nuisances, fit=fit, load=load, theta=theta, cov_u=cov, gradient_u=G,
+                         ring_sd=ring_sd, omega=float(omega), k_max=int(k_max), fixed=dict(fixed))
+
+
+# --------------------------------------------------------------------------- per revolution
+
+@dataclass
+class StateRevolutions:
+    """Per-revolution state of a recording (docs/formats.md §7.1): ``revolution``, ``t_s``, ``rotation_hz``
+    ``(R,)``; ``values``, ``lo``, ``hi`` — key of :data:`QUANTITIES` → ``(R,)`` in the file's units (95 %,
+    statistical); ``rms`` ``(R,)`` the whitened residual of each revolution relative to its noise; ``noise_scale``
+    s_r; ``steps`` Gauss–Newton steps taken."""
+
+    revolution: np.ndarray
+    t_s: np.ndarray
+    rotation_hz: np.ndarray
+    values: dict
+    lo: dict
+    hi: dict
+    rms: np.ndarray
+    noise_scale: float
+    steps: int = 1
+
+    def __len__(self) -> int:
+        return int(self.revolution.size)
+
+    def columns(self) -> dict:
+        """Column name → ``(R,)``: revolution, t_s, rotation_hz, then each quantity with ``_lo``, ``_hi``."""
+        cols = {"revolution": self.revolution, "t_s": self.t_s, "rotation_hz": self.rotation_hz}
+        for key in self.values:
+            cols[key] = self.values[key]
+            cols[key + "_lo"] = self.lo[key]
+            cols[key + "_hi"] = self.hi[key]
+        cols["rms_ratio"] = self.rms
+        return cols
+
+    def summary(self) -> dict:
+        return {"revolutions": len(self), "noise_scale": self.noise_scale, "gauss_newton_steps": self.steps,
+                **{f"{k}_median": float(np.median(v)) for k, v in self.values.items()}}
+
+
+def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: StateEstimate, *,
+                      settings: EstimateSettings = EstimateSettings(), revolution=None, t_s=None,
+                      steps: int = 1) -> StateRevolutions:
+    """The state of every revolution (docs/physics.md §13.4 *per revolution*): from the averaged profile's fit
+    ``reference``, one Gauss–Newton step per revolution with the reference's Jacobian (computed once), all
+    revolutions in one matrix product; ``steps=2`` adds a second step with each revolution's own model rows
+    (a batched model evaluation: slower).
+
+    ``rows`` ``(R, 4K)`` each revolution's radial and tangential harmonic rows (as :func:`profile_rows`);
+    ``rotation_hz`` ``(R,)`` from the encoder. The weights are each channel's smoothed spectrum of the
+    successive differences of revolutions (noise, blind to a state that changes slowly), and the noise scale
+    s_r the whitened differences' RMS. **Returns:** :class:`StateRevolutions`.
+    """
+    fit = reference.fit
+    problem = fit.problem
+    rows = np.asarray(rows, dtype=np.float64)
+    R = rows.shape[0]
+    if R < 2:
+        raise InputError(f"{R} revolution(s): the per-revolution state needs at least 2")
+    diff = np.diff(rows, axis=0) / math.sqrt(2.0)
+    weight = channel_weights(np.sqrt(np.mean(diff**2, axis=0)))
+    s_r = float(np.sqrt(np.mean((diff * weight) ** 2)))
+    data = eqx.tree_at(lambda a: a.weight, problem.data, as_traced(weight[None]))
+    data = eqx.tree_at(lambda a: a.measured, data, as_traced(np.mean(rows, axis=0)[None]))
+    prob = dataclasses.replace(problem, data=data)
+    free = tuple(fit.names)
+    theta = np.asarray(fit.theta, dtype=np.float64)
+    lin = linearize(prob, theta, free)
+    J = lin.jacobian / s_r
+    model_rows = np.asarray(lin.aux)[0]
+    coords = [STATE_COORDS[STATE_PARAMETERS.index(n)] for n in free]
+    u_hat = np.array([c.to_u(theta[STATE_PARAMETERS.index(n)]) for c, n in zip(coords, free)])
+    Wp, mean = problem.prior.rows(free, len(free)) if problem.prior is not None else (np.zeros((len(free),) * 2),
+                                                                                      np.zeros(len(free)))
+    Lam = Wp.T @ Wp
+    A = J.T @ J + Lam
+    cov = np.linalg.inv(A)
+    E = (model_rows[None, :] - rows) * weight[None, :] / s_r  # (R, m): whitened residual at û per revolution
+    du = -(E @ J + (Lam @ (u_hat - mean))[None, :]) @ cov.T  # (R, k)
+    E_lin = E + du @ J.T  # the linearised residual after the step
+    if steps >= 2:  # a second step at each revolution's own model rows, the same Jacobian
+        from ringfit.fit.engine import residuals_batch
+
+        th = np.repeat(theta[None], R, axis=0)
+        for j, (c, n) in enumerate(zip(coords, free)):
+            th[:, STATE_PARAMETERS.index(n)] = c.from_u(u_hat[j] + du[:, j])
+        zero = dataclasses.replace(prob, data=eqx.tree_at(lambda a: a.measured, data,
+                                                          as_traced(np.zeros((1, rows.shape[1])))))
+        model_r = residuals_batch(zero, th) / weight[None, :]
+        E2 = (model_r - rows) * weight[None, :] / s_r
+        step = -(E2 @ J + (u_hat[None, :] + du - mean[None, :]) @ Lam.T) @ cov.T
+        du = du + step
+        E_lin = E2 + step @ J.T
+    # quantities: linear in du through the reference's gradient
+    G = reference.gradient_u
+    keys = list(QUANTITIES)
+    v0 = np.array([reference.quantities[k]["value"] / QUANTITIES[k][1] for k in keys])
+    vals = v0[None, :] + du @ G.T
+    sd = np.sqrt(np.maximum(np.einsum("qi,ij,qj->q", G, cov, G), 0.0))
+    z = float(ndtri(0.975))
+    omega_r = 2 * math.pi * np.asarray(rotation_hz, dtype=np.float64)
+    iq = {k: i for i, k in enumerate(keys)}
+    values, lo, hi = {}, {}, {}
+    for k in keys:
+        s = QUANTITIES[k][1]
+        v = vals[:, iq[k]]
+        sdk = np.full(R, sd[iq[k]])
+        if k == "speed_kmh":  # V = Ω_r·r_road per revolution
+            r_road = vals[:, iq["rolling_radius_m"]]
+            v = omega_r * r_road
+            sdk = omega_r * sd[iq["rolling_radius_m"]]
+        values[k] = v * s
+        lo[k] = (v - z * sdk) * s
+        hi[k] = (v + z * sdk) * s
+    rms = np.sqrt(np.mean(E_lin**2, axis=1))
+    return StateRevolutions(revolution=np.arange(R) if revolution is None else np.asarray(revolution),
+                            t_s=np.zeros(R) if t_s is None else np.asarray(t_s), rotation_hz=np.asarray(rotation_hz),
+                            values=values, lo=lo, hi=hi, rms=rms, noise_scale=s_r, steps=int(steps))
+
+
+# --------------------------------------------------------------------------- Fisher information
+
+@dataclass
+class StateFisher:
+    """Per-revolution Fisher information of the state (docs/physics.md §13.5): ``names`` (keys of
+    :data:`QUANTITIES` that vary), ``value``, ``sd`` (SI units of the quantity; the file's units in
+    :meth:`table`), ``correlation`` ``(Q, Q)``; ``free``: the θ names free in it; ``information`` ``(k, k)`` in u."""
+
+    names: list
+    value: np.ndarray
+    sd: np.ndarray
+    correlation: np.ndarray
+    free: tuple
+    information: np.ndarray
+
+    def table(self) -> dict:
+        """key → {value, sd, sd_pct, unit} in the file's units (σ per revolution)."""
+        out = {}
+        for i, k in enumerate(self.names):
+            unit, scale, _ = QUANTITIES[k]
+            v = float(self.value[i]) * scale
+            out[k] = {"value": v, "sd": float(self.sd[i]) * scale, "unit": unit,
+                      "sd_pct": 100 * float(self.sd[i]) / abs(float(self.value[i])) if self.value[i] else math.inf}
+        return out
+
+    def corr(self, a: str, b: str) -> float:
+        return float(self.correlation[self.names.index(a), self.names.index(b)])
+
+
+def state_fisher(geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, state: TyreState, noise_ms2: float, *,
+                 samples_per_revolution: int = 1024, settings: EstimateSettings = EstimateSettings(),
+                 gain: float = 1.0, corner_hz: float = 0.3, tilt: float = 0.5, with_priors: bool = False,
+                 fixed: tuple = (), drum_diameter_m=None) -> StateFisher:
+    """The Fisher information of one revolution at white noise σ = ``noise_ms2`` per sample in each channel
+    (docs/physics.md §13.5): harmonic k's Re and Im have variance 2σ²/N (N samples per revolution), the rows
+    are both channels' harmonics 2…k_max, the nuisances (gain, offset, corner, tilt) free. ``with_priors``
+    adds §13.4's weak priors (default: the data alone); ``fixed``: θ names held.
+
+    **Returns:** :class:`StateFisher`: σ per revolution of every quantity (load, pressure, κ, Fx, depth, speed …)
+    and their correlation (delta method through the inverse information).
+    """
+    k_max = settings.k_max
+    K = k_max - 1
+    sigma_row = noise_ms2 * math.sqrt(2.0 / samples_per_revolution)
+    slip = 0.0 if state.slip is None else float(state.slip)
+    theta = np.array([float(state.load), float(state.pressure), slip, float(state.tread_depth), gain, 0.0,
+                      corner_hz, tilt])
+    omega = float(state.omega)
+    arrays = StateArrays(geometry=geometry, ring=ring, laws=laws, omega=np.array([omega]),
+                         roads=flat_or_drum(drum_diameter_m, 1), response=np.ones((1, K)),
+                         measured=np.zeros((1, 4 * K)), weight=np.full((1, 4 * K), 1.0 / sigma_row))
+    free = free_parameters(laws, {n: None for n in fixed})
+    prior = GaussianPrior.independent({k: v for k, v in state_priors(geometry, laws).items() if k in free}) \
+        if with_priors else None
+    problem = state_problem(arrays, settings, k_max, prior, sigma="fixed")
+    lin = linearize(problem, theta, free)
+    F = lin.jacobian.T @ lin.jacobian
+    if prior is not None:
+        W, _ = prior.rows(free, len(free))
+        F = F + W.T @ W
+    cov = np.linalg.pinv(F)
+    from ringfit.physics.operating import Drum, FlatRoad
+
+    road = Drum(float(drum_diameter_m)) if drum_diameter_m else FlatRoad()
+    value, jt, _ = state_quantities(theta, geometry, ring, laws, omega, road, settings=settings)
+    idx = [STATE_PARAMETERS.index(n) for n in free]
+    G = jt[:, idx] * _du_dtheta(theta)[idx][None, :]
+    cq = G @ cov @ G.T
+    keys = list(QUANTITIES)
+    keep = [i for i in range(len(keys)) if cq[i, i] > 0]
+    cq = cq[np.ix_(keep, keep)]
+    sd = np.sqrt(np.diag(cq))
+    return StateFisher(names=[keys[i] for i in keep], value=value[keep], sd=sd, correlation=cq / np.outer(sd, sd),
+                       free=free, information=F)
+
+
+__all__ = ["STATE_PARAMETERS", "STATE_NAMES", "STATE_COORDS", "PRESSURE", "SLIP", "TREAD", "QUANTITIES", "StateArrays",
+           "StateResiduals", "state_problem", "state_priors", "free_parameters", "state_quantities", "StateEstimate",
+           "estimate_state", "profile_rows", "channel_weights", "StateRevolutions", "state_revolutions",
+           "StateFisher", "state_fisher", "state_of"]

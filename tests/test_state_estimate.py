@@ -1,0 +1,136 @@
+"""The state estimate (docs/physics.md §13.4–13.5): self-consistency of the inverter on profiles of the forward model
+at known states with coloured noise, the per-revolution linearised step against full per-revolution fits, and the
+Fisher information against the scatter of the per-revolution estimates.
+
+(The blind check on an independent simulator is ``benchmarks/bench_state.py``'s.)
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ringfit.fit.engine import least_squares
+from ringfit.fit.estimate.state import (PRESSURE, SLIP, TREAD, channel_weights, estimate_state, free_parameters,
+                                        profile_rows, state_fisher, state_revolutions)
+from ringfit.io.profiles import Profile, grid_angles_deg
+from ringfit.params import TyreLaws, table9
+from ringfit.physics.profile import ProfileModel
+from ringfit.physics.sensor import STANDARD_GRAVITY
+from ringfit.physics.state import TyreState, solve_state
+
+GEO, RING = table9()
+LAWS = TyreLaws(tread_depth_ref=0.008, k_x=15e6, kw_share=0.5, kv_share=0.3, has_tread_depth=True, has_brush=True)
+OMEGA = 2 * math.pi * 12.0
+SENSOR = ProfileModel().with_sensor(gravity=STANDARD_GRAVITY, tilt_gain=0.8, corner_hz=0.5)
+
+
+def _channels(state):
+    return solve_state(GEO, RING, LAWS, state, model=SENSOR)
+
+
+def _coloured(rng, shape, sd, corr=0.9):
+    """AR(1) noise along the angle (coloured: most power at low harmonics), marginal σ = sd."""
+    e = rng.standard_normal(shape)
+    x = np.zeros(shape)
+    x[..., 0] = e[..., 0]
+    for j in range(1, shape[-1]):
+        x[..., j] = corr * x[..., j - 1] + math.sqrt(1 - corr**2) * e[..., j]
+    return sd * x
+
+
+def _profile(ch, source="synthetic"):
+    return Profile(grid_angles_deg(ch.shape[-1]), ch[0], ch[1],
+                   condition={"speed_kmh": 50.0, "rotation_hz": OMEGA / (2 * math.pi)}, source=source)
+
+
+def test_free_parameters_follow_the_laws():
+    assert free_parameters(LAWS, {}) == ("load_n", PRESSURE, SLIP, TREAD, "gain", "angle_offset", "corner_hz",
+                                         "tilt_gain")
+    none = free_parameters(TyreLaws(), {PRESSURE: 2.4e5})
+    assert PRESSURE not in none and SLIP not in none and TREAD not in none and "load_n" in none
+
+
+def test_channel_weights_whiten_each_channel_separately():
+    rng = np.random.default_rng(0)
+    K = 20
+    rows = np.concatenate([3.0 * rng.standard_normal(2 * K), 0.1 * rng.standard_normal(2 * K)])
+    w = channel_weights(rows)
+    assert np.median(w[: 2 * K]) * 3.0 == pytest.approx(1.0, rel=0.5)
+    assert np.median(w[2 * K:]) * 0.1 == pytest.approx(1.0, rel=0.5)
+
+
+@pytest.mark.slow
+def test_recovers_a_known_state_from_coloured_noise():
+    truth = TyreState(4500.0, 2.5e5, 0.006, 0.01, OMEGA)
+    _, ch, q = _channels(truth)
+    rng = np.random.default_rng(7)
+    noisy = ch + np.stack([_coloured(rng, (ch.shape[-1],), 1.0), _coloured(rng, (ch.shape[-1],), 0.15)])
+    est = estimate_state(_profile(noisy), GEO, RING, LAWS)
+    assert est.converged
+    Q = est.quantities
+    print({k: (Q[k]["value"], Q[k]["sd"]) for k in Q})
+    truth_of = {"load_n": 4500.0, "pressure_bar": 2.5, "slip": 0.01, "fx_n": q["fx"], "tread_depth_mm": 6.0,
+                "speed_kmh": q["speed"] * 3.6}
+    for key, value in truth_of.items():
+        assert Q[key]["lo"] <= value <= Q[key]["hi"], (key, Q[key], value)
+        assert Q[key]["status"] == "estimated"
+    assert abs(Q["load_n"]["value"] / 4500 - 1) < 0.01
+    assert abs(Q["pressure_bar"]["value"] / 2.5 - 1) < 0.02
+    assert abs(Q["fx_n"]["value"] - q["fx"]) < 0.02 * 4500
+    assert abs(Q["tread_depth_mm"]["value"] - 6.0) < 0.5
+    assert abs(Q["speed_kmh"]["value"] / (q["speed"] * 3.6) - 1) < 0.003
+    assert est.correlation["names"][:2] == ["load_n", "pressure_bar"]
+    # the pressure held at a stated value (a TPMS): reported as fixed, and the rest still recovered
+    held = estimate_state(_profile(noisy), GEO, RING, LAWS, fixed={PRESSURE: 2.5e5}, load=est.load)
+    assert held.quantities["pressure_bar"]["status"] == "fixed"
+    assert held.quantities["pressure_bar"]["value"] == pytest.approx(2.5, rel=1e-12)
+    assert held.quantities["pressure_bar"]["sd"] == 0.0
+    assert abs(held.quantities["load_n"]["value"] / 4500 - 1) < 0.01
+
+
+@pytest.mark.slow
+def test_per_revolution_step_against_full_fits_and_the_fisher_information():
+    """Constant state, white noise σ per sample in each revolution: (1) the one-step linearised estimate of each
+    revolution against a full fit of that revolution (same weights, priors and noise scale) — well inside its σ;
+    (2) the scatter of the per-revolution loads and slips against state_fisher's σ; (3) coverage of the
+    per-revolution intervals over the revolutions."""
+    truth = TyreState(4000.0, 2.2e5, 0.007, -0.008, OMEGA)
+    _, ch, q = _channels(truth)
+    rng = np.random.default_rng(11)
+    R, sd = 48, 2.0
+    revs = ch[None] + sd * rng.standard_normal((R,) + ch.shape)
+    rows = np.array([profile_rows(_profile(c), 512, 40) for c in revs])
+    est = estimate_state(_profile(revs.mean(axis=0)), GEO, RING, LAWS)
+    assert est.converged
+    per = state_revolutions(rows, np.full(R, OMEGA / (2 * math.pi)), est)
+    # (1) full fits of three revolutions on the same problem (weights and noise scale of the per-revolution step)
+    import dataclasses
+
+    import equinox as eqx
+
+    from ringfit.physics.contact import as_traced
+
+    diff = np.diff(rows, axis=0) / math.sqrt(2.0)
+    weight = channel_weights(np.sqrt(np.mean(diff**2, axis=0)))
+    s_r = float(np.sqrt(np.mean((diff * weight) ** 2)))
+    sd_load = (per.hi["load_n"][0] - per.lo["load_n"][0]) / (2 * 1.96)
+    for r in (0, 17, 33):
+        data = eqx.tree_at(lambda a: a.weight, est.fit.problem.data, as_traced((weight / s_r)[None]))
+        data = eqx.tree_at(lambda a: a.measured, data, as_traced(rows[r][None]))
+        prob = dataclasses.replace(est.fit.problem, data=data, sigma="fixed")
+        full = least_squares(prob, est.fit.theta, est.fit.names, max_steps=50, rtol=1e-8, atol=1e-8)
+        assert full.converged
+        assert abs(per.values["load_n"][r] - full.values["load_n"]) < 0.1 * sd_load
+        assert abs(per.values["slip"][r] - full.values[SLIP]) < 0.1 * (per.hi["slip"][r] - per.lo["slip"][r]) / 3.92
+    # (2) the scatter against the Fisher information (white noise σ per sample, data only)
+    fisher = state_fisher(GEO, RING, LAWS, truth, sd, samples_per_revolution=512, gain=1.0, corner_hz=0.5, tilt=0.8)
+    for key in ("load_n", "slip"):
+        scatter = np.std(per.values[key], ddof=1)
+        assert scatter == pytest.approx(fisher.table()[key]["sd"], rel=0.35), key
+    # (3) coverage of the per-revolution 95 % intervals (48 revolutions: 40 or more inside)
+    for key, value in (("load_n", 4000.0), ("slip", -0.008), ("fx_n", q["fx"])):
+        inside = np.sum((per.lo[key] <= value) & (value <= per.hi[key]))
+        assert inside >= 40, (key, inside)
