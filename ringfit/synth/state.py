@@ -221,7 +221,10 @@ class RingFD:
         m = ea / R**2 - par["rho_a"] * self.omega**2
         self.elastic = sp.bmat([[b4 * d4 - P * (d2 + eye) + par["kw"] * eye, -b4 * d3],
                                 [b4 * d3, -b4 * d2 + par["kv"] * eye]]).tocsr()
-        L = (self.elastic + sp.bmat([[m * eye, m * d1], [-m * d1, -m * d2]])).tocsc()
+        # the membrane term as the strain ε = w + D1 v and its adjoint D1ᵀ = −D1, so that the discrete
+        # inextensible motions (w = −D1 v) carry no penalty at all: with D2 in place of D1·D1 the penalty
+        # would stiffen short waves by EA/R²·O(k²(kh)⁴) (a 2nd-order D2 reads loads ~2 % off, §10)
+        L = (self.elastic + sp.bmat([[m * eye, m * d1], [-m * d1, -m * (d1 @ d1)]])).tocsc()
         self.lu = spla.splu(L)
         self.eta = par["eta"] if damping else 0.0
         self.win = np.flatnonzero(np.abs(self.phi) <= math.radians(window_deg))
@@ -387,6 +390,26 @@ class RingFD:
         f_r, f_t = a_r - G * np.cos(phi), a_t + G * np.sin(phi)
         f_r0, f_t0 = -om2 * rs - G * np.cos(phi), G * np.sin(phi)
         return -f_r + sensor.tilt * psi * f_t0, f_t + sensor.tilt * psi * f_r0
+
+
+def free_frequencies(tyre: TrueTyre, pressure: float, depth: float, modes, *, n: int = 2048, order: int = 4,
+                     ea: float = 1e9) -> np.ndarray:
+    """Natural frequencies [Hz] of the free, standing tyre (Ω = 0, no contact) for wave numbers ``modes``, from
+    the same FD operator as :class:`RingFD`: the operator is circulant, so e^{ikφ} is an eigenvector of each
+    stencil; its 2×2 symbol (w, v) against the mass ρA·I gives two frequencies per k, the lower the
+    flexural one (docs/physics.md §2.1 in the limit EA → ∞, h → 0)."""
+    par = tyre.at(pressure, depth)
+    R, b4, P, m = par["R"], par["ei"] / par["R"] ** 4, par["P"], ea / par["R"] ** 2
+    phi = -np.pi + 2 * np.pi * np.arange(n) / n
+    out = []
+    for k in modes:
+        e = np.exp(1j * k * phi)
+        s1, s2, s3, s4 = ((d @ e)[0] / e[0] for d in stencils(n, order))
+        K = np.array([[b4 * s4 - P * (s2 + 1) + par["kw"] + m, -b4 * s3 + m * s1],
+                      [b4 * s3 - m * s1, -b4 * s2 - m * s1 * s1 + par["kv"]]])
+        lam = np.linalg.eigvals(K).real.min() / par["rho_a"]
+        out.append(math.sqrt(lam) / (2 * math.pi))
+    return np.asarray(out)
 
 
 # ============================================================================ the time domain
@@ -575,6 +598,19 @@ def _write_recording(path: Path, rec: Recording, condition: dict) -> None:
         w.write(rec.acc, encoder=rec.encoder_deg)
 
 
+def _write_free_modes(path: Path, tyre: TrueTyre, pressure: float, depth: float, rng) -> None:
+    """The free tyre's modes n = 1 … 8 at this pressure (docs/formats.md §2): frequencies with 0.2 % noise,
+    damping 100·ζ with 5 %."""
+    from ringfit.io.modes import ModeTable, write_mode_table
+
+    k = np.arange(1, 9)
+    f = free_frequencies(tyre, pressure, depth, k) * (1 + 0.002 * rng.normal(size=k.size))
+    zeta = 100 * tyre.damping_ratio * np.exp(0.05 * rng.normal(size=k.size))
+    write_mode_table(ModeTable(freq_hz=f, n=k, damping_pct=zeta, freq_std_hz=0.002 * f,
+                               condition={"state": "free", "pressure_bar": pressure / BAR, "speed_kmh": 0.0,
+                                          "rotation_hz": 0.0, "tread_depth_mm": 1e3 * depth}), path)
+
+
 def _write_truth_csv(path: Path, revs: list) -> None:
     lines = [",".join(TRUTH_COLUMNS)]
     lines += [",".join(repr(float(r[c])) if c != "revolution" else str(r[c]) for c in TRUTH_COLUMNS) for r in revs]
@@ -584,7 +620,8 @@ def _write_truth_csv(path: Path, revs: list) -> None:
 def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float = 4.0, n: int = 2048,
                         progress: bool = False) -> dict:
     """Write ``ringfit example state`` into the existing, empty-enough ``folder``: ``tyre.toml`` (nominal),
-    ``calibration/*.records.npz`` (known states), ``blind/*.records.npz`` (hidden states), ``truth/``
+    ``calibration/*.records.npz`` (known states) and ``calibration/free_pNNN.modes.csv`` (the free tyre's modes
+    at NNN % of the reference pressure), ``blind/*.records.npz`` (hidden states), ``truth/``
     (``README.md``, ``tyre.truth.toml``, one ``NAME.truth.csv`` per recording, ``truth.json``).
 
     **Returns** the truth: ``{"tyre": {...}, "recordings": {name: {"state": ..., "sensor": ..., "revolutions":
@@ -641,6 +678,9 @@ def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float
                                        revolutions=rec.revolutions)
         if progress:
             print(f"  {kind}/{name}: {len(rec.revolutions)} revolutions", flush=True)
+    for pf in sorted({c[3] for c in CALIBRATION}):
+        _write_free_modes(folder / "calibration" / f"free_p{round(100 * pf):03d}.modes.csv", truth_tyre,
+                          pf * nominal.pressure_ref, nominal.depth_ref, rng)
     (folder / "truth" / "truth.json").write_text(json.dumps(out, indent=1))
     (folder / "truth" / "README.md").write_text(_truth_readme(out))
     (folder / "README.md").write_text(_readme(out, seed, blind, seconds))
@@ -696,7 +736,8 @@ time, coloured noise).
 - `tyre.toml` — the NOMINAL tyre (not the truth), with the state keys (tread depth, k_x, friction, the
   pressure shares);
 - `calibration/` — recordings at known states, stated in their conditions (load_n, pressure_bar,
-  speed_kmh, rotation_hz, torque_nm, tread_depth_mm): two loads, three pressures, drive and brake;
+  speed_kmh, rotation_hz, torque_nm, tread_depth_mm): two loads, three pressures, drive and brake; and
+  `free_pNNN.modes.csv` (+ `.json`), the free tyre's modes n = 1…8 at NNN % of the reference pressure;
 - `blind/` — recordings whose state is hidden (speed 20–120 km/h, load 0.3–1.2 × {RATED_LOAD:.0f} N,
   pressure ± 20 %, Fx within ± 0.3 Fz, tread depth 2–8 mm; the load oscillates by up to 4 % at ~1 Hz and
   Fx ramps within a recording);
