@@ -4,23 +4,23 @@ sensor on a tyre at a known — or hidden — load, inflation pressure, speed, d
 Written separately from the model on purpose, the way :class:`ringfit.synth.cases.LeverShearTruth` and
 ``benchmarks/_independent_ring.py`` were: nothing of :mod:`ringfit.physics` or :mod:`ringfit.fit` is used
 (only :mod:`ringfit.io` to write the files), so that a blind estimate checks the model and its inversion
-against a second discretisation of the same physics (docs/physics.md §13, "the independent simulator").
+against a second discretisation of the same physics (docs/physics.md §10.1, "the independent simulator").
 
 **The ring** (docs/physics.md §4.1, χ = 1): the steady equations in the axle frame by periodic central
 finite differences in φ (4th order by default) on ``n`` points, in (w, v) with a membrane penalty EA
 (default 1e9 N) for inextensibility; EI, the pressure pretension P = p·b/R, and the foundation
-k_w(p) = k_w·[1 − s_w + s_w·p/p_ref], k_v(p) likewise (docs/physics.md §13 / the contract's shares).
+k_w(p) = k_w·[1 − s_w + s_w·p/p_ref], k_v(p) likewise (the laws of the state, docs/physics.md §10.1).
 **Damping**: the hysteretic loss of docs/physics.md §4.2 is included: ``iη·sign(n)`` times the elastic
 operator (EI, P, k_w, k_v; not EA) is −η times the Hilbert transform of the finite-difference elastic
 forces; the Hilbert transform is taken by FFT and the system is solved by a Neumann series on the sparse
 LU of the undamped operator (ratio ~η, converged to 1e-12). Without it the contact patch would lose its
-forward shift and the radial pressure its rolling resistance (≈ 1 % of Fz at ζ = 0.025).
+forward shift and the radial pressure its rolling resistance (≈ 0.5 % of Fz at ζ = 0.025).
 
 **The road**: radial tread springs k_trd(p, d) (§4.3, flat road s = H/cos φ; no drum) between the road and
 the ring, outer radius R + τ(d), with Fz imposed through the axle height H by an active-set loop over the
 points in a window of ±``window_deg`` around the patch centre (its own bordered solve, not ringfit's).
 
-**The brush** (docs/physics.md §13; issue 33): a tread element normal to the belt, its tip at
+**The brush** (docs/physics.md §10.1; issue 33): a tread element normal to the belt, its tip at
 ``(R + w) sin φ + v cos φ + τ sin(φ − ψ)`` (exact rotation, ψ = (w′ − v)/R by the FD derivative), sticks to
 the road at the leading edge (interpolated from the penetration's zero crossing) and is carried by the road
 at ``r_road`` metres per radian of wheel turn; a *memory* brush walked from the leading to the trailing
@@ -223,7 +223,7 @@ class RingFD:
                                 [b4 * d3, -b4 * d2 + par["kv"] * eye]]).tocsr()
         # the membrane term as the strain ε = w + D1 v and its adjoint D1ᵀ = −D1, so that the discrete
         # inextensible motions (w = −D1 v) carry no penalty at all: with D2 in place of D1·D1 the penalty
-        # would stiffen short waves by EA/R²·O(k²(kh)⁴) (a 2nd-order D2 reads loads ~2 % off, §10)
+        # would stiffen short waves by EA/R²·O(k²(kh)⁴) (2nd order with D2 reads loads 2 % low, §10.1)
         L = (self.elastic + sp.bmat([[m * eye, m * d1], [-m * d1, -m * (d1 @ d1)]])).tocsc()
         self.lu = spla.splu(L)
         self.eta = par["eta"] if damping else 0.0
@@ -296,10 +296,12 @@ class RingFD:
         return np.asarray(q)
 
     def solve(self, load: float, fx: float = 0.0, *, tol: float = 1e-10, max_outer: int = 200,
-              start: Steady | None = None) -> Steady:
+              start: Steady | None = None, steps: int | None = None) -> Steady:
         """The steady state at load Fz [N] with the tips' net force ``fx`` [N] (+ driving); ``start``: a
         nearby solution whose brush loads start the fixed point. ``tol``: the fixed point stops when the
-        brush loads move by less than ``tol`` times the largest radial tread force."""
+        brush loads move by less than ``tol`` times the largest radial tread force. ``steps``: stop after
+        that many evaluations of the brush instead (``steps=1``: the brush loads of the radial-only solution,
+        then the contact solved again with them — the two-pass fixed point of a load hook), for studies."""
         from scipy.optimize import brentq
 
         n, nw, win = self.n, self.win.size, self.win
@@ -356,7 +358,7 @@ class RingFD:
             change = np.max(np.abs(new - qb))
             qb = new
             w_b = self.G[:n][win] @ qb
-            if change <= tol * max(1.0, np.max(p)):
+            if change <= tol * max(1.0, np.max(p)) or it == steps:
                 break
         else:
             raise RuntimeError("the brush and the contact did not reach a fixed point")
@@ -557,7 +559,7 @@ CALIBRATION = (
 #: Sample rates the recordings draw from [Hz].
 SAMPLE_RATES = (10240.0, 12800.0, 20480.0, 25600.0)
 NOISE_COLOURS = ("white", "pink", "red", "band")
-#: The truth CSV's columns, in order (docs/formats.md §19).
+#: The truth CSV's columns, in order (docs/formats.md §15.1).
 TRUTH_COLUMNS = ("revolution", "t_start_s", "t_end_s", "load_n", "pressure_bar", "speed_kmh", "rotation_hz",
                  "rolling_radius_m", "free_radius_m", "fx_n", "slip", "torque_nm", "axle_height_m",
                  "tread_depth_mm", "contact_length_m", "fx_radial_n")
@@ -717,7 +719,7 @@ True ring at the reference pressure {t['pressure_ref'] / BAR:.2f} bar and tread 
 ζ {t['damping_ratio']:.4g}, k_trd {t['k_tread']:.5g} N/m², τ {t['tread_ref']:.4f} m.
 
 Means over each recording's revolutions (the range for the quantities that drift). Per revolution:
-`NAME.truth.csv` (docs/formats.md §19: load_n, pressure_bar, speed_kmh, rolling_radius_m, fx_n, slip,
+`NAME.truth.csv` (docs/formats.md §15.1: load_n, pressure_bar, speed_kmh, rolling_radius_m, fx_n, slip,
 tread_depth_mm, …), every number of the simulation in `truth.json`. Fx is the tread tips' net force along
 the direction of travel (+ driving), torque = Fx·H (H the axle height); slip = r_free/r_road − 1.
 
@@ -729,7 +731,7 @@ def _readme(out, seed, blind, seconds) -> str:
     return f"""# `ringfit example state` (seed {seed}, {blind} blind recordings, {seconds:g} s each)
 
 Continuous recordings (docs/formats.md §9) of a co-rotating radial + tangential accelerometer with a rim
-encoder, from the independent simulator `ringfit.synth.state` (docs/physics.md §13: its own finite
+encoder, from the independent simulator `ringfit.synth.state` (docs/physics.md §10.1: its own finite
 differences of the ring, tread springs on a flat road, a memory brush with the lever, the IEPE high-pass in
 time, coloured noise).
 
