@@ -54,6 +54,8 @@ import numpy as np
 
 BAR = 1e5
 G = 9.81
+#: Relaxation of the brush–contact fixed point (its plain steps alternate with a ratio of about −0.28).
+RELAX = 0.88
 #: The rated load of the example tyre [N] (Table 9's test load).
 RATED_LOAD = 4000.0
 
@@ -237,6 +239,8 @@ class RingFD:
         shift = (np.arange(n)[:, None] - self.win[None, :]) % n
         self.G = np.block([[g[:n, 0][shift], g[:n, 1][shift]], [g[n:, 0][shift], g[n:, 1][shift]]])
         self.Gww = self.G[:n][self.win][:, :nw]
+        d1w = self.d[0][self.win][:, self.win].toarray()  # d/dφ within the window (the patch is inside it)
+        self._window = (np.ascontiguousarray(self.G[self.win]), np.ascontiguousarray(self.G[n + self.win]), d1w)
 
     def _solve(self, rhs):
         """(L + η·K_hyst) x = rhs by a Neumann series on L's LU (K_hyst = i·sign(n)·elastic)."""
@@ -295,7 +299,7 @@ class RingFD:
             q.append(-k * e)
         return np.asarray(q)
 
-    def solve(self, load: float, fx: float = 0.0, *, tol: float = 1e-10, max_outer: int = 200,
+    def solve(self, load: float, fx: float = 0.0, *, tol: float = 1e-9, max_outer: int = 200,
               start: Steady | None = None, steps: int | None = None) -> Steady:
         """The steady state at load Fz [N] with the tips' net force ``fx`` [N] (+ driving); ``start``: a
         nearby solution whose brush loads start the fixed point. ``tol``: the fixed point stops when the
@@ -309,22 +313,22 @@ class RingFD:
         R, tau, k, kx, mu, h = par["R"], par["tau"], par["k_tread"], par["kx"], par["mu"], self.h
         rout = R + tau
         phik = self.phi[win]
-        d1 = self.d[0]
-        d1w = d1[win][:, win].toarray()   # the FD derivative restricted to the window (rows and columns)
+        gw, gv, d1w = self._window
         active = np.abs(phik) < 0.1
         qb = np.zeros(2 * nw) if start is None else start.brush_loads.copy()  # brush loads (q_w, q_v), window
-        w_b = self.G[:n][win] @ qb
-        r_free = r_road = None
+        r_guess = None if start is None else start.r_road
+        top = mu * load
+        if abs(fx) >= 0.999 * top:
+            raise ValueError(f"Fx = {fx:.1f} N is beyond the friction limit μ·Fz = {top:.1f} N")
         for it in range(1, max_outer + 1):
-            p, H, pen, active = self._contact(load, w_b, k, rout, active)
-            wv = self.G @ np.concatenate([qb[:nw] - p, qb[nw:]])
-            w, v = wv[:n], wv[n:]
+            p, H, pen, active = self._contact(load, gw[:, :nw] @ qb[:nw] + gw[:, nw:] @ qb[nw:], k, rout, active)
+            loads = np.concatenate([qb[:nw] - p, qb[nw:]])
+            ww, vw = gw @ loads, gv @ loads     # w, v on the window
             idx = np.flatnonzero(active)
             if idx.size < 3 or np.any(np.diff(idx) != 1):
                 raise RuntimeError("the contact patch is not one contiguous run of grid points")
             if idx[0] < 4 or idx[-1] > nw - 5:
                 raise RuntimeError("the contact patch reaches the edge of the window; widen window_deg")
-            ww, vw = w[win], v[win]
             psi = (d1w @ ww - vw) / R
             xt = (R + ww) * np.sin(phik) + vw * np.cos(phik) + tau * np.sin(phik - psi)
             i0 = idx[0]
@@ -333,37 +337,26 @@ class RingFD:
             x_l = xt[i0 - 1] + t * (xt[i0] - xt[i0 - 1])
             xs, ss, ps = xt[idx].tolist(), (phik[idx] - phi_l).tolist(), p[idx].tolist()
 
-            def net(r):
+            def net(r, xs=xs, ss=ss, ps=ps, x_l=x_l):
                 return float(-np.sum(self._tips(xs, ss, ps, x_l, r, kx, mu)) * R * h)
 
-            lo, hi = 0.8 * rout, 1.2 * rout
-            if not net(hi) < 0.0 < net(lo):
-                raise RuntimeError("the brush's force does not change sign over the bracket of rolling radii")
-            r_free = brentq(net, lo, hi, xtol=1e-14, rtol=1e-14)
-            if fx == 0.0:
-                r_road = r_free
-            else:
-                top = mu * load
-                if abs(fx) >= 0.999 * top:
-                    raise ValueError(f"Fx = {fx:.1f} N is beyond the friction limit μ·Fz = {top:.1f} N")
-                f_lo, f_hi = net(lo), net(hi)
-                if not f_hi < fx < f_lo:
-                    raise ValueError(f"Fx = {fx:.1f} N is outside what the brush can carry "
-                                     f"({f_hi:.1f} … {f_lo:.1f} N)")
-                r_road = brentq(lambda r: net(r) - fx, lo, hi, xtol=1e-14, rtol=1e-14)
+            r_road = self._root(lambda r: net(r) - fx, r_guess, rout)
+            r_guess = r_road
             q = np.zeros(nw)
             q[idx] = self._tips(xs, ss, ps, x_l, r_road, kx, mu)
             c = -tau * q * np.cos(phik - psi) / R
             new = np.concatenate([q * np.sin(phik) + d1w.T @ c, q * np.cos(phik) - c])
             change = np.max(np.abs(new - qb))
-            qb = new
-            w_b = self.G[:n][win] @ qb
+            # the plain fixed point alternates with a ratio of about −0.28 (docs/physics.md §10.1):
+            # relaxing by 0.88 (between that mode's 1/1.28 and 1 for the slow one) halves the steps
+            qb = new if steps is not None else qb + RELAX * (new - qb)
             if change <= tol * max(1.0, np.max(p)) or it == steps:
                 break
         else:
             raise RuntimeError("the brush and the contact did not reach a fixed point")
+        r_free = r_road if fx == 0.0 else self._root(net, r_road, rout)
         # the final fields with the final brush loads
-        p, H, pen, active = self._contact(load, w_b, k, rout, active)
+        p, H, pen, active = self._contact(load, gw[:, :nw] @ qb[:nw] + gw[:, nw:] @ qb[nw:], k, rout, active)
         wv = self.G @ np.concatenate([qb[:nw] - p, qb[nw:]])
         pf = np.zeros(n)
         pf[win] = p
@@ -376,6 +369,25 @@ class RingFD:
             r_free=float(r_free), fz=float(R * h * np.sum(p * np.cos(phik))), fx=float(-np.sum(qf) * R * h),
             fx_radial=float(R * h * np.sum(p * np.sin(phik))), leading=float(phi_l),
             trailing=float(phik[trailing_i] + tt * h), outer_iterations=it, brush_loads=qb)
+
+    @staticmethod
+    def _root(f, guess, rout):
+        """The road length per radian where ``f`` (decreasing in it) vanishes: Brent's method, on a bracket
+        grown from ``guess`` (or ±20 % of R_out); :class:`ValueError` when the brush cannot carry it."""
+        from scipy.optimize import brentq
+
+        if guess is not None:
+            for width in (1e-5, 1e-4, 1e-3):
+                lo, hi = guess - width * rout, guess + width * rout
+                f_lo, f_hi = f(lo), f(hi)
+                if f_hi < 0.0 < f_lo:
+                    return brentq(f, lo, hi, xtol=1e-14, rtol=1e-14)
+        lo, hi = 0.8 * rout, 1.2 * rout
+        f_lo, f_hi = f(lo), f(hi)
+        if not f_hi < 0.0 < f_lo:
+            raise ValueError(f"the brush cannot carry this Fx: its force minus the wanted one runs "
+                             f"{f_lo:.1f} … {f_hi:.1f} N over r_road = {lo:.4f} … {hi:.4f} m")
+        return brentq(f, lo, hi, xtol=1e-14, rtol=1e-14)
 
     # ------------------------------------------------------------------ the sensor
     def reading(self, sol: Steady, sensor: Sensor) -> tuple[np.ndarray, np.ndarray]:
