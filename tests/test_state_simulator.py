@@ -310,3 +310,18 @@ def test_cross_check_with_the_load_estimate_without_tread_shear(tmp_path):
         assert run.returncode == 0, run.stderr
         est = json.loads((tmp_path / "e.estimate.json").read_text())["load_n"]["value"]
         assert abs(est / load - 1) < 5e-3, (load, est)
+
+
+@pytest.mark.parametrize("argv,where", [
+    (["example", "state", "--out", "{d}", "--seconds", "0.1"], "--seconds"),
+    (["example", "state", "--out", "{d}", "--blind", "-1"], "--blind"),
+    (["example", "records", "--out", "{d}", "--blind", "2"], "--blind"),
+])
+def test_example_state_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, argv, where):
+    from ringfit.cli import main
+
+    d = tmp_path / "ex"
+    assert main([a.replace("{d}", str(d)) for a in argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and where in err[0]
+    assert not d.exists()

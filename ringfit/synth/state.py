@@ -702,7 +702,7 @@ def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float
 
 
 def _mean(revs, key):
-    return float(np.mean([r[key] for r in revs]))
+    return round(float(np.mean([r[key] for r in revs])), 6) + 0.0  # no "-0.0" for a force of −1e-12 N
 
 
 def _truth_readme(out) -> str:
@@ -713,7 +713,7 @@ def _truth_readme(out) -> str:
     for name, r in out["recordings"].items():
         rv = r["revolutions"]
         lo, hi = min(x["load_n"] for x in rv), max(x["load_n"] for x in rv)
-        f_lo, f_hi = min(x["fx_n"] for x in rv), max(x["fx_n"] for x in rv)
+        f_lo, f_hi = (round(f(x["fx_n"] for x in rv)) + 0.0 for f in (min, max))
         s = r["sensor"]
         rows.append(
             f"| {name} | {r['kind']} | {_mean(rv, 'load_n'):.1f} ({lo:.0f}…{hi:.0f}) | {_mean(rv, 'pressure_bar'):.4f} "
