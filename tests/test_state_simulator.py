@@ -158,6 +158,28 @@ def test_pressure_and_tread_depth_laws():
     assert a["rho_a"] == pytest.approx(t.rho_a - 1100 * 0.152 * 0.7 * 0.004)
 
 
+@pytest.mark.parametrize("kx", [1e-3, 15e6])
+def test_sensor_reading_obeys_the_identities_of_section_5(kx):
+    """docs/physics.md §5 identities (γ = 1, e = 0, inextensible, first order), from the solved w alone:
+    s_rad = Ω²R²κ + g cos(φ − ψ) with κ = 1/R − (w + w″)/R², and s_tan = g sin(φ − ψ): on an
+    inextensible belt the tangential channel reads gravity only — with the brush too, whose tip forces
+    cannot stretch it (measured 6e-6 of Ω²R; with D2 for v″ the discrete belt read a spurious 7.5e-3).
+    Spectral w″ (not the simulator's FD): 1e-5 of Ω²R in the tangential channel, 2e-4 in the radial."""
+    tyre = replace(TrueTyre(), kx=kx)
+    ring = RingFD(tyre, 2.2e5, 0.008, OMEGA, n=2048)
+    s = ring.solve(3000.0)
+    rad, tan = ring.reading(s, Sensor(tilt=1.0))
+    R, g, phi = tyre.radius, 9.81, ring.phi
+    k = np.fft.rfftfreq(phi.size, 1.0 / phi.size)
+    w2 = np.fft.irfft(-(k**2) * np.fft.rfft(s.w), phi.size)
+    w1 = np.fft.irfft(1j * k * np.fft.rfft(s.w), phi.size)
+    psi = (w1 - s.v) / R
+    scale = OMEGA**2 * R
+    kappa = 1 / R - (s.w + w2) / R**2
+    assert np.max(np.abs(rad - (OMEGA**2 * R**2 * kappa + g * np.cos(phi - psi)))) < 2e-4 * scale
+    assert np.max(np.abs(tan - g * np.sin(phi - psi))) < 1e-5 * scale
+
+
 def test_iepe_highpass_in_time_has_the_analytic_response():
     """First-order s/(s + 2πf_c) in time: the step response is exp(−2πf_c t) (to the bilinear transform's
     half-sample offset, ω_c/2f_s), and a settled sine at f has gain f/√(f² + f_c²) and phase lead atan(f_c/f)

@@ -400,7 +400,9 @@ class RingFD:
         vs = v + e * psi
         rs = R - e
         a_r = om2 * (d2 @ w - 2 * (d1 @ vs) - w) - om2 * rs
-        a_t = om2 * (d2 @ vs + 2 * (d1 @ w) - vs)
+        # v″ as D1·D1 v, as in the membrane strain: with D2 the discrete inextensible belt would show a
+        # spurious strain rate Ω²(D2 − D1·D1)v at the patch edges in the tangential channel
+        a_t = om2 * (d1 @ (d1 @ vs) + 2 * (d1 @ w) - vs)
         f_r, f_t = a_r - G * np.cos(phi), a_t + G * np.sin(phi)
         f_r0, f_t0 = -om2 * rs - G * np.cos(phi), G * np.sin(phi)
         return -f_r + sensor.tilt * psi * f_t0, f_t + sensor.tilt * psi * f_r0
