@@ -232,6 +232,7 @@ def test_recording_angles_follow_the_encoder_and_the_truth_follows_the_drift():
         assert phi[i[0]] < -179.0 or r["revolution"] == 0
         assert abs(phi[i[np.argmin(rad[i])]]) < 8.0  # the dip inside the patch (±10°)
         t_mid = 0.5 * (r["t_start_s"] + r["t_end_s"])
+        assert r["complete"] == int(0 < r["revolution"] < len(rec.revolutions) - 1)
         assert r["load_n"] == pytest.approx(states(t_mid).load, rel=1e-12)
         assert r["fx_n"] == pytest.approx(states(t_mid).fx, abs=1e-6)
         assert r["speed_kmh"] == pytest.approx(3.6 * rec.omega * r["rolling_radius_m"], rel=1e-12)
@@ -268,13 +269,14 @@ def test_example_state_writes_what_ringfit_reads(tmp_path):
     hidden = ("load_n", "pressure_bar", "torque_nm", "tread_depth_mm", "speed_kmh")
     cal = sorted((out / "calibration").glob("*.records.npz"))
     blind = sorted((out / "blind").glob("*.records.npz"))
-    assert len(cal) == 6 and len(blind) == 2
-    pressures, torques = set(), []
+    assert len(cal) == 7 and len(blind) == 2
+    pressures, torques, depths = set(), [], set()
     for path in cal + blind:
         name = path.name.removesuffix(".records.npz")
         rec = read_continuous(path)
         rows = (out / "truth" / f"{name}.truth.csv").read_text().splitlines()
-        assert rows[0].split(",")[:6] == ["revolution", "t_start_s", "t_end_s", "load_n", "pressure_bar", "speed_kmh"]
+        assert rows[0].split(",")[:7] == ["revolution", "complete", "t_start_s", "t_end_s", "load_n", "pressure_bar",
+                                          "speed_kmh"]
         assert len(rows) - 1 == len(truth["recordings"][name]["revolutions"]) >= 3
         assert f"| {name} |" in readme
         assert rec.axes == ("radial", "tangential") and rec.has_encoder and 10000 <= rec.fs_hz <= 25600
@@ -286,9 +288,10 @@ def test_example_state_writes_what_ringfit_reads(tmp_path):
             for k in hidden:
                 assert rec.condition[k] == pytest.approx(first[k], rel=1e-9)
             pressures.add(round(rec.condition["pressure_bar"], 6))
+            depths.add(rec.condition["tread_depth_mm"])
             torques.append(rec.condition["torque_nm"])
         rec.close()
-    assert len(pressures) >= 2 and any(abs(t) > 1.0 for t in torques)
+    assert len(pressures) >= 2 and any(abs(t) > 1.0 for t in torques) and len(depths) >= 2
     from ringfit.io.modes import read_mode_table
 
     free = sorted((out / "calibration").glob("free_p*.modes.csv"))

@@ -539,7 +539,7 @@ def _simulate(tyre, states, speed_kmh, seconds, fs, sensor, seed, n, encoder_cou
             sig_lead[:] = spl((phi_lead + np.pi) % (2 * np.pi) - np.pi).T
             level = np.array([np.mean(rad), np.mean(tan)])
         revs.append(dict(
-            revolution=i, t_start_s=float(t[sel[0]]), t_end_s=float(t[sel[-1]]), load_n=st.load,
+            revolution=i, complete=int(0 < i < n_rev - 1), t_start_s=float(t[sel[0]]), t_end_s=float(t[sel[-1]]), load_n=st.load,
             pressure_bar=st.pressure / BAR, speed_kmh=3.6 * omega * sol.r_road, rotation_hz=omega / (2 * np.pi),
             rolling_radius_m=sol.r_road, free_radius_m=sol.r_free, fx_n=sol.fx, slip=sol.slip,
             torque_nm=sol.fx * sol.axle_height, axle_height_m=sol.axle_height, tread_depth_mm=1e3 * st.depth,
@@ -569,12 +569,13 @@ CALIBRATION = (
     ("cal_p100_brake", 80.0, 0.8, 1.0, -0.2, 8.0),
     ("cal_p080_l080", 60.0, 0.8, 0.8, 0.0, 8.0),
     ("cal_p120_l080", 100.0, 0.8, 1.2, 0.0, 8.0),
+    ("cal_p100_worn", 60.0, 0.8, 1.0, 0.0, 5.0),
 )
 #: Sample rates the recordings draw from [Hz].
 SAMPLE_RATES = (10240.0, 12800.0, 20480.0, 25600.0)
 NOISE_COLOURS = ("white", "pink", "red", "band")
 #: The truth CSV's columns, in order (docs/formats.md §15.1).
-TRUTH_COLUMNS = ("revolution", "t_start_s", "t_end_s", "load_n", "pressure_bar", "speed_kmh", "rotation_hz",
+TRUTH_COLUMNS = ("revolution", "complete", "t_start_s", "t_end_s", "load_n", "pressure_bar", "speed_kmh", "rotation_hz",
                  "rolling_radius_m", "free_radius_m", "fx_n", "slip", "torque_nm", "axle_height_m",
                  "tread_depth_mm", "contact_length_m", "fx_radial_n")
 
@@ -629,7 +630,8 @@ def _write_free_modes(path: Path, tyre: TrueTyre, pressure: float, depth: float,
 
 def _write_truth_csv(path: Path, revs: list) -> None:
     lines = [",".join(TRUTH_COLUMNS)]
-    lines += [",".join(repr(float(r[c])) if c != "revolution" else str(r[c]) for c in TRUTH_COLUMNS) for r in revs]
+    lines += [",".join(str(r[c]) if c in ("revolution", "complete") else repr(float(r[c])) for c in TRUTH_COLUMNS)
+              for r in revs]
     path.write_text("\n".join(lines) + "\n")
 
 
@@ -752,8 +754,8 @@ time, coloured noise).
 - `tyre.toml` — the NOMINAL tyre (not the truth), with the state keys (tread depth, k_x, friction, the
   pressure shares);
 - `calibration/` — recordings at known states, stated in their conditions (load_n, pressure_bar,
-  speed_kmh, rotation_hz, torque_nm, tread_depth_mm): two loads, three pressures, drive and brake; and
-  `free_pNNN.modes.csv` (+ `.json`), the free tyre's modes n = 1…8 at NNN % of the reference pressure;
+  speed_kmh, rotation_hz, torque_nm, tread_depth_mm): two loads, three pressures, drive and brake, a
+  worn tread (5 mm); and `free_pNNN.modes.csv` (+ `.json`), the free tyre's modes n = 1…8 at NNN % of the reference pressure;
 - `blind/` — recordings whose state is hidden (speed 20–120 km/h, load 0.3–1.2 × {RATED_LOAD:.0f} N,
   pressure ± 20 %, Fx within ± 0.3 Fz, tread depth 2–8 mm; the load oscillates by up to 4 % at ~1 Hz and
   Fx ramps within a recording);
