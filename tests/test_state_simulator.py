@@ -89,9 +89,9 @@ def _rigid(tyre):
 def test_rigid_ring_on_tread_springs_matches_the_closed_form():
     """Rigid ring, radial springs k_trd on a flat road (docs/physics.md §4.3): with cos α = H/R_out,
     Fz = 2 k_trd R (R_out sin α − H α), solved here for H; the free-rolling radius of a sticking brush on a
-    rigid ring, where ∫(R_out sin φ − R_out sin φ_l − r (φ − φ_l)) dφ = 0, is r_free = R_out sin α/α; its slip
-    stiffness dFx/dκ = 2 k_x R α R_out sin α (Pacejka's C_κ = 2 c_px a² with a = R_out sin α and c_px per
-    unit road length k_x R / r_free)."""
+    rigid ring, where ∫(R_out sin φ − R_out sin φ_l − r (φ − φ_l)) dφ = 0, is r_free = R_out sin α/α; its
+    slip stiffness dFx/dκ = 2 k_x R α R_out sin α (Pacejka's C_κ = 2 c_px a² with a = R_out sin α and c_px
+    per unit road length k_x R / r_free)."""
     tyre = replace(_rigid(TrueTyre()), mu=100.0)
     R, rout, k, kx = tyre.radius, tyre.radius + tyre.tread_ref, tyre.k_tread, tyre.kx
     ring = RingFD(tyre, 2.2e5, 0.008, OMEGA, n=4096, damping=False)
@@ -133,7 +133,8 @@ def test_fx_vanishes_at_the_free_rolling_radius_and_drive_is_positive():
 
 def test_free_frequencies_reach_eq_18():
     """The FD operator's free modes at n = 2048, EA = 1e9 N against eq. 18 (docs/physics.md §2.1, written here):
-    ω² = n²[EI(n²−1)²/R⁴ + P(n²−1) + k_w + k_v/n²] / (ρA(n²+1)), to 2e-6 (EA's share); they rise with pressure."""
+    ω² = n²[EI(n²−1)²/R⁴ + P(n²−1) + k_w + k_v/n²] / (ρA(n²+1)), to 2e-6 (EA's share); they rise with
+    pressure."""
     from ringfit.synth.state import free_frequencies
 
     t = TrueTyre()
@@ -302,7 +303,8 @@ def test_example_state_writes_what_ringfit_reads(tmp_path):
     true = tomllib.loads((out / "truth" / "tyre.truth.toml").read_text())
     assert true["ring"]["k_tread_n_per_m2"] != nominal["ring"]["k_tread_n_per_m2"]  # the nominal is not the truth
     tyre = _strip_state_keys(out / "tyre.toml", tmp_path / "nominal.toml")
-    est = subprocess.run([sys.executable, "-m", "ringfit", "estimate", str(out / "calibration" / "cal_p100_l100.records.npz"),
+    cal = out / "calibration" / "cal_p100_l100.records.npz"
+    est = subprocess.run([sys.executable, "-m", "ringfit", "estimate", str(cal),
                           "--tyre", str(tyre), "--out", str(tmp_path / "cal.estimate.json"), "--quiet"],
                          capture_output=True, text=True)
     assert est.returncode == 0, est.stderr
@@ -330,8 +332,9 @@ def test_cross_check_with_the_load_estimate_without_tread_shear(tmp_path):
         path = tmp_path / f"r{load:.0f}.records.npz"
         _write_recording(path, rec, dict(speed_kmh=rec.revolutions[0]["speed_kmh"],
                                          rotation_hz=rec.revolutions[0]["rotation_hz"]))
-        run = subprocess.run([sys.executable, "-m", "ringfit", "estimate", str(path), "--tyre", str(tmp_path / "true.toml"),
-                              "--out", str(tmp_path / "e.estimate.json"), "--force", "--quiet"], capture_output=True, text=True)
+        run = subprocess.run([sys.executable, "-m", "ringfit", "estimate", str(path), "--tyre",
+                              str(tmp_path / "true.toml"), "--out", str(tmp_path / "e.estimate.json"), "--force",
+                              "--quiet"], capture_output=True, text=True)
         assert run.returncode == 0, run.stderr
         est = json.loads((tmp_path / "e.estimate.json").read_text())["load_n"]["value"]
         assert abs(est / load - 1) < 5e-3, (load, est)

@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -306,8 +305,6 @@ class RingFD:
         brush loads move by less than ``tol`` times the largest radial tread force. ``steps``: stop after
         that many evaluations of the brush instead (``steps=1``: the brush loads of the radial-only solution,
         then the contact solved again with them — the two-pass fixed point of a load hook), for studies."""
-        from scipy.optimize import brentq
-
         n, nw, win = self.n, self.win.size, self.win
         par = self.par
         R, tau, k, kx, mu, h = par["R"], par["tau"], par["k_tread"], par["kx"], par["mu"], self.h
@@ -415,7 +412,7 @@ def free_frequencies(tyre: TrueTyre, pressure: float, depth: float, modes, *, n:
     stencil; its 2×2 symbol (w, v) against the mass ρA·I gives two frequencies per k, the lower the
     flexural one (docs/physics.md §2.1 in the limit EA → ∞, h → 0)."""
     par = tyre.at(pressure, depth)
-    R, b4, P, m = par["R"], par["ei"] / par["R"] ** 4, par["P"], ea / par["R"] ** 2
+    b4, P, m = par["ei"] / par["R"] ** 4, par["P"], ea / par["R"] ** 2
     phi = -np.pi + 2 * np.pi * np.arange(n) / n
     out = []
     for k in modes:
@@ -527,19 +524,20 @@ def _simulate(tyre, states, speed_kmh, seconds, fs, sensor, seed, n, encoder_cou
         st = state_at(t_mid)
         if st.pressure != s0.pressure or st.depth != s0.depth:
             raise ValueError("pressure and tread depth must stay constant within a recording")
-        if sol is None or st != last:
+        if sol is None or st != last:  # a constant state is solved once
             sol = ring.solve(st.load, st.fx, start=sol)
             last = st
-        rad, tan = ring.reading(sol, sensor)
-        spl = CubicSpline(grid, np.vstack([np.append(rad, rad[0]), np.append(tan, tan[0])]).T,
-                          bc_type="periodic")
+            rad, tan = ring.reading(sol, sensor)
+            spl = CubicSpline(grid, np.vstack([np.append(rad, rad[0]), np.append(tan, tan[0])]).T,
+                              bc_type="periodic")
         wrapped = (phi_u[sel] + np.pi) % (2 * np.pi) - np.pi
         sig[:, sel] = spl(wrapped).T
         if i == 0:
             sig_lead[:] = spl((phi_lead + np.pi) % (2 * np.pi) - np.pi).T
             level = np.array([np.mean(rad), np.mean(tan)])
         revs.append(dict(
-            revolution=i, complete=int(0 < i < n_rev - 1), t_start_s=float(t[sel[0]]), t_end_s=float(t[sel[-1]]), load_n=st.load,
+            revolution=i, complete=int(0 < i < n_rev - 1), t_start_s=float(t[sel[0]]), t_end_s=float(t[sel[-1]]),
+            load_n=st.load,
             pressure_bar=st.pressure / BAR, speed_kmh=3.6 * omega * sol.r_road, rotation_hz=omega / (2 * np.pi),
             rolling_radius_m=sol.r_road, free_radius_m=sol.r_free, fx_n=sol.fx, slip=sol.slip,
             torque_nm=sol.fx * sol.axle_height, axle_height_m=sol.axle_height, tread_depth_mm=1e3 * st.depth,
@@ -720,7 +718,8 @@ def _truth_readme(out) -> str:
         f_lo, f_hi = (round(f(x["fx_n"] for x in rv)) + 0.0 for f in (min, max))
         s = r["sensor"]
         rows.append(
-            f"| {name} | {r['kind']} | {_mean(rv, 'load_n'):.1f} ({lo:.0f}…{hi:.0f}) | {_mean(rv, 'pressure_bar'):.4f} "
+            f"| {name} | {r['kind']} | {_mean(rv, 'load_n'):.1f} ({lo:.0f}…{hi:.0f}) "
+            f"| {_mean(rv, 'pressure_bar'):.4f} "
             f"| {_mean(rv, 'speed_kmh'):.3f} | {_mean(rv, 'rolling_radius_m'):.5f} | {_mean(rv, 'fx_n'):.1f} "
             f"({f_lo:.0f}…{f_hi:.0f}) | {_mean(rv, 'slip'):.5f} | {_mean(rv, 'torque_nm'):.1f} "
             f"| {_mean(rv, 'tread_depth_mm'):.3f} | {r['fs_hz']:.0f} | {s['colour']} {s['noise'][0]:.2f} m/s² "
@@ -755,7 +754,8 @@ time, coloured noise).
   pressure shares);
 - `calibration/` — recordings at known states, stated in their conditions (load_n, pressure_bar,
   speed_kmh, rotation_hz, torque_nm, tread_depth_mm): two loads, three pressures, drive and brake, a
-  worn tread (5 mm); and `free_pNNN.modes.csv` (+ `.json`), the free tyre's modes n = 1…8 at NNN % of the reference pressure;
+  worn tread (5 mm); and `free_pNNN.modes.csv` (+ `.json`), the free tyre's modes n = 1…8 at NNN % of
+  the reference pressure;
 - `blind/` — recordings whose state is hidden (speed 20–120 km/h, load 0.3–1.2 × {RATED_LOAD:.0f} N,
   pressure ± 20 %, Fx within ± 0.3 Fz, tread depth 2–8 mm; the load oscillates by up to 4 % at ~1 Hz and
   Fx ramps within a recording);
