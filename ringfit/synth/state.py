@@ -604,16 +604,16 @@ def _sensor(rng, speed_kmh, rout) -> Sensor:
                   colour=str(rng.choice(NOISE_COLOURS)))
 
 
-def _write_recording(path: Path, rec: Recording, condition: dict) -> None:
+def _write_recording(path: Path, rec: Recording, condition: dict, overwrite: bool = False) -> None:
     from ringfit.io.continuous import ContinuousWriter
 
     with ContinuousWriter(path, axes=("radial", "tangential"), fs_hz=rec.fs, samples=rec.acc.shape[1],
                           encoder="angle", hall=False, encoder_offset_deg=rec.encoder_offset_deg,
-                          condition=condition, acc_dtype=np.float32) as w:
+                          condition=condition, acc_dtype=np.float32, overwrite=overwrite) as w:
         w.write(rec.acc, encoder=rec.encoder_deg)
 
 
-def _write_free_modes(path: Path, tyre: TrueTyre, pressure: float, depth: float, rng) -> None:
+def _write_free_modes(path: Path, tyre: TrueTyre, pressure: float, depth: float, rng, overwrite=False) -> None:
     """The free tyre's modes n = 1 … 8 at this pressure (docs/formats.md §2): frequencies with 0.2 % noise,
     damping 100·ζ with 5 %."""
     from ringfit.io.modes import ModeTable, write_mode_table
@@ -623,7 +623,8 @@ def _write_free_modes(path: Path, tyre: TrueTyre, pressure: float, depth: float,
     zeta = 100 * tyre.damping_ratio * np.exp(0.05 * rng.normal(size=k.size))
     write_mode_table(ModeTable(freq_hz=f, n=k, damping_pct=zeta, freq_std_hz=0.002 * f,
                                condition={"state": "free", "pressure_bar": pressure / BAR, "speed_kmh": 0.0,
-                                          "rotation_hz": 0.0, "tread_depth_mm": 1e3 * depth}), path)
+                                          "rotation_hz": 0.0, "tread_depth_mm": 1e3 * depth}), path,
+                     overwrite=overwrite)
 
 
 def _write_truth_csv(path: Path, revs: list) -> None:
@@ -634,24 +635,29 @@ def _write_truth_csv(path: Path, revs: list) -> None:
 
 
 def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float = 4.0, n: int = 2048,
-                        progress: bool = False) -> dict:
+                        progress: bool = False, overwrite: bool = False) -> dict:
     """Write ``ringfit example state`` into the existing, empty-enough ``folder``: ``tyre.toml`` (nominal),
     ``calibration/*.records.npz`` (known states) and ``calibration/free_pNNN.modes.csv`` (the free tyre's modes
     at NNN % of the reference pressure), ``blind/*.records.npz`` (hidden states), ``truth/``
     (``README.md``, ``tyre.truth.toml``, one ``NAME.truth.csv`` per recording, ``truth.json``).
 
     **Returns** the truth: ``{"tyre": {...}, "recordings": {name: {"state": ..., "sensor": ..., "revolutions":
-    [...]}}}`` (SI in ``tyre``, file units in the rows)."""
+    [...]}}}`` (SI in ``tyre``, file units in the rows). A ``folder`` that holds anything is refused before
+    any work (:class:`ringfit.errors.InputError`) unless ``overwrite``."""
+    from ringfit.errors import InputError
     from ringfit.io.tyre import write_tyre
 
     folder = Path(folder)
+    if not overwrite and folder.is_dir() and any(folder.iterdir()):
+        raise InputError("is not empty; the state example is written into an empty folder (or overwrite)",
+                         source=folder)
     rng = np.random.default_rng(seed)
     nominal = nominal_tyre()
     truth_tyre = jittered_tyre(rng, nominal)
     for sub in ("calibration", "blind", "truth"):
         (folder / sub).mkdir(parents=True, exist_ok=True)
-    write_tyre(nominal.tyre_file("example tyre (nominal)"), folder / "tyre.toml")
-    write_tyre(truth_tyre.tyre_file("example tyre (TRUE)"), folder / "truth" / "tyre.truth.toml")
+    write_tyre(nominal.tyre_file("example tyre (nominal)"), folder / "tyre.toml", overwrite=overwrite)
+    write_tyre(truth_tyre.tyre_file("example tyre (TRUE)"), folder / "truth" / "tyre.truth.toml", overwrite=overwrite)
     jobs = []
     for name, speed, lf, pf, fxf, depth in CALIBRATION:
         load = lf * RATED_LOAD
@@ -687,7 +693,7 @@ def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float
                              tread_depth_mm=r0["tread_depth_mm"], road="flat")
         else:
             condition = dict(road="flat", note="state hidden: see truth/README.md")
-        _write_recording(folder / kind / f"{name}.records.npz", rec, condition)
+        _write_recording(folder / kind / f"{name}.records.npz", rec, condition, overwrite)
         _write_truth_csv(folder / "truth" / f"{name}.truth.csv", rec.revolutions)
         out["recordings"][name] = dict(kind=kind, fs_hz=fs, seconds=seconds, speed_kmh_nominal=speed,
                                        sensor=asdict(sensor), drift=drift, condition=condition,
@@ -696,7 +702,7 @@ def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float
             print(f"  {kind}/{name}: {len(rec.revolutions)} revolutions", flush=True)
     for pf in sorted({c[3] for c in CALIBRATION}):
         _write_free_modes(folder / "calibration" / f"free_p{round(100 * pf):03d}.modes.csv", truth_tyre,
-                          pf * nominal.pressure_ref, nominal.depth_ref, rng)
+                          pf * nominal.pressure_ref, nominal.depth_ref, rng, overwrite)
     (folder / "truth" / "truth.json").write_text(json.dumps(out, indent=1))
     (folder / "truth" / "README.md").write_text(_truth_readme(out))
     (folder / "README.md").write_text(_readme(out, seed, blind, seconds))
