@@ -181,3 +181,25 @@ def test_the_ring_covariance_is_carried_by_the_estimators_own_sensitivity():
     for k in keys:
         assert est.quantities[k]["ring_sd"] == pytest.approx(math.sqrt(var[k]), rel=0.05), k
         assert est.quantities[k]["sd"] >= est.quantities[k]["ring_sd"]
+
+
+@pytest.mark.slow
+def test_what_the_data_cannot_tell_is_said():
+    """A tyre file without laws holds κ and d (status fixed; Fx 0) and still estimates load and pressure; at a
+    very high noise the tread depth's interval is its prior's: status 'not told', and said in `untold`."""
+    rng = np.random.default_rng(4)
+    _, ch, _ = solve_state(GEO, RING, TyreLaws(), TyreState(4000.0, 2.4e5, 0.008, 0.0, OMEGA), model=SENSOR)
+    ch = ch + np.array([[1.0], [0.15]]) * rng.standard_normal(ch.shape)
+    est = estimate_state(_profile(ch), GEO, RING, TyreLaws())
+    assert est.converged
+    Q = est.quantities
+    assert Q["slip"]["status"] == Q["tread_depth_mm"]["status"] == Q["fx_n"]["status"] == "fixed"
+    assert Q["fx_n"]["value"] == 0.0 and Q["tread_depth_mm"]["value"] == pytest.approx(8.0)
+    for key, value in (("load_n", 4000.0), ("pressure_bar", 2.4)):
+        assert Q[key]["status"] == "estimated" and Q[key]["lo"] <= value <= Q[key]["hi"]
+    _, ch, _ = _channels(TyreState(4000.0, 2.2e5, 0.007, 0.003, OMEGA))
+    noisy = ch + np.array([[30.0], [5.0]]) * rng.standard_normal(ch.shape)
+    loud = estimate_state(_profile(noisy), GEO, RING, LAWS)
+    assert loud.converged
+    assert loud.quantities["tread_depth_mm"]["status"] == "not told"
+    assert any(line.startswith("tread_depth_mm: the data do not bound it") for line in loud.untold)

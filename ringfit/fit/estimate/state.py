@@ -331,7 +331,12 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     weight = channel_weights(np.asarray(first.extra["aux"])[0] - measured)
     arrays = eqx.tree_at(lambda a: a.weight, arrays, weight[None])
     problem = state_problem(arrays, settings, k_max, prior)
-    fit = least_squares(problem, first.theta, free, **opts)
+    # a parameter the first pass left on a bound (or not finite) restarts from its start: on a bound the solver's
+    # sine transform has no slope, and the second pass's priors are what hold a weakly told quantity
+    theta1 = np.where(np.isfinite(first.theta), first.theta, theta0)
+    for name in first.extra["at_bound"]:
+        theta1[STATE_PARAMETERS.index(name)] = theta0[STATE_PARAMETERS.index(name)]
+    fit = least_squares(problem, theta1, free, **opts)
     est = _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fixed, ring_covariance, measured,
                         prior, k_max)
     if str(load.rotation_source).startswith("speed_kmh"):  # Ω from the nominal speed: V = Ω·r_road says it back
