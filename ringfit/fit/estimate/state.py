@@ -38,7 +38,7 @@ from ringfit.params import BAR, RingParams, TyreGeometry, TyreLaws
 from ringfit.physics.contact import ContactSolver, as_traced
 from ringfit.physics.operating import KMH
 from ringfit.physics.profile import FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels
-from ringfit.physics.state import QUANTITY_NAMES, TyreState, state_profile, state_solution
+from ringfit.physics.state import TyreState, state_profile, state_solution
 
 PRESSURE, SLIP, TREAD = "pressure_pa", "slip", "tread_depth_m"
 #: θ of the state estimate, in order.
@@ -355,7 +355,6 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     if ring_covariance is not None:
         fields_ = {f.name for f in dataclasses.fields(RingParams)}
         names = tuple(n for n in ring_covariance.names if n in fields_)
-    road = problem.data.roads
     from ringfit.physics.operating import Drum, FlatRoad
 
     drum = load.drum_diameter_m
