@@ -17,7 +17,7 @@ import pytest
 from ringfit.io.tyre import InputError, read_tyre, write_tyre
 from ringfit.params import BAR, RingParams, TyreLaws, table9
 from ringfit.physics.contact import BrushShearLoad, ContactSolver, as_traced, patch_edges, solve_rolling_jit
-from ringfit.physics.operating import FlatRoad, OperatingPoint
+from ringfit.physics.operating import OperatingPoint
 from ringfit.physics.profile import ProfileModel, flat_or_drum, full_band, profile_channels
 from ringfit.physics.state import TyreState, solve_state, state_solution, state_tyre
 

@@ -1,6 +1,7 @@
 """``ringfit estimate`` — wheel load and contact patch from the one accelerometer (docs/formats.md §7).
 
     ringfit estimate INPUT --tyre FITTED.toml --out NAME.estimate.json [--per-revolution REVS.csv] [--plot P.png]
+                     [--state [--fix NAME=VALUE ...]]
 
 INPUT is a rolling profile ``*.profile.csv`` (its sidecar may omit ``load_n``) or a continuous
 recording ``*.records.npz`` (docs/records-continuous.md) or rig file (.tdms, .mat, .csv; docs/formats.md §17).
@@ -39,6 +40,14 @@ def register(sub) -> None:
                         "file's value and propagate it into the interval (default: the tyre file's "
                         "[ring.covariance] when it has one, every ring parameter it holds propagated, else fixed; "
                         "0.3 when the tyre file has no k_tread)")
+    p.add_argument("--state", action="store_true",
+                   help="also estimate the tyre's state from the radial and tangential channels: load, pressure, "
+                        "slip and longitudinal force, tread depth, speed and rolling radius, with 95 %% intervals, "
+                        "their correlation and what the data cannot tell apart (docs/physics.md §13, docs/formats.md "
+                        "§7.1); drive/brake needs the tyre file's kx_n_per_m2, tread depth its tread_depth_mm")
+    p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
+                   help="with --state: hold one quantity at a value — load_n [N], pressure_bar [bar] (a TPMS), "
+                        "slip, tread_depth_mm [mm] — or at the input's stated condition (NAME=stated); repeatable")
     p.add_argument("--harmonics", type=integer("a number of harmonics >= 8", lo=8), default=40, metavar="K",
                    help="highest revolution harmonic fitted (default 40)")
     p.add_argument("--grid", type=integer("an even grid size >= 128", lo=128, hi=1 << 16), default=512, help="model grid M of the contact solve (default 512)")
@@ -66,6 +75,8 @@ def run_estimate(args) -> int:
     if args.channel_map is not None and kind != "recording":
         raise InputError("--channels applies to a recording in a TDMS, .mat or CSV file, not a profile",
                          source=args.input)
+    if args.fix and not args.state:
+        raise InputError("--fix holds a quantity of the state estimate: it needs --state")
     inputs = [args.input, args.tyre] + ([sidecar_path(args.input)] if kind == "profile" else []) + (
         [args.channel_map] if args.channel_map else [])
     check_output_paths([args.out, args.per_revolution, args.plot], overwrite=args.force, inputs=inputs)
@@ -96,8 +107,26 @@ def run_estimate(args) -> int:
             import warnings
 
             warnings.warn(note, stacklevel=2)
+        fixed = parse_fix(args.fix, profile.condition, source=args.input) if args.state else {}
         est = estimate_load(profile, tyre.geometry, tyre.ring, settings=settings, k_tread_in_file=k_in_file,
-                            ring_covariance=tyre.covariance)
+                            ring_covariance=tyre.covariance, laws=tyre.laws)
+        if args.state:
+            from ringfit.fit.estimate.state import estimate_state
+
+            state = estimate_state(profile, tyre.geometry, tyre.ring, tyre.laws, settings=settings, fixed=fixed,
+                                   omega=est.omega, omega_source=est.rotation_source, load=est,
+                                   ring_covariance=tyre.covariance, k_tread_in_file=k_in_file)
+    elif args.state:
+        from ringfit.fit.estimate.state import estimate_recording_state
+        from ringfit.io.continuous import read_continuous
+
+        want_revs = args.per_revolution is not None or args.plot is not None
+        with read_continuous(args.input, channels=args.channel_map) as rec:
+            fixed = parse_fix(args.fix, rec.condition, source=args.input)
+            est, state, revs = estimate_recording_state(rec, tyre.geometry, tyre.ring, tyre.laws, settings=settings,
+                                                        fixed=fixed, k_tread_in_file=k_in_file,
+                                                        per_revolution=want_revs, progress=not args.quiet,
+                                                        ring_covariance=tyre.covariance)
     else:
         from ringfit.io.continuous import read_continuous
 
@@ -105,7 +134,8 @@ def run_estimate(args) -> int:
         with read_continuous(args.input, channels=args.channel_map) as rec:
             est, revs = estimate_recording(rec, tyre.geometry, tyre.ring, settings=settings,
                                            k_tread_in_file=k_in_file, per_revolution=want_revs,
-                                           progress=not args.quiet, ring_covariance=tyre.covariance)
+                                           progress=not args.quiet, ring_covariance=tyre.covariance,
+                                           laws=tyre.laws)
     if not args.quiet:
         for flag in est.flags:
             print(f"ringfit estimate: {flag}", file=sys.stderr)
@@ -114,7 +144,17 @@ def run_estimate(args) -> int:
         raise CommandFailed(f"the load estimate did not converge (status {est.status}"
                             + (f"; {est.flags[-1]}" if est.flags else "") + "); nothing written")
     record = est.to_record(args.input.name)
-    if revs is not None:
+    if args.state:
+        _print_state(state, quiet=args.quiet)
+        if not state.converged:
+            raise CommandFailed(f"the state estimate did not converge (status {state.status}"
+                                + (f"; {state.flags[-1]}" if state.flags else "") + "); nothing written")
+        record["state"] = state.to_record()
+        if revs is not None:
+            record["state"]["per_revolution"] = revs.summary()
+            print(f"per revolution: {len(revs)} revolutions, one linearised Gauss–Newton step each from the "
+                  f"averaged fit; load median {record['state']['per_revolution']['load_n_median']:.0f} N")
+    elif revs is not None:
         record["per_revolution"] = revs.summary()
         print(f"per revolution: {len(revs)} revolutions, {int(revs.converged.sum())} converged; load "
               f"{record['per_revolution']['load_n_min']:.0f} … {record['per_revolution']['load_n_max']:.0f} N "
@@ -131,9 +171,62 @@ def run_estimate(args) -> int:
         from ringfit.report.estimate_plots import estimate_figure
         from ringfit.report.figures import save_figure
 
-        save_figure(estimate_figure(est, revs, title=args.input.name), args.plot)
+        if args.state:
+            from ringfit.report.estimate_plots import state_figure
+
+            save_figure(state_figure(state, revs, title=args.input.name), args.plot)
+        else:
+            save_figure(estimate_figure(est, revs, title=args.input.name), args.plot)
         print(f"wrote {args.plot}")
     return 0
+
+
+#: ``--fix`` names → (θ name of ringfit.fit.estimate.state, factor to SI, plausible range in the name's unit).
+FIXABLE = {"load_n": ("load_n", 1.0, (200.0, 20000.0)), "pressure_bar": ("pressure_pa", 1e5, (0.3, 8.0)),
+           "slip": ("slip", 1.0, (-0.3, 0.3)), "tread_depth_mm": ("tread_depth_m", 1e-3, (0.2, 30.0))}
+
+
+def parse_fix(items, condition: dict, *, source=None) -> dict:
+    """``--fix NAME=VALUE`` items → ``{θ name: SI value}`` (:data:`FIXABLE`; VALUE ``stated``: the input's condition).
+
+    **Raises** :class:`InputError` (exit 2) for an unknown name, a value that is not a number in its range, a
+    ``stated`` value the input does not state, or a name given twice."""
+    from ringfit.errors import InputError
+
+    out = {}
+    for item in items:
+        name, sep, text = str(item).partition("=")
+        name, text = name.strip(), text.strip()
+        if not sep or name not in FIXABLE:
+            raise InputError(f"--fix {item!r}: expected NAME=VALUE with NAME one of {', '.join(FIXABLE)}")
+        key, factor, (lo, hi) = FIXABLE[name]
+        if key in out:
+            raise InputError(f"--fix {name} given twice")
+        if text.lower() == "stated":
+            if name == "slip" or condition.get(name) is None:
+                raise InputError(f"--fix {name}=stated: the input states no {name}", source=source)
+            value = float(condition[name])
+        else:
+            try:
+                value = float(text)
+            except ValueError:
+                raise InputError(f"--fix {item!r}: {text!r} is not a number (or 'stated')") from None
+        if not (lo <= value <= hi):
+            raise InputError(f"--fix {name}={value:g}: outside the plausible range [{lo:g}, {hi:g}]")
+        out[key] = value * factor
+    return out
+
+
+def _print_state(state, *, quiet: bool = False) -> None:
+    import sys
+
+    for key, q in state.quantities.items():
+        print(f"state {key} {q['value']:.5g} {q['unit']} (95 %: {q['lo']:.5g} … {q['hi']:.5g}) {q['status']}")
+    if not quiet:
+        for line in state.untold:
+            print(f"ringfit estimate: not told apart: {line}", file=sys.stderr)
+        for flag in state.flags:
+            print(f"ringfit estimate: state: {flag}", file=sys.stderr)
 
 
 def tread_uncertainty(tyre, k_tread_sd):

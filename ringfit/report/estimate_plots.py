@@ -90,4 +90,41 @@ def estimate_figure(est, revs=None, *, title: str = ""):
     return fig
 
 
-__all__ = ["estimate_figure", "draw_profile_fit", "draw_load_against_time"]
+#: The state quantities plotted against time (docs/formats.md §7.1), in panel order.
+STATE_PANELS = ("load_n", "pressure_bar", "fx_n", "slip", "speed_kmh", "tread_depth_mm")
+
+
+def state_figure(state, revs=None, *, title: str = ""):
+    """The tyre's state (docs/physics.md §13): for a recording each quantity against time with its 95 % band and the
+    averaged profile's estimate (dotted, its interval shaded grey); for a profile each quantity's value and interval.
+
+    **Arguments:** ``state`` :class:`ringfit.fit.estimate.StateEstimate`; ``revs``
+    :class:`ringfit.fit.estimate.StateRevolutions` or None; ``title``.
+    """
+    keys = [k for k in STATE_PANELS if k in state.quantities]
+    fig, axes = new_figure(len(keys), 1, figsize=(9, 1.9 * len(keys) + 0.6), squeeze=False, sharex=revs is not None)
+    for ax, key in zip(axes[:, 0], keys):
+        q = state.quantities[key]
+        label = f"{key} [{q['unit']}]"
+        if revs is not None:
+            t = np.asarray(revs.t_s)
+            ax.fill_between(t, revs.lo[key], revs.hi[key], color="C0", alpha=0.3, lw=0, label="95 % per revolution")
+            ax.plot(t, revs.values[key], color="C0", lw=0.9, label="per revolution")
+            ax.axhspan(q["lo"], q["hi"], color="0.5", alpha=0.2, lw=0)
+            ax.axhline(q["value"], color="k", lw=0.7, ls=":", label="averaged profile")
+        else:
+            ax.errorbar([0.0], [q["value"]], yerr=[[q["value"] - q["lo"]], [q["hi"] - q["value"]]], fmt="o",
+                        color="C0", capsize=4)
+            ax.set_xticks([])
+        ax.set_ylabel(label, fontsize=8)
+        ax.set_title(f"{q['what']}: {q['value']:.4g} (95 %: {q['lo']:.4g} … {q['hi']:.4g}) — {q['status']}", fontsize=8)
+        ax.grid(alpha=0.3)
+    if revs is not None:
+        axes[-1, 0].set_xlabel("time [s]")
+        axes[0, 0].legend(fontsize=7, loc="upper right")
+    fig.suptitle(f"tyre state{': ' + title if title else ''}")
+    fig.tight_layout()
+    return fig
+
+
+__all__ = ["estimate_figure", "draw_profile_fit", "draw_load_against_time", "state_figure", "STATE_PANELS"]

@@ -129,10 +129,22 @@ def rotation_from_profile(profile, geometry: TyreGeometry, ring: RingParams, loa
     return omega, f"speed_kmh / R_e (nominal speed, R_e = {r_e:.4f} m)", [msg]
 
 
-def _geometry_at_pressure(geometry: TyreGeometry, profile) -> tuple[TyreGeometry, list[str]]:
-    """The geometry at the profile's pressure (with a warning when it differs from the tyre file's by > 5 %)."""
+def _geometry_at_pressure(geometry: TyreGeometry, profile, ring: RingParams | None = None, laws=None):
+    """The geometry at the profile's pressure (with a warning when it differs from the tyre file's by > 5 %).
+
+    With ``laws`` that scale the ring with pressure (:class:`~ringfit.params.TyreLaws`, docs/physics.md §13.1) the
+    ring and geometry are carried to the stated pressure by them, without a warning. **Returns**
+    ``(geometry, notes)``, or ``(geometry, ring, notes)`` when ``ring`` is given."""
     notes = []
     pb = profile.condition.get("pressure_bar")
+    if pb is not None and laws is not None and laws.has_pressure_law:
+        from ringfit.physics.state import state_tyre
+
+        geometry, ring, _ = state_tyre(geometry, ring, laws, pb * BAR, laws.tread_depth_ref)
+        geometry = TyreGeometry(float(geometry.radius), float(geometry.width), float(geometry.pressure),
+                                float(geometry.tread_thickness), geometry.tread_rib_width, name=geometry.name)
+        ring = RingParams(**{k: float(v) for k, v in ring.as_dict().items()})
+        return geometry, ring, notes
     if pb is not None:
         tyre_bar = float(geometry.pressure) / BAR
         if abs(pb - tyre_bar) > 0.05 * tyre_bar:
@@ -140,7 +152,7 @@ def _geometry_at_pressure(geometry: TyreGeometry, profile) -> tuple[TyreGeometry
                          "by more than 5 %; the model uses the profile's pressure with the tyre file's ring")
         geometry = TyreGeometry(geometry.radius, geometry.width, pb * BAR, geometry.tread_thickness,
                                 geometry.tread_rib_width, name=geometry.name)
-    return geometry, notes
+    return (geometry, notes) if ring is None else (geometry, ring, notes)
 
 
 def check_sign(amplitudes, curves: LoadCurves, source) -> None:
@@ -169,7 +181,7 @@ def profile_amplitudes(profile, n_grid: int, k_max: int) -> np.ndarray:
 def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings: EstimateSettings = EstimateSettings(),
                   k_tread_in_file: bool = True, omega: float | None = None, omega_source: str | None = None,
                   noise_per_angle: np.ndarray | None = None, noise_source: str | None = None,
-                  response: np.ndarray | None = None, ring_covariance=None) -> LoadEstimate:
+                  response: np.ndarray | None = None, ring_covariance=None, laws=None) -> LoadEstimate:
     """Estimate the load and contact patch from one rolling profile (docs/formats.md §3 → §7).
 
     **Arguments:**
@@ -190,10 +202,12 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
       propagated into the load's interval (:func:`ring_propagation`, docs/physics.md §10). Its k_trd part
       frees k_trd with the prior σ of ln k_trd *given* the other ring parameters (unless ``settings.k_tread_sd``
       is set, which wins); the other parameters enter through the estimate's sensitivities.
+    - ``laws``: the tyre file's state laws (:class:`~ringfit.params.TyreLaws`): with a pressure law, a profile at
+      another stated pressure is read with the ring carried there (docs/physics.md §13.1), without a warning.
 
     **Returns:** :class:`LoadEstimate`. Never raises on non-convergence (check ``converged``).
     """
-    geometry, flags = _geometry_at_pressure(geometry, profile)
+    geometry, ring, flags = _geometry_at_pressure(geometry, profile, ring, laws)
     N = len(profile)
     k_max = int(min(settings.k_max, (N - 1) // 2 - 1, settings.n_grid // 2 - 2))
     if k_max < 8:

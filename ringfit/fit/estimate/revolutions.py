@@ -116,6 +116,8 @@ class RecordingRevolutions:
     #: with a cleat trigger: ``(R,)`` share of each revolution's angles read in a hit's ringing (else None)
     cleat_share: np.ndarray | None = None
     noise_source: str = "differences of successive revolutions / √(2·revolutions), in the fitted band"
+    #: with ``tangential=True``: ``(R, 2K)`` the tangential channel's harmonic rows (the profile then holds its mean)
+    rows_tangential: np.ndarray | None = None
 
 
 def first_rotation_hz(record, samples: int = 1 << 18) -> float:
@@ -130,7 +132,7 @@ def first_rotation_hz(record, samples: int = 1 << 18) -> float:
 
 
 def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progress: bool = False,
-                          geometry: TyreGeometry | None = None) -> RecordingRevolutions:
+                          geometry: TyreGeometry | None = None, tangential: bool = False) -> RecordingRevolutions:
     """Walk a continuous recording once (bounded memory): every whole revolution's radial reading on
     the angle grid (:func:`ringfit.targets.rolling_profile.revolution_grids`, M = the power of two at or
     above the samples per revolution, so that every sample takes part), its harmonics 2…k_max, and
@@ -141,8 +143,12 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     pass): φ = 0 at each passage, linear in time in between (the angle offset then takes up where
     the dip sits relative to the patch centre).
 
-    **Raises** :class:`InputError` without a radial axis, without an encoder and without clear patch
-    passages, with fewer than 2 whole revolutions, or with too few samples per revolution.
+    ``tangential``: read the tangential channel too (the state estimate, docs/physics.md §13.4): its rows per
+    revolution and its average in the profile.
+
+    **Raises** :class:`InputError` without a radial axis (or, with ``tangential``, a tangential one), without an
+    encoder and without clear patch passages, with fewer than 2 whole revolutions, or with too few samples per
+    revolution.
     """
     from ringfit.io.profiles import Profile
     from ringfit.targets.rolling_profile import patch_passages, revolution_grids
@@ -150,6 +156,9 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     if "radial" not in record.axes:
         raise InputError(f"no 'radial' axis (have: {', '.join(record.axes)}); the estimate reads the radial channel",
                          source=record.source)
+    if tangential and "tangential" not in record.axes:
+        raise InputError(f"no 'tangential' axis (have: {', '.join(record.axes)}); the state estimate reads the radial "
+                         "and tangential channels (the load alone: without --state)", source=record.source)
     passages = None
     if record.has_encoder:
         spr = record.fs_hz / first_rotation_hz(record)
@@ -163,12 +172,14 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
                          f"(need ≥ {4 * (k_max + 2)})", source=record.source)
     points = int(min(4096, max(128, 2 ** math.ceil(math.log2(spr)))))
     hits = cleat_windows(record, progress=progress)
-    rows, rev, t_s, rate, hit = [], [], [], [], []
+    rows, rev, t_s, rate, hit, rows_t = [], [], [], [], [], []
+    t1 = np.zeros((2, points))
     # sums over revolutions per angle [0] of every revolution, [1] of those read outside a cleat hit's ringing
     s1, s2, sd = np.zeros((2, points)), np.zeros((2, points)), np.zeros((2, points))
     count, pairs = np.zeros((2, points)), np.zeros((2, points))
     previous = None
-    for block in revolution_grids(record, points=points, axes=("radial",), passages=passages, progress=progress):
+    axes = ("radial", "tangential") if tangential else ("radial",)
+    for block in revolution_grids(record, points=points, axes=axes, passages=passages, progress=progress):
         values = block.values[0]
         rows.append(harmonic_rows(harmonic_amplitudes(values, 2, k_max)))
         rev.append(block.revolution)
@@ -176,6 +187,11 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
         rate.append(block.rotation_hz)
         quiet = np.ones(values.shape) if hits is None else _quiet(block, points, *hits).astype(np.float64)
         hit.append(1.0 - quiet.mean(axis=1))
+        if tangential:
+            tv = block.values[1]
+            rows_t.append(harmonic_rows(harmonic_amplitudes(tv, 2, k_max)))
+            t1[0] += tv.sum(axis=0)
+            t1[1] += (quiet * tv).sum(axis=0)
         chain = values if previous is None else np.concatenate([previous[0], values])
         for i, w in enumerate((np.ones(values.shape), quiet)):
             s1[i] += (w * values).sum(axis=0)
@@ -231,15 +247,17 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     cond = {k: float(record.condition[k]) for k in ("speed_kmh", "pressure_bar", "drum_diameter_m")
             if record.condition.get(k) is not None}
     cond.update(revolutions=R, sample_rate_hz=float(record.fs_hz), rotation_hz=float(np.mean(rate)),
-                missing_axes=["tangential"])
+                **({} if tangential else {"missing_axes": ["tangential"]}))
     angle = grid_angles_deg(points)
-    profile = Profile(angle, mean, np.zeros(points), condition=cond, source=str(record.source),
+    mean_t = t1[use] / count if tangential else np.zeros(points)
+    profile = Profile(angle, mean, mean_t, condition=cond, source=str(record.source),
                       extra={"acc_radial_spread_ms2": np.array([repr(float(x)) for x in spread], dtype=object)})
     k = np.arange(2, k_max + 1)
     return RecordingRevolutions(rows=np.concatenate(rows), revolution=np.concatenate(rev), t_s=np.concatenate(t_s),
                                 rotation_hz=rate, profile=profile, response=np.sinc(k / spr) ** 2, k_max=k_max,
                                 noise=noise / np.sqrt(count), rotation_source=source,
                                 cleat_share=None if hits is None else np.concatenate(hit),
+                                rows_tangential=np.concatenate(rows_t) if tangential else None,
                                 **({} if use == 0 else {"noise_source": "the quiet revolutions (cleat hits left out): "
                                     "their successive differences, or their spread where no two successive ones are "
                                     "quiet, / √(revolutions), in the fitted band"}))
@@ -401,7 +419,7 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
 def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
                        settings: EstimateSettings = EstimateSettings(), k_tread_in_file: bool = True,
                        per_revolution: bool = True, batch: int = REVOLUTION_BATCH, mode: str = "batch",
-                       progress: bool = False, ring_covariance=None):
+                       progress: bool = False, ring_covariance=None, laws=None):
     """The averaged and the per-revolution estimates of a continuous recording (one pass over it).
 
     The averaged profile (:func:`recording_revolutions`) is estimated like any profile
@@ -418,7 +436,7 @@ def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
                               omega=2 * math.pi * rate, omega_source=data.rotation_source,
                               response=data.response, noise_per_angle=data.noise,
                               noise_source=data.noise_source,
-                              ring_covariance=ring_covariance)
+                              ring_covariance=ring_covariance, laws=laws)
     revs = None
     if per_revolution:
         revs = estimate_revolutions(data, reference, ring, settings=settings, batch=batch, mode=mode,

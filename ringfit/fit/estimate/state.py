@@ -38,7 +38,7 @@ from ringfit.params import BAR, RingParams, TyreGeometry, TyreLaws
 from ringfit.physics.contact import ContactSolver, as_traced
 from ringfit.physics.operating import KMH
 from ringfit.physics.profile import FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels
-from ringfit.physics.state import QUANTITY_NAMES, TyreState, state_profile, state_solution
+from ringfit.physics.state import TyreState, state_profile, state_solution
 
 PRESSURE, SLIP, TREAD = "pressure_pa", "slip", "tread_depth_m"
 #: θ of the state estimate, in order.
@@ -300,7 +300,7 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     if load is None:
         load = estimate_load(profile, geometry, ring, settings=dataclasses.replace(settings, grid_check=False),
                              k_tread_in_file=k_tread_in_file, omega=omega, omega_source=omega_source,
-                             response=response)
+                             response=response, laws=laws)
     omega = load.omega
     k_max = load.k_max
     K = k_max - 1
@@ -331,9 +331,19 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     weight = channel_weights(np.asarray(first.extra["aux"])[0] - measured)
     arrays = eqx.tree_at(lambda a: a.weight, arrays, weight[None])
     problem = state_problem(arrays, settings, k_max, prior)
-    fit = least_squares(problem, first.theta, free, **opts)
-    return _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fixed, ring_covariance, measured,
-                         prior, k_max)
+    # a parameter the first pass left on a bound (or not finite) restarts from its start: on a bound the solver's
+    # sine transform has no slope, and the second pass's priors are what hold a weakly told quantity
+    theta1 = np.where(np.isfinite(first.theta), first.theta, theta0)
+    for name in first.extra["at_bound"]:
+        theta1[STATE_PARAMETERS.index(name)] = theta0[STATE_PARAMETERS.index(name)]
+    fit = least_squares(problem, theta1, free, **opts)
+    est = _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fixed, ring_covariance, measured,
+                        prior, k_max)
+    if str(load.rotation_source).startswith("speed_kmh"):  # Ω from the nominal speed: V = Ω·r_road says it back
+        est.quantities["speed_kmh"]["status"] = "not told"
+        est.untold.append("speed_kmh: no encoder rate (rotation_hz): Ω came from the nominal speed_kmh, so the "
+                          "speed V = Ω·r_road only restates it; the rolling radius and slip do not rest on it")
+    return est
 
 
 def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fixed, ring_covariance, measured, prior,
@@ -345,7 +355,6 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     if ring_covariance is not None:
         fields_ = {f.name for f in dataclasses.fields(RingParams)}
         names = tuple(n for n in ring_covariance.names if n in fields_)
-    road = problem.data.roads
     from ringfit.physics.operating import Drum, FlatRoad
 
     drum = load.drum_diameter_m
@@ -560,6 +569,35 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
                             values=values, lo=lo, hi=hi, rms=rms, noise_scale=s_r, steps=int(steps))
 
 
+def estimate_recording_state(record, geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *,
+                             settings: EstimateSettings = EstimateSettings(), fixed: dict | None = None,
+                             k_tread_in_file: bool = True, per_revolution: bool = True, progress: bool = False,
+                             ring_covariance=None, steps: int = 1):
+    """The state of a continuous recording (docs/physics.md §13.4): one pass over it for both channels
+    (:func:`~ringfit.fit.estimate.revolutions.recording_revolutions` with ``tangential``), the load estimate of
+    the averaged profile (as ``ringfit estimate`` without ``--state``), its state (:func:`estimate_state`) and,
+    with ``per_revolution``, every revolution's (:func:`state_revolutions`).
+
+    **Returns:** ``(LoadEstimate, StateEstimate, StateRevolutions or None)``.
+    """
+    from ringfit.fit.estimate.revolutions import recording_revolutions
+
+    data = recording_revolutions(record, k_max=settings.k_max, progress=progress, geometry=geometry, tangential=True)
+    omega = 2 * math.pi * float(np.mean(data.rotation_hz))
+    load = estimate_load(data.profile, geometry, ring, settings=settings, k_tread_in_file=k_tread_in_file, omega=omega,
+                         omega_source=data.rotation_source, response=data.response, noise_per_angle=data.noise,
+                         noise_source=data.noise_source, ring_covariance=ring_covariance, laws=laws)
+    state = estimate_state(data.profile, geometry, ring, laws, settings=settings, fixed=fixed, omega=omega,
+                           omega_source=data.rotation_source, response=data.response, ring_covariance=ring_covariance,
+                           load=load, k_tread_in_file=k_tread_in_file)
+    revs = None
+    if per_revolution:
+        rows = np.concatenate([data.rows, data.rows_tangential], axis=1)
+        revs = state_revolutions(rows, data.rotation_hz, state, settings=settings, revolution=data.revolution,
+                                 t_s=data.t_s, steps=steps)
+    return load, state, revs
+
+
 # --------------------------------------------------------------------------- Fisher information
 
 @dataclass
@@ -639,4 +677,4 @@ def state_fisher(geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, state
 __all__ = ["STATE_PARAMETERS", "STATE_NAMES", "STATE_COORDS", "PRESSURE", "SLIP", "TREAD", "QUANTITIES", "StateArrays",
            "StateResiduals", "state_problem", "state_priors", "free_parameters", "state_quantities", "StateEstimate",
            "estimate_state", "profile_rows", "channel_weights", "StateRevolutions", "state_revolutions",
-           "StateFisher", "state_fisher", "state_of"]
+           "StateFisher", "state_fisher", "state_of", "estimate_recording_state"]
