@@ -635,7 +635,7 @@ def _write_truth_csv(path: Path, revs: list) -> None:
 
 
 def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float = 4.0, n: int = 2048,
-                        progress: bool = False, overwrite: bool = False) -> dict:
+                        progress: bool = False, overwrite: bool = False, speed_stated: bool = False) -> dict:
     """Write ``ringfit example state`` into the existing, empty-enough ``folder``: ``tyre.toml`` (nominal),
     ``calibration/*.records.npz`` (known states) and ``calibration/free_pNNN.modes.csv`` (the free tyre's modes
     at NNN % of the reference pressure), ``blind/*.records.npz`` (hidden states), ``truth/``
@@ -643,7 +643,9 @@ def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float
 
     **Returns** the truth: ``{"tyre": {...}, "recordings": {name: {"state": ..., "sensor": ..., "revolutions":
     [...]}}}`` (SI in ``tyre``, file units in the rows). A ``folder`` that holds anything is refused before
-    any work (:class:`ringfit.errors.InputError`) unless ``overwrite``."""
+    any work (:class:`ringfit.errors.InputError`) unless ``overwrite``. ``speed_stated``: the blind recordings
+    also state their mean ``speed_kmh`` (as a vehicle's own speed signal would; by default the speed is
+    hidden too and V = Ω·r_road is left to the estimate)."""
     from ringfit.errors import InputError
     from ringfit.io.tyre import write_tyre
 
@@ -693,6 +695,8 @@ def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float
                              tread_depth_mm=r0["tread_depth_mm"], road="flat")
         else:
             condition = dict(road="flat", note="state hidden: see truth/README.md")
+            if speed_stated:
+                condition["speed_kmh"] = _mean(rec.revolutions, "speed_kmh")
         _write_recording(folder / kind / f"{name}.records.npz", rec, condition, overwrite)
         _write_truth_csv(folder / "truth" / f"{name}.truth.csv", rec.revolutions)
         out["recordings"][name] = dict(kind=kind, fs_hz=fs, seconds=seconds, speed_kmh_nominal=speed,
