@@ -9,11 +9,13 @@ against a second discretisation of the same physics (docs/physics.md §10.1, "th
 **The ring** (docs/physics.md §4.1, χ = 1): the steady equations in the axle frame by periodic central
 finite differences in φ (4th order by default) on ``n`` points, in (w, v) with a membrane penalty EA
 (default 1e9 N) for inextensibility; EI, the pressure pretension P = p·b/R, and the foundation
-k_w(p) = k_w·[1 − s_w + s_w·p/p_ref], k_v(p) likewise (the laws of the state, docs/physics.md §10.1).
+k_w(p) = k_w·[1 − s_w + s_w·p/p_ref], k_v(p) and k_trd(p) likewise (the laws of the state, docs/physics.md
+§10.1). The membrane strain is w + D1·v and its adjoint −D1 (the sensor's v″ is D1·D1·v too), so that the
+discrete inextensible motions carry no penalty.
 **Damping**: the hysteretic loss of docs/physics.md §4.2 is included: ``iη·sign(n)`` times the elastic
 operator (EI, P, k_w, k_v; not EA) is −η times the Hilbert transform of the finite-difference elastic
 forces; the Hilbert transform is taken by FFT and the system is solved by a Neumann series on the sparse
-LU of the undamped operator (ratio ~η, converged to 1e-12). Without it the contact patch would lose its
+LU of the undamped operator (ratio ~η, down to its roundoff floor, ~1e-10 of the largest response). Without it the contact patch would lose its
 forward shift and the radial pressure its rolling resistance (≈ 0.5 % of Fz at ζ = 0.025).
 
 **The road**: radial tread springs k_trd(p, d) (§4.3, flat road s = H/cos φ; no drum) between the road and
@@ -28,13 +30,14 @@ edge: where the tip force k_x·e exceeds μ·p the tip slides and its anchor fol
 The tip forces load the belt through the work-conjugate forces of the tip kinematics (by hand, with the FD
 derivative's transpose). ``r_road`` is found by Brent's method so that the tips' net force is the wanted
 Fx (Fx > 0 driving, along the direction of travel); the free-rolling radius ``r_free`` is where Fx = 0;
-slip κ = r_free/r_road − 1; V = Ω·r_road. The brush and the contact are iterated to a fixed point.
+slip κ = r_free/r_road − 1; V = Ω·r_road. The brush and the contact are iterated to a fixed point
+(``RingFD.solve(..., steps=1)`` stops after the first step, as a load hook evaluated once would).
 
 **Tread depth d**: τ(d) = τ_ref + (d − d_ref), k_trd(d) = k_trd·τ_ref/τ(d), k_x(d) = k_x·τ_ref/τ(d),
 ρA(d) = ρA + ρ_t·b·λ·(d − d_ref).
 
 **The sensor** (docs/physics.md §4.6, §5): the inertial acceleration of the liner point at offset e (FD
-derivatives of the solution), gravity rotating in the sensor frame, tilt γ (first order, §5 layer 4), a
+derivatives of the solution, sampled through a periodic cubic spline), gravity rotating in the sensor frame, tilt γ (first order, §5 layer 4), a
 sensitivity error per channel, coloured noise in time (white, pink, red or a band), the first-order IEPE
 high-pass *in the time domain* (``scipy.signal.lfilter`` of the bilinear transform, with a lead-in so its
 transient has decayed), sampled at ``fs``; a quantised absolute rim encoder. The state may drift within a
