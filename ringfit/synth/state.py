@@ -238,11 +238,23 @@ class RingFD:
         rhs = np.zeros((2 * n, 2))
         rhs[0, 0] = rhs[n, 1] = 1.0
         g = self._solve(rhs)
-        shift = (np.arange(n)[:, None] - self.win[None, :]) % n
-        self.G = np.block([[g[:n, 0][shift], g[:n, 1][shift]], [g[n:, 0][shift], g[n:, 1][shift]]])
-        self.Gww = self.G[:n][self.win][:, :nw]
+        self._spectra = np.fft.rfft(g.reshape(2, n, 2), axis=1)  # [w or v, harmonic, from q_w or q_v]
+        shift = (self.win[:, None] - self.win[None, :]) % n
+        gw = np.block([g[:n, 0][shift], g[:n, 1][shift]])     # w on the window from (q_w, q_v) on it
+        gv = np.block([g[n:, 0][shift], g[n:, 1][shift]])     # v likewise
+        self.Gww = gw[:, :nw]
         d1w = self.d[0][self.win][:, self.win].toarray()  # d/dφ within the window (the patch is inside it)
-        self._window = (np.ascontiguousarray(self.G[self.win]), np.ascontiguousarray(self.G[n + self.win]), d1w)
+        self._window = (gw, gv, d1w)
+
+    def response(self, q_w, q_v):
+        """(w, v) on the whole grid for the loads ``q_w``, ``q_v`` [N/m] on the window points: the circulant
+        operator's columns are the two base responses shifted, summed here as circular convolutions."""
+        n = self.n
+        Q = np.zeros((2, n))
+        Q[0, self.win], Q[1, self.win] = q_w, q_v
+        F = np.fft.rfft(Q, axis=1)
+        out = np.einsum("akb,bk->ak", self._spectra, F)
+        return np.fft.irfft(out, n, axis=1)
 
     def _solve(self, rhs):
         """(L + η·K_hyst) x = rhs by a Neumann series on L's LU (K_hyst = i·sign(n)·elastic)."""
@@ -357,7 +369,7 @@ class RingFD:
         r_free = r_road if fx == 0.0 else self._root(net, r_road, rout)
         # the final fields with the final brush loads
         p, H, pen, active = self._contact(load, gw[:, :nw] @ qb[:nw] + gw[:, nw:] @ qb[nw:], k, rout, active)
-        wv = self.G @ np.concatenate([qb[:nw] - p, qb[nw:]])
+        w, v = self.response(qb[:nw] - p, qb[nw:])
         pf = np.zeros(n)
         pf[win] = p
         qf = np.zeros(n)
@@ -365,7 +377,7 @@ class RingFD:
         trailing_i = idx[-1]
         tt = pen[trailing_i] / (pen[trailing_i] - pen[trailing_i + 1])
         return Steady(
-            phi=self.phi, w=wv[:n], v=wv[n:], pressure=pf, tip=qf, axle_height=float(H), r_road=float(r_road),
+            phi=self.phi, w=w, v=v, pressure=pf, tip=qf, axle_height=float(H), r_road=float(r_road),
             r_free=float(r_free), fz=float(R * h * np.sum(p * np.cos(phik))), fx=float(-np.sum(qf) * R * h),
             fx_radial=float(R * h * np.sum(p * np.sin(phik))), leading=float(phi_l),
             trailing=float(phik[trailing_i] + tt * h), outer_iterations=it, brush_loads=qb)
