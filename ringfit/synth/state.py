@@ -15,8 +15,9 @@ discrete inextensible motions carry no penalty.
 **Damping**: the hysteretic loss of docs/physics.md §4.2 is included: ``iη·sign(n)`` times the elastic
 operator (EI, P, k_w, k_v; not EA) is −η times the Hilbert transform of the finite-difference elastic
 forces; the Hilbert transform is taken by FFT and the system is solved by a Neumann series on the sparse
-LU of the undamped operator (ratio ~η, down to its roundoff floor, ~1e-10 of the largest response). Without it the contact patch would lose its
-forward shift and the radial pressure its rolling resistance (≈ 0.5 % of Fz at ζ = 0.025).
+LU of the undamped operator (ratio ~η, down to its roundoff floor, ~1e-10 of the largest response).
+Without it the contact patch would lose its forward shift and the radial pressure its rolling resistance
+(≈ 0.5 % of Fz at ζ = 0.025).
 
 **The road**: radial tread springs k_trd(p, d) (§4.3, flat road s = H/cos φ; no drum) between the road and
 the ring, outer radius R + τ(d), with Fz imposed through the axle height H by an active-set loop over the
@@ -37,7 +38,8 @@ slip κ = r_free/r_road − 1; V = Ω·r_road. The brush and the contact are ite
 ρA(d) = ρA + ρ_t·b·λ·(d − d_ref).
 
 **The sensor** (docs/physics.md §4.6, §5): the inertial acceleration of the liner point at offset e (FD
-derivatives of the solution, sampled through a periodic cubic spline), gravity rotating in the sensor frame, tilt γ (first order, §5 layer 4), a
+derivatives of the solution, sampled through a periodic cubic spline), gravity rotating in the sensor
+frame, tilt γ (first order, §5 layer 4), a
 sensitivity error per channel, coloured noise in time (white, pink, red or a band), the first-order IEPE
 high-pass *in the time domain* (``scipy.signal.lfilter`` of the bilinear transform, with a lead-in so its
 transient has decayed), sampled at ``fs``; a quantised absolute rim encoder. The state may drift within a
