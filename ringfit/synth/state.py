@@ -39,9 +39,8 @@ slip κ = r_free/r_road − 1; V = Ω·r_road. The brush and the contact are ite
 
 **The sensor** (docs/physics.md §4.6, §5): the inertial acceleration of the liner point at offset e (FD
 derivatives of the solution, sampled through a periodic cubic spline), gravity rotating in the sensor
-frame, tilt γ (first order, §5 layer 4), a
-sensitivity error per channel, coloured noise in time (white, pink, red or a band), the first-order IEPE
-high-pass *in the time domain* (``scipy.signal.lfilter`` of the bilinear transform, with a lead-in so its
+frame, tilt γ (first order, §5 layer 4), a sensitivity error per channel, coloured noise in time (white,
+pink, red or a band), the first-order IEPE high-pass *in the time domain* (``scipy.signal.lfilter`` of the bilinear transform, with a lead-in so its
 transient has decayed), sampled at ``fs``; a quantised absolute rim encoder. The state may drift within a
 recording (the load oscillating, Fx ramping): each revolution (from top to top, φ = 180°) is solved at its
 own state and the truth is kept per revolution.
