@@ -9,14 +9,17 @@ against a second discretisation of the same physics (docs/physics.md §10.1, "th
 **The ring** (docs/physics.md §4.1, χ = 1): the steady equations in the axle frame by periodic central
 finite differences in φ (4th order by default) on ``n`` points, in (w, v) with a membrane penalty EA
 (default 1e9 N) for inextensibility; EI, the pressure pretension P = p·b/R, and the foundation
-k_w(p) = k_w·[1 − s_w + s_w·p/p_ref], k_v(p) likewise (the laws of the state, docs/physics.md §10.1).
+k_w(p) = k_w·[1 − s_w + s_w·p/p_ref], k_v(p) and k_trd(p) likewise (the laws of the state, docs/physics.md
+§10.1). The membrane strain is w + D1·v and its adjoint −D1 (the sensor's v″ is D1·D1·v too), so that the
+discrete inextensible motions carry no penalty.
 **Damping**: the hysteretic loss of docs/physics.md §4.2 is included: ``iη·sign(n)`` times the elastic
 operator (EI, P, k_w, k_v; not EA) is −η times the Hilbert transform of the finite-difference elastic
 forces; the Hilbert transform is taken by FFT and the system is solved by a Neumann series on the sparse
-LU of the undamped operator (ratio ~η, converged to 1e-12). Without it the contact patch would lose its
-forward shift and the radial pressure its rolling resistance (≈ 0.5 % of Fz at ζ = 0.025).
+LU of the undamped operator (ratio ~η, down to its roundoff floor, ~1e-10 of the largest response).
+Without it the contact patch would lose its forward shift and the radial pressure its rolling resistance
+(≈ 0.5 % of Fz at ζ = 0.025).
 
-**The road**: radial tread springs k_trd(p, d) (§4.3, flat road s = H/cos φ; no drum) between the road and
+**The road**: radial tread springs k_trd(p, d) (§4.3, flat road s = H/cos φ, or a drum) between the road and
 the ring, outer radius R + τ(d), with Fz imposed through the axle height H by an active-set loop over the
 points in a window of ±``window_deg`` around the patch centre (its own bordered solve, not ringfit's).
 
@@ -28,16 +31,18 @@ edge: where the tip force k_x·e exceeds μ·p the tip slides and its anchor fol
 The tip forces load the belt through the work-conjugate forces of the tip kinematics (by hand, with the FD
 derivative's transpose). ``r_road`` is found by Brent's method so that the tips' net force is the wanted
 Fx (Fx > 0 driving, along the direction of travel); the free-rolling radius ``r_free`` is where Fx = 0;
-slip κ = r_free/r_road − 1; V = Ω·r_road. The brush and the contact are iterated to a fixed point.
+slip κ = r_free/r_road − 1; V = Ω·r_road. The brush and the contact are iterated to a fixed point
+(``RingFD.solve(..., steps=1)`` stops after the first step, as a load hook evaluated once would).
 
 **Tread depth d**: τ(d) = τ_ref + (d − d_ref), k_trd(d) = k_trd·τ_ref/τ(d), k_x(d) = k_x·τ_ref/τ(d),
 ρA(d) = ρA + ρ_t·b·λ·(d − d_ref).
 
 **The sensor** (docs/physics.md §4.6, §5): the inertial acceleration of the liner point at offset e (FD
-derivatives of the solution), gravity rotating in the sensor frame, tilt γ (first order, §5 layer 4), a
-sensitivity error per channel, coloured noise in time (white, pink, red or a band), the first-order IEPE
-high-pass *in the time domain* (``scipy.signal.lfilter`` of the bilinear transform, with a lead-in so its
-transient has decayed), sampled at ``fs``; a quantised absolute rim encoder. The state may drift within a
+derivatives of the solution, sampled through a periodic cubic spline), gravity rotating in the sensor
+frame, tilt γ (first order, §5 layer 4), a sensitivity error per channel, coloured noise in time (white,
+pink, red or a band), the first-order IEPE high-pass *in the time domain* (``scipy.signal.lfilter`` of the
+bilinear transform, with a lead-in so its transient has decayed), sampled at ``fs``; a quantised absolute
+rim encoder. The state may drift within a
 recording (the load oscillating, Fx ramping): each revolution (from top to top, φ = 180°) is solved at its
 own state and the truth is kept per revolution.
 """
@@ -190,6 +195,7 @@ class Steady:
     fx_radial: float          # the radial springs' horizontal force, + along travel (−: rolling resistance)
     leading: float            # patch edges φ [rad]
     trailing: float
+    contact_length: float     # along the road between the patch edges [m]
     outer_iterations: int
     brush_loads: np.ndarray = None   # (q_w, q_v) of the tips on the window points: a warm start
 
@@ -197,9 +203,6 @@ class Steady:
     def slip(self) -> float:
         return self.r_free / self.r_road - 1.0
 
-    @property
-    def contact_length(self) -> float:
-        return float(self.axle_height * (math.tan(self.trailing) - math.tan(self.leading)))
 
 
 class RingFD:
@@ -207,11 +210,13 @@ class RingFD:
     matrix over the contact window; :meth:`solve` finds the steady state for a load and an Fx."""
 
     def __init__(self, tyre: TrueTyre, pressure: float, depth: float, omega: float, *, n: int = 2048,
-                 order: int = 4, ea: float = 1e9, window_deg: float = 30.0, damping: bool = True):
+                 order: int = 4, ea: float = 1e9, window_deg: float = 30.0, damping: bool = True,
+                 drum_diameter: float | None = None):
         import scipy.sparse as sp
         import scipy.sparse.linalg as spla
 
         self.tyre, self.omega, self.n, self.order = tyre, float(omega), int(n), order
+        self.drum = None if drum_diameter is None else 0.5 * float(drum_diameter)  # drum radius R_d [m]
         self.par = par = tyre.at(pressure, depth)
         R = par["R"]
         self.h = 2 * np.pi / n
@@ -235,11 +240,23 @@ class RingFD:
         rhs = np.zeros((2 * n, 2))
         rhs[0, 0] = rhs[n, 1] = 1.0
         g = self._solve(rhs)
-        shift = (np.arange(n)[:, None] - self.win[None, :]) % n
-        self.G = np.block([[g[:n, 0][shift], g[:n, 1][shift]], [g[n:, 0][shift], g[n:, 1][shift]]])
-        self.Gww = self.G[:n][self.win][:, :nw]
+        self._spectra = np.fft.rfft(g.reshape(2, n, 2), axis=1)  # [w or v, harmonic, from q_w or q_v]
+        shift = (self.win[:, None] - self.win[None, :]) % n
+        gw = np.block([g[:n, 0][shift], g[:n, 1][shift]])     # w on the window from (q_w, q_v) on it
+        gv = np.block([g[n:, 0][shift], g[n:, 1][shift]])     # v likewise
+        self.Gww = gw[:, :nw]
         d1w = self.d[0][self.win][:, self.win].toarray()  # d/dφ within the window (the patch is inside it)
-        self._window = (np.ascontiguousarray(self.G[self.win]), np.ascontiguousarray(self.G[n + self.win]), d1w)
+        self._window = (gw, gv, d1w)
+
+    def response(self, q_w, q_v):
+        """(w, v) on the whole grid for the loads ``q_w``, ``q_v`` [N/m] on the window points: the circulant
+        operator's columns are the two base responses shifted, summed here as circular convolutions."""
+        n = self.n
+        Q = np.zeros((2, n))
+        Q[0, self.win], Q[1, self.win] = q_w, q_v
+        F = np.fft.rfft(Q, axis=1)
+        out = np.einsum("akb,bk->ak", self._spectra, F)
+        return np.fft.irfft(out, n, axis=1)
 
     def _solve(self, rhs):
         """(L + η·K_hyst) x = rhs by a Neumann series on L's LU (K_hyst = i·sign(n)·elastic)."""
@@ -262,39 +279,66 @@ class RingFD:
             prev = change
         raise RuntimeError("the hysteretic Neumann series did not converge")
 
+    # ------------------------------------------------------------------ the road
+    def road_distance(self, phi, H):
+        """Distance s(φ) from the axle to the road along the ray at φ, and ∂s/∂H (docs/physics.md §4.3): flat,
+        H/cos φ; a drum of radius R_d whose top is H below the axle, D cos φ − √(R_d² − D² sin²φ),
+        D = H + R_d (+inf where the ray misses it)."""
+        if self.drum is None:
+            return H / np.cos(phi), 1.0 / np.cos(phi)
+        rd, D = self.drum, H + self.drum
+        disc = rd**2 - (D * np.sin(phi)) ** 2
+        root = np.sqrt(np.maximum(disc, 1e-300))
+        s = np.where(disc > 0, D * np.cos(phi) - root, np.inf)
+        ds = np.where(disc > 0, np.cos(phi) + D * np.sin(phi) ** 2 / root, 0.0)
+        return s, ds
+
+    def _road_x(self, sigma):
+        """Horizontal position (x̂, rearward) of the road point at arc length σ from the top of the road."""
+        return sigma if self.drum is None else self.drum * math.sin(sigma / self.drum)
+
+    def _road_sigma(self, x):
+        return x if self.drum is None else self.drum * math.asin(x / self.drum)
+
     # ------------------------------------------------------------------ contact
-    def _contact(self, load, w_other, k, rout, active):
-        """Radial tread forces p on the window for the load, the ring moved by ``w_other`` (other loads)."""
+    def _contact(self, load, w_other, k, rout, active, H=None):
+        """Radial tread forces p on the window for the load, the ring moved by ``w_other`` (other loads):
+        the active set and, on a drum, Newton in H (the road linearised in H at each step)."""
         phik = self.phi[self.win]
         R, h = self.par["R"], self.h
-        for _ in range(100):
+        H = rout - 0.01 if H is None else H
+        for _ in range(200):
             idx = np.flatnonzero(active)
             m = idx.size
+            s0, ds = self.road_distance(phik[idx], H)
             A = np.zeros((m + 1, m + 1))
             A[:m, :m] = np.eye(m) + k * self.Gww[np.ix_(idx, idx)]
-            A[:m, m] = k / np.cos(phik[idx])
+            A[:m, m] = k * ds
             A[m, :m] = R * h * np.cos(phik[idx])
-            x = np.linalg.solve(A, np.append(k * (rout + w_other[idx]), load))
+            x = np.linalg.solve(A, np.append(k * (rout + w_other[idx] - s0 + ds * H), load))
             p = np.zeros(self.win.size)
             p[idx] = x[:m]
+            moved = abs(x[m] - H)
             H = x[m]
-            pen = rout + w_other - self.Gww @ p - H / np.cos(phik)
+            pen = rout + w_other - self.Gww @ p - self.road_distance(phik, H)[0]
             new = pen > 0
-            if np.array_equal(new, active):
+            if np.array_equal(new, active) and (self.drum is None or moved < 1e-13):
                 return p, H, pen, active
             active = new
         raise RuntimeError("the contact active set did not settle")
 
     def _tips(self, x, s, p, x_lead, r, k, mu):
-        """Memory brush: tip forces along x̂ (road on tip) for road metres per radian ``r``."""
-        anchor = x_lead
+        """Memory brush: tip forces along x̂ (road on tip) for road metres per radian ``r``. Each tip's anchor
+        is a road point, at arc length σ along the road; the road carries it r·s after a wheel turn s."""
+        anchor = self._road_sigma(x_lead)
+        road_x = self._road_x
         q = []
         for xj, sj, pj in zip(x, s, p):
-            e = xj - anchor - r * sj
+            e = xj - road_x(anchor + r * sj)
             lim = mu * pj / k
             if abs(e) > lim:
                 e = math.copysign(lim, e)
-                anchor = xj - r * sj - e
+                anchor = self._road_sigma(xj - e) - r * sj
             q.append(-k * e)
         return np.asarray(q)
 
@@ -317,8 +361,9 @@ class RingFD:
         top = mu * load
         if abs(fx) >= 0.999 * top:
             raise ValueError(f"Fx = {fx:.1f} N is beyond the friction limit μ·Fz = {top:.1f} N")
+        H = None
         for it in range(1, max_outer + 1):
-            p, H, pen, active = self._contact(load, gw[:, :nw] @ qb[:nw] + gw[:, nw:] @ qb[nw:], k, rout, active)
+            p, H, pen, active = self._contact(load, gw[:, :nw] @ qb[:nw] + gw[:, nw:] @ qb[nw:], k, rout, active, H)
             loads = np.concatenate([qb[:nw] - p, qb[nw:]])
             ww, vw = gw @ loads, gv @ loads     # w, v on the window
             idx = np.flatnonzero(active)
@@ -353,19 +398,27 @@ class RingFD:
             raise RuntimeError("the brush and the contact did not reach a fixed point")
         r_free = r_road if fx == 0.0 else self._root(net, r_road, rout)
         # the final fields with the final brush loads
-        p, H, pen, active = self._contact(load, gw[:, :nw] @ qb[:nw] + gw[:, nw:] @ qb[nw:], k, rout, active)
-        wv = self.G @ np.concatenate([qb[:nw] - p, qb[nw:]])
+        p, H, pen, active = self._contact(load, gw[:, :nw] @ qb[:nw] + gw[:, nw:] @ qb[nw:], k, rout, active, H)
+        w, v = self.response(qb[:nw] - p, qb[nw:])
         pf = np.zeros(n)
         pf[win] = p
         qf = np.zeros(n)
         qf[win[idx]] = q[idx]
         trailing_i = idx[-1]
         tt = pen[trailing_i] / (pen[trailing_i] - pen[trailing_i + 1])
+        phi_t = float(phik[trailing_i] + tt * h)
+        if self.drum is None:
+            length = H * (math.tan(phi_t) - math.tan(phi_l))
+        else:  # the arc of the drum between the road points of the two edges
+            edges = np.array([phi_l, phi_t])
+            sd = self.road_distance(edges, H)[0]
+            beta = np.arctan2(sd * np.sin(edges), H + self.drum - sd * np.cos(edges))
+            length = self.drum * (beta[1] - beta[0])
         return Steady(
-            phi=self.phi, w=wv[:n], v=wv[n:], pressure=pf, tip=qf, axle_height=float(H), r_road=float(r_road),
+            phi=self.phi, w=w, v=v, pressure=pf, tip=qf, axle_height=float(H), r_road=float(r_road),
             r_free=float(r_free), fz=float(R * h * np.sum(p * np.cos(phik))), fx=float(-np.sum(qf) * R * h),
-            fx_radial=float(R * h * np.sum(p * np.sin(phik))), leading=float(phi_l),
-            trailing=float(phik[trailing_i] + tt * h), outer_iterations=it, brush_loads=qb)
+            fx_radial=float(R * h * np.sum(p * np.sin(phik))), leading=float(phi_l), trailing=phi_t,
+            contact_length=float(length), outer_iterations=it, brush_loads=qb)
 
     @staticmethod
     def _root(f, guess, rout):
@@ -473,7 +526,7 @@ class Recording:
 
 def simulate_state_recording(tyre: TrueTyre, states, *, speed_kmh: float, seconds: float, fs: float,
                              sensor: Sensor, seed: int = 0, n: int = 2048, encoder_counts: int = 4096,
-                             progress=None) -> Recording:
+                             drum_diameter_m: float | None = None, progress=None) -> Recording:
     """A continuous recording of ``seconds`` at ``fs`` [Hz] of the sensor on ``tyre``.
 
     ``states``: a :class:`State` (held for the whole recording) or a function ``t [s] -> State`` (evaluated
@@ -481,14 +534,16 @@ def simulate_state_recording(tyre: TrueTyre, states, *, speed_kmh: float, second
     Ω = V/r_road with V = ``speed_kmh`` at the state of t = 0; each revolution (top to top, φ = 180°) is
     solved at its own state; V = Ω·r_road then follows the state. **Returns** a :class:`Recording` whose
     ``revolutions`` hold the truth (``load_n``, ``pressure_bar``, ``speed_kmh``, ``rolling_radius_m``,
-    ``free_radius_m``, ``fx_n``, ``slip``, ``torque_nm`` = Fx·H, ``tread_depth_mm``, …)."""
+    ``free_radius_m``, ``fx_n``, ``slip``, ``torque_nm`` = Fx·H, ``tread_depth_mm``, …). ``drum_diameter_m``:
+    on a drum of that diameter instead of a flat road (V is then the drum's surface speed)."""
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1):  # small dense solves: BLAS threads only cost here
-        return _simulate(tyre, states, speed_kmh, seconds, fs, sensor, seed, n, encoder_counts, progress)
+        return _simulate(tyre, states, speed_kmh, seconds, fs, sensor, seed, n, encoder_counts, drum_diameter_m,
+                         progress)
 
 
-def _simulate(tyre, states, speed_kmh, seconds, fs, sensor, seed, n, encoder_counts, progress):
+def _simulate(tyre, states, speed_kmh, seconds, fs, sensor, seed, n, encoder_counts, drum, progress):
     from scipy.interpolate import CubicSpline
 
     rng = np.random.default_rng(seed)
@@ -498,9 +553,9 @@ def _simulate(tyre, states, speed_kmh, seconds, fs, sensor, seed, n, encoder_cou
     # (only through EA/R² − ρAΩ²), so a first solve at a nominal Ω gives r_road, and the ring is rebuilt at Ω
     rout = tyre.radius + tyre.at(s0.pressure, s0.depth)["tau"]
     v_ms = speed_kmh / 3.6
-    ring = RingFD(tyre, s0.pressure, s0.depth, v_ms / rout, n=n)
+    ring = RingFD(tyre, s0.pressure, s0.depth, v_ms / rout, n=n, drum_diameter=drum)
     omega = v_ms / ring.solve(s0.load, s0.fx).r_road
-    ring = RingFD(tyre, s0.pressure, s0.depth, omega, n=n)
+    ring = RingFD(tyre, s0.pressure, s0.depth, omega, n=n, drum_diameter=drum)
 
     samples = int(round(seconds * fs))
     t = np.arange(samples) / fs
@@ -559,15 +614,17 @@ def _simulate(tyre, states, speed_kmh, seconds, fs, sensor, seed, n, encoder_cou
 
 
 # ============================================================================ the example folder
-#: Calibration recordings: (name, speed [km/h], load [× rated], pressure [× p_ref], Fx [× Fz], depth [mm]).
+#: Calibration recordings: (name, speed [km/h], load [× rated], pressure [× p_ref], Fx [× Fz], depth [mm],
+#: drum diameter [m] or None for the flat road).
 CALIBRATION = (
-    ("cal_p100_l050", 60.0, 0.5, 1.0, 0.0, 8.0),
-    ("cal_p100_l100", 60.0, 1.0, 1.0, 0.0, 8.0),
-    ("cal_p100_drive", 60.0, 0.8, 1.0, 0.2, 8.0),
-    ("cal_p100_brake", 80.0, 0.8, 1.0, -0.2, 8.0),
-    ("cal_p080_l080", 60.0, 0.8, 0.8, 0.0, 8.0),
-    ("cal_p120_l080", 100.0, 0.8, 1.2, 0.0, 8.0),
-    ("cal_p100_worn", 60.0, 0.8, 1.0, 0.0, 5.0),
+    ("cal_p100_l050", 60.0, 0.5, 1.0, 0.0, 8.0, None),
+    ("cal_p100_l100", 60.0, 1.0, 1.0, 0.0, 8.0, None),
+    ("cal_p100_drive", 60.0, 0.8, 1.0, 0.2, 8.0, None),
+    ("cal_p100_brake", 80.0, 0.8, 1.0, -0.2, 8.0, None),
+    ("cal_p080_l080", 60.0, 0.8, 0.8, 0.0, 8.0, None),
+    ("cal_p120_l080", 100.0, 0.8, 1.2, 0.0, 8.0, None),
+    ("cal_p100_worn", 60.0, 0.8, 1.0, 0.0, 5.0, None),
+    ("cal_drum_l080", 60.0, 0.8, 1.0, 0.0, 8.0, 1.2192),
 )
 #: Sample rates the recordings draw from [Hz].
 SAMPLE_RATES = (10240.0, 12800.0, 20480.0, 25600.0)
@@ -635,7 +692,7 @@ def _write_truth_csv(path: Path, revs: list) -> None:
 
 
 def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float = 4.0, n: int = 2048,
-                        progress: bool = False, overwrite: bool = False) -> dict:
+                        progress: bool = False, overwrite: bool = False, speed_stated: bool = False) -> dict:
     """Write ``ringfit example state`` into the existing, empty-enough ``folder``: ``tyre.toml`` (nominal),
     ``calibration/*.records.npz`` (known states) and ``calibration/free_pNNN.modes.csv`` (the free tyre's modes
     at NNN % of the reference pressure), ``blind/*.records.npz`` (hidden states), ``truth/``
@@ -643,7 +700,9 @@ def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float
 
     **Returns** the truth: ``{"tyre": {...}, "recordings": {name: {"state": ..., "sensor": ..., "revolutions":
     [...]}}}`` (SI in ``tyre``, file units in the rows). A ``folder`` that holds anything is refused before
-    any work (:class:`ringfit.errors.InputError`) unless ``overwrite``."""
+    any work (:class:`ringfit.errors.InputError`) unless ``overwrite``. ``speed_stated``: the blind recordings
+    also state their mean ``speed_kmh`` (as a vehicle's own speed signal would; by default the speed is
+    hidden too and V = Ω·r_road is left to the estimate)."""
     from ringfit.errors import InputError
     from ringfit.io.tyre import write_tyre
 
@@ -659,10 +718,10 @@ def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float
     write_tyre(nominal.tyre_file("example tyre (nominal)"), folder / "tyre.toml", overwrite=overwrite)
     write_tyre(truth_tyre.tyre_file("example tyre (TRUE)"), folder / "truth" / "tyre.truth.toml", overwrite=overwrite)
     jobs = []
-    for name, speed, lf, pf, fxf, depth in CALIBRATION:
+    for name, speed, lf, pf, fxf, depth, drum in CALIBRATION:
         load = lf * RATED_LOAD
         st = State(load=load, pressure=pf * nominal.pressure_ref, fx=fxf * load, depth=depth * 1e-3)
-        jobs.append(("calibration", name, speed, st, None))
+        jobs.append(("calibration", name, speed, st, None, drum))
     for i in range(blind):
         speed = float(rng.uniform(20.0, 120.0))
         load = float(rng.uniform(0.3, 1.2) * RATED_LOAD)
@@ -677,25 +736,32 @@ def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float
             lt = load * (1 + amp * math.sin(2 * math.pi * freq * t + ph))
             return State(load=lt, pressure=pressure, fx=fx0 + (fx1 - fx0) * min(t / seconds, 1.0), depth=depth)
 
-        jobs.append(("blind", f"blind_{i + 1:02d}", speed, states, drift))
+        jobs.append(("blind", f"blind_{i + 1:02d}", speed, states, drift, None))
     out = {"tyre": asdict(truth_tyre), "nominal": asdict(nominal), "recordings": {}}
-    for kind, name, speed, states, drift in jobs:
+    for kind, name, speed, states, drift, drum in jobs:
         st0 = states if isinstance(states, State) else states(0.0)
         rout = truth_tyre.radius + truth_tyre.at(st0.pressure, st0.depth)["tau"]
         sensor = _sensor(rng, speed, rout)
         fs = float(rng.choice(SAMPLE_RATES))
         rec = simulate_state_recording(truth_tyre, states, speed_kmh=speed, seconds=seconds, fs=fs, sensor=sensor,
-                                       seed=int(rng.integers(2**31)), n=n)
+                                       seed=int(rng.integers(2**31)), n=n, drum_diameter_m=drum)
         r0 = rec.revolutions[0]
         if kind == "calibration":
             condition = dict(speed_kmh=r0["speed_kmh"], rotation_hz=r0["rotation_hz"], load_n=r0["load_n"],
                              pressure_bar=r0["pressure_bar"], torque_nm=r0["torque_nm"],
-                             tread_depth_mm=r0["tread_depth_mm"], road="flat")
+                             tread_depth_mm=r0["tread_depth_mm"])
+            if drum is None:
+                condition["road"] = "flat"
+            else:
+                condition["drum_diameter_m"] = drum
         else:
             condition = dict(road="flat", note="state hidden: see truth/README.md")
+            if speed_stated:
+                condition["speed_kmh"] = _mean(rec.revolutions, "speed_kmh")
         _write_recording(folder / kind / f"{name}.records.npz", rec, condition, overwrite)
         _write_truth_csv(folder / "truth" / f"{name}.truth.csv", rec.revolutions)
         out["recordings"][name] = dict(kind=kind, fs_hz=fs, seconds=seconds, speed_kmh_nominal=speed,
+                                       drum_diameter_m=drum,
                                        sensor=asdict(sensor), drift=drift, condition=condition,
                                        revolutions=rec.revolutions)
         if progress:
@@ -760,8 +826,8 @@ time, coloured noise).
   pressure shares);
 - `calibration/` — recordings at known states, stated in their conditions (load_n, pressure_bar,
   speed_kmh, rotation_hz, torque_nm, tread_depth_mm): two loads, three pressures, drive and brake, a
-  worn tread (5 mm); and `free_pNNN.modes.csv` (+ `.json`), the free tyre's modes n = 1…8 at NNN % of
-  the reference pressure;
+  worn tread (5 mm), one on a 1.2192 m drum (drum_diameter_m); and `free_pNNN.modes.csv` (+ `.json`),
+  the free tyre's modes n = 1…8 at NNN % of the reference pressure;
 - `blind/` — recordings whose state is hidden (speed 20–120 km/h, load 0.3–1.2 × {RATED_LOAD:.0f} N,
   pressure ± 20 %, Fx within ± 0.3 Fz, tread depth 2–8 mm; the load oscillates by up to 4 % at ~1 Hz and
   Fx ramps within a recording);
