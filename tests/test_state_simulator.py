@@ -353,7 +353,7 @@ def test_example_state_writes_what_ringfit_reads(tmp_path):
                          capture_output=True, text=True)
     assert est.returncode == 0, est.stderr
     load = json.loads((tmp_path / "cal.estimate.json").read_text())["load_n"]["value"]
-    assert 0.7 * 4000.0 < load < 1.3 * 4000.0  # accepted and plausible; the brush's bias: docs/physics.md §10.1
+    assert 0.7 * 4000.0 < load < 1.3 * 4000.0  # accepted and plausible; the brush's bias: docs/physics.md §13.7
 
 
 @pytest.mark.slow  # two recordings and two `ringfit estimate` runs per road: ~40 s

@@ -4,13 +4,13 @@ sensor on a tyre at a known — or hidden — load, inflation pressure, speed, d
 Written separately from the model on purpose, the way :class:`ringfit.synth.cases.LeverShearTruth` and
 ``benchmarks/_independent_ring.py`` were: nothing of :mod:`ringfit.physics` or :mod:`ringfit.fit` is used
 (only :mod:`ringfit.io` to write the files), so that a blind estimate checks the model and its inversion
-against a second discretisation of the same physics (docs/physics.md §10.1, "the independent simulator").
+against a second discretisation of the same physics (docs/physics.md §13.7, "the independent simulator").
 
 **The ring** (docs/physics.md §4.1, χ = 1): the steady equations in the axle frame by periodic central
 finite differences in φ (4th order by default) on ``n`` points, in (w, v) with a membrane penalty EA
 (default 1e9 N) for inextensibility; EI, the pressure pretension P = p·b/R, and the foundation
 k_w(p) = k_w·[1 − s_w + s_w·p/p_ref], k_v(p) and k_trd(p) likewise (the laws of the state, docs/physics.md
-§10.1). The membrane strain is w + D1·v and its adjoint −D1 (the sensor's v″ is D1·D1·v too), so that the
+§13.7). The membrane strain is w + D1·v and its adjoint −D1 (the sensor's v″ is D1·D1·v too), so that the
 discrete inextensible motions carry no penalty.
 **Damping**: the hysteretic loss of docs/physics.md §4.2 is included: ``iη·sign(n)`` times the elastic
 operator (EI, P, k_w, k_v; not EA) is −η times the Hilbert transform of the finite-difference elastic
@@ -23,7 +23,7 @@ Without it the contact patch would lose its forward shift and the radial pressur
 the ring, outer radius R + τ(d), with Fz imposed through the axle height H by an active-set loop over the
 points in a window of ±``window_deg`` around the patch centre (its own bordered solve, not ringfit's).
 
-**The brush** (docs/physics.md §10.1; issue 33): a tread element normal to the belt, its tip at
+**The brush** (docs/physics.md §13.7; issue 33): a tread element normal to the belt, its tip at
 ``(R + w) sin φ + v cos φ + τ sin(φ − ψ)`` (exact rotation, ψ = (w′ − v)/R by the FD derivative), sticks to
 the road at the leading edge (interpolated from the penetration's zero crossing) and is carried by the road
 at ``r_road`` metres per radian of wheel turn; a *memory* brush walked from the leading to the trailing
@@ -229,7 +229,7 @@ class RingFD:
                                 [b4 * d3, -b4 * d2 + par["kv"] * eye]]).tocsr()
         # the membrane term as the strain ε = w + D1 v and its adjoint D1ᵀ = −D1, so that the discrete
         # inextensible motions (w = −D1 v) carry no penalty at all: with D2 in place of D1·D1 the penalty
-        # would stiffen short waves by EA/R²·O(k²(kh)⁴) (2nd order with D2 reads loads 2 % low, §10.1)
+        # would stiffen short waves by EA/R²·O(k²(kh)⁴) (2nd order with D2 reads loads 2 % low, §13.7)
         L = (self.elastic + sp.bmat([[m * eye, m * d1], [-m * d1, -m * (d1 @ d1)]])).tocsc()
         self.lu = spla.splu(L)
         self.eta = par["eta"] if damping else 0.0
@@ -389,7 +389,7 @@ class RingFD:
             c = -tau * q * np.cos(phik - psi) / R
             new = np.concatenate([q * np.sin(phik) + d1w.T @ c, q * np.cos(phik) - c])
             change = np.max(np.abs(new - qb))
-            # the plain fixed point alternates with a ratio of about −0.28 (docs/physics.md §10.1):
+            # the plain fixed point alternates with a ratio of about −0.28 (docs/physics.md §13.7):
             # relaxing by 0.88 (between that mode's 1/1.28 and 1 for the slow one) halves the steps
             qb = new if steps is not None else qb + RELAX * (new - qb)
             if change <= tol * max(1.0, np.max(p)) or it == steps:
@@ -818,7 +818,7 @@ def _readme(out, seed, blind, seconds) -> str:
     return f"""# `ringfit example state` (seed {seed}, {blind} blind recordings, {seconds:g} s each)
 
 Continuous recordings (docs/formats.md §9) of a co-rotating radial + tangential accelerometer with a rim
-encoder, from the independent simulator `ringfit.synth.state` (docs/physics.md §10.1: its own finite
+encoder, from the independent simulator `ringfit.synth.state` (docs/physics.md §13.7: its own finite
 differences of the ring, tread springs on a flat road, a memory brush with the lever, the IEPE high-pass in
 time, coloured noise).
 
