@@ -199,7 +199,7 @@ def output_stems(inputs: list[str], rule: OutputRule) -> list[str]:
     stems = [stem(p) for p in paths]
     for x, s in zip(inputs, stems):
         if not s or s in (".", "..") or "/" in s or "\\" in s:
-            raise InputError(f"has no name to derive an output name from (the root folder?); expected input "
+            raise InputError("has no name to derive an output name from (the root folder?); expected input "
                              "files or case folders with a name", source=x)
     counts = {s: stems.count(s) for s in stems}
     stems = [f"{p.resolve().parent.name}-{s}" if counts[s] > 1 else s for p, s in zip(paths, stems)]
