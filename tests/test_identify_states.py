@@ -295,3 +295,36 @@ BEFORE_SEED3_SD_LN = {
     'k_tread': 0.0012643948606260074,
     'damping_ratio': 0.014268175821127476,
 }
+
+
+#: Seeds of the coverage check across states (each a case and an identification: ~1.5 min on one core).
+COVERAGE_SEEDS = (1, 2, 3, 4, 5, 6)
+
+
+@pytest.mark.slow
+def test_the_laws_intervals_cover_over_random_cases(tmp_path):
+    """Coverage over cases at random rings, laws (shares in 0.1–0.7, k_x ± 20 %), noise colours, gains and offsets:
+    each of the ten parameters (ring and laws) inside its 95 % interval in at least 85 % of the (parameter, case)
+    pairs (6 cases: 60 pairs; a calibrated interval misses more than 9 of 60 with probability < 0.1 %), and the laws
+    inside in at least 20 of the 24 law pairs."""
+    from ringfit.synth.identify import make_state_identify_case
+
+    inside = laws_inside = laws_total = total = 0
+    misses = []
+    for seed in COVERAGE_SEEDS:
+        truth = make_state_identify_case(tmp_path / f"case{seed}", seed=seed, truth_file=False)
+        ident = im.identify(im.read_identify_folder(tmp_path / f"case{seed}"))
+        assert ident.converged, seed
+        params = ident.parameters()
+        for name, value in {**truth["ring"], **truth["laws"]}.items():
+            if name not in params:
+                continue
+            ok = params[name]["lo95"] <= value <= params[name]["hi95"]
+            inside, total = inside + ok, total + 1
+            if name in truth["laws"]:
+                laws_inside, laws_total = laws_inside + ok, laws_total + 1
+            if not ok:
+                misses.append((seed, name, value, params[name]))
+    assert total == 10 * len(COVERAGE_SEEDS) and laws_total == 4 * len(COVERAGE_SEEDS)
+    assert inside >= 0.85 * total, misses
+    assert laws_inside >= laws_total - 4, misses
