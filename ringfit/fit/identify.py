@@ -705,6 +705,7 @@ class StatePlan:
         return np.concatenate([law, np.zeros(P)])
 
     def free_names(self, P: int) -> tuple[str, ...]:
+        """The engine's free names of the plan: the laws identified, then the slips of the profiles at a torque."""
         return tuple(self.free) + tuple(slip_names(P)[i] for i in self.driven)
 
 
