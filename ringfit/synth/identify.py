@@ -118,7 +118,8 @@ STATE_TORQUE_STD = 0.02
 
 
 def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_colour: str | None = None,
-                             truth_file: bool = True, profiles=STATE_PROFILES, loaded=STATE_LOADED) -> dict:
+                             truth_file: bool = True, profiles=STATE_PROFILES, loaded=STATE_LOADED,
+                             noise_scale: float = 1.0) -> dict:
     """A case folder across states (docs/physics.md §11 *across states*): the tyre at two pressures and at a drive
     and a brake torque, from a known ring **and known state laws** (pressure shares, k_x); returns the truth.
 
@@ -129,7 +130,8 @@ def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_
     live) on a finer contact grid (1024 or 2048) and more loaded-mode harmonics (48) than identify's; a profile
     at a slip is the lever brush's (:func:`~ringfit.physics.state.solve_state`), its sidecar stating the torque
     T = Fx·H of the truth plus a draw of its σ (``torque_std_nm``, :data:`STATE_TORQUE_STD` of it), the rotation
-    Ω and the speed Ω·r_road. Noise, gains and angle offsets as :func:`make_identify_case`.
+    Ω and the speed Ω·r_road. Noise, gains and angle offsets as :func:`make_identify_case`; ``noise_scale``
+    multiplies the profiles' noise (a small one isolates the model's own systematic errors).
     """
     import jax.numpy as jnp
 
@@ -201,7 +203,7 @@ def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_
         gain = float(np.exp(rng.normal(0.0, 0.03)))
         offset_deg = float(rng.uniform(-1.0, 1.0))
         ch = band_limited_resample(channels, n_points) * gain
-        sigma = float(rng.uniform(0.005, 0.02)) * float(np.std(ch[0]))
+        sigma = float(rng.uniform(0.005, 0.02)) * float(np.std(ch[0])) * noise_scale
         ch = ch + np.stack([coloured_noise(rng, n_points, sigma, colour), coloured_noise(rng, n_points, sigma, colour)])
         angle = (grid_angles_deg(n_points) - offset_deg + 180.0) % 360.0 - 180.0
         order = np.argsort(angle)
