@@ -14,10 +14,13 @@ def register(sub) -> None:
                        description="One joint weighted least squares of the ring (ρA, EI, k_w, k_v, k_tread, ζ) "
                                    "over every measurement of a case folder whose condition is known: "
                                    "free.modes.csv, standing loaded tables at their load_n, rolling profiles at "
-                                   "their load_n and speed (per profile a gain and an angle offset). Each data "
-                                   "type's noise is estimated from its own residual. Writes the tyre file with "
-                                   "[ring] and [ring.covariance] (ln θ) and NAME.identify.json beside it "
-                                   "(docs/formats.md §18). Exit 1 if the fit does not converge.")
+                                   "their load_n and speed (per profile a gain and an angle offset). Measurements "
+                                   "at two or more pressures identify the pressure law ([ring.pressure] shares), "
+                                   "profiles at a stated torque_nm the tread's longitudinal stiffness k_x "
+                                   "(docs/physics.md §11). Each data type's noise is estimated from its own "
+                                   "residual. Writes the tyre file with [ring] (and the identified laws) and "
+                                   "[ring.covariance] and NAME.identify.json beside it (docs/formats.md §18). Exit "
+                                   "1 if the fit does not converge.")
     p.add_argument("folder", type=Path, help="case folder (docs/formats.md §6)")
     p.add_argument("--out", required=True, type=Path, help="output tyre TOML (NAME.tyre.toml); NAME.identify.json "
                                                            "is written beside it")
@@ -71,6 +74,8 @@ def run_identify(args) -> int:
     if not ident.converged:
         raise CommandFailed(f"the joint fit did not converge ({ident.fit.message}); nothing written")
     tyre = inputs.tyre.with_ring(ident.ring, covariance=ident.covariance)
+    if ident.law_values():  # identified across states: [ring.pressure] shares, kx_n_per_m2 (docs/formats.md §1)
+        tyre = tyre.with_state_values(**ident.law_values())
     tyre.extra = dict(tyre.extra)
     meta = dict(tyre.extra.get("meta", {}))
     meta.update(identified_from=str(folder), identify_report=report.name)
@@ -131,8 +136,9 @@ def _print(ident, doc) -> None:
 
     for name, p in doc["parameters"].items():
         mark = "  (to the plausible bound)" if p.get("to_bound") else ""
+        linear = "  (sd of the share itself)" if "sd" in p else ""
         print(f"{name:16s} {g(p['value'], 12, 5)} [{g(p['lo95'], 12, 5)}, {g(p['hi95'], 12, 5)}] "
-              f"{g(p['sd_ln'], 8, 3)}{mark}")
+              f"{g(p.get('sd_ln', p.get('sd')), 8, 3)}{mark}{linear}")
     names = list(doc["parameters"])
     print("Fisher information share per block (which data pin which parameter):")
     print(f"{'block':14s} {'rows':>5s} {'σ scale':>8s} " + " ".join(f"{n[:8]:>8s}" for n in names))

@@ -64,14 +64,15 @@ from ringfit.fit.priors import BOUNDS
 from ringfit.fit.result import FitResult, covariance_from_jacobian
 from ringfit.io.conditions import case_inputs, check_stated, pressure_conflict
 from ringfit.io.modes import ModeTable, read_mode_table
-from ringfit.io.tyre import RingCovariance, Tyre, read_tyre
-from ringfit.params import RingParams, TyreGeometry
+from ringfit.io.tyre import LINEAR_COVARIANCE, RingCovariance, Tyre, read_tyre
+from ringfit.params import RingParams, TyreGeometry, TyreLaws
 from ringfit.physics.contact import ContactSolver, as_traced, patch_edges, solve_rolling
 from ringfit.physics.loaded import loaded_natural_frequencies
 from ringfit.physics.natural import natural_frequencies
 from ringfit.physics.operating import OperatingPoint
 from ringfit.physics.profile import FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels
 from ringfit.physics.sensor import shift_angle
+from ringfit.physics.state import TyreState, state_solution, state_tyre
 
 #: Passes of fit → block noise scales → refit (the scales settle in two or three).
 SCALE_PASSES = 4
@@ -95,7 +96,7 @@ LOADED_HARMONICS = 24
 GRID_CHECK_FACTOR = 2
 #: Parameters of the ring the identification can free.
 RING_FREE = ("rho_a", "ei", "kw", "kv", "k_tread", "damping_ratio")
-BLOCKS = ("free modes", "free damping", "loaded modes", "profiles")
+BLOCKS = ("free modes", "free damping", "loaded modes", "profiles", "torque")
 
 
 # ----------------------------------------------------------------------------- inputs
@@ -111,10 +112,12 @@ class IdentifyInputs:
     loaded: list[ModeTable] = field(default_factory=list)
     profiles: list = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
+    #: free tables at other pressures than ``free``'s (identify across states, docs/physics.md §11)
+    free_more: list[ModeTable] = field(default_factory=list)
 
     @property
     def files(self) -> list[str]:
-        return [Path(t.source).name for t in [self.free, *self.loaded]] + \
+        return [Path(t.source).name for t in [self.free, *self.free_more, *self.loaded]] + \
             [Path(str(p.source)).name for p in self.profiles]
 
 
@@ -148,8 +151,7 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
         raise InputError(f"state {free.state!r}: free.modes.csv must be the static, free tyre",
                          source=free_path.with_suffix(".json"))
     inputs = IdentifyInputs(folder, tyre, free)
-    tyre_bar = float(tyre.geometry.pressure) / 1e5
-    _check_pressure(free.condition, tyre_bar, free_path.with_suffix(".json"))
+    stated = [(free.condition, free_path.with_suffix(".json"))]  # every measurement's condition: its pressure
     # the same table or profile given twice (a copy, a symlink) is counted once: the data are not twice as sure
     tables, profiles = case_inputs(folder)
     for p in tables:
@@ -161,7 +163,16 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
         cond = table.condition
         speed = _number(cond, "speed_kmh") or _number(cond, "rotation_hz") or 0.0
         if table.state == "free" and not speed:
-            inputs.skipped.append(f"{p.name}: a second free table (only free.modes.csv is used)")
+            # a free table at another pressure is a state of its own (identify across states); at a pressure
+            # already measured it is a second copy of that state
+            seen = [measured_pressure(t.condition, tyre) for t in [free, *inputs.free_more]]
+            here = measured_pressure(cond, tyre)
+            if all(not _same_pressure(here, q) for q in seen):
+                inputs.free_more.append(table)
+                stated.append((cond, sidecar))
+                continue
+            inputs.skipped.append(f"{p.name}: a second free table at a pressure already measured (only one free "
+                                  "table per pressure is used: free.modes.csv at its own)")
             continue
         if speed:
             inputs.skipped.append(f"{p.name}: spinning/rolling table (state {table.state!r}, speed {speed:g}); "
@@ -176,7 +187,7 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
                              source=sidecar)
         if not (math.isfinite(load) and load > 0):
             raise InputError(f"load_n = {cond.get('load_n')!r}: expected a positive load [N]", source=sidecar)
-        _check_pressure(cond, tyre_bar, sidecar)
+        stated.append((cond, sidecar))
         inputs.loaded.append(table)
     for p in profiles:
         sidecar = p.with_suffix(".json")
@@ -188,11 +199,18 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
             if v is None or not (math.isfinite(v) and v > 0):
                 raise InputError(f"missing or non-positive '{key}': a profile's {key} is needed to identify "
                                  "from it", source=sidecar)
-        prof, notes = check_stated(prof, tyre.geometry, source=sidecar, other_pressure="refuse")
+        # the pressure is checked below, over every measurement (one pressure: the tyre file's; several: the law)
+        prof, notes = check_stated(prof, tyre.geometry, source=sidecar, other_pressure="refuse", pressure_law=True)
         for note in notes:
             warnings.warn(note, stacklevel=2)
+        torque = _number(prof.condition, "torque_nm")
+        if torque is not None and torque != 0.0 and prof.rotation_hz is None:
+            warnings.warn(f"{p.name}: a profile at a torque without rotation_hz: Ω = V/R_e of free rolling, off by "
+                          "the slip (state the encoder's rotation_hz)", stacklevel=2)
+        stated.append((prof.condition, sidecar))
         inputs.profiles.append(prof)
     inputs.profiles.sort(key=lambda pr: (float(pr.condition["load_n"]), float(pr.condition["speed_kmh"])))
+    _check_pressures(stated, tyre)
     return inputs
 
 
@@ -203,6 +221,66 @@ def _check_pressure(cond: dict, tyre_bar: float, source) -> None:
     if note:
         raise InputError(f"{note}; identify measurements at one pressure, with that pressure in tyre.toml",
                          source=source)
+
+
+# ----------------------------------------------------------------------------- identify across states: inputs
+
+
+#: A measurement's stated pressure must lie within this share of the tyre file's p_ref when the measurements span
+#: two or more pressures: the pressure law of docs/physics.md §13.1 is linear in p/p_ref, not trusted beyond.
+PRESSURE_LAW_SPAN = (0.5, 1.5)
+#: Two stated pressures closer than this share are one pressure (io.conditions' tolerance).
+PRESSURE_SAME = 0.05
+#: A stated tread depth this far [mm] from the tyre file's is another tread state (not read by identify).
+TREAD_DEPTH_TOL_MM = 0.05
+
+
+def measured_pressure(cond: dict, tyre: Tyre) -> float:
+    """A measurement's pressure [Pa]: its stated ``pressure_bar``, else the tyre file's p_ref."""
+    p = _number(cond, "pressure_bar")
+    return float(tyre.geometry.pressure) if p is None or not (math.isfinite(p) and p > 0) else p * 1e5
+
+
+def _same_pressure(a: float, b: float) -> bool:
+    return abs(a - b) <= PRESSURE_SAME * max(a, b)
+
+
+def distinct_pressures(pressures) -> list[float]:
+    """The distinct pressures among ``pressures`` [Pa] (two within :data:`PRESSURE_SAME` are one), sorted."""
+    out: list[float] = []
+    for p in sorted(float(x) for x in pressures):
+        if not out or not _same_pressure(p, out[-1]):
+            out.append(p)
+    return out
+
+
+def _check_pressures(stated: list, tyre: Tyre) -> None:
+    """The measurements' pressures, checked together (docs/formats.md §6).
+
+    One pressure (every measurement within :data:`PRESSURE_SAME` of one value): it must be the tyre file's, as
+    before — the ring identified is the tyre's at p_ref. Two or more: the ring is carried to each through the
+    pressure law (docs/physics.md §13.1), which is trusted within :data:`PRESSURE_LAW_SPAN` × p_ref only. A
+    stated tread depth other than the file's is refused (identify reads every measurement at d_ref)."""
+    p_ref = float(tyre.geometry.pressure)
+    pressures = [measured_pressure(c, tyre) for c, _ in stated]
+    if len(distinct_pressures(pressures)) <= 1:
+        for cond, source in stated:
+            _check_pressure(cond, p_ref / 1e5, source)
+    else:
+        lo, hi = PRESSURE_LAW_SPAN
+        for p, (cond, source) in zip(pressures, stated):
+            if not lo * p_ref <= p <= hi * p_ref:
+                raise InputError(f"pressure_bar = {p / 1e5:g} is outside {lo:g}–{hi:g} × the tyre file's "
+                                 f"{p_ref / 1e5:g} bar, the range the linear pressure law (docs/physics.md §13.1) "
+                                 "is identified over; give measurements nearer the tyre file's pressure",
+                                 source=source)
+    d_ref = tyre.state_values.get("tread_depth_mm")
+    for cond, source in stated:
+        d = _number(cond, "tread_depth_mm")
+        if d is not None and (d_ref is None or abs(d - d_ref) > TREAD_DEPTH_TOL_MM):
+            at = "no tread_depth_mm" if d_ref is None else f"tread_depth_mm = {d_ref:g}"
+            raise InputError(f"tread_depth_mm = {d:g}: identify reads every measurement at the tyre file's tread "
+                             f"depth ({at} in tyre.toml); give measurements at that depth", source=source)
 
 
 # ----------------------------------------------------------------------------- the joint residual model
@@ -237,6 +315,18 @@ class JointArrays(eqx.Module):
     p_band: jax.Array | None
     p_measured: jax.Array | None
     p_sigma: jax.Array | None
+    # identify across states (docs/physics.md §11 *across states*; None without): the tyre file's state laws,
+    # each free table's pressure ``f_pressures`` (F,) and its rows' table ``f_table`` (mf,), each loaded table's
+    # ``l_pressure`` (T,), each profile's ``p_pressure`` (P,); the torque rows: profile ``t_index`` (D,), stated
+    # ``t_torque`` and ``t_sigma`` [N m]
+    laws: TyreLaws | None = None
+    f_pressures: jax.Array | None = None
+    f_table: jax.Array | None = None
+    l_pressure: jax.Array | None = None
+    p_pressure: jax.Array | None = None
+    t_index: jax.Array | None = None
+    t_torque: jax.Array | None = None
+    t_sigma: jax.Array | None = None
 
 
 def harmonic_rows(channels, k_min: int = PROFILE_K_MIN, rows_grid: int | None = None, k_top: int = 0):
@@ -293,12 +383,27 @@ class JointResiduals(AbstractResiduals):
     rows_grid: int = eqx.field(static=True, default=0)
     #: highest profile harmonic compared (0: M/2 − 1); :func:`profile_band`
     k_top: int = eqx.field(static=True, default=0)
+    #: identify across states (docs/physics.md §11): θ carries the state laws and the profiles' slips
+    #: (:func:`state_parameters`), every state is read through :func:`ringfit.physics.state.state_tyre`
+    across: bool = eqx.field(static=True, default=False)
 
     def __call__(self, theta, data: JointArrays):
         ring = ring_from_vector(theta)
         g = data.geometry
-        # free modes: eq. 18 (docs/physics.md §2.1), block "free modes" of §11
-        f_model = natural_frequencies(ring, g, data.f_n)
+        laws, slips = state_parameters(theta, data, self.n_profiles) if self.across else (None, None)
+
+        def at(pressure):
+            """The ring and geometry at a measurement's pressure (docs/physics.md §13.1; at d_ref)."""
+            g_p, ring_p, _ = state_tyre(g, ring, laws, pressure, laws.tread_depth_ref)
+            return ring_p, g_p
+
+        # free modes: eq. 18 (docs/physics.md §2.1), block "free modes" of §11; across states each free table at
+        # its own pressure
+        if laws is None:
+            f_model = natural_frequencies(ring, g, data.f_n)
+        else:
+            per = jax.vmap(lambda p: natural_frequencies(*at(p), data.f_n))(data.f_pressures)  # (F, mf)
+            f_model = per[data.f_table, jnp.arange(data.f_n.shape[0])]
         rows = [(f_model - data.f_freq) / data.f_sigma]
         aux = [f_model, None, None]
         if data.d_zeta is not None:  # free damping: one modal ζ (docs/physics.md §11)
@@ -308,12 +413,14 @@ class JointResiduals(AbstractResiduals):
             # the modes from the patch foundation of §6 ground_contact (§11 "loaded modes"); one table after another
             # (serial_map: no batched LAPACK call, see its docstring)
             def table_freqs(args):
-                fz, road = args
-                a = standing_half_angle(ring, g, fz, road, self.solver)
-                c, s = loaded_natural_frequencies(ring, g, a, self.n_harmonics)
+                fz, road, pressure = args
+                ring_t, g_t = (ring, g) if laws is None else at(pressure)
+                a = standing_half_angle(ring_t, g_t, fz, road, self.solver)
+                c, s = loaded_natural_frequencies(ring_t, g_t, a, self.n_harmonics)
                 return jnp.stack([c, s])
 
-            freqs = serial_map(table_freqs, (data.l_load, data.l_roads))  # (T, 2, N)
+            pressures = data.l_load if data.l_pressure is None else data.l_pressure  # (unused without laws)
+            freqs = serial_map(table_freqs, (data.l_load, data.l_roads, pressures))  # (T, 2, N)
             model = freqs[data.l_table, data.l_sin, data.l_n]
             rows.append((model - data.l_freq) / data.l_sigma)
             aux[1] = model
@@ -330,12 +437,68 @@ class JointResiduals(AbstractResiduals):
                 return profile_channels(self.profile_model, ring, g, om[None], fz[None],
                                         jax.tree.map(lambda x: x[None], road), band[None], 0.0, self.solver)[0]
 
-            ch = serial_map(one_profile, (data.p_omega, data.p_load, data.p_roads, data.p_band))
+            def one_state(args):
+                # across states: the profile at its state — pressure, slip (docs/physics.md §13) — through the one
+                # state solution (the lever brush when the tyre has one); its drive torque T = Fx·H for the torque rows
+                om, fz, road, pressure, slip = args
+                state = TyreState(load=fz, pressure=pressure, tread_depth=laws.tread_depth_ref, slip=slip, omega=om)
+                _, channels, q = state_solution(g, ring, laws, state, model=self.profile_model, solver=self.solver,
+                                                road=road)
+                return channels, q.torque
+
+            if laws is None:
+                ch = serial_map(one_profile, (data.p_omega, data.p_load, data.p_roads, data.p_band))
+                torque = None
+            else:
+                ch, torque = serial_map(one_state, (data.p_omega, data.p_load, data.p_roads, data.p_pressure, slips))
             ch = shift_angle(ch, offset[:, None, None]) * gain[:, None, None]
             model = harmonic_rows(ch, rows_grid=self.rows_grid or None, k_top=self.k_top)
             rows.append(((model - data.p_measured) / data.p_sigma).ravel())
             aux[2] = model
+            if data.t_index is not None:
+                # torque: the stated axle torque against the brush's T = Fx·H at the profile's slip (§11, §13.2)
+                rows.append((torque[data.t_index] - data.t_torque) / data.t_sigma)
         return jnp.concatenate(rows), tuple(aux)
+
+
+#: The state laws identified across states, in θ after the profiles' nuisances (docs/physics.md §11): the pressure
+#: shares (linear, in [0, 1]) and the tread's longitudinal stiffness k_x (log). Then one slip κ per profile.
+LAW_FIELDS = ("kw_share", "kv_share", "k_tread_share", "k_x")
+#: k_x's plausible range [N/m²]: the bounded coordinate of the fit and the cap of its covariance.
+K_X_BOUNDS = (1.0e5, 1.0e9)
+#: k_x's start [N/m²] when profiles at a torque identify it and the tyre file has no ``kx_n_per_m2``
+#: (docs/formats.md §6): a passenger-car tread's order of magnitude; the data move it.
+K_X_START = 15.0e6
+#: Bound of a profile's slip κ (the nuisance of a profile at a torque).
+SLIP_BOUND = 0.3
+#: A stated torque's σ when the sidecar gives no ``torque_std_nm``: this share of |T|, at least the floor [N m].
+TORQUE_RELATIVE_STD = 0.02
+TORQUE_STD_FLOOR_NM = 2.0
+
+
+def slip_names(P: int) -> tuple[str, ...]:
+    """Names of the profiles' slips across states: ``slip_i`` (i = 1 … P)."""
+    return tuple(f"slip_{i + 1}" for i in range(P))
+
+
+def state_parameters(theta, data: JointArrays, P: int):
+    """The state laws at θ (the tyre file's :class:`~ringfit.params.TyreLaws` with :data:`LAW_FIELDS` from θ) and
+    the profiles' slips ``(P,)`` — θ's part after the ring and the profiles' nuisances (:func:`state_coords`)."""
+    base = len(RING_FIELDS) + 2 * P
+    v = theta[base : base + len(LAW_FIELDS)]
+    laws = data.laws.replace(**{name: v[j] for j, name in enumerate(LAW_FIELDS)})
+    start = base + len(LAW_FIELDS)
+    return laws, theta[start : start + P]
+
+
+def state_coords(P: int) -> tuple[Coordinate, ...]:
+    """Coordinates of the state laws and slips (after :func:`joint_coords`' when identifying across states): each
+    pressure share linear in [0, 1], k_x log in :data:`K_X_BOUNDS`, each slip linear (scale 0.01) in ±
+    :data:`SLIP_BOUND`. Every one of them bounded: a law the data do not bound stops at its range's edge, flagged."""
+    coords = [Coordinate(n, LINEAR, lo=0.0, hi=1.0) for n in LAW_FIELDS[:3]]
+    coords.append(Coordinate("k_x", LOG, lo=K_X_BOUNDS[0], hi=K_X_BOUNDS[1]))
+    coords += [Coordinate(n, LINEAR, scale=0.01, lo=-SLIP_BOUND, hi=SLIP_BOUND) for n in slip_names(P)]
+    return tuple(coords)
 
 
 def nuisance_names(P: int) -> tuple[str, ...]:
@@ -370,11 +533,24 @@ class _Rows:
     damping: dict | None
     loaded: dict | None
     profiles: dict | None
+    #: identify across states: the torque rows (``index``, ``torque``, ``sigma`` per profile at a torque)
+    torque: dict | None = None
+    #: identify across states: ``laws``, ``f_pressures``, ``l_pressure``, ``p_pressure`` (None: one state)
+    states: dict | None = None
 
 
-def _free_rows(table: ModeTable) -> dict:
-    d = frequency_data(table)
-    return dict(n=d.n, freq=d.freq_hz, sigma=d.sigma_hz, given=d.sigma_source == "freq_std_hz", rows=d.rows)
+def _free_rows(table: ModeTable, more: list[ModeTable] = ()) -> dict:
+    """The free tables' rows (``free.modes.csv``, then each free table at another pressure); ``table`` says whose."""
+    parts = [frequency_data(t) for t in [table, *more]]
+    d = parts[0]
+    out = dict(n=d.n, freq=d.freq_hz, sigma=d.sigma_hz, given=d.sigma_source == "freq_std_hz", rows=d.rows)
+    if more:
+        out.update(n=np.concatenate([q.n for q in parts]), freq=np.concatenate([q.freq_hz for q in parts]),
+                   sigma=np.concatenate([q.sigma_hz for q in parts]),
+                   given=all(q.sigma_source == "freq_std_hz" for q in parts),
+                   table=np.concatenate([np.full(q.n.size, j) for j, q in enumerate(parts)]),
+                   sources=[t.source for t in [table, *more]])
+    return out
 
 
 def _damping_rows(table: ModeTable) -> dict | None:
@@ -426,12 +602,18 @@ def _loaded_rows(tables: list[ModeTable], ring: RingParams, geometry: TyreGeomet
                 sigma0=np.array(sigma), load=np.array(loads), drum=np.array(drums), given=given), notes
 
 
-def _profile_rows(profiles, geometry, ring, solver) -> dict | None:
+def _profile_rows(profiles, geometry, ring, solver, plan: "StatePlan | None" = None) -> dict | None:
     if not profiles:
         return None
     from ringfit.fit.rolling import rolling_data
 
     data = rolling_data(profiles, geometry, ring, solver=solver)
+    if plan is not None and plan.active:
+        # Ω = V/R_e of a profile without rotation_hz at another pressure: R_e of the ring at that pressure (§13.1)
+        for i, prof in enumerate(profiles):
+            if prof.rotation_hz is None and not _same_pressure(plan.p_pressure[i], float(geometry.pressure)):
+                g_i, ring_i, _ = state_tyre(geometry, ring, plan.laws, plan.p_pressure[i], plan.laws.tread_depth_ref)
+                data.omega[i] = rolling_data([prof], g_i, ring_i, solver=solver).omega[0]
     k_top = profile_band(profiles, solver.n_grid)
     measured = np.asarray(harmonic_rows(jnp.asarray(data.measured), k_top=k_top))
     P = measured.shape[0]
@@ -469,17 +651,130 @@ def _arrays(geometry, rows: _Rows, solver) -> JointArrays:
     if pr is not None:
         kw.update(p_omega=pr["omega"], p_load=pr["load"], p_roads=flat_or_drum(pr["drum"], pr["P"]),
                   p_band=full_band(pr["P"], solver.n_grid), p_measured=pr["measured"], p_sigma=pr["sigma"])
+    if rows.states is not None:
+        kw.update(_state_arrays(rows))
     return as_traced(JointArrays(**kw))
 
 
 def _slices(rows: _Rows) -> dict[str, slice]:
     out, start = {}, 0
-    for name, block in zip(BLOCKS, (rows.free, rows.damping, rows.loaded, rows.profiles)):
+    for name, block in zip(BLOCKS, (rows.free, rows.damping, rows.loaded, rows.profiles, rows.torque)):
         if block is None:
             continue
         m = block["sigma"].size  # one σ per row, in every block
         out[name] = slice(start, start + m)
         start += m
+    return out
+
+
+# ----------------------------------------------------------------------------- identify across states: setup
+
+
+@dataclass
+class StatePlan:
+    """What identify across states does with a folder (docs/physics.md §11 *across states*).
+
+    - ``laws``: the tyre file's :class:`~ringfit.params.TyreLaws` (with the brush switched on at
+      :data:`K_X_START` when profiles at a torque need one and the file has none): the start and the held values;
+    - ``free``: the laws the data identify (of :data:`LAW_FIELDS`); ``driven``: the profiles at a torque (indices);
+    - ``pressures``: each free table's, loaded table's and profile's pressure [Pa]; ``notes``: what is not
+      identified and why. ``active`` False: one state (one pressure, no torque, no brush) — today's model exactly.
+    """
+
+    laws: TyreLaws
+    free: tuple[str, ...]
+    driven: tuple[int, ...]
+    f_pressures: np.ndarray
+    l_pressure: np.ndarray
+    p_pressure: np.ndarray
+    torque: np.ndarray
+    torque_sigma: np.ndarray
+    notes: list
+    active: bool
+
+    def start(self, P: int) -> np.ndarray:
+        """θ's start for :data:`LAW_FIELDS` and the slips: a share the data identify from 0.5 when the file's is 0 (a
+        share at a bound of its sine-bounded coordinate could not move), else from the file's (held ones as given);
+        every slip 0 (free rolling)."""
+        law = []
+        for name in LAW_FIELDS:
+            v = float(getattr(self.laws, name))
+            if name in self.free and name != "k_x":
+                v = 0.5 if v == 0.0 else min(max(v, 0.05), 0.95)
+            law.append(v)
+        return np.concatenate([law, np.zeros(P)])
+
+    def free_names(self, P: int) -> tuple[str, ...]:
+        """The engine's free names of the plan: the laws identified, then the slips of the profiles at a torque."""
+        return tuple(self.free) + tuple(slip_names(P)[i] for i in self.driven)
+
+
+def plan_states(inputs: IdentifyInputs) -> StatePlan:
+    """Which state laws a folder identifies (docs/physics.md §11 *across states*): kw_share and kv_share from
+    measurements at two or more pressures, k_tread_share from loaded tables or profiles at two or more, k_x from
+    profiles at a known torque; the rest held at the tyre file's values (0 without), each with a note saying so."""
+    tyre = inputs.tyre
+    laws = tyre.laws
+    p_free = np.array([measured_pressure(t.condition, tyre) for t in [inputs.free, *inputs.free_more]])
+    p_loaded = np.array([measured_pressure(t.condition, tyre) for t in inputs.loaded])
+    p_prof = np.array([measured_pressure(pr.condition, tyre) for pr in inputs.profiles])
+    torque = np.array([_number(pr.condition, "torque_nm") or 0.0 for pr in inputs.profiles])
+    sigma = np.zeros(torque.size)
+    for i, pr in enumerate(inputs.profiles):
+        given = _number(pr.condition, "torque_std_nm")
+        if given is not None and not (math.isfinite(given) and given > 0):
+            raise InputError(f"torque_std_nm = {pr.condition.get('torque_std_nm')!r}: expected a positive σ of the "
+                             "stated torque [N m]", source=Path(str(pr.source)).with_suffix(".json"))
+        sigma[i] = given if given is not None else max(TORQUE_RELATIVE_STD * abs(torque[i]), TORQUE_STD_FLOOR_NM)
+    driven = tuple(int(i) for i in np.flatnonzero(torque != 0.0))
+    every = distinct_pressures(np.concatenate([p_free, p_loaded, p_prof]))
+    contact = distinct_pressures(np.concatenate([p_loaded, p_prof]))
+    held = lambda names: ", ".join(f"{n} = {float(getattr(laws, n)):g}" for n in names)  # noqa: E731
+    free, notes = [], []
+    if len(every) >= 2:
+        free += ["kw_share", "kv_share"]
+        if len(contact) >= 2:
+            free.append("k_tread_share")
+        else:
+            notes.append("loaded tables and profiles at one pressure: the pressure law of k_tread is not identified "
+                         f"(held at the tyre file's {held(['k_tread_share'])})")
+    else:
+        notes.append("one pressure: the pressure law is not identified (held at the tyre file's "
+                     f"{held(LAW_FIELDS[:3])}); give measurements at two or more pressures to identify it")
+    if driven:
+        if not laws.has_brush:
+            laws = laws.replace(k_x=K_X_START, has_brush=True)
+            notes.append(f"the tyre file has no kx_n_per_m2: k_x started from {K_X_START:g} N/m² (the profiles at a "
+                         "torque identify it)")
+        free.append("k_x")
+    else:
+        kept = f" (held at the tyre file's {float(laws.k_x):g} N/m²)" if laws.has_brush else ""
+        notes.append(f"no profile at a known torque: the tread's longitudinal stiffness k_x is not identified{kept}")
+    active = len(every) >= 2 or bool(driven) or laws.has_brush
+    return StatePlan(laws, tuple(free), driven, p_free, p_loaded, p_prof, torque, sigma, notes, active)
+
+
+def _state_rows(plan: StatePlan, inputs: IdentifyInputs) -> tuple[dict, dict | None]:
+    """The rows' state data (``_Rows.states``) and the torque rows (``_Rows.torque``) of a plan."""
+    states = dict(laws=plan.laws, f_pressures=plan.f_pressures, l_pressure=plan.l_pressure,
+                  p_pressure=plan.p_pressure)
+    if not plan.driven:
+        return states, None
+    idx = np.array(plan.driven, dtype=np.int32)
+    return states, dict(index=idx, torque=plan.torque[idx], sigma=plan.torque_sigma[idx],
+                        sources=[inputs.profiles[i].source for i in plan.driven])
+
+
+def _state_arrays(rows: _Rows) -> dict:
+    st, fr, tq = rows.states, rows.free, rows.torque
+    out = dict(laws=st["laws"], f_pressures=np.asarray(st["f_pressures"], dtype=np.float64),
+               f_table=np.asarray(fr.get("table", np.zeros(fr["n"].size)), dtype=np.int32))
+    if rows.loaded is not None:
+        out["l_pressure"] = np.asarray(st["l_pressure"], dtype=np.float64)
+    if rows.profiles is not None:
+        out["p_pressure"] = np.asarray(st["p_pressure"], dtype=np.float64)
+    if tq is not None:
+        out.update(t_index=tq["index"], t_torque=tq["torque"], t_sigma=tq["sigma"])
     return out
 
 
@@ -523,6 +818,17 @@ class Identification:
 
     #: the notes also given as warnings (a table's data contradicting its stated load: :func:`load_check`)
     warned: list = field(default_factory=list)
+    #: identify across states (docs/physics.md §11): the state laws identified (of :data:`LAW_FIELDS`), in
+    #: ``covariance`` after the ring's, and the laws at the optimum (None: one state, the file's laws untouched)
+    laws_free: tuple = ()
+    laws: TyreLaws | None = None
+
+    def law_values(self) -> dict:
+        """The identified state laws by tyre-file key (``kw_share`` …, ``kx_n_per_m2``; docs/formats.md §1), for
+        :meth:`ringfit.io.tyre.Tyre.with_state_values`; empty when none was identified."""
+        if self.laws is None:
+            return {}
+        return {("kx_n_per_m2" if n == "k_x" else n): float(getattr(self.laws, n)) for n in self.laws_free}
 
     def posterior_likelihood(self) -> dict:
         """What :func:`ringfit.fit.posterior.sample` needs to sample the noise model of the intervals
@@ -543,9 +849,12 @@ class Identification:
         cut there (``"lo"``, ``"hi"``), and :meth:`barely_identified` says it in a flag line. Every number is
         finite (``sd_ln`` is None when the data give no finite σ), so the report stays JSON."""
         out = {}
-        for name in self.free:
+        for name in tuple(self.free) + tuple(self.laws_free):
             value, sd = self.fit.values[name], self.covariance.sd_ln(name)
-            out[name] = log_interval(value, sd, BOUNDS.get(name))
+            if name in LINEAR_COVARIANCE:  # a pressure share: value ± 1.96 σ in [0, 1]
+                out[name] = linear_interval(value, sd, PARAMETER_BOUNDS[name])
+            else:
+                out[name] = log_interval(value, sd, PARAMETER_BOUNDS.get(name))
         return out
 
     def barely_identified(self) -> list[str]:
@@ -553,13 +862,39 @@ class Identification:
         lines = []
         for name, p in self.parameters().items():
             if p.get("to_bound"):
-                lo, hi = BOUNDS[name]
-                sd = "no finite σ" if p["sd_ln"] is None else f"sd ln {p['sd_ln']:.3g}"
+                lo, hi = PARAMETER_BOUNDS[name]
+                sd_value = p.get("sd_ln", p.get("sd"))
+                sd = "no finite σ" if sd_value is None else f"sd{'' if 'sd' in p else ' ln'} {sd_value:.3g}"
                 ends = " and ".join({"lo": f"lower bound {lo:g}", "hi": f"upper bound {hi:g}"}[e] for e in p["to_bound"])
+                how = ("measurements at more pressures or profiles at larger torques" if name in PARAMETER_BOUNDS
+                       and name not in BOUNDS else "loaded tables, profiles")
                 lines.append(f"{name} is barely identified by these measurements ({sd}): its 95 % interval "
                              f"[{p['lo95']:.4g}, {p['hi95']:.4g}] runs to the plausible range's {ends}; "
-                             "add measurements that pin it (loaded tables, profiles) or hold it at a known value")
+                             f"add measurements that pin it ({how}) or hold it at a known value")
         return lines
+
+
+#: Plausible ranges of every parameter identify reports: the ring's (:data:`ringfit.fit.priors.BOUNDS`), k_x's and
+#: the pressure shares' (docs/physics.md §11 *across states*).
+PARAMETER_BOUNDS = {**BOUNDS, "k_x": K_X_BOUNDS, **{n: (0.0, 1.0) for n in LINEAR_COVARIANCE}}
+
+
+def linear_interval(value: float, sd, bounds: tuple[float, float]) -> dict:
+    """``value ± 1.96 sd`` cut at ``bounds`` (a pressure share: [0, 1]); ``to_bound`` the ends cut, as
+    :func:`log_interval`; ``sd`` None when not finite."""
+    lo_b, hi_b = bounds
+    if sd is None or not math.isfinite(sd) or not math.isfinite(value):
+        return dict(value=float(value) if math.isfinite(value) else None, lo95=lo_b, hi95=hi_b, sd=None,
+                    to_bound=["lo", "hi"])
+    lo, hi, cut = value - Z95 * sd, value + Z95 * sd, []
+    if lo <= lo_b + 1e-12:
+        lo, cut = min(lo_b, value), cut + ["lo"]
+    if hi >= hi_b - 1e-12:
+        hi, cut = max(hi_b, value), cut + ["hi"]
+    out = dict(value=float(value), lo95=float(lo), hi95=float(hi), sd=float(sd))
+    if cut:
+        out["to_bound"] = cut
+    return out
 
 
 def log_interval(value: float, sd_ln, bounds: tuple[float, float] | None) -> dict:
@@ -613,10 +948,14 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     tyre = inputs.tyre
     geometry, ring0 = tyre.geometry, tyre.ring
     notes = list(inputs.skipped)
+    plan = plan_states(inputs)  # identify across states (docs/physics.md §11): which laws, which notes
+    notes += plan.notes
     ld, ld_notes = _loaded_rows(inputs.loaded, ring0, geometry, solver) if inputs.loaded else (None, [])
     notes += ld_notes
-    rows = _Rows(_free_rows(inputs.free), _damping_rows(inputs.free), ld,
-                 _profile_rows(inputs.profiles, geometry, ring0, solver))
+    rows = _Rows(_free_rows(inputs.free, inputs.free_more), _damping_rows(inputs.free), ld,
+                 _profile_rows(inputs.profiles, geometry, ring0, solver, plan))
+    if plan.active:
+        rows.states, rows.torque = _state_rows(plan, inputs)
     P = 0 if rows.profiles is None else rows.profiles["P"]
     free = ["rho_a", "ei", "kw", "kv"]
     if rows.loaded is not None or rows.profiles is not None:
@@ -627,7 +966,12 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     free = tuple(free) + nuisance_names(P)
     coords = joint_coords(P)
     theta = np.concatenate([ring_vector(ring0), np.tile([0.0, 1.0], P)])
-    model = JointResiduals(P, solver, ProfileModel(), k_top=0 if rows.profiles is None else rows.profiles["k_top"])
+    free_laws = plan.free if plan.active else ()
+    if plan.active:
+        free, coords = free + plan.free_names(P), coords + state_coords(P)
+        theta = np.concatenate([theta, plan.start(P)])
+    model = JointResiduals(P, solver, ProfileModel(), k_top=0 if rows.profiles is None else rows.profiles["k_top"],
+                           across=plan.active)
     slices = _slices(rows)
     scales = {b: 1.0 for b in slices}
     prior = None
@@ -657,6 +1001,9 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
         change = 0.0
         block_dof = {}
         for name, sl in slices.items():
+            if name == "torque":  # the stated torque's σ holds: no scale estimated (one row per slip nuisance)
+                block_dof[name] = math.inf
+                continue
             m = sl.stop - sl.start
             dof = max(m - float(h[sl].sum()), 1.0)
             block_dof[name] = dof
@@ -683,11 +1030,18 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
         check = grid_check(fit, rows, geometry, solver, P)
     warned = []
     if rows.loaded is not None and all(math.isfinite(fit.values[n]) for n in fit.names):
+        laws = None
+        if plan.active:
+            laws = plan.laws.replace(**{n: float(fit.values[n]) for n in LAW_FIELDS})
         warned = load_check(ring_from_vector(jnp.asarray(fit.theta)), geometry, rows.loaded,
-                            [t.source for t in inputs.loaded], solver)
+                            [t.source for t in inputs.loaded], solver, laws=laws,
+                            pressures=plan.l_pressure if plan.active else None)
         for note in warned:
             warnings.warn(note, stacklevel=2)
-    ident = _finish(fit, rows, slices, scales, free_ring, P, notes + warned, passes, inputs, check, widen)
+    ident = _finish(fit, rows, slices, scales, free_ring, P, notes + warned, passes, inputs, check, widen,
+                    free_laws=free_laws)
+    if plan.active:
+        ident.laws = plan.laws.replace(**{n: float(fit.values[n]) for n in LAW_FIELDS})
     ident.warned = warned
     return ident
 
@@ -711,7 +1065,8 @@ def _scan_loaded(ring, geometry, loads, roads, solver, n_harmonics):
     return serial_map(one, (loads, roads))
 
 
-def load_check(ring: RingParams, geometry: TyreGeometry, loaded: dict, sources, solver: ContactSolver) -> list[str]:
+def load_check(ring: RingParams, geometry: TyreGeometry, loaded: dict, sources, solver: ContactSolver, *,
+               laws: TyreLaws | None = None, pressures=None) -> list[str]:
     """What the loaded tables' own frequencies say of their stated ``load_n`` (one sentence per contradiction).
 
     With the identified ring, each table's rows are compared with the loaded-mode model (docs/physics.md §6) at
@@ -719,7 +1074,8 @@ def load_check(ring: RingParams, geometry: TyreGeometry, loaded: dict, sources, 
     is its best-fit load. A table whose best-fit load is more than :data:`LOAD_SHARE_TOL` off its stated one and
     fits there better by an F ratio of :data:`LOAD_F_RATIO` — (χ²(stated) − χ²(best)) over the table's residual
     variance at its best load — was not measured at the load its sidecar states (a 5000 N table labelled 3000 N
-    is absorbed by the block's σ scale otherwise, without a word)."""
+    is absorbed by the block's σ scale otherwise, without a word). Across states (``laws`` and each table's
+    ``pressures`` [Pa]) each table is scanned with the ring at its pressure (docs/physics.md §13.1)."""
     stated = np.asarray(loaded["load"], dtype=np.float64)
     T = stated.size
     lo, hi, k = LOAD_SCAN
@@ -727,7 +1083,16 @@ def load_check(ring: RingParams, geometry: TyreGeometry, loaded: dict, sources, 
     loads = (stated[:, None] * rel[None, :]).ravel()
     drums = np.repeat(np.asarray(loaded["drum"], dtype=np.float64), k)
     roads = flat_or_drum(drums, loads.size)
-    freqs = np.asarray(_scan_loaded(ring, geometry, jnp.asarray(loads), roads, solver, LOADED_HARMONICS))
+    if laws is None:
+        freqs = np.asarray(_scan_loaded(ring, geometry, jnp.asarray(loads), roads, solver, LOADED_HARMONICS))
+    else:
+        parts = []
+        for t in range(T):
+            g_t, ring_t, _ = as_traced(state_tyre(geometry, ring, laws, float(pressures[t]), laws.tread_depth_ref))
+            sl = slice(t * k, (t + 1) * k)
+            parts.append(np.asarray(_scan_loaded(ring_t, g_t, jnp.asarray(loads[sl]),
+                                                 jax.tree.map(lambda x: x[sl], roads), solver, LOADED_HARMONICS)))
+        freqs = np.concatenate(parts)
     freqs = freqs.reshape(T, k, 2, -1)
     sigma0 = loaded.get("sigma0", loaded["sigma"])
     notes = []
@@ -781,7 +1146,8 @@ def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: Cont
     """
     fine = ContactSolver(n_grid=factor * solver.n_grid, window_deg=solver.window_deg, max_iter=solver.max_iter)
     model = JointResiduals(P, fine, ProfileModel(), n_harmonics=factor * LOADED_HARMONICS, rows_grid=solver.n_grid,
-                           k_top=0 if rows.profiles is None else rows.profiles["k_top"])
+                           k_top=0 if rows.profiles is None else rows.profiles["k_top"],
+                           across=rows.states is not None)
     problem = Problem(model, _arrays(geometry, rows, fine), fit.coords, data_label="these measurements")
     r_fine, _ = residuals(problem, fit.theta)
     m = fit.residuals.size
@@ -837,7 +1203,8 @@ def _rescale_profiles(pr: dict, residuals: np.ndarray, leverage: np.ndarray) -> 
     pr["sigma"] = np.concatenate([sigma, sigma], axis=-1)
 
 
-def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, check=None, widen=None) -> Identification:
+def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, check=None, widen=None,
+            free_laws=()) -> Identification:
     J, r = fit.jacobian, fit.residuals
     names = fit.names
     cov_u = fit.covariance_log
@@ -859,21 +1226,24 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
                     shift={n: float(x) for n, x in zip(names, du)})
     fisher = {b: J[sl].T @ J[sl] for b, sl in slices.items()}
     total = np.diag(J.T @ J)  # data and prior rows
+    # the covariance's parameters: the ring's, then the state laws identified across states (ln k_x; a share as
+    # itself: its coordinate is linear with scale 1, state_coords)
+    cov_names = tuple(free_ring) + tuple(free_laws)
     blocks = {}
     for b, sl in slices.items():
         share = np.diag(fisher[b]) / np.where(total > 0, total, 1.0)
         blocks[b] = dict(rows=int(sl.stop - sl.start), sigma_scale=float(scales[b]),
                          t_widening=float((widen or {}).get(b, 1.0)),
                          rms=float(math.sqrt(np.mean(r[sl] ** 2))),
-                         fisher_share={n: float(share[j]) for j, n in enumerate(names) if n in free_ring})
-    idx = [names.index(n) for n in free_ring]
+                         fisher_share={n: float(share[j]) for j, n in enumerate(names) if n in cov_names})
+    idx = [names.index(n) for n in cov_names]
     cov = cov_u[np.ix_(idx, idx)]
     cov = 0.5 * (cov + cov.T)
-    cov = cap_unbounded(cov, free_ring)
+    cov = cap_unbounded(cov, cov_names, bounds=PARAMETER_BOUNDS, linear=LINEAR_COVARIANCE)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sd, sd)
-    covariance = RingCovariance(free_ring, cov, "ringfit identify")
+    covariance = RingCovariance(cov_names, cov, "ringfit identify")
     nuisances = []
     pr = rows.profiles
     for i in range(P):
@@ -885,9 +1255,27 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
                               angle_offset_deg=math.degrees(fit.values[o]),
                               angle_offset_sd_deg=math.degrees(scale_o * math.sqrt(max(cov_u[io, io], 0.0))),
                               gain=fit.values[g], gain_sd=fit.values[g] * math.sqrt(max(cov_u[ig, ig], 0.0))))
+        if rows.states is not None:
+            nuisances[-1].update(_state_nuisances(fit, rows, cov_u, i))
     ring = RingParams(**{n: fit.values[n] for n in RING_FIELDS})
-    return Identification(fit, ring, free_ring, blocks, (free_ring, corr), covariance, nuisances, notes, passes,
-                          inputs, grid, row_scale, shift_u, dict(slices), _table_rows(rows, slices, inputs, P))
+    ident = Identification(fit, ring, free_ring, blocks, (cov_names, corr), covariance, nuisances, notes, passes,
+                           inputs, grid, row_scale, shift_u, dict(slices), _table_rows(rows, slices, inputs, P))
+    ident.laws_free = tuple(free_laws)
+    return ident
+
+
+def _state_nuisances(fit, rows: _Rows, cov_u: np.ndarray, i: int) -> dict:
+    """Across states, a profile's pressure and, at a torque, its stated torque and the slip κ identified with it."""
+    out = dict(pressure_bar=float(rows.states["p_pressure"][i]) / 1e5)
+    tq = rows.torque
+    if tq is not None and i in tq["index"]:
+        j = int(np.flatnonzero(tq["index"] == i)[0])
+        name = slip_names(i + 1)[i]
+        k = fit.names.index(name)
+        scale = fit.coords[[c.name for c in fit.coords].index(name)].scale
+        out.update(torque_nm=float(tq["torque"][j]), torque_sd_nm=float(tq["sigma"][j]), slip=float(fit.values[name]),
+                   slip_sd=scale * math.sqrt(max(float(cov_u[k, k]), 0.0)))
+    return out
 
 
 def _table_rows(rows: _Rows, slices: dict, inputs, P: int) -> dict:
@@ -899,6 +1287,10 @@ def _table_rows(rows: _Rows, slices: dict, inputs, P: int) -> dict:
 
     free = None if inputs is None else inputs.free
     out = {name(free, "free.modes.csv"): np.arange(slices["free modes"].start, slices["free modes"].stop)}
+    if "table" in rows.free:  # free tables at several pressures (identify across states)
+        start = slices["free modes"].start
+        out = {Path(str(src)).name or f"free table {t + 1}": start + np.flatnonzero(rows.free["table"] == t)
+               for t, src in enumerate(rows.free["sources"])}
     if "free damping" in slices:
         sl = slices["free damping"]
         out[name(free, "free.modes.csv") + " damping"] = np.arange(sl.start, sl.stop)
@@ -914,6 +1306,9 @@ def _table_rows(rows: _Rows, slices: dict, inputs, P: int) -> dict:
         for i in range(P):
             out[Path(str(rows.profiles["sources"][i])).name or f"profile {i + 1}"] = np.arange(sl.start + i * per,
                                                                                               sl.start + (i + 1) * per)
+    if "torque" in slices:
+        sl = slices["torque"]
+        out["torque"] = np.arange(sl.start, sl.stop)
     return out
 
 
@@ -934,14 +1329,21 @@ def scale_flags(blocks: dict) -> list[str]:
     return out
 
 
-def cap_unbounded(cov: np.ndarray, names) -> np.ndarray:
+def cap_unbounded(cov: np.ndarray, names, bounds: dict | None = None, linear=()) -> np.ndarray:
     """The ring covariance (ln θ) with each parameter the data do not bound — a variance that is not finite or
     whose 95 % interval is wider than the whole plausible range :data:`BOUNDS` — given that range's spread
     instead: σ_ln = ln(hi/lo)/(2·1.96), uncorrelated with the rest. A parameter barely identified is then a
     finite, readable ``[ring.covariance]`` entry whose interval runs to the bounds (docs/formats.md §18), not
-    an infinity that no reader accepts."""
+    an infinity that no reader accepts. ``bounds``: the ranges (default :data:`BOUNDS`); a name in ``linear`` (a
+    pressure share) has a covariance of the value itself, so its spread is (hi − lo)/(2·1.96)."""
     cov = np.array(cov, dtype=np.float64)
-    caps = {i: math.log(BOUNDS[n][1] / BOUNDS[n][0]) / (2.0 * Z95) for i, n in enumerate(names) if n in BOUNDS}
+    bounds = BOUNDS if bounds is None else bounds
+
+    def spread(n):
+        lo, hi = bounds[n]
+        return (hi - lo) if n in linear else math.log(hi / lo)
+
+    caps = {i: spread(n) / (2.0 * Z95) for i, n in enumerate(names) if n in bounds}
     wide = [i for i, c in caps.items() if not (math.isfinite(cov[i, i]) and cov[i, i] <= c**2)]
     for i in wide:
         cov[i, :] = 0.0

@@ -263,10 +263,10 @@ def _parse(doc: dict, source: str) -> Tyre:
         if key not in by_key:
             raise _unknown(key, list(by_key) + list(STATE_RING_KEYS) + ["covariance", "pressure"], "key in [ring]")
         ring_values[by_key[key]] = _number(ring_table, key, "ring")
-    if "covariance" in ring_table:
-        covariance = _covariance(ring_table["covariance"], ring_values)
     if "pressure" in ring_table:
         state_values.update(_pressure_laws(ring_table["pressure"]))
+    if "covariance" in ring_table:
+        covariance = _covariance(ring_table["covariance"], ring_values, state_values)
     extra = {"tyre": {}, "ring": {}}
     extra.update(doc)  # [meta]
     return Tyre(geometry, ring_values, extra, source, covariance, state_values)
@@ -294,10 +294,20 @@ def _pressure_laws(table) -> dict:
 
 #: Positive ring parameters a ``[ring.covariance]`` may name (it is a covariance of their logarithms).
 COVARIANCE_PARAMETERS = ("rho_a", "ei", "kw", "kv", "damping_ratio", "k_tread", "ea")
+#: The state laws ``ringfit identify`` identifies across states (docs/physics.md §11, §13) that a
+#: ``[ring.covariance]`` may name besides: name -> the key that must hold its value. ``k_x`` (positive) enters as
+#: ln k_x like the ring's; a pressure share s (in [0, 1], possibly 0) enters as s itself (:data:`LINEAR_COVARIANCE`).
+STATE_COVARIANCE_PARAMETERS = {"k_x": "kx_n_per_m2", "kw_share": "kw_share", "kv_share": "kv_share",
+                               "k_tread_share": "k_tread_share"}
+#: Names whose ``[ring.covariance]`` row is of the value itself, not of its logarithm (the pressure shares).
+LINEAR_COVARIANCE = ("kw_share", "kv_share", "k_tread_share")
+#: Largest σ of a pressure share in a ``[ring.covariance]``: more than the share's whole range [0, 1] says nothing.
+SHARE_SD_MAX = 1.0
 
 
-def _covariance(table, ring_values: dict) -> "RingCovariance":
-    """``[ring.covariance]``: ``names`` (short names) and ``ln`` (k × k covariance of ln θ), checked."""
+def _covariance(table, ring_values: dict, state_values: dict | None = None) -> "RingCovariance":
+    """``[ring.covariance]``: ``names`` (short names) and ``ln`` (k × k covariance of ln θ; of the share itself for
+    a pressure share, :data:`LINEAR_COVARIANCE`), checked."""
     where = "[ring.covariance]"
     if not isinstance(table, dict):
         raise InputError(f"ring.covariance = {_show(table)}: expected a [ring.covariance] table (names, ln)")
@@ -307,10 +317,17 @@ def _covariance(table, ring_values: dict) -> "RingCovariance":
     names, ln = table.get("names"), table.get("ln")
     if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
         raise InputError(f"{where} names: expected a list of ring parameter names, e.g. [\"ei\", \"k_tread\"]")
+    state_values = state_values or {}
+    known = COVARIANCE_PARAMETERS + tuple(STATE_COVARIANCE_PARAMETERS)
     for n in names:
-        if n not in COVARIANCE_PARAMETERS:
-            raise _unknown(n, COVARIANCE_PARAMETERS, f"parameter in {where} names")
-        if n not in ring_values:
+        if n not in known:
+            raise _unknown(n, known, f"parameter in {where} names")
+        if n in STATE_COVARIANCE_PARAMETERS:
+            key = STATE_COVARIANCE_PARAMETERS[n]
+            if key not in state_values:
+                table_of = "[ring.pressure]" if n in LINEAR_COVARIANCE else "[ring]"
+                raise InputError(f"{where} names {n!r}, but {table_of} has no {key} for it")
+        elif n not in ring_values:
             raise InputError(f"{where} names {n!r}, but [ring] has no value for it")
     if len(set(names)) != len(names):
         raise InputError(f"{where} names lists a parameter twice")
@@ -327,9 +344,14 @@ def _covariance(table, ring_values: dict) -> "RingCovariance":
         raise InputError(f"{where} ln: not symmetric")
     if np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() < -1e-12 * max(1.0, float(np.abs(cov).max())):
         raise InputError(f"{where} ln: not positive semi-definite")
-    if np.any(np.sqrt(np.diag(cov)) > 5.0):
+    sd = np.sqrt(np.diag(cov))
+    linear = np.array([n in LINEAR_COVARIANCE for n in names])
+    if np.any(sd[~linear] > 5.0):
         raise InputError(f"{where} ln: a standard deviation of ln θ above 5 (a factor e^5): not an uncertainty "
                          "a model can use")
+    if np.any(sd[linear] > SHARE_SD_MAX):
+        raise InputError(f"{where} ln: a pressure share's standard deviation above {SHARE_SD_MAX:g} (its whole "
+                         "range [0, 1]): not an uncertainty a model can use")
     source = table.get("source", "")
     if not isinstance(source, str):
         raise InputError(f"{where} source = {_show(source)}: expected a string")
@@ -339,14 +361,24 @@ def _covariance(table, ring_values: dict) -> "RingCovariance":
 @dataclass(frozen=True)
 class RingCovariance:
     """The tyre file's ``[ring.covariance]`` (docs/formats.md §1.1): covariance ``ln`` ``(k, k)`` of ln θ for
-    ``names``; ``source`` says where it came from (e.g. the identify report)."""
+    ``names``; ``source`` says where it came from (e.g. the identify report).
+
+    Besides ring parameters it may hold the state laws identified across states
+    (:data:`STATE_COVARIANCE_PARAMETERS`: ln k_x, and the pressure shares as themselves, :data:`LINEAR_COVARIANCE`);
+    :meth:`draws` and every reader that wants the ring's part take the ring parameters only."""
 
     names: tuple[str, ...]
     ln: np.ndarray
     source: str = ""
 
+    @property
+    def ring_names(self) -> tuple[str, ...]:
+        """The names that are ring parameters (:data:`COVARIANCE_PARAMETERS`), in order."""
+        return tuple(n for n in self.names if n in COVARIANCE_PARAMETERS)
+
     def sd_ln(self, name: str) -> float | None:
-        """σ of ln θ of ``name``, or None when the covariance does not hold it."""
+        """σ of ln θ of ``name`` (of the share itself for a pressure share), or None when the covariance does not
+        hold it."""
         if name not in self.names:
             return None
         i = self.names.index(name)
@@ -355,9 +387,11 @@ class RingCovariance:
     def draws(self, ring: RingParams, n: int, seed: int = 0) -> list[RingParams]:
         """``n`` rings drawn from the log-normal ``ln θ ~ N(ln ring, ln)`` (the other parameters as in ``ring``)."""
         rng = np.random.default_rng(seed)
-        centre = np.log([float(getattr(ring, k)) for k in self.names])
-        u = rng.multivariate_normal(centre, self.ln, size=int(n), method="eigh")
-        return [ring.replace(**{k: float(math.exp(x)) for k, x in zip(self.names, row)}) for row in u]
+        names = self.ring_names  # the ring's marginal (the state laws' rows left out)
+        idx = [self.names.index(k) for k in names]
+        centre = np.log([float(getattr(ring, k)) for k in names])
+        u = rng.multivariate_normal(centre, self.ln[np.ix_(idx, idx)], size=int(n), method="eigh")
+        return [ring.replace(**{k: float(math.exp(x)) for k, x in zip(names, row)}) for row in u]
 
     def table(self) -> dict:
         """The ``[ring.covariance]`` table of the tyre TOML (docs/formats.md §1.1)."""
