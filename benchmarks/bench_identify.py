@@ -42,6 +42,13 @@ def parse():
     ap.add_argument("--jobs", type=int, default=0,
                     help="run each case in its own process, this many at a time (0: all in this process)")
     ap.add_argument("--case-timeout", type=float, default=600.0, help="seconds before a case process is stopped")
+    ap.add_argument("--independent", action="store_true",
+                    help="cases from the independent finite-difference truth (ringfit.synth.independent, issue 32 "
+                         "item 4) instead of ringfit's own model")
+    ap.add_argument("--resolution", default="fine", choices=("fine", "coarse"),
+                    help="the independent truth's discretisation (ringfit.synth.independent.RESOLUTIONS)")
+    ap.add_argument("--dump", default=None, metavar="DIR",
+                    help="also save each case's weighted Jacobian, residuals, blocks and truth as DIR/caseSEED.npz")
     ap.add_argument("--merge", nargs="+", default=None, metavar="LOG",
                     help="print the summary of the RESULT lines in these logs of earlier runs (shards of seeds run "
                          "as separate processes, e.g. --seed 100 --cases 7 and --seed 107 --cases 7) and stop")
@@ -59,6 +66,13 @@ import numpy as np  # noqa: E402
 
 from ringfit.fit.identify import identify, read_identify_folder  # noqa: E402
 from ringfit.synth.identify import make_identify_case  # noqa: E402
+from ringfit.synth.independent import make_independent_case  # noqa: E402
+
+if ARGS.independent:
+    import functools
+
+    # same folder layout and truth keys
+    make_identify_case = functools.partial(make_independent_case, resolution=ARGS.resolution)  # noqa: F811
 
 NAMES = ("rho_a", "ei", "kw", "kv", "k_tread", "damping_ratio")
 
@@ -93,6 +107,20 @@ def one_case(seed: int, without: bool, timed: bool) -> dict:
     return out
 
 
+def _dump(ident, truth, seed) -> None:
+    """The case's final pass for offline study of its intervals (``--dump``)."""
+    import json
+
+    Path(ARGS.dump).mkdir(parents=True, exist_ok=True)
+    fit = ident.fit
+    np.savez(Path(ARGS.dump) / f"case{seed}.npz", jacobian=fit.jacobian, residuals=fit.residuals,
+             theta_names=np.array(fit.names), values=np.array([fit.values[n] for n in fit.names]),
+             row_scale=ident.row_scale, shift_u=np.zeros(0) if ident.shift_u is None else ident.shift_u,
+             meta=json.dumps(dict(slices={b: [s.start, s.stop] for b, s in ident.slices.items()},
+                                  truth=truth["ring"], profiles=truth["profiles"], blocks=ident.blocks,
+                                  parameters=ident.parameters(), nuisances=ident.nuisances)))
+
+
 def _nuisance_z(ident, truth) -> dict:
     """z-scores of the per-profile gains (in ln) and angle offsets against the truth."""
     gain, offset = [], []
@@ -114,7 +142,7 @@ def main_processes() -> None:
     seeds = [ARGS.seed + c for c in range(ARGS.cases)]
 
     def run(seed):
-        argv = [sys.executable, __file__, "--worker", str(seed), "--cores", "0"]
+        argv = [sys.executable, __file__, "--worker", str(seed), "--cores", "0"] + ["--independent"] * ARGS.independent + ["--resolution", ARGS.resolution]
         if seed >= seeds[-1] - ARGS.without + 1:
             argv.append("--without-worker")
         if seed == seeds[0]:
@@ -202,6 +230,8 @@ def main() -> None:
                 bare = Path(tmp) / f"bare{seed}"
                 shutil.copytree(folder, bare, ignore=shutil.ignore_patterns("*.profile.*"))
                 ei_sd_without.append(identify(read_identify_folder(bare)).parameters()["ei"]["sd_ln"])
+            if ARGS.dump:
+                _dump(ident, truth, seed)
             worst = max(NAMES, key=lambda n: abs(z[n][-1]))
             print("RESULT " + json.dumps(dict(
                 seed=seed, status=ident.fit.status, converged=bool(ident.converged),

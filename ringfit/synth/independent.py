@@ -52,6 +52,15 @@ EA_PENALTY = 1e9
 EIGEN_GRID = 1024
 PATCH_GRID = 4096
 PROFILE_GRID = 2048
+#: The truth's discretisations: ``fine`` (the default) is converged far below the noise (4th order; the patch's
+#: edge cells weighted by the share inside it); ``coarse`` is the same physics on a coarse 2nd-order grid with a
+#: staircase patch (the grid points inside it, its half-angle from the active set's count) — a discretisation
+#: still consistent with the equations whose own error, of the order of the data's noise, stands in for a model
+#: form that differs from the data's more than ringfit's grid check can see.
+RESOLUTIONS = {
+    "fine": dict(order=4, eigen=EIGEN_GRID, patch=PATCH_GRID, profile=PROFILE_GRID, staircase=False),
+    "coarse": dict(order=2, eigen=360, patch=720, profile=720, staircase=True),
+}
 #: Loads [N] of the standing loaded tables and of the profiles with their speeds [km/h] (as make_identify_case).
 LOADED_LOADS = (3000.0, 5000.0)
 PROFILE_POINTS = ((3000.0, 30.0), (4000.0, 50.0), (5000.0, 70.0))
@@ -107,17 +116,20 @@ def ring_stiffness(ring, geometry, n: int, *, order: int = 4, ea: float = EA_PEN
                     [b4 * d3 - m * d1, -b4 * d2 - m * (d1 @ d1) + kv * eye]]).tocsc()
 
 
-def patch_weights(n: int, half_angle: float) -> np.ndarray:
-    """The share of each grid cell [φ_j − h/2, φ_j + h/2] inside the patch |φ| < a."""
+def patch_weights(n: int, half_angle: float, staircase: bool = False) -> np.ndarray:
+    """The share of each grid cell [φ_j − h/2, φ_j + h/2] inside the patch |φ| < a (``staircase``: 1 for the grid
+    points inside it, 0 elsewhere)."""
     h = 2 * np.pi / n
     phi = -np.pi + h * np.arange(n)
+    if staircase:
+        return (np.abs(phi) < half_angle).astype(np.float64)
     lo = np.maximum(phi - h / 2, -half_angle)
     hi = np.minimum(phi + h / 2, half_angle)
     return np.clip(hi - lo, 0.0, None) / h
 
 
 def fd_modes(ring, geometry, n: int = EIGEN_GRID, *, half_angle: float = 0.0, order: int = 4,
-             ea: float = EA_PENALTY, count: int = 26):
+             ea: float = EA_PENALTY, count: int = 26, staircase: bool = False):
     """The ``count`` lowest modes of the rim-fixed ring, with the tread springs k_trd on w over |φ| < a.
 
     **Returns** ``(f_hz, w, v)``: frequencies ascending ``(count,)`` and the mode shapes ``(n, count)``."""
@@ -127,7 +139,7 @@ def fd_modes(ring, geometry, n: int = EIGEN_GRID, *, half_angle: float = 0.0, or
     R, b, p0, tau, rho_a, ei, kw, kv, ktrd = _params(ring, geometry)
     K = ring_stiffness(ring, geometry, n, order=order, ea=ea)
     if half_angle > 0:
-        K = K + sp.diags(np.concatenate([ktrd * patch_weights(n, half_angle), np.zeros(n)]))
+        K = K + sp.diags(np.concatenate([ktrd * patch_weights(n, half_angle, staircase), np.zeros(n)]))
     M = sp.identity(2 * n, format="csc") * rho_a
     lam, vec = spla.eigsh(K.tocsc(), k=count, M=M, sigma=0.0, which="LM")
     order_ = np.argsort(lam)
@@ -153,11 +165,12 @@ def fd_free_frequencies(ring, geometry, n_max: int = 9, n: int = EIGEN_GRID, *, 
 
 
 def fd_loaded_frequencies(ring, geometry, half_angle: float, n_max: int = 7, n: int = EIGEN_GRID, *,
-                          order: int = 4, ea: float = EA_PENALTY) -> tuple[np.ndarray, np.ndarray]:
+                          order: int = 4, ea: float = EA_PENALTY, staircase: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Standing loaded modes [Hz]: ``(cos_type, sin_type)``, each the ``n_max`` lowest modes whose w is even
     (resp. odd) about the patch centre φ = 0, ascending (the k-th continues harmonic k of the free ring); the
     rigid rotation (w ≡ 0; the patch's radial springs do not see it) is left out."""
-    f, w, v = fd_modes(ring, geometry, n, half_angle=half_angle, order=order, ea=ea, count=2 * n_max + 8)
+    f, w, v = fd_modes(ring, geometry, n, half_angle=half_angle, order=order, ea=ea, count=2 * n_max + 8,
+                       staircase=staircase)
     refl = (-np.arange(n)) % n  # φ_j → −φ_j
     even, odd = [], []
     for j in range(f.size):
@@ -238,7 +251,7 @@ def fd_rolling(ring, geometry, load: float, n: int = PROFILE_GRID, *, order: int
     full_p = np.zeros(n)
     full_p[win] = p
     return dict(phi=phi, w=w, v=v, p=full_p, H=float(x[-1]), delta=delta, lead=float(cross(i0 - 1, i0)),
-                trail=float(cross(i1 + 1, i1)))
+                trail=float(cross(i1 + 1, i1)), active=int(idx.size))
 
 
 def fd_channels(sol: dict, omega: float) -> tuple[np.ndarray, np.ndarray]:
@@ -254,17 +267,22 @@ def fd_channels(sol: dict, omega: float) -> tuple[np.ndarray, np.ndarray]:
     return -(a_r - a_r.mean()), a_t - a_t.mean()
 
 
-def fd_profile(ring, geometry, load, n, *, order=4, omega=2 * math.pi * 9.0, ea=EA_PENALTY, window_deg=35.0):
+def fd_profile(ring, geometry, load, n, *, order=4, omega=2 * math.pi * 9.0, ea=EA_PENALTY, window_deg=35.0,
+               damped=False):
     """The radial reading of the steady rolling ring (:func:`fd_rolling`, :func:`fd_channels`) on φ_j =
-    −π + 2πj/n: ``(φ, reading)`` [rad, m/s²], toward the centre +, without its mean. Damped as ``ring``'s
-    damping ratio says (0: undamped)."""
-    sol = fd_rolling(ring, geometry, load, n, order=order, omega=omega, ea=ea, window_deg=window_deg)
+    −π + 2πj/n: ``(φ, reading)`` [rad, m/s²], toward the centre +, without its mean. Undamped unless ``damped``
+    (then hysteretic with ``ring``'s damping ratio)."""
+    sol = fd_rolling(ring, geometry, load, n, order=order, omega=omega, ea=ea, window_deg=window_deg, damped=damped)
     return sol["phi"], fd_channels(sol, omega)[0]
 
 
-def standing_half_angle(ring, geometry, load: float, n: int = PATCH_GRID, *, order: int = 4) -> float:
-    """Half the static patch's length [rad] at ``load`` (Ω = 0) by :func:`fd_rolling`."""
+def standing_half_angle(ring, geometry, load: float, n: int = PATCH_GRID, *, order: int = 4,
+                        staircase: bool = False) -> float:
+    """Half the static patch's length [rad] at ``load`` (Ω = 0) by :func:`fd_rolling`: between the zero crossings
+    of the penetration, or (``staircase``) the active grid points' count times h/2."""
     sol = fd_rolling(ring, geometry, load, n, order=order, omega=0.0)
+    if staircase:
+        return 0.5 * sol["active"] * 2 * np.pi / n
     return 0.5 * (sol["trail"] - sol["lead"])
 
 
@@ -281,10 +299,13 @@ def resample(values: np.ndarray, angles_rad: np.ndarray, k_max: int) -> np.ndarr
 
 
 def make_independent_case(folder: str | os.PathLike, seed: int = 0, *, profiles: bool = True, loaded: bool = True,
-                          noise_colour: str | None = None, truth_file: bool = True) -> dict:
+                          noise_colour: str | None = None, truth_file: bool = True, resolution: str = "fine") -> dict:
     """Write a ``ringfit identify`` case into ``folder`` (created; must be empty or absent) from the independent
-    FD truth; returns the truth (also ``truth.json`` there when ``truth_file``; the identification does not
-    read it). Files and noise as :func:`ringfit.synth.identify.make_identify_case`."""
+    FD truth at ``resolution`` (:data:`RESOLUTIONS`); returns the truth (also ``truth.json`` there when
+    ``truth_file``; the identification does not read it). Files and noise as
+    :func:`ringfit.synth.identify.make_identify_case`."""
+    res = RESOLUTIONS[resolution]
+    order, stair = res["order"], res["staircase"]
     from ringfit.io.modes import ModeTable, write_mode_table
     from ringfit.io.profiles import Profile, write_profile
     from ringfit.io.tyre import Tyre, write_tyre
@@ -311,15 +332,15 @@ def make_independent_case(folder: str | os.PathLike, seed: int = 0, *, profiles:
         write_mode_table(t, folder / name)
 
     n_free = np.arange(1, 10)
-    f_free = fd_free_frequencies(ring, geometry, 9)
+    f_free = fd_free_frequencies(ring, geometry, 9, res["eigen"], order=order)
     damp = 100.0 * zeta * np.exp(rng.normal(0.0, 0.05, n_free.size))
     table("free.modes.csv", f_free, n_free, [""] * n_free.size, damp, {"state": "free"})
     half_angles = {}
     if loaded:
         for load in LOADED_LOADS:
-            half = standing_half_angle(ring, geometry, load)
+            half = standing_half_angle(ring, geometry, load, res["patch"], order=order, staircase=stair)
             half_angles[load] = half
-            c, s = fd_loaded_frequencies(ring, geometry, half, 7)
+            c, s = fd_loaded_frequencies(ring, geometry, half, 7, res["eigen"], order=order, staircase=stair)
             n = np.arange(1, 8)
             tags = ["vert" if k == 1 else "extr" for k in n] + ["hort" if k == 1 else "0" for k in n]
             table(f"loaded{int(load)}.modes.csv", np.concatenate([c, s]), np.concatenate([n, n]), tags,
@@ -331,9 +352,9 @@ def make_independent_case(folder: str | os.PathLike, seed: int = 0, *, profiles:
         for i, (load, speed) in enumerate(PROFILE_POINTS):
             n_points = int(rng.choice([720, 1000, 1024]))
             # Ω = V/R_e, R_e = R_out − δ_z/3 with the standing deflection (docs/physics.md §4.3)
-            still = fd_rolling(ring, geometry, load, PROFILE_GRID, omega=0.0)
+            still = fd_rolling(ring, geometry, load, res["profile"], order=order, omega=0.0)
             omega = speed / 3.6 / (R_out - (R_out - still["H"]) / 3.0)
-            sol = fd_rolling(ring, geometry, load, PROFILE_GRID, omega=omega)
+            sol = fd_rolling(ring, geometry, load, res["profile"], order=order, omega=omega)
             rad, tan = fd_channels(sol, omega)
             gain = float(np.exp(rng.normal(0.0, 0.03)))
             offset_deg = float(rng.uniform(-1.0, 1.0))
@@ -354,7 +375,7 @@ def make_independent_case(folder: str | os.PathLike, seed: int = 0, *, profiles:
     truth = dict(seed=seed, ring={k: float(v) for k, v in ring.as_dict().items() if math.isfinite(v)},
                  sigma_rel=sigma_rel, with_std=with_std, half_angles=half_angles, profiles=truth_profiles,
                  truth="finite differences (ringfit.synth.independent)",
-                 grids=dict(eigen=EIGEN_GRID, patch=PATCH_GRID, profile=PROFILE_GRID, ea=EA_PENALTY))
+                 resolution=resolution, discretisation=dict(res, ea=EA_PENALTY))
     if truth_file:
         (folder / "truth.json").write_text(json.dumps(truth, indent=1))
     truth["ring_object"] = ring
@@ -364,4 +385,4 @@ def make_independent_case(folder: str | os.PathLike, seed: int = 0, *, profiles:
 
 __all__ = ["stencils", "symbols", "ring_stiffness", "patch_weights", "fd_modes", "fd_free_frequencies",
            "fd_loaded_frequencies", "fd_rolling", "fd_channels", "fd_profile", "standing_half_angle", "resample",
-           "make_independent_case", "LOADED_LOADS", "PROFILE_POINTS"]
+           "make_independent_case", "RESOLUTIONS", "LOADED_LOADS", "PROFILE_POINTS"]
