@@ -121,6 +121,8 @@ def patch_weights(n: int, half_angle: float, staircase: bool = False) -> np.ndar
     points inside it, 0 elsewhere)."""
     h = 2 * np.pi / n
     phi = -np.pi + h * np.arange(n)
+    if half_angle >= np.pi:
+        return np.ones(n)  # the whole circle (the cell at φ = −π wraps round)
     if staircase:
         return (np.abs(phi) < half_angle).astype(np.float64)
     lo = np.maximum(phi - h / 2, -half_angle)
