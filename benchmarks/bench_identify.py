@@ -68,11 +68,12 @@ from ringfit.fit.identify import identify, read_identify_folder  # noqa: E402
 from ringfit.synth.identify import make_identify_case  # noqa: E402
 from ringfit.synth.independent import make_independent_case  # noqa: E402
 
-if ARGS.independent:
+if ARGS.independent:  # same folder layout and truth keys
     import functools
 
-    # same folder layout and truth keys
-    make_identify_case = functools.partial(make_independent_case, resolution=ARGS.resolution)  # noqa: F811
+    make_case = functools.partial(make_independent_case, resolution=ARGS.resolution)
+else:
+    make_case = make_identify_case
 
 NAMES = ("rho_a", "ei", "kw", "kv", "k_tread", "damping_ratio")
 
@@ -83,7 +84,7 @@ def one_case(seed: int, without: bool, timed: bool) -> dict:
 
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / f"case{seed}"
-        truth = make_identify_case(folder, seed=seed)
+        truth = make_case(folder, seed=seed)
         inputs = read_identify_folder(folder)
         t0, c0 = time.perf_counter(), time.process_time()
         ident = identify(inputs)
@@ -235,7 +236,7 @@ def main() -> None:
         for c in range(ARGS.cases):
             seed = ARGS.seed + c
             folder = Path(tmp) / f"case{seed}"
-            truth = make_identify_case(folder, seed=seed)
+            truth = make_case(folder, seed=seed)
             inputs = read_identify_folder(folder)
             t0, c0 = time.perf_counter(), time.process_time()
             ident = identify(inputs)

@@ -30,8 +30,8 @@ CONTIGUOUS = np.array_split(np.arange(M), 3)
 @pytest.mark.parametrize("folds", [ROUND_ROBIN, CONTIGUOUS], ids=["round-robin", "contiguous"])
 def test_noise_alone_gives_no_discrepancy(folds):
     """Rows of unit noise: κ − 1 is 0 in at least half the draws and small on average (the positive part of a
-    ratio whose expectation is exactly 1: E[D_F] = tr H_FF). The ratio is about χ²_ν/ν with ν = (tr H)²/tr H² ≈ 4
-    here (four parameters), above 2 in ~9 % of draws: the estimator is noisy when a block pins few parameters."""
+    ratio whose expectation is exactly 1: E[D_F] = tr H_FF). The ratio is about χ²_ν/ν with
+    ν = (tr H)²/tr H² ≈ 4 here (four parameters), above 2 in ~9 % of draws: the estimator is noisy when a block pins few parameters."""
     rng = np.random.default_rng(1)
     _, J = design(rng)
     kappa = np.array([discrepancy_ratio(J, residual(J, rng.normal(size=M)), folds) for _ in range(DRAWS)])

@@ -29,7 +29,8 @@ def extensible_flexural_hz(n: int, ea: float, kw_extra: float = 0.0) -> float:
 def eq18_hz(n: int, kw_extra: float = 0.0) -> float:
     """docs/physics.md §2.1, eq. 18."""
     R, b, p0 = GEOMETRY.radius, GEOMETRY.width, GEOMETRY.pressure
-    num = RING.ei / R**4 * n**2 * (n**2 - 1) ** 2 + p0 * b / R * n**2 * (n**2 - 1) + (RING.kw + kw_extra) * n**2 + RING.kv
+    num = (RING.ei / R**4 * n**2 * (n**2 - 1) ** 2 + p0 * b / R * n**2 * (n**2 - 1)
+           + (RING.kw + kw_extra) * n**2 + RING.kv)
     return math.sqrt(num / (RING.rho_a * (1 + n**2))) / (2 * math.pi)
 
 
@@ -80,7 +81,8 @@ def test_a_short_soft_patch_shifts_the_modes_as_first_order_perturbation_says(n)
 
 
 def test_channels_of_an_inextensible_harmonic_are_the_closed_form():
-    """§4.6 inextensible: a_r,n = −Ω²(n²−1)W_n, a_θ,n = iΩ²(n²−1)W_n/n; the sensor reads −a_r and a_θ."""
+    """§4.6 inextensible: a_r,n = −Ω²(n²−1)W_n, a_θ,n = iΩ²(n²−1)W_n/n; the sensor reads −a_r and a_θ
+    (§5, the baseline)."""
     M, n, eps, omega = 256, 3, 1e-3, 40.0
     phi = -np.pi + 2 * np.pi * np.arange(M) / M
     w = eps * np.cos(n * phi)
@@ -109,6 +111,7 @@ def test_rolling_fd_balances_the_load_scales_with_speed_and_damping_resists():
     assert fx(damped) > 1e-3 * load
 
 
+@pytest.mark.slow  # a fresh interpreter and a whole case: ~15 s
 def test_the_case_is_an_identify_folder_and_its_truth_uses_no_ringfit_physics(tmp_path):
     """make_independent_case writes what `ringfit identify FOLDER` reads (docs/formats.md §6), and generating it
     imports nothing of ringfit.physics (run in a fresh interpreter)."""

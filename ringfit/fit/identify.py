@@ -28,7 +28,10 @@ stated σ. Rolling mode tables (speed > 0) are not part of the joint model yet: 
 with a warning. A block scale from ν residual degrees of freedom widens that block's share of the
 covariance by Student's t_ν (:func:`t_widening`), and the model's own discretisation (contact grid,
 loaded-mode basis) is checked once at the optimum (:func:`grid_check`, refined ×2) and carried into the
-covariance as a rank-one term.
+covariance as a rank-one term. A form error of the model that the parameters absorb differently in different
+parts of a block shows as held-out rows predicted worse than their noise: each block's σ is multiplied by the
+square root of its discrepancy ratio κ_b ≥ 1 in the covariance and the posterior (:func:`discrepancy_ratio`,
+:func:`block_folds`; docs/physics.md §11).
 
 Stated conditions are checked on reading (:mod:`ringfit.io.conditions`: duplicates counted once, another
 pressure refused, a profile's rotation against its speed) and, after the fit, each loaded table's load
@@ -512,7 +515,8 @@ class Identification:
     passes: int
     inputs: IdentifyInputs | None = None
     grid_check: dict | None = None
-    #: ``(m,)`` per data row: its block's Student-t widening (:func:`t_widening`), 1 elsewhere
+    #: ``(m,)`` per data row: its block's Student-t widening (:func:`t_widening`) times √κ_b
+    #: (:func:`discrepancy_ratio`), 1 elsewhere
     row_scale: np.ndarray | None = None
     #: ``(k,)`` the grid check's move δu (solver coordinates of ``fit.names``), None when not run
     shift_u: np.ndarray | None = None
@@ -526,8 +530,8 @@ class Identification:
 
     def posterior_likelihood(self) -> dict:
         """What :func:`ringfit.fit.posterior.sample` needs to sample the noise model of the intervals
-        (docs/physics.md §12.3): ``row_scale`` (the t-widening per row) and ``shift_u`` (the grid check's
-        systematic direction, convolved into the draws)."""
+        (docs/physics.md §12.3): ``row_scale`` (the t-widening and discrepancy per row) and ``shift_u`` (the grid
+        check's systematic direction, convolved into the draws)."""
         return dict(row_scale=self.row_scale, shift_u=self.shift_u, tables=self.tables)
 
     @property
@@ -794,8 +798,8 @@ def discrepancy_ratio(J: np.ndarray, r: np.ndarray, folds: list[np.ndarray]) -> 
     ``J``: the weighted Jacobian of the fit (data and prior rows), ``r``: its weighted residuals (unit variance
     where the noise model is right), ``folds``: the block's held-out groups (row indices). With H = J(JᵀJ)⁺Jᵀ,
     a fold F's rows predicted from the fit without them have the residual (I − H_FF)⁻¹ r_F (linearised), and its
-    influence ``D_F = r_Fᵀ H_FF (I − H_FF)⁻¹ r_F`` has expectation tr H_FF under the noise model alone. A form error
-    the parameters absorb differently in each fold raises it, however well the block's σ was fitted. Returns
+    influence ``D_F = r_Fᵀ H_FF (I − H_FF)⁻¹ r_F`` has expectation tr H_FF under the noise model alone. A form
+    error the parameters absorb differently in each fold raises it, however well the block's σ was fitted. Returns
     ``max(1, Σ_F D_F / Σ_F tr H_FF)`` (directions of leverage > :data:`FOLD_LEVERAGE_MAX` left out); the block's
     σ is multiplied by √κ_b in the covariance, i.e. a discrepancy variance (κ_b − 1)σ² added in quadrature."""
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
@@ -1044,5 +1048,6 @@ def _json_safe(x):
 
 
 __all__ = ["identify", "read_identify_folder", "log_interval", "cap_unbounded", "load_check", "IdentifyInputs",
+           "discrepancy_ratio", "block_folds",
            "Identification", "identification_report",
            "JointResiduals", "harmonic_rows", "standing_half_angle", "BLOCKS"]

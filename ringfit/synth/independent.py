@@ -100,7 +100,8 @@ def ring_stiffness(ring, geometry, n: int, *, order: int = 4, ea: float = EA_PEN
     """The ring's sparse stiffness (w block first, then v) on n points, §4.1 at χ = 1 without damping:
 
     ``(R) EI/R⁴(w'''' − v''') + (EA/R² − ρAΩ²)(w + v') − P(w'' + w) + k_w w``,
-    ``(T) EI/R⁴(w''' − v'') − (EA/R² − ρAΩ²)(v'' + w') + k_v v``, P = p₀b/R (symmetric: d1, d3 antisymmetric).
+    ``(T) EI/R⁴(w''' − v'') − (EA/R² − ρAΩ²)(v'' + w') + k_v v``, P = p₀b/R (symmetric: d1, d3
+    antisymmetric).
     The membrane terms are the energy of the discrete strain ε = (w + d1 v)/R, so that v'' there is d1·d1, not
     the 5-point d2: a shape with ε = 0 on the grid then carries no penalty (with d2 the penalty EA locks the ring,
     an error ∝ EA h⁴)."""
@@ -167,7 +168,8 @@ def fd_free_frequencies(ring, geometry, n_max: int = 9, n: int = EIGEN_GRID, *, 
 
 
 def fd_loaded_frequencies(ring, geometry, half_angle: float, n_max: int = 7, n: int = EIGEN_GRID, *,
-                          order: int = 4, ea: float = EA_PENALTY, staircase: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                          order: int = 4, ea: float = EA_PENALTY,
+                          staircase: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Standing loaded modes [Hz]: ``(cos_type, sin_type)``, each the ``n_max`` lowest modes whose w is even
     (resp. odd) about the patch centre φ = 0, ascending (the k-th continues harmonic k of the free ring); the
     rigid rotation (w ≡ 0; the patch's radial springs do not see it) is left out."""
@@ -360,7 +362,8 @@ def make_independent_case(folder: str | os.PathLike, seed: int = 0, *, profiles:
             rad, tan = fd_channels(sol, omega)
             gain = float(np.exp(rng.normal(0.0, 0.03)))
             offset_deg = float(rng.uniform(-1.0, 1.0))
-            # recorded angle α = φ − offset (docs/physics.md §5 layer 6): the reading at α is the ring at α + offset
+            # recorded angle α = φ − offset (docs/physics.md §5 layer 6): the reading at α is the ring at
+            # α + offset
             alpha = -180.0 + 360.0 * np.arange(n_points) / n_points
             at = np.radians(alpha + offset_deg)
             k_max = (n_points - 1) // 2
