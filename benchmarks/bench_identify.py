@@ -11,7 +11,15 @@ white, pink, red or band-coloured noise; the truth solved on a 1024- or 2048-poi
    (target: its nominal rate, 95 %; with 20 cases, 17 … 20 covered is within a binomial 95 % band);
 2. EI's relative σ with profiles (target < 10 %) and, on the last ``--without`` cases, without them;
 3. the warm time of one identification (free + 2 loaded + 3 profiles; target < 10 s on one core),
-   CPU time beside wall, the load average at start and end. The summary is printed every 5 cases too.
+   CPU time beside wall, the load average at start and end. The summary is printed every 5 cases too;
+4. the model-discrepancy term (issue 32 item 4, docs/physics.md §11): the 95 % coverage per parameter without
+   and with it, from the same fits, with Clopper–Pearson intervals (target 90–98 % on independent cases), the
+   width ratio with/without (target ≤ 2× where the model is right) and each block's κ − 1.
+
+``--independent`` takes the cases from :func:`ringfit.synth.independent.make_independent_case` instead: the same
+files and noise, the truth a finite-difference ring written apart from ringfit's model (``--resolution coarse``:
+a 2nd-order grid with a staircase patch, whose own error is of the order of the noise). ``--dump DIR`` saves each
+case's final pass (weighted Jacobian, residuals, blocks, truth) for offline study.
 
 On a busy machine run shards of seeds as separate processes and merge their logs: e.g.
 ``--seed 100 --cases 7 --without 0 > a.log``, ``--seed 107 --cases 7 --without 0 > b.log``,
