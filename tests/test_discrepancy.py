@@ -81,3 +81,9 @@ def test_a_fold_that_alone_pins_a_direction_is_left_out_not_divided_by_zero():
     r = residual(J, rng.normal(size=M))
     kappa = discrepancy_ratio(J, r, ROUND_ROBIN)
     assert np.isfinite(kappa) and kappa >= 1.0
+
+
+def test_a_fit_without_finite_rows_gets_no_discrepancy():
+    J = np.ones((M, 2))
+    r = np.full(M, np.nan)
+    assert discrepancy_ratio(J, r, ROUND_ROBIN) == 1.0

@@ -801,7 +801,10 @@ def discrepancy_ratio(J: np.ndarray, r: np.ndarray, folds: list[np.ndarray]) -> 
     influence ``D_F = r_Fᵀ H_FF (I − H_FF)⁻¹ r_F`` has expectation tr H_FF under the noise model alone. A form
     error the parameters absorb differently in each fold raises it, however well the block's σ was fitted. Returns
     ``max(1, Σ_F D_F / Σ_F tr H_FF)`` (directions of leverage > :data:`FOLD_LEVERAGE_MAX` left out); the block's
-    σ is multiplied by √κ_b in the covariance, i.e. a discrepancy variance (κ_b − 1)σ² added in quadrature."""
+    σ is multiplied by √κ_b in the covariance, i.e. a discrepancy variance (κ_b − 1)σ² added in quadrature.
+    A fit without finite rows (not converged, said by its status) gets 1."""
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
+        return 1.0
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     keep = s > 1e-12 * (s[0] if s.size else 1.0)
     L = Vt[keep].T / s[keep]  # (JᵀJ)⁺ = L Lᵀ
