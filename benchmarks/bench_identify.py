@@ -11,7 +11,15 @@ white, pink, red or band-coloured noise; the truth solved on a 1024- or 2048-poi
    (target: its nominal rate, 95 %; with 20 cases, 17 … 20 covered is within a binomial 95 % band);
 2. EI's relative σ with profiles (target < 10 %) and, on the last ``--without`` cases, without them;
 3. the warm time of one identification (free + 2 loaded + 3 profiles; target < 10 s on one core),
-   CPU time beside wall, the load average at start and end. The summary is printed every 5 cases too.
+   CPU time beside wall, the load average at start and end. The summary is printed every 5 cases too;
+4. the model-discrepancy term (issue 32 item 4, docs/physics.md §11): the 95 % coverage per parameter without
+   and with it, from the same fits, with Clopper–Pearson intervals (target 90–98 % on independent cases), the
+   width ratio with/without (target ≤ 2× where the model is right) and each block's κ − 1.
+
+``--independent`` takes the cases from :func:`ringfit.synth.independent.make_independent_case` instead: the same
+files and noise, the truth a finite-difference ring written apart from ringfit's model (``--resolution coarse``:
+a 2nd-order grid with a staircase patch, whose own error is of the order of the noise). ``--dump DIR`` saves each
+case's final pass (weighted Jacobian, residuals, blocks, truth) for offline study.
 
 On a busy machine run shards of seeds as separate processes and merge their logs: e.g.
 ``--seed 100 --cases 7 --without 0 > a.log``, ``--seed 107 --cases 7 --without 0 > b.log``,
@@ -42,6 +50,13 @@ def parse():
     ap.add_argument("--jobs", type=int, default=0,
                     help="run each case in its own process, this many at a time (0: all in this process)")
     ap.add_argument("--case-timeout", type=float, default=600.0, help="seconds before a case process is stopped")
+    ap.add_argument("--independent", action="store_true",
+                    help="cases from the independent finite-difference truth (ringfit.synth.independent, issue 32 "
+                         "item 4) instead of ringfit's own model")
+    ap.add_argument("--resolution", default="fine", choices=("fine", "coarse"),
+                    help="the independent truth's discretisation (ringfit.synth.independent.RESOLUTIONS)")
+    ap.add_argument("--dump", default=None, metavar="DIR",
+                    help="also save each case's weighted Jacobian, residuals, blocks and truth as DIR/caseSEED.npz")
     ap.add_argument("--merge", nargs="+", default=None, metavar="LOG",
                     help="print the summary of the RESULT lines in these logs of earlier runs (shards of seeds run "
                          "as separate processes, e.g. --seed 100 --cases 7 and --seed 107 --cases 7) and stop")
@@ -59,6 +74,14 @@ import numpy as np  # noqa: E402
 
 from ringfit.fit.identify import identify, read_identify_folder  # noqa: E402
 from ringfit.synth.identify import make_identify_case  # noqa: E402
+from ringfit.synth.independent import make_independent_case  # noqa: E402
+
+if ARGS.independent:  # same folder layout and truth keys
+    import functools
+
+    make_case = functools.partial(make_independent_case, resolution=ARGS.resolution)
+else:
+    make_case = make_identify_case
 
 NAMES = ("rho_a", "ei", "kw", "kv", "k_tread", "damping_ratio")
 
@@ -69,7 +92,7 @@ def one_case(seed: int, without: bool, timed: bool) -> dict:
 
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / f"case{seed}"
-        truth = make_identify_case(folder, seed=seed)
+        truth = make_case(folder, seed=seed)
         inputs = read_identify_folder(folder)
         t0, c0 = time.perf_counter(), time.process_time()
         ident = identify(inputs)
@@ -85,12 +108,48 @@ def one_case(seed: int, without: bool, timed: bool) -> dict:
                    z={n: math.log(params[n]["value"] / truth["ring"][n]) / params[n]["sd_ln"] for n in NAMES},
                    err={n: abs(math.log(params[n]["value"] / truth["ring"][n])) for n in NAMES},
                    ei_sd=params["ei"]["sd_ln"], ei_sd_without=None, nz=_nuisance_z(ident, truth))
+        sd0 = _sd_without_discrepancy(ident)
+        out["z_before"] = {n: math.log(params[n]["value"] / truth["ring"][n]) / sd0[n] for n in NAMES}
+        out["width_ratio"] = {n: params[n]["sd_ln"] / sd0[n] for n in NAMES}
+        out["discrepancy"] = {b: v["discrepancy"] for b, v in ident.blocks.items()}
         if without:
             bare = Path(tmp) / f"bare{seed}"
             shutil.copytree(folder, bare, ignore=shutil.ignore_patterns("*.profile.*"))
             out["ei_sd_without"] = identify(read_identify_folder(bare)).parameters()["ei"]["sd_ln"]
     print("RESULT " + json.dumps(out), flush=True)
     return out
+
+
+def _sd_without_discrepancy(ident) -> dict:
+    """σ of ln θ per ring parameter without the model-discrepancy term (docs/physics.md §11): the rows widened by
+    t_ν only, plus the grid check — the intervals as they were before issue 32 item 4, from the same fit."""
+    from ringfit.fit.result import covariance_from_jacobian
+
+    fit = ident.fit
+    m = fit.residuals.size
+    scale = ident.row_scale.copy()
+    for b, sl in ident.slices.items():
+        scale[sl] /= math.sqrt(1.0 + ident.blocks[b].get("discrepancy", 0.0))
+    J = fit.jacobian.copy()
+    J[:m] /= scale[:, None]
+    cov = covariance_from_jacobian(J)
+    if ident.shift_u is not None:
+        cov = cov + np.outer(ident.shift_u, ident.shift_u)
+    return {n: math.sqrt(cov[fit.names.index(n), fit.names.index(n)]) for n in NAMES}
+
+
+def _dump(ident, truth, seed) -> None:
+    """The case's final pass for offline study of its intervals (``--dump``)."""
+    import json
+
+    Path(ARGS.dump).mkdir(parents=True, exist_ok=True)
+    fit = ident.fit
+    np.savez(Path(ARGS.dump) / f"case{seed}.npz", jacobian=fit.jacobian, residuals=fit.residuals,
+             theta_names=np.array(fit.names), values=np.array([fit.values[n] for n in fit.names]),
+             row_scale=ident.row_scale, shift_u=np.zeros(0) if ident.shift_u is None else ident.shift_u,
+             meta=json.dumps(dict(slices={b: [s.start, s.stop] for b, s in ident.slices.items()},
+                                  truth=truth["ring"], profiles=truth["profiles"], blocks=ident.blocks,
+                                  parameters=ident.parameters(), nuisances=ident.nuisances)))
 
 
 def _nuisance_z(ident, truth) -> dict:
@@ -114,7 +173,7 @@ def main_processes() -> None:
     seeds = [ARGS.seed + c for c in range(ARGS.cases)]
 
     def run(seed):
-        argv = [sys.executable, __file__, "--worker", str(seed), "--cores", "0"]
+        argv = [sys.executable, __file__, "--worker", str(seed), "--cores", "0"] + ["--independent"] * ARGS.independent + ["--resolution", ARGS.resolution]
         if seed >= seeds[-1] - ARGS.without + 1:
             argv.append("--without-worker")
         if seed == seeds[0]:
@@ -148,6 +207,7 @@ def main_processes() -> None:
     print(f"{len(results) - len(ok)} of {len(results)} case processes failed")
     _summary(len(ok), z, err, [r["ei_sd"] for r in ok], [r["ei_sd_without"] for r in ok if r["ei_sd_without"]],
              times, sum(r["converged"] for r in ok))
+    _discrepancy_table(ok)
     load1 = os.getloadavg()
     print(f"load average at end: {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}")
 
@@ -168,6 +228,7 @@ def merge(logs) -> None:
     times = [tuple(r["warm"]) for r in ok if r.get("warm")]
     _summary(len(ok), z, err, [r["ei_sd"] for r in ok], [r["ei_sd_without"] for r in ok if r.get("ei_sd_without")],
              times, sum(r["converged"] for r in ok))
+    _discrepancy_table(ok)
 
 
 def main() -> None:
@@ -178,11 +239,12 @@ def main() -> None:
     z = {n: [] for n in NAMES}
     err = {n: [] for n in NAMES}
     ei_sd, ei_sd_without, times, converged = [], [], [], 0
+    records = []
     with tempfile.TemporaryDirectory() as tmp:
         for c in range(ARGS.cases):
             seed = ARGS.seed + c
             folder = Path(tmp) / f"case{seed}"
-            truth = make_identify_case(folder, seed=seed)
+            truth = make_case(folder, seed=seed)
             inputs = read_identify_folder(folder)
             t0, c0 = time.perf_counter(), time.process_time()
             ident = identify(inputs)
@@ -202,13 +264,23 @@ def main() -> None:
                 bare = Path(tmp) / f"bare{seed}"
                 shutil.copytree(folder, bare, ignore=shutil.ignore_patterns("*.profile.*"))
                 ei_sd_without.append(identify(read_identify_folder(bare)).parameters()["ei"]["sd_ln"])
+            if ARGS.dump:
+                _dump(ident, truth, seed)
+            sd0 = _sd_without_discrepancy(ident)
             worst = max(NAMES, key=lambda n: abs(z[n][-1]))
+            records.append(dict(z={n: z[n][-1] for n in NAMES},
+                                z_before={n: math.log(params[n]["value"] / truth["ring"][n]) / sd0[n] for n in NAMES},
+                                width_ratio={n: params[n]["sd_ln"] / sd0[n] for n in NAMES},
+                                discrepancy={b: v["discrepancy"] for b, v in ident.blocks.items()}))
             print("RESULT " + json.dumps(dict(
                 seed=seed, status=ident.fit.status, converged=bool(ident.converged),
                 colour=truth["profiles"][0]["noise_colour"], cold=None, warm=[wall, cpu] if c > 0 else None,
                 z={n: z[n][-1] for n in NAMES}, err={n: err[n][-1] for n in NAMES}, ei_sd=params["ei"]["sd_ln"],
                 ei_sd_without=ei_sd_without[-1] if c >= ARGS.cases - ARGS.without else None,
                 nz=_nuisance_z(ident, truth), grid_shift=ident.grid_check,
+                z_before={n: math.log(params[n]["value"] / truth["ring"][n]) / sd0[n] for n in NAMES},
+                width_ratio={n: params[n]["sd_ln"] / sd0[n] for n in NAMES},
+                discrepancy={b: v["discrepancy"] for b, v in ident.blocks.items()},
                 signed={n: math.log(params[n]["value"] / truth["ring"][n]) for n in NAMES},
                 sd={n: params[n]["sd_ln"] for n in NAMES}, truth_grid=truth.get("truth_grid"),
                 fisher={b: v["fisher_share"] for b, v in ident.blocks.items()})), flush=True)
@@ -218,8 +290,41 @@ def main() -> None:
             if (c + 1) % 5 == 0 and c + 1 < ARGS.cases:
                 _summary(c + 1, z, err, ei_sd, ei_sd_without, times, converged)
     _summary(ARGS.cases, z, err, ei_sd, ei_sd_without, times, converged)
+    _discrepancy_table(records)
     load1 = os.getloadavg()
     print(f"load average at end: {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}")
+
+
+def _discrepancy_table(records) -> None:
+    """Coverage of the 95 % intervals without and with the model-discrepancy term (docs/physics.md §11; issue 32
+    item 4: target 90–98 % on independent cases, and no more than 2× wider where the model is right), from the
+    same fits; Clopper–Pearson 95 % intervals."""
+    recs = [r for r in records if "z_before" in r]
+    if not recs:
+        return
+    print(f"model discrepancy (issue 32 item 4), {len(recs)} cases: 95 % coverage without → with the term "
+          "(Clopper–Pearson 95 %), and the interval width ratio with/without")
+    print(f"{'parameter':14s} {'without':>9s} {'CP':>15s} {'with':>9s} {'CP':>15s} {'width ×':>8s} {'max ×':>6s}")
+    pooled = [0, 0, 0]
+    for n in NAMES:
+        c0 = sum(abs(r["z_before"][n]) < 1.959964 for r in recs)
+        c1 = sum(abs(r["z"][n]) < 1.959964 for r in recs)
+        M = len(recs)
+        pooled = [pooled[0] + c0, pooled[1] + c1, pooled[2] + M]
+        a0, b0 = _clopper_pearson(c0, M)
+        a1, b1 = _clopper_pearson(c1, M)
+        w = [r["width_ratio"][n] for r in recs]
+        print(f"{n:14s} {c0:4d}/{M:<4d} {100 * a0:5.1f} … {100 * b0:5.1f} % {c1:4d}/{M:<4d} {100 * a1:5.1f} … "
+              f"{100 * b1:5.1f} % {statistics.median(w):8.3f} {max(w):6.2f}")
+    a0, b0 = _clopper_pearson(pooled[0], pooled[2])
+    a1, b1 = _clopper_pearson(pooled[1], pooled[2])
+    print(f"{'all six':14s} {pooled[0]:4d}/{pooled[2]:<4d} {100 * a0:5.1f} … {100 * b0:5.1f} % {pooled[1]:4d}/"
+          f"{pooled[2]:<4d} {100 * a1:5.1f} … {100 * b1:5.1f} %")
+    for b in recs[0]["discrepancy"]:
+        d = [r["discrepancy"].get(b, 0.0) for r in recs]
+        print(f"   discrepancy κ − 1 of {b}: median {statistics.median(d):.3f}, mean {statistics.mean(d):.3f}, "
+              f"max {max(d):.2f}, zero in {sum(x == 0 for x in d)} of {len(d)}")
+    print(flush=True)
 
 
 def _summary(N, z, err, ei_sd, ei_sd_without, times, converged) -> None:

@@ -28,7 +28,10 @@ stated σ. Rolling mode tables (speed > 0) are not part of the joint model yet: 
 with a warning. A block scale from ν residual degrees of freedom widens that block's share of the
 covariance by Student's t_ν (:func:`t_widening`), and the model's own discretisation (contact grid,
 loaded-mode basis) is checked once at the optimum (:func:`grid_check`, refined ×2) and carried into the
-covariance as a rank-one term.
+covariance as a rank-one term. A form error of the model that the parameters absorb differently in different
+parts of a block shows as held-out rows predicted worse than their noise: each block's σ is multiplied by the
+square root of its discrepancy ratio κ_b ≥ 1 in the covariance and the posterior (:func:`discrepancy_ratio`,
+:func:`block_folds`; docs/physics.md §11).
 
 Stated conditions are checked on reading (:mod:`ringfit.io.conditions`: duplicates counted once, another
 pressure refused, a profile's rotation against its speed) and, after the fit, each loaded table's load
@@ -807,7 +810,8 @@ class Identification:
     passes: int
     inputs: IdentifyInputs | None = None
     grid_check: dict | None = None
-    #: ``(m,)`` per data row: its block's Student-t widening (:func:`t_widening`), 1 elsewhere
+    #: ``(m,)`` per data row: its block's Student-t widening (:func:`t_widening`) times √κ_b
+    #: (:func:`discrepancy_ratio`), 1 elsewhere
     row_scale: np.ndarray | None = None
     #: ``(k,)`` the grid check's move δu (solver coordinates of ``fit.names``), None when not run
     shift_u: np.ndarray | None = None
@@ -832,8 +836,8 @@ class Identification:
 
     def posterior_likelihood(self) -> dict:
         """What :func:`ringfit.fit.posterior.sample` needs to sample the noise model of the intervals
-        (docs/physics.md §12.3): ``row_scale`` (the t-widening per row) and ``shift_u`` (the grid check's
-        systematic direction, convolved into the draws)."""
+        (docs/physics.md §12.3): ``row_scale`` (the t-widening and discrepancy per row) and ``shift_u`` (the grid
+        check's systematic direction, convolved into the draws)."""
         return dict(row_scale=self.row_scale, shift_u=self.shift_u, tables=self.tables)
 
     @property
@@ -1024,6 +1028,9 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     # the final weights are those the last fit used: evaluate blocks with them
     # a scale estimated from ν residual degrees of freedom: its parameters follow Student's t_ν, not the normal
     widen = {n: t_widening(d) for n, d in block_dof.items() if n != "profiles"}
+    # the model's form error as its held-out rows show it (docs/physics.md §11, model discrepancy)
+    folds = {n: block_folds(n, sl, rows) for n, sl in slices.items()}
+    ratio = {n: discrepancy_ratio(fit.jacobian, fit.residuals, f) for n, f in folds.items()}
     check = None
     # (θ holds EA = ∞ of the inextensible ring: only the free parameters need be finite)
     if all(math.isfinite(fit.values[n]) for n in fit.names) and (rows.loaded is not None or rows.profiles is not None):
@@ -1038,7 +1045,7 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
                             pressures=plan.l_pressure if plan.active else None)
         for note in warned:
             warnings.warn(note, stacklevel=2)
-    ident = _finish(fit, rows, slices, scales, free_ring, P, notes + warned, passes, inputs, check, widen,
+    ident = _finish(fit, rows, slices, scales, free_ring, P, notes + warned, passes, inputs, check, widen, ratio,
                     free_laws=free_laws)
     if plan.active:
         ident.laws = plan.laws.replace(**{n: float(fit.values[n]) for n in LAW_FIELDS})
@@ -1129,6 +1136,56 @@ def t_widening(dof: float) -> float:
     return float(stdtrit(max(dof, 1.0), 0.975)) / Z95
 
 
+#: Folds of a frequency block for its discrepancy ratio (rows dealt round-robin), and harmonic bands of the profiles.
+DISCREPANCY_FOLDS = 3
+DISCREPANCY_BANDS = 4
+#: A fold direction whose leverage is above this is the fold's alone (held out, nothing predicts it): left out.
+FOLD_LEVERAGE_MAX = 0.99
+
+
+def block_folds(name: str, sl: slice, rows: _Rows) -> list[np.ndarray]:
+    """The held-out groups of a block's rows (indices into the residual vector; docs/physics.md §11): a frequency
+    block's rows dealt round-robin into :data:`DISCREPANCY_FOLDS` (each fold spans the harmonics n), the profiles'
+    rows in :data:`DISCREPANCY_BANDS` contiguous bands of revolution harmonics (every profile, channel and part)."""
+    idx = np.arange(sl.start, sl.stop)
+    if name == "profiles":
+        H = rows.profiles["measured"].shape[-1] // 2
+        k = np.tile(np.arange(H), idx.size // H)  # rows: profile, channel, (Re k…, Im k…)
+        edges = np.linspace(0, H, DISCREPANCY_BANDS + 1).round().astype(int)
+        return [idx[(k >= a) & (k < b)] for a, b in zip(edges[:-1], edges[1:])]
+    return [idx[j::DISCREPANCY_FOLDS] for j in range(min(DISCREPANCY_FOLDS, idx.size))]
+
+
+def discrepancy_ratio(J: np.ndarray, r: np.ndarray, folds: list[np.ndarray]) -> float:
+    """κ_b ≥ 1: how much more each held-out fold of a block would move the fit than its noise allows
+    (docs/physics.md §11, *model discrepancy*).
+
+    ``J``: the weighted Jacobian of the fit (data and prior rows), ``r``: its weighted residuals (unit variance
+    where the noise model is right), ``folds``: the block's held-out groups (row indices). With H = J(JᵀJ)⁺Jᵀ,
+    a fold F's rows predicted from the fit without them have the residual (I − H_FF)⁻¹ r_F (linearised), and its
+    influence ``D_F = r_Fᵀ H_FF (I − H_FF)⁻¹ r_F`` has expectation tr H_FF under the noise model alone. A form
+    error the parameters absorb differently in each fold raises it, however well the block's σ was fitted. Returns
+    ``max(1, Σ_F D_F / Σ_F tr H_FF)`` (directions of leverage > :data:`FOLD_LEVERAGE_MAX` left out); the block's
+    σ is multiplied by √κ_b in the covariance, i.e. a discrepancy variance (κ_b − 1)σ² added in quadrature.
+    A fit without finite rows (not converged, said by its status) gets 1."""
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
+        return 1.0
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    keep = s > 1e-12 * (s[0] if s.size else 1.0)
+    L = Vt[keep].T / s[keep]  # (JᵀJ)⁺ = L Lᵀ
+    D = T = 0.0
+    for F in folds:
+        if F.size == 0:
+            continue
+        u, sv, _ = np.linalg.svd(J[F] @ L, full_matrices=False)  # H_FF = u diag(sv²) uᵀ
+        lam = sv**2
+        ok = lam < FOLD_LEVERAGE_MAX
+        c = u[:, ok].T @ r[F]
+        D += float(np.sum(lam[ok] / (1.0 - lam[ok]) * c**2))
+        T += float(np.sum(lam[ok]))
+    return max(1.0, D / T) if T > 0 else 1.0
+
+
 def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: ContactSolver, P: int,
                factor: int = GRID_CHECK_FACTOR) -> dict:
     """How far the joint optimum moves when the model's discretisation is refined (docs/physics.md §11).
@@ -1204,19 +1261,19 @@ def _rescale_profiles(pr: dict, residuals: np.ndarray, leverage: np.ndarray) -> 
 
 
 def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, check=None, widen=None,
-            free_laws=()) -> Identification:
+            ratio=None, free_laws=()) -> Identification:
     J, r = fit.jacobian, fit.residuals
     names = fit.names
     cov_u = fit.covariance_log
-    if widen and any(w > 1.0 for w in widen.values()):
+    # each block's σ times t_ν/z (t_widening) and √κ_b (its discrepancy ratio): in the covariance and the posterior
+    row_scale = np.ones(r.size)
+    for b, sl in slices.items():
+        row_scale[sl] = (widen or {}).get(b, 1.0) * math.sqrt((ratio or {}).get(b, 1.0))
+    if np.any(row_scale > 1.0):
         Jw = J.copy()
-        for b, w in widen.items():
-            Jw[slices[b]] /= w  # the block's σ times t_ν/z (t_widening)
+        Jw[: r.size] /= row_scale[:, None]
         cov_u = covariance_from_jacobian(Jw)
     grid = None
-    row_scale = np.ones(r.size)
-    for b, w in (widen or {}).items():
-        row_scale[slices[b]] = w
     shift_u = None
     if check is not None and np.all(np.isfinite(check["shift_u"])):
         du = check["shift_u"]
@@ -1234,6 +1291,7 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
         share = np.diag(fisher[b]) / np.where(total > 0, total, 1.0)
         blocks[b] = dict(rows=int(sl.stop - sl.start), sigma_scale=float(scales[b]),
                          t_widening=float((widen or {}).get(b, 1.0)),
+                         discrepancy=float((ratio or {}).get(b, 1.0) - 1.0),
                          rms=float(math.sqrt(np.mean(r[sl] ** 2))),
                          fisher_share={n: float(share[j]) for j, n in enumerate(names) if n in cov_names})
     idx = [names.index(n) for n in cov_names]
@@ -1394,5 +1452,6 @@ def _json_safe(x):
 
 
 __all__ = ["identify", "read_identify_folder", "log_interval", "cap_unbounded", "load_check", "IdentifyInputs",
+           "discrepancy_ratio", "block_folds",
            "Identification", "identification_report",
            "JointResiduals", "harmonic_rows", "standing_half_angle", "BLOCKS"]

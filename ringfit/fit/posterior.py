@@ -6,7 +6,7 @@ solver coordinates ``u`` (log for positive parameters, scaled for linear ones; d
 
 - likelihood ``−½ Σ r²`` of the problem's weighted residuals (divided by the
   fit's residual σ when the problem's ``sigma`` is ``"estimate"``, and by a per-row widening
-  ``row_scale`` where given: identify's Student-t widening);
+  ``row_scale`` where given: identify's Student-t widening and model-discrepancy ratio);
 - prior: the problem's Gaussian prior on ``u``, flat elsewhere, truncated to the
   coordinates' bounds and the problem's plausible ranges;
 - sampler (``sampler=``): ``"compiled"`` (default) — Goodman & Weare's stretch move as one compiled
