@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from ringfit.fit.engine import least_squares
-from ringfit.fit.estimate.state import (PRESSURE, SLIP, TREAD, channel_weights, estimate_state, free_parameters,
-                                        profile_rows, state_fisher, state_revolutions)
+from ringfit.fit.estimate.state import (PRESSURE, REVOLUTION_FREE, SLIP, TREAD, channel_weights, estimate_state,
+                                        free_parameters, profile_rows, state_fisher, state_revolutions)
 from ringfit.io.profiles import Profile, grid_angles_deg
 from ringfit.params import TyreLaws, table9
 from ringfit.physics.profile import ProfileModel
@@ -94,9 +94,9 @@ def test_recovers_a_known_state_from_coloured_noise():
 @pytest.mark.slow
 def test_per_revolution_step_against_full_fits_and_the_fisher_information():
     """Constant state, white noise σ per sample in each revolution: (1) the one-step linearised estimate of each
-    revolution against a full fit of that revolution (same weights, priors and noise scale) — well inside its σ;
-    (2) the scatter of the per-revolution loads and slips against state_fisher's σ; (3) coverage of the
-    per-revolution intervals over the revolutions."""
+    revolution against a full fit of that revolution (load, slip, gain, offset; same weights, priors and noise
+    scale) — well inside its σ; (2) the scatter of the per-revolution loads and slips against state_fisher's σ
+    with the same quantities held; (3) coverage of the per-revolution intervals over the revolutions."""
     truth = TyreState(4000.0, 2.2e5, 0.007, -0.008, OMEGA)
     _, ch, q = _channels(truth)
     rng = np.random.default_rng(11)
@@ -121,12 +121,13 @@ def test_per_revolution_step_against_full_fits_and_the_fisher_information():
         data = eqx.tree_at(lambda a: a.weight, est.fit.problem.data, as_traced((weight / s_r)[None]))
         data = eqx.tree_at(lambda a: a.measured, data, as_traced(rows[r][None]))
         prob = dataclasses.replace(est.fit.problem, data=data, sigma="fixed")
-        full = least_squares(prob, est.fit.theta, est.fit.names, max_steps=50, rtol=1e-8, atol=1e-8)
+        full = least_squares(prob, est.fit.theta, REVOLUTION_FREE, max_steps=50, rtol=1e-8, atol=1e-8)
         assert full.converged
         assert abs(per.values["load_n"][r] - full.values["load_n"]) < 0.1 * sd_load
         assert abs(per.values["slip"][r] - full.values[SLIP]) < 0.1 * (per.hi["slip"][r] - per.lo["slip"][r]) / 3.92
     # (2) the scatter against the Fisher information (white noise σ per sample, data only)
-    fisher = state_fisher(GEO, RING, LAWS, truth, sd, samples_per_revolution=512, gain=1.0, corner_hz=0.5, tilt=0.8)
+    fisher = state_fisher(GEO, RING, LAWS, truth, sd, samples_per_revolution=512, gain=1.0, corner_hz=0.5, tilt=0.8,
+                          fixed=(PRESSURE, TREAD, "corner_hz", "tilt_gain"))
     for key in ("load_n", "slip"):
         scatter = np.std(per.values[key], ddof=1)
         assert scatter == pytest.approx(fisher.table()[key]["sd"], rel=0.35), key

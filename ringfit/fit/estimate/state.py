@@ -55,6 +55,9 @@ PRESSURE_PRIOR_SD = 0.3
 SLIP_PRIOR_SD = 0.05
 TREAD_PRIOR_SD = 0.5
 UNTOLD_SHARE = 0.9
+#: What a revolution's step moves (:func:`state_revolutions`): what changes from one revolution to the next; the
+#: pressure, tread depth and the sensor's corner and tilt stay at the recording's averaged fit.
+REVOLUTION_FREE = (LOAD, SLIP, GAIN, ANGLE_OFFSET)
 #: Correlation above which two quantities are reported as not told apart.
 RIDGE_CORRELATION = 0.95
 
@@ -470,6 +473,7 @@ class StateRevolutions:
     rms: np.ndarray
     noise_scale: float
     steps: int = 1
+    free: tuple = ()
 
     def __len__(self) -> int:
         return int(self.revolution.size)
@@ -486,16 +490,23 @@ class StateRevolutions:
 
     def summary(self) -> dict:
         return {"revolutions": len(self), "noise_scale": self.noise_scale, "gauss_newton_steps": self.steps,
+                "stepped": list(self.free),
                 **{f"{k}_median": float(np.median(v)) for k, v in self.values.items()}}
 
 
 def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: StateEstimate, *,
                       settings: EstimateSettings = EstimateSettings(), revolution=None, t_s=None,
-                      steps: int = 1) -> StateRevolutions:
+                      steps: int = 1, free: tuple = REVOLUTION_FREE) -> StateRevolutions:
     """The state of every revolution (docs/physics.md §13.4 *per revolution*): from the averaged profile's fit
     ``reference``, one Gauss–Newton step per revolution with the reference's Jacobian (computed once), all
     revolutions in one matrix product; ``steps=2`` adds a second step with each revolution's own model rows
     (a batched model evaluation: slower).
+
+    Per revolution only ``free`` (default :data:`REVOLUTION_FREE`: load, slip, gain, angle offset — what changes
+    from one revolution to the next) are stepped; the pressure, tread depth, high-pass corner and tilt, which do
+    not change within a recording, stay at the averaged fit, and their uncertainty there is carried into every
+    revolution's interval (the marginal: the step's sensitivity to them, −(JᵀJ + Λ)⁻¹Jᵀ J_held, through the
+    averaged fit's covariance).
 
     ``rows`` ``(R, 4K)`` each revolution's radial and tangential harmonic rows (as :func:`profile_rows`);
     ``rotation_hz`` ``(R,)`` from the encoder. The weights are each channel's smoothed spectrum of the
@@ -514,18 +525,21 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
     data = eqx.tree_at(lambda a: a.weight, problem.data, as_traced(weight[None]))
     data = eqx.tree_at(lambda a: a.measured, data, as_traced(np.mean(rows, axis=0)[None]))
     prob = dataclasses.replace(problem, data=data)
-    free = tuple(fit.names)
+    names = tuple(fit.names)
     theta = np.asarray(fit.theta, dtype=np.float64)
-    lin = linearize(prob, theta, free)
-    J = lin.jacobian / s_r
+    lin = linearize(prob, theta, names)
+    J_all = lin.jacobian / s_r
     model_rows = np.asarray(lin.aux)[0]
-    coords = [STATE_COORDS[STATE_PARAMETERS.index(n)] for n in free]
-    u_hat = np.array([c.to_u(theta[STATE_PARAMETERS.index(n)]) for c, n in zip(coords, free)])
-    Wp, mean = problem.prior.rows(free, len(free)) if problem.prior is not None else (np.zeros((len(free),) * 2),
-                                                                                      np.zeros(len(free)))
+    fr = [i for i, n in enumerate(names) if n in free]
+    hd = [i for i, n in enumerate(names) if n not in free]
+    sub = tuple(names[i] for i in fr)
+    J, J_h = J_all[:, fr], J_all[:, hd]
+    coords = [STATE_COORDS[STATE_PARAMETERS.index(n)] for n in sub]
+    u_hat = np.array([c.to_u(theta[STATE_PARAMETERS.index(n)]) for c, n in zip(coords, sub)])
+    Wp, mean = problem.prior.rows(sub, len(sub)) if problem.prior is not None else (np.zeros((len(sub),) * 2),
+                                                                                    np.zeros(len(sub)))
     Lam = Wp.T @ Wp
-    A = J.T @ J + Lam
-    cov = np.linalg.inv(A)
+    cov = np.linalg.inv(J.T @ J + Lam)
     E = (model_rows[None, :] - rows) * weight[None, :] / s_r  # (R, m): whitened residual at û per revolution
     du = -(E @ J + (Lam @ (u_hat - mean))[None, :]) @ cov.T  # (R, k)
     E_lin = E + du @ J.T  # the linearised residual after the step
@@ -533,7 +547,7 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
         from ringfit.fit.engine import residuals_batch
 
         th = np.repeat(theta[None], R, axis=0)
-        for j, (c, n) in enumerate(zip(coords, free)):
+        for j, (c, n) in enumerate(zip(coords, sub)):
             th[:, STATE_PARAMETERS.index(n)] = c.from_u(u_hat[j] + du[:, j])
         zero = dataclasses.replace(prob, data=eqx.tree_at(lambda a: a.measured, data,
                                                           as_traced(np.zeros((1, rows.shape[1])))))
@@ -542,12 +556,17 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
         step = -(E2 @ J + (u_hat[None, :] + du - mean[None, :]) @ Lam.T) @ cov.T
         du = du + step
         E_lin = E2 + step @ J.T
-    # quantities: linear in du through the reference's gradient
+    # quantities: linear in du through the reference's gradient; their σ with the held coordinates' uncertainty
     G = reference.gradient_u
+    G_f, G_h = G[:, fr], G[:, hd]
     keys = list(QUANTITIES)
     v0 = np.array([reference.quantities[k]["value"] / QUANTITIES[k][1] for k in keys])
-    vals = v0[None, :] + du @ G.T
-    sd = np.sqrt(np.maximum(np.einsum("qi,ij,qj->q", G, cov, G), 0.0))
+    vals = v0[None, :] + du @ G_f.T
+    S = -cov @ (J.T @ J_h)  # d u_free / d u_held of the step
+    C_h = np.asarray(reference.cov_u)[np.ix_(hd, hd)]
+    T = G_f @ S + G_h
+    var = np.einsum("qi,ij,qj->q", G_f, cov, G_f) + np.einsum("qi,ij,qj->q", T, C_h, T)
+    sd = np.sqrt(np.maximum(var, 0.0))
     z = float(ndtri(0.975))
     omega_r = 2 * math.pi * np.asarray(rotation_hz, dtype=np.float64)
     iq = {k: i for i, k in enumerate(keys)}
@@ -566,7 +585,7 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
     rms = np.sqrt(np.mean(E_lin**2, axis=1))
     return StateRevolutions(revolution=np.arange(R) if revolution is None else np.asarray(revolution),
                             t_s=np.zeros(R) if t_s is None else np.asarray(t_s), rotation_hz=np.asarray(rotation_hz),
-                            values=values, lo=lo, hi=hi, rms=rms, noise_scale=s_r, steps=int(steps))
+                            values=values, lo=lo, hi=hi, rms=rms, noise_scale=s_r, steps=int(steps), free=sub)
 
 
 def estimate_recording_state(record, geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *,
