@@ -122,6 +122,7 @@ class StateResiduals(AbstractResiduals):
     k_max: int = eqx.field(static=True)
 
     def rows(self, theta, data: StateArrays):
+        """The model's radial and tangential harmonic rows at θ (before subtracting the measured and weighting)."""
         gain, offset, corner, tilt = theta[4], theta[5], theta[6], theta[7]
         base = self.profile.with_sensor(corner_hz=corner, tilt_gain=tilt)
         model, ring, geometry = state_profile(data.geometry, data.ring, data.laws, state_of(theta, data.omega[0]),
@@ -252,6 +253,7 @@ class StateEstimate:
     fixed: dict = field(default_factory=dict)
 
     def value(self, key: str) -> float:
+        """The estimate of quantity ``key`` (:data:`QUANTITIES`), SI."""
         return float(self.quantities[key]["value"])
 
     def to_record(self) -> dict:
@@ -489,6 +491,7 @@ class StateRevolutions:
         return cols
 
     def summary(self) -> dict:
+        """The per-revolution run in a few numbers for the JSON: revolutions, noise scale, steps, what was stepped."""
         return {"revolutions": len(self), "noise_scale": self.noise_scale, "gauss_newton_steps": self.steps,
                 "stepped": list(self.free),
                 **{f"{k}_median": float(np.median(v)) for k, v in self.values.items()}}
@@ -643,6 +646,7 @@ class StateFisher:
         return out
 
     def corr(self, a: str, b: str) -> float:
+        """The correlation of quantities ``a`` and ``b`` per revolution."""
         return float(self.correlation[self.names.index(a), self.names.index(b)])
 
 
