@@ -4,7 +4,8 @@
 A problem on the one engine (:mod:`ringfit.fit.engine`), like :mod:`ringfit.fit.estimate.problem`:
 
 - θ = :data:`STATE_PARAMETERS` (load Fz [N], pressure p [Pa], slip κ, tread depth d [m], gain, angle offset
-  [rad], high-pass corner [Hz], tilt γ); positive ones in log coordinates (:data:`STATE_COORDS`);
+  [rad], high-pass corner [Hz], tilt γ, the tangential axis's relative gain, the liner offset e [m]); positive
+  ones in log coordinates (:data:`STATE_COORDS`);
 - rows: the radial **and** tangential revolution harmonics 2…k_max of
   :func:`ringfit.physics.profile.profile_channels` at :func:`ringfit.physics.state.state_profile`'s model
   (:class:`StateResiduals` on :class:`StateArrays`), each channel whitened by its own residual spectrum;
@@ -41,8 +42,13 @@ from ringfit.physics.profile import FlatOrDrum, ProfileModel, flat_or_drum, full
 from ringfit.physics.state import TyreState, state_profile, state_solution
 
 PRESSURE, SLIP, TREAD = "pressure_pa", "slip", "tread_depth_m"
+#: The sensor's two further nuisances (docs/physics.md §5, §13.4): the tangential axis's sensitivity relative to
+#: the radial one (each axis of a tri-axial sensor has its own calibration, typically within ±2–5 %), and the
+#: sensor's offset e inward of the belt (layer 1: the liner point reads v + eψ, a tangential term the drive/brake
+#: asymmetry shares). Without them a 2 % axis mismatch or a 1 mm offset is read as state.
+GAIN_TANGENTIAL, LINER_OFFSET = "gain_tangential", "liner_offset_m"
 #: θ of the state estimate, in order.
-STATE_PARAMETERS = (LOAD, PRESSURE, SLIP, TREAD, GAIN, ANGLE_OFFSET, CORNER, TILT)
+STATE_PARAMETERS = (LOAD, PRESSURE, SLIP, TREAD, GAIN, ANGLE_OFFSET, CORNER, TILT, GAIN_TANGENTIAL, LINER_OFFSET)
 #: The state's own parameters (the rest are the sensor's nuisances).
 STATE_NAMES = (LOAD, PRESSURE, SLIP, TREAD)
 #: Plausible pressures [Pa] (0.3–8 bar), slips, tread depths [m].
@@ -55,6 +61,10 @@ PRESSURE_PRIOR_SD = 0.3
 SLIP_PRIOR_SD = 0.05
 TREAD_PRIOR_SD = 0.5
 UNTOLD_SHARE = 0.9
+#: Priors [A] of the two sensor nuisances: σ of ln(tangential/radial sensitivity) about 0, and the liner offset's
+#: mean and σ [m] (the sensor's centre sits a few mm inside the belt's neutral line).
+GAIN_TANGENTIAL_PRIOR_SD = 0.05
+LINER_OFFSET_PRIOR = (1.0e-3, 3.0e-3)
 #: What a revolution's step moves (:func:`state_revolutions`): what changes from one revolution to the next; the
 #: pressure, tread depth and the sensor's corner and tilt stay at the recording's averaged fit.
 REVOLUTION_FREE = (LOAD, SLIP, GAIN, ANGLE_OFFSET)
@@ -70,6 +80,8 @@ STATE_COORDS = (
     Coordinate(ANGLE_OFFSET, LINEAR, scale=math.radians(1.0)),
     Coordinate(CORNER, LOG),
     Coordinate(TILT, LINEAR, scale=0.1),
+    Coordinate(GAIN_TANGENTIAL, LOG, lo=GAIN_RANGE[0], hi=GAIN_RANGE[1]),
+    Coordinate(LINER_OFFSET, LINEAR, scale=1e-3),
 )
 
 #: Reported quantities: key → (unit, scale from SI, what) — the state, then the derived ones (docs/formats.md §7.1).
@@ -124,13 +136,14 @@ class StateResiduals(AbstractResiduals):
     def rows(self, theta, data: StateArrays):
         """The model's radial and tangential harmonic rows at θ (before subtracting the measured and weighting)."""
         gain, offset, corner, tilt = theta[4], theta[5], theta[6], theta[7]
-        base = self.profile.with_sensor(corner_hz=corner, tilt_gain=tilt)
+        base = self.profile.with_sensor(corner_hz=corner, tilt_gain=tilt, offset=theta[9])
         model, ring, geometry = state_profile(data.geometry, data.ring, data.laws, state_of(theta, data.omega[0]),
                                               model=base)
         P = data.omega.shape[0]
         ch = gain * profile_channels(model, ring, geometry, data.omega, jnp.full(P, theta[0]), data.roads,
                                      full_band(P, self.solver.n_grid), offset, self.solver)
         amp = harmonic_amplitudes(ch, self.k_min, self.k_max) * data.response[:, None, :]
+        amp = amp * jnp.stack([jnp.ones_like(theta[8]), theta[8]])[None, :, None]  # the tangential axis's own gain
         return jnp.concatenate([harmonic_rows(amp[:, 0]), harmonic_rows(amp[:, 1])], axis=-1)
 
     def __call__(self, theta, data: StateArrays):
@@ -162,11 +175,14 @@ def state_priors(geometry: TyreGeometry, laws: TyreLaws) -> dict:
     """``name -> (mean, sd)`` in solver coordinates: §13.4's weak priors and §10's nuisance priors."""
     tilt = STATE_COORDS[STATE_PARAMETERS.index(TILT)]
     slip = STATE_COORDS[STATE_PARAMETERS.index(SLIP)]
+    e = STATE_COORDS[STATE_PARAMETERS.index(LINER_OFFSET)]
     return {PRESSURE: (math.log(float(geometry.pressure)), PRESSURE_PRIOR_SD),
             SLIP: (0.0, SLIP_PRIOR_SD / slip.scale),
             TREAD: (math.log(float(laws.tread_depth_ref)), TREAD_PRIOR_SD),
             CORNER: (math.log(CORNER_PRIOR[0]), CORNER_PRIOR[1]),
-            TILT: ((TILT_PRIOR[0] - tilt.center) / tilt.scale, TILT_PRIOR[1] / tilt.scale)}
+            TILT: ((TILT_PRIOR[0] - tilt.center) / tilt.scale, TILT_PRIOR[1] / tilt.scale),
+            GAIN_TANGENTIAL: (0.0, GAIN_TANGENTIAL_PRIOR_SD),
+            LINER_OFFSET: ((LINER_OFFSET_PRIOR[0] - e.center) / e.scale, LINER_OFFSET_PRIOR[1] / e.scale)}
 
 
 def free_parameters(laws: TyreLaws, fixed: dict) -> tuple[str, ...]:
@@ -200,7 +216,7 @@ def _quantities_and_jacobian(theta, ring_ln, geometry, ring, laws, omega, road, 
 
 def state_quantities(theta, geometry, ring, laws, omega, road=None, *, ring_names=(), settings=EstimateSettings()):
     """The reported quantities at θ (SI, :data:`QUANTITIES` order), their Jacobian in θ (natural units) and in ln
-    of ``ring_names``: ``(value (Q,), d/dθ (Q, 8), d/dln q (Q, r))``. One compiled program per structure."""
+    of ``ring_names``: ``(value (Q,), d/dθ (Q, len(θ)), d/dln q (Q, r))``. One compiled program per structure."""
     from ringfit.physics.operating import FlatRoad
 
     names = tuple(ring_names)
@@ -319,10 +335,12 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     prior = GaussianPrior.independent(entries)
     # the first pass's rows are not in units of their noise (unknown yet): the state's priors would weigh
     # arbitrarily against them, so it has the nuisances' priors only
-    prior0 = GaussianPrior.independent({k: v for k, v in entries.items() if k in (CORNER, TILT)})
+    prior0 = GaussianPrior.independent({k: v for k, v in entries.items()
+                                        if k in (CORNER, TILT, GAIN_TANGENTIAL, LINER_OFFSET)})
     nv = load.fit.values
     start = {LOAD: load.load_n, PRESSURE: float(geometry.pressure), SLIP: 0.0, TREAD: float(laws.tread_depth_ref),
-             GAIN: nv[GAIN], ANGLE_OFFSET: nv[ANGLE_OFFSET], CORNER: max(nv[CORNER], 1e-3), TILT: nv[TILT]}
+             GAIN: nv[GAIN], ANGLE_OFFSET: nv[ANGLE_OFFSET], CORNER: max(nv[CORNER], 1e-3), TILT: nv[TILT],
+             GAIN_TANGENTIAL: 1.0, LINER_OFFSET: LINER_OFFSET_PRIOR[0]}
     start.update(fixed)
     theta0 = np.array([start[n] for n in STATE_PARAMETERS])
     # first pass: each channel's rows scaled by its RMS (the tangential reading is ~5× smaller than the radial)
@@ -449,7 +467,8 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     flags = [f for f in fit.flags if "solver did not converge" in f or any(f.startswith(n) for n in STATE_NAMES)]
     nuisances = {}
     for n, key, s in ((GAIN, "gain", 1.0), (ANGLE_OFFSET, "angle_offset_deg", 180 / math.pi), (CORNER, "corner_hz", 1.0),
-                      (TILT, "tilt_gain", 1.0)):
+                      (TILT, "tilt_gain", 1.0), (GAIN_TANGENTIAL, "gain_tangential", 1.0),
+                      (LINER_OFFSET, "liner_offset_mm", 1e3)):
         nuisances[key] = {"value": float(fit.values[n]) * s, "stderr": float(fit.stderr.get(n, math.nan)) * s}
     return StateEstimate(quantities=quantities, correlation={"names": corr_names, "matrix": corr.tolist()},
                          untold=untold, status=fit.status, converged=converged, rms=rms, flags=flags,
@@ -667,7 +686,7 @@ def state_fisher(geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, state
     sigma_row = noise_ms2 * math.sqrt(2.0 / samples_per_revolution)
     slip = 0.0 if state.slip is None else float(state.slip)
     theta = np.array([float(state.load), float(state.pressure), slip, float(state.tread_depth), gain, 0.0,
-                      corner_hz, tilt])
+                      corner_hz, tilt, 1.0, LINER_OFFSET_PRIOR[0]])
     omega = float(state.omega)
     arrays = StateArrays(geometry=geometry, ring=ring, laws=laws, omega=np.array([omega]),
                          roads=flat_or_drum(drum_diameter_m, 1), response=np.ones((1, K)),
