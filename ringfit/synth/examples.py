@@ -15,7 +15,10 @@ at once and its answer checked against the truth:
   pulses), with the travelling waves it excites: ``profile``, ``cleat``;
 - ``case`` — a case folder (docs/formats.md §6) with one injected effect: ``diagnose``;
 - ``rolling`` — a case folder with rolling mode tables (20/40/60 km/h, 4 kN, co-rotating sensor):
-  ``diagnose`` (rotation + ground_contact), ``campbell``.
+  ``diagnose`` (rotation + ground_contact), ``campbell``;
+- ``state`` — continuous recordings of the independent simulator (:mod:`ringfit.synth.state`) at known
+  states (``calibration/``) and hidden ones (``blind/``), a nominal ``tyre.toml`` and the truth per
+  revolution (``truth/``): ``estimate``.
 
 Files are generated in a temporary folder inside ``DIR`` and moved into
 place only when all are ready; an existing file is replaced only with
@@ -24,6 +27,7 @@ place only when all are ready; an existing file is replaced only with
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import tempfile
@@ -33,13 +37,14 @@ import numpy as np
 
 from ringfit.errors import InputError
 
-KINDS = ("records", "case", "cleat", "profiles", "rolling", "identify")
+KINDS = ("records", "case", "cleat", "profiles", "rolling", "identify", "state")
 #: Rig formats ``records`` can also be written in (docs/formats.md §17).
 RIG_FORMATS = ("tdms", "mat", "csv")
 
 
 def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = False, progress: bool = False,
-                  fmt: str | None = None, effect: str | None = None) -> list[Path]:
+                  fmt: str | None = None, effect: str | None = None, seed: int = 0, blind: int = 6,
+                  seconds: float = 4.0) -> list[Path]:
     """Write the example ``kind`` into ``folder`` (created if missing); returns the paths written.
 
     ``fmt`` (``records`` only): also write the records as ``"tdms"``, ``"mat"``
@@ -47,6 +52,7 @@ def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = Fal
     ``effect`` (``case`` only): the effect hidden in the case folder (one of
     :data:`ringfit.synth.cases.MODAL_INJECTIONS` or ``EXTRA_INJECTIONS``: mode tables; or a profile-only
     effect of ``PROFILE_INJECTIONS`` such as ``tread_shear``: rolling profiles; default ``ground_contact``).
+    ``seed``, ``blind``, ``seconds`` (``state`` only): :func:`ringfit.synth.state.write_state_example`.
 
     **Raises** :class:`InputError` for an unknown kind, format or effect, a format or effect for
     another kind, a ``folder`` that is a file, or files that exist there already (unless ``overwrite``).
@@ -64,6 +70,13 @@ def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = Fal
     known = MODAL_INJECTIONS + EXTRA_INJECTIONS + tuple(e for e in PROFILE_INJECTIONS if e not in MODAL_INJECTIONS)
     if effect is not None and effect not in known:
         raise InputError(f"unknown effect {effect!r}; expected one of {', '.join(known)}", source="--effect")
+    if kind == "state":
+        if not (isinstance(blind, int) and 0 <= blind <= 200):
+            raise InputError(f"--blind {blind}: expected a whole number of recordings in 0 … 200", source="--blind")
+        if not (math.isfinite(seconds) and 0.5 <= seconds <= 120.0):
+            raise InputError(f"--seconds {seconds}: expected a recording length in 0.5 … 120 s", source="--seconds")
+        if not 0 <= seed < 2**32:
+            raise InputError(f"--seed {seed}: expected 0 … 2³² − 1", source="--seed")
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise InputError("exists and is not a folder; --out names the folder the example is written into",
@@ -81,6 +94,10 @@ def write_example(kind: str, folder: str | os.PathLike, *, overwrite: bool = Fal
             _records(tmp, progress, fmt)
         elif kind == "case":
             _case(tmp, progress, effect or "ground_contact")
+        elif kind == "state":
+            from ringfit.synth.state import write_state_example
+
+            write_state_example(tmp, seed=seed, blind=blind, seconds=seconds, progress=progress)
         else:
             {"cleat": _cleat, "profiles": _profiles, "rolling": _rolling, "identify": _identify}[kind](tmp, progress)
         made = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
