@@ -208,6 +208,26 @@ def state_quantities(theta, geometry, ring, laws, omega, road=None, *, ring_name
     return np.asarray(v), np.asarray(jt), np.asarray(jr)
 
 
+#: A state parameter within this share of its coordinate's range of a bound is at it (the engine's 1e-6 misses a
+#: bounded coordinate that creeps towards its bound: 7.9996 bar of 8).
+NEAR_BOUND = 1e-3
+
+
+def near_bound(theta, free) -> list:
+    """The state parameters and gain among ``free`` within :data:`NEAR_BOUND` of their range's ends (in u)."""
+    out = []
+    for n in free:
+        if n not in STATE_NAMES and n != GAIN:
+            continue
+        c = STATE_COORDS[STATE_PARAMETERS.index(n)]
+        if not (math.isfinite(c.lo) and math.isfinite(c.hi)):
+            continue
+        u, lo, hi = (c.to_u(x) for x in (float(theta[STATE_PARAMETERS.index(n)]), c.lo, c.hi))
+        if min(u - lo, hi - u) <= NEAR_BOUND * (hi - lo):
+            out.append(n)
+    return out
+
+
 def _du_dtheta(theta) -> np.ndarray:
     """dθ/du per parameter (θ for a log coordinate, its scale for a linear one)."""
     return np.array([t if c.kind == LOG else c.scale for c, t in zip(STATE_COORDS, theta)])
@@ -326,7 +346,11 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     w0 = np.concatenate([np.full(half, 1 / scale[0]), np.full(half, 1 / scale[1])])
     arrays = eqx.tree_at(lambda a: a.weight, arrays, (w0 / w0.mean())[None])
     opts = dict(max_steps=settings.max_steps, rtol=settings.rtol, atol=settings.atol)
-    first = least_squares(state_problem(arrays, settings, k_max, prior0), theta0, free, **opts)
+    # the pressure and tread depth are held at their priors' means in it: with no prior to hold them, along the
+    # load–pressure–depth ridge (§13.5) they ran to their bounds, where the bounded coordinate's slope vanishes
+    # and the second pass could not bring them back
+    free0 = tuple(n for n in free if n not in (PRESSURE, TREAD))
+    first = least_squares(state_problem(arrays, settings, k_max, prior0), theta0, free0, **opts)
     # second pass: whiten each channel's residual spectrum
     weight = channel_weights(np.asarray(first.extra["aux"])[0] - measured)
     arrays = eqx.tree_at(lambda a: a.weight, arrays, weight[None])
@@ -431,6 +455,7 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     rms = {"radial": float(np.sqrt(0.5 * np.sum(resid[:half] ** 2))),
            "tangential": float(np.sqrt(0.5 * np.sum(resid[half:] ** 2)))}
     at_bound = [n for n in fit.extra["at_bound"] if n in STATE_NAMES or n == GAIN]
+    at_bound += [n for n in near_bound(theta, free) if n not in at_bound]
     converged = bool(fit.converged and finite and not at_bound)
     flags = [f for f in fit.flags if "solver did not converge" in f or any(f.startswith(n) for n in STATE_NAMES)]
     nuisances = {}
