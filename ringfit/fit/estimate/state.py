@@ -85,6 +85,9 @@ QUANTITIES = {
 }
 #: The quantities whose correlation is reported.
 CORRELATED = ("load_n", "pressure_bar", "slip", "fx_n", "tread_depth_mm", "speed_kmh")
+#: Pairs that are one quantity in two forms (Fx = Fx(κ) through the brush): correlated by construction, never
+#: reported as "not told apart".
+ONE_QUANTITY = ({"slip", "fx_n"},)
 
 
 class StateArrays(eqx.Module):
@@ -445,7 +448,7 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
                           f"(docs/physics.md §13.4); the value is the prior's, not a measurement")
     for a in range(len(sel)):
         for b in range(a + 1, len(sel)):
-            if abs(corr[a, b]) > RIDGE_CORRELATION:
+            if abs(corr[a, b]) > RIDGE_CORRELATION and {corr_names[a], corr_names[b]} not in ONE_QUANTITY:
                 untold.append(f"{corr_names[a]} and {corr_names[b]} are not told apart (correlation "
                               f"{corr[a, b]:+.3f}): their intervals are along the ridge (marginal)")
     # fit quality per channel
