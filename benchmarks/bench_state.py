@@ -73,6 +73,8 @@ def parse_args(argv=None):
                    help="the tyre file the estimate reads (default: the example's nominal tyre.toml)")
     p.add_argument("--hold", type=bc.choices_list(("pressure", "tread"), "quantities"), default=[],
                    help="hold these at the recording's true mean (a TPMS, a known wear): pressure,tread")
+    p.add_argument("--examples", type=Path, default=None,
+                   help="keep the simulated examples in this folder (seedS-bB-Ts/) and reuse them on the next run")
     p.add_argument("--fisher", action="store_true", help="print the Fisher table too")
     p.add_argument("--fisher-only", action="store_true", help="print only the Fisher table")
     p.add_argument("--steps", type=bc.count("1 or 2", hi=2), default=1,
@@ -200,11 +202,12 @@ def blind():
           + (f"; held at the truth: {', '.join(ARGS.hold)}" if ARGS.hold else ""))
     with tempfile.TemporaryDirectory() as tmp:
         for seed in ARGS.seeds:
-            folder = Path(tmp) / f"seed{seed}"
-            folder.mkdir()
-            c = time.process_time()
-            write_state_example(folder, seed=seed, blind=ARGS.blind, seconds=ARGS.seconds)
-            sim_cpu += time.process_time() - c
+            folder = (ARGS.examples or Path(tmp)) / f"seed{seed}-b{ARGS.blind}-{ARGS.seconds:g}s"
+            if not (folder / "README.md").is_file():  # written in full (its README comes last)
+                folder.mkdir(parents=True, exist_ok=True)
+                c = time.process_time()
+                write_state_example(folder, seed=seed, blind=ARGS.blind, seconds=ARGS.seconds, overwrite=True)
+                sim_cpu += time.process_time() - c
             tyre = read_tyre(folder / ("tyre.toml" if ARGS.tyre == "nominal" else "truth/tyre.truth.toml"))
             for path in sorted((folder / "blind").glob("*.records.npz")):
                 name = path.name.removesuffix(".records.npz")
