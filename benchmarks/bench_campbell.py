@@ -4,7 +4,7 @@ Prints figures against the issue's targets; run with ``python benchmarks/bench_c
 (``--quick``: 3 repeats, a smoke run). Timings are warm (after compilation), best of repeated
 calls (robust to other processes sharing the cores), wall and CPU (process time) side by side,
 ratios of CPU times, the load average at the start and the end, BLAS limited to one thread as the library does
-for these small eigenproblems (``ringfit.targets.ssi.small_matrix_threads``).
+for these small eigenproblems (``ringfit._threads.small_matrix_threads``).
 
 1. ``campbell_modes``: 17 speeds (0–80 km/h) × the Hill basis K = 32 (modes up to
    n ≈ 30, of which n ≤ 15 are kept), Table 9 tyre, 4 kN, 1.2192 m drum — the
@@ -34,7 +34,7 @@ from ringfit.params import table9
 from ringfit.physics.contact import as_traced
 from ringfit.physics.operating import Drum
 from ringfit.physics.rolling_modes import DEFAULT_HARMONICS, campbell_modes
-from ringfit.targets.ssi import small_matrix_threads
+from ringfit._threads import small_matrix_threads
 
 GEOMETRY, RING = table9()
 SPEEDS = jnp.arange(0.0, 80.0 + 1e-9, 5.0)

@@ -268,7 +268,7 @@ if __name__ == "__main__":
     if ARGS.merge:
         merge(ARGS.merge)
     elif ARGS.worker is not None:
-        from ringfit.targets.ssi import small_matrix_threads
+        from ringfit._threads import small_matrix_threads
 
         with small_matrix_threads():  # the synthetic truth's contact solves too (see ringfit.fit.identify.identify)
             one_case(ARGS.worker, ARGS.without_worker, ARGS.timed)

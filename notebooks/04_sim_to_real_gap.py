@@ -61,7 +61,7 @@ diag.write(out / "case.diagnosis.json", overwrite=True)
 # %%
 import math
 
-from ringfit.gap.modal import contact_patch
+from ringfit.gap.modal_conditions import contact_patch
 from ringfit.params import table9
 from ringfit.physics.loaded import loaded_natural_frequencies
 from ringfit.physics.wheel import Wheel, loaded_wheel_angular_frequencies

@@ -21,18 +21,21 @@ equations in docs/physics.md, files in docs/formats.md):
 (``ringfit diagnose``):
     read_case, diagnose
 
+**Identify once** — one ring from everything measured of a tyre, a case folder
+(``ringfit identify``):
+    read_identify_folder, identify
+
 **State estimation** — load and contact patch from the sensor
 (``ringfit estimate``):
     estimate_load
 
 **Everywhere:**
-    InputError, enable_compilation_cache
+    RingParams, TyreGeometry, InputError, enable_compilation_cache
 
 Everything else stays importable from the module that defines it, e.g. the
 fitting engine under every fit (``ringfit.fit.engine``: ``least_squares``,
 ``Problem``, ``Coordinate``; ``ringfit.fit.posterior``: ``sample``,
-``Posterior``), parameters and geometry (``ringfit.params``: ``RingParams``,
-``TyreGeometry``), readers and writers (``ringfit.io``), the rolling model
+``Posterior``), the source study's tyre (``ringfit.params.table9``), readers and writers (``ringfit.io``), the rolling model
 (``ringfit.physics``), the gap diagnosis (``ringfit.gap``) and the Dask batch
 machinery (``ringfit.batch``); the documentation site's API reference lists
 every module.
@@ -80,9 +83,14 @@ _EXPORTS = {
     # sim-to-real gap
     "read_case": "ringfit.gap.case",
     "diagnose": "ringfit.gap.diagnosis",
+    # identify once
+    "read_identify_folder": "ringfit.fit.identify",
+    "identify": "ringfit.fit.identify",
     # state estimation
     "estimate_load": "ringfit.fit.estimate.load",
     # everywhere
+    "RingParams": "ringfit.params",
+    "TyreGeometry": "ringfit.params",
     "InputError": "ringfit.errors",
     "enable_compilation_cache": "ringfit._cache",
 }
@@ -125,8 +133,6 @@ _ELSEWHERE = {
     "write_records": "ringfit.io.records",
     "Tyre": "ringfit.io.tyre",
     "write_tyre": "ringfit.io.tyre",
-    "RingParams": "ringfit.params",
-    "TyreGeometry": "ringfit.params",
     "table9": "ringfit.params",
     "ContactSolver": "ringfit.physics.contact",
     "RollingSolution": "ringfit.physics.contact",

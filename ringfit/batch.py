@@ -66,6 +66,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from ringfit._threads import limit_threads
+
 #: XLA flag given to every LocalCluster worker process (on top of Dask's own
 #: ``OMP/MKL/OPENBLAS_NUM_THREADS=1``): XLA's CPU runtime on one thread.
 WORKER_XLA_FLAG = "--xla_cpu_multi_thread_eigen=false"
@@ -202,19 +204,6 @@ class _JaxCompiles:
 
         jax.monitoring.register_event_duration_secs_listener(listener)
         cls.installed = True
-
-
-def limit_threads() -> None:
-    """One BLAS/OpenMP thread in this process (threadpoolctl), once."""
-    if getattr(limit_threads, "_done", False):
-        return
-    try:
-        from threadpoolctl import threadpool_limits
-
-        limit_threads._limiter = threadpool_limits(limits=1)  # kept: the limit holds while referenced
-    except Exception:  # noqa: BLE001 - a missing or odd BLAS must not stop the worker
-        pass
-    limit_threads._done = True
 
 
 def _status_mb(field_name: str) -> float | None:

@@ -21,7 +21,6 @@ from ringfit._precision import enable_x64
 enable_x64()  # before JAX loads: float64 even when ``ringfit`` itself is shadowed (ringfit._precision)
 
 import equinox as eqx
-import jax.numpy as jnp
 
 BAR = 1.0e5  # Pa per bar
 
@@ -171,11 +170,3 @@ def table9() -> tuple[TyreGeometry, RingParams]:
     geometry = TyreGeometry(radius=float(t["radius_m"]), width=float(t["width_m"]),
                             pressure=float(t["pressure_bar"]) * BAR, name=str(t.get("name", "")))
     return geometry, RingParams(**{field_of[k]: float(v) for k, v in r.items()})
-
-
-def as_float64(x):
-    """``jnp.asarray(x, float64)``; raises if x64 is not enabled (see ringfit/__init__)."""
-    a = jnp.asarray(x, dtype=jnp.float64)
-    if a.dtype != jnp.float64:  # pragma: no cover - guarded by ringfit/__init__
-        raise TypeError("ringfit needs float64: import ringfit before creating JAX arrays")
-    return a

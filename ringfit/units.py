@@ -4,3 +4,10 @@ from __future__ import annotations
 
 #: m/s per km/h.
 KMH = 1.0 / 3.6
+
+#: m/s² per g, the unit (standard gravity, exact by definition): converting readings recorded in g.
+G_UNIT = 9.80665
+
+#: The gravitational acceleration of the model [m/s²] (docs/physics.md §5 layer 3: the rotating gravity the
+#: sensor reads) and of the plots' "g" axes; the 0.03 % from G_UNIT is far below any sensor's calibration.
+GRAVITY = 9.81

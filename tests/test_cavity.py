@@ -83,7 +83,7 @@ def test_cavity_mode_effect_uses_the_direction_lines_and_respects_no_air():
     import jax.numpy as jnp
 
     from ringfit.gap import effects as lib
-    from ringfit.gap.modal import ModalRows
+    from ringfit.gap.modal_rows import ModalRows
     from ringfit.physics.natural import natural_angular_frequencies
 
     g, r = table9()

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ringfit.gap import effects as lib
-from ringfit.gap.modal import ModalRows
+from ringfit.gap.modal_rows import ModalRows
 from ringfit.params import table9
 
 

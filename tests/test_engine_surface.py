@@ -85,3 +85,13 @@ def test_log_probability_is_the_gaussian_density_and_respects_bounds():
         expect = -0.5 * (np.sum(_rows(th, y) ** 2) / 4.0 + ((row[0] - math.log(3.0)) / 0.5) ** 2)
         np.testing.assert_allclose(value, expect, rtol=1e-12)
     assert got[2] == -np.inf  # k = 200 is beyond its bound of 100
+
+
+def test_an_unknown_sigma_mode_is_refused_when_the_problem_is_made():
+    """``Problem(sigma=…)`` is one of ``SigmaMode``; a misspelt mode used to behave silently as ``"fixed"``."""
+    import pytest
+
+    from ringfit.fit.engine import Coordinate, Problem
+
+    with pytest.raises(ValueError, match="sigma='estimte'"):
+        Problem(model=None, data=None, coords=(Coordinate("a", "log"),), sigma="estimte")

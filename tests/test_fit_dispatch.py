@@ -77,7 +77,7 @@ def test_marquardt_scaling_makes_the_fit_independent_of_a_parameters_unit():
 @pytest.fixture
 def unscaled(monkeypatch):
     """Levenberg–Marquardt without Marquardt's scaling (d = 1): the control of the test above."""
-    monkeypatch.setattr(engine._LevenbergMarquardt, "scaled", False)
+    monkeypatch.setattr(engine.SOLVERS["levenberg_marquardt"], "scaled", False)
     engine._solve.clear_cache()
     yield
     engine._solve.clear_cache()

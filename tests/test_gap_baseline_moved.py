@@ -15,7 +15,7 @@ from scipy import optimize, stats
 
 import ringfit  # noqa: F401  (x64)
 from ringfit.gap.effects.base import Effect, Parameter
-from ringfit.gap.problem import GapProblem
+from ringfit.gap.problem import GapProblem, ProblemMeta
 from ringfit.gap.ranking import baseline_movement, fit_chain
 from ringfit.gap.screening import nonlinear_screen, objective, reference_start, screen
 
@@ -27,7 +27,7 @@ def _problem(y, sigma, x, effects=(), prior_mean=(1.0,), prior_cov=((0.05**2,),)
         scale=np.ones(len(y)), folds=np.arange(len(y)) % 2, fold_kind="toy", labels={"group": np.full(len(y), "a")},
         base=tuple(f"p{i}" for i in range(nb)), base_values=np.asarray(prior_mean, float),
         base_prior_sd=np.sqrt(np.diag(np.asarray(prior_cov, float))), effects=tuple(effects), data=jnp.asarray(x),
-        noise_method="toy", baseline_model="toy", meta={"prior_guarded": tuple(range(nb)), "tangents": 3},
+        noise_method="toy", baseline_model="toy", meta=ProblemMeta(prior_guarded=tuple(range(nb)), tangents=3),
         base_prior_mean=np.asarray(prior_mean, float), base_prior_cov=np.asarray(prior_cov, float),
         predictor=predictor)
 
@@ -54,7 +54,7 @@ def test_movement_against_a_correlated_prior():
     small = baseline_movement(p, SimpleNamespace(theta=mean * np.exp([0.1, -0.1, 0.5])), fit)
     assert not small["prior_distance"]["outside"]
     # no prior and the reference is the fit itself: nothing to compare with
-    p.meta["prior_guarded"] = ()
+    p.meta.prior_guarded = ()
     assert baseline_movement(p, fit, fit) is None
 
 

@@ -138,7 +138,7 @@ def test_p_value_is_uniform_under_the_null(tmp_path):
         lins.append(linearise(prob, fit))
     assert len(lins) >= 4
     rng = np.random.default_rng(5)
-    ref = np.asarray(prob.meta["reference_mask"], dtype=bool)
+    ref = np.asarray(prob.meta.reference_mask, dtype=bool)
 
     def draw(n):
         noise = prob.sigma[None, :] * rng.standard_normal((n, prob.m))

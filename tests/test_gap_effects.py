@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ringfit.gap import effects as lib
-from ringfit.gap.modal import ModalRows
+from ringfit.gap.modal_rows import ModalRows
 from ringfit.params import table9
 from ringfit.physics.natural import (extensible_natural_frequencies, natural_angular_frequencies,
                                      rotating_natural_frequencies)

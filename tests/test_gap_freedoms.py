@@ -158,7 +158,7 @@ def test_labels_kept_agree_with_the_matching_and_the_permutation_test_reads_them
     out = {}
     for name in ("c", "w", "r"):
         prob = build_problems(read_case(tmp_path / name), resolve_effects("ground_contact,rotation"))[0]
-        counts = prob.meta["label_counts"]
+        counts = prob.meta.label_counts
         perm = label_permutation_test(prob, draws=200)
         assert perm["observed_kept"] == sum(v["kept"] for v in counts.values())
         assert perm["labelled_rows"] == sum(v["labelled"] for v in counts.values())

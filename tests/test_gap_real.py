@@ -56,7 +56,7 @@ def test_b_leave_modes_out_on_the_real_free_tyre(tmp_path):
 def _real_looking_loaded_table(folder, seed=7):
     """The contact model's loaded modes of the real free fit, degraded as real tables are."""
     from ringfit.fit.least_squares import fit_natural_frequencies
-    from ringfit.gap.modal import contact_patch
+    from ringfit.gap.modal_conditions import contact_patch
     from ringfit.physics.loaded import loaded_natural_frequencies
 
     tyre = read_tyre(folder / "tyre.toml")

@@ -124,7 +124,7 @@ def test_joint_prediction_is_the_campbell_line_and_the_null_is_eq18(contact_case
     ring = case.tyre.ring.replace(**{k: c["baseline"]["reference_fit"]["values"][k] for k in ("rho_a", "ei", "kw", "kv")})
     theta = prob.null_theta()
     null = predict(prob, theta)
-    test = ~prob.meta["reference_mask"]
+    test = ~prob.meta.reference_mask
     n = np.asarray(prob.data.rows.n)[: prob.m]
     np.testing.assert_allclose(null[test], np.asarray(natural_frequencies(ring, case.tyre.geometry, n[test])),
                                rtol=1e-6)
@@ -187,7 +187,7 @@ def test_the_rows_choose_their_model_structure_on_many_seeds(tmp_path):
             folder = tmp_path / f"{seed}-{int(contact)}"
             make_rolling_case(folder, contact=contact, seed=seed)
             prob = build_problems(read_case(folder), resolve_effects(EFFECTS))[0]
-            st = prob.meta["rolling_structure"]
+            st = prob.meta.rolling_structure
             want = "rolling_loaded" if contact else "free_spinning"
             if st["chosen"] != want:
                 wrong.append((seed, contact, st["cost"]))

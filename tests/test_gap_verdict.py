@@ -151,7 +151,7 @@ def test_a_computed_variant_replaces_the_fitted_one_only_when_the_heldout_data_c
     m = 40
     y = np.zeros(m)
     problem = SimpleNamespace(y=y, standardised=lambda r, heldout=False: np.asarray(r),
-                              sigma=np.ones(m), meta={})
+                              sigma=np.ones(m))
     ss_b = 1000.0
 
     def fit_with(ss):  # a converged fit whose held-out residual has sum of squares ss

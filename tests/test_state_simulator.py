@@ -37,7 +37,7 @@ def test_the_simulator_imports_nothing_of_the_model():
     names = {a.name for node in ast.walk(tree) if isinstance(node, ast.Import) for a in node.names}
     names |= {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
     ours = {n for n in names if n.startswith("ringfit")}
-    assert ours <= {"ringfit.io.tyre", "ringfit.io.continuous", "ringfit.io.modes", "ringfit.params"}, ours
+    assert ours <= {"ringfit.io.tyre", "ringfit.io.continuous", "ringfit.io.modes", "ringfit.params", "ringfit.errors"}, ours
     assert not any(n.startswith(("jax", "equinox")) for n in names)
 
 

@@ -10,7 +10,8 @@ import scipy.linalg
 
 from ringfit.errors import InputError
 from ringfit.gap import effects as lib
-from ringfit.gap.modal import ModalRows, wheel_row
+from ringfit.gap.modal_conditions import wheel_row
+from ringfit.gap.modal_rows import ModalRows
 from ringfit.io.modes import wheel_of
 from ringfit.params import table9
 from ringfit.physics import wheel as W

@@ -603,7 +603,7 @@ def identify(inputs: IdentifyInputs, *, solver: ContactSolver = ContactSolver(),
     and a threaded LAPACK under them only synchronises — on a busy machine it was seen to deadlock
     (two XLA threads waiting in ``dgetrf``).
     """
-    from ringfit.targets.ssi import small_matrix_threads
+    from ringfit._threads import small_matrix_threads
 
     with small_matrix_threads():
         return _identify(inputs, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, progress=progress)

@@ -35,6 +35,7 @@ import threading
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -533,6 +534,8 @@ def predictive_check(result, u_draws: np.ndarray, blocks: dict | None = None, ro
 #: The samplers of :func:`sample`: the compiled stretch move (:mod:`ringfit.fit.ensemble`, the default) and
 #: emcee's (the reference; same algorithm, driven from Python one step at a time).
 SAMPLERS = ("compiled", "emcee")
+#: A sampler name (:data:`SAMPLERS`).
+Sampler = Literal["compiled", "emcee"]
 #: Independent ensembles the compiled sampler runs side by side by default.
 DEFAULT_CHAINS = 1
 
@@ -642,7 +645,7 @@ def sample_posterior(
     progress: bool = True,
     lsq=None,
     data_only=None,
-    sampler: str = "compiled",
+    sampler: Sampler = "compiled",
     chains: int = DEFAULT_CHAINS,
 ) -> Posterior:
     """Posterior of ring parameters given measured natural frequencies (eq. 18, docs/physics.md §2.1).

@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
 
 from ringfit.errors import InputError
 
@@ -92,17 +91,3 @@ def resolve_priors(prior, free: tuple[str, ...]) -> dict[str, LogNormalPrior]:
         raise InputError(f"prior = {prior!r}; expected 'none', 'physical' or a dict")
     return {k: v for k, v in chosen.items() if k in free}
 
-
-def prior_arrays(priors: dict[str, LogNormalPrior], free: tuple[str, ...]):
-    """``(mu, sigma_ln, mask)`` arrays of shape ``(k,)`` in solver order (mask 0 = no prior)."""
-    mu = np.array([priors[k].mu if k in priors else 0.0 for k in free])
-    sd = np.array([priors[k].sigma_ln if k in priors else 1.0 for k in free])
-    mask = np.array([1.0 if k in priors else 0.0 for k in free])
-    return mu, sd, mask
-
-
-def log_bounds(free: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper bounds of ``log θ`` for the free parameters, shape ``(k,)`` each."""
-    lo = np.log([BOUNDS[k][0] for k in free])
-    hi = np.log([BOUNDS[k][1] for k in free])
-    return lo, hi

@@ -234,7 +234,7 @@ def parametric_null(problem: GapProblem, current, fits: dict, chain: tuple, elem
                    f"session (runs in speed order) and a per-run angle jitter of {ANGLE_JITTER_DEG:g} deg"
                    if nuisances else ""))
     else:
-        ref = problem.meta.get("reference_mask")
+        ref = problem.meta.reference_mask
         redraw = np.ones(m, dtype=bool) if ref is None else ~np.asarray(ref, dtype=bool)
         ystar = np.where(redraw[None, :], pred[None, :] + problem.sigma[None, :] * rng.standard_normal((draws, m)),
                          y[None, :])
@@ -288,7 +288,7 @@ def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, dr
     ``frequencies``: optional ``f(rows) -> (draws, len(rows))`` giving the drawn frequencies of a group of rows
     instead of uniform draws (a test feeds the measured ones back: the null's statistic must then equal the
     observed one)."""
-    from ringfit.gap.modal import line_problem, mixture_sigma
+    from ringfit.gap.modal_lines import line_problem, mixture_sigma
 
     setup = line_problem(problem)
     if setup is None:
@@ -300,13 +300,13 @@ def random_line_null(problem: GapProblem, fits: dict, chain: tuple, elements, dr
     sig = problem.sigma_heldout if problem.sigma_heldout is not None else problem.sigma
     base_lin = linearise(lp, fits[()])
     # draws: matched rows uniform over their table's span, labelled test rows from the baseline
-    ref = np.asarray(problem.meta.get("reference_mask", np.zeros(m, dtype=bool)), dtype=bool)
+    ref = np.asarray((problem.meta.reference_mask if problem.meta.reference_mask is not None else np.zeros(m, dtype=bool)), dtype=bool)
     ystar = np.where(ref[None, :], y[None, :],
                      base_lin.pred[None, :m] + problem.sigma[None, :] * rng.standard_normal((draws, m)))
     idx = np.broadcast_to(np.arange(m), (draws, m)).copy()
     s_meas = np.broadcast_to(problem.sigma, (draws, m)).copy()
     s_ho = np.broadcast_to(sig, (draws, m)).copy()
-    base_sigma = problem.meta.get("sigma_matched", problem.sigma)
+    base_sigma = (problem.meta.sigma_matched if problem.meta.sigma_matched is not None else problem.sigma)
     loaded_draws = None
     overridden = np.zeros(draws, dtype=int)
     labelled = 0
@@ -377,7 +377,7 @@ def label_permutation_test(problem: GapProblem, draws: int = DRAWS, seed: int = 
     here: the baseline reads the labels too, so shuffled labels make the baseline worse rather than the candidates
     better; and the candidates' own held-out fit favours whichever assignment takes the nearest lines, which shuffled
     labels, all overridden, do.) ``None`` where no rolling table's rows carry labels the assignment may override."""
-    from ringfit.gap.modal import line_problem
+    from ringfit.gap.modal_lines import line_problem
 
     setup = line_problem(problem)
     if setup is None:

@@ -82,7 +82,8 @@ class TableCondition:
     source_speed: str
 
 
-def _group_key(contact: bool, load_n: float, drum: float | None):
+def diagram_group_key(contact: bool, load_n: float, drum: float | None):
+    """The key under which tables share one Campbell diagram: contact, the load when in contact, the drum."""
     return (bool(contact), round(float(load_n), 6) if contact else 0.0, drum)
 
 
@@ -109,7 +110,7 @@ def table_conditions(tables, ring, geometry, *, load_n: float | None = None, dru
         if contact and not (load and load > 0):
             raise InputError(f"{state} table without 'load_n' in its sidecar; give the load (--load)", source=src)
         load = float(load) if contact else 0.0
-        key = _group_key(contact, load, drum_diameter_m)
+        key = diagram_group_key(contact, load, drum_diameter_m)
         if key not in radii:
             radii[key] = _rolling_radius(ring, geometry, load, drum_diameter_m, contact)
         r_e = radii[key]
@@ -149,7 +150,10 @@ def _rolling_radius(ring, geometry, load, drum, contact) -> float:
 
 # ----------------------------------------------------------------------------------------------- candidates
 @dataclass
-class _Candidate:
+class Candidate:
+    """One model line a measured row can be matched to: a branch of the diagram at one speed, in the fixed
+    frame or as one sensor line ω + kΩ (docs/physics.md §3.7), with its order, direction and line weight."""
+
     branch: int  # 0-based
     k: int | None  # sensor line harmonic (None: fixed frame)
     hz: float
@@ -160,18 +164,20 @@ class _Candidate:
     weight: float  # line weight relative to the mode's strongest line (1 in the fixed frame)
 
     def describe(self, frame: str) -> str:
+        """One line for reports: the branch, its order and direction, the line and its frequency."""
         qual = self.direction if self.direction != "standing" else (f"standing, {self.tag}" if self.tag else "standing")
         if frame == "fixed" or self.k is None:
             return f"branch {self.branch + 1} (n={self.n} {qual}) at {self.hz:.1f} Hz"
         return (f"the ω{self.k:+d}Ω line of branch {self.branch + 1} (n={self.n} {qual}) at {self.hz:.1f} Hz")
 
 
-def _candidates(d: CampbellDiagram, s: int, frame: str) -> list[_Candidate]:
+def diagram_candidates(d: CampbellDiagram, s: int, frame: str) -> list[Candidate]:
+    """Every :class:`Candidate` of diagram ``d`` at its speed index ``s`` in ``frame`` (``fixed``/``rotating``)."""
     out = []
     direction, tag = d.direction(), d.tag()
     for b in range(d.branches):
         if frame == "fixed":
-            out.append(_Candidate(b, None, float(d.fixed_hz[s, b]), int(d.order[s, b]), direction[s, b],
+            out.append(Candidate(b, None, float(d.fixed_hz[s, b]), int(d.order[s, b]), direction[s, b],
                                   float(d.symmetry[s, b]), tag[s, b], 1.0))
             continue
         w = d.line_weight[s, b]
@@ -185,7 +191,7 @@ def _candidates(d: CampbellDiagram, s: int, frame: str) -> list[_Candidate]:
             # every line of the branch is a candidate and carries the branch's labels: its n is the mode's
             # dominant order (the line ω + 2Ω of an n = 1 mode is still that n = 1 mode); a row labelled with
             # the line's own harmonic |k| (what a shape seen by the co-rotating sensor gives) agrees too
-            out.append(_Candidate(b, k, abs(line), int(d.order[s, b]), sense, float(d.symmetry[s, b]), tag[s, b],
+            out.append(Candidate(b, k, abs(line), int(d.order[s, b]), sense, float(d.symmetry[s, b]), tag[s, b],
                                   float(w[j] / top)))
     return out
 
@@ -206,7 +212,8 @@ def matching_cost(f, std, hz, line_cost, pen, tol: float = MODEL_TOLERANCE) -> n
     return z * z + line_cost + pen
 
 
-def _row_labels(table: ModeTable, i: int) -> dict:
+def row_labels(table: ModeTable, i: int) -> dict:
+    """The labels row ``i`` of a mode table states (order n, tag, branch) as the matching's penalties read them."""
     n = int(table.n[i])
     tag = table.tag[i]
     if n < 0 and tag in ("vert", "hort"):
@@ -214,13 +221,13 @@ def _row_labels(table: ModeTable, i: int) -> dict:
     return {"n": n, "tag": tag, "branch": table.branch[i]}
 
 
-def _n_agrees(n: int, c: _Candidate) -> bool:
+def _n_agrees(n: int, c: Candidate) -> bool:
     """A row's n agrees with a candidate naming its mode's dominant order, or, for a sensor line ω + kΩ,
     the line's own harmonic |k| (the winding a co-rotating measurement sees at that line)."""
     return n == c.n or (c.k is not None and n == abs(c.k))
 
 
-def _label_penalties(lab: dict, c: _Candidate) -> tuple[float, list[str]]:
+def label_penalties(lab: dict, c: Candidate) -> tuple[float, list[str]]:
     """Penalty and the list of contradicted labels."""
     pen, bad = 0.0, []
     if lab["n"] >= 0 and not _n_agrees(lab["n"], c):
@@ -241,10 +248,10 @@ def _label_penalties(lab: dict, c: _Candidate) -> tuple[float, list[str]]:
     return pen, bad
 
 
-def _score(f: float, std: float, lab: dict, c: _Candidate, tol: float, use_labels: bool = True):
+def _score(f: float, std: float, lab: dict, c: Candidate, tol: float, use_labels: bool = True):
     sig = _sigma(c.hz, std, tol)
     z = (f - c.hz) / sig
-    pen, bad = _label_penalties(lab, c) if use_labels else (0.0, [])
+    pen, bad = label_penalties(lab, c) if use_labels else (0.0, [])
     line = -2.0 * math.log(max(c.weight, 1e-12))
     return z * z + pen + line, z, sig, bad
 
@@ -337,7 +344,7 @@ def match_tables(
     conds = table_conditions(tables, ring, geometry, load_n=load_n, drum_diameter_m=drum_diameter_m)
     groups: dict = {}
     for ti, c in enumerate(conds):
-        groups.setdefault(_group_key(c.contact, c.load_n, drum_diameter_m), []).append(ti)
+        groups.setdefault(diagram_group_key(c.contact, c.load_n, drum_diameter_m), []).append(ti)
     diagrams = {}
     for key, idx in groups.items():
         top = max(conds[i].speed_kmh for i in idx)
@@ -360,14 +367,14 @@ def _match_rows(tables, conds, diagrams, drum_diameter_m, tol):
     ctx: list[tuple] = []  # (diagram key, speed index, table, row index, labels)
     for ti, t in enumerate(tables):
         c = conds[ti]
-        key = _group_key(c.contact, c.load_n, drum_diameter_m)
+        key = diagram_group_key(c.contact, c.load_n, drum_diameter_m)
         d = diagrams[key]
         s = int(np.argmin(np.abs(d.speed_kmh - round(c.speed_kmh, 9))))
         if not d.ok[s]:
             raise InputError(f"the model did not converge at {c.speed_kmh:.4g} km/h ({c.load_n:g} N)", source=t.source)
-        cands = _candidates(d, s, c.frame)
-        labs = [_row_labels(t, i) for i in range(len(t))]
-        assign = _assign(t, labs, cands, tol)
+        cands = diagram_candidates(d, s, c.frame)
+        labs = [row_labels(t, i) for i in range(len(t))]
+        assign = assign_rows(t, labs, cands, tol)
         for i in range(len(t)):
             row = _row_record(t, i, c, d, s, labs[i], assign[i], tol)
             rows.append(row)
@@ -401,7 +408,7 @@ def data_tolerance(rows) -> tuple[float, str]:
                  "(1.4826·median |relative error|, less the rows' freq_std_hz)")
 
 
-def _assign(table, labs, cands, tol):
+def assign_rows(table, labs, cands, tol):
     """One candidate per row (Hungarian on the cost), or None."""
     from scipy.optimize import linear_sum_assignment
 
@@ -465,11 +472,11 @@ def _best(f, std, lab, cands, tol, *, use_labels=True, require=None):
 def _alternatives(f, std, lab, d, s, frame, tol) -> str:
     """Test a frame mix-up, a line of another mode and a different n; a clause for the first that explains the row."""
     other = "fixed" if frame == "rotating" else "rotating"
-    oc = _candidates(d, s, other)
+    oc = diagram_candidates(d, s, other)
     b = _best(f, std, lab, oc, tol)
     if b is not None and abs(b[2]) <= EXPLAINED_Z and not b[3]:
         return f"a frame mix-up explains it: seen in the {other} frame it is {b[1].describe(other)} (z = {b[2]:+.1f})"
-    cands = _candidates(d, s, frame)
+    cands = diagram_candidates(d, s, frame)
     if frame == "rotating":
         weak = _best(f, std, lab, cands, tol, require=lambda c: c.weight < 0.999)
         if weak is not None and abs(weak[2]) <= EXPLAINED_Z and not weak[3]:
@@ -499,7 +506,7 @@ def _explain(rows, ctx, diagrams, tol):
             rec["note"] = (f"matched to {cand.describe(c.frame)}: error {rec['error_hz']:+.2f} Hz "
                            f"({rec['error_pct']:+.1f} %, z = {rec['z']:+.1f}).")
         elif rec["status"] == "label_conflict":
-            near = [x for x in _candidates(d, s, c.frame) if abs((f - x.hz) / _sigma(x.hz, std, tol)) <= EXPLAINED_Z]
+            near = [x for x in diagram_candidates(d, s, c.frame) if abs((f - x.hz) / _sigma(x.hz, std, tol)) <= EXPLAINED_Z]
             what = ", ".join(sorted({x.describe(c.frame).split(" at ")[0] for x in near})[:4])
             bad = rec["label_conflicts"].split(",")
             conflict = " and ".join(bad) + (" labels contradict" if len(bad) > 1 else " label contradicts")
@@ -571,7 +578,7 @@ def _pair_consistent(ra, rb, ca, cb, diagrams, tol):
     fa, fb = ra["freq_hz"], rb["freq_hz"]
     stda, stdb = float(ca[2].freq_std_hz[ca[3]]), float(cb[2].freq_std_hz[cb[3]])
     through = []
-    for c in _candidates(d, sa, frame):
+    for c in diagram_candidates(d, sa, frame):
         if abs((fa - c.hz) / _sigma(c.hz, stda, tol)) > EXPLAINED_Z:
             continue
         follow = _follow(d, c, sb, frame)
@@ -715,5 +722,5 @@ __all__ = [
     "DEFAULT_N_MAX", "MODEL_TOLERANCE", "MIN_TOLERANCE", "data_tolerance", "EXPLAINED_Z", "LABEL_PENALTY", "CampbellDiagram", "campbell_diagram",
     "track_branches", "TableCondition", "table_conditions", "CampbellMatch", "match_tables", "MATCH_COLUMNS",
     "CAMPBELL_COLUMNS", "match_rows_table", "resolution_flags", "label_identified_modes", "compare_with_ring",
-    "frame_name",
+    "frame_name", "Candidate", "diagram_candidates", "diagram_group_key", "row_labels", "label_penalties", "assign_rows",
 ]

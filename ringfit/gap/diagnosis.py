@@ -153,7 +153,7 @@ def _candidate_entry(problem: GapProblem, element: str, fit: FitResult, current:
         effect = next(e for e in problem.effects if e.name == name)
         partners |= set(effect.baseline_partners)
         computed = piece.endswith(COMPUTED)
-        cond_sd = problem.meta.get("condition_sd", {}).get(name, {})
+        cond_sd = problem.meta.condition_sd.get(name, {})
         for p, i in zip(problem.effect_params(effect), range(sl.start, sl.stop)):
             v = fit.theta[i]
             se = float(cond_sd.get(p.name, 0.0)) if computed else fit.stderr[names[i]]
@@ -168,7 +168,7 @@ def _candidate_entry(problem: GapProblem, element: str, fit: FitResult, current:
                            **_physical(problem, name, p.name, v, se)}
     partners = tuple(sorted(partners))
     d = drift(problem, fit, reference)
-    guarded = set(problem.meta.get("prior_guarded", ()))
+    guarded = set(problem.meta.prior_guarded)
     d2, kp = prior_distance(problem, fit.theta, partners)
     d2_ref, _ = prior_distance(problem, reference.theta, partners)
     ref_drift = reference_drift(problem, fit, reference)
@@ -176,8 +176,8 @@ def _candidate_entry(problem: GapProblem, element: str, fit: FitResult, current:
         "effect": effect_of(element),
         "element": element,
         "variant": _variant(element),
-        **({"condition": problem.meta.get("conditions", {})} if _variant(element) == "computed"
-           and problem.meta.get("conditions") else {}),
+        **({"condition": problem.meta.conditions} if _variant(element) == "computed"
+           and problem.meta.conditions else {}),
         "rms": _r(rms_c), "heldout_rms": _r(hrms_c),
         "shrink_pct": _r(shrink(problem, rb, rc), 2),
         "heldout_shrink_pct": _r(shrink(problem, hb, hc, heldout=True), 2),
@@ -237,13 +237,13 @@ def _physical(problem: GapProblem, effect: str, param: str, value: float, se: fl
     """An effect parameter in physical units per table (docs/formats.md §5 ``physical``): the contact patch's
     half-angle [deg] and length [mm] for ``ground_contact.patch_scale``, the wheel speed Ω [rad/s] the modes
     see for ``rotation.speed_gain``; ``{}`` for other parameters."""
-    tables = problem.meta.get("table_names")
+    tables = problem.meta.table_names
     if not tables:
         return {}
     if (effect, param) == ("ground_contact", "patch_scale"):
-        radius = problem.meta.get("outer_radius_m", math.nan)
+        radius = problem.meta.outer_radius_m
         out = {}
-        for t, (a, _) in zip(tables, problem.meta.get("patches", ())):
+        for t, (a, _) in zip(tables, problem.meta.patches):
             if a > 0:
                 ang = value * a
                 out[t] = {"half_angle_deg": _r(math.degrees(ang), 3), "half_angle_sd_deg": _r(math.degrees(se * a), 3),
@@ -251,7 +251,7 @@ def _physical(problem: GapProblem, effect: str, param: str, value: float, se: fl
         return {"physical": out} if out else {}
     if (effect, param) == ("rotation", "speed_gain"):
         out = {t: {"omega_rad_s": _r(value * w, 4), "omega_sd_rad_s": _r(se * w, 4)}
-               for t, w in zip(tables, problem.meta.get("spins", ())) if w > 0}
+               for t, w in zip(tables, problem.meta.spins) if w > 0}
         return {"physical": out} if out else {}
     return {}
 
@@ -259,7 +259,7 @@ def _physical(problem: GapProblem, effect: str, param: str, value: float, se: fl
 def _screened_entry(problem, element, current, current_ho, scores, on_top_of, reason=None):
     y = problem.y
     r, h = rms(problem, y - current.extra["pred"]), rms(problem, y - current_ho)
-    min_frac = float(problem.meta.get("screen_min_fraction", 0.0))
+    min_frac = float(problem.meta.screen_min_fraction)
     reason = reason or (f"screen score < {SCREEN_MIN_SCORE} or alignment^2 < {min_frac:g}: "
                         "the residual does not look like this effect")
     return {"effect": effect_of(element), "element": element, "variant": _variant(element), "rms": _r(r),
@@ -310,14 +310,14 @@ def _screen_kind(score: dict) -> dict:
 
 def _screened_out(problem: GapProblem, score: dict) -> bool:
     """The screen's verdict on one candidate (see :mod:`ringfit.gap.screening`)."""
-    min_frac = float(problem.meta.get("screen_min_fraction", 0.0))
+    min_frac = float(problem.meta.screen_min_fraction)
     return score.get("score", 0.0) < SCREEN_MIN_SCORE or score.get("alignment", 0.0) ** 2 < min_frac
 
 
 def _structure(problem: GapProblem, heldout_pred: np.ndarray) -> dict:
     """:func:`~ringfit.gap.verdict.residual_test` of the held-out residual (noise series from ``problem.meta``)."""
     return residual_test(problem.standardised(problem.y - heldout_pred, heldout=True), problem.labels["group"],
-                         problem.labels.get("series"), problem.meta.get("series_dof"),
+                         problem.labels.get("series"), problem.meta.series_dof,
                          p_try=P_TRY_DAMPING if problem.domain == "damping" else P_NOISE)
 
 
@@ -459,7 +459,7 @@ def _labels_evidence(problem, part, rounds, alpha, draws) -> dict:
     label-permutation test of the first round's best refitted candidate
     (:func:`ringfit.gap.calibration.label_permutation_test`) and a sentence; ``{}`` without rolling tables.
     ``rests_on``: the clause an accepted verdict's sentence gets when its rows' labels were overridden."""
-    counts = problem.meta.get("label_counts")
+    counts = problem.meta.label_counts
     if problem.domain != "modes" or not counts:
         return {}
     labelled = sum(v["labelled"] for v in counts.values())
@@ -525,7 +525,7 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
     base_ho = heldout(problem, base, variance=extrapolates)
     if extrapolates:  # one σ for every held-out statistic: noise and the baseline's held-out prediction variance
         problem.sigma_heldout = np.sqrt(problem.sigma**2 + base.extra["heldout_var"])
-    ref_mask = problem.meta.get("reference_mask")
+    ref_mask = problem.meta.reference_mask
     reference = fit_chain(problem, (), train=ref_mask) if ref_mask is not None and not np.all(ref_mask) else base
     part = PartResult(problem, base, reference)
     part.fits[()] = base
@@ -555,7 +555,7 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
     current, current_ho, chain, rounds = base, base_ho, (), []
     remaining = list(elements)
     cur = test
-    rescreen = float(problem.meta.get("screen_min_fraction", 0.0)) > 0
+    rescreen = float(problem.meta.screen_min_fraction) > 0
     while True:
         entries = []
         round_scores = scores if not chain else (screen(problem, current, elements=remaining) if rescreen else {})
@@ -638,7 +638,7 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
                **({"explains": explains, "leaves": leaves, "outliers": outliers} if names else {}),
                "rule": {**RULES, "screen": (
                    f"a candidate is refitted only if its linearised score (chi2 it would remove) >= {SCREEN_MIN_SCORE}"
-                   f" and alignment^2 >= {float(problem.meta.get('screen_min_fraction', 0.0)):g} of the residual"),
+                   f" and alignment^2 >= {float(problem.meta.screen_min_fraction):g} of the residual"),
                    "shrink": ("100 (1 - SS_after/SS_before) over held-out rows, SS = sum of psi(residual/sigma)^2, "
                               "each residual weighted by its own noise sigma; psi = Huber on robust rows"),
                    "noise": problem.noise_method, "heldout": problem.fold_kind,
@@ -663,11 +663,11 @@ def diagnose_problem(problem: GapProblem, progress: bool = True, alpha: float = 
                      "noise_method": problem.noise_method, "heldout_method": problem.fold_kind,
                      "parameters": {k: _r(v, 6) for k, v in zip(problem.base, base.theta)},
                      **({"drift": _movement_json(moved)} if moved is not None else {}),
-                     **({"reference_fit": problem.meta["reference_fit"]} if "reference_fit" in problem.meta else {}),
-                     **({"conditions": problem.meta["conditions"]} if problem.meta.get("conditions") else {}),
-                     **({"rolling_structure": problem.meta["rolling_structure"]}
-                        if "rolling_structure" in problem.meta else {}),
-                     **({"sources": problem.meta["sources"]} if "sources" in problem.meta else {})},
+                     **({"reference_fit": problem.meta.reference_fit} if problem.meta.reference_fit is not None else {}),
+                     **({"conditions": problem.meta.conditions} if problem.meta.conditions else {}),
+                     **({"rolling_structure": problem.meta.rolling_structure}
+                        if problem.meta.rolling_structure is not None else {}),
+                     **({"sources": problem.meta.sources} if problem.meta.sources is not None else {})},
         "where": loc["where"],
         "where_detail": {k: v for k, v in loc.items() if k != "where"},
         "candidates": rounds[0],
@@ -722,10 +722,10 @@ def _ring_from_free(modal_problems: list[GapProblem], tyre):
     from ringfit.gap.profile import RING_BASE, RING_PRIOR_SD_FALLBACK
 
     freq = modal_problems[0]
-    fit = freq.meta["reference_result"]
+    fit = freq.meta.reference_result
     fitted = {k: float(fit.values[k]) for k in freq.base}
     sources = {k: "ringfit fit of free.modes.csv (eq. 18, physical EI prior)" for k in fitted}
-    damping = next((p for p in modal_problems[1:] if p.domain == "damping" and 0 in p.meta["tables"]), None)
+    damping = next((p for p in modal_problems[1:] if p.domain == "damping" and 0 in p.meta.tables), None)
     names = [n for n in RING_BASE if n in fit.names]
     infl = max(1.0, fit.chi2 / max(fit.dof, 1))
     idx = [fit.names.index(n) for n in names]
@@ -787,7 +787,7 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
     t0 = time.perf_counter()
     # one BLAS thread: every solve here is small (eigen-solves of ≤ 100 × 100, least squares of ≤ a few
     # thousand rows × ≤ 12 columns), where threaded BLAS only synchronises (50× slower on a busy machine)
-    from ringfit.targets.ssi import small_matrix_threads
+    from ringfit._threads import small_matrix_threads
 
     parts_ = []
     with small_matrix_threads():

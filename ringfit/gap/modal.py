@@ -63,217 +63,53 @@ jackknife σ) is wider in ``ln ζ`` (δζ/ζ) takes that. Effects: those whose m
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from dataclasses import dataclass
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.gap.effects.base import Effect
-from ringfit.gap.problem import GapProblem
-from ringfit.gap.rolling_rows import JOINT, assign_rolling_rows, joint_for
+from ringfit.gap.modal_conditions import (DEFAULT_K_TREAD, K_TREAD_FITTED_SD, K_TREAD_PRIOR_SD, _cavity_split,
+                                         _is_reference_state, _static_contact, _table_rows, _wheel_note, contact_patch,
+                                         spin_of, table_label)
+from ringfit.gap.modal_lines import LineSets, _ambiguity, _match_missing_n, label_counts
+from ringfit.gap.modal_rows import (ROW_BUCKET, TEST_SIGMA_FLOOR_REL, DampingPredictor, ModalData, ModalPredictor,
+                                   ModalRows, _rows_module, pad_rows, rolling_tables)
+from ringfit.gap.problem import GapProblem, ProblemMeta
+from ringfit.gap.rolling_rows import assign_rolling_rows, joint_for
 from ringfit.io.modes import ModeTable
-from ringfit.params import RingParams, TyreGeometry
 from ringfit._cache import jit
-from ringfit.physics.natural import (cavity_frequency_jit, natural_angular_frequencies,
-                                     natural_frequencies_jit)
-from ringfit.units import KMH
 
+#: Absolute floor of a frequency's σ [Hz].
 FREQ_SIGMA_FLOOR_HZ = 0.02
+
+
 #: Relative floor: a frequency is rarely identified better than this.
 FREQ_SIGMA_FLOOR_REL = 2e-4
-#: Relative floor of the measurement σ of a test-table row without ``freq_std_hz``: a table identified
-#: on a loaded or rolling tyre (contact, rotation, a drifting operating point) is not measured better
-#: than this, even when the free table it borrows its σ from was (a few free modes give a small and
-#: uncertain scale).
-TEST_SIGMA_FLOOR_REL = 1e-3
+
+
+
+
 #: Floor of the damping noise (ln ζ): modal damping is rarely identified better than 10 %.
 DAMPING_SIGMA_FLOOR = 0.10
+
+
 #: Huber threshold on standardised residuals of test rows (refits and statistics).
 HUBER = 2.0
+
+
 #: A row whose held-out standardised residual exceeds this is named an outlier.
 OUTLIER_Z = 3.0
-#: log-normal σ of k_trd when the tyre file gives none (its median is then the Table 9 value).
-K_TREAD_PRIOR_SD = 0.5
-#: log σ of k_trd when the tyre file gives it (a fitted value: ``ringfit fit-rolling``'s typical error).
-K_TREAD_FITTED_SD = 0.1
-DEFAULT_K_TREAD = 19e6
+
+
 #: Baseline parameters of the frequency side: the ring of eq. 18 (``ringfit fit``'s default free set).
 BASE = ("rho_a", "ei", "kw", "kv")
+
+
 #: Effect parameters a chain frees at most besides the baseline (the refit's padded free-set size).
 MAX_CHAIN_PARAMETERS = 4
-#: Rows are padded to a multiple of this (dummy rows, weight 0, dropped from every output), so one
-#: compiled refit serves mode tables of similar size.
-ROW_BUCKET = 32
-#: Rows of a line problem (the random-line null, :func:`line_problem`) are padded to a multiple of this.
-LINE_BUCKET = 128
-#: Largest n a row without n is matched to.
-MATCH_N_MAX = 15
-
-
-class ModalRows(eqx.Module):
-    """The observations of a mode-table diagnosis as arrays, shape ``(m,)`` each.
-
-    - ``n``: circumferential index (float; matched by frequency where the table gave none);
-      ``is_freq``: 1 frequency row, 0 damping row.
-    - ``contact``: 0 untagged / free, 1 cosine type (``extr``, ``vert``), 2 sine type (``0``, ``hort``).
-    - ``spin``: wheel speed Ω of the table's condition [rad/s] (0 = static).
-    - ``branch``: +1 backward, −1 forward, 0 none; ``fixed_frame``: 1 fixed observer, 0 co-rotating.
-    - ``cavity_hz``: uncoupled cavity frequency the row's ring mode meets (``cavity_mode``) [Hz], per row:
-      the unloaded line f_a, on a loaded table the fore-aft (``hort``/``0`` rows) or vertical
-      (``vert``/``extr``) line of n = 1 (:mod:`ringfit.physics.cavity`); 0 where the table's tyre
-      has no air (``pressure_bar`` = 0).
-    - ``reference``: 1 for rows of ``free.modes.csv`` (the ring answers to them only).
-    - ``patch``: contact half-angle computed from the table's load [rad] (0: no contact / unknown).
-    - ``freq_hz``: the row's measured frequency [Hz] (damping rows: their mode's).
-    - ``table``: index of the row's table (0 = free table); ``table_patch``: ``(T,)`` the
-      computed contact half-angle of each table [rad] (0: none).
-    - ``joint``: 1 for a row of a ``rolling`` table assigned to a mode of the rolling model
-      (:mod:`ringfit.gap.rolling_rows`), ``mode_index`` its mode (int) and ``line_k`` its
-      sensor line k; ``table_omega``, ``table_leading``, ``table_trailing``: ``(T,)`` Ω [rad/s]
-      and the contact arc edges [rad] of each rolling table (0 for the others).
-    - ``contact_tables`` (static): the tables whose ``table_patch`` > 0.
-    """
-
-    n: jax.Array
-    is_freq: jax.Array
-    contact: jax.Array
-    spin: jax.Array
-    branch: jax.Array
-    fixed_frame: jax.Array
-    cavity_hz: jax.Array
-    reference: jax.Array
-    patch: jax.Array
-    freq_hz: jax.Array
-    table: jax.Array
-    table_patch: jax.Array
-    # rolling tables (None where a caller builds rows without them: no rolling model)
-    joint: jax.Array | None = None
-    mode_index: jax.Array | None = None
-    line_k: jax.Array | None = None
-    table_omega: jax.Array | None = None
-    table_leading: jax.Array | None = None
-    table_trailing: jax.Array | None = None
-    #: indices of the tables with a contact patch (static: effects solve only these tables' contact
-    #: problems); None = every table
-    contact_tables: tuple | None = eqx.field(static=True, default=None)
-
-    def joint_rows(self) -> np.ndarray:
-        """``(m,)`` bool (NumPy): rows the rolling model predicts (:mod:`ringfit.gap.rolling_rows`), for the
-        effects' masks; all False for rows built without rolling tables."""
-        return np.zeros(np.shape(self.n), dtype=bool) if self.joint is None else np.asarray(self.joint) > 0
-    #: ``(m, 9)`` the wheel body of the row's table (``fixture: suspension``, docs/formats.md §2):
-    #: on (1/0), m_w, I_w, compliances 1/k_z, 1/k_x, 1/k_θ, dampers c_z, c_x, c_θ (SI; all 0 when bolted)
-    wheel: jax.Array | None = None
-
-
-class ModalData(eqx.Module):
-    """What a modal gap problem's model reads: the test rows, the reference ring and the geometry."""
-
-    rows: ModalRows
-    ring: RingParams
-    geometry: TyreGeometry
-
-
-def _apply_effects(theta, ring, geometry, rows, effects, sizes, i0, joint=None):
-    """ω, ζ of every row: eq. 18, then each effect in turn; rolling rows with both effects of
-    :data:`ringfit.gap.rolling_rows.JOINT` on take the joint rolling model instead of the two
-    (``joint``: :class:`~ringfit.gap.rolling_rows.RollingJoint`, docs/physics.md §3.7, §6)."""
-    omega0 = natural_angular_frequencies(ring, geometry, rows.n)
-    omega = omega0
-    zeta = jnp.zeros_like(omega) + ring.damping_ratio
-    on = None if joint is None else joint.active(theta, rows)
-    i = i0
-    for effect, k in zip(effects, sizes):
-        new, zeta = effect.modal(theta[i : i + k], omega, zeta, rows, ring, geometry)
-        omega = jnp.where(on, omega, new) if on is not None and effect.name in JOINT else new
-        i += k
-    if on is not None:
-        omega = jnp.where(on, omega + joint.angular_frequencies(theta, ring, geometry, rows) - omega0, omega)
-    return omega, zeta
-
-
-class ModalPredictor(eqx.Module):
-    """Frequencies [Hz] of every (padded) row: eq. 18 of the ring ``theta[:4]`` with the effects applied.
-
-    Rows of the reference table see the ring itself, every other row a stop-gradient
-    copy: in a refit the ring answers to the free table alone (module docstring).
-    ``joint``: the rolling model's prediction of rolling rows (:mod:`ringfit.gap.rolling_rows`),
-    ``None`` without rolling tables or without both ``ground_contact`` and ``rotation``.
-    """
-
-    effects: tuple = eqx.field(static=True)
-    base: tuple = eqx.field(static=True)
-    sizes: tuple = eqx.field(static=True)
-    joint: object = eqx.field(static=True, default=None)
-
-    def __call__(self, theta, data: ModalData):
-        ring = data.ring.replace(**{k: theta[i] for i, k in enumerate(self.base)})
-        frozen = jax.lax.stop_gradient(ring)
-        nb = len(self.base)
-        # reference rows never touch the ground (the free table has no patch): their pass solves no
-        # contact problem
-        live_rows = dataclasses.replace(data.rows, contact_tables=())
-        live, _ = _apply_effects(theta, ring, data.geometry, live_rows, self.effects, self.sizes, nb)
-        test, _ = _apply_effects(theta, frozen, data.geometry, data.rows, self.effects, self.sizes, nb, self.joint)
-        return jnp.where(data.rows.reference > 0, live, test) / (2.0 * jnp.pi)
-
-
-class DampingPredictor(eqx.Module):
-    """``ln ζ`` of every (padded) damping row: one level per table (``theta[:T]``) with the effects applied.
-
-    Effects see each row's measured frequency as ω (the damping side needs no ring model).
-    """
-
-    effects: tuple = eqx.field(static=True)
-    base: tuple = eqx.field(static=True)
-    sizes: tuple = eqx.field(static=True)
-
-    def __call__(self, theta, data: ModalData):
-        rows = data.rows
-        levels = jnp.stack([theta[i] for i in range(len(self.base))])
-        zeta = levels[rows.table]
-        omega = 2.0 * jnp.pi * rows.freq_hz
-        i = len(self.base)
-        for effect, k in zip(self.effects, self.sizes):
-            omega, zeta = effect.modal(theta[i : i + k], omega, zeta, rows, data.ring, data.geometry)
-            i += k
-        return jnp.log(jnp.clip(zeta, 1e-6))
-
-
-def table_label(table: ModeTable, index: int) -> str:
-    """A short name for a table: its state (and speed, load) for the free table, else its file name."""
-    c = table.condition
-    state = table.state
-    parts = [state]
-    sp = c.get("speed_kmh") or 0
-    if sp:
-        parts.append(f"{sp:g} km/h")
-    if state != "free" and c.get("load_n"):
-        parts.append(f"{c['load_n']:g} N")
-    name = str(table.source).rsplit("/", 1)[-1].removesuffix(".modes.csv")
-    return " ".join(parts) if index == 0 else f"{name} ({' '.join(parts)})"
-
-
-def spin_of(table: ModeTable, outer_radius: float) -> float:
-    """Ω [rad/s] of a table's condition: ``rotation_hz`` or ``speed_kmh``/R_out (0 if static)."""
-    c = table.condition
-    if c.get("rotation_hz"):
-        return 2.0 * math.pi * float(c["rotation_hz"])
-    if c.get("speed_kmh"):
-        return float(c["speed_kmh"]) * KMH / outer_radius
-    return 0.0
-
-
-def _is_reference_state(table: ModeTable) -> bool:
-    c = table.condition
-    # a free tyre on a suspended wheel is another state (its n <= 1 modes move: wheel_suspension)
-    return (table.state == "free" and not float(c.get("speed_kmh") or 0) and not float(c.get("rotation_hz") or 0)
-            and c.get("fixture", "bolted") == "bolted")
 
 
 def second_difference_sigma(residual: np.ndarray, sequence, n: np.ndarray) -> tuple[float, int]:
@@ -289,250 +125,6 @@ def second_difference_sigma(residual: np.ndarray, sequence, n: np.ndarray) -> tu
     if not d2:
         return math.nan, 0
     return float(1.4826 * np.median(d2) / math.sqrt(6.0)), len(d2)
-
-
-def contact_patch(ring: RingParams, geometry: TyreGeometry, load_n: float, drum_diameter_m=None,
-                  k_tread_sd: float = K_TREAD_FITTED_SD) -> tuple[float, float]:
-    """Contact half-angle [rad] of the standing tyre at ``load_n`` and its σ from the k_trd uncertainty.
-
-    The static contact solve of the rolling model (docs/physics.md §4.3–4.4, Ω = 0): the
-    half-angle is half the patch between its edges; σ from k_trd·e^{±k_tread_sd}.
-    """
-    a, sa, _ = _static_contact(ring, geometry, load_n, drum_diameter_m, k_tread_sd)
-    return a, sa
-
-
-def _static_contact(ring, geometry, load_n, drum_diameter_m, k_tread_sd):
-    """:func:`contact_patch`'s ``(a, σ_a)`` and the nominal static solution (the loaded cavity's split uses it)."""
-    from ringfit.physics.contact import ContactSolver, patch_edges, solve_rolling_jit
-    from ringfit.physics.operating import OperatingPoint, road_from_drum_diameter
-
-    road = road_from_drum_diameter(drum_diameter_m)
-    out, sols = [], []
-    for factor in (1.0, math.exp(-k_tread_sd), math.exp(k_tread_sd)):
-        r = ring.replace(k_tread=float(ring.k_tread) * factor)
-        sol = solve_rolling_jit(r, geometry, OperatingPoint(0.0, float(load_n), road), solver=ContactSolver())
-        lead, trail = (float(x) for x in patch_edges(sol))
-        out.append(0.5 * (trail - lead))
-        sols.append(sol)
-    return out[0], 0.5 * abs(out[2] - out[1]), sols[0]
-
-
-@jit
-def _loaded_cavity_lines(f_a, split):
-    """The loaded cavity's pair at rest (fore-aft, vertical) [Hz] (docs/physics.md §6), in one compiled program."""
-    from ringfit.physics.cavity import loaded_cavity_lines
-
-    return loaded_cavity_lines(f_a, split)
-
-
-@jit
-def _cavity_split(solution, geometry):
-    """W_2/h_c of a static contact solution (docs/physics.md §6 cavity_mode), in one compiled program."""
-    from ringfit.physics.cavity import cavity_height, deflection_cos2
-
-    return deflection_cos2(solution) / cavity_height(geometry)
-
-
-def wheel_row(condition: dict, source: str = "<condition>") -> list[float]:
-    """The 9 numbers of :attr:`ModalRows.wheel` from a table's sidecar (zeros for a bolted rim)."""
-    from ringfit.io.modes import wheel_of
-
-    w = wheel_of(condition, source=source)
-    if w is None:
-        return [0.0] * 9
-    inv = [1.0 / w[k] for k in ("k_vertical", "k_fore_aft", "k_torsion")]
-    return [1.0, w["mass"], w["inertia"], *inv, w["c_vertical"], w["c_fore_aft"], w["c_torsion"]]
-
-
-def _table_rows(tables, geometry, patches, spins, cavity_split=None):
-    """Per structural row: dict of its attributes (before n-matching).
-
-    ``cavity_split``: per table W_2/h_c of the loaded cavity (docs/physics.md §6 cavity_mode), or None."""
-    cavity = [float(f) for t in tables for f, k in zip(t.freq_hz, t.kind) if k == "acoustic"]
-    f_a = cavity[0] if cavity else float(cavity_frequency_jit(1))  # one program, not one per operation
-    rows = []
-    damping_std = [t.extra_floats("damping_std_pct") for t in tables]
-    wheels = [wheel_row(t.condition, str(t.source)) for t in tables]
-    for ti, t in enumerate(tables):
-        fixed = t.condition.get("frame", "rotating" if spins[ti] > 0 else "fixed") == "fixed"
-        tl = table_label(t, ti)
-        for i in range(len(t)):
-            if t.kind[i] != "structural":
-                continue
-            tag, branch = str(t.tag[i]), str(t.branch[i])
-            contact = 0
-            if t.state != "free":
-                contact = 1 if tag in ("extr", "vert") else 2 if tag in ("0", "hort") else 0
-            rows.append(dict(
-                table=ti, i=i, tlabel=tl, n=int(t.n[i]), tag=tag, branch=branch, contact=contact,
-                spin=spins[ti], fixed=fixed, patch=patches[ti][0] if contact else 0.0,
-                freq=float(t.freq_hz[i]), std=float(t.freq_std_hz[i]), damping=float(t.damping_pct[i]),
-                damping_std=damping_std[ti][i],
-                reference=ti == 0, a=int(t.a[i]), joint=0.0, mode_index=0, line_k=0.0, wave="",
-                wheel=wheels[ti], cavity=_row_cavity(t, f_a, contact, int(t.n[i]),
-                                                     None if cavity_split is None else cavity_split[ti]),
-            ))
-    return rows, f_a
-
-
-def _row_cavity(table: ModeTable, f_a: float, contact: int, n: int, split) -> float:
-    """The cavity line a row's ring mode meets [Hz] (:attr:`ModalRows.cavity_hz`)."""
-    p = table.condition.get("pressure_bar")
-    if p is not None and float(p) == 0.0:
-        return 0.0  # no air in the cavity: cavity_mode does not act on this table
-    if split is None or n != 1 or not contact:
-        return f_a
-
-    # the loaded cavity's pair at rest: fore-aft f_a sqrt(1 + e), vertical f_a sqrt(1 - e) (docs/physics.md §6);
-    # one compiled program, not one per operation (a cold process compiles each)
-    fore_aft, vertical = _loaded_cavity_lines(f_a, split)
-    return float(vertical if contact == 1 else fore_aft)
-
-
-def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=None) -> ModalRows:
-    def col(key, dtype=np.float64):
-        return np.asarray([r[key] for r in rows], dtype=dtype)
-
-    def per_table(field):
-        return np.asarray(np.zeros(len(table_patch)) if rolling is None else getattr(rolling, field),
-                           dtype=np.float64)
-
-    return ModalRows(
-        n=col("n"), is_freq=np.full(len(rows), is_freq), contact=col("contact", np.int32), spin=col("spin"),
-        # a rolling row without a branch: the wave of eq. 25/26 it was matched to (rotation alone)
-        branch=np.asarray([{"backward": 1.0, "forward": -1.0}.get(r["branch"] or r.get("wave", ""), 0.0)
-                            for r in rows]),
-        fixed_frame=np.asarray([1.0 if r["fixed"] else 0.0 for r in rows]),
-        cavity_hz=np.asarray([r.get("cavity", cavity_hz) for r in rows], dtype=np.float64),
-        reference=np.asarray([1.0 if r["reference"] else 0.0 for r in rows]), patch=col("patch"),
-        freq_hz=col("freq"), table=col("table", np.int32),
-        table_patch=np.asarray(np.asarray(table_patch, dtype=np.float64)),
-        joint=col("joint"), mode_index=col("mode_index", np.int32), line_k=col("line_k"),
-        table_omega=per_table("omega"), table_leading=per_table("leading"), table_trailing=per_table("trailing"),
-        contact_tables=tuple(int(i) for i, a in enumerate(np.asarray(table_patch, dtype=np.float64)) if a > 0),
-        wheel=np.asarray([r.get("wheel", [0.0] * 9) for r in rows], dtype=np.float64).reshape(len(rows), 9),
-    )
-
-
-def pad_rows(rows: ModalRows, bucket: int = ROW_BUCKET) -> ModalRows:
-    """``rows`` padded with dummy rows (n = 2, untagged, static, reference) to a multiple of ``bucket``."""
-    m = int(rows.n.shape[0])
-    extra = (-m) % bucket
-    if extra == 0:
-        return rows
-    fill = {"n": 2.0, "is_freq": rows.is_freq[0] if m else 1.0, "contact": 0, "spin": 0.0, "branch": 0.0,
-            "fixed_frame": 0.0, "reference": 1.0, "patch": 0.0, "freq_hz": 100.0, "table": 0, "joint": 0.0,
-            "mode_index": 0, "line_k": 0.0}
-    def grow(k, v):
-        col = getattr(rows, k)
-        return None if col is None else np.concatenate([col, np.full(extra, v, dtype=col.dtype)])
-
-    cav = rows.cavity_hz
-    cav = cav if np.ndim(cav) == 0 else np.concatenate([cav, np.full(extra, cav[0] if m else 0.0)])
-    return ModalRows(**{k: grow(k, v) for k, v in fill.items()}, cavity_hz=cav, table_patch=rows.table_patch,
-                     table_omega=rows.table_omega, table_leading=rows.table_leading,
-                     table_trailing=rows.table_trailing, contact_tables=rows.contact_tables,
-                     wheel=None if rows.wheel is None else np.concatenate([rows.wheel, np.zeros((extra, 9))]))
-
-
-@dataclass
-class LineSets:
-    """What the random-line null of :mod:`ringfit.gap.calibration` needs to match new frequencies by the
-    diagnosis's own rule: the frequency problem's row dicts, the rolling tables' lines under both model
-    structures and the rule that chooses between them (``rolling_lines``: the
-    :class:`~ringfit.gap.rolling_rows.StructureChoice` of :func:`ringfit.gap.rolling_rows.assign_rolling_rows`,
-    ``None`` without rolling tables), and per row without n of another test
-    table the lines of the model its condition computes (:func:`missing_n_lines`, n = 1 … MATCH_N_MAX)."""
-
-    rows: list
-    rolling_lines: object
-    row_lines: dict
-    cavity_hz: float
-    table_patch: list
-    rolling: object
-
-
-def missing_n_lines(r: dict, ring, geometry) -> tuple[np.ndarray, str]:
-    """The frequencies [Hz] of n = 1 … :data:`MATCH_N_MAX` in the model a row's condition computes (the loaded
-    modes of its type at the computed patch, eq. 25/26 of its branch, else eq. 18), and the model's name."""
-    from ringfit.physics.loaded import loaded_natural_frequencies
-    from ringfit.physics.natural import fixed_frame_frequencies, rotating_natural_frequencies
-
-    n_all = np.arange(1, MATCH_N_MAX + 1, dtype=float)
-    if r["contact"] and r["patch"] > 0:
-        c, s = (np.asarray(x)[:MATCH_N_MAX] for x in loaded_natural_frequencies(ring, geometry, r["patch"]))
-        return (c if r["contact"] == 1 else s), "loaded modes at the computed patch"
-    if r["spin"] > 0 and r["branch"]:
-        fn = fixed_frame_frequencies if r["fixed"] else rotating_natural_frequencies
-        waves = np.abs(np.asarray(fn(ring, geometry, n_all, r["spin"])))
-        return waves[:, 0 if r["branch"] == "backward" else 1], ("eq. 26" if r["fixed"] else "eq. 25")
-    return np.asarray(natural_frequencies_jit(ring, geometry, n_all)), "eq. 18"  # one program, not one per op
-
-
-#: Two lines within this many σ of a row's frequency: its assignment is ambiguous (docs/formats.md §5).
-AMBIGUOUS_Z = 2.0
-
-
-def mixture_sigma(f, sigma, hz_assigned, hz_lines):
-    """σ of rows whose frequency ``f`` lies within :data:`AMBIGUOUS_Z` σ of a line other than the one assigned:
-    √(σ² + (Δ/2)²), Δ the spacing from the assigned line to the nearest such line (the two-line mixture in moment
-    form); ``σ`` elsewhere. Arrays broadcast over rows; ``hz_lines`` ``(L,)``. **Returns** ``(σ', ambiguous, alt)``."""
-    f, sigma, hz_assigned = (np.asarray(x, dtype=np.float64) for x in (f, sigma, hz_assigned))
-    hz = np.asarray(hz_lines, dtype=np.float64)
-    near = (np.abs(hz - f[..., None]) <= AMBIGUOUS_Z * sigma[..., None]) & (np.abs(hz - hz_assigned[..., None]) > 1e-9)
-    gap = np.where(near, np.abs(hz - hz_assigned[..., None]), np.inf)
-    j = np.argmin(gap, axis=-1)
-    ambiguous = np.any(near, axis=-1)
-    alt = np.take_along_axis(np.broadcast_to(hz, gap.shape), j[..., None], -1)[..., 0]
-    half = np.where(ambiguous, np.min(gap, axis=-1) / 2.0, 0.0)
-    return np.sqrt(sigma**2 + half**2), ambiguous, alt
-
-
-def _ambiguity(problem: GapProblem, rows, choice):
-    """Rows of rolling tables whose frequency lies within :data:`AMBIGUOUS_Z` σ of a second line of their table
-    (of the model structure the case chose, :class:`ringfit.gap.rolling_rows.StructureChoice`): the data cannot
-    decide between the two, so the row carries the two-line mixture (equal weights) in moment form —
-    the matched line's prediction with σ² widened by (Δ/2)², Δ the lines' spacing — instead of a free choice."""
-    problem.meta["sigma_matched"] = problem.sigma.copy()  # before any widening (the random-line null widens alike)
-    if choice is None:
-        return
-    line_sets = choice.lines[choice.chosen]
-    rec = problem.labels["rolling"]
-    for j, r in enumerate(rows):
-        if not r.get("rolling_matched") or r["table"] not in line_sets or r.get("line_hz") is None:
-            continue
-        sig, amb, other = mixture_sigma(r["freq"], problem.sigma[j], r["line_hz"],
-                                        [ln["hz"] for ln in line_sets[r["table"]]])
-        if not amb:
-            continue
-        problem.sigma[j] = float(sig)
-        label = problem.labels["label"][j]
-        if label in rec:
-            rec[label].update(ambiguous=True, alternative_hz=round(float(other), 4),
-                              mixture_sigma_hz=round(float(sig), 4))
-
-
-def _match_missing_n(rows, ring, geometry):
-    """Assign n to rows without one: nearest mode of the model their condition computes.
-
-    **Returns:** ``(notes, lines)``: the match sentence and the model's lines (:func:`missing_n_lines`) of each
-    matched row, by row position. Rows that see the same model (same table condition and mode type) share one
-    evaluation of it.
-    """
-    notes, lines, seen = {}, {}, {}
-    for j, r in enumerate(rows):
-        if r["n"] >= 0:
-            continue
-        key = (r["contact"], r["patch"]) if r["contact"] and r["patch"] > 0 else \
-            (r["spin"], r["branch"], r["fixed"]) if r["spin"] > 0 and r["branch"] else "eq18"
-        if key not in seen:
-            seen[key] = missing_n_lines(r, ring, geometry)
-        cand, model = lines[j] = seen[key]
-        k = int(np.argmin(np.abs(cand - r["freq"])))
-        r["n"] = k + 1
-        notes[j] = (f"n matched to {k + 1} by frequency ({r['freq']:.1f} Hz vs {cand[k]:.1f} Hz of {model})")
-    return notes, lines
 
 
 def _baseline_covariance(fit, tyre) -> None:
@@ -666,37 +258,19 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
         match_notes[j] = "; ".join(x for x in (note, match_notes.get(j)) if x)
     problems = [_frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_rel, sigma_method,
                                    match_notes, patches, conditions, effects, noise, rolling, rolling_records)]
-    problems[0].meta["lines"] = LineSets(rows=rows, rolling_lines=choice, row_lines=row_lines,
+    problems[0].meta.lines = LineSets(rows=rows, rolling_lines=choice, row_lines=row_lines,
                                          cavity_hz=cavity_hz, table_patch=[p[0] for p in patches], rolling=rolling)
     if choice is not None:  # the model structure the rolling rows were assigned to (docs/formats.md §5)
-        problems[0].meta["rolling_structure"] = choice.record()
-        problems[0].meta["label_counts"] = label_counts(tables, rows, rolling_records, choice)
+        problems[0].meta.rolling_structure = choice.record()
+        problems[0].meta.label_counts = label_counts(tables, rows, rolling_records, choice)
     _ambiguity(problems[0], rows, choice)
-    problems[0].meta.update(table_names=[table_label(t, i) for i, t in enumerate(tables)], patches=patches,
-                            spins=spins, outer_radius_m=float(geometry.outer_radius))
+    meta = problems[0].meta
+    meta.table_names, meta.patches = [table_label(t, i) for i, t in enumerate(tables)], patches
+    meta.spins, meta.outer_radius_m = spins, float(geometry.outer_radius)
     damp = [r for r in rows if math.isfinite(r["damping"]) and r["damping"] > 0]
     if len(damp) >= 4:
         problems.append(_damping_problem(tables, damp, cavity_hz, geometry, ring_ref, effects, noise))
     return problems
-
-
-def _wheel_note(table: ModeTable) -> str:
-    """One line on the table's fixture (empty for a bolted rim); a ``WARNING`` where defaults stand in."""
-    import warnings
-
-    from ringfit.io.modes import wheel_of
-
-    w = wheel_of(table.condition, source=str(table.source))
-    if w is None:
-        return ""
-    note = (f"fixture suspension: wheel {w['mass']:g} kg, {w['inertia']:g} kg m^2 on k_z {w['k_vertical']:.3g}, "
-            f"k_x {w['k_fore_aft']:.3g} N/m, k_theta {w['k_torsion']:.3g} N m/rad")
-    if w["defaults"]:
-        msg = (f"{table.source}: fixture 'suspension' without {', '.join(w['defaults'])}: the defaults of "
-               "docs/formats.md §2 stand in (the computed wheel_suspension candidate uses them)")
-        warnings.warn(msg, stacklevel=2)
-        note += f" (defaults for {', '.join(w['defaults'])})"
-    return note
 
 
 def _labels(rows, suffix=""):
@@ -846,12 +420,11 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
         "predictions of the free-table fit", labels=meta_labels, base=BASE, base_values=prior_mean.copy(),
         base_prior_sd=prior_sd, effects=usable, data=data, noise_method="; ".join(notes),
         baseline_model="eq18-free (ringfit fit on free.modes.csv)", not_applicable=dropped,
-        meta={"reference_mask": ref, "block": 1, "tangents": len(BASE) + MAX_CHAIN_PARAMETERS,
-              "padded_rows": int(data.rows.n.shape[0]), "files": [str(t.source).rsplit("/", 1)[-1] for t in tables],
-              "reference_fit": fit.to_record(sigma_rel=sigma_rel, sigma_method=sigma_method),
-              "conditions": {table_label(t, i): c for i, (t, c) in enumerate(zip(tables, conditions)) if c},
-              "reference_result": fit,
-              "condition_sd": _condition_sd(patches)},
+        meta=ProblemMeta(reference_mask=ref, block=1, tangents=len(BASE) + MAX_CHAIN_PARAMETERS,
+                         padded_rows=int(data.rows.n.shape[0]), files=[str(t.source).rsplit("/", 1)[-1] for t in tables],
+                         reference_fit=fit.to_record(sigma_rel=sigma_rel, sigma_method=sigma_method),
+                         conditions={table_label(t, i): c for i, (t, c) in enumerate(zip(tables, conditions)) if c},
+                         reference_result=fit, condition_sd=_condition_sd(patches)),
         base_prior_mean=prior_mean,
         predictor=ModalPredictor(effects=usable, base=BASE, sizes=sizes,
                                  joint=joint_for(usable, sizes, len(BASE), rolling_tables(rows))),
@@ -859,11 +432,6 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
     )
     problem.base_values = np.array([fit.values[k] for k in BASE])
     return problem
-
-
-def rolling_tables(rows) -> tuple[int, ...]:
-    """Indices of the tables with rows the rolling model predicts (assigned rows of ``rolling`` tables)."""
-    return tuple(sorted({r["table"] for r in rows if r["joint"] > 0}))
 
 
 def _condition_sd(patches) -> dict:
@@ -920,285 +488,12 @@ def _damping_problem(tables, rows, cavity_hz, geometry, ring_ref, effects, noise
                     measured_freq=np.array([r["freq"] for r in rows])),
         base=base, base_values=levels, base_prior_sd=np.full(len(base), np.inf), effects=usable, data=data,
         noise_method="; ".join(notes), baseline_model="one damping ratio per table", not_applicable=dropped,
-        meta={"block": 1, "tangents": len(base) + MAX_CHAIN_PARAMETERS, "padded_rows": int(data.rows.n.shape[0]),
-              "files": [str(tables[t].source).rsplit("/", 1)[-1] for t in table_ids], "tables": table_ids},
+        meta=ProblemMeta(block=1, tangents=len(base) + MAX_CHAIN_PARAMETERS, padded_rows=int(data.rows.n.shape[0]),
+                         files=[str(tables[t].source).rsplit("/", 1)[-1] for t in table_ids], tables=table_ids),
         predictor=DampingPredictor(effects=usable, base=base, sizes=sizes),
         robust=np.ones(m, dtype=bool), huber=HUBER,
     )
     return problem
 
 
-__all__ = ["build_modal_problems", "ModalRows", "ModalData", "ModalPredictor", "DampingPredictor",
-           "second_difference_sigma", "contact_patch", "spin_of", "table_label", "HUBER", "OUTLIER_Z"]
-
-
-def line_problem(problem: GapProblem):
-    """The *line problem* of a frequency problem whose test rows were matched by frequency (the random-line null
-    of :mod:`ringfit.gap.calibration`): the problem's rows followed by one row per line a new frequency of such a
-    row could be matched to (each rolling table's lines, with the labels the shared assignment gives; for a row
-    of another table, n = 1 … :data:`MATCH_N_MAX` of the model its condition computes), predicted by the same
-    predictor. ``None`` when no row was matched by frequency.
-
-    **Returns:** ``(line_problem, groups, spans)``: ``groups`` — per rolling table (or per row elsewhere)
-    its row positions ``rows``, ``kind`` and ``assign(f) -> (B, r)`` line-problem row indices for
-    frequencies ``f`` ``(B, r)`` by the diagnosis's rule (one assignment per rolling table by the matching
-    cost of ``ringfit campbell``; the nearest line elsewhere); ``spans`` — ``{table: (lowest, highest)}``
-    measured frequency. Cached in ``problem.meta``.
-    """
-    if "line_problem" in problem.meta:
-        return problem.meta["line_problem"]
-
-    L = problem.meta.get("lines")
-    rows = L.rows if L is not None else []
-    m = len(rows)
-    matchable = [j for j, r in enumerate(rows) if r.get("matchable") or _label_free(r, L.rolling_lines)]
-    if not matchable:
-        problem.meta["line_problem"] = None
-        return None
-    spans = {t: (min(r["freq"] for r in rows if r["table"] == t), max(r["freq"] for r in rows if r["table"] == t))
-             for t in {rows[j]["table"] for j in matchable}}
-    extra, groups = [], []
-    if L.rolling_lines is not None:
-        g = _rolling_group(L.rolling_lines, rows, matchable, extra, m)
-        if g is not None:
-            groups.append(g)
-    for j in matchable:
-        if j not in L.row_lines:
-            continue
-        hz = np.asarray(L.row_lines[j], dtype=np.float64)
-        start = m + len(extra)
-        extra += [{**rows[j], "n": k + 1, "freq": float(h), "matchable": False} for k, h in enumerate(hz)]
-        groups.append(dict(kind="nearest", table=rows[j]["table"], rows=np.asarray([j]),
-                           assign=lambda f, hz=hz, start=start: start + np.argmin(np.abs(f[..., None] - hz), axis=-1)))
-    if not groups:
-        problem.meta["line_problem"] = None
-        return None
-    every = list(rows) + extra
-    mrows = _rows_module(every, 1.0, L.cavity_hz, L.table_patch, L.rolling)
-    # a coarser bucket than the problem's: line problems of different cases (a few hundred rows) then share
-    # one compiled linearisation per candidate structure instead of compiling per 32-row step
-    data = ModalData(rows=pad_rows(mrows, LINE_BUCKET), ring=problem.data.ring, geometry=problem.data.geometry)
-    p = problem.predictor
-    # the joint rolling model only where the problem has it (a case whose rows chose the free spinning ring has none)
-    predictor = ModalPredictor(effects=p.effects, base=p.base, sizes=p.sizes,
-                               joint=None if p.joint is None else
-                               joint_for(p.effects, p.sizes, len(p.base), rolling_tables(every)))
-    y = np.array([r["freq"] for r in every])
-    M = len(every)
-    lp = dataclasses.replace(
-        problem, y=y, sigma=np.concatenate([problem.sigma, TEST_SIGMA_FLOOR_REL * y[m:]]),
-        robust=np.concatenate([np.asarray(problem.robust, dtype=bool), np.ones(M - m, dtype=bool)]),
-        scale=np.ones(M), folds=np.zeros(M, dtype=int), data=data, predictor=predictor, sigma_heldout=None,
-        meta={**problem.meta, "padded_rows": int(data.rows.n.shape[0]), "line_problem": None})
-    problem.meta["line_problem"] = (lp, groups, spans)
-    return problem.meta["line_problem"]
-
-
-def _label_free(r: dict, choice) -> bool:
-    """Whether the data choose a row's line although the table may label it: a structural row of a rolling table
-    assigned by the matching cost, where a contradicted label costs a finite penalty (``ringfit campbell``'s
-    :data:`~ringfit.gap.campbell.LABEL_PENALTY`) — the assignment may override its n, tag or branch. Such a row
-    is redrawn by the random-line null like a row without labels (its labels kept, docs/physics.md §6.4)."""
-    return bool(choice is not None and r.get("rolling_matched") and r["table"] in choice.tables)
-
-
-def _line_row(r: dict, name: str, ln: dict) -> dict:
-    """The row ``r`` (labels as the table gave them) assigned to the line ``ln`` of structure ``name``: the fields
-    the measured assignment gives it (:func:`ringfit.gap.rolling_rows.assign_rolling_rows`) — the line's mode,
-    sensor line, n, wave and loaded-mode type, except where the row's own label says otherwise (a given n stays
-    the row's n; a given branch its wave; a given tag its loaded-mode type)."""
-    from ringfit.gap.rolling_rows import LOADED
-
-    f = dict(ln["fields"])
-    n0 = r.get("label_n", r["n"])
-    if n0 >= 1:
-        f["n"] = n0
-    if name == LOADED:
-        if r["branch"]:
-            f["wave"] = ""
-        c0 = r.get("label_contact", 0)
-        if c0:
-            f["contact"], f["patch"] = c0, r.get("label_patch", f["patch"])
-    return {**r, **f, "freq": ln["hz"], "matchable": False, "line_hz": ln["hz"]}
-
-
-def _rolling_group(choice, rows, matchable, extra, m):
-    """The random-line null's group of the rolling tables' rows whose line the data choose (:func:`line_problem`):
-    rows without labels and rows whose labels the assignment may override (:func:`_label_free`: every matched row
-    of a rolling table), redrawn uniformly over their table's span with their labels kept. The model structure is
-    chosen per draw by the case's own rule (:class:`ringfit.gap.rolling_rows.StructureChoice`, its τ maximised per
-    draw, the rows' label penalties included), then one assignment per table under that structure by the matching
-    cost of ``ringfit campbell`` (Hungarian; z² + the line's weight cost + the row's label penalties, τ of the
-    measured assignment). Adds to ``extra`` one line-problem row per line of either structure and per distinct
-    label set of a table's rows (the prediction of a labelled row on a line depends on its labels), and per other
-    labelled rolling row its copy with the other structure's assignment (swapped in on draws that choose the other
-    structure). ``None`` without such rows."""
-    from scipy.optimize import linear_sum_assignment
-
-    from ringfit.gap.campbell import matching_cost
-    from ringfit.gap.rolling_rows import FREE, LOADED
-
-    per_table: dict = {}
-    for j in matchable:
-        if rows[j].get("rolling_matched") and rows[j]["table"] in choice.tables:
-            per_table.setdefault(rows[j]["table"], []).append(j)
-    if not per_table:
-        return None
-    chosen = choice.chosen
-    segments = []  # per table: its rows, and per structure (start per row, hz, sigma, cost, penalties) of its lines
-    for t, js in per_table.items():
-        tb = choice.tables[t]
-        pos = {int(j): k for k, j in enumerate(tb["rows"])}
-        where = np.array([pos[j] for j in js])
-        mine = [r["freq"] for r in rows if r["table"] == t]  # the table's span, as every random-line draw
-        seg = {"table": t, "rows": np.asarray(js), "lo": min(mine), "hi": max(mine), "std": tb["std"][where]}
-        for name in (LOADED, FREE):
-            lines = choice.lines[name][t]
-            starts, by_key = [], {}
-            for j in js:
-                r = rows[j]
-                key = (r.get("label_n", r["n"]), r.get("label_contact", 0), r["branch"], r["tag"])
-                if key not in by_key:
-                    by_key[key] = m + len(extra)
-                    extra.extend(_line_row(r, name, ln) for ln in lines)
-                starts.append(by_key[key])
-            hz = np.array([ln["hz"] for ln in lines])
-            seg[name] = (np.asarray(starts), hz, np.array([ln["cost"] for ln in lines]),
-                         np.asarray(tb["pen"][name], dtype=np.float64)[where])
-        segments.append(seg)
-    # labelled rows of the rolling tables the groups leave alone: their assignment under the structure the
-    # measured rows did not choose
-    in_groups = {int(j) for s in segments for j in s["rows"]}
-    other = FREE if chosen == LOADED else LOADED
-    labelled, swapped = [], []
-    for j, r in enumerate(rows):
-        if "structure_fields" in r and j not in in_groups:
-            labelled.append(j)
-            swapped.append(m + len(extra))
-            extra.append({**r, **r["structure_fields"][other], "matchable": False})
-    labelled, swapped = np.asarray(labelled, dtype=int), np.asarray(swapped, dtype=int)
-    all_rows = np.concatenate([s["rows"] for s in segments])
-
-    def hungarian(f, std, starts, hz, cost, pen):
-        c = matching_cost(f[..., None], std[:, None], hz, cost, pen)  # (B, r, L): ringfit campbell's cost
-        col = np.argmin(c, axis=-1)  # rows the assignment leaves without a line: their nearest
-        for b in range(f.shape[0]):
-            ri, ci = linear_sum_assignment(np.minimum(c[b], 1e6))
-            col[b, ri] = ci
-        return np.broadcast_to(starts, col.shape) + col
-
-    def draw(rng, B):
-        # per table, uniform over its span at its row count (sorted, as a table lists its rows)
-        return np.concatenate([np.sort(rng.uniform(s["lo"], s["hi"], (B, s["rows"].size)), axis=1)
-                               for s in segments], axis=1)
-
-    def choose(ystar):
-        """``(idx (B, r), [(positions, idx (B, l))], loaded (B,))`` for the drawn data ``ystar`` ``(B, m)``."""
-        loaded = choice.choose({t: ystar[:, tb["rows"]] for t, tb in choice.tables.items()})
-        out = []
-        for s in segments:
-            f = ystar[:, s["rows"]]
-            out.append(np.where(loaded[:, None], hungarian(f, s["std"], *s[LOADED]),
-                                hungarian(f, s["std"], *s[FREE])))
-        same = loaded if chosen == LOADED else ~loaded
-        lab = np.where(same[:, None], labelled[None, :], swapped[None, :])
-        return np.concatenate(out, axis=1), [(labelled, lab)], loaded
-
-    def sigma(f, s_rows, idx_rows, loaded):
-        """The two-line mixture's σ of each drawn row under the structure its draw chose (as the measured rows)."""
-        out, col = np.array(s_rows, dtype=np.float64), 0
-        for sg in segments:
-            k = sg["rows"].size
-            sl = slice(col, col + k)
-            res = []
-            for name in (LOADED, FREE):
-                starts, hz, _, _ = sg[name]
-                ix = np.clip(idx_rows[:, sl] - starts[None, :], 0, hz.size - 1)
-                res.append(mixture_sigma(f[:, sl], out[:, sl], hz[ix], hz)[0])
-            out[:, sl] = np.where(loaded[:, None], res[0], res[1])
-            col += k
-        return out
-
-    def overrides(idx_rows, loaded, perms=None):
-        """``(B,)`` labels the drawn assignment overrode (the null's count beside the measured one); ``perms``: per
-        segment ``(B, k)`` the label permutation the draws were assigned with (the label-permutation test)."""
-        total, col = np.zeros(idx_rows.shape[0], dtype=int), 0
-        for si, sg in enumerate(segments):
-            k = sg["rows"].size
-            sl = slice(col, col + k)
-            for name, on in ((LOADED, loaded), (FREE, ~loaded)):
-                starts, hz, _, pen = sg[name]
-                if perms is None:
-                    start_b = np.broadcast_to(starts, (idx_rows.shape[0], k))
-                    pen_b = np.broadcast_to(pen, (idx_rows.shape[0],) + pen.shape)
-                else:
-                    start_b, pen_b = starts[perms[si]], pen[perms[si]]
-                ix = np.clip(idx_rows[:, sl] - start_b, 0, hz.size - 1)
-                bad = np.take_along_axis(pen_b, ix[..., None], -1)[..., 0]
-                total += np.where(on, np.sum(bad > LABEL_OVERRIDE, axis=1), 0)
-            col += k
-        return total
-
-    def permuted(rng, B, y):
-        """The label-permutation test's draws: the measured frequencies ``y`` ``(m,)`` kept, the labels of each
-        table's rows shuffled among them (B permutations); the structure chosen and the rows assigned again with
-        the shuffled labels' penalties. **Returns** ``(idx (B, r), swaps, loaded (B,), overridden (B,))``: as
-        :func:`choose`, and the shuffled labels each draw's assignment overrode."""
-        perms = []
-        pens = {name: {} for name in (LOADED, FREE)}
-        for s_ in segments:
-            k = s_["rows"].size
-            perms.append(np.argsort(rng.random((B, k)), axis=1))
-        for t, tb in choice.tables.items():
-            for name in (LOADED, FREE):
-                pens[name][t] = np.broadcast_to(np.asarray(tb["pen"][name], dtype=np.float64),
-                                                (B,) + np.shape(tb["pen"][name])).copy()
-        for s_, perm in zip(segments, perms):
-            tb = choice.tables[s_["table"]]
-            pos = {int(j): k for k, j in enumerate(tb["rows"])}
-            where = np.array([pos[int(j)] for j in s_["rows"]])
-            for name in (LOADED, FREE):
-                pens[name][s_["table"]][:, where] = s_[name][3][perm]
-        loaded = choice.choose({t: np.broadcast_to(y[tb["rows"]], (B, tb["rows"].size))
-                                for t, tb in choice.tables.items()}, pens)
-        out = []
-        for s_, perm in zip(segments, perms):
-            f = np.broadcast_to(y[s_["rows"]], perm.shape)
-            res = []
-            for name in (LOADED, FREE):
-                starts, hz, cost, pen = s_[name]
-                res.append(hungarian(f, s_["std"], starts[perm], hz, cost, pen[perm]))
-            out.append(np.where(loaded[:, None], res[0], res[1]))
-        same = loaded if chosen == LOADED else ~loaded
-        lab = np.where(same[:, None], labelled[None, :], swapped[None, :])
-        idx = np.concatenate(out, axis=1)
-        return idx, [(labelled, lab)], loaded, overrides(idx, loaded, perms)
-
-    return dict(kind="rolling tables", table=segments[0]["table"], rows=all_rows, draw=draw, choose=choose,
-                sigma=sigma, chosen=chosen, overrides=overrides, permuted=permuted,
-                labelled_rows=int(sum(1 for j in all_rows if _has_label(rows[j]))))
-
-
-#: A label penalty above this on the assigned line counts as an overridden label (half of ``ringfit campbell``'s
-#: LABEL_PENALTY: a contradicted n or branch, or a tag whose symmetry share is over 1/2).
-LABEL_OVERRIDE = 2.0
-
-
-def _has_label(r: dict) -> bool:
-    """Whether a row came with any label (n, tag or branch)."""
-    return r.get("label_n", r["n"]) >= 0 or bool(r["tag"]) or bool(r["branch"])
-
-
-def label_counts(tables, rows, records, choice) -> dict:
-    """Per rolling table, the labels its assignment kept and overrode (docs/formats.md §5 ``verdict.labels``):
-    ``{table name: {"rows", "labelled", "kept", "overridden", "unlabelled"}}``. A label is overridden when the
-    row's line contradicts it (its n, branch, or a tag whose symmetry the line does not share: the matching's
-    ``label_conflicts``)."""
-    out = {}
-    for t in sorted(choice.tables):
-        js = [j for j, r in enumerate(rows) if r["table"] == t and r.get("rolling_matched")]
-        lab = [j for j in js if _has_label(rows[j])]
-        over = [j for j in lab if (records or {}).get(j, {}).get("label_conflicts")]
-        out[table_label(tables[t], t)] = {"rows": len(js), "labelled": len(lab), "kept": len(lab) - len(over),
-                                          "overridden": len(over), "unlabelled": len(js) - len(lab)}
-    return out
+__all__ = ["build_modal_problems", "second_difference_sigma", "HUBER", "OUTLIER_Z", "BASE"]

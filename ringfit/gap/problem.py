@@ -20,6 +20,69 @@ import numpy as np
 
 from ringfit.gap.effects.base import Effect, Parameter
 
+#: :attr:`ProblemMeta.line_problem` before :func:`ringfit.gap.modal_lines.line_problem` has looked (``None`` = looked, none).
+UNSET = object()
+
+
+@dataclass
+class ProblemMeta:
+    """What a :class:`GapProblem`'s builder knows beyond the rows, for the diagnosis, its nulls and its report.
+
+    Every field is optional (``None`` = the builder did not set it); the defaults are what a reader assumes.
+
+    *Statistics*
+    - ``block``: rows per block of the held-out shrink's block bootstrap (``ranking.shrink_interval``);
+      ``tangents``: the linearised screen's tangent budget (``None`` = the problem's θ size);
+      ``screen_min_fraction``: the rescreen's alignment² threshold (0 = off).
+    - ``reference_mask``: bool ``(m,)`` the rows the baseline is fitted to (free-table rows); the others are
+      its predictions (test rows). ``sigma_matched``: σ of the rows before any widening (the random-line null).
+    - ``series_dof``: ``{series: effective dof}`` of a profile's noise; ``noise_slope``: its fitted power law.
+    - ``prior_guarded``: baseline indices whose prior the candidate refits may not move far.
+    - ``condition_sd``: stated-condition uncertainty per effect parameter (loaded tables' patches).
+
+    *Modal problems*
+    - ``padded_rows``: the predictor's padded row count; ``files``: data file names; ``tables``: the damping
+      problem's table indices; ``table_names``, ``patches``, ``spins``, ``outer_radius_m``: per table its label,
+      (patch half-angle, …), spin [rad/s], and the tyre's outer radius (localisation).
+    - ``reference_fit`` (record) and ``reference_result`` (:class:`~ringfit.fit.result.FitResult`): the free-table
+      fit; ``conditions``: the tables' stated conditions.
+    - ``lines``: the rows' candidate model lines (``modal.LineSets``); ``line_problem``: their cached line
+      problem (:data:`UNSET` until built); ``rolling_structure``, ``label_counts``: the rolling rows'
+      assignment record and label counts (docs/formats.md §5).
+
+    *Profile problems*
+    - ``k_max``: top harmonic per profile; ``omega``, ``omega_source``: Ω per profile and where it came from;
+      ``sources``: where each baseline value came from.
+    """
+
+    block: int = 1
+    tangents: int | None = None
+    screen_min_fraction: float = 0.0
+    reference_mask: np.ndarray | None = None
+    sigma_matched: np.ndarray | None = None
+    series_dof: dict | None = None
+    noise_slope: Any = None
+    prior_guarded: tuple = ()
+    condition_sd: dict = field(default_factory=dict)
+    padded_rows: int | None = None
+    files: list | None = None
+    tables: list | None = None
+    table_names: list | None = None
+    patches: list = field(default_factory=list)
+    spins: list = field(default_factory=list)
+    outer_radius_m: float = float("nan")
+    reference_fit: dict | None = None
+    reference_result: Any = None
+    conditions: dict = field(default_factory=dict)
+    lines: Any = None
+    line_problem: Any = UNSET
+    rolling_structure: dict | None = None
+    label_counts: dict | None = None
+    k_max: Any = None
+    omega: Any = None
+    omega_source: list | None = None
+    sources: dict | None = None
+
 
 @dataclass
 class GapProblem:
@@ -74,7 +137,7 @@ class GapProblem:
     noise_method: str
     baseline_model: str
     not_applicable: dict = field(default_factory=dict)
-    meta: dict = field(default_factory=dict)
+    meta: ProblemMeta = field(default_factory=ProblemMeta)
     base_linear: tuple | None = None
     base_linear_scale: tuple | None = None
     base_linear_bound: tuple | None = None

@@ -31,7 +31,7 @@ per profile and channel, or the user's ``noise={"profile_ms2": σ}``; a
 model-resolution floor of :data:`MODEL_PRECISION` × the channel's RMS is added
 in quadrature (what the M = 512 grid misses against M = 4096, measured for the
 baseline sensor and the strongest sensor tilt; docs/physics.md §4.5). The fitted noise spectrum also gives each
-profile and channel its effective degrees of freedom (``meta["series_dof"]``)
+profile and channel its effective degrees of freedom (``meta.series_dof``)
 for the χ² test of :mod:`ringfit.gap.verdict`.
 
 **Held-out**: leave-one-speed-out (one fold per profile); with a single
@@ -59,7 +59,7 @@ import numpy as np
 from ringfit._cache import jit
 from ringfit.errors import InputError
 from ringfit.gap.effects.base import Effect
-from ringfit.gap.problem import GapProblem
+from ringfit.gap.problem import GapProblem, ProblemMeta
 from ringfit.gap.profile_noise import noise_dof, profile_noise
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced
@@ -224,9 +224,9 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
         fold_kind=fold_kind, labels=labels, base=base, base_values=values.copy(),
         base_prior_sd=np.sqrt(np.diag(cov)), effects=usable, data=data,
         noise_method="", baseline_model="gong-rolling", not_applicable=dropped,
-        meta={"block": BLOCK, "tangents": TANGENTS, "screen_min_fraction": SCREEN_MIN_FRACTION,
-              "k_max": kmax, "omega": rdata.omega, "omega_source": list(rdata.omega_source),
-              "prior_guarded": (0,) + tuple(range(2, nb))},
+        meta=ProblemMeta(block=BLOCK, tangents=TANGENTS, screen_min_fraction=SCREEN_MIN_FRACTION, k_max=kmax,
+                         omega=rdata.omega, omega_source=list(rdata.omega_source),
+                         prior_guarded=(0,) + tuple(range(2, nb))),
         base_linear=(False, True) + (False,) * len(ring_names),
         base_linear_scale=(1.0, OFFSET_SCALE) + (1.0,) * len(ring_names),
         base_linear_bound=(1.0, OFFSET_BOUND) + (1.0,) * len(ring_names),
@@ -242,7 +242,7 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
             fitted = ring.replace(**{n: float(v) for n, v in zip(base, theta) if n != "angle_offset"})
             rdata, problem.data = prepare(fitted)
             problem.y = y = rdata.measured.reshape(-1)
-            problem.meta.update(omega=rdata.omega, omega_source=list(rdata.omega_source))
+            problem.meta.omega, problem.meta.omega_source = rdata.omega, list(rdata.omega_source)
         resid = (y - predict(problem, problem.null_theta())).reshape(P, 2, M)
         if user is not None:
             sigma, slope = np.full((P, 2), float(user)), 0.0
@@ -260,16 +260,16 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
                 "(model resolution, M = 512 against M = 4096) in quadrature; "
                 "sigma [m/s^2] " + ", ".join(f"{s:g} km/h: {sigma[i, 0]:.3g}/{sigma[i, 1]:.3g}"
                                              for i, s in enumerate(rdata.speed_kmh)))
-            problem.meta["noise_slope"] = slope
+            problem.meta.noise_slope = slope
             problem.noise_method += f"; spectral slope {slope:.2f}"
         problem.sigma = np.repeat(sigma.reshape(-1), M)
-        problem.meta["series_dof"] = {2 * i + c: noise_dof(slope, kmax[i]) for i in range(P) for c in range(2)}
-    problem.meta["sources"] = dict(sources or {})
-    problem.meta["sources"]["k_tread"] = "fitted to the profiles"
+        problem.meta.series_dof = {2 * i + c: noise_dof(slope, kmax[i]) for i in range(P) for c in range(2)}
+    problem.meta.sources = dict(sources or {})
+    problem.meta.sources["k_tread"] = "fitted to the profiles"
     for n in ring_names:
-        problem.meta["sources"][n] = (problem.meta["sources"].get(n, "free-table fit")
+        problem.meta.sources[n] = (problem.meta.sources.get(n, "free-table fit")
                                       + "; refitted to the profiles with that fit's uncertainty as prior")
-    problem.meta["sources"]["omega"] = sorted(set(rdata.omega_source))
+    problem.meta.sources["omega"] = sorted(set(rdata.omega_source))
     return problem
 
 

@@ -99,7 +99,7 @@ def _engine_problem(problem: GapProblem, train) -> Problem:
     w = np.where(train, 1.0 / problem.sigma, 0.0)
     y = problem.y
     robust = np.zeros(m, dtype=bool) if problem.robust is None else np.asarray(problem.robust, dtype=bool)
-    pad = int(problem.meta.get("padded_rows", m)) - m  # rows the predictor pads (weight 0)
+    pad = int(problem.meta.padded_rows if problem.meta.padded_rows is not None else m) - m  # rows the predictor pads (weight 0)
     if pad:
         y, w = np.concatenate([y, np.zeros(pad)]), np.concatenate([w, np.zeros(pad)])
         robust = np.concatenate([robust, np.zeros(pad, dtype=bool)])
@@ -109,7 +109,7 @@ def _engine_problem(problem: GapProblem, train) -> Problem:
 
 
 def _pad(problem: GapProblem) -> int:
-    return int(problem.meta.get("tangents", problem.n_theta))
+    return int((problem.meta.tangents if problem.meta.tangents is not None else problem.n_theta))
 
 
 def predict(problem: GapProblem, theta) -> np.ndarray:
@@ -299,11 +299,11 @@ def shrink(problem: GapProblem, r_base: np.ndarray, r_cand: np.ndarray, mask=Non
 
 def shrink_interval(problem: GapProblem, r_base: np.ndarray, r_cand: np.ndarray, n_boot: int = 400,
                     seed: int = 0, mask=None, heldout: bool = True) -> tuple[float, float]:
-    """95 % block-bootstrap interval of the held-out :func:`shrink` [%] over rows (blocks of ``meta["block"]``)."""
+    """95 % block-bootstrap interval of the held-out :func:`shrink` [%] over rows (blocks of ``meta.block``)."""
     rb2 = problem.standardised(r_base, mask, heldout) ** 2
     rc2 = problem.standardised(r_cand, mask, heldout) ** 2
     m = rb2.size
-    block = int(problem.meta.get("block", 1))
+    block = int(problem.meta.block)
     nb = max(1, math.ceil(m / block))
     rng = np.random.default_rng(seed)
     starts = rng.integers(0, m, size=(n_boot, nb))
@@ -317,7 +317,7 @@ def reference_drift(problem: GapProblem, fit: FitResult, reference: FitResult) -
     """How far a refit moved the reference-state predictions: RMS over the reference rows of the
     baseline's prediction (every effect at its null) with the refit's baseline parameters minus that
     with the reference fit's, in units of each row's σ. ``None`` without reference rows."""
-    mask = problem.meta.get("reference_mask")
+    mask = problem.meta.reference_mask
     if mask is None or not np.any(mask):
         return None
     nb = len(problem.base)
@@ -344,12 +344,12 @@ def drift(problem: GapProblem, fit: FitResult, reference: FitResult) -> dict[str
 def prior_distance(problem: GapProblem, theta: np.ndarray, exclude=()) -> tuple[float, int]:
     """Squared Mahalanobis distance of the prior-guarded baseline parameters from their prior.
 
-    The guarded parameters are ``problem.meta["prior_guarded"]`` (baseline indices whose prior
+    The guarded parameters are ``problem.meta.prior_guarded`` (baseline indices whose prior
     comes from independent data — for profiles the ring stiffnesses from the free-table fit),
     less the names in ``exclude`` (an effect's ``baseline_partners``, marginalised out).
     **Returns:** ``(D², k)``; ``(0, 0)`` when nothing is guarded. Under the prior D² ~ χ²_k.
     """
-    idx = [i for i in problem.meta.get("prior_guarded", ()) if problem.base[i] not in exclude]
+    idx = [i for i in problem.meta.prior_guarded if problem.base[i] not in exclude]
     if not idx or problem.base_prior_cov is None:
         return 0.0, 0
     mean = np.asarray(problem.base_prior_mean if problem.base_prior_mean is not None else problem.base_values)
@@ -372,7 +372,7 @@ def baseline_movement(problem: GapProblem, fit: FitResult, reference: FitResult)
     from ringfit.gap.verdict import PRIOR_REGION
 
     nb = len(problem.base)
-    guarded = [i for i in problem.meta.get("prior_guarded", ())]
+    guarded = list(problem.meta.prior_guarded)
     if guarded and problem.base_prior_cov is not None and problem.base_prior_mean is not None:
         mean = np.asarray(problem.base_prior_mean, dtype=np.float64)
         sd = np.sqrt(np.diag(np.asarray(problem.base_prior_cov, dtype=np.float64)))

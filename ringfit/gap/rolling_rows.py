@@ -117,7 +117,7 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
     lines per table, for the random-line null of :mod:`ringfit.gap.calibration` (which repeats the
     choice per draw) and the ambiguity of a match.
     """
-    from ringfit.gap.campbell import MODEL_TOLERANCE, _assign, _candidates, _group_key, _row_labels, match_tables
+    from ringfit.gap.campbell import MODEL_TOLERANCE, assign_rows, diagram_candidates, diagram_group_key, row_labels, match_tables
 
     T = len(tables)
     sel = [ti for ti, t in enumerate(tables) if is_rolling(t)]
@@ -139,12 +139,12 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
         offset = 0
         for ti, cond in zip(idx, match.conditions):
             t = tables[ti]
-            d = match.diagrams[_group_key(cond.contact, cond.load_n, drum)]
+            d = match.diagrams[diagram_group_key(cond.contact, cond.load_n, drum)]
             s = int(np.argmin(np.abs(d.speed_kmh - round(cond.speed_kmh, 9))))
             omega[ti] = cond.omega
             lead[ti], trail[ti] = math.radians(d.leading_deg[s]), math.radians(d.trailing_deg[s])
             patch = patches[ti][0]
-            cands = _candidates(d, s, cond.frame)
+            cands = diagram_candidates(d, s, cond.frame)
             free_cands = _free_ring_candidates(ring, geometry, cond.omega, cond.frame == "fixed")
             lines[LOADED][ti] = [dict(hz=c.hz, cost=-2.0 * math.log(max(c.weight, 1e-12)), weight=c.weight,
                                       sigma=MODEL_TOLERANCE * c.hz,
@@ -158,8 +158,8 @@ def assign_rolling_rows(tables, rows, ring, geometry, patches):
                                f"{cond.source_speed}, contact arc {d.leading_deg[s]:.2f}…{d.trailing_deg[s]:.2f} deg "
                                f"of the steady rolling solution at {cond.load_n:g} N, {cond.frame} frame, "
                                f"K = {ROLLING_HARMONICS} harmonics")
-            labs = [_row_labels(t, i) for i in range(len(t))]
-            free_assign = _assign(t, labs, free_cands, MODEL_TOLERANCE)
+            labs = [row_labels(t, i) for i in range(len(t))]
+            free_assign = assign_rows(t, labs, free_cands, MODEL_TOLERANCE)
             js, structural = [], []
             for i in range(len(t)):
                 rec = match.rows[offset + i]
@@ -269,7 +269,7 @@ def _free_ring_program(fixed: bool):
 def _free_ring_candidates(ring, geometry, omega: float, fixed: bool):
     """The waves n = 1 … :data:`ROLLING_N_MAX` of the free spinning ring at Ω (eq. 25 co-rotating, eq. 26 fixed)
     as matching candidates (weight 1; a travelling wave: no symmetry about a patch)."""
-    from ringfit.gap.campbell import _Candidate
+    from ringfit.gap.campbell import Candidate
 
     n_all = np.arange(1, ROLLING_N_MAX + 1, dtype=float)
     w = np.abs(np.asarray(_free_ring_program(fixed)(ring, geometry, n_all, omega)))  # [Hz], (n, 2): backward, forward
@@ -277,15 +277,15 @@ def _free_ring_candidates(ring, geometry, omega: float, fixed: bool):
     for k, n in enumerate(n_all.astype(int)):
         for b, direction in enumerate(("backward", "forward")):
             line_k = None if fixed else (int(n) if direction == "backward" else -int(n))
-            out.append(_Candidate(-1, line_k, float(w[k, b]), int(n), direction, math.nan, "", 1.0))
+            out.append(Candidate(-1, line_k, float(w[k, b]), int(n), direction, math.nan, "", 1.0))
     return out
 
 
 def _penalties(labs, cands) -> np.ndarray:
     """``(r, L)`` label penalties of ``ringfit campbell``'s matching cost (n, branch, tag) of each row on each line."""
-    from ringfit.gap.campbell import _label_penalties
+    from ringfit.gap.campbell import label_penalties
 
-    return np.array([[_label_penalties(lab, c)[0] for c in cands] for lab in labs]).reshape(len(labs), len(cands))
+    return np.array([[label_penalties(lab, c)[0] for c in cands] for lab in labs]).reshape(len(labs), len(cands))
 
 
 def structure_loglik(f, std, hz, weight, pen, lo: float, hi: float) -> np.ndarray:

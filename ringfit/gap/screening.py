@@ -14,7 +14,7 @@ effect cannot score by mimicking a baseline refit), the columns S⊥ give
 
 Candidates with ``score < SCREEN_MIN_SCORE`` are not refitted (they are
 listed with the baseline's figures and ``screened_out``); so are those whose
-linearised score is below ``problem.meta["screen_min_fraction"]`` (default 0)
+linearised score is below ``problem.meta.screen_min_fraction`` (default 0)
 of the current χ²: a 10 % held-out RMS shrink needs ≈ 19 % of the χ², so a
 candidate that aligns with only a few per cent of it cannot be accepted.
 The screen is run at the baseline and again on top of each accepted chain.

@@ -192,7 +192,7 @@ def outputs_committed_together():
     exception; on an exception (or Ctrl-C) none is, and the temporary files are removed.
 
     Nested blocks join the outermost one. Code inside must not read back what it wrote (the files appear
-    only at the end); :func:`direct_writes` suspends the staging where it must.
+    only at the end).
     """
     if _STAGED.get() is not None:
         yield
@@ -207,16 +207,6 @@ def outputs_committed_together():
     finally:
         _STAGED.reset(token)
     _commit(staged)
-
-
-@contextlib.contextmanager
-def direct_writes():
-    """Suspend :func:`outputs_committed_together` inside the block (writes into a private temporary folder)."""
-    token = _STAGED.set(None)
-    try:
-        yield
-    finally:
-        _STAGED.reset(token)
 
 
 def _discard(staged) -> None:

@@ -50,6 +50,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.files import atomic_write, check_output_path, existing_file
 from ringfit.io.record_types import AXES, MeasuredFRF, Records
+from ringfit.units import G_UNIT
 
 #: ringfit's axis -> UFF direction code (the accelerometer's x, y, z inside the tyre).
 DIRECTION = {"tangential": 1, "lateral": 2, "radial": 3}
@@ -66,7 +67,7 @@ _FUNCTIONS = {0: "general or unknown", 1: "time response", 2: "auto spectrum", 3
               4: "frequency response function", 5: "transmissibility", 6: "coherence", 7: "auto correlation",
               8: "cross correlation", 9: "power spectral density", 10: "energy spectral density",
               11: "probability density function", 12: "spectrum", 13: "cumulative frequency distribution"}
-STANDARD_GRAVITY = 9.80665  # m/s² per g
+STANDARD_GRAVITY = G_UNIT  # m/s² per g (ringfit.units)
 _ANGLE = re.compile(r"sensor_angle_deg\s*=\s*([-+0-9.eE]+)")
 _FS = re.compile(r"fs_hz\s*=\s*([-+0-9.eE]+)")
 _OWN_ID = "ringfit records"

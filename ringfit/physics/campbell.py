@@ -24,17 +24,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from ringfit.errors import InputError
+# frames of docs/formats.md §2 (``rotating`` = the co-rotating sensor; the CLI calls it ``sensor``) and the
+# standing/travelling threshold (a mode whose dominant order's backward/forward amplitude ratio is below it is
+# standing): the mode files' and the cleat SSI's own, so that a diagram and a measured table classify alike
+from ringfit.io.modes import FRAMES
 from ringfit.physics.operating import road_from_drum_diameter
+from ringfit.targets.rolling_modes import TRAVELLING_RATIO
 
 #: Highest dominant order kept in a diagram (the issue's n ≤ 15).
 DEFAULT_N_MAX = 15
-#: A mode whose dominant order's backward/forward amplitude ratio is below this is standing
-#: (the same threshold as the cleat SSI, :data:`ringfit.targets.rolling_modes.TRAVELLING_RATIO`).
-TRAVELLING_RATIO = 3.0
 #: Speeds of one diagram are padded to a multiple of this, so that tables at a few speeds share a compilation.
 SPEED_BUCKET = 8
-#: Frames of docs/formats.md §2 (``rotating`` = the co-rotating sensor; the CLI calls it ``sensor``).
-FRAMES = ("rotating", "fixed")
 
 
 def frame_name(frame: str) -> str:
@@ -233,7 +233,7 @@ def campbell_diagram(
     import jax
 
     from ringfit.physics.rolling_modes import DEFAULT_HARMONICS, campbell_modes_jit
-    from ringfit.targets.ssi import small_matrix_threads
+    from ringfit._threads import small_matrix_threads
 
     K = DEFAULT_HARMONICS if harmonics is None else int(harmonics)
     if n_max < 1 or 2 * n_max > K:

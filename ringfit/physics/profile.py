@@ -64,6 +64,11 @@ class ProfileModel(eqx.Module):
     sensor: SensorModel = SensorModel()
     membrane_compliance: object = None
     channel_filters: tuple = ()
+    #: fixed-point passes of the load hooks (static): 1 = one step (radial solve → hook loads → solve again, what the
+    #: gap diagnosis's ``tread_shear`` and its blind truth use); more iterate the hooks towards their fixed point with
+    #: the update relaxed by ``hook_relaxation`` (docs/physics.md §13: the lever brush at a drive/brake slip needs it)
+    hook_passes: int = eqx.field(static=True, default=1)
+    hook_relaxation: float = eqx.field(static=True, default=1.0)
 
     def with_ring_changes(self, **changes) -> "ProfileModel":
         """Set ring parameters (``RingParams`` field names, SI) — e.g. ``chi=0.7``."""
@@ -143,7 +148,7 @@ def rolling_passes(model: ProfileModel, ring: RingParams, geometry: TyreGeometry
                    solver: ContactSolver) -> tuple[RollingSolution, RollingSolution, jax.Array]:
     """:func:`rolling_state` with the first (radial) pass: ``(first, solution, channels)``.
 
-    With load hooks, ``first`` is the contact solution the hooks' loads were computed from (what a brush's
+    With load hooks, ``first`` is the contact solution the last hook loads were computed from (the pass before the last) (what a brush's
     tip forces, slip and free-rolling radius are read on, docs/physics.md §13); without, it is the solution.
     """
     ring_model = model.operator_model()
@@ -153,17 +158,24 @@ def rolling_passes(model: ProfileModel, ring: RingParams, geometry: TyreGeometry
     else:
         M = solver.n_grid
 
-        # one fixed-point step (radial solve -> hook loads -> solve again) as a two-pass scan:
-        # the contact solve is traced and compiled once, not twice
-        def step(extra, _):
+        # hook_passes fixed-point steps (solve -> hook loads -> solve again …) as one scan of hook_passes + 1
+        # solves: the contact solve is traced and compiled once; the loads of step k + 1 are the relaxed
+        # (1 − ω)·loads_k + ω·hook(solution_k), ω = hook_relaxation (1: plain steps, the default single step)
+        w = model.hook_relaxation
+        first_step = jnp.arange(model.hook_passes + 1) == 0
+
+        def step(extra, first):
             s = solve_rolling(ring, geometry, operating, model=ring_model, solver=solver, extra_load=extra)
             loads = [hook(s, ring, geometry) for hook in model.load_hooks]
-            return (sum(q[0] for q in loads), sum(q[1] for q in loads)), s
+            new = (sum(q[0] for q in loads), sum(q[1] for q in loads))
+            if w == 1.0:
+                return new, s
+            return tuple(jnp.where(first, n, (1.0 - w) * e + w * n) for n, e in zip(new, extra)), s
 
         zero = (jnp.zeros(M), jnp.zeros(M))
-        _, sols = jax.lax.scan(step, zero, None, length=2)
-        first = jax.tree.map(lambda x: x[0], sols)
-        sol = jax.tree.map(lambda x: x[1], sols)
+        _, sols = jax.lax.scan(step, zero, first_step)
+        first = jax.tree.map(lambda x: x[-2], sols)
+        sol = jax.tree.map(lambda x: x[-1], sols)
     return first, sol, jnp.stack(sensor_signals(sol, geometry, model.sensor))
 
 

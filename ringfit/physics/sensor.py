@@ -34,8 +34,7 @@ from ringfit.params import TyreGeometry
 from ringfit.physics.contact import RollingSolution, as_traced
 from ringfit.physics.rolling import harmonic_numbers
 
-#: Standard gravity [m/s²].
-STANDARD_GRAVITY = 9.81
+from ringfit.units import GRAVITY as STANDARD_GRAVITY  # noqa: E402  (the model's g, defined once)
 
 
 def belt_slope(w_spectrum, v_spectrum, radius):

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-G = 9.81
+from ringfit.units import GRAVITY as G
 
 
 def _pyplot():

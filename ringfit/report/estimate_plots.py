@@ -9,7 +9,7 @@ import numpy as np
 
 from ringfit.report.figures import new_figure
 
-G = 9.81
+from ringfit.units import GRAVITY as G
 
 
 def draw_profile_fit(ax_fit, ax_res, est) -> None:

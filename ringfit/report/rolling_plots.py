@@ -11,7 +11,7 @@ import numpy as np
 
 from ringfit.report.figures import new_figure
 
-G = 9.81
+from ringfit.units import GRAVITY as G
 CHANNELS = ("radial (toward centre +)", "tangential (along travel +)")
 
 

@@ -48,9 +48,8 @@ import numpy as np
 
 from ringfit.io.continuous import DEFAULT_CHUNK, ContinuousRecord, ContinuousWriter
 from ringfit.io.profiles import band_limited_resample, grid_angles_deg
+from ringfit.units import GRAVITY as G
 from ringfit.units import KMH
-
-G = 9.81
 #: Deflection of the Table 9 tyre at 4 kN on the 1.2192 m drum (docs/physics.md §7), for R_e.
 TABLE9_DRUM_DEFLECTION = 0.01386
 

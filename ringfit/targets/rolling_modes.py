@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -139,7 +140,7 @@ def identify_rolling_modes(
     skip_s: float | None = None,
     f_max: float = DEFAULT_F_MAX,
     orders=range(4, 81, 2),
-    method: str = "decay",
+    method: Literal["decay", "cov"] = "decay",
     block_rows: int | None = None,
     min_orders: float = 0.3,
     freq_tol: float = 0.005,

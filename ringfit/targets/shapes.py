@@ -15,9 +15,7 @@ A shape vector has one entry per channel; each channel has a sensor angle θ
 - real shapes: the source's rule ``v_r = sign(Im v)·|v|`` (seed §4.3) and a
   better one, :func:`real_shape_principal`, which turns the complex vector
   by the phase that makes it as real as possible (½ arg Σv²) before taking
-  the real part (exact for any standing wave, whatever its phase), or
-  :func:`standing_wave` which rebuilds the standing wave of a double pole
-  from its two counter-rotating waves;
+  the real part (exact for any standing wave, whatever its phase);
 - :func:`acoustic_candidates` flags modes that are not ring-like: a weak
   dominant harmonic, or an n out of the ring's monotone order (a ring's
   flexural frequencies rise with n for n ≥ 1, docs/physics.md §2.1; the cavity
@@ -108,33 +106,6 @@ def real_shape_principal(v: np.ndarray) -> np.ndarray:
     phase = 0.5 * np.angle(np.sum(v**2))
     r = np.real(v * np.exp(-1j * phase))
     return r * np.sign(r[np.argmax(np.abs(r))])
-
-
-def standing_wave(shape: np.ndarray, angle_rad: np.ndarray, axis: np.ndarray, n: int, at: np.ndarray | None = None) -> dict:
-    """Split harmonic n of a (double-pole) shape into its two counter-rotating waves.
-
-    **Returns:** dict with ``forward``/``backward`` complex amplitudes per axis
-    (of e^{+inθ} and e^{−inθ}), ``orientation_rad`` α of the standing wave
-    ``cos n(θ − α)`` that the two waves form on the radial axis, and
-    ``real`` — per axis, that standing wave evaluated at angles ``at``
-    (default the channel angles): ``|c_n| cos(nθ + arg c_n) + |c_{−n}| cos(nθ − arg c_{−n})``
-    after removing the common phase, i.e. what the source drew by summing conjugate shapes.
-    """
-    coeffs = harmonic_coefficients(shape, angle_rad, axis, max(n, 0))
-    th = np.unique(np.asarray(angle_rad)) if at is None else np.asarray(at)
-    out = {"forward": {}, "backward": {}, "real": {}}
-    common = None
-    for name, c in coeffs.items():
-        mm = (c.shape[0] - 1) // 2
-        a, b = c[mm + n], c[mm - n]
-        if common is None:  # common phase: make the sum of the wave amplitudes real
-            common = np.exp(-1j * 0.5 * (np.angle(a) + np.angle(b))) if n else np.exp(-1j * np.angle(a))
-        out["forward"][name], out["backward"][name] = a, b
-        out["real"][name] = np.real(common * (a * np.exp(1j * n * th) + b * np.exp(-1j * n * th)))
-    radial = coeffs.get("radial", next(iter(coeffs.values())))
-    mm = (radial.shape[0] - 1) // 2
-    out["orientation_rad"] = float(0.5 * (np.angle(radial[mm - n]) - np.angle(radial[mm + n])) / n) if n else 0.0
-    return out
 
 
 def acoustic_candidates(n: np.ndarray, confidence: np.ndarray, freq_hz: np.ndarray, min_confidence: float = 0.5) -> np.ndarray:

@@ -34,14 +34,14 @@ merges several setups (records) that share reference channels.
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Literal, Sequence
 
 import numpy as np
 import scipy.linalg
 
+from ringfit._threads import small_matrix_threads
 from ringfit.errors import InputError
 
 
@@ -248,11 +248,15 @@ class BlockHankelOperator:
         return block_hankel(self._cov, self.p, self.q)
 
 
+#: How :func:`truncated_svd` factors the block Hankel matrix.
+SvdMethod = Literal["randomized", "svds", "full"]
+
+
 def truncated_svd(
     h,
     rank: int,
     *,
-    method: str = "randomized",
+    method: SvdMethod = "randomized",
     n_iter: int = 2,
     oversample: int | None = None,
     seed: int = 0,
@@ -343,24 +347,6 @@ def _column_blocks(workers: int):
 def _lu_normalise(a: np.ndarray) -> np.ndarray:
     """A well-conditioned basis of the column space of ``a`` (rows, k): the permuted unit-lower L of ``a = P L U``."""
     return scipy.linalg.lu(a, permute_l=True, check_finite=False, overwrite_a=True)[0]
-
-
-def small_matrix_threads():
-    """Context manager: one BLAS thread for loops of small dense problems (eig of ≤ 200 × 200).
-
-    Multi-threaded BLAS on matrices this small only adds synchronisation; on
-    a loaded machine it made the order sweep 30× slower. One
-    ``threadpoolctl.ThreadpoolController`` is kept (finding the BLAS
-    libraries costs ~1 ms; setting the limit ~20 µs).
-    """
-    return _blas_controller().limit(limits=1, user_api="blas")
-
-
-@functools.lru_cache(maxsize=1)
-def _blas_controller():
-    from threadpoolctl import ThreadpoolController
-
-    return ThreadpoolController()
 
 
 def poles_from_svd(
@@ -530,7 +516,7 @@ def ssi_cov(
     orders: Sequence[int] = range(2, 161, 2),
     block_rows: int | None = None,
     refs: np.ndarray | None = None,
-    svd_method: str = "randomized",
+    svd_method: SvdMethod = "randomized",
     max_damping: float = 0.3,
     unbiased: bool = True,
     progress: bool = False,
@@ -578,7 +564,7 @@ class HankelFactors:
 
 
 def ssi_cov_factors(y: np.ndarray, fs_hz: float, *, orders: Sequence[int] = range(2, 161, 2),
-                    block_rows: int | None = None, refs: np.ndarray | None = None, svd_method: str = "randomized",
+                    block_rows: int | None = None, refs: np.ndarray | None = None, svd_method: SvdMethod = "randomized",
                     max_damping: float = 0.3, unbiased: bool = True, progress: bool = False,
                     workers: int | None = None) -> tuple[PoleSet, HankelFactors]:
     """:func:`ssi_cov`, also returning the SVD factors of H (:class:`HankelFactors`) for re-identifications.
@@ -620,7 +606,7 @@ def poles_from_hankel(
     orders: Sequence[int],
     dt: float,
     *,
-    svd_method: str = "randomized",
+    svd_method: SvdMethod = "randomized",
     max_damping: float = 0.3,
     progress: bool = False,
     workers: int | None = None,
@@ -721,7 +707,7 @@ def ssi_cov_multi_setup(
     *,
     orders: Sequence[int] = range(2, 161, 2),
     block_rows: int | None = None,
-    svd_method: str = "randomized",
+    svd_method: SvdMethod = "randomized",
     max_damping: float = 0.3,
     progress: bool = False,
     workers: int | None = None,

@@ -68,7 +68,8 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 
-from ringfit.targets.ssi import HankelFactors, PoleSet, discrete_poles, small_matrix_threads
+from ringfit._threads import small_matrix_threads
+from ringfit.targets.ssi import HankelFactors, PoleSet, discrete_poles
 
 #: Most groups of sensor angles (replicates) of the jackknife.
 JACKKNIFE_GROUPS = 12

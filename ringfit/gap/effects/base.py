@@ -105,7 +105,7 @@ class Effect:
 
     # ---------------------------------------------------------------- modal data
     def modal_mask(self, rows) -> np.ndarray | None:
-        """Bool ``(m,)``: which rows of a :class:`ringfit.gap.modal.ModalRows` the effect can change; ``None`` = not a modal effect."""
+        """Bool ``(m,)``: which rows of a :class:`ringfit.gap.modal_rows.ModalRows` the effect can change; ``None`` = not a modal effect."""
         return None
 
     def modal(self, values, omega, zeta, rows, ring, geometry):
@@ -114,7 +114,7 @@ class Effect:
         **Arguments:** ``values`` — this effect's parameters, JAX ``(k,)`` in
         the order of ``parameters``; ``omega``, ``zeta`` — ``(m,)`` the
         prediction so far (baseline, possibly modified by earlier effects);
-        ``rows`` — :class:`ringfit.gap.modal.ModalRows`; ``ring``,
+        ``rows`` — :class:`ringfit.gap.modal_rows.ModalRows`; ``ring``,
         ``geometry`` — the current ring parameters.
 
         **Returns:** ``(omega, zeta)`` of the same shapes. At the null values

@@ -5,7 +5,7 @@ take the k-th cosine-type (contact-symmetric) mode of :mod:`ringfit.physics.load
 rows tagged ``0``/``hort`` the k-th sine-type (contact-antisymmetric) one (k = n).
 The contact half-angle of each row is ``s · a_row``: ``a_row`` is the patch the
 rolling model's static contact solve gives at the row's table load
-(:func:`ringfit.gap.modal.contact_patch`, ``rows.patch``), ``s`` the parameter
+(:func:`ringfit.gap.modal_conditions.contact_patch`, ``rows.patch``), ``s`` the parameter
 ``patch_scale`` — null 0 (no patch: eq. 18 exactly), fixed by the measured
 condition at 1 (the *computed* candidate: a prediction with no free parameter),
 free in the *fitted* candidate (a patch the load does not explain is a finding

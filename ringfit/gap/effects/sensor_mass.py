@@ -8,7 +8,7 @@ so its modal mass grows by m_s (Rayleigh): ``ω' = ω √(M_n/(M_n + m_s))`` wit
 test tables only, never on ``free.modes.csv`` (``rows.reference``). The ring is fitted to the reference table:
 a mass glued on for that measurement too is already in the fitted ρA (its Rayleigh factor is ρA's own
 ``1 + 1/n²`` pattern), and what a test table can show is the difference. Applied to the reference rows as well,
-the refit (where the ring answers to the reference rows alone, :class:`ringfit.gap.modal.ModalPredictor`) lets
+the refit (where the ring answers to the reference rows alone, :class:`ringfit.gap.modal_rows.ModalPredictor`) lets
 the ring undo the mass there while the mass answers to the test rows with the ring held: a 44 g sensor present
 only in the test table then fits at 20 g with an interval reaching 0 (issue 30 item 9, the independent
 ``sensor_mass`` cases of ``benchmarks/_independent_effects.py``).
