@@ -253,6 +253,9 @@ def blind():
           f" {'per revolution: median |err|':>28s} {'bias':>7s}  coverage 95 %")
     for q in quantities:
         tgt, unit = TARGETS[q]
+        if all(a[2] == "fixed" for a in avg[q]):
+            print(f"   {q:10s} {tgt:>5g} {unit:>4s} | held at the truth (--hold): not estimated")
+            continue
         ea = np.array([a[0] for a in avg[q]])
         ka = sum(bool(a[1]) for a in avg[q])
         told = [a for a in avg[q] if a[2] == "estimated"]
