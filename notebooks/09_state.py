@@ -138,9 +138,9 @@ for key in keys:
 # %% [markdown]
 # **Read it honestly.** On this simulator the estimate read with the nominal tyre is *not* at the targets
 # (`benchmarks/bench_state.py` measures it over many blind recordings): the load, pressure and tread depth move
-# together along the ridge the Fisher table shows, and the model's brush (one fixed-point step, §13.2) is not
-# the simulator's (converged), a load-equivalent of a few per cent (§10.1). The per-revolution bands are
-# statistical only: they are as wide as the revolution's noise, not as the averaged estimate's model error.
+# together along the ridge the Fisher table shows, pushed by a model-form difference between the two codes of
+# about 2 % in load-equivalent (docs/physics.md §13.6). The per-revolution bands are statistical only: they are
+# as wide as the revolution's noise, not as the averaged estimate's model error.
 #
 # ## What a stated pressure and tread depth buy
 # A TPMS reading and a known wear (`ringfit estimate --fix pressure=… --fix tread_depth=…` in the CLI) hold two
