@@ -349,15 +349,18 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     w0 = np.concatenate([np.full(half, 1 / scale[0]), np.full(half, 1 / scale[1])])
     arrays = eqx.tree_at(lambda a: a.weight, arrays, (w0 / w0.mean())[None])
     opts = dict(max_steps=settings.max_steps, rtol=settings.rtol, atol=settings.atol)
-    first = least_squares(state_problem(arrays, settings, k_max, prior0), theta0, free, **opts)
-    # with no prior to hold them, the pressure or tread depth may run along the load–pressure–depth ridge
-    # (§13.6) to a bound, where the bounded coordinate's slope vanishes and the second pass cannot bring them
-    # back (7.9996 bar of 8, 0.2001 mm: the engine's 1e-6 does not see it): the first pass again, with them
-    # held at their priors' means
+    # with no prior to hold them, the pressure and tread depth ran along the load–pressure–depth ridge (§13.6)
+    # from the start, some to a bound (where the bounded coordinate's slope vanishes and the second pass cannot
+    # bring them back): the first pass fits with them held at their priors' means, then frees them from there
+    # (its residual, which weights the second pass, is then the free fit's); one that still ends at (within 1e-3
+    # of) a bound stays held in it
+    prob0 = state_problem(arrays, settings, k_max, prior0)
     free0 = tuple(n for n in free if n not in (PRESSURE, TREAD))
-    if free0 != free and (near_bound(first.theta, [n for n in free if n in (PRESSURE, TREAD)])
-                          or not np.all(np.isfinite(first.theta))):
-        first = least_squares(state_problem(arrays, settings, k_max, prior0), theta0, free0, **opts)
+    first = least_squares(prob0, theta0, free0, **opts)
+    if free0 != free and np.all(np.isfinite(first.theta)):
+        freed = least_squares(prob0, first.theta, free, **opts)
+        if np.all(np.isfinite(freed.theta)) and not near_bound(freed.theta, free):
+            first = freed
     # second pass: whiten each channel's residual spectrum
     weight = channel_weights(np.asarray(first.extra["aux"])[0] - measured)
     arrays = eqx.tree_at(lambda a: a.weight, arrays, weight[None])
