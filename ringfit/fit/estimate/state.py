@@ -100,6 +100,9 @@ QUANTITIES = {
 }
 #: The quantities whose correlation is reported.
 CORRELATED = ("load_n", "pressure_bar", "slip", "fx_n", "tread_depth_mm", "speed_kmh")
+#: Pairs that are one quantity in two forms (Fx = Fx(κ) through the brush): correlated by construction, never
+#: reported as "not told apart".
+ONE_QUANTITY = ({"slip", "fx_n"},)
 
 
 class StateArrays(eqx.Module):
@@ -228,6 +231,26 @@ def state_quantities(theta, geometry, ring, laws, omega, road=None, *, ring_name
     return np.asarray(v), np.asarray(jt), np.asarray(jr)
 
 
+#: A state parameter within this share of its coordinate's range of a bound is at it (the engine's 1e-6 misses a
+#: bounded coordinate that creeps towards its bound: 7.9996 bar of 8).
+NEAR_BOUND = 1e-3
+
+
+def near_bound(theta, free) -> list:
+    """The state parameters and gain among ``free`` within :data:`NEAR_BOUND` of their range's ends (in u)."""
+    out = []
+    for n in free:
+        if n not in STATE_NAMES and n != GAIN:
+            continue
+        c = STATE_COORDS[STATE_PARAMETERS.index(n)]
+        if not (math.isfinite(c.lo) and math.isfinite(c.hi)):
+            continue
+        u, lo, hi = (c.to_u(x) for x in (float(theta[STATE_PARAMETERS.index(n)]), c.lo, c.hi))
+        if min(u - lo, hi - u) <= NEAR_BOUND * (hi - lo):
+            out.append(n)
+    return out
+
+
 def _du_dtheta(theta) -> np.ndarray:
     """dθ/du per parameter (θ for a log coordinate, its scale for a linear one)."""
     return np.array([t if c.kind == LOG else c.scale for c, t in zip(STATE_COORDS, theta)])
@@ -349,7 +372,18 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     w0 = np.concatenate([np.full(half, 1 / scale[0]), np.full(half, 1 / scale[1])])
     arrays = eqx.tree_at(lambda a: a.weight, arrays, (w0 / w0.mean())[None])
     opts = dict(max_steps=settings.max_steps, rtol=settings.rtol, atol=settings.atol)
-    first = least_squares(state_problem(arrays, settings, k_max, prior0), theta0, free, **opts)
+    # with no prior to hold them, the pressure and tread depth ran along the load–pressure–depth ridge (§13.6)
+    # from the start, some to a bound (where the bounded coordinate's slope vanishes and the second pass cannot
+    # bring them back): the first pass fits with them held at their priors' means, then frees them from there
+    # (its residual, which weights the second pass, is then the free fit's); one that still ends at (within 1e-3
+    # of) a bound stays held in it
+    prob0 = state_problem(arrays, settings, k_max, prior0)
+    free0 = tuple(n for n in free if n not in (PRESSURE, TREAD))
+    first = least_squares(prob0, theta0, free0, **opts)
+    if free0 != free and np.all(np.isfinite(first.theta)):
+        freed = least_squares(prob0, first.theta, free, **opts)
+        if np.all(np.isfinite(freed.theta)) and not near_bound(freed.theta, free):
+            first = freed
     # second pass: whiten each channel's residual spectrum
     weight = channel_weights(np.asarray(first.extra["aux"])[0] - measured)
     arrays = eqx.tree_at(lambda a: a.weight, arrays, weight[None])
@@ -453,7 +487,7 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
                           f"(docs/physics.md §13.4); the value is the prior's, not a measurement")
     for a in range(len(sel)):
         for b in range(a + 1, len(sel)):
-            if abs(corr[a, b]) > RIDGE_CORRELATION:
+            if abs(corr[a, b]) > RIDGE_CORRELATION and {corr_names[a], corr_names[b]} not in ONE_QUANTITY:
                 untold.append(f"{corr_names[a]} and {corr_names[b]} are not told apart (correlation "
                               f"{corr[a, b]:+.3f}): their intervals are along the ridge (marginal)")
     # fit quality per channel
@@ -463,6 +497,7 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     rms = {"radial": float(np.sqrt(0.5 * np.sum(resid[:half] ** 2))),
            "tangential": float(np.sqrt(0.5 * np.sum(resid[half:] ** 2)))}
     at_bound = [n for n in fit.extra["at_bound"] if n in STATE_NAMES or n == GAIN]
+    at_bound += [n for n in near_bound(theta, free) if n not in at_bound]
     converged = bool(fit.converged and finite and not at_bound)
     flags = [f for f in fit.flags if "solver did not converge" in f or any(f.startswith(n) for n in STATE_NAMES)]
     nuisances = {}
