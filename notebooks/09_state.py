@@ -3,7 +3,7 @@
 #
 # Load, inflation pressure, drive/brake force (with its slip), speed and tread depth, revolution by
 # revolution, each with a 95 % interval (docs/physics.md §13). The recordings come from `ringfit example
-# state`: the *independent* simulator (`ringfit.synth.state`, §10.1 — its own finite differences, a brush
+# state`: the *independent* simulator (`ringfit.synth.state`, §13.7 — its own finite differences, a brush
 # iterated to its fixed point, coloured noise, sensor tilt, the IEPE high-pass in time), a true tyre that is
 # the example's nominal `tyre.toml` jittered, and recordings whose state is hidden (`blind/`) with the truth
 # kept aside (`truth/`).
