@@ -309,7 +309,8 @@ def fisher_table():
     print(f"\n3. Fisher table (state_fisher): σ of ONE revolution, nominal example tyre at p_ref "
           f"{geometry.pressure / 1e5:.2f} bar, tread {1e3 * depth:g} mm, κ = {slip:g}; white noise σ = "
           f"{100 * FISHER_NOISE_SHARE:g} % of Ω²R_out per sample in each channel, {FISHER_SAMPLES} samples per "
-          "revolution; nuisances (gain, angle offset, high-pass corner, tilt) free; the data alone (no priors). "
+          "revolution; nuisances (gain, tangential gain, angle offset, high-pass corner, tilt, liner offset) free; "
+          "the data alone (no priors). "
           "'*': σ wider than the estimate's weak prior (§13.4): not told by one revolution. 'd held': the tread depth "
           "stated (known from the wear history). '10 s': σ/√R over the R revolutions of 10 s at that speed.")
     print(f"   {'':14s} | {'per revolution, d free':^43s} | {'d held':^20s} | {'10 s, d free':^21s} |")
