@@ -19,7 +19,7 @@ import bench_state as bench  # noqa: E402
 
 def _theta(**kw):
     base = dict(load_n=4000.0, pressure_pa=2.2e5, slip=0.0, tread_depth_m=8e-3, gain=1.0, angle_offset=0.0,
-                corner_hz=0.5, tilt_gain=0.5)
+                corner_hz=0.5, tilt_gain=0.5, gain_tangential=1.0, liner_offset_m=1e-3)
     base.update(kw)
     return np.array([base[n] for n in STATE_PARAMETERS])
 
