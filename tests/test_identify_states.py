@@ -274,7 +274,10 @@ def test_one_pressure_folder_gives_the_ring_it_gave_before(tmp_path):
     before = BEFORE_SEED3
     for name, value in before.items():
         assert ident.fit.values[name] == pytest.approx(value, rel=1e-5), name
-        assert ident.covariance.sd_ln(name) == pytest.approx(BEFORE_SEED3_SD_LN[name], rel=1e-3), name
+        # the σ since widened by the blocks' model-discrepancy ratio √κ_b ≥ 1 (docs/physics.md §11, issue 32
+        # item 4): never narrower than before, and within the issue's 2× where the model is right
+        before_sd = BEFORE_SEED3_SD_LN[name]
+        assert before_sd * (1 - 1e-3) <= ident.covariance.sd_ln(name) <= 2.0 * before_sd, name
 
 
 #: The ring ``identify`` gave on ``make_identify_case(seed=3)`` at commit d48645d (before identify across states).

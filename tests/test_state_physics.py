@@ -60,8 +60,12 @@ def test_tread_law_by_hand():
 
 
 def _brush_channels(k_x, **brush):
-    """The gap diagnosis's lever brush (free rolling by default) through profile_channels, at the reference."""
-    model = ProfileModel().with_load_hook(BrushShearLoad(k_x, lever=True, **brush))
+    """The gap diagnosis's lever brush (free rolling by default) through profile_channels, at the reference, iterated
+    as the state model iterates it (``BRUSH_PASSES`` relaxed passes)."""
+    from ringfit.physics.state import BRUSH_PASSES, BRUSH_RELAXATION
+
+    model = ProfileModel(hook_passes=BRUSH_PASSES, hook_relaxation=BRUSH_RELAXATION).with_load_hook(
+        BrushShearLoad(k_x, lever=True, **brush))
     ch = profile_channels(*as_traced((model, RING, GEO)), np.array([OMEGA]), np.array([4000.0]), flat_or_drum(None, 1),
                           full_band(1, 512), 0.0, ContactSolver())
     return np.asarray(ch[0])
@@ -73,13 +77,19 @@ def test_free_rolling_state_is_the_free_rolling_brush():
     np.testing.assert_allclose(ch, _brush_channels(15e6), rtol=0, atol=1e-9 * np.abs(ch).max())
     assert q["slip"] == 0.0 and q["r_free"] == q["r_road"]
     assert abs(q["fx"]) < 1e-4 * 4000.0  # the tips as a whole push no net force at free rolling
-    # a given road length per radian equal to r_free/(1 + κ) is the same state as the slip κ
+    # a slip κ is a road length per radian r_road = r_free/(1 + κ), r_free read on the driven patch (the brush
+    # iterated to its fixed point: the patch under drive is not the free-rolling one, so r_free moves a little)
     _, ch_k, q_k = solve_state(GEO, RING, LAWS, TyreState(4000.0, GEO.pressure, 0.008, 0.02, OMEGA))
-    r_road = q["r_free"] / 1.02
-    np.testing.assert_allclose(_brush_channels(15e6, r_road=r_road), ch_k, rtol=0, atol=1e-8 * np.abs(ch_k).max())
-    _, _, q_r = solve_state(GEO, RING, LAWS, TyreState(4000.0, GEO.pressure, 0.008, 0.0, OMEGA, r_road=r_road))
-    assert q_r["fx"] == pytest.approx(q_k["fx"], rel=1e-9)
-    assert q_r["slip"] == pytest.approx(0.02, rel=1e-9)
+    assert q_k["r_road"] == pytest.approx(q_k["r_free"] / 1.02, rel=1e-9)
+    assert q_k["r_free"] == pytest.approx(q["r_free"], rel=5e-3)  # 0.24 % at κ = 0.02 on Table 9
+    # and given that r_road, the state is the same one (channels, Fx, κ)
+    _, ch_r, q_r = solve_state(GEO, RING, LAWS, TyreState(4000.0, GEO.pressure, 0.008, 0.0, OMEGA,
+                                                          r_road=float(q_k["r_road"])))
+    np.testing.assert_allclose(ch_r, ch_k, rtol=0, atol=1e-5 * np.abs(ch_k).max())
+    np.testing.assert_allclose(_brush_channels(15e6, r_road=float(q_k["r_road"])), ch_k, rtol=0,
+                               atol=1e-5 * np.abs(ch_k).max())
+    assert q_r["fx"] == pytest.approx(q_k["fx"], rel=1e-5)
+    assert q_r["slip"] == pytest.approx(0.02, rel=1e-3)
 
 
 def test_drive_and_brake_signs():
