@@ -80,6 +80,37 @@ def _ring(rng):
     return geometry, ring
 
 
+def joint_ring(rng):
+    """The truth of a joint identify case: :func:`_ring`, a damping ratio ζ ~ U(0.015, 0.035) and k_trd jittered
+    once more (σ 0.15 of its log). **Returns:** ``(geometry, ring, ζ)``."""
+    geometry, ring = _ring(rng)
+    zeta = float(rng.uniform(0.015, 0.035))
+    ring = ring.replace(damping_ratio=zeta, k_tread=float(ring.k_tread * np.exp(rng.normal(0.0, 0.15))))
+    return geometry, ring, zeta
+
+
+@dataclass
+class TableWriter:
+    """Writes structural mode tables of a joint case into ``folder``: each frequency with relative noise
+    ``sigma_rel`` (drawn from ``rng``), ``freq_std_hz`` stated when ``with_std``."""
+
+    folder: Path
+    rng: object
+    sigma_rel: float
+    with_std: bool
+
+    def __call__(self, name, f, n, tag, damping, condition) -> None:
+        from ringfit.io.modes import ModeTable, write_mode_table
+
+        f = np.asarray(f)
+        noisy = f * (1.0 + self.sigma_rel * self.rng.standard_normal(f.size))
+        t = ModeTable(freq_hz=noisy, n=np.asarray(n), tag=np.asarray(tag, object),
+                      kind=np.array(["structural"] * f.size, object), branch=np.array([""] * f.size, object),
+                      damping_pct=np.asarray(damping), freq_std_hz=(self.sigma_rel * noisy) if self.with_std else None,
+                      condition=condition)
+        write_mode_table(t, Path(self.folder) / name)
+
+
 def _noise(rng, freq, sigma_rel, colour):
     """White or coloured (white + a random walk along the rows) relative frequency noise."""
     white = rng.normal(0.0, 1.0, freq.size)

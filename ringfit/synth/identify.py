@@ -27,7 +27,6 @@ def make_identify_case(folder: str | os.PathLike, seed: int = 0, *, profiles: bo
     ``truth.json`` there when ``truth_file``; the identification does not read it)."""
     import jax.numpy as jnp
 
-    from ringfit.io.modes import ModeTable, write_mode_table
     from ringfit.io.profiles import Profile, write_profile
     from ringfit.io.tyre import Tyre, write_tyre
     from ringfit.physics.contact import ContactSolver, patch_edges, solve_rolling_jit
@@ -35,25 +34,16 @@ def make_identify_case(folder: str | os.PathLike, seed: int = 0, *, profiles: bo
     from ringfit.physics.natural import natural_frequencies
     from ringfit.physics.operating import OperatingPoint
     from ringfit.physics.profile import ProfileModel, simulate_profile
-    from ringfit.synth.cases import NOISE_COLOURS, _new_case_folder, _ring, coloured_noise
+    from ringfit.synth.cases import NOISE_COLOURS, TableWriter, _new_case_folder, coloured_noise, joint_ring
 
     rng = np.random.default_rng(seed)
     folder = _new_case_folder(folder)
-    geometry, ring = _ring(rng)
-    zeta = float(rng.uniform(0.015, 0.035))
-    ring = ring.replace(damping_ratio=zeta, k_tread=float(ring.k_tread * np.exp(rng.normal(0.0, 0.15))))
+    geometry, ring, zeta = joint_ring(rng)
     sigma_rel = float(rng.uniform(0.001, 0.003))
     with_std = bool(rng.random() < 0.5)
     write_tyre(Tyre(geometry, {}), folder / "tyre.toml")
 
-    def table(name, f, n, tag, damping, condition):
-        f = np.asarray(f)
-        noisy = f * (1.0 + sigma_rel * rng.standard_normal(f.size))
-        t = ModeTable(freq_hz=noisy, n=np.asarray(n), tag=np.asarray(tag, object),
-                      kind=np.array(["structural"] * f.size, object), branch=np.array([""] * f.size, object),
-                      damping_pct=np.asarray(damping), freq_std_hz=(sigma_rel * noisy) if with_std else None,
-                      condition=condition)
-        write_mode_table(t, folder / name)
+    table = TableWriter(folder, rng, sigma_rel, with_std)
 
     n_free = np.arange(1, 10)
     f_free = np.asarray(natural_frequencies(ring, geometry, jnp.asarray(n_free, float)))
@@ -135,7 +125,6 @@ def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_
     """
     import jax.numpy as jnp
 
-    from ringfit.io.modes import ModeTable, write_mode_table
     from ringfit.io.profiles import Profile, band_limited_resample, grid_angles_deg, write_profile
     from ringfit.io.tyre import Tyre, write_tyre
     from ringfit.params import BAR
@@ -145,14 +134,12 @@ def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_
     from ringfit.physics.operating import OperatingPoint
     from ringfit.physics.profile import ProfileModel, effective_rolling_radius
     from ringfit.physics.state import TyreState, solve_state, state_tyre
-    from ringfit.synth.cases import NOISE_COLOURS, _new_case_folder, _ring, coloured_noise
+    from ringfit.synth.cases import NOISE_COLOURS, TableWriter, _new_case_folder, coloured_noise, joint_ring
     from ringfit.params import TyreLaws
 
     rng = np.random.default_rng(seed)
     folder = _new_case_folder(folder)
-    geometry, ring = _ring(rng)
-    zeta = float(rng.uniform(0.015, 0.035))
-    ring = ring.replace(damping_ratio=zeta, k_tread=float(ring.k_tread * np.exp(rng.normal(0.0, 0.15))))
+    geometry, ring, zeta = joint_ring(rng)
     laws = TyreLaws(kw_share=float(rng.uniform(0.3, 0.7)), kv_share=float(rng.uniform(0.2, 0.6)),
                     k_tread_share=float(rng.uniform(0.1, 0.5)), k_x=float(15e6 * np.exp(rng.normal(0.0, 0.2))),
                     has_brush=True)
@@ -165,14 +152,7 @@ def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_
         g, r, _ = state_tyre(geometry, ring, laws, share * p_ref, laws.tread_depth_ref)
         return g, r
 
-    def table(name, f, n, tag, damping, condition):
-        f = np.asarray(f)
-        noisy = f * (1.0 + sigma_rel * rng.standard_normal(f.size))
-        t = ModeTable(freq_hz=noisy, n=np.asarray(n), tag=np.asarray(tag, object),
-                      kind=np.array(["structural"] * f.size, object), branch=np.array([""] * f.size, object),
-                      damping_pct=np.asarray(damping), freq_std_hz=(sigma_rel * noisy) if with_std else None,
-                      condition=condition)
-        write_mode_table(t, folder / name)
+    table = TableWriter(folder, rng, sigma_rel, with_std)
 
     n_free = np.arange(1, 10)
     for name, share in (("free.modes.csv", 1.0), ("free_low.modes.csv", LOW_PRESSURE)):
