@@ -17,12 +17,12 @@ import numpy as np
 from scipy.special import ndtri
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import GaussianPrior, least_squares, linearize, residuals
+from ringfit.fit.engine import GaussianPrior, least_squares, residuals
 from ringfit.fit.estimate.curves import LoadCurves, load_curves
 from ringfit.fit.estimate.feature import FeatureEstimate, _num, feature_estimate
 from ringfit.fit.estimate.harmonics import band_signal, grid_signal, harmonic_amplitudes, harmonic_rows, smoothed_noise
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, GAIN, K_TREAD, LOAD, LOAD_RANGE, TILT, EstimateArrays,
-                                          EstimateSettings, estimate_problem, nuisance_priors, ring_sensitivity_problem)
+                                          EstimateSettings, estimate_problem, nuisance_priors, optimum_ring_shift)
 from ringfit.fit.result import FitResult
 from ringfit.params import BAR, RingParams, TyreGeometry
 from ringfit.physics.operating import KMH
@@ -308,17 +308,9 @@ def ring_propagation(fit: FitResult, ring: RingParams, spread: dict) -> dict:
     k_tread_prior_sd, load_sd_pct)``.
     """
     names = tuple(spread["names"])
-    problem = ring_sensitivity_problem(fit.problem, names)
-    theta = np.concatenate([fit.theta, [float(getattr(ring, n)) for n in names]])
-    lin = linearize(problem, theta, names)
-    m = fit.residuals.size
-    J = fit.jacobian.copy()
-    J[:m] *= float(fit.extra["sigma_scale"])  # the rows the solver minimised (FitResult divides them by s)
-    Jq = np.zeros((J.shape[0], len(names)))
-    Jq[:m] = lin.jacobian
-    cov = np.linalg.pinv(J.T @ J)
+    du_dq, cov = optimum_ring_shift(fit, ring, names)
     iL = list(fit.names).index(LOAD)
-    g = -(cov @ (J.T @ Jq))[iL]
+    g = du_dq[iL]
     if K_TREAD in fit.names and spread["k_tread_sd"] is not None:
         ik = list(fit.names).index(K_TREAD)
         g = g + cov[iL, ik] / spread["k_tread_sd"] ** 2 * spread["shift"]

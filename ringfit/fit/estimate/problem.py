@@ -141,18 +141,20 @@ class EstimateResiduals(AbstractResiduals):
 
 
 class RingSensitivityResiduals(AbstractResiduals):
-    """:class:`EstimateResiduals` with ring parameters appended to θ: θ = (:data:`PARAMETERS`…, ``ring_names``…).
+    """An estimate's residuals with ring parameters appended to θ: θ = (the problem's own ``n_own`` parameters…,
+    ``ring_names``…) — the load estimate's (:class:`EstimateResiduals`) or the state's.
 
     Only for the Jacobian of the estimate's rows with respect to the tyre's ring parameters (ln θ), which
-    propagates the tyre file's ``[ring.covariance]`` into the load (:func:`ringfit.fit.estimate.load.ring_propagation`,
-    docs/physics.md §10); never fitted. ``k_tread`` is θ's own :data:`K_TREAD`, not a ring name here.
+    propagates the tyre file's ``[ring.covariance]`` into the estimate (:func:`optimum_ring_shift`,
+    docs/physics.md §10, §13.4); never fitted. ``k_tread`` is the load estimate's own θ, not a ring name there.
     """
 
-    base: EstimateResiduals
+    base: AbstractResiduals
     ring_names: tuple = eqx.field(static=True)
+    n_own: int = eqx.field(static=True)
 
-    def __call__(self, theta, data: EstimateArrays):
-        n = len(PARAMETERS)
+    def __call__(self, theta, data):
+        n = self.n_own
         ring = data.ring.replace(**{name: theta[n + i] for i, name in enumerate(self.ring_names)})
         return self.base(theta[:n], eqx.tree_at(lambda a: a.ring, data, ring))
 
@@ -160,8 +162,32 @@ class RingSensitivityResiduals(AbstractResiduals):
 def ring_sensitivity_problem(problem: Problem, ring_names: tuple[str, ...]) -> Problem:
     """The estimate ``problem`` with ``ring_names`` (log coordinates) appended to θ (:class:`RingSensitivityResiduals`)."""
     coords = tuple(problem.coords) + tuple(Coordinate(n, LOG) for n in ring_names)
-    return Problem(RingSensitivityResiduals(problem.model, tuple(ring_names)), problem.data, coords,
-                   sigma=problem.sigma, data_label=problem.data_label)
+    return Problem(RingSensitivityResiduals(problem.model, tuple(ring_names), len(problem.coords)), problem.data,
+                   coords, sigma=problem.sigma, data_label=problem.data_label)
+
+
+def optimum_ring_shift(fit, ring: RingParams, names: tuple[str, ...]):
+    """How a fit's optimum û moves with ring parameters q held fixed in it (docs/physics.md §10):
+    ``∂û/∂ln q = −(JᵀJ)⁻¹ Jᵀ ∂r/∂ln q``, J the Jacobian of the rows the solver minimised (prior rows included;
+    weights of mean 1, not divided by the fitted σ scale), ∂r/∂ln q the engine's Jacobian of the same rows
+    (:func:`ringfit.fit.engine.linearize` on :func:`ring_sensitivity_problem`).
+
+    **Returns:** ``(du_dlnq (free, r), (JᵀJ)⁻¹ (free, free))``.
+    """
+    import numpy as np
+
+    from ringfit.fit.engine import linearize
+
+    problem = ring_sensitivity_problem(fit.problem, names)
+    theta = np.concatenate([np.asarray(fit.theta, dtype=np.float64), [float(getattr(ring, n)) for n in names]])
+    lin = linearize(problem, theta, names)
+    m = fit.residuals.size
+    J = np.asarray(fit.jacobian).copy()
+    J[:m] *= float(fit.extra["sigma_scale"])  # the rows the solver minimised (FitResult divides them by s)
+    Jq = np.zeros((J.shape[0], len(names)))
+    Jq[:m] = lin.jacobian
+    cov = np.linalg.pinv(J.T @ J)
+    return -(cov @ (J.T @ Jq)), cov
 
 
 def nuisance_priors() -> dict:

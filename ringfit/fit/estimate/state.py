@@ -34,7 +34,7 @@ from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Gauss
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows, smoothed_noise
 from ringfit.fit.estimate.load import LoadEstimate, estimate_load
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
-                                          TILT_PRIOR, EstimateSettings)
+                                          TILT_PRIOR, EstimateSettings, optimum_ring_shift)
 from ringfit.params import BAR, RingParams, TyreGeometry, TyreLaws
 from ringfit.physics.contact import ContactSolver, as_traced
 from ringfit.physics.operating import KMH
@@ -152,18 +152,6 @@ class StateResiduals(AbstractResiduals):
     def __call__(self, theta, data: StateArrays):
         rows = self.rows(theta, data)
         return ((rows - data.measured) * data.weight).ravel(), rows
-
-
-class StateRingResiduals(AbstractResiduals):
-    """:class:`StateResiduals` with ring parameters appended to θ (for the ``[ring.covariance]`` propagation)."""
-
-    base: StateResiduals
-    ring_names: tuple = eqx.field(static=True)
-
-    def __call__(self, theta, data: StateArrays):
-        n = len(STATE_PARAMETERS)
-        ring = data.ring.replace(**{name: theta[n + i] for i, name in enumerate(self.ring_names)})
-        return self.base(theta[:n], eqx.tree_at(lambda a: a.ring, data, ring))
 
 
 def state_problem(arrays: StateArrays, settings: EstimateSettings, k_max: int, prior: GaussianPrior | None = None,
@@ -425,16 +413,7 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     if names and finite:
         # the ring's covariance: û moves with ln q by −(JᵀJ)⁻¹ Jᵀ ∂r/∂ln q (the rows the solver minimised), and
         # the quantities depend on the ring directly too (docs/physics.md §13.4, as §10)
-        sens = Problem(StateRingResiduals(problem.model, names), problem.data,
-                       tuple(problem.coords) + tuple(Coordinate(n, LOG) for n in names), prior=problem.prior,
-                       sigma=problem.sigma)
-        lin = linearize(sens, np.concatenate([theta, [float(getattr(ring, n)) for n in names]]), names)
-        m = fit.residuals.size
-        J = np.asarray(fit.jacobian).copy()
-        J[:m] *= float(fit.extra["sigma_scale"])
-        Jq = np.zeros((J.shape[0], len(names)))
-        Jq[:m] = lin.jacobian
-        du_dq = -np.linalg.pinv(J.T @ J) @ (J.T @ Jq)
+        du_dq, _ = optimum_ring_shift(fit, ring, names)
         total = G @ du_dq + jr
         idx_c = [ring_covariance.names.index(n) for n in names]
         sigma_q = np.asarray(ring_covariance.ln)[np.ix_(idx_c, idx_c)]
