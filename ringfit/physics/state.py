@@ -145,7 +145,7 @@ def state_solution(geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, sta
 
     The channels are :func:`ringfit.physics.profile.rolling_passes`' (then the model's channel filters and the
     angle ``offset`` [rad], as :func:`~ringfit.physics.profile.profile_channels`); the quantities read the brush's
-    tips on the first (radial) pass, the one its loads were computed from.
+    tips on the pass its last loads were computed from (at the fixed point, :data:`BRUSH_PASSES`, the solution).
     """
     model, ring_s, geometry_s = state_profile(geometry, ring, laws, state, model=model)
     ring_s = model.ring(ring_s)
