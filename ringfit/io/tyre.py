@@ -58,9 +58,12 @@ RANGES: dict[str, tuple[float, float]] = {
     "tread_land_ratio": (0.0, 1.0),
     "kx_n_per_m2": (1.0, 1e12),
     "friction": (0.0, 10.0),
+    "kw_share": (0.0, 1.0),
+    "kv_share": (0.0, 1.0),
+    "k_tread_share": (0.0, 1.0),
 }
-#: Range [lo, hi] (both included) of a pressure share of ``[ring.pressure]`` (docs/formats.md §1).
-SHARE_RANGE = (0.0, 1.0)
+#: Keys whose range includes its lower end: a pressure share of ``[ring.pressure]`` may be 0 (docs/formats.md §1).
+CLOSED_RANGE = ("kw_share", "kv_share", "k_tread_share")
 
 #: Defaults used when [ring] lacks a value that a model needs (Table 9 of the seed).
 RING_DEFAULTS = dict(rho_a=2.715, ei=0.9426, kw=1.294e6, kv=1.161e6, damping_ratio=0.025, k_tread=19.0e6)
@@ -151,9 +154,10 @@ def _number(table: dict, key: str, where: str) -> float:
     if not math.isfinite(x):
         raise InputError(f"[{where}] {key} = {_show(value)}: expected a finite number")
     lo, hi = RANGES[key]
-    if not lo < x <= hi:
-        raise InputError(f"[{where}] {key} = {x:g}: outside the plausible range ({lo:g}, {hi:g}] "
-                         "(docs/formats.md §1; a unit slip?)")
+    closed = key in CLOSED_RANGE
+    if not (lo <= x if closed else lo < x) or x > hi:
+        raise InputError(f"[{where}] {key} = {x:g}: outside the plausible range {'[' if closed else '('}{lo:g}, "
+                         f"{hi:g}] (docs/formats.md §1; a unit slip?)")
     return x
 
 
@@ -274,22 +278,13 @@ def _parse(doc: dict, source: str) -> Tyre:
 
 def _pressure_laws(table) -> dict:
     """``[ring.pressure]``: the pressure shares s of k_w, k_v, k_trd (docs/physics.md §13.1), each in [0, 1]."""
-    where = "[ring.pressure]"
     if not isinstance(table, dict):
         raise InputError(f"ring.pressure = {_show(table)}: expected a [ring.pressure] table "
                          f"({', '.join(PRESSURE_KEYS)})")
-    out = {}
-    for key, value in table.items():
+    for key in table:
         if key not in PRESSURE_KEYS:
-            raise _unknown(key, PRESSURE_KEYS, f"key in {where}")
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
-            raise InputError(f"{where} {key} = {_show(value)}: expected a finite number")
-        x = float(value)
-        if not SHARE_RANGE[0] <= x <= SHARE_RANGE[1]:
-            raise InputError(f"{where} {key} = {x:g}: expected a share in [{SHARE_RANGE[0]:g}, {SHARE_RANGE[1]:g}] "
-                             "(the part of the stiffness proportional to the pressure, docs/formats.md §1)")
-        out[key] = x
-    return out
+            raise _unknown(key, PRESSURE_KEYS, "key in [ring.pressure]")
+    return {key: _number(table, key, "ring.pressure") for key in table}
 
 
 #: Positive ring parameters a ``[ring.covariance]`` may name (it is a covariance of their logarithms).

@@ -162,14 +162,14 @@ class RingSensitivityResiduals(AbstractResiduals):
 def ring_sensitivity_problem(problem: Problem, ring_names: tuple[str, ...]) -> Problem:
     """The estimate ``problem`` with ``ring_names`` (log coordinates) appended to θ (:class:`RingSensitivityResiduals`)."""
     coords = tuple(problem.coords) + tuple(Coordinate(n, LOG) for n in ring_names)
-    return Problem(RingSensitivityResiduals(problem.model, tuple(ring_names), len(problem.coords)), problem.data,
-                   coords, sigma=problem.sigma, data_label=problem.data_label)
+    model = RingSensitivityResiduals(problem.model, tuple(ring_names), len(problem.coords))
+    return Problem(model, problem.data, coords, sigma=problem.sigma, data_label=problem.data_label)
 
 
 def optimum_ring_shift(fit, ring: RingParams, names: tuple[str, ...]):
     """How a fit's optimum û moves with ring parameters q held fixed in it (docs/physics.md §10):
-    ``∂û/∂ln q = −(JᵀJ)⁻¹ Jᵀ ∂r/∂ln q``, J the Jacobian of the rows the solver minimised (prior rows included;
-    weights of mean 1, not divided by the fitted σ scale), ∂r/∂ln q the engine's Jacobian of the same rows
+    ``∂û/∂ln q = −(JᵀJ)⁻¹ Jᵀ ∂r/∂ln q``, J the Jacobian of the rows the solver minimised (prior rows
+    included; weights of mean 1, not divided by the fitted σ scale), ∂r/∂ln q the engine's Jacobian of the same rows
     (:func:`ringfit.fit.engine.linearize` on :func:`ring_sensitivity_problem`).
 
     **Returns:** ``(du_dlnq (free, r), (JᵀJ)⁻¹ (free, free))``.
