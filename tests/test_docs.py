@@ -130,6 +130,35 @@ def test_every_notebook_becomes_a_tutorial_page():
 
 
 @needs_site
+def test_tutorials_show_the_figures_their_notebooks_save(tmp_path, caplog):
+    """Every figure a notebook saves under a literal name is rendered in docs/figures/ and shown under the code
+    cell that saves it; one that is not rendered is a warning (a failure under --strict)."""
+    gen = _gen_pages()
+    shown = 0
+    for path in sorted((ROOT / "notebooks").glob("*.py")):
+        md = gen.notebook_markdown(path)
+        for name in gen.saved_figures(path.read_text()):
+            png = ROOT / "docs" / "figures" / path.stem / name
+            assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", (path.name, name)
+            image = f"![{name}](../figures/{path.stem}/{name})"
+            assert md.count(image) == 1, (path.name, name)
+            # under the cell that saves it: the image follows the fence that holds the saving line
+            code, between = md[:md.index(image)].rsplit("```python", 1)[1].split("```", 1)
+            assert f'OUT / "{name}"' in code, (path.name, name)
+            assert all(line.startswith("![") for line in between.split() if line), (path.name, name, between)
+            shown += 1
+    assert shown >= 10
+    book = tmp_path / "99_toy.py"
+    book.write_text('# %% [markdown]\n# # Toy\n\n# %%\nfig.savefig(OUT / "never_rendered.png")\n'
+                    '# %%\nfig.savefig(OUT / f"{name}.png")  # an f-string name is not resolved\n')
+    with caplog.at_level("WARNING", logger="mkdocs.plugins.ringfit_docs"):
+        md = gen.notebook_markdown(book, figures=tmp_path / "figures")
+    assert "![never_rendered.png]" not in md  # no image for it
+    assert [r.getMessage() for r in caplog.records if "never_rendered.png" in r.getMessage()], caplog.text
+    assert gen.saved_figures(book.read_text()) == ["never_rendered.png"]
+
+
+@needs_site
 def test_section_references_become_links_and_a_missing_section_is_a_warning(caplog):
     from types import SimpleNamespace
 

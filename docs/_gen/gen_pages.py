@@ -1,7 +1,10 @@
 """Pages of the documentation site that are generated at build time (mkdocs-gen-files).
 
 - ``tutorials/NN_name.md``: one per notebook (``notebooks/*.py``, jupytext percent
-  format), markdown cells as text and code cells as code; outputs are not executed.
+  format), markdown cells as text and code cells as code; the notebooks are not executed
+  here: each figure a code cell saves (``OUT / "name.png"``) is shown under it from
+  ``docs/figures/<notebook>/`` (rendered by ``docs/_gen/render_figures.py``; a figure
+  saved there but not rendered is a warning, a failure under ``--strict``).
 - ``cli.md``: every ``ringfit`` command and option, from the argparse parser that
   ``ringfit.cli.build_parser`` builds (so it cannot drift from ``--help``).
 - ``api/``: one page per top-level module or subpackage of ``ringfit`` (found by
@@ -35,17 +38,22 @@ log = logging.getLogger("mkdocs.plugins.ringfit_docs")  # warnings here fail `mk
 
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+if str(Path(__file__).resolve().parent) not in sys.path:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from render_figures import FIGURES, saved_figures  # noqa: E402  (docs/_gen, beside this file)
 
 
 # ----------------------------------------------------------------------------- tutorials
 
 
-def notebook_markdown(path: Path) -> str:
-    """Markdown of one jupytext percent-format notebook: markdown cells as text, code cells fenced."""
+def notebook_markdown(path: Path, figures: Path = FIGURES) -> str:
+    """Markdown of one jupytext percent-format notebook: markdown cells as text, code cells fenced, each figure a
+    code cell saves shown under it from ``figures/<notebook stem>/``."""
     import jupytext
 
     nb = jupytext.read(path, fmt="py:percent")
-    rel = path.relative_to(ROOT).as_posix()
+    rel = path.relative_to(ROOT).as_posix() if path.is_relative_to(ROOT) else path.name
     parts = []
     for cell in nb.cells:
         text = cell.source.strip("\n")
@@ -55,11 +63,18 @@ def notebook_markdown(path: Path) -> str:
             parts.append(text)
         else:
             parts.append(f"```python\n{text}\n```")
+            for name in saved_figures(text):  # the figure this cell saves, as the notebook last rendered it
+                if (figures / path.stem / name).is_file():
+                    parts.append(f"![{name}](../figures/{path.stem}/{name})")
+                else:
+                    log.warning("tutorial %s: the figure %s it saves is not rendered in docs/figures/%s/ "
+                                "(run python docs/_gen/render_figures.py %s)", rel, name, path.stem, path.stem[:2])
     head = parts[0] if parts and parts[0].startswith("# ") else f"# {path.stem}"
     body = parts[1:] if parts and parts[0].startswith("# ") else parts
     note = (f'!!! note "Run it"\n    This page is `{rel}`, a plain Python file in jupytext\'s percent format. '
             f"Run it with\n    `MPLBACKEND=Agg RINGFIT_NOTEBOOK_OUT=/tmp/nb python {rel}`, or open it as a "
-            f"notebook with\n    `jupytext --to notebook {rel}`. Outputs are not shown here.")
+            f"notebook with\n    `jupytext --to notebook {rel}`. The figures below are the notebook's own, saved "
+            f"when it last ran\n    (`python docs/_gen/render_figures.py`); printed outputs are not shown.")
     return "\n\n".join([head, note, *body]) + "\n"
 
 
