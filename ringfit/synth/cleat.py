@@ -299,7 +299,10 @@ class CleatBench:
         the damping ratio SSI sees on the field). With ``modes="loaded"``: one entry
         per mode, ``n`` its dominant order and ``branch`` its direction
         (``backward``/``forward``/``standing``) in the radial acceleration content,
-        ``tag`` (``extr``/``0``, ``vert``/``hort``) for standing modes, ``rotating_hz`` NaN.
+        ``tag`` (``extr``/``0``, ``vert``/``hort``) for standing modes, ``rotating_hz`` NaN, and
+        ``harmonics``/``shares`` ``(modes, 2)``: the two strongest signed harmonics k of the mode's radial
+        acceleration content (k > 0 backward) and their shares of it (docs/physics.md §3.7: a hybrid of
+        the forward wave of n and the backward waves of n and n + 2 shows both).
         """
         m = self._modes
         if self.modes == "loaded":
