@@ -352,7 +352,12 @@ ringfit cleat cleat.records.npz --sectors 128 --out field2.npz --ssi rolling.mod
 
 `true.tyre.toml` holds the values above (the truth, for labelling): with
 `--tyre true.tyre.toml` added to the last line each identified mode is labelled with the model's branch
-(`model_n`, `model_direction`, `label_flag`).
+(`model_n`, `model_direction`, `label_flag`), and the Campbell diagram matches them to its branches:
+
+```bash
+ringfit cleat cleat.records.npz --sectors 128 --out field2.npz --ssi rolling.modes.csv --tyre true.tyre.toml --force
+ringfit campbell --tyre true.tyre.toml --load 4000 --drum 1.2192 --speeds 0:40:10 --modes rolling.modes.csv --out cleat.campbell.csv
+```
 """)
 
 
