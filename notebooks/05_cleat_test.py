@@ -31,7 +31,10 @@ OUT = Path(os.environ.get("RINGFIT_NOTEBOOK_OUT", "."))
 # ## A synthetic drum test
 # Table 9 tyre at 40 km/h, 4 kN on the 1.2192 m drum. The steady reading comes from the rolling ring
 # model (contact on the drum, gravity, sensor axes turning with the belt); each cleat hit excites the
-# rotating ring's backward and forward waves n = 1…8. Sampling at 6.4 kHz keeps the notebook quick.
+# rotating ring's backward and forward waves n = 1…8 (`modes="free"`: the free spinning ring, eq. 25/26, a
+# known analytic truth for the signal chain). A tyre loaded on the drum has other modes: the patch turns the
+# forward waves into hybrids with the backward ones (docs/physics.md §3.7, notebook 06, `ringfit example
+# cleat`). Sampling at 6.4 kHz keeps the notebook quick.
 
 # %%
 bench = CleatBench(speed_kmh=40.0, fs_hz=6400.0, steady="ring", noise_ms2=5.0)

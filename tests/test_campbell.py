@@ -238,7 +238,8 @@ def test_end_to_end_cleat_records_to_matched_branches(tmp_path, tyre, diagram, c
     from ringfit.io.modes import read_mode_table
     from ringfit.synth.cleat import CleatBench
 
-    # the generator's patch: the drum solve's half-width (the model recomputes its own, slightly asymmetric)
+    # the generator's modes are the model's (the steady drum patch at its speed and load, issue 31 item 6);
+    # the ridge's half-width from the drum solve
     half = 0.5 * (diagram.trailing_deg[0] - diagram.leading_deg[0])
     bench = CleatBench(steady="analytic", fs_hz=6400.0, noise_ms2=5.0, modes="loaded", contact_half_angle_deg=half)
     truth = bench.generating_modes()

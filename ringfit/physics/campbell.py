@@ -249,7 +249,7 @@ def campbell_diagram(
     with small_matrix_threads():
         cm = campbell_modes_jit(ring, geometry, float(load_n) if contact else 0.0, pad, road, harmonics=K,
                                 contact=contact, wheel=wheel)
-        labels = _acceleration_labels(cm.modes)
+        labels = acceleration_labels(cm.modes)
         cm, labels = jax.device_get((cm, labels))
     m = cm.modes
     sl = slice(0, S)
@@ -286,7 +286,19 @@ def _acoustic_lines(ring, geometry, load_n: float, road, omegas) -> np.ndarray:
     return np.stack([np.asarray(fa), np.asarray(vt)], axis=1) / (2 * math.pi)
 
 
-def _acceleration_labels(modes):
+def acceleration_labels(modes):
+    """Labels of rolling modes read from their radial acceleration content (docs/physics.md §3.7), as a
+    co-rotating sensor's or a cleat field's data carry them: the labels of :class:`CampbellDiagram`.
+
+    **Arguments:** ``modes`` — :class:`ringfit.physics.rolling_modes.RollingModes` (any leading axes).
+
+    **Returns:** ``(order, travel, symmetry, line_hz, line_weight)``: dominant order, signed travelling
+    ratio and contact symmetry ``(..., N)`` of :func:`~ringfit.physics.rolling_modes.mode_labels` on
+    ``−(ω + kΩ)² W_k``, and the sensor lines with their weights ``(..., N, H)``
+    (:func:`~ringfit.physics.rolling_modes.sensor_lines`). A mode without radial content (the inextensible
+    ring's n = 0) keeps its displacement order and travel, NaN symmetry and its tangential line weights.
+    One compilation (jit).
+    """
     return _acceleration_labels_jit(modes)
 
 
@@ -296,7 +308,8 @@ def _labels_impl(modes):
     from ringfit.physics.rolling_modes import material_acceleration, mode_labels, sensor_lines
 
     A, _ = material_acceleration(modes)
-    lab = mode_labels(A, jnp.zeros_like(A), modes.k[0], modes.angular_frequency, modes.omega)
+    k = modes.k.reshape(-1, modes.k.shape[-1])[0]  # the harmonics (one speed, or the first of several)
+    lab = mode_labels(A, jnp.zeros_like(A), k, modes.angular_frequency, modes.omega)
     f, wr, wt = sensor_lines(modes, "acceleration")
     # a mode without radial content (the inextensible ring's n = 0) keeps its displacement labels and
     # its tangential lines
@@ -355,4 +368,4 @@ def track_branches(freq: np.ndarray, content: np.ndarray) -> np.ndarray:
 
 
 __all__ = ["DEFAULT_N_MAX", "TRAVELLING_RATIO", "SPEED_BUCKET", "FRAMES", "frame_name", "CampbellDiagram",
-           "CAMPBELL_COLUMNS", "campbell_diagram", "track_branches"]
+           "CAMPBELL_COLUMNS", "campbell_diagram", "track_branches", "acceleration_labels"]

@@ -363,28 +363,22 @@ def _sensor_view(ring, geometry, contact: bool):
     ``vert``/``hort`` for n = 1; "" otherwise), each ``(speeds, modes)``. K = 40 harmonics."""
     import jax
 
+    from ringfit.physics.campbell import acceleration_labels
     from ringfit.physics.contact import solve_rolling_jit
     from ringfit.physics.operating import KMH, OperatingPoint, rolling_radius
-    from ringfit.physics.rolling_modes import campbell_modes_jit, material_acceleration, mode_labels, sensor_lines
+    from ringfit.physics.rolling_modes import campbell_modes_jit
 
     # the tyre rolls under its load either way: Ω = V/R_e (R_e = R_out − δ/3 of the standing tyre at the load)
     standing = solve_rolling_jit(ring, geometry, OperatingPoint(0.0, ROLLING_LOAD_N))
     r_e = float(rolling_radius(geometry.outer_radius, float(standing.deflection)))
     omegas = np.asarray(ROLLING_SPEEDS) * KMH / r_e
     cm = campbell_modes_jit(ring, geometry, ROLLING_LOAD_N, omegas, speed_unit="rad/s", contact=contact, harmonics=40)
-    m = cm.modes
-    acc, _ = material_acceleration(m)
-    lab = jax.device_get(mode_labels(acc, jnp.zeros_like(acc), m.k[0], m.angular_frequency, m.omega))
-    f, w_rad, w_tan = (np.asarray(x) for x in sensor_lines(m, "acceleration"))
-    # a mode without radial content (the inextensible ring's n = 0, the belt turning on its sidewalls) is
-    # read on the tangential axis, with its displacement order
-    radial = np.sum(np.abs(np.asarray(m.radial)) ** 2, axis=-1) > 1e-12
-    weight = np.where(radial[..., None], w_rad, w_tan)
+    # the labels and lines of the Campbell diagram (radial acceleration; a mode without radial content, the
+    # inextensible ring's n = 0, read on the tangential axis with its displacement order)
+    order, travel, sym, f, weight = (np.asarray(x) for x in jax.device_get(acceleration_labels(cm.modes)))
     best = np.argmax(np.nan_to_num(weight, nan=-1.0), axis=-1)
     hz = np.abs(np.take_along_axis(f, best[..., None], -1)[..., 0])
     hz = np.where(np.all(np.isnan(weight), axis=-1), np.nan, hz)
-    order, travel, sym = (np.asarray(lab[k]) for k in ("order", "travel", "symmetry"))
-    order = np.where(radial, order, np.asarray(m.order))
     standing = (np.abs(travel) < 3.0) & np.isfinite(sym) & contact
     cos_type = np.nan_to_num(sym) >= 0.5
     tag = np.where(order == 1, np.where(cos_type, "vert", "hort"), np.where(cos_type, "extr", "0"))

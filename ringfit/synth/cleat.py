@@ -15,11 +15,16 @@ field → rolling-tyre modes can be tested:
   waves at the co-rotating frequencies of seed eq. 25
   (:func:`ringfit.physics.natural.rotating_natural_frequencies`, docs/physics.md
   §3.2), decaying with the ring's damping ratio; a fixed observer sees them
-  Doppler-shifted by −nΩ (eq. 26, §3.3). With ``modes="loaded"`` the waves
-  are instead the modes of the rolling ring **with** the tread springs of the
-  patch (:mod:`ringfit.physics.rolling_modes`, docs/physics.md §3.7): each
-  fixed-frame mode spreads over neighbouring harmonics, and the response to
-  the impulse is their modal superposition. The cleat itself travels through
+  Doppler-shifted by −nΩ (eq. 26, §3.3): the free spinning ring, no patch, an
+  analytic stand-in for tests of the signal chain — not the modes of a tyre
+  loaded on a drum. With ``modes="loaded"`` (``ringfit example cleat``) the waves
+  are the modes of the rolling ring **with** the tread springs of the steady
+  patch at the bench's speed, load and drum (the one model of the rolling,
+  loaded tyre's modes, :func:`ringfit.physics.rolling_modes.loaded_rolling_modes`,
+  docs/physics.md §3.7, the model ``ringfit campbell`` and ``cleat --ssi --tyre``
+  use): each fixed-frame mode spreads over several harmonics (the forward wave
+  of n hybridises with the backward wave of n + 2), and the response to the
+  impulse, at the patch's leading edge, is their modal superposition. The cleat itself travels through
   the patch with the belt and adds a short, large ridge along
   φ = φ_L + Ωτ (the enveloping phase);
 * **the measurement chain** — absolute encoder (quantised) or incremental
@@ -69,11 +74,13 @@ class CleatBench:
     - ``fs_hz``: sample rate.
     - ``orders``: circumferential orders n excited by the cleat (``modes="loaded"``: the modes
       whose dominant order is one of these).
-    - ``modes``: ``"free"`` (eq. 25 waves of the free spinning ring) or ``"loaded"`` (modes of the
-      rolling ring with the patch ``|φ| ≤ contact_half_angle_deg``, docs/physics.md §3.7).
+    - ``modes``: ``"free"`` (eq. 25 waves of the free spinning ring: no patch, a stand-in) or ``"loaded"``
+      (modes of the rolling ring with the tread springs of the steady patch at ``speed_kmh``, ``load_n``
+      and the drum, :attr:`contact_arc`; docs/physics.md §3.7: the model of ``ringfit campbell``).
     - ``impulse_ns``: radial impulse of a cleat hit [N s]; ``rolloff_order``:
       order n_c of the Gaussian roll-off exp(−(n/n_c)²) of the cleat's footprint.
-    - ``contact_half_angle_deg``: patch half-angle a; the hit is at φ_L = −a.
+    - ``contact_half_angle_deg``: patch half-angle a of the enveloping ridge (and, ``modes="free"``, of the
+      hit at φ_L = −a; ``modes="loaded"`` hits the steady patch's leading edge).
     - ``ridge_ms2``, ``ridge_width_deg``: peak and width of the enveloping ridge.
     - ``noise_ms2``: white noise std per sample and axis.
     - ``highpass_hz``: IEPE corner f_c (0 = none).
@@ -208,15 +215,21 @@ class CleatBench:
         return {"n": n, "f_rot": f, "s": s, "coef": coef, "rate": rate}
 
     def _loaded_modes(self) -> dict:
-        """Impulse response of the rolling ring with the patch, by modal superposition (docs/physics.md §3.7)."""
+        """Impulse response of the rolling ring with the patch, by modal superposition (docs/physics.md §3.7).
+
+        The modes are the one model of the rolling, loaded tyre, the model ``ringfit campbell``, ``cleat --ssi
+        --tyre`` labelling and the diagnosis's rolling rows use:
+        :func:`ringfit.physics.rolling_modes.loaded_rolling_modes` at this bench's Ω, load and drum (the tread
+        springs on the patch of the steady rolling solution, :data:`~ringfit.physics.rolling_modes.DEFAULT_HARMONICS`
+        harmonics), labelled from their radial acceleration content as the Campbell diagram labels them
+        (:func:`ringfit.physics.campbell.acceleration_labels`). The cleat hits the leading edge of that patch.
+        """
         import jax
 
-        from ringfit.physics.rolling_modes import (
-            ContactArc, gyroscopic_matrices, harmonic_basis, material_acceleration, mode_labels, rolling_modes_jit,
-        )
+        from ringfit.physics.campbell import acceleration_labels
+        from ringfit.physics.rolling_modes import gyroscopic_matrices, harmonic_basis, rolling_modes_jit
 
-        a = math.radians(self.contact_half_angle_deg)
-        arc = ContactArc.symmetric(a, self.ring.k_tread)
+        arc = self.contact_arc  # loaded_rolling_modes = contact_arc, then rolling_modes on that arc
         model = jax.device_get(rolling_modes_jit(self.ring, self.geometry, self.omega, arc))
         K = (model.k.size - 1) // 2
         M, Gm, Km, _, kd = (np.asarray(x) for x in gyroscopic_matrices(self.ring, self.geometry, self.omega, arc,
@@ -224,8 +237,9 @@ class CleatBench:
         k = np.asarray(model.k)
         b = np.asarray(harmonic_basis(k, False))[:, :, 0]  # (H, 2): (W_k, V_k) = b_k q_k
         R = float(self.geometry.radius)
-        # radial impulse at the leading edge α0 = −a, footprint roll-off exp(−(k/n_c)²), per unit length
-        Q = self.impulse_ns / (2 * np.pi * R) * np.exp(1j * k * a) * np.exp(-((k / self.rolloff_order) ** 2))
+        # radial impulse at the patch's leading edge φ_L, footprint roll-off exp(−(k/n_c)²), per unit length
+        lead = float(arc.leading)
+        Q = self.impulse_ns / (2 * np.pi * R) * np.exp(-1j * k * lead) * np.exp(-((k / self.rolloff_order) ** 2))
         f = np.conj(b[:, 0]) * Q
         d = k.size
         Minv = np.linalg.inv(M)
@@ -242,20 +256,38 @@ class CleatBench:
         mu = rate[None, :] + 1j * k[:, None] * self.omega  # rate the material sees at harmonic k
         acc_r = -(mu**2) * b[:, 0:1] * q  # radial acceleration content (H, modes)
         acc_t = -(mu**2) * b[:, 1:2] * q
-        A_r, _ = material_acceleration(model)
-        lab = jax.device_get(mode_labels(A_r, 0 * A_r, model.k, model.angular_frequency, model.omega))
-        # labels from the radial acceleration content; a mode without radial content (n = 0) keeps its own
+        order, travel, symmetry, _, _ = (np.asarray(x) for x in jax.device_get(acceleration_labels(model)))
         radial = np.sum(np.abs(np.asarray(model.radial)) ** 2, axis=-1) > 1e-12
-        order = np.where(radial, np.asarray(lab["order"]), np.asarray(model.order))[mi]
+        order, travel, symmetry = order[mi], travel[mi], symmetry[mi]
         keep = np.isin(order, np.asarray(self.orders)) & radial[mi]
-        travel = np.asarray(lab["travel"])[mi][keep]
-        symmetry = np.asarray(lab["symmetry"])[mi][keep]
+        # the two strongest signed harmonics of each mode's radial acceleration content and their shares
+        share = np.abs(acc_r[:, keep]) ** 2
+        share = share / share.sum(axis=0, keepdims=True)
+        top = np.argsort(-share, axis=0)[:2]
         # spatial patterns on a fine grid φ_j = −π + 2πj/L for fast interpolation (2 Re: the conjugate poles)
         L = 4096
         phi = np.radians(grid_angles_deg(L))
         basis = np.exp(1j * np.outer(k, phi))  # (H, L)
         tables = {"radial": 2.0 * (acc_r[:, keep].T @ basis), "tangential": 2.0 * (acc_t[:, keep].T @ basis)}
-        return {"n": order[keep], "travel": travel, "symmetry": symmetry, "rate": rate[keep], "tables": tables}
+        return {"n": order[keep], "travel": travel[keep], "symmetry": symmetry[keep], "rate": rate[keep],
+                "tables": tables, "harmonics": k[top].T.astype(int),
+                "shares": np.take_along_axis(share, top, axis=0).T}
+
+    @cached_property
+    def contact_arc(self):
+        """The linearised contact of ``modes="loaded"`` (:class:`ringfit.physics.rolling_modes.ContactArc`): the
+        tread springs on the patch of the steady rolling solution at this bench's Ω, load and drum
+        (:func:`ringfit.physics.rolling_modes.contact_arc`, docs/physics.md §3.7, §4.3–4.4)."""
+        import jax
+
+        from ringfit.physics.operating import Drum, OperatingPoint
+        from ringfit.physics.rolling_modes import contact_arc
+
+        op = OperatingPoint(omega=self.omega, load=float(self.load_n), road=Drum(diameter=self.drum_diameter_m))
+        arc, sol = contact_arc(self.ring, self.geometry, op)
+        if not bool(sol.ok):
+            raise ValueError(f"the steady contact solve at {self.load_n:g} N, {self.speed_kmh:g} km/h did not converge")
+        return jax.device_get(arc)
 
     def generating_modes(self) -> dict:
         """The travelling waves the cleat excites, as seen by a fixed observer (the angle–time field).
@@ -267,18 +299,25 @@ class CleatBench:
         the damping ratio SSI sees on the field). With ``modes="loaded"``: one entry
         per mode, ``n`` its dominant order and ``branch`` its direction
         (``backward``/``forward``/``standing``) in the radial acceleration content,
-        ``tag`` (``extr``/``0``, ``vert``/``hort``) for standing modes, ``rotating_hz`` NaN.
+        ``tag`` (``extr``/``0``, ``vert``/``hort``) for standing modes, ``rotating_hz`` NaN, and
+        ``harmonics``/``shares`` ``(modes, 2)``: the two strongest signed harmonics k of the mode's radial
+        acceleration content (k > 0 backward) and their shares of it (docs/physics.md §3.7: a hybrid of
+        the forward wave of n and the backward waves of n and n + 2 shows both).
         """
         m = self._modes
         if self.modes == "loaded":
+            from ringfit.targets.rolling_modes import TRAVELLING_RATIO
+
             rate = m["rate"]
-            direction = np.where(m["travel"] >= 3, "backward", np.where(m["travel"] <= -3, "forward", "standing"))
+            direction = np.where(m["travel"] >= TRAVELLING_RATIO, "backward",
+                                 np.where(m["travel"] <= -TRAVELLING_RATIO, "forward", "standing"))
             cos_type = m["symmetry"] >= 0.5
             tag = np.where(m["n"] == 1, np.where(cos_type, "vert", "hort"), np.where(cos_type, "extr", "0"))
             return {
                 "n": m["n"].astype(int), "branch": direction, "tag": np.where(direction == "standing", tag, ""),
                 "rotating_hz": np.full(rate.size, np.nan), "fixed_hz": np.abs(rate.imag) / (2 * np.pi),
                 "decay_per_s": -rate.real, "damping_fixed": -rate.real / np.abs(rate),
+                "harmonics": m["harmonics"], "shares": m["shares"],
             }
         n = np.repeat(m["n"], 2)
         rate = m["rate"].ravel()

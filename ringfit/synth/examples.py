@@ -12,7 +12,8 @@ at once and its answer checked against the truth:
 - ``profiles`` — rolling profiles at two drum speeds from a ring with a known
   tread stiffness, and the tyre file fitted to its free modes: ``fit-rolling``, ``roll``;
 - ``cleat`` — a continuous drum recording with a cleat (encoder, hall
-  pulses), with the travelling waves it excites: ``profile``, ``cleat``;
+  pulses), with the modes of the rolling, loaded tyre it excites (docs/physics.md §3.7) and the true
+  ``true.tyre.toml`` to label them with: ``profile``, ``cleat`` (``--ssi --tyre``);
 - ``case`` — a case folder (docs/formats.md §6) with one injected effect: ``diagnose``;
 - ``rolling`` — a case folder with rolling mode tables (20/40/60 km/h, 4 kN, co-rotating sensor):
   ``diagnose`` (rotation + ground_contact), ``campbell``;
@@ -285,21 +286,36 @@ ringfit roll --tyre fitted.toml --speed 45 --drum 1.2192 --out sim45.profile.csv
 """)
 
 
-def _cleat(folder: Path, progress: bool) -> None:
+def cleat_bench():
+    """The bench of ``ringfit example cleat``: the true ring on the 1.2192 m drum at 40 km/h, 4 kN, its modes the
+    rolling, loaded tyre's (``modes="loaded"``: the model ``ringfit campbell`` and ``cleat --ssi --tyre`` use,
+    docs/physics.md §3.7)."""
     from ringfit.synth.cleat import CleatBench
 
     geometry, ring = _true_ring()
-    bench = CleatBench(geometry=geometry, ring=ring, steady="ring", fs_hz=12800.0, noise_ms2=5.0, seed=31)
+    return CleatBench(geometry=geometry, ring=ring, steady="ring", modes="loaded", fs_hz=12800.0, noise_ms2=5.0,
+                      seed=31)
+
+
+def _cleat(folder: Path, progress: bool) -> None:
+    bench = cleat_bench()
+    ring = bench.ring
     seconds = 20.0
     bench.write(folder / "cleat.records.npz", seconds, progress=progress)
+    _starting_tyre(folder, "true.tyre.toml", ring=ring)  # the truth, for labelling (not a fit's start)
     m = bench.generating_modes()
-    lines = "\n".join(f"| {n} | {b} | {fr:+.2f} | {ff:.2f} | {100 * z:.2f} |" for n, b, fr, ff, z in
-                      zip(m["n"], m["branch"], m["rotating_hz"], m["fixed_hz"], m["damping_fixed"]))
+    order = np.argsort(m["fixed_hz"])
+    lines = "\n".join(
+        f"| {m['n'][j]} | {m['branch'][j]}{' ' + m['tag'][j] if m['tag'][j] else ''} | {m['fixed_hz'][j]:.2f} | "
+        f"{100 * m['damping_fixed'][j]:.2f} | "
+        + ", ".join(f"{k:+d}: {100 * w:.0f} %" for k, w in zip(m["harmonics"][j], m["shares"][j])) + " |"
+        for j in order)
     arrivals = bench.arrival_times(seconds)
+    lead, trail = (math.degrees(float(x)) for x in (bench.contact_arc.leading, bench.contact_arc.trailing))
     (folder / "README.md").write_text(f"""# Example: a drum recording with a cleat
 
 Written by `ringfit example cleat`. {seconds:g} s of one co-rotating tri-axial sensor
-(radial, tangential) at {bench.fs_hz:g} Hz on a 1.2192 m drum at {bench.speed_kmh:g} km/h, 4000 N,
+(radial, tangential) at {bench.fs_hz:g} Hz on a 1.2192 m drum at {bench.speed_kmh:g} km/h, {bench.load_n:g} N,
 with an absolute encoder and the hall sensor that marks each cleat pass
 (docs/records-continuous.md). White noise {bench.noise_ms2:g} m/s², an IEPE high-pass at
 {bench.highpass_hz:g} Hz, gravity included.
@@ -309,10 +325,18 @@ with an absolute encoder and the hall sensor that marks each cleat pass
 - wheel rotation: {bench.rotation_hz:.4f} Hz; {arrivals.size} cleat arrivals, one every
   {bench.drum_period_s:.4f} s; the tyre turns {bench.circumference_ratio:.4f} revolutions per pass;
 - the ring: as in the table below (Table 9 geometry);
-- the travelling waves each cleat hit excites (eq. 25 in the rotating frame, eq. 26 as the
-  fixed observer of the angle–time field sees them, docs/physics.md §3.2–3.3):
+- the modes each cleat hit excites: those of the rolling tyre **in contact with the drum**, the tread
+  springs on the patch of the steady rolling solution ({lead:.2f}° to {trail:+.2f}°) — the model of
+  docs/physics.md §3.7 that `ringfit campbell` and `ringfit cleat --ssi --tyre` use, so a tyre file with
+  the values below labels them as generated. The fixed observer of the angle–time field sees each mode at
+  its fixed-frame frequency. Under contact the free ring's pairs of travelling waves (eq. 25/26) do not
+  survive as such: the patch couples the forward wave of order n with the backward waves of n and n + 2
+  (which lie near it in the fixed frame), so every mode is a hybrid of several harmonics; its order n and
+  direction are those of its strongest harmonic in the radial acceleration (the last column: signed
+  harmonic k, k > 0 backward, k < 0 forward, and its share). At {bench.load_n:g} N no mode between 100 and
+  300 Hz is forward-dominated; standing modes carry the loaded tyre's tag (docs/physics.md §3.7):
 
-| n | branch | rotating frame [Hz] | fixed frame [Hz] | damping seen [%] |
+| n | branch | fixed frame [Hz] | damping seen [%] | strongest harmonics (radial acceleration) |
 |---|---|---|---|---|
 {lines}
 
@@ -324,6 +348,15 @@ with an absolute encoder and the hall sensor that marks each cleat pass
 ringfit profile cleat.records.npz --quiet-after 0.25 --out drum.profile.csv
 ringfit cleat cleat.records.npz --sectors 128 --out field.npz --snapshots snapshots.png --coverage-plot coverage.png
 ringfit cleat cleat.records.npz --sectors 128 --out field2.npz --ssi rolling.modes.csv --animate field.gif
+```
+
+`true.tyre.toml` holds the values above (the truth, for labelling): with
+`--tyre true.tyre.toml` added to the last line each identified mode is labelled with the model's branch
+(`model_n`, `model_direction`, `label_flag`), and the Campbell diagram matches them to its branches:
+
+```bash
+ringfit cleat cleat.records.npz --sectors 128 --out field2.npz --ssi rolling.modes.csv --tyre true.tyre.toml --force
+ringfit campbell --tyre true.tyre.toml --load 4000 --drum 1.2192 --speeds 0:40:10 --modes rolling.modes.csv --out cleat.campbell.csv
 ```
 """)
 
