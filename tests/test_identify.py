@@ -60,7 +60,9 @@ def _small_joint_problem(T: int = 2, P: int = 3):
     geometry, ring = table9()
     solver = ContactSolver()
     M = solver.n_grid
-    H = M // 2 - im.PROFILE_K_MIN
+    from ringfit.fit.profile_block import PROFILE_K_MIN
+
+    H = M // 2 - PROFILE_K_MIN
     n = np.arange(1, 6)
     rows = im._Rows(
         free=dict(n=n.astype(float), freq=100.0 * n, sigma=np.ones(5)),
@@ -296,7 +298,7 @@ def test_profile_noise_spectrum_is_calibrated_for_coloured_noise():
     neighbouring parts, the row left out) in every band, the lowest harmonics of red noise included (to 5 %; a
     resonance band only errs wide at k = 2 … 4); a plain
     ±4 moving average of the power (the negative control) reads the σ of k = 2 … 4 of red noise low."""
-    from ringfit.fit.identify import NOISE_SMOOTHING, noise_spectrum
+    from ringfit.fit.profile_block import NOISE_SMOOTHING, noise_spectrum
 
     rng = np.random.default_rng(11)
     for colour in ("white", "pink", "red", "band"):
@@ -334,7 +336,7 @@ def test_t_widening_is_students_quantile_over_the_normals():
 
 def test_rows_of_a_finer_grid_are_the_same_band_limited_rows():
     """The grid check compares a 2M-point model with M-point data: the rows of the same revolution agree."""
-    from ringfit.fit.identify import harmonic_rows
+    from ringfit.fit.profile_block import harmonic_rows
 
     def signal(M):
         phi = -np.pi + 2 * np.pi * np.arange(M) / M
