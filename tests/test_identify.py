@@ -244,6 +244,36 @@ def test_diagnose_with_the_fitted_tyre_as_baseline_gives_the_same_diagnosis(tmp_
 
 
 @pytest.mark.slow
+def test_the_diagnosis_reads_identifys_profiles_as_identify_does(joint_case, tmp_path):
+    """Same data, same answer (issue 31): `identify` then `diagnose --tyre` on the same case folder, with no hidden
+    effect. The diagnosis's profile baseline reads each profile through the profile block's gain and angle offset
+    (ringfit.fit.profile_block), as identify does, so it finds no structure in the profiles, keeps the identified
+    ring inside its covariance, and recovers each profile's true gain and offset — as identify does. (With one
+    offset for all profiles and no gain it rated them at reduced χ² ≈ 28 with the ring pulled ≈ 18 σ.)"""
+    from ringfit.gap import diagnose
+
+    folder, truth = joint_case
+    tyre_path = tmp_path / "identified.tyre.toml"
+    assert main(["identify", str(folder), "--out", str(tyre_path), "--quiet"]) == 0
+    report = json.loads(tyre_path.with_name("identified.identify.json").read_text())
+    d = diagnose(folder, effects=(), progress=False, null_draws=0, tyre=read_tyre(tyre_path))
+    part = next(p for p in d.parts if p.problem.domain == "profiles")
+    base = part.summary["baseline"]
+    assert not base["structured"] and base["reduced_chi2"] < 2.0, base["reduced_chi2"]
+    assert base["drift"]["max_abs_sigma"] < 3.0 and not base["drift"]["prior_distance"]["outside"]
+    labels = part.problem.labels
+    speed_of = {int(i): float(labels["speed_kmh"][labels["profile"] == i][0]) for i in np.unique(labels["profile"])}
+    values = base["parameters"]
+    for i, speed in speed_of.items():
+        want = next(t for t in truth["profiles"] if abs(t["speed_kmh"] - speed) < 1e-6)
+        ident = next(n for n in report["nuisances"] if abs(n["speed_kmh"] - speed) < 1e-6)
+        gain, offset_deg = values[f"gain_{i + 1}"], math.degrees(values[f"angle_offset_{i + 1}"])
+        assert abs(gain / want["gain"] - 1) < 0.02 and abs(offset_deg - want["angle_offset_deg"]) < 0.1
+        assert abs(gain - ident["gain"]) < 3 * ident["gain_sd"] + 1e-3, (gain, ident)
+        assert abs(offset_deg - ident["angle_offset_deg"]) < 3 * ident["angle_offset_sd_deg"] + 0.02, (offset_deg, ident)
+
+
+@pytest.mark.slow
 def test_roll_states_the_ring_band_from_the_covariance(tmp_path, capsys):
     """The tyre's [ring.covariance] propagated into the standing deflection: a band around the nominal value that
     grows with the covariance (k_trd ±20 % must move the deflection more than ±2 %)."""
