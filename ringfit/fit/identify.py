@@ -68,9 +68,9 @@ from ringfit.fit.priors import BOUNDS
 from ringfit.fit.profile_block import (harmonic_rows, noise_from_residual, nuisance_coords, nuisance_names,
                                        nuisance_start, profile_rows, read_through)
 from ringfit.fit.result import FitResult, covariance_from_jacobian
-from ringfit.io.conditions import case_inputs, check_stated, pressure_conflict
-from ringfit.io.modes import ModeTable, read_mode_table
-from ringfit.io.tyre import LINEAR_COVARIANCE, RingCovariance, Tyre, read_tyre
+from ringfit.io.conditions import pressure_conflict
+from ringfit.io.modes import ModeTable
+from ringfit.io.tyre import LINEAR_COVARIANCE, RingCovariance, Tyre
 from ringfit.params import RingParams, TyreGeometry, TyreLaws
 from ringfit.physics.contact import ContactSolver, as_traced, patch_edges, solve_rolling
 from ringfit.physics.loaded import loaded_natural_frequencies
@@ -130,33 +130,22 @@ def _number(cond: dict, key: str):
 
 
 def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
-    """Read a case folder for :func:`identify`; a state whose condition is missing is refused (one line, its key)."""
-    from ringfit.io.profiles import read_profile
+    """Read a case folder for :func:`identify` with the one case-folder reader
+    (:func:`ringfit.io.case.read_case_folder`: its rules and messages), then identify's own use of it: a free table
+    at another pressure is a state of its own (identify across states), a rolling table is listed as skipped, any
+    other table must be ``loaded`` with its ``load_n`` (one line naming the sidecar and the key); every pressure is
+    checked at the end (one: the tyre file's; several: the pressure law)."""
+    from ringfit.io.case import read_case_folder
 
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise InputError("is not a folder; expected a case folder with tyre.toml and free.modes.csv", source=folder)
-    if not (folder / "tyre.toml").exists():
-        raise InputError("missing tyre.toml (docs/formats.md §1: [tyre] radius_m, width_m, pressure_bar)",
-                         source=folder)
-    tyre = read_tyre(folder / "tyre.toml")
-    free_path = folder / "free.modes.csv"
-    if not free_path.exists():
-        raise InputError("missing free.modes.csv: the free, static tyre's modes (docs/formats.md §6)", source=folder)
-    free = read_mode_table(free_path)
-    if free.state != "free" or (_number(free.condition, "speed_kmh") or 0) > 0:
-        raise InputError(f"state {free.state!r}: free.modes.csv must be the static, free tyre",
-                         source=free_path.with_suffix(".json"))
-    inputs = IdentifyInputs(folder, tyre, free)
+    # the pressure is checked below, over every measurement (one pressure: the tyre file's; several: the law)
+    case = read_case_folder(folder, other_pressure="refuse", pressure_law=True)
+    tyre, free = case.tyre, case.free
+    inputs = IdentifyInputs(case.folder, tyre, free)
+    free_path = Path(str(free.source))
     stated = [(free.condition, free_path.with_suffix(".json"))]  # every measurement's condition: its pressure
-    # the same table or profile given twice (a copy, a symlink) is counted once: the data are not twice as sure
-    tables, profiles = case_inputs(folder)
-    for p in tables:
+    for table in case.tables:
+        p = Path(str(table.source))
         sidecar = p.with_suffix(".json")
-        if not sidecar.exists():
-            raise InputError(f"missing sidecar {sidecar.name}: its condition (state, load_n, speed_kmh) is needed",
-                             source=p)
-        table = read_mode_table(p)
         cond = table.condition
         speed = _number(cond, "speed_kmh") or _number(cond, "rotation_hz") or 0.0
         if table.state == "free" and not speed:
@@ -186,27 +175,9 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
             raise InputError(f"load_n = {cond.get('load_n')!r}: expected a positive load [N]", source=sidecar)
         stated.append((cond, sidecar))
         inputs.loaded.append(table)
-    for p in profiles:
-        sidecar = p.with_suffix(".json")
-        if not sidecar.exists():
-            raise InputError(f"missing sidecar {sidecar.name} (speed_kmh, load_n; docs/formats.md §3)", source=p)
-        prof = read_profile(p)
-        for key in ("load_n", "speed_kmh"):
-            v = _number(prof.condition, key)
-            if v is None or not (math.isfinite(v) and v > 0):
-                raise InputError(f"missing or non-positive '{key}': a profile's {key} is needed to identify "
-                                 "from it", source=sidecar)
-        # the pressure is checked below, over every measurement (one pressure: the tyre file's; several: the law)
-        prof, notes = check_stated(prof, tyre.geometry, source=sidecar, other_pressure="refuse", pressure_law=True)
-        for note in notes:
-            warnings.warn(note, stacklevel=2)
-        torque = _number(prof.condition, "torque_nm")
-        if torque is not None and torque != 0.0 and prof.rotation_hz is None:
-            warnings.warn(f"{p.name}: a profile at a torque without rotation_hz: Ω = V/R_e of free rolling, off by "
-                          "the slip (state the encoder's rotation_hz)", stacklevel=2)
-        stated.append((prof.condition, sidecar))
+    for prof in case.profiles:  # sorted by load, then speed; load_n and speed_kmh checked by the reader
+        stated.append((prof.condition, Path(str(prof.source)).with_suffix(".json")))
         inputs.profiles.append(prof)
-    inputs.profiles.sort(key=lambda pr: (float(pr.condition["load_n"]), float(pr.condition["speed_kmh"])))
     _check_pressures(stated, tyre)
     return inputs
 
