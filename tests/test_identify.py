@@ -243,8 +243,17 @@ def test_diagnose_with_the_fitted_tyre_as_baseline_gives_the_same_diagnosis(tmp_
     assert main(["diagnose", str(case), "--out", str(tmp_path / "c.diagnosis.json"), "--tyre", str(bare)]) == 2
 
 
+@pytest.fixture(scope="module")
+def identified_tyre(joint_case, tmp_path_factory):
+    """``ringfit identify`` of the joint case: the tyre file and its report."""
+    folder, _ = joint_case
+    tyre_path = tmp_path_factory.mktemp("identified") / "identified.tyre.toml"
+    assert main(["identify", str(folder), "--out", str(tyre_path), "--quiet"]) == 0
+    return tyre_path, json.loads(tyre_path.with_name("identified.identify.json").read_text())
+
+
 @pytest.mark.slow
-def test_the_diagnosis_reads_identifys_profiles_as_identify_does(joint_case, tmp_path):
+def test_the_diagnosis_reads_identifys_profiles_as_identify_does(joint_case, identified_tyre):
     """Same data, same answer (issue 31): `identify` then `diagnose --tyre` on the same case folder, with no hidden
     effect. The diagnosis's profile baseline reads each profile through the profile block's gain and angle offset
     (ringfit.fit.profile_block), as identify does, so it finds no structure in the profiles, keeps the identified
@@ -253,9 +262,7 @@ def test_the_diagnosis_reads_identifys_profiles_as_identify_does(joint_case, tmp
     from ringfit.gap import diagnose
 
     folder, truth = joint_case
-    tyre_path = tmp_path / "identified.tyre.toml"
-    assert main(["identify", str(folder), "--out", str(tyre_path), "--quiet"]) == 0
-    report = json.loads(tyre_path.with_name("identified.identify.json").read_text())
+    tyre_path, report = identified_tyre
     d = diagnose(folder, effects=(), progress=False, null_draws=0, tyre=read_tyre(tyre_path))
     part = next(p for p in d.parts if p.problem.domain == "profiles")
     base = part.summary["baseline"]
@@ -271,6 +278,23 @@ def test_the_diagnosis_reads_identifys_profiles_as_identify_does(joint_case, tmp
         assert abs(gain / want["gain"] - 1) < 0.02 and abs(offset_deg - want["angle_offset_deg"]) < 0.1
         assert abs(gain - ident["gain"]) < 3 * ident["gain_sd"] + 1e-3, (gain, ident)
         assert abs(offset_deg - ident["angle_offset_deg"]) < 3 * ident["angle_offset_sd_deg"] + 0.02, (offset_deg, ident)
+
+
+@pytest.mark.slow
+def test_estimate_with_the_identified_tyre_gives_back_each_profiles_stated_load(joint_case, identified_tyre, tmp_path):
+    """Same data, same answer (issue 31): identify read each profile at its stated load; `ringfit estimate` of the
+    same profile with the identified tyre file finds that load again, inside its 95 % interval and within 1 %."""
+    folder, truth = joint_case
+    tyre_path, _ = identified_tyre
+    for i, want in enumerate(truth["profiles"]):
+        prof = sorted(folder.glob("*.profile.csv"))[i]
+        stated = json.loads(prof.with_suffix(".json").read_text())["load_n"]
+        assert stated == pytest.approx(want["load_n"])
+        out = tmp_path / f"{prof.stem}.estimate.json"
+        assert main(["estimate", str(prof), "--tyre", str(tyre_path), "--out", str(out), "--quiet"]) == 0
+        load = json.loads(out.read_text())["load_n"]
+        assert load["lo"] <= stated <= load["hi"], (prof.name, stated, load)
+        assert abs(load["value"] / stated - 1) < 0.01
 
 
 @pytest.mark.slow
