@@ -14,6 +14,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ringfit.errors import InputError
 from ringfit.io.case import read_case_folder
 from ringfit.io.modes import ModeTable
 from ringfit.io.tyre import Tyre
@@ -47,10 +48,16 @@ class Case:
 def read_case(folder: str | os.PathLike) -> Case:
     """Read and check a case folder (docs/formats.md §6) with the one case-folder reader
     (:func:`ringfit.io.case.read_case_folder`: its rules and messages); raises :class:`InputError` for an incomplete
-    one. A measurement at another pressure than the tyre file's is used at the tyre file's, with a warning."""
+    one. The diagnosis's own rules: ``free.modes.csv`` holds at least :data:`MIN_FREE_MODES` structural modes with
+an n; a measurement at another pressure than the tyre file's is used at the tyre file's, with a warning."""
     c = read_case_folder(folder, other_pressure="warn", used_as=USED_AS)
+    if int(((c.free.kind == "structural") & (c.free.n >= 0)).sum()) < MIN_FREE_MODES:
+        raise InputError(f"needs at least {MIN_FREE_MODES} structural modes with an assigned n to fit the ring "
+                         "(rho_a, EI, kw, kv)", source=c.free.source)
     return Case(folder=c.folder, tyre=c.tyre, free=c.free, tests=c.tables, profiles=c.profiles, records=c.records)
 
 
+#: Structural modes with an n the diagnosis needs in free.modes.csv: it fits the ring's four eq. 18 parameters to it.
+MIN_FREE_MODES = 4
 #: How the diagnosis uses a measurement at another pressure than the tyre file's (its warning says so).
 USED_AS = "the diagnosis uses it as if measured"

@@ -6,8 +6,7 @@
 messages (each one line naming the file and, where there is one, the field):
 
 - the folder exists and holds ``tyre.toml`` and ``free.modes.csv``; ``free.modes.csv`` is the static,
-  free tyre (its sidecar's ``state`` is ``free``, no speed, no rotation) with at least
-  :data:`MIN_FREE_MODES` structural modes with an assigned n (the ring has four eq. 18 parameters);
+  free tyre (its sidecar's ``state`` is ``free``, no speed, no rotation);
 - every other ``*.modes.csv`` is a test table and every ``*.profile.csv`` a rolling profile, each with
   its sidecar (``NAME.json``), counted once when given twice (:func:`ringfit.io.conditions.case_inputs`);
 - a table's sidecar states a condition that can be modelled (:func:`ringfit.io.modes.check_test_condition`);
@@ -19,7 +18,9 @@ messages (each one line naming the file and, where there is one, the field):
   ring to it with the pressure law or refuses it.
 
 What each command then uses is its own rule (identify: loaded tables need ``load_n``, rolling tables are
-skipped; the diagnosis: every table is a test). ``*.records.npz`` files are listed, not read.
+skipped, a free table of any length is used, a parameter it does not bound flagged at its plausible bound; the
+diagnosis: every table is a test, and ``free.modes.csv`` needs four structural modes with an n, since the
+diagnosis fits the ring to it alone). ``*.records.npz`` files are listed, not read.
 
 Example::
 
@@ -39,10 +40,6 @@ from ringfit.errors import InputError
 from ringfit.io.conditions import case_inputs, check_stated
 from ringfit.io.modes import ModeTable, check_test_condition, read_mode_table
 from ringfit.io.tyre import Tyre, read_tyre
-
-#: Structural modes with an assigned n that ``free.modes.csv`` must hold: the ring's four eq. 18 parameters.
-MIN_FREE_MODES = 4
-
 
 @dataclass
 class CaseFolder:
@@ -104,9 +101,6 @@ def read_case_folder(folder: str | os.PathLike, *, other_pressure: str = "warn",
     if free.state != "free" or speed > 0 or rotation > 0:
         raise InputError(f"free.modes.json says state {free.state!r}, speed {free.condition.get('speed_kmh', 0)}; "
                          "free.modes.csv must be the static, free tyre", source=free_path.with_suffix(".json"))
-    if int(((free.kind == "structural") & (free.n >= 0)).sum()) < MIN_FREE_MODES:
-        raise InputError(f"needs at least {MIN_FREE_MODES} structural modes with an assigned n to fit the ring "
-                         "(rho_a, EI, kw, kv)", source=free_path)
 
     def stated(item, sidecar):
         item, notes = check_stated(item, tyre.geometry, source=sidecar, other_pressure=other_pressure,
@@ -145,4 +139,4 @@ def read_case_folder(folder: str | os.PathLike, *, other_pressure: str = "warn",
     return case
 
 
-__all__ = ["read_case_folder", "CaseFolder", "MIN_FREE_MODES"]
+__all__ = ["read_case_folder", "CaseFolder"]
