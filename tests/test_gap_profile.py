@@ -40,10 +40,16 @@ def _data(band_kmax=None):
                        roads=FlatRoad(), band=jnp.asarray(band)), g, r
 
 
-def _predict(effects, values, data, k_tread=19e6, offset=0.0):
+#: The baseline of two profiles: k_trd, then each profile's angle offset and gain (the profile block's nuisances).
+BASE2 = BASE + ("angle_offset_1", "gain_1", "angle_offset_2", "gain_2")
+
+
+def _predict(effects, values, data, k_tread=19e6, offset=0.0, gains=(1.0, 1.0), offsets=None):
     sizes = tuple(len(e.params_for("profiles")) for e in effects)
-    theta = jnp.asarray([k_tread, offset] + list(values))
-    return np.asarray(profile_predict(theta, data, effects=effects, sizes=sizes, solver=SOLVER)).reshape(2, 2, M)
+    o1, o2 = (offset, offset) if offsets is None else offsets
+    theta = jnp.asarray([k_tread, o1, gains[0], o2, gains[1]] + list(values))
+    return np.asarray(profile_predict(theta, data, effects=effects, sizes=sizes, solver=SOLVER,
+                                      base=BASE2)).reshape(2, 2, M)
 
 
 def _group(name):
@@ -76,6 +82,21 @@ def test_baseline_matches_the_simulated_profile():
     for i, om in enumerate(np.asarray(data.omega)):
         prof = simulate_profile(r, g, speed_kmh=30.0, load_n=4000.0, rotation_hz=om / (2 * np.pi), solver=SOLVER)
         ref = np.asarray(shift_angle(prof.channels, 0.01))
+        np.testing.assert_allclose(ours[i], ref, atol=1e-9 * np.abs(ref).max())
+
+
+def test_each_profile_is_read_through_its_own_gain_and_angle_offset():
+    """The profile block's nuisances in the diagnosis's baseline, as identify fits them: profile i's channels are
+    the simulated profile (§6 baseline sensor) shifted by its own offset and scaled by its own gain."""
+    from ringfit.physics.profile import simulate_profile
+    from ringfit.physics.sensor import shift_angle
+
+    data, g, r = _data()
+    gains, offsets = (1.07, 0.93), (0.02, -0.035)
+    ours = _predict((), [], data, gains=gains, offsets=offsets)
+    for i, om in enumerate(np.asarray(data.omega)):
+        prof = simulate_profile(r, g, speed_kmh=30.0, load_n=4000.0, rotation_hz=om / (2 * np.pi), solver=SOLVER)
+        ref = gains[i] * np.asarray(shift_angle(prof.channels, offsets[i]))
         np.testing.assert_allclose(ours[i], ref, atol=1e-9 * np.abs(ref).max())
 
 

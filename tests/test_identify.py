@@ -60,7 +60,9 @@ def _small_joint_problem(T: int = 2, P: int = 3):
     geometry, ring = table9()
     solver = ContactSolver()
     M = solver.n_grid
-    H = M // 2 - im.PROFILE_K_MIN
+    from ringfit.fit.profile_block import PROFILE_K_MIN
+
+    H = M // 2 - PROFILE_K_MIN
     n = np.arange(1, 6)
     rows = im._Rows(
         free=dict(n=n.astype(float), freq=100.0 * n, sigma=np.ones(5)),
@@ -241,6 +243,60 @@ def test_diagnose_with_the_fitted_tyre_as_baseline_gives_the_same_diagnosis(tmp_
     assert main(["diagnose", str(case), "--out", str(tmp_path / "c.diagnosis.json"), "--tyre", str(bare)]) == 2
 
 
+@pytest.fixture(scope="module")
+def identified_tyre(joint_case, tmp_path_factory):
+    """``ringfit identify`` of the joint case: the tyre file and its report."""
+    folder, _ = joint_case
+    tyre_path = tmp_path_factory.mktemp("identified") / "identified.tyre.toml"
+    assert main(["identify", str(folder), "--out", str(tyre_path), "--quiet"]) == 0
+    return tyre_path, json.loads(tyre_path.with_name("identified.identify.json").read_text())
+
+
+@pytest.mark.slow
+def test_the_diagnosis_reads_identifys_profiles_as_identify_does(joint_case, identified_tyre):
+    """Same data, same answer (issue 31): `identify` then `diagnose --tyre` on the same case folder, with no hidden
+    effect. The diagnosis's profile baseline reads each profile through the profile block's gain and angle offset
+    (ringfit.fit.profile_block), as identify does, so it finds no structure in the profiles, keeps the identified
+    ring inside its covariance, and recovers each profile's true gain and offset — as identify does. (With one
+    offset for all profiles and no gain it rated them at reduced χ² ≈ 28 with the ring pulled ≈ 18 σ.)"""
+    from ringfit.gap import diagnose
+
+    folder, truth = joint_case
+    tyre_path, report = identified_tyre
+    d = diagnose(folder, effects=(), progress=False, null_draws=0, tyre=read_tyre(tyre_path))
+    part = next(p for p in d.parts if p.problem.domain == "profiles")
+    base = part.summary["baseline"]
+    assert not base["structured"] and base["reduced_chi2"] < 2.0, base["reduced_chi2"]
+    assert base["drift"]["max_abs_sigma"] < 3.0 and not base["drift"]["prior_distance"]["outside"]
+    labels = part.problem.labels
+    speed_of = {int(i): float(labels["speed_kmh"][labels["profile"] == i][0]) for i in np.unique(labels["profile"])}
+    values = base["parameters"]
+    for i, speed in speed_of.items():
+        want = next(t for t in truth["profiles"] if abs(t["speed_kmh"] - speed) < 1e-6)
+        ident = next(n for n in report["nuisances"] if abs(n["speed_kmh"] - speed) < 1e-6)
+        gain, offset_deg = values[f"gain_{i + 1}"], math.degrees(values[f"angle_offset_{i + 1}"])
+        assert abs(gain / want["gain"] - 1) < 0.02 and abs(offset_deg - want["angle_offset_deg"]) < 0.1
+        assert abs(gain - ident["gain"]) < 3 * ident["gain_sd"] + 1e-3, (gain, ident)
+        assert abs(offset_deg - ident["angle_offset_deg"]) < 3 * ident["angle_offset_sd_deg"] + 0.02, (offset_deg, ident)
+
+
+@pytest.mark.slow
+def test_estimate_with_the_identified_tyre_gives_back_each_profiles_stated_load(joint_case, identified_tyre, tmp_path):
+    """Same data, same answer (issue 31): identify read each profile at its stated load; `ringfit estimate` of the
+    same profile with the identified tyre file finds that load again, inside its 95 % interval and within 1 %."""
+    folder, truth = joint_case
+    tyre_path, _ = identified_tyre
+    for i, want in enumerate(truth["profiles"]):
+        prof = sorted(folder.glob("*.profile.csv"))[i]
+        stated = json.loads(prof.with_suffix(".json").read_text())["load_n"]
+        assert stated == pytest.approx(want["load_n"])
+        out = tmp_path / f"{prof.stem}.estimate.json"
+        assert main(["estimate", str(prof), "--tyre", str(tyre_path), "--out", str(out), "--quiet"]) == 0
+        load = json.loads(out.read_text())["load_n"]
+        assert load["lo"] <= stated <= load["hi"], (prof.name, stated, load)
+        assert abs(load["value"] / stated - 1) < 0.01
+
+
 @pytest.mark.slow
 def test_roll_states_the_ring_band_from_the_covariance(tmp_path, capsys):
     """The tyre's [ring.covariance] propagated into the standing deflection: a band around the nominal value that
@@ -296,7 +352,7 @@ def test_profile_noise_spectrum_is_calibrated_for_coloured_noise():
     neighbouring parts, the row left out) in every band, the lowest harmonics of red noise included (to 5 %; a
     resonance band only errs wide at k = 2 … 4); a plain
     ±4 moving average of the power (the negative control) reads the σ of k = 2 … 4 of red noise low."""
-    from ringfit.fit.identify import NOISE_SMOOTHING, noise_spectrum
+    from ringfit.fit.profile_block import NOISE_SMOOTHING, noise_spectrum
 
     rng = np.random.default_rng(11)
     for colour in ("white", "pink", "red", "band"):
@@ -334,7 +390,7 @@ def test_t_widening_is_students_quantile_over_the_normals():
 
 def test_rows_of_a_finer_grid_are_the_same_band_limited_rows():
     """The grid check compares a 2M-point model with M-point data: the rows of the same revolution agree."""
-    from ringfit.fit.identify import harmonic_rows
+    from ringfit.fit.profile_block import harmonic_rows
 
     def signal(M):
         phi = -np.pi + 2 * np.pi * np.arange(M) / M

@@ -14,11 +14,12 @@ ring parameters and each run keeps its own nuisances:
 - ``profiles`` — ``*.profile.csv`` at known ``load_n`` and speed: the steady rolling ring read
   by the sensor (§4–§6, :func:`ringfit.physics.profile.profile_channels`), per profile a gain
   (sensor sensitivity) and an angle offset; the residual is taken per revolution harmonic
-  (2 … M/2 − 1, and :data:`PROFILE_BAND_MARGIN` below what the coarsest profile resolves; real and
+  (2 … M/2 − 1, and :data:`~ringfit.fit.profile_block.PROFILE_BAND_MARGIN` below what the coarsest profile resolves; real and
   imaginary parts) so that coloured noise is whitened by its own spectrum, estimated from the residual
-  (:func:`noise_spectrum`: a power law, then the ratio averaged over the ±:data:`NOISE_SMOOTHING`
+  (:func:`~ringfit.fit.profile_block.noise_spectrum`: a power law, then the ratio averaged over the ±:data:`~ringfit.fit.profile_block.NOISE_SMOOTHING`
   neighbouring harmonics, each harmonic's own residual left out, times ν/(ν − 4) for weights estimated
-  from ν parts).
+  from ν parts). Rows, nuisances and noise are the profile block's (:mod:`ringfit.fit.profile_block`), the same
+  the diagnosis's profile baseline composes.
 
 Noise scales: each block's σ is estimated from its own residual, ``s_b² = χ²_b / (m_b − tr H_bb)``
 with ``H`` the hat matrix of the weighted fit (the block's share of the fitted degrees of
@@ -64,35 +65,28 @@ from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Probl
 from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, frequency_data,
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
+from ringfit.fit.profile_block import (harmonic_rows, noise_from_residual, nuisance_coords, nuisance_names,
+                                       nuisance_start, profile_rows, read_through)
 from ringfit.fit.result import FitResult, covariance_from_jacobian
-from ringfit.io.conditions import case_inputs, check_stated, pressure_conflict
-from ringfit.io.modes import ModeTable, read_mode_table
-from ringfit.io.tyre import LINEAR_COVARIANCE, RingCovariance, Tyre, read_tyre
+from ringfit.io.conditions import pressure_conflict
+from ringfit.io.modes import ModeTable
+from ringfit.io.tyre import LINEAR_COVARIANCE, RingCovariance, Tyre
 from ringfit.params import RingParams, TyreGeometry, TyreLaws
 from ringfit.physics.contact import ContactSolver, as_traced, patch_edges, solve_rolling
 from ringfit.physics.loaded import loaded_natural_frequencies
 from ringfit.physics.natural import natural_frequencies
 from ringfit.physics.operating import OperatingPoint
 from ringfit.physics.profile import FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels
-from ringfit.physics.sensor import shift_angle
 from ringfit.physics.state import TyreState, state_solution, state_tyre
 
 #: Passes of fit → block noise scales → refit (the scales settle in two or three).
 SCALE_PASSES = 4
 #: Stop re-weighting once every block scale changes by less than this fraction.
 SCALE_TOLERANCE = 0.02
-#: Harmonics averaged on either side for a profile's noise spectrum.
-NOISE_SMOOTHING = 4
-#: Lowest revolution harmonic of a profile used (k = 1 carries gravity and the sensor's tilt; k = 0 is removed).
-PROFILE_K_MIN = 2
 #: Relative σ of a damping ratio row before its block scale is estimated.
 DAMPING_RELATIVE_STD = 0.05
 #: The two-sided 95 % normal quantile.
 Z95 = 1.959963984540054
-#: Bounds of a profile's gain on the reading (sensor sensitivity, its offset from the belt).
-GAIN_RANGE = (0.5, 2.0)
-#: Bound of a profile's angle offset [rad].
-OFFSET_BOUND = math.radians(10.0)
 #: Harmonics of the loaded-mode basis (docs/physics.md §6; N = 20 is within 0.2 Hz of N = 40).
 LOADED_HARMONICS = 24
 #: The grid check refines the contact grid and the loaded-mode basis by this factor (docs/physics.md §11).
@@ -136,33 +130,22 @@ def _number(cond: dict, key: str):
 
 
 def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
-    """Read a case folder for :func:`identify`; a state whose condition is missing is refused (one line, its key)."""
-    from ringfit.io.profiles import read_profile
+    """Read a case folder for :func:`identify` with the one case-folder reader
+    (:func:`ringfit.io.case.read_case_folder`: its rules and messages), then identify's own use of it: a free table
+    at another pressure is a state of its own (identify across states), a rolling table is listed as skipped, any
+    other table must be ``loaded`` with its ``load_n`` (one line naming the sidecar and the key); every pressure is
+    checked at the end (one: the tyre file's; several: the pressure law)."""
+    from ringfit.io.case import read_case_folder
 
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise InputError("is not a folder; expected a case folder with tyre.toml and free.modes.csv", source=folder)
-    if not (folder / "tyre.toml").exists():
-        raise InputError("missing tyre.toml (docs/formats.md §1: [tyre] radius_m, width_m, pressure_bar)",
-                         source=folder)
-    tyre = read_tyre(folder / "tyre.toml")
-    free_path = folder / "free.modes.csv"
-    if not free_path.exists():
-        raise InputError("missing free.modes.csv: the free, static tyre's modes (docs/formats.md §6)", source=folder)
-    free = read_mode_table(free_path)
-    if free.state != "free" or (_number(free.condition, "speed_kmh") or 0) > 0:
-        raise InputError(f"state {free.state!r}: free.modes.csv must be the static, free tyre",
-                         source=free_path.with_suffix(".json"))
-    inputs = IdentifyInputs(folder, tyre, free)
+    # the pressure is checked below, over every measurement (one pressure: the tyre file's; several: the law)
+    case = read_case_folder(folder, other_pressure="refuse", pressure_law=True)
+    tyre, free = case.tyre, case.free
+    inputs = IdentifyInputs(case.folder, tyre, free)
+    free_path = Path(str(free.source))
     stated = [(free.condition, free_path.with_suffix(".json"))]  # every measurement's condition: its pressure
-    # the same table or profile given twice (a copy, a symlink) is counted once: the data are not twice as sure
-    tables, profiles = case_inputs(folder)
-    for p in tables:
+    for table in case.tables:
+        p = Path(str(table.source))
         sidecar = p.with_suffix(".json")
-        if not sidecar.exists():
-            raise InputError(f"missing sidecar {sidecar.name}: its condition (state, load_n, speed_kmh) is needed",
-                             source=p)
-        table = read_mode_table(p)
         cond = table.condition
         speed = _number(cond, "speed_kmh") or _number(cond, "rotation_hz") or 0.0
         if table.state == "free" and not speed:
@@ -192,27 +175,9 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
             raise InputError(f"load_n = {cond.get('load_n')!r}: expected a positive load [N]", source=sidecar)
         stated.append((cond, sidecar))
         inputs.loaded.append(table)
-    for p in profiles:
-        sidecar = p.with_suffix(".json")
-        if not sidecar.exists():
-            raise InputError(f"missing sidecar {sidecar.name} (speed_kmh, load_n; docs/formats.md §3)", source=p)
-        prof = read_profile(p)
-        for key in ("load_n", "speed_kmh"):
-            v = _number(prof.condition, key)
-            if v is None or not (math.isfinite(v) and v > 0):
-                raise InputError(f"missing or non-positive '{key}': a profile's {key} is needed to identify "
-                                 "from it", source=sidecar)
-        # the pressure is checked below, over every measurement (one pressure: the tyre file's; several: the law)
-        prof, notes = check_stated(prof, tyre.geometry, source=sidecar, other_pressure="refuse", pressure_law=True)
-        for note in notes:
-            warnings.warn(note, stacklevel=2)
-        torque = _number(prof.condition, "torque_nm")
-        if torque is not None and torque != 0.0 and prof.rotation_hz is None:
-            warnings.warn(f"{p.name}: a profile at a torque without rotation_hz: Ω = V/R_e of free rolling, off by "
-                          "the slip (state the encoder's rotation_hz)", stacklevel=2)
-        stated.append((prof.condition, sidecar))
+    for prof in case.profiles:  # sorted by load, then speed; load_n and speed_kmh checked by the reader
+        stated.append((prof.condition, Path(str(prof.source)).with_suffix(".json")))
         inputs.profiles.append(prof)
-    inputs.profiles.sort(key=lambda pr: (float(pr.condition["load_n"]), float(pr.condition["speed_kmh"])))
     _check_pressures(stated, tyre)
     return inputs
 
@@ -332,20 +297,6 @@ class JointArrays(eqx.Module):
     t_sigma: jax.Array | None = None
 
 
-def harmonic_rows(channels, k_min: int = PROFILE_K_MIN, rows_grid: int | None = None, k_top: int = 0):
-    """Rows ``(..., 2H)`` of revolution harmonics k_min … M/2 − 1 of ``channels`` ``(..., M)``: real then imaginary
-    parts of ``rfft · √(2/M)`` (white noise of σ per sample gives each row variance σ²).
-
-    ``rows_grid``: the rows of the same revolution band-limited to that many points (harmonics k_min …
-    rows_grid/2 − 1), for a model evaluated on a finer grid than the data's (the grid check). ``k_top`` > 0: the
-    rows stop at harmonic k_top (the profiles' band, :func:`profile_band`)."""
-    M = channels.shape[-1]
-    R = M if rows_grid is None else int(rows_grid)
-    top = R // 2 if k_top <= 0 else min(R // 2, int(k_top) + 1)
-    spec = jnp.fft.rfft(channels, axis=-1)[..., k_min:top] * (R / M) * math.sqrt(2.0 / R)
-    return jnp.concatenate([spec.real, spec.imag], axis=-1)
-
-
 def standing_half_angle(ring: RingParams, geometry: TyreGeometry, load, road, solver: ContactSolver):
     """Contact half-angle [rad] of the standing tyre at ``load`` [N]: the static contact solve (docs/physics.md §4.3–4.4)."""
     sol = solve_rolling(ring, geometry, OperatingPoint(0.0, load, road), solver=solver)
@@ -454,8 +405,7 @@ class JointResiduals(AbstractResiduals):
                 torque = None
             else:
                 ch, torque = serial_map(one_state, (data.p_omega, data.p_load, data.p_roads, data.p_pressure, slips))
-            ch = shift_angle(ch, offset[:, None, None]) * gain[:, None, None]
-            model = harmonic_rows(ch, rows_grid=self.rows_grid or None, k_top=self.k_top)
+            model = harmonic_rows(read_through(ch, offset, gain), rows_grid=self.rows_grid or None, k_top=self.k_top)
             rows.append(((model - data.p_measured) / data.p_sigma).ravel())
             aux[2] = model
             if data.t_index is not None:
@@ -504,11 +454,6 @@ def state_coords(P: int) -> tuple[Coordinate, ...]:
     return tuple(coords)
 
 
-def nuisance_names(P: int) -> tuple[str, ...]:
-    """Names of the per-profile nuisances of ``P`` profiles: ``angle_offset_i`` and ``gain_i`` (i = 1 … P)."""
-    return tuple(n for i in range(P) for n in (f"angle_offset_{i + 1}", f"gain_{i + 1}"))
-
-
 def joint_coords(P: int) -> tuple[Coordinate, ...]:
     """The joint fit's coordinates: the ring's (log), then per profile its angle offset (linear) and gain (log).
 
@@ -518,11 +463,7 @@ def joint_coords(P: int) -> tuple[Coordinate, ...]:
     bound, instead of running off towards 0 or ∞ until the solver's step limit."""
     coords = [Coordinate(c.name, c.kind, c.center, c.scale, lo=BOUNDS[c.name][0], hi=BOUNDS[c.name][1])
               if c.name in RING_FREE and c.name in BOUNDS else c for c in RING_COORDS]
-    for i in range(P):
-        coords.append(Coordinate(f"angle_offset_{i + 1}", LINEAR, scale=math.radians(1.0), lo=-OFFSET_BOUND,
-                                 hi=OFFSET_BOUND))
-        coords.append(Coordinate(f"gain_{i + 1}", LOG, lo=GAIN_RANGE[0], hi=GAIN_RANGE[1]))
-    return tuple(coords)
+    return tuple(coords) + nuisance_coords(P)  # the profile block's nuisances (ringfit.fit.profile_block)
 
 
 # ----------------------------------------------------------------------------- rows of each block
@@ -606,36 +547,19 @@ def _loaded_rows(tables: list[ModeTable], ring: RingParams, geometry: TyreGeomet
 
 
 def _profile_rows(profiles, geometry, ring, solver, plan: "StatePlan | None" = None) -> dict | None:
+    """The profile block's rows (:func:`ringfit.fit.profile_block.profile_rows`); across states, Ω of a profile
+    without ``rotation_hz`` at another pressure is V/R_e of the ring at that pressure (§13.1)."""
     if not profiles:
         return None
     from ringfit.fit.rolling import rolling_data
 
-    data = rolling_data(profiles, geometry, ring, solver=solver)
+    rows = profile_rows(profiles, geometry, ring, solver)
     if plan is not None and plan.active:
-        # Ω = V/R_e of a profile without rotation_hz at another pressure: R_e of the ring at that pressure (§13.1)
         for i, prof in enumerate(profiles):
             if prof.rotation_hz is None and not _same_pressure(plan.p_pressure[i], float(geometry.pressure)):
                 g_i, ring_i, _ = state_tyre(geometry, ring, plan.laws, plan.p_pressure[i], plan.laws.tread_depth_ref)
-                data.omega[i] = rolling_data([prof], g_i, ring_i, solver=solver).omega[0]
-    k_top = profile_band(profiles, solver.n_grid)
-    measured = np.asarray(harmonic_rows(jnp.asarray(data.measured), k_top=k_top))
-    P = measured.shape[0]
-    # starting σ per profile and channel: the RMS of the reading's rows (rescaled by the first pass)
-    sigma = np.broadcast_to(np.sqrt(np.mean(measured**2, axis=-1, keepdims=True)) * 0.1, measured.shape).copy()
-    return dict(measured=measured, sigma=sigma, omega=data.omega, load=data.load, drum=data.drum_diameter,
-                P=P, M=data.measured.shape[-1], sources=data.sources, speed_kmh=data.speed_kmh, k_top=k_top)
-
-
-#: Harmonics kept below the coarsest profile's Nyquist harmonic (its resampling's edge).
-PROFILE_BAND_MARGIN = 8
-
-
-def profile_band(profiles, n_grid: int) -> int:
-    """The highest revolution harmonic the profile rows compare: below the grid's Nyquist (M/2 − 1) and
-    :data:`PROFILE_BAND_MARGIN` below what the coarsest profile resolves ((N − 1)/2 for N angles) — a
-    profile holds nothing above that, and a model row there would be compared with a zero."""
-    n_min = min(len(p) for p in profiles)
-    return int(min(n_grid // 2 - 1, (n_min - 1) // 2 - PROFILE_BAND_MARGIN))
+                rows["omega"][i] = rolling_data([prof], g_i, ring_i, solver=solver).omega[0]
+    return rows
 
 
 def _arrays(geometry, rows: _Rows, solver) -> JointArrays:
@@ -969,7 +893,7 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     free_ring = tuple(free)
     free = tuple(free) + nuisance_names(P)
     coords = joint_coords(P)
-    theta = np.concatenate([ring_vector(ring0), np.tile([0.0, 1.0], P)])
+    theta = np.concatenate([ring_vector(ring0), nuisance_start(P)])
     free_laws = plan.free if plan.active else ()
     if plan.active:
         free, coords = free + plan.free_names(P), coords + state_coords(P)
@@ -1014,7 +938,8 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
             s = math.sqrt(float(r[sl] @ r[sl]) / dof)
             block = {"free modes": rows.free, "free damping": rows.damping, "loaded modes": rows.loaded}.get(name)
             if name == "profiles":
-                _rescale_profiles(rows.profiles, r[sl], h[sl])
+                pr = rows.profiles
+                pr["sigma"] = noise_from_residual(r[sl].reshape(pr["measured"].shape) * pr["sigma"], h[sl])
                 s = 1.0
             elif block is not None:
                 if block.get("given") and s <= 1.0:
@@ -1213,51 +1138,6 @@ def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: Cont
     du = -np.linalg.lstsq(fit.jacobian, delta, rcond=None)[0]
     return dict(grid=[solver.n_grid, fine.n_grid], loaded_harmonics=[LOADED_HARMONICS, factor * LOADED_HARMONICS],
                 shift_u=du)
-
-
-def noise_spectrum(power: np.ndarray, k_min: int = PROFILE_K_MIN, half_width: int = NOISE_SMOOTHING) -> tuple:
-    """Noise power per harmonic ``(..., H)`` (k = k_min …) from residual powers, and its degrees of freedom ``(H,)``.
-
-    Coloured noise (docs/physics.md §11, *profile noise*): a power law ``a·k^b`` fitted to ln power per series takes
-    out the spectrum's slope (pink and red noise change by ×5 over the first few harmonics, where a plain moving
-    average mixes them); the ratio to it is averaged over the ±``half_width`` *neighbouring* harmonics, leaving
-    each harmonic's own residual out, so a row's weight does not depend on its own noise (a bump — a structural
-    mode — is followed by the average). ``dof``: 2 × the neighbours averaged (each harmonic's residual holds a
-    real and an imaginary part).
-    """
-    H = power.shape[-1]
-    k = np.arange(k_min, k_min + H, dtype=np.float64)
-    X = np.stack([np.ones(H), np.log(k)], axis=1)
-    floor = 1e-300 + 1e-30 * float(np.max(power)) if power.size else 1e-300
-    lp = np.log(np.maximum(power, floor)).reshape(-1, H)
-    coef = np.linalg.lstsq(X, lp.T, rcond=None)[0]
-    trend = np.exp(X @ coef).T.reshape(power.shape)
-    kernel = np.ones(2 * half_width + 1)
-    kernel[half_width] = 0.0  # leave the harmonic's own residual out
-    num = np.apply_along_axis(lambda p: np.convolve(p, kernel, mode="same"), -1, power / trend)
-    den = np.convolve(np.ones(H), kernel, mode="same")
-    return trend * num / den, 2.0 * den
-
-
-def _rescale_profiles(pr: dict, residuals: np.ndarray, leverage: np.ndarray) -> None:
-    """New σ per profile, channel and harmonic from the residual spectrum (:func:`noise_spectrum`).
-
-    ``residuals`` and ``leverage`` (the hat matrix's diagonal) are the profile block's rows of the fit.
-
-    Weights estimated from ν = ``dof`` residual parts make the weighted fit's actual variance larger than
-    ``(JᵀŴJ)⁻¹`` says: with ŵ = w/c, c ~ χ²_ν/ν independent of the row, the estimator's variance is
-    E[1/c²]/E[1/c]² / Σ J²w and the formula's E[1/c]⁻¹ / Σ J²w, a ratio ν/(ν − 4). The σ² of each row is
-    multiplied by it, so that the covariance of the fit is the weighted estimator's (docs/physics.md §11)."""
-    res = residuals.reshape(pr["measured"].shape) * pr["sigma"]  # back in m/s²
-    H = res.shape[-1] // 2
-    power = 0.5 * (res[..., :H] ** 2 + res[..., H:] ** 2)
-    noise, dof = noise_spectrum(power)
-    # degrees of freedom the fit took from the profile rows: share them out evenly
-    used = float(leverage.sum()) / leverage.size
-    inflate = dof / np.maximum(dof - 4.0, 1.0)
-    sigma = np.sqrt(noise * inflate / max(1.0 - used, 0.5))
-    sigma = np.maximum(sigma, 1e-6 * max(float(sigma.max()), 1e-300))
-    pr["sigma"] = np.concatenate([sigma, sigma], axis=-1)
 
 
 def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, check=None, widen=None,

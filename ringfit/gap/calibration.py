@@ -185,9 +185,10 @@ def _phase_randomised(res: np.ndarray, series, rng, B: int) -> np.ndarray:
     return out
 
 
-#: The rig's nuisances the profile baseline does not model, carried by the nuisance null of profiles
-#: (:func:`parametric_null` ``nuisances=True``): a per-revolution gain that drifts linearly over the session (runs
-#: in speed order) by up to this much end to end, either sign (a slow sensor/DAQ gain drift: 1–4 %) …
+#: The rig's nuisances carried by the nuisance null of profiles (:func:`parametric_null` ``nuisances=True``; the
+#: baseline fits each run's gain and angle offset — the profile block's nuisances — and so does every linearised
+#: refit, so the null repeats that choice on data that hold them): a per-revolution gain that drifts linearly over
+#: the session (runs in speed order) by up to this much end to end, either sign (a slow sensor/DAQ gain drift: 1–4 %) …
 GAIN_DRIFT_MAX = 0.04
 #: … and a per-run angle jitter of this σ [deg] (the recorded angle's trigger uncertainty between runs).
 ANGLE_JITTER_DEG = 0.2

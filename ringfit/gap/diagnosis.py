@@ -405,8 +405,8 @@ def _calibrate(problem, part, chain, current, remaining, entries, alpha, draws, 
         rl = random_line_null(problem, part.fits, chain, elements, draws, seed=100 + round_no)
         if rl is not None:
             nulls.append(rl)
-    # where the null decides instead of a bar (profiles), it must carry the rig's nuisances the baseline does not
-    # model (gain drift over the session, angle jitter; docs/physics.md §6.4): a third null for those candidates
+    # where the null decides instead of a bar (profiles), it must carry the rig's nuisances (gain drift over the
+    # session, angle jitter; docs/physics.md §6.4; the baseline and every refit fit them per run): a third null
     rig = None
     if problem.domain == "profiles" and any(null_decides(c) for c in entries):
         rig = parametric_null(problem, current, part.fits, chain, elements, draws, seed=200 + round_no, nuisances=True)

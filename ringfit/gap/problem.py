@@ -147,6 +147,9 @@ class GapProblem:
     robust: np.ndarray | None = None
     huber: float | None = None
     sigma_heldout: np.ndarray | None = None
+    #: optional solver coordinate of a baseline parameter by name (e.g. the profile block's nuisances:
+    #: a gain bounded to its range), in place of the default (log within e^±3 of its value, or linear)
+    base_coords: dict | None = None
 
     def prior_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The baseline prior as whitened residual rows: ``(index, mean_u, W)`` with rows ``W (u[index] − mean_u)``.

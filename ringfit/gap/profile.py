@@ -7,8 +7,11 @@ per-revolution mean removed. The ring's ρA, EI, k_w, k_v come from the eq. 18
 fit to ``free.modes.csv`` (:mod:`ringfit.gap.modal`), its damping ratio from
 that table's damping column (else ``tyre.toml``). Fitted to the profiles:
 the tread stiffness k_trd (starting at ``tyre.toml``'s value or 19e6 N/m²,
-weak log-normal prior σ = 1), one recorded-angle offset for all profiles (a
-nuisance, linear within ±10°, docs/physics.md §5 layer 6), and EI, k_w, k_v, ζ
+weak log-normal prior σ = 1), per profile a recorded-angle offset (linear within
+±10°, docs/physics.md §5 layer 6) and a gain on the reading (log, 0.5–2) — the
+nuisances of the profile block :mod:`ringfit.fit.profile_block`, the same that
+``ringfit identify`` fits, applied by its :func:`~ringfit.fit.profile_block.read_through`
+— and EI, k_w, k_v, ζ
 with the free-table fit's Laplace posterior (correlated, log units) as their
 prior. Why: eq. 18 pins the stiffnesses only relative to the pressure term
 P(n²−1), which dominates the free modes for n ≥ 3, so a free table leaves EI
@@ -48,7 +51,6 @@ with the same number of profiles (flat road or drum alike, :class:`ringfit.physi
 
 from __future__ import annotations
 
-import math
 from functools import partial
 
 import equinox as eqx
@@ -58,6 +60,8 @@ import numpy as np
 
 from ringfit._cache import jit
 from ringfit.errors import InputError
+from ringfit.fit.engine import LINEAR
+from ringfit.fit.profile_block import nuisance_coords, nuisance_names, nuisance_start, read_through
 from ringfit.gap.effects.base import Effect
 from ringfit.gap.problem import GapProblem, ProblemMeta
 from ringfit.gap.profile_noise import noise_dof, profile_noise
@@ -67,20 +71,18 @@ from ringfit.physics.profile import ProfileModel, flat_or_drum, profile_channels
 
 #: Model grid of the diagnosis (docs/physics.md §4.5: within 0.1 % of M = 8192 for the sensor signals).
 GRID = 512
-#: Baseline parameters always fitted to the profiles: tread stiffness (log) and the angle offset [rad] (linear).
-BASE = ("k_tread", "angle_offset")
+#: Baseline parameters always fitted to the profiles: the tread stiffness (log); then the profile block's
+#: nuisances per profile (:func:`ringfit.fit.profile_block.nuisance_names`: angle offset [rad], linear; gain, log).
+BASE = ("k_tread",)
 #: Ring parameters of the baseline also refitted to the profiles, with the free-table fit's Laplace
 #: posterior as a correlated log-normal prior (``damping_ratio`` only when the free table has damping).
 RING_BASE = ("ei", "kw", "kv", "damping_ratio")
-#: Angle-offset bound and scale [rad].
-OFFSET_BOUND = math.radians(10.0)
-OFFSET_SCALE = math.radians(1.0)
 #: log-normal prior σ of k_trd around its starting value (weak: the profiles determine it).
 K_TREAD_PRIOR_SD = 1.0
 #: Prior σ (log) of a ring parameter when the free-table fit gives no usable covariance.
 RING_PRIOR_SD_FALLBACK = 0.3
-#: Forward-mode tangents per Jacobian pass (free parameters of a baseline + one two-parameter effect).
-TANGENTS = 8
+#: Forward-mode tangents per Jacobian pass beyond the baseline's free parameters (one two-parameter effect).
+EFFECT_TANGENTS = 2
 #: Bootstrap block [rows] for the shrink interval (contiguous angle samples: coloured noise).
 BLOCK = 16
 #: Screen: a candidate aligned with less than this share of the χ² is not refitted (see screening).
@@ -106,17 +108,32 @@ class ProfileData(eqx.Module):
     band: jax.Array
 
 
+def _nuisances(theta, base: tuple, P: int):
+    """Each profile's angle offset and gain ``(P,)`` from θ: the block's ``angle_offset_i``/``gain_i``; a single
+    ``angle_offset`` is one offset for every profile; no gain is gain 1."""
+    off = [theta[i] for i, n in enumerate(base) if n.startswith("angle_offset")]
+    gain = [theta[i] for i, n in enumerate(base) if n.startswith("gain_")]
+    offset = jnp.stack(off) if len(off) == P else jnp.full((P,), off[0] if off else 0.0)
+    return offset, (jnp.stack(gain) if gain else jnp.ones((P,)))
+
+
+def _is_nuisance(name: str) -> bool:
+    return name.startswith(("angle_offset", "gain_"))
+
+
 def _channels(theta, data: ProfileData, base: tuple, effects: tuple, sizes: tuple, solver: ContactSolver):
-    """``(P·2·M,)`` rows of the composed model (un-jitted core of the predictors)."""
-    ring = data.ring.replace(**{name: theta[i] for i, name in enumerate(base) if name != "angle_offset"})
+    """``(P·2·M,)`` rows of the composed model (un-jitted core of the predictors), read through each profile's
+    angle offset and gain (:func:`ringfit.fit.profile_block.read_through`)."""
+    ring = data.ring.replace(**{name: theta[i] for i, name in enumerate(base) if not _is_nuisance(name)})
     model = ProfileModel()
     i = len(base)
     for effect, k in zip(effects, sizes):
         model = effect.profile_model(theta[i : i + k], model)
         i += k
-    offset = theta[base.index("angle_offset")]
-    ch = profile_channels(model, ring, data.geometry, data.omega, data.load, data.roads, data.band, offset, solver)
-    return ch.reshape(-1)
+    P = data.omega.shape[0]
+    offset, gain = _nuisances(theta, base, P)
+    ch = profile_channels(model, ring, data.geometry, data.omega, data.load, data.roads, data.band, 0.0, solver)
+    return read_through(ch, offset, gain).reshape(-1)
 
 
 class ProfilePredictor(eqx.Module):
@@ -137,8 +154,8 @@ def profile_predict(theta, data: ProfileData, *, effects: tuple, sizes: tuple, s
     """Predicted rows ``(P·2·M,)`` [m/s²]: profiles × (radial, tangential) × grid angle.
 
     ``theta`` = [baseline parameters named by ``base`` (natural units: ring fields of
-    :class:`~ringfit.params.RingParams`, ``angle_offset`` [rad]), each effect's parameters (``sizes``)].
-    Default ``base``: k_trd [N/m²] and the angle offset.
+    :class:`~ringfit.params.RingParams`, per profile ``angle_offset_i`` [rad] and ``gain_i`` — or one
+    ``angle_offset`` for all), each effect's parameters (``sizes``)]. Default ``base``: k_trd [N/m²] alone.
     """
     return _channels(theta, data, base, effects, sizes, solver)
 
@@ -190,8 +207,12 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
     band, kmax = _band(profiles, M)
     has_encoder = all(p.rotation_hz is not None for p in profiles)
     ring_names = tuple(ring_prior["names"]) if ring_prior else ()
-    base = BASE + ring_names
+    P = len(profiles)
+    nuis = nuisance_names(P)  # the profile block's per-run nuisances, as identify fits them
+    base = BASE + nuis + ring_names
     nb = len(base)
+    nuis_coords = nuisance_coords(P)
+    linear = tuple(c.kind == LINEAR for c in nuis_coords)
 
     def prepare(ring_now):
         d = rolling_data(profiles, geometry, ring_now, solver=solver)
@@ -200,7 +221,6 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
                               band=jnp.asarray(band))
 
     rdata, data = prepare(ring)
-    P = rdata.measured.shape[0]
     y = rdata.measured.reshape(-1)
     folds, fold_kind = _folds(P, M)
     phi_deg = grid_angles_deg(M)
@@ -214,22 +234,24 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
     labels["series"] = np.repeat(np.arange(2 * P), M)  # one noise series per profile and channel
 
     k0 = float(ring.k_tread)
-    values = np.array([k0, 0.0] + [float(getattr(ring, n)) for n in ring_names])
-    cov = np.diag([K_TREAD_PRIOR_SD**2, np.inf] + [0.0] * len(ring_names))
+    values = np.concatenate([[k0], nuisance_start(P), [float(getattr(ring, n)) for n in ring_names]])
+    cov = np.diag([K_TREAD_PRIOR_SD**2] + [np.inf] * len(nuis) + [0.0] * len(ring_names))
     if ring_names:
-        cov[2:, 2:] = np.asarray(ring_prior["cov"], dtype=np.float64)
+        cov[1 + len(nuis):, 1 + len(nuis):] = np.asarray(ring_prior["cov"], dtype=np.float64)
     problem = GapProblem(
         domain="profiles", data_files=[str(p.source).rsplit("/", 1)[-1] for p in profiles], y=y,
         sigma=np.full(y.shape, max(float(np.std(y)), 1e-9)), unit="m/s^2", scale=np.ones_like(y), folds=folds,
         fold_kind=fold_kind, labels=labels, base=base, base_values=values.copy(),
         base_prior_sd=np.sqrt(np.diag(cov)), effects=usable, data=data,
         noise_method="", baseline_model="gong-rolling", not_applicable=dropped,
-        meta=ProblemMeta(block=BLOCK, tangents=TANGENTS, screen_min_fraction=SCREEN_MIN_FRACTION, k_max=kmax,
-                         omega=rdata.omega, omega_source=list(rdata.omega_source),
-                         prior_guarded=(0,) + tuple(range(2, nb))),
-        base_linear=(False, True) + (False,) * len(ring_names),
-        base_linear_scale=(1.0, OFFSET_SCALE) + (1.0,) * len(ring_names),
-        base_linear_bound=(1.0, OFFSET_BOUND) + (1.0,) * len(ring_names),
+        meta=ProblemMeta(block=BLOCK, tangents=nb + EFFECT_TANGENTS, screen_min_fraction=SCREEN_MIN_FRACTION,
+                         k_max=kmax, omega=rdata.omega, omega_source=list(rdata.omega_source),
+                         prior_guarded=(0,) + tuple(range(1 + len(nuis), nb))),
+        base_linear=(False,) + linear + (False,) * len(ring_names),
+        base_linear_scale=(1.0,) + tuple(c.scale for c in nuis_coords) + (1.0,) * len(ring_names),
+        base_linear_bound=(1.0,) + tuple(c.hi if c.kind == LINEAR else 1.0 for c in nuis_coords)
+        + (1.0,) * len(ring_names),
+        base_coords={c.name: c for c in nuis_coords},
         base_prior_mean=values.copy(), base_prior_cov=cov,
         predictor=ProfilePredictor(usable, sizes, solver, base),
     )
@@ -239,7 +261,7 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
         theta = fit_chain(problem, ()).theta
         problem.base_values = theta[:nb].copy()
         if it == 0 and not has_encoder:  # Ω = V/R_e with the fitted baseline's deflection
-            fitted = ring.replace(**{n: float(v) for n, v in zip(base, theta) if n != "angle_offset"})
+            fitted = ring.replace(**{n: float(v) for n, v in zip(base, theta) if not _is_nuisance(n)})
             rdata, problem.data = prepare(fitted)
             problem.y = y = rdata.measured.reshape(-1)
             problem.meta.omega, problem.meta.omega_source = rdata.omega, list(rdata.omega_source)

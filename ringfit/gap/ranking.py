@@ -162,7 +162,9 @@ def coordinates(problem: GapProblem) -> tuple[Coordinate, ...]:
     """How each entry of theta is solved for (see the module docstring)."""
     out = []
     for i, name in enumerate(problem.base):
-        if problem.is_linear(i):
+        if problem.base_coords and name in problem.base_coords:
+            out.append(problem.base_coords[name])
+        elif problem.is_linear(i):
             bound = problem.base_linear_bound[i]
             out.append(Coordinate(name, LINEAR, scale=problem.base_linear_scale[i], lo=-bound, hi=bound))
         else:

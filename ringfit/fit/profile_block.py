@@ -1,0 +1,162 @@
+"""The profile block: a rolling profile's rows, its per-run nuisances and its noise model, once for every fit
+that reads profiles (docs/physics.md §11 "profiles").
+
+``ringfit identify`` (:mod:`ringfit.fit.identify`) and the diagnosis's profile baseline and candidates
+(:mod:`ringfit.gap.profile`) both compose this block, so the same profile is read the same way by both:
+
+- **rows**: :func:`profile_rows` — each ``*.profile.csv`` band-limited and resampled onto the model grid
+  (:func:`ringfit.fit.rolling.rolling_data`), Ω from the sidecar's ``rotation_hz`` else V/R_e;
+  :func:`harmonic_rows` turns channels into revolution-harmonic rows (real then imaginary parts);
+- **nuisances**: per profile an angle offset (linear, ±:data:`OFFSET_BOUND`) and a gain on the reading
+  (log, in :data:`GAIN_RANGE`; the sensor's sensitivity and its offset from the belt), named by
+  :func:`nuisance_names`, solved in :func:`nuisance_coords`, applied to the model's channels by
+  :func:`read_through`;
+- **noise**: per profile, channel and harmonic, from the residual's spectrum (:func:`noise_spectrum`: a
+  power law, then the ratio averaged over the ±:data:`NOISE_SMOOTHING` neighbouring harmonics with each
+  harmonic's own residual left out), widened by ν/(ν − 4) for weights estimated from ν parts and by the
+  degrees of freedom the fit took (:func:`noise_from_residual`).
+
+Example::
+
+    rows = profile_rows(profiles, geometry, ring, solver)
+    model = harmonic_rows(read_through(channels, offset, gain), k_top=rows["k_top"])
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+from ringfit.fit.engine import LINEAR, LOG, Coordinate
+from ringfit.physics.sensor import shift_angle
+
+#: Harmonics averaged on either side for a profile's noise spectrum.
+NOISE_SMOOTHING = 4
+#: Lowest revolution harmonic of a profile used (k = 1 carries gravity and the sensor's tilt; k = 0 is removed).
+PROFILE_K_MIN = 2
+#: Bounds of a profile's gain on the reading (sensor sensitivity, its offset from the belt).
+GAIN_RANGE = (0.5, 2.0)
+#: Bound of a profile's angle offset [rad], and its solver scale.
+OFFSET_BOUND = math.radians(10.0)
+OFFSET_SCALE = math.radians(1.0)
+#: Harmonics kept below the coarsest profile's Nyquist harmonic (its resampling's edge).
+PROFILE_BAND_MARGIN = 8
+
+
+def nuisance_names(P: int) -> tuple[str, ...]:
+    """Names of the per-profile nuisances of ``P`` profiles: ``angle_offset_i`` and ``gain_i`` (i = 1 … P)."""
+    return tuple(n for i in range(P) for n in (f"angle_offset_{i + 1}", f"gain_{i + 1}"))
+
+
+def nuisance_coords(P: int) -> tuple[Coordinate, ...]:
+    """The solver coordinates of :func:`nuisance_names`: each angle offset linear (scale 1°, bounded by
+    :data:`OFFSET_BOUND`), each gain log (bounded by :data:`GAIN_RANGE`)."""
+    out = []
+    for i in range(P):
+        out.append(Coordinate(f"angle_offset_{i + 1}", LINEAR, scale=OFFSET_SCALE, lo=-OFFSET_BOUND, hi=OFFSET_BOUND))
+        out.append(Coordinate(f"gain_{i + 1}", LOG, lo=GAIN_RANGE[0], hi=GAIN_RANGE[1]))
+    return tuple(out)
+
+
+def nuisance_start(P: int) -> np.ndarray:
+    """The nuisances' start ``(2P,)``: no offset, unit gain."""
+    return np.tile([0.0, 1.0], P)
+
+
+def read_through(channels, offset, gain):
+    """The model's channels ``(P, 2, M)`` as each run records them: shifted by its angle offset ``(P,)`` [rad]
+    (docs/physics.md §5 layer 6, band-limited) and scaled by its gain ``(P,)``."""
+    return shift_angle(channels, offset[:, None, None]) * gain[:, None, None]
+
+
+def harmonic_rows(channels, k_min: int = PROFILE_K_MIN, rows_grid: int | None = None, k_top: int = 0):
+    """Rows ``(..., 2H)`` of revolution harmonics k_min … M/2 − 1 of ``channels`` ``(..., M)``: real then imaginary
+    parts of ``rfft · √(2/M)`` (white noise of σ per sample gives each row variance σ²).
+
+    ``rows_grid``: the rows of the same revolution band-limited to that many points (harmonics k_min …
+    rows_grid/2 − 1), for a model evaluated on a finer grid than the data's (the grid check). ``k_top`` > 0: the
+    rows stop at harmonic k_top (the profiles' band, :func:`profile_band`)."""
+    M = channels.shape[-1]
+    R = M if rows_grid is None else int(rows_grid)
+    top = R // 2 if k_top <= 0 else min(R // 2, int(k_top) + 1)
+    spec = jnp.fft.rfft(channels, axis=-1)[..., k_min:top] * (R / M) * math.sqrt(2.0 / R)
+    return jnp.concatenate([spec.real, spec.imag], axis=-1)
+
+
+def profile_band(profiles, n_grid: int) -> int:
+    """The highest revolution harmonic the profile rows compare: below the grid's Nyquist (M/2 − 1) and
+    :data:`PROFILE_BAND_MARGIN` below what the coarsest profile resolves ((N − 1)/2 for N angles) — a
+    profile holds nothing above that, and a model row there would be compared with a zero."""
+    n_min = min(len(p) for p in profiles)
+    return int(min(n_grid // 2 - 1, (n_min - 1) // 2 - PROFILE_BAND_MARGIN))
+
+
+def profile_rows(profiles, geometry, ring, solver, k_min: int = PROFILE_K_MIN) -> dict:
+    """The block's rows of ``profiles``: ``measured`` ``(P, 2, 2H)`` harmonic rows (:func:`harmonic_rows`, k_min …
+    :func:`profile_band`), a starting ``sigma`` of the same shape (a tenth of each profile and channel's RMS row,
+    replaced by :func:`noise_from_residual` after the first fit), and per profile ``omega``, ``load``, ``drum``,
+    ``speed_kmh``, ``sources`` (``P``, ``M``, ``k_top``, ``k_min``, ``grid`` the channels ``(P, 2, M)`` on the model
+    grid, ``omega_source``)."""
+    from ringfit.fit.rolling import rolling_data
+
+    data = rolling_data(profiles, geometry, ring, solver=solver)
+    k_top = profile_band(profiles, solver.n_grid)
+    measured = np.asarray(harmonic_rows(jnp.asarray(data.measured), k_min=k_min, k_top=k_top))
+    P = measured.shape[0]
+    sigma = np.broadcast_to(np.sqrt(np.mean(measured**2, axis=-1, keepdims=True)) * 0.1, measured.shape).copy()
+    return dict(measured=measured, sigma=sigma, omega=np.array(data.omega, dtype=np.float64), load=data.load,
+                drum=data.drum_diameter, P=P, M=data.measured.shape[-1], sources=data.sources,
+                speed_kmh=data.speed_kmh, k_top=k_top, k_min=k_min, grid=data.measured,
+                omega_source=list(data.omega_source))
+
+
+def noise_spectrum(power: np.ndarray, k_min: int = PROFILE_K_MIN, half_width: int = NOISE_SMOOTHING) -> tuple:
+    """Noise power per harmonic ``(..., H)`` (k = k_min …) from residual powers, and its degrees of freedom ``(H,)``.
+
+    Coloured noise (docs/physics.md §11, *profile noise*): a power law ``a·k^b`` fitted to ln power per series takes
+    out the spectrum's slope (pink and red noise change by ×5 over the first few harmonics, where a plain moving
+    average mixes them); the ratio to it is averaged over the ±``half_width`` *neighbouring* harmonics, leaving
+    each harmonic's own residual out, so a row's weight does not depend on its own noise (a bump — a structural
+    mode — is followed by the average). ``dof``: 2 × the neighbours averaged (each harmonic's residual holds a
+    real and an imaginary part).
+    """
+    H = power.shape[-1]
+    k = np.arange(k_min, k_min + H, dtype=np.float64)
+    X = np.stack([np.ones(H), np.log(k)], axis=1)
+    floor = 1e-300 + 1e-30 * float(np.max(power)) if power.size else 1e-300
+    lp = np.log(np.maximum(power, floor)).reshape(-1, H)
+    coef = np.linalg.lstsq(X, lp.T, rcond=None)[0]
+    trend = np.exp(X @ coef).T.reshape(power.shape)
+    kernel = np.ones(2 * half_width + 1)
+    kernel[half_width] = 0.0  # leave the harmonic's own residual out
+    num = np.apply_along_axis(lambda p: np.convolve(p, kernel, mode="same"), -1, power / trend)
+    den = np.convolve(np.ones(H), kernel, mode="same")
+    return trend * num / den, 2.0 * den
+
+
+def noise_from_residual(residual: np.ndarray, leverage: np.ndarray, k_min: int = PROFILE_K_MIN) -> np.ndarray:
+    """The block's σ ``(P, 2, 2H)`` per profile, channel and harmonic from its residual rows ``(P, 2, 2H)``
+    [m/s²] (:func:`noise_spectrum`) and the fit's leverage of those rows (the hat matrix's diagonal, any shape
+    with their count; the degrees of freedom the fit took, shared out evenly).
+
+    Weights estimated from ν = ``dof`` residual parts make the weighted fit's actual variance larger than
+    ``(JᵀŴJ)⁻¹`` says: with ŵ = w/c, c ~ χ²_ν/ν independent of the row, the estimator's variance is
+    E[1/c²]/E[1/c]² / Σ J²w and the formula's E[1/c]⁻¹ / Σ J²w, a ratio ν/(ν − 4). The σ² of each row is
+    multiplied by it, so that the covariance of the fit is the weighted estimator's (docs/physics.md §11)."""
+    res = np.asarray(residual, dtype=np.float64)
+    H = res.shape[-1] // 2
+    power = 0.5 * (res[..., :H] ** 2 + res[..., H:] ** 2)
+    noise, dof = noise_spectrum(power, k_min=k_min)
+    leverage = np.asarray(leverage, dtype=np.float64)
+    used = float(leverage.sum()) / max(leverage.size, 1)
+    inflate = dof / np.maximum(dof - 4.0, 1.0)
+    sigma = np.sqrt(noise * inflate / max(1.0 - used, 0.5))
+    sigma = np.maximum(sigma, 1e-6 * max(float(sigma.max()), 1e-300))
+    return np.concatenate([sigma, sigma], axis=-1)
+
+
+__all__ = ["profile_rows", "harmonic_rows", "profile_band", "nuisance_names", "nuisance_coords", "nuisance_start",
+           "read_through", "noise_spectrum", "noise_from_residual", "GAIN_RANGE", "OFFSET_BOUND", "OFFSET_SCALE",
+           "PROFILE_K_MIN", "NOISE_SMOOTHING", "PROFILE_BAND_MARGIN"]
