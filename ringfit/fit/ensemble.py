@@ -35,6 +35,8 @@ from ringfit._cache import jit
 
 #: Goodman & Weare's stretch scale (emcee's default).
 STRETCH_A = 2.0
+import os
+UNROLL = int(os.environ.get("UNROLL", "1"))
 
 
 def autocorrelation(x: np.ndarray) -> np.ndarray:
@@ -53,23 +55,58 @@ def autocorrelation(x: np.ndarray) -> np.ndarray:
         return np.moveaxis(acf / acf[..., :1], -1, 0)
 
 
+def _mean_autocorrelation(chain: np.ndarray, lags: int) -> np.ndarray:
+    """The walkers' mean normalised autocorrelation ``(lags, k)`` of ``chain`` ``(steps, walkers, k)`` at lags
+    ``0 … lags − 1``: what ``nanmean(autocorrelation(chain), axis=1)[:lags]`` gives, with two transforms fewer.
+
+    Each walker's series is zero-padded to ``steps + lags`` (enough for a linear, not circular, correlation up
+    to that lag); its normalised autocorrelation is ``irfft(|F_w|²) / a_w`` with ``a_w = Σ x_w²`` (its value at
+    lag 0), and since the inverse transform is linear the walkers' mean is one inverse transform per
+    parameter of ``Σ_w |F_w|² / a_w`` over the walkers that are not constant (the others are NaN in emcee's
+    mean and left out of it)."""
+    import scipy.fft
+
+    steps = chain.shape[0]
+    y = np.ascontiguousarray(np.moveaxis(chain - chain.mean(axis=0), 0, -1))  # (walkers, k, steps)
+    m = scipy.fft.next_fast_len(steps + lags, real=True)
+    f = scipy.fft.rfft(y, n=m, axis=-1)
+    a = np.einsum("wkt,wkt->wk", y, y)
+    moving = a > 0
+    weight = np.divide(1.0, a, out=np.zeros_like(a), where=moving)
+    power = np.einsum("wkf,wk->kf", f.real**2 + f.imag**2, weight)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = scipy.fft.irfft(power, n=m, axis=-1)[:, :lags] / moving.sum(axis=0)[:, None]
+    return rho.T
+
+
 def integrated_time(chain: np.ndarray, c: float = 5.0) -> np.ndarray:
     """Integrated autocorrelation time per parameter of ``chain`` ``(steps, walkers, k)`` [steps].
 
     emcee's estimator (``emcee.autocorr.integrated_time(chain, c, tol=0)``): the walkers' normalised
     autocorrelation functions are averaged, ``τ(M) = 2 Σ_{t ≤ M} ρ(t) − 1``, and the window M is the first with
     ``M ≥ c τ(M)`` (Sokal), else the last lag. NaN for a constant parameter.
+
+    The averaged function is first computed only up to lag ``steps/4`` (:func:`_mean_autocorrelation`, a
+    shorter transform); where the window lies beyond, for any parameter, again at every lag. A chain long
+    enough to stop (``steps > 50 τ``) has its window near ``c τ < steps/10``, so the τ checks between blocks
+    pay the short transform.
     """
     chain = np.asarray(chain, dtype=np.float64)
     steps, walkers, k = chain.shape
-    rho = np.nanmean(autocorrelation(chain), axis=1)  # (steps, k)
-    taus = 2.0 * np.cumsum(rho, axis=0) - 1.0
-    out = np.empty(k)
-    lags = np.arange(steps)
-    for d in range(k):
-        m = lags < c * taus[:, d]
-        window = int(np.argmin(m)) if np.any(m) else steps - 1
-        out[d] = taus[window, d]
+    out = np.full(k, np.nan)
+    for lags in (max(1, steps // 4), steps):
+        taus = 2.0 * np.cumsum(_mean_autocorrelation(chain, lags), axis=0) - 1.0  # (lags, k)
+        found = True
+        for d in range(k):
+            m = np.arange(lags) < c * taus[:, d]
+            if np.any(~m):
+                out[d] = taus[int(np.argmin(m)), d]
+            elif lags == steps:
+                out[d] = taus[-1, d]
+            else:
+                found = False
+        if found:
+            break
     return out
 
 
@@ -132,7 +169,7 @@ def _block(x, key, consts, *, kernel, steps: int, a: float = STRETCH_A):
     # the start in the slot layout: ensemble c's walkers 0 … h−1 in the moving half, h … W−1 in the fixed one
     ids = jnp.arange(C * W, dtype=jnp.int32).reshape(C, 2, h).transpose(1, 0, 2).reshape(-1)  # walker c·W + w
     start = (x.reshape(C * W, k)[ids], jnp.zeros(C * W, dtype=x.dtype), ids)
-    _, (xs, lps, whos, accepted) = jax.lax.scan(half, start, (perm, z, partner, log_u, init))
+    _, (xs, lps, whos, accepted) = jax.lax.scan(half, start, (perm, z, partner, log_u, init), unroll=UNROLL)
     counts = jnp.zeros(C * W, jnp.int32).at[whos[:, : C * h]].add(accepted.astype(jnp.int32))
     xs, lps, whos = xs[3::2], lps[3::2], whos[3::2]  # the state after each whole step
     rows = jnp.arange(steps)[:, None]
