@@ -35,8 +35,6 @@ from ringfit._cache import jit
 
 #: Goodman & Weare's stretch scale (emcee's default).
 STRETCH_A = 2.0
-import os
-UNROLL = int(os.environ.get("UNROLL", "1"))
 
 
 def autocorrelation(x: np.ndarray) -> np.ndarray:
@@ -169,7 +167,7 @@ def _block(x, key, consts, *, kernel, steps: int, a: float = STRETCH_A):
     # the start in the slot layout: ensemble c's walkers 0 … h−1 in the moving half, h … W−1 in the fixed one
     ids = jnp.arange(C * W, dtype=jnp.int32).reshape(C, 2, h).transpose(1, 0, 2).reshape(-1)  # walker c·W + w
     start = (x.reshape(C * W, k)[ids], jnp.zeros(C * W, dtype=x.dtype), ids)
-    _, (xs, lps, whos, accepted) = jax.lax.scan(half, start, (perm, z, partner, log_u, init), unroll=UNROLL)
+    _, (xs, lps, whos, accepted) = jax.lax.scan(half, start, (perm, z, partner, log_u, init))
     counts = jnp.zeros(C * W, jnp.int32).at[whos[:, : C * h]].add(accepted.astype(jnp.int32))
     xs, lps, whos = xs[3::2], lps[3::2], whos[3::2]  # the state after each whole step
     rows = jnp.arange(steps)[:, None]
