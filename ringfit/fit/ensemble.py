@@ -11,7 +11,7 @@ a whole block of steps is one compiled program instead of one Python iteration a
   probability ``min(1, z^{k−1} p(y)/p(x_j))``; then the second half does the same against the updated
   first half. Updating one half against the other, held fixed, keeps the move exact while every walker of
   a half is evaluated at once (vmapped, or serially for models whose batches must not be vmapped).
-- **A block**: ``lax.scan`` over ``steps`` such steps; the draws ``(steps, C, W, k)`` and log densities come
+- **A block**: ``lax.scan`` over the ``2·steps`` half-steps of ``steps`` such steps (:func:`_block`); the draws ``(steps, C, W, k)`` and log densities come
   back to the host. The density is a :class:`~ringfit.fit.engine.DensityKernel` (static: the model) with its
   data traced, so one compilation serves every block, every seed and every data set of the same structure.
 - **Stopping** (on the host, between blocks): emcee's integrated autocorrelation time
@@ -111,9 +111,13 @@ def integrated_time(chain: np.ndarray, c: float = 5.0) -> np.ndarray:
 #: Compiled with :data:`ringfit._cache.BALANCED_COMPILE` (the CPU backend at optimisation level 1): a cold
 #: process compiles the free table's block in ~1–2 s. The model appears once in the program: every half-step,
 #: and the starting densities (two first, "init" half-steps that move nothing), run through one loop body.
-#: Every random number of a block is drawn before the loop, in a few vectorised calls (drawing them inside
-#: the loop body, a dozen small threefry programs per step, cost more than the free table's model itself),
-#: and a half-step only reorders the walkers (one gather) so that the moving half is a static slice.
+#: Every random number of a block is drawn before the loop, in a few vectorised calls (drawn inside the loop
+#: body, a dozen small threefry programs per step cost more than the free table's model itself; the random
+#: split is the ranks of random words, XLA's CPU sort of 32 keys being ~10× dearer), and a half-step only
+#: reorders the walkers (one gather) so that the moving half is a static slice. Measured on the free table
+#: (32 walkers, a shared 2-core machine at load ~10): ~25 µs of CPU per step with the lean density
+#: (:class:`~ringfit.fit.engine.DensityKernel`), against ~100 µs for the loop that drew its random numbers per
+#: step and moved each half by scatter.
 @functools.partial(jit, quick="balanced", static_argnames=("kernel", "steps", "a"))
 def _block(x, key, consts, *, kernel, steps: int, a: float = STRETCH_A):
     """``steps`` stretch moves of ``C`` ensembles from ``x`` ``(C, W, k)``: one compiled program.
