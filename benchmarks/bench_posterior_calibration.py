@@ -20,8 +20,9 @@ Run: python benchmarks/bench_posterior_calibration.py [--n 200] [--n-identify 0]
    that did not reach 50 τ are counted and left out of both.
 
    The cost, measured on case 100 (12 free parameters, a shared 2-core machine): the case 15 s of CPU, the
-   identification 29 s, and then the posterior ~9 ms of CPU per evaluation of the joint density (the loaded
-   tables' and the profiles' contact solves, serially over the walkers: ``JointResiduals.serial_batches``),
+   identification 29 s, and then the posterior ~9 ms of CPU per evaluation of the joint density (a model with
+   contact solves for the loaded tables and the profiles, evaluated serially over the walkers:
+   ``JointResiduals.serial_batches``; not broken down further),
    i.e. 53 s of CPU per 250 steps of 24 walkers; τ ≈ 60–150 steps asks for 3,000–7,500 steps, 10–25 minutes
    of CPU per case. The default is 0 cases; 20 cases are a few hours of one core.
 
