@@ -147,7 +147,7 @@ def coverage_identify(n: int, sampler: str, seed0: int = 100, max_steps: int = 5
                 print(f"   case {i + 1}/{n}: the joint fit did not converge ({ident.fit.message}); left out", flush=True)
                 continue
             k = len(ident.fit.names)
-            post = sample(ident.fit, sampler=sampler, walkers=2 * k, min_steps=500, max_steps=max_steps,
+            post = sample(ident.fit, sampler=sampler, walkers=2 * k, min_steps=min(500, max_steps), max_steps=max_steps,
                           check_every=250, seed=i, progress=False, spread=0.25, **ident.posterior_likelihood())
             if not post.converged:
                 unconverged += 1
