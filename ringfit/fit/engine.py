@@ -244,15 +244,20 @@ class _Free(eqx.Module):
         return jnp.where(self.is_log, jnp.exp(u), self.center + self.scale * u)
 
 
+def _theta_at(u, theta0, free):
+    """Every parameter ``(p,)`` at the free slots' coordinates ``u``; theta0 has p + 1 entries.
+
+    θ: the free slots' values where a slot points at the parameter, else theta0 (the padding slots point past
+    the last parameter): a gather, whose tangents are gathers too (a scatter here, batched over the Jacobian's
+    k tangents, made the compiled solve larger)."""
+    hit = free.index[None, :] == jnp.arange(theta0.shape[0] - 1)[:, None]  # (p, K)
+    return jnp.where(hit.any(axis=1), free.theta_of(u)[jnp.argmax(hit, axis=1)], theta0[:-1])
+
+
 def _weighted(z, model, data, theta0, free, prior_w, prior_mean):
     """Residual rows (data, then prior) and the model's aux at solver point z; theta0 has p + 1 entries."""
     u = free.u_of(z)
-    # θ: the free slots' values where a slot points at the parameter, else theta0 (the padding slots point
-    # past the last parameter): a gather, whose tangents are gathers too (a scatter here, batched over the
-    # Jacobian's k tangents, made the compiled solve larger)
-    hit = free.index[None, :] == jnp.arange(theta0.shape[0] - 1)[:, None]  # (p, K)
-    theta = jnp.where(hit.any(axis=1), free.theta_of(u)[jnp.argmax(hit, axis=1)], theta0[:-1])
-    res, aux = model(theta, data)
+    res, aux = model(_theta_at(u, theta0, free), data)
     return jnp.concatenate([res, prior_w @ (u - prior_mean)]), aux
 
 
@@ -750,9 +755,11 @@ class DensityKernel:
         k = u.shape[1]
 
         def one(ui):
-            r, _ = _weighted(ui, self.model, data, theta0, free, prior_w, prior_mean)
-            m = r.shape[0] - k
-            value = -0.5 * (jnp.sum(inv_s2 * r[:m] ** 2) + jnp.sum(r[m:] ** 2))
+            # u itself (the free set is unbounded: no sine transform) and the prior rows as a sum of products
+            # (k ≤ 15; a dot here is a library call per evaluation in the sampler's loop)
+            r, _ = self.model(_theta_at(ui, theta0, free), data)
+            prior = jnp.sum(prior_w[:k, :k] * (ui - prior_mean[:k])[None, :], axis=1)
+            value = -0.5 * (jnp.sum(inv_s2 * r**2) + jnp.sum(prior**2))
             inside = jnp.all((ui >= lo) & (ui <= hi))
             value = jnp.where(inside, value, -jnp.inf)
             return jnp.where(jnp.isnan(value), -jnp.inf, value)

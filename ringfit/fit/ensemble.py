@@ -11,7 +11,7 @@ a whole block of steps is one compiled program instead of one Python iteration a
   probability ``min(1, z^{k−1} p(y)/p(x_j))``; then the second half does the same against the updated
   first half. Updating one half against the other, held fixed, keeps the move exact while every walker of
   a half is evaluated at once (vmapped, or serially for models whose batches must not be vmapped).
-- **A block**: ``lax.scan`` over ``steps`` such steps; the draws ``(steps, C, W, k)`` and log densities come
+- **A block**: ``lax.scan`` over the ``2·steps`` half-steps of ``steps`` such steps (:func:`_block`); the draws ``(steps, C, W, k)`` and log densities come
   back to the host. The density is a :class:`~ringfit.fit.engine.DensityKernel` (static: the model) with its
   data traced, so one compilation serves every block, every seed and every data set of the same structure.
 - **Stopping** (on the host, between blocks): emcee's integrated autocorrelation time
@@ -53,84 +53,131 @@ def autocorrelation(x: np.ndarray) -> np.ndarray:
         return np.moveaxis(acf / acf[..., :1], -1, 0)
 
 
+def _mean_autocorrelation(chain: np.ndarray, lags: int) -> np.ndarray:
+    """The walkers' mean normalised autocorrelation ``(lags, k)`` of ``chain`` ``(steps, walkers, k)`` at lags
+    ``0 … lags − 1``: what ``nanmean(autocorrelation(chain), axis=1)[:lags]`` gives, with two transforms fewer.
+
+    Each walker's series is zero-padded to ``steps + lags`` (enough for a linear, not circular, correlation up
+    to that lag); its normalised autocorrelation is ``irfft(|F_w|²) / a_w`` with ``a_w = Σ x_w²`` (its value at
+    lag 0), and since the inverse transform is linear the walkers' mean is one inverse transform per
+    parameter of ``Σ_w |F_w|² / a_w`` over the walkers that are not constant (the others are NaN in emcee's
+    mean and left out of it)."""
+    import scipy.fft
+
+    steps = chain.shape[0]
+    y = np.ascontiguousarray(np.moveaxis(chain - chain.mean(axis=0), 0, -1))  # (walkers, k, steps)
+    m = scipy.fft.next_fast_len(steps + lags, real=True)
+    f = scipy.fft.rfft(y, n=m, axis=-1)
+    a = np.einsum("wkt,wkt->wk", y, y)
+    moving = a > 0
+    weight = np.divide(1.0, a, out=np.zeros_like(a), where=moving)
+    power = np.einsum("wkf,wk->kf", f.real**2 + f.imag**2, weight)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = scipy.fft.irfft(power, n=m, axis=-1)[:, :lags] / moving.sum(axis=0)[:, None]
+    return rho.T
+
+
 def integrated_time(chain: np.ndarray, c: float = 5.0) -> np.ndarray:
     """Integrated autocorrelation time per parameter of ``chain`` ``(steps, walkers, k)`` [steps].
 
     emcee's estimator (``emcee.autocorr.integrated_time(chain, c, tol=0)``): the walkers' normalised
     autocorrelation functions are averaged, ``τ(M) = 2 Σ_{t ≤ M} ρ(t) − 1``, and the window M is the first with
     ``M ≥ c τ(M)`` (Sokal), else the last lag. NaN for a constant parameter.
+
+    The averaged function is first computed only up to lag ``steps/4`` (:func:`_mean_autocorrelation`, a
+    shorter transform); where the window lies beyond, for any parameter, again at every lag. A chain long
+    enough to stop (``steps > 50 τ``) has its window near ``c τ < steps/10``, so the τ checks between blocks
+    pay the short transform.
     """
     chain = np.asarray(chain, dtype=np.float64)
     steps, walkers, k = chain.shape
-    rho = np.nanmean(autocorrelation(chain), axis=1)  # (steps, k)
-    taus = 2.0 * np.cumsum(rho, axis=0) - 1.0
-    out = np.empty(k)
-    lags = np.arange(steps)
-    for d in range(k):
-        m = lags < c * taus[:, d]
-        window = int(np.argmin(m)) if np.any(m) else steps - 1
-        out[d] = taus[window, d]
+    out = np.full(k, np.nan)
+    for lags in (max(1, steps // 4), steps):
+        taus = 2.0 * np.cumsum(_mean_autocorrelation(chain, lags), axis=0) - 1.0  # (lags, k)
+        found = True
+        for d in range(k):
+            m = np.arange(lags) < c * taus[:, d]
+            if np.any(~m):
+                out[d] = taus[int(np.argmin(m)), d]
+            elif lags == steps:
+                out[d] = taus[-1, d]
+            else:
+                found = False
+        if found:
+            break
     return out
 
 
-def _stretch_half(x, lp, key, active, other, consts, kernel, a, init):
-    """Update walkers ``active`` ``(C, h)`` of every ensemble against walkers ``other`` ``(C, h)`` held fixed.
-
-    ``init`` (traced bool): evaluate the active walkers where they are (no move; their log densities set), so
-    that the program's one evaluation site also computes the starting densities."""
-    C, h = active.shape
-    k = x.shape[-1]
-    k_z, k_pick, k_acc = jax.random.split(key, 3)
-    take = jax.vmap(lambda xc, idx: xc[idx])
-    xa, xo, lpa = take(x, active), take(x, other), take(lp, active)
-    z = ((a - 1.0) * jax.random.uniform(k_z, (C, h), dtype=x.dtype) + 1.0) ** 2 / a
-    partner = take(xo, jax.random.randint(k_pick, (C, h), 0, h))
-    y = jnp.where(init, xa, partner + z[..., None] * (xa - partner))
-    lpy = kernel(y.reshape(C * h, k), consts).reshape(C, h)
-    log_ratio = (k - 1) * jnp.log(z) + lpy - lpa
-    accept = (jnp.log(jax.random.uniform(k_acc, (C, h), dtype=x.dtype)) < log_ratio) | init
-    put = jax.vmap(lambda xc, idx, val: xc.at[idx].set(val))
-    x = put(x, active, jnp.where(accept[..., None], y, xa))
-    lp = put(lp, active, jnp.where(accept, lpy, lpa))
-    counts = put(jnp.zeros(lp.shape, dtype=jnp.int32), active, (accept & ~init).astype(jnp.int32))
-    return x, lp, counts
-
-
 #: Compiled with :data:`ringfit._cache.BALANCED_COMPILE` (the CPU backend at optimisation level 1): a cold
-#: process compiles the free table's block in ~1–2 s, and it runs at 30–50 µs per step of 32 walkers (one
-#: core) instead of 67–89 µs at level 0 (``QUICK_COMPILE``). The model appears once in the program: both halves
-#: of a step, and the starting densities (a first, "init" step that moves nothing), run through one loop body.
+#: process compiles the free table's block in ~1–2 s. The model appears once in the program: every half-step,
+#: and the starting densities (two first, "init" half-steps that move nothing), run through one loop body.
+#: Every random number of a block is drawn before the loop, in a few vectorised calls (drawn inside the loop
+#: body, a dozen small threefry programs per step cost more than the free table's model itself; the random
+#: split is the ranks of random words, XLA's CPU sort of 32 keys being ~10× dearer), and a half-step only
+#: reorders the walkers (one gather) so that the moving half is a static slice. Measured on the free table
+#: (32 walkers, a shared 2-core machine at load ~10): ~25 µs of CPU per step with the lean density
+#: (:class:`~ringfit.fit.engine.DensityKernel`), against ~100 µs for the loop that drew its random numbers per
+#: step and moved each half by scatter.
 @functools.partial(jit, quick="balanced", static_argnames=("kernel", "steps", "a"))
 def _block(x, key, consts, *, kernel, steps: int, a: float = STRETCH_A):
     """``steps`` stretch moves of ``C`` ensembles from ``x`` ``(C, W, k)``: one compiled program.
+
+    The loop runs over half-steps on the walkers of every ensemble in one flat array of ``C·W`` slots: the
+    first ``C·h`` (``h = W/2``, ensemble c's at ``c·h …``) move, each against a walker of its own ensemble in
+    the last ``C·h`` held fixed. Before half-step t the slots are reordered by a permutation ``perm[t]`` that
+    keeps every walker within its ensemble. A step is two half-steps: per ensemble a uniformly random
+    permutation (emcee's ``randomize_split``), then the swap of its two halves, so that the other half moves
+    against the updated first, exactly emcee's order. Which walker sits in which slot (``who``) travels with
+    the state; the draws are put back in walker order after the loop.
 
     **Returns:** ``(chain (steps, C, W, k), log_prob (steps, C, W), accepted (C, W) counts, key)``.
     """
     C, W, k = x.shape
     h = W // 2
+    n = 2 * steps + 2  # two init half-steps (the start's densities, no move), then two per step
+    key, k_perm, k_z, k_pick, k_acc = jax.random.split(key, 5)
+    local = jnp.arange(W, dtype=jnp.int32)
+    swap = jnp.roll(local, h)
+    # a uniformly random permutation per step and ensemble: the ranks of W random words, ties broken by position
+    # (XLA's sort on the CPU is ~10× slower than these W² comparisons at these sizes)
+    bits = jax.random.bits(k_perm, (steps, C, W), dtype=jnp.uint32)
+    bi, bj = bits[..., :, None], bits[..., None, :]
+    shuffle = jnp.sum((bj < bi) | ((bj == bi) & (local[None, :] < local[:, None])), axis=-1, dtype=jnp.int32)
+    # local permutations (n, C, W): position q of ensemble c takes the walker at position perm[q]
+    perm = jnp.concatenate([jnp.broadcast_to(local, (1, C, W)), jnp.broadcast_to(swap, (1, C, W)),
+                            jnp.stack([shuffle, jnp.broadcast_to(swap, (steps, C, W))], axis=1).reshape(-1, C, W)])
+    # local position q of ensemble c -> flat slot: moving half first, then the fixed half
+    chain_of = jnp.arange(C, dtype=jnp.int32)[None, :, None]
+    slot = jnp.where(perm < h, chain_of * h + perm, C * h + chain_of * h + perm - h)  # (n, C, W)
+    perm = jnp.concatenate([slot[..., :h].reshape(n, C * h), slot[..., h:].reshape(n, C * h)], axis=1)
+    z = ((a - 1.0) * jax.random.uniform(k_z, (n, C * h), dtype=x.dtype) + 1.0) ** 2 / a  # g(z) ∝ 1/√z on [1/a, a]
+    partner = C * h + (jnp.arange(C * h, dtype=jnp.int32) // h) * h + jax.random.randint(
+        k_pick, (n, C * h), 0, h, dtype=jnp.int32)
+    log_u = jnp.log(jax.random.uniform(k_acc, (n, C * h), dtype=x.dtype))
+    init = jnp.arange(n) < 2
 
-    def step(carry, inputs):
-        key, init = inputs
-        k_split, k_half = jax.random.split(key)
-        perm = jax.vmap(lambda kk: jax.random.permutation(kk, W))(jax.random.split(k_split, C))  # (C, W)
-        perm = jnp.where(init, jnp.arange(W)[None, :], perm)
+    def half(carry, inputs):
+        x, lp, who = carry
+        p, zz, pk, lu, first = inputs
+        x, lp, who = x[p], lp[p], who[p]
+        xa, lpa, xp = x[: C * h], lp[: C * h], x[pk]
+        y = jnp.where(first, xa, xp + zz[:, None] * (xa - xp))
+        lpy = kernel(y, consts)
+        accept = (lu < (k - 1) * jnp.log(zz) + lpy - lpa) | first
+        x = jnp.concatenate([jnp.where(accept[:, None], y, xa), x[C * h :]])
+        lp = jnp.concatenate([jnp.where(accept, lpy, lpa), lp[C * h :]])
+        return (x, lp, who), (x, lp, who, accept & ~first)
 
-        def half(c, which):  # which = 0: the first half moves against the second; 1: the other way round
-            x, lp, acc = c
-            active = jax.lax.dynamic_slice_in_dim(perm, which * h, h, axis=1)
-            other = jax.lax.dynamic_slice_in_dim(perm, (1 - which) * h, h, axis=1)
-            x, lp, n = _stretch_half(x, lp, jax.random.fold_in(k_half, which), active, other, consts, kernel, a,
-                                     init)
-            return (x, lp, acc + n), None
-
-        carry, _ = jax.lax.scan(half, carry, jnp.arange(2))
-        return carry, carry[:2]
-
-    key, sub = jax.random.split(key)
-    init = jnp.arange(steps + 1) == 0
-    start = (x, jnp.zeros((C, W), dtype=x.dtype), jnp.zeros((C, W), dtype=jnp.int32))
-    (x, lp, acc), (xs, lps) = jax.lax.scan(step, start, (jax.random.split(sub, steps + 1), init))
-    return xs[1:], lps[1:], acc, key
+    # the start in the slot layout: ensemble c's walkers 0 … h−1 in the moving half, h … W−1 in the fixed one
+    ids = jnp.arange(C * W, dtype=jnp.int32).reshape(C, 2, h).transpose(1, 0, 2).reshape(-1)  # walker c·W + w
+    start = (x.reshape(C * W, k)[ids], jnp.zeros(C * W, dtype=x.dtype), ids)
+    _, (xs, lps, whos, accepted) = jax.lax.scan(half, start, (perm, z, partner, log_u, init))
+    counts = jnp.zeros(C * W, jnp.int32).at[whos[:, : C * h]].add(accepted.astype(jnp.int32))
+    xs, lps, whos = xs[3::2], lps[3::2], whos[3::2]  # the state after each whole step
+    rows = jnp.arange(steps)[:, None]
+    xs = jnp.zeros_like(xs).at[rows, whos].set(xs).reshape(steps, C, W, k)  # back in walker order
+    lps = jnp.zeros_like(lps).at[rows, whos].set(lps).reshape(steps, C, W)
+    return xs, lps, counts.reshape(C, W), key
 
 
 class CompiledRun:
