@@ -18,7 +18,6 @@ per harmonic (the content an accelerometer's data carry): the dominant signed ha
 and direction the model's Campbell labels report, is pinned too.
 """
 
-import math
 import sys
 from pathlib import Path
 
