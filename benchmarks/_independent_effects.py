@@ -627,7 +627,7 @@ def _rolling_case(folder, seed, family):
     for speed in ROLLING_SPEEDS:
         omega = speed / 3.6 / r_e
         a = fd_static(p, g, ROLLING_LOAD_N, n=1024, omega=omega)["a"] if contact else 0.0
-        f, k, acc = collocation_modes(p, g, omega, -a, a)
+        f, k, acc = collocation_modes(p, g, omega, -a, a, radial_floor=1e-2)
         line, kd, _ = sensor_lines(f, k, acc, omega, n_top)
         drop = set(rng.choice(line.size, size=int(rng.integers(1, 3)), replace=False).tolist())
         keep = [j for j in range(line.size) if j not in drop]

@@ -37,15 +37,18 @@ def collocation_d(points: int) -> np.ndarray:
 
 
 def collocation_modes(p: dict, g: dict, omega: float, leading: float, trailing: float, *, chi: float = 1.0,
-                      points: int = POINTS):
+                      points: int = POINTS, radial_floor: float = 1e-6):
     """Fixed-frame modes of (3.1) with tread springs on [leading, trailing] [rad]: ``(freq_hz, k, acc_content)``.
 
     ``p``: ring parameters ``rho_a, ei, kw, kv, k_tread`` (SI); ``g``: ``R`` [m], ``b`` [m], ``p0`` [Pa] (the
     pressure term P = p0 b/R); ``omega`` [rad/s]; ``chi`` the belt's share of the centrifugal hoop tension.
     ``freq_hz`` ascending (the roots with positive imaginary part, one per mode); ``k`` the signed harmonic of
     each FFT bin; ``acc_content[j, :]`` is |−(ω_j + kΩ)² W_k|² per signed harmonic k (normalised per mode; NaN
-    for a mode without radial content), W_k the Fourier coefficient of the radial displacement over α (α = 0 the
-    patch centre, + in the direction of rotation).
+    for a mode without radial content: ‖w‖ < ``radial_floor``·‖v‖ on the grid), W_k the Fourier coefficient of
+    the radial displacement over α (α = 0 the patch centre, + in the direction of rotation). The belt's turn
+    (n = 0, w ≡ 0 on the free ring) picks up ‖w‖/‖v‖ ~ 1e-4 of round-off when a flexural mode lies within a
+    fraction of a hertz of it (the companion matrix's norm ~1e12 over the gap): a sensor-view caller sets the
+    floor at 1e-2 (a radial content under 1 % of the tangential one is not a line the accelerometer reads).
     """
     D = collocation_d(points)
     h = 2 * np.pi / points
@@ -80,21 +83,38 @@ def collocation_modes(p: dict, g: dict, omega: float, leading: float, trailing: 
     acc = np.abs((w_ang[None, :] + k[:, None] * O) ** 2 * Wk) ** 2
     acc /= acc.sum(axis=0, keepdims=True)
     # no radial content (w = −v′ ≈ 0: the belt turning, n = 0): no harmonic to read
-    acc[:, np.linalg.norm(w, axis=0) < 1e-6 * np.linalg.norm(v, axis=0)] = np.nan
+    acc[:, np.linalg.norm(w, axis=0) < radial_floor * np.linalg.norm(v, axis=0)] = np.nan
     return w_ang / (2 * np.pi), k.astype(int), acc.T
 
 
-def sensor_lines(freq_hz: np.ndarray, k: np.ndarray, acc: np.ndarray, omega: float, n_max: int):
+def sensor_lines(freq_hz: np.ndarray, k: np.ndarray, acc: np.ndarray, omega: float, n_max: int,
+                 rtol: float = 1e-6):
     """What the co-rotating sensor sees of the modes of :func:`collocation_modes`: for every mode whose dominant
     radial-acceleration harmonic k_d has 1 ≤ |k_d| ≤ ``n_max``, the line |f + k_d Ω/2π| [Hz] (the material
     point at θ sees e^{i(ω + kΩ)t} of harmonic k). Modes without radial content (NaN content: the inextensible
-    ring's n = 0, the belt turning) are left out. **Returns:** ``(line_hz, k_d, share)`` sorted by line, share
-    the dominant harmonic's fraction of the content."""
-    ok = np.all(np.isfinite(acc), axis=1)
-    j = np.flatnonzero(ok)
-    kd = k[np.argmax(acc[j], axis=1)]
-    share = np.max(acc[j], axis=1)
-    sel = (np.abs(kd) >= 1) & (np.abs(kd) <= n_max)
-    line = np.abs(freq_hz[j][sel] + kd[sel] * omega / (2 * np.pi))
-    o = np.argsort(line)
-    return line[o], kd[sel][o], share[sel][o]
+    ring's n = 0, the belt turning) are left out.
+
+    Modes degenerate in the fixed frame (within ``rtol``: the free spinning ring's n = 1 pair, eq. 26 puts its
+    forward and backward waves both at ω_f) span pure harmonics the eigensolver returns mixed (±1 at 55/45 %):
+    such a cluster of m modes is read as the m strongest harmonics of its summed content, each its own line
+    (ω_f ± Ω: the split the sensor sees). **Returns:** ``(line_hz, k_d, share)`` sorted by line, share the
+    dominant harmonic's fraction of one mode's content."""
+    j = np.flatnonzero(np.all(np.isfinite(acc), axis=1))
+    f, a = freq_hz[j], acc[j]
+    lines, kds, shares = [], [], []
+    i = 0
+    while i < f.size:
+        c = i + 1
+        while c < f.size and abs(f[c] - f[i]) <= rtol * abs(f[i]):
+            c += 1
+        m = c - i
+        tot = a[i:c].sum(axis=0)
+        fc = float(np.mean(f[i:c]))
+        for t in np.argsort(tot)[::-1][:m]:
+            if 1 <= abs(int(k[t])) <= n_max:
+                lines.append(abs(fc + int(k[t]) * omega / (2 * np.pi)))
+                kds.append(int(k[t]))
+                shares.append(float(tot[t]))
+        i = c
+    o = np.argsort(lines)
+    return np.asarray(lines)[o], np.asarray(kds, int)[o], np.asarray(shares)[o]
