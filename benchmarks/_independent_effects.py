@@ -14,12 +14,16 @@ Families (``FAMILIES``; each generator's docstring has its physics):
 
 - mode tables: ``none_modes``, ``cavity_mode``, ``ground_contact``, ``sensor_mass``;
 - profiles: ``none_profiles``, ``tread_shear``, ``wave_damping``, ``gravity``, ``sensor_tilt``, ``iepe_highpass``,
-  ``rotation``.
+  ``rotation``;
+- rolling mode tables without labels (20/40/60 km/h, 4 kN, the modes of the Fourier collocation of
+  :mod:`_independent_rolling`): ``rolling_contact``, ``rolling_free``.
 
 Each generator ``make(folder, seed) -> IndependentLabel`` writes one case folder (docs/formats.md §6) and returns
-the hidden answer: the effect that must be found (``None`` for a null), the effects the truth contains (a
+the hidden answer: the effect that must be found (``None`` for a null; ``a+b``: every one of them), the effects the truth contains (a
 ``cavity_mode`` case on a loaded table also has the ground contact), and the realised noise for the ideal shrink
-(the same fields bench_gap reads from ringfit's own labels).
+(the same fields bench_gap reads from ringfit's own labels); ``extra["candidates"]``, where set, the candidates
+the benchmark gives the diagnosis (the rolling families: bench_gap_rolling's ``ground_contact,rotation``; their
+``extra`` also holds the truth ring and every true line with its dominant harmonic).
 """
 
 from __future__ import annotations
@@ -46,7 +50,7 @@ class IndependentLabel:
     """The hidden answer of one independent case."""
 
     family: str
-    expected: str | None  # the effect that must be accepted (None: a null case, the verdict must be `none`)
+    expected: str | None  # the effect(s) that must be accepted ("a+b": all; None: a null case, the verdict `none`)
     truth: tuple[str, ...]  # every effect the truth contains (accepted ones outside this are "extra")
     magnitude: dict
     noise: dict
@@ -569,10 +573,89 @@ def _profile_case(folder, seed, family):
                             expected_verdict=expected or "none", extra={"load_n": load, "n_points": n_points})
 
 
+# ============================================================================ rolling, loaded tables
+ROLLING_SPEEDS = (20.0, 40.0, 60.0)
+ROLLING_LOAD_N = 4000.0
+#: The candidates bench_gap_rolling gives the diagnosis on its rolling cases (its default, not ``--all``).
+ROLLING_CANDIDATES = "ground_contact,rotation"
+
+
+def _rolling_case(folder, seed, family):
+    """A rolling mode-table case (docs/formats.md §6), the independent counterpart of
+    :func:`ringfit.synth.cases.make_rolling_case`: ``tyre.toml`` (Table 9), ``free.modes.csv`` (the FD ring's free
+    modes, n = 1…8–10, relative noise σ 0.05–0.2 %, damping ζ0 with 8 % scatter) and ``roll20/40/60.modes.csv``
+    (``state: rolling``, ``load_n`` 4000, ``speed_kmh``, ``frame: rotating``): what the co-rotating sensor sees of
+    the rolling tyre's modes, **without n, tag or branch labels**, relative noise σ·U(1, 1.3), one or two lines
+    missing per table, scattered damping.
+
+    The modes are those of the independent Fourier collocation of eq. (3.1) in the fixed frame
+    (:func:`_independent_rolling.collocation_modes`, the truth ring, χ = 1), each seen on the line |ω + k_dΩ| of
+    its dominant radial-acceleration harmonic k_d, 1 ≤ |k_d| ≤ 6–8 (:func:`_independent_rolling.sensor_lines`).
+    Ω = V/R_e, R_e = R_out − δ_z/3 of the FD ring's standing solution at 4 kN (docs/physics.md §4.3).
+
+    - ``rolling_contact``: tread springs k_trd on the patch, its edges ±a from the FD ring's own steady rolling
+      contact solve at that Ω (:func:`fd_static`, undamped: symmetric; 1024 points, a to half a cell). Truth and
+      expected verdict ``ground_contact`` + ``rotation`` (bench_gap_rolling's contact case).
+    - ``rolling_free``: no patch (the free spinning ring, whose collocation is eq. 26; Ω as above). Expected
+      ``rotation`` (bench_gap_rolling's control).
+    """
+    from _independent_rolling import collocation_modes, sensor_lines
+
+    rng = np.random.default_rng(seed)
+    folder = _new(folder)
+    geometry, p, g = _truth_ring(rng)
+    contact = family == "rolling_contact"
+    sigma = float(rng.uniform(0.0005, 0.002))
+    sigma_roll = sigma * float(rng.uniform(1.0, 1.3))
+    zeta0 = float(rng.uniform(0.015, 0.035))
+    n_free = np.arange(1, int(rng.integers(8, 11)) + 1)
+    free = fd_free_frequencies(p, g, int(n_free[-1]))
+    rows, row_noise = [], []
+    for nn, f0 in zip(n_free, free):
+        e = f0 * sigma * rng.normal()
+        d = zeta0 * math.exp(rng.normal(0.0, 0.08))
+        rows.append({"n": int(nn), "freq_hz": float(f0 + e), "damping_pct": 100.0 * d})
+        row_noise += [("freq", float(e)), ("ln_damping", math.log(d / zeta0))]
+    _write_tyre(folder)
+    _write_table(folder, "free.modes.csv", rows, dict(FREE_CONDITION))
+    standing = fd_static(p, g, ROLLING_LOAD_N, n=1024)
+    r_e = g["R"] + g["tau"] - (g["R"] + g["tau"] - standing["H"]) / 3.0
+    n_top = int(rng.integers(6, 9))
+    magnitude = {"load_n": ROLLING_LOAD_N, "contact": contact, "half_angle_deg": {}}
+    # the truth in full (bulky: kept out of the magnitude the benchmark prints)
+    truth_lines = {"ring": dict(p), "geometry": dict(g), "r_e_m": float(r_e), "true_hz": {}, "k": {}}
+    for speed in ROLLING_SPEEDS:
+        omega = speed / 3.6 / r_e
+        a = fd_static(p, g, ROLLING_LOAD_N, n=1024, omega=omega)["a"] if contact else 0.0
+        f, k, acc = collocation_modes(p, g, omega, -a, a, radial_floor=1e-2)
+        line, kd, _ = sensor_lines(f, k, acc, omega, n_top)
+        drop = set(rng.choice(line.size, size=int(rng.integers(1, 3)), replace=False).tolist())
+        keep = [j for j in range(line.size) if j not in drop]
+        trows = []
+        for j in keep:
+            e = float(line[j]) * sigma_roll * rng.normal()
+            trows.append({"freq_hz": float(line[j] + e),
+                          "damping_pct": float(100.0 * zeta0 * np.exp(rng.normal(0.3, 0.4)))})
+            row_noise.append(("freq", e))
+        name = f"roll{int(speed)}.modes.csv"
+        magnitude["half_angle_deg"][name] = round(math.degrees(a), 3)
+        truth_lines["true_hz"][name] = [float(line[j]) for j in keep]
+        truth_lines["k"][name] = [int(kd[j]) for j in keep]
+        _write_table(folder, name, trows, {"state": "rolling", "load_n": ROLLING_LOAD_N, "speed_kmh": speed,
+                                           "pressure_bar": 2.2, "frame": "rotating"})
+    expected = "ground_contact+rotation" if contact else "rotation"
+    truth = ("ground_contact", "rotation") if contact else ("rotation",)
+    return IndependentLabel(family=family, expected=expected, truth=truth, magnitude=magnitude,
+                            noise={"relative": sigma, "relative_rolling": sigma_roll, "rows": row_noise},
+                            domain="modes", expected_verdict=expected,
+                            extra={"candidates": ROLLING_CANDIDATES, **truth_lines})
+
+
 MODAL_FAMILIES = ("none_modes", "cavity_mode", "ground_contact", "sensor_mass")
 PROFILE_FAMILIES = ("none_profiles", "tread_shear", "wave_damping", "gravity", "sensor_tilt", "iepe_highpass",
                     "rotation")
-FAMILIES = MODAL_FAMILIES + PROFILE_FAMILIES
+ROLLING_FAMILIES = ("rolling_contact", "rolling_free")
+FAMILIES = MODAL_FAMILIES + PROFILE_FAMILIES + ROLLING_FAMILIES
 
 
 def make(family: str, folder, seed: int) -> IndependentLabel:
@@ -581,4 +664,6 @@ def make(family: str, folder, seed: int) -> IndependentLabel:
         return _modal_case(folder, seed, family)
     if family in PROFILE_FAMILIES:
         return _profile_case(folder, seed, family)
+    if family in ROLLING_FAMILIES:
+        return _rolling_case(folder, seed, family)
     raise ValueError(f"unknown family {family!r}; known: {', '.join(FAMILIES)}")

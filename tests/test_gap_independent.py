@@ -61,3 +61,36 @@ def test_sensor_mass_only_in_the_test_table_is_found(tmp_path):
     c = next(c for c in d.content["candidates"] if c["effect"] == "sensor_mass" and c.get("accepted"))
     par = c["params"]["mass_kg"]
     assert par["lo"] <= label.magnitude["mass_kg"] <= par["hi"]
+
+
+@pytest.mark.slow
+def test_rolling_free_case_is_eq25_without_labels(tmp_path):
+    """The independent rolling control (benchmarks/_independent_effects.py ``rolling_free``): every line of its
+    rolling tables is the co-rotating sensor's line of the free spinning ring, |shift ± root| of eq. 25 (written
+    out here, docs/physics.md §3.7) of the truth's ring at Ω = V/R_e, for the n its dominant harmonic names; the
+    tables carry no n, tag or branch, and ``frame: rotating``, ``state: rolling``."""
+    import json
+
+    import _independent_effects as ie
+
+    label = ie.make("rolling_free", tmp_path / "case", 7300)
+    p, g = label.extra["ring"], label.extra["geometry"]
+    for speed in ie.ROLLING_SPEEDS:
+        name = f"roll{int(speed)}.modes.csv"
+        omega = speed / 3.6 / label.extra["r_e_m"]
+        n = np.abs(np.asarray(label.extra["k"][name], float))
+        d = p["ei"] * (n**2 - 1) ** 2 / g["R"] ** 4 + g["p0"] * g["b"] / g["R"] * (n**2 - 1) + p["kw"] + p["kv"] / n**2
+        wf = np.sqrt(n**2 * d / (p["rho_a"] * (n**2 + 1)))  # eq. 18
+        root = np.sqrt(wf**2 + n**2 * (n**2 - 1) ** 2 * omega**2 / (n**2 + 1) ** 2)
+        shift = 2 * n * omega / (n**2 + 1)
+        lines = np.stack([np.abs(shift + root), np.abs(shift - root)]) / (2 * math.pi)
+        true = np.asarray(label.extra["true_hz"][name])
+        assert np.all(np.min(np.abs(lines - true) / true, axis=0) < 1e-6), name
+        text = (tmp_path / "case" / name).read_text().splitlines()
+        head = text[0].split(",")
+        rows = [r.split(",") for r in text[1:]]
+        assert len(rows) == true.size >= 8
+        for col in ("n", "tag", "branch"):
+            assert all(r[head.index(col)] == "" for r in rows), col
+        cond = json.loads((tmp_path / "case" / name.replace(".csv", ".json")).read_text())
+        assert (cond["state"], cond["frame"], cond["load_n"]) == ("rolling", "rotating", 4000.0)

@@ -4,7 +4,8 @@
 The model (:func:`ringfit.physics.rolling_modes.loaded_rolling_modes`, the one behind ``ringfit campbell``,
 ``cleat --ssi`` labelling, the diagnosis's rolling rows and the synthetic cleat field) is Hill's method:
 Fourier harmonics of the ring with the analytic Fourier coefficients of the tread springs on the patch.
-The check below is written here from the PDEs alone: eq. (3.1) in the space-fixed angle α = θ + Ωt
+The check (benchmarks/_independent_rolling.py, shared with the benchmark's independent rolling families) is
+written from the PDEs alone: eq. (3.1) in the space-fixed angle α = θ + Ωt
 (∂/∂t|θ = ∂/∂t + Ω∂/∂α), inextensible ring (w = −v′, the tension eliminated by virtual work), discretised
 by **Fourier collocation** on an odd grid (a dense differentiation matrix, not harmonics), the contact
 **sampled in space** (k_trd times the share of each grid cell inside the patch), and the quadratic
@@ -17,7 +18,8 @@ per harmonic (the content an accelerometer's data carry): the dominant signed ha
 and direction the model's Campbell labels report, is pinned too.
 """
 
-import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,6 +28,9 @@ from ringfit.params import table9
 from ringfit.physics.contact import patch_edges
 from ringfit.physics.operating import Drum, OperatingPoint
 from ringfit.physics.rolling_modes import loaded_rolling_modes, material_acceleration
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from _independent_rolling import collocation_modes  # noqa: E402
 
 #: The Table 9 tyre's rated (nominal) load [N]: the thesis's drum tests and the examples run at 4 kN.
 RATED_N = 4000.0
@@ -39,56 +44,11 @@ BAND_HZ = (100.0, 320.0)
 TOL_HZ = 0.04
 
 
-def _collocation_d(points: int) -> np.ndarray:
-    """First-derivative matrix of trigonometric interpolation on ``points`` (odd) equispaced nodes over 2π."""
-    h = 2 * np.pi / points
-    j = np.arange(points)
-    diff = j[:, None] - j[None, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        D = 0.5 * (-1.0) ** diff / np.sin(diff * h / 2)
-    D[diff == 0] = 0.0
-    return D
-
-
 def _collocation_modes(ring, geometry, omega, leading, trailing, points=POINTS):
-    """Fixed-frame modes of (3.1) with tread springs on [leading, trailing]: ``(freq_hz, k, acc_content)``.
-
-    ``acc_content[:, k]`` is |−(ω + kΩ)² W_k|² per signed harmonic k (normalised per mode), W_k the Fourier
-    coefficient of the radial displacement over α (α = 0 the patch centre, + in the direction of rotation).
-    """
-    D = _collocation_d(points)
-    h = 2 * np.pi / points
-    alpha = (np.arange(points) - (points - 1) / 2) * h
-    lo, hi = np.maximum(alpha - h / 2, leading), np.minimum(alpha + h / 2, trailing)
-    kc = float(ring.k_tread) * np.clip(hi - lo, 0.0, None) / h  # share of each cell inside the patch
-    I = np.eye(points)
-    R = float(geometry.radius)
-    rho, b4, P = float(ring.rho_a), float(ring.ei) / R**4, float(geometry.hoop_pressure_stiffness)
-    kw, kv, chi, O = float(ring.kw), float(ring.kv), float(ring.chi), float(omega)
-    D2, D3, D4 = D @ D, D @ D @ D, D @ D @ D @ D
-    W = -D  # w = W v (inextensible)
-    # (R) and (T) of (3.1) in α: ∂t → ∂t + Ω∂α; coefficients of λ², λ, 1 acting on v
-    R2, R1 = rho * W, rho * (2 * O * D @ W - 2 * O * I)
-    R0 = (rho * (O**2 * D2 @ W - 2 * O**2 * D - O**2 * W) + b4 * (D4 @ W - D3) - P * (D2 @ W + W)
-          - chi * rho * O**2 * (D2 @ W - D) + kw * W + np.diag(kc) @ W)
-    T2, T1 = rho * I, rho * (2 * O * D + 2 * O * W)
-    T0 = (rho * (O**2 * D2 + 2 * O**2 * D @ W - O**2 * I) + b4 * (D3 @ W - D2)
-          + chi * rho * O**2 * (I - D @ W) + kv * I)
-    # virtual work: δw (R) + δv (T) with δw = −D δv, D skew on the grid: (T) + D (R) = 0
-    A2, A1, A0 = T2 + D @ R2, T1 + D @ R1, T0 + D @ R0
-    Z = np.zeros_like(I)
-    comp = np.block([[Z, I], [-np.linalg.solve(A2, A0), -np.linalg.solve(A2, A1)]])
-    lam, vec = np.linalg.eig(comp)
-    keep = lam.imag > 1e-6
-    lam, vec = lam[keep], vec[:points, keep]
-    order = np.argsort(lam.imag)
-    w_ang, v = lam.imag[order], vec[:, order]
-    w = W @ v  # radial displacement on the grid
-    k = np.fft.fftfreq(points, 1.0 / points)  # signed harmonic of each FFT bin
-    Wk = np.exp(-1j * k[:, None] * alpha[0]) * np.fft.fft(w, axis=0) / points  # coefficients of e^{ikα}
-    acc = np.abs((w_ang[None, :] + k[:, None] * O) ** 2 * Wk) ** 2
-    acc /= acc.sum(axis=0, keepdims=True)
-    return w_ang / (2 * np.pi), k.astype(int), acc.T
+    """The shared independent collocation (benchmarks/_independent_rolling.py) on ringfit's parameter objects."""
+    p = {k: float(getattr(ring, k)) for k in ("rho_a", "ei", "kw", "kv", "k_tread")}
+    g = {"R": float(geometry.radius), "b": float(geometry.width), "p0": float(geometry.pressure)}
+    return collocation_modes(p, g, omega, leading, trailing, chi=float(ring.chi), points=points)
 
 
 @pytest.fixture(scope="module")
