@@ -115,6 +115,36 @@ def test_linearised_refit_is_exact_on_a_linear_problem():
         np.testing.assert_allclose(e[te], y[te] - X[te] @ b, rtol=1e-9, atol=1e-12)
 
 
+def test_linearised_refits_of_many_draws_with_a_prior():
+    """``heldout_linear`` for B draws sharing the rows' weights (one normal matrix per fold) against an independent
+    refit of each draw and fold: numpy.linalg.lstsq on the weighted rows plus the prior's rows (Λ = LᵀL, the
+    prior's gradient term as L d = −L⁻ᵀ·grad), and against the same draws with per-draw weights."""
+    from ringfit.gap.calibration import Linearised, heldout_linear
+
+    rng = np.random.default_rng(3)
+    m, k, B = 60, 4, 7
+    X = rng.normal(size=(m, k))
+    pred = rng.normal(size=m)
+    y = pred + rng.normal(size=(B, m))
+    sigma = rng.uniform(0.05, 0.2, m)
+    folds = np.arange(m) % 3
+    Lam = np.diag([0.0, 2.0, 0.5, 1.0]) + 0.1 * np.eye(k)
+    grad = rng.normal(size=k)
+    lin = Linearised(pred=pred, J=X, u_hat=np.zeros(k), lam=Lam, prior_grad=grad)
+    e = heldout_linear(lin, y, 1.0 / sigma**2, folds)
+    e_per_draw = heldout_linear(lin, y, np.broadcast_to(1.0 / sigma**2, (B, m)), folds)
+    np.testing.assert_allclose(e, e_per_draw, rtol=1e-10, atol=1e-12)
+    L = np.linalg.cholesky(Lam).T
+    c = -np.linalg.solve(L.T, grad)
+    for b in range(B):
+        for f in range(3):
+            tr, te = folds != f, folds == f
+            A = np.vstack([X[tr] / sigma[tr, None], L])
+            rhs = np.concatenate([(y[b, tr] - pred[tr]) / sigma[tr], c])
+            d = np.linalg.lstsq(A, rhs, rcond=None)[0]
+            np.testing.assert_allclose(e[b, te], y[b, te] - pred[te] - X[te] @ d, rtol=1e-7, atol=1e-9)
+
+
 @pytest.mark.slow  # > 10 s: CI runs it with -m slow (issue 24 item 3)
 def test_p_value_is_uniform_under_the_null(tmp_path):
     """200 data sets drawn from a small case's baseline (no effect), each with its p against an independent

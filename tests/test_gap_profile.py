@@ -350,3 +350,37 @@ def test_blind_profile_subset_json_and_cli(tmp_path, blind):
     text = report.read_text()
     assert text.startswith("<!doctype html>") and "residual vs angle" in text
     assert main(["diagnose", folder, "--out", str(out), "--quiet"]) == 2  # exists
+
+
+def test_linearised_gain_and_offset_columns_match_central_differences():
+    """The profile refits' Jacobian (the engine's two-stage linearisation: the rolling solve's tangents for k_trd
+    only, each run's gain and angle offset through the reading alone) against central differences of the
+    residuals in the solver coordinates (ln g, δ/scale, ln k_trd), off the nulls."""
+    from ringfit.fit.engine import LOG, Coordinate, Problem, linearize
+    from ringfit.fit.profile_block import nuisance_coords
+    from ringfit.gap.profile import ProfilePredictor
+    from ringfit.gap.ranking import GapResiduals
+
+    data, _, _ = _data()
+    predictor = ProfilePredictor((), (), SOLVER, BASE2)
+    assert predictor.readout == (1, 2, 3, 4)
+    y = np.zeros(2 * 2 * M)
+    w = np.full(y.shape, 0.37)
+    coords = (Coordinate("k_tread", LOG),) + nuisance_coords(2)
+    problem = Problem(GapResiduals(predictor, 0.0, False, predictor.readout), (data, y, w, np.zeros(y.shape, bool)),
+                      coords)
+    theta = np.array([17e6, 0.021, 1.08, -0.034, 0.91])
+    lin = linearize(problem, theta, BASE2)
+    assert lin.names == BASE2
+    h = 1e-5
+    for j, c in enumerate(coords):
+        up, down = theta.copy(), theta.copy()
+        if c.kind == LOG:
+            up[j], down[j] = theta[j] * np.exp(h), theta[j] * np.exp(-h)
+        else:
+            up[j], down[j] = theta[j] + h * c.scale, theta[j] - h * c.scale
+        fd = (linearize(problem, up, BASE2).residuals - linearize(problem, down, BASE2).residuals) / (2 * h)
+        scale = np.abs(fd).max()
+        assert scale > 0
+        np.testing.assert_allclose(lin.jacobian[:, j], fd, rtol=0, atol=(1e-4 if j == 0 else 1e-7) * scale,
+                                   err_msg=c.name)

@@ -27,7 +27,9 @@ The solve is one jitted region (:class:`ringfit._cache.jit`, with XLA's compile 
 :func:`ringfit._cache.compiler_options`): optimistix Levenberg–Marquardt (or,
 on request, undamped Gauss–Newton) with an SVD linear solve, the model linearised once per step by a forward-mode pass
 (primal and k tangents) whose Jacobian the solver then reuses as a dense matrix,
-and the final residuals, Jacobian and ``aux`` at the optimum. Everything after it
+and the final residuals, Jacobian and ``aux`` at the optimum (a two-stage model — an expensive inner stage
+and a cheap readout, :class:`AbstractResiduals` ``readout`` — passes only the inner stage's slots' tangents
+through the inner stage). Everything after it
 (covariance, standard errors, flags) is NumPy on small arrays:
 
 - covariance of ``u`` = ``(JᵀJ)⁻¹`` of all rows (data and prior) by SVD; a
@@ -174,6 +176,14 @@ class AbstractResiduals(eqx.Module):
 
     serial_batches: ClassVar[bool] = False
     compile_quick: ClassVar[bool] = False
+    #: A model in two stages (``readout`` not empty): an expensive ``inner(theta, data)`` (a solve) that does not
+    #: depend on the θ entries ``readout`` (indices; e.g. each run's gain and angle offset on the reading) and a
+    #: cheap ``outer(inner, theta, data) -> (residuals, aux)``, with ``model(θ) = outer(inner(θ), θ)``. Its
+    #: linearisation over K free slots passes only the first K − len(readout) slots' tangents through ``inner``
+    #: and reads the other slots (readout parameters or padding, checked) through ``outer`` alone
+    #: (:func:`_linearisation`); :func:`least_squares` and :func:`linearize` order the free set so (results in
+    #: the caller's order).
+    readout: ClassVar[tuple[int, ...]] = ()
 
     def __call__(self, theta, data):
         raise NotImplementedError
@@ -254,10 +264,17 @@ def _theta_at(u, theta0, free):
     return jnp.where(hit.any(axis=1), free.theta_of(u)[jnp.argmax(hit, axis=1)], theta0[:-1])
 
 
-def _weighted(z, model, data, theta0, free, prior_w, prior_mean):
-    """Residual rows (data, then prior) and the model's aux at solver point z; theta0 has p + 1 entries."""
+def _theta(z, theta0, free):
+    """θ at solver point z (:func:`_theta_at` at the free slots' coordinates ``u(z)``)."""
+    return _theta_at(free.u_of(z), theta0, free)
+
+
+def _weighted(z, model, data, theta0, free, prior_w, prior_mean, inner=None):
+    """Residual rows (data, then prior) and the model's aux at solver point z; theta0 has p + 1 entries.
+    ``inner``: a two-stage model's inner stage as a function of z (:class:`AbstractResiduals`)."""
     u = free.u_of(z)
-    res, aux = model(_theta_at(u, theta0, free), data)
+    theta = _theta_at(u, theta0, free)
+    res, aux = model(theta, data) if inner is None else model.outer(inner(z), theta, data)
     return jnp.concatenate([res, prior_w @ (u - prior_mean)]), aux
 
 
@@ -277,7 +294,33 @@ def _linearisation(model, data, theta0, free, prior_w, prior_mean):
         jac, (res, aux) = jax.jacfwd(both, has_aux=True)(z)
         return res, (aux, jac)
 
-    return linearise
+    def linearise_any(z):
+        S = inner_slots(model, z.shape[0])
+        return linearise_staged(z, S) if S else linearise(z)
+
+    def linearise_staged(z, S):
+        # a two-stage model: the inner stage (the solve) linearised over the first S slots only (the others are
+        # readout parameters or padding, which it does not depend on), then the outer stage over all K slots
+        # through that linearisation: the same Jacobian with S, not K, tangents through the solve
+        z_in = z[:S]
+
+        def inner_of(zs):
+            x = model.inner(_theta(jnp.concatenate([zs, z[S:]]), theta0, free), data)
+            return x, x
+
+        j_in, x0 = jax.jacfwd(inner_of, has_aux=True)(z_in)
+
+        def inner_lin(zz):
+            return jax.tree.map(lambda x, j: x + j @ (zz[:S] - z_in), x0, j_in)
+
+        def both_staged(zz):
+            r, aux = _weighted(zz, model, data, theta0, free, prior_w, prior_mean, inner=inner_lin)
+            return r, (r, aux)
+
+        jac, (res, aux) = jax.jacfwd(both_staged, has_aux=True)(z)
+        return res, (aux, jac)
+
+    return linearise_any
 
 
 def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, *, model, treedef,
@@ -356,6 +399,29 @@ def _solve_chain(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps
     return jax.lax.scan(step, z0, (leaves, theta0))[1]
 
 
+def inner_slots(model: AbstractResiduals, K: int) -> int:
+    """Free slots (of ``K``) whose tangents a two-stage model's inner stage takes: K − len(readout); 0 for a
+    model in one stage (or no slot left beside its readout: linearised as one stage)."""
+    return max(K - len(model.readout), 0) if model.readout else 0
+
+
+def _inner_first(problem: Problem, free: tuple[str, ...]) -> tuple[tuple[str, ...], np.ndarray]:
+    """``free`` ordered for a two-stage model (:class:`AbstractResiduals`): the parameters its inner stage depends
+    on first, then its readout parameters (each group in the given order); and the positions that give back
+    the given order. Identity for other models."""
+    readout = {problem.names[i] for i in problem.model.readout}
+    order = sorted(range(len(free)), key=lambda j: free[j] in readout)
+    return tuple(free[j] for j in order), np.argsort(order)
+
+
+def _check_stages(problem: Problem, index, K: int) -> None:
+    """A two-stage model's free slots past :func:`inner_slots` must be readout parameters (or padding)."""
+    S = inner_slots(problem.model, K)
+    if S and any(i not in problem.model.readout for i in list(index)[S:]):
+        raise ValueError(f"free parameters {[problem.names[i] for i in index]}: a two-stage model takes at most {S} "
+                         f"parameters of its inner stage (readout: {[problem.names[i] for i in problem.model.readout]})")
+
+
 def _setup(problem: Problem, free: tuple[str, ...], pad_to: int | None):
     """Free-set arrays of a solve: ``(index, K, free_arrays, prior W, prior mean, lo_u, hi_u)`` (K slots, padded)."""
     coords, prior, names = problem.coords, problem.prior, problem.names
@@ -430,7 +496,9 @@ def least_squares(
     model, data, coords = problem.model, problem.data, problem.coords
     names = problem.names
     free = tuple(free)
-    index, K, free_arrays, W, mean, lo_u, hi_u = _setup(problem, free, pad_to)
+    solve_free, back = _inner_first(problem, free)
+    index, K, free_arrays, W, mean, lo_u, hi_u = _setup(problem, solve_free, pad_to)
+    _check_stages(problem, index, K)
     theta0 = np.asarray(theta0, dtype=np.float64)
     if theta0.shape != (len(names),):
         raise ValueError(f"theta0 has shape {theta0.shape}, coords {len(names)}")
@@ -445,12 +513,14 @@ def least_squares(
     out = _solve_program(model)(*args, np.int64(max_steps), *tol, model=model, treedef=treedef, method=method)
     u_free, result, steps, res, jac = jax.device_get(out[:5])  # one transfer; the model's aux stays as it is
     aux = out[5]
-    u_free, jac = u_free[: len(free)], jac[:, : len(free)]
+    # back to the caller's order of ``free`` (prior rows stay whitened rows: their sum of squares is the same)
+    u_free, jac = u_free[: len(free)][back], jac[:, : len(free)][:, back]
+    index, lo_u, hi_u = [index[j] for j in back], lo_u[: len(free)][back], hi_u[: len(free)][back]
     m = res.size - K
     res, jac = np.concatenate([res[:m], res[m:][: len(free)]]), np.concatenate([jac[:m], jac[m:][: len(free)]])
     status, message = solver_status(result)
     result = _result(problem, free, index, theta0, u_free, status, message, int(steps), res, jac, m, aux,
-                     n_data, lo_u[: len(free)], hi_u[: len(free)])
+                     n_data, lo_u, hi_u)
     result.problem = problem
     return result
 
@@ -544,6 +614,7 @@ def least_squares_batch(
     require_x64("ringfit.fit.engine.least_squares_batch")
     free = tuple(free)
     index, K, free_arrays, W, mean, lo_u, hi_u = _setup(problem, free, None)
+    _check_stages(problem, index, K)  # a two-stage model's free set must come inner stage first here
     leaves, treedef = jax.tree.flatten(data)
     if not leaves:
         raise ValueError("data has no arrays to batch over")
@@ -677,7 +748,9 @@ class Linearization:
 
 
 def _linearize_all(problem: Problem, theta, free, pad_to):
-    fs = free_set(problem, free, pad_to)
+    solve_free, back = _inner_first(problem, tuple(free))
+    fs = free_set(problem, solve_free, pad_to)
+    _check_stages(problem, fs.index, fs.size)
     theta = np.asarray(theta, dtype=np.float64)
     if theta.shape != (len(problem.names),):
         raise ValueError(f"theta has shape {theta.shape}, coords {len(problem.names)}")
@@ -690,7 +763,13 @@ def _linearize_all(problem: Problem, theta, free, pad_to):
     _, _, _, res, jac, aux = solve(leaves, u, np.append(theta, 0.0), fs.unbounded_arrays(), fs.prior_w,
                                    fs.prior_mean, np.int64(0), np.float64(1e-10), np.float64(1e-10),
                                    model=problem.model, treedef=treedef, method="levenberg_marquardt")
-    return fs, u, np.asarray(res), np.asarray(jac), aux
+    jac = np.asarray(jac)
+    if solve_free != tuple(free):  # back to the caller's order (a two-stage model's free set was reordered)
+        k = len(back)
+        fs = free_set(problem, free, pad_to)
+        u = np.concatenate([u[:k][back], u[k:]])
+        jac = np.concatenate([jac[:, :k][:, back], jac[:, k:]], axis=1)
+    return fs, u, np.asarray(res), jac, aux
 
 
 def linearize(problem: Problem, theta, free: tuple[str, ...], *, pad_to: int | None = None) -> Linearization:
@@ -842,4 +921,4 @@ def evaluate(problem: Problem, theta, free: tuple[str, ...], *, pad_to: int | No
 
 
 __all__ = ["least_squares", "least_squares_batch", "SOLVERS", "evaluate", "sum_of_squares_batch", "linearize",
-           "Linearization", "residuals", "residuals_batch", "log_probability", "log_density", "DensityKernel", "free_set", "FreeSet", "in_fixed_chunks", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]
+           "Linearization", "inner_slots", "residuals", "residuals_batch", "log_probability", "log_density", "DensityKernel", "free_set", "FreeSet", "in_fixed_chunks", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]

@@ -47,6 +47,9 @@ iepe_highpass, wave_damping, tread_shear, rotation (χ), ring_extensibility
 the engine's refit (prediction and K forward-mode tangents per step), stopped after one
 linearisation for plain predictions and Jacobians — serves every candidate, chain and case
 with the same number of profiles (flat road or drum alike, :class:`ringfit.physics.profile.FlatOrDrum`): it is compiled once.
+The predictor is one of the engine's two-stage models (the rolling solve, then each run's reading through
+its gain and offset): of the K tangents only K − 2P pass through the solve, the 2P nuisances' through the
+reading alone (as many solve tangents per step as before the per-run nuisances).
 """
 
 from __future__ import annotations
@@ -121,19 +124,29 @@ def _is_nuisance(name: str) -> bool:
     return name.startswith(("angle_offset", "gain_"))
 
 
-def _channels(theta, data: ProfileData, base: tuple, effects: tuple, sizes: tuple, solver: ContactSolver):
-    """``(P·2·M,)`` rows of the composed model (un-jitted core of the predictors), read through each profile's
-    angle offset and gain (:func:`ringfit.fit.profile_block.read_through`)."""
+def _solved(theta, data: ProfileData, base: tuple, effects: tuple, sizes: tuple, solver: ContactSolver):
+    """The composed model's channels ``(P, 2, M)`` before each run's reading (the rolling solve: every θ entry
+    but the profile block's nuisances)."""
     ring = data.ring.replace(**{name: theta[i] for i, name in enumerate(base) if not _is_nuisance(name)})
     model = ProfileModel()
     i = len(base)
     for effect, k in zip(effects, sizes):
         model = effect.profile_model(theta[i : i + k], model)
         i += k
-    P = data.omega.shape[0]
-    offset, gain = _nuisances(theta, base, P)
-    ch = profile_channels(model, ring, data.geometry, data.omega, data.load, data.roads, data.band, 0.0, solver)
-    return read_through(ch, offset, gain).reshape(-1)
+    return profile_channels(model, ring, data.geometry, data.omega, data.load, data.roads, data.band, 0.0, solver)
+
+
+def _read(channels, theta, base: tuple):
+    """``(P·2·M,)`` rows: ``channels`` ``(P, 2, M)`` read through each profile's angle offset and gain
+    (:func:`ringfit.fit.profile_block.read_through`)."""
+    offset, gain = _nuisances(theta, base, channels.shape[0])
+    return read_through(channels, offset, gain).reshape(-1)
+
+
+def _channels(theta, data: ProfileData, base: tuple, effects: tuple, sizes: tuple, solver: ContactSolver):
+    """``(P·2·M,)`` rows of the composed model (un-jitted core of the predictors), read through each profile's
+    angle offset and gain (:func:`ringfit.fit.profile_block.read_through`)."""
+    return _read(_solved(theta, data, base, effects, sizes, solver), theta, base)
 
 
 class ProfilePredictor(eqx.Module):
@@ -146,6 +159,20 @@ class ProfilePredictor(eqx.Module):
 
     def __call__(self, theta, data):
         return _channels(theta, data, self.base, self.effects, self.sizes, self.solver)
+
+    # two stages (the engine's two-stage model, via :class:`ringfit.gap.ranking.GapResiduals`): the rolling
+    # solve, then each run's reading — so a linearisation passes the nuisances' tangents through the reading
+    # only (2P fewer tangents through the solve)
+    @property
+    def readout(self) -> tuple[int, ...]:
+        """θ indices of the profile block's nuisances (they act after the solve)."""
+        return tuple(i for i, n in enumerate(self.base) if _is_nuisance(n))
+
+    def inner(self, theta, data):
+        return _solved(theta, data, self.base, self.effects, self.sizes, self.solver)
+
+    def outer(self, channels, theta, data):
+        return _read(channels, theta, self.base)
 
 
 @partial(jit, static_argnames=("effects", "sizes", "solver", "base"))

@@ -33,8 +33,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
-                                linearize)
+from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, inner_slots,
+                                least_squares, linearize)
 from ringfit.fit.result import FitResult
 from ringfit.gap.problem import GapProblem
 
@@ -77,13 +77,30 @@ class GapResiduals(AbstractResiduals):
     #: dominate their diagnosis) keep XLA's optimised code
     quick: bool = eqx.field(static=True, default=False)
 
+    #: a predictor in two stages (``inner``/``outer``, e.g. the profile predictor: the rolling solve, then each
+    #: run's gain and angle offset): the θ indices of its readout (the engine's two-stage model,
+    #: :class:`ringfit.fit.engine.AbstractResiduals`); ``()``: one stage
+    readout_index: tuple = eqx.field(static=True, default=())
+
     @property
     def compile_quick(self) -> bool:
         return self.quick
 
+    @property
+    def readout(self) -> tuple:
+        return self.readout_index
+
+    def inner(self, theta, data):
+        return self.predictor.inner(theta, data[0])
+
+    def outer(self, inner, theta, data):
+        return self._rows(self.predictor.outer(inner, theta, data[0]), data)
+
     def __call__(self, theta, data):
-        pdata, y, w, robust = data
-        pred = self.predictor(theta, pdata)
+        return self._rows(self.predictor(theta, data[0]), data)
+
+    def _rows(self, pred, data):
+        _, y, w, robust = data
         z = (pred - y) * w
         if self.huber > 0:
             c = self.huber
@@ -104,8 +121,10 @@ def _engine_problem(problem: GapProblem, train) -> Problem:
         y, w = np.concatenate([y, np.zeros(pad)]), np.concatenate([w, np.zeros(pad)])
         robust = np.concatenate([robust, np.zeros(pad, dtype=bool)])
     huber = float(problem.huber) if problem.huber and problem.robust is not None and robust.any() else 0.0
-    return Problem(GapResiduals(problem.predictor, huber, problem.domain in ("damping", "modes")), (problem.data, y, w, robust),
-                   coordinates(problem), prior=gap_prior(problem), sigma="inflate", data_label="the gap data")
+    readout = tuple(getattr(problem.predictor, "readout", ()))
+    return Problem(GapResiduals(problem.predictor, huber, problem.domain in ("damping", "modes"), readout),
+                   (problem.data, y, w, robust), coordinates(problem), prior=gap_prior(problem), sigma="inflate",
+                   data_label="the gap data")
 
 
 def _pad(problem: GapProblem) -> int:
@@ -127,7 +146,8 @@ def predict_and_jacobian(problem: GapProblem, theta: np.ndarray, free) -> tuple[
     """Prediction ``(m,)`` and ∂pred/∂theta for the ``free`` columns ``(m, len(free))`` (natural units of theta).
 
     Evaluated by the engine's linearisation (:func:`ringfit.fit.engine.linearize`, one forward-mode
-    pass), in chunks of the padded free-set size. Used by the screen.
+    pass), in chunks of the padded free-set size (for a two-stage predictor, each chunk holds at most the
+    inner stage's slots of its parameters, the rest readout parameters). Used by the screen.
     """
     free = np.asarray(free, dtype=int)
     names = theta_names(problem)
@@ -136,14 +156,16 @@ def predict_and_jacobian(problem: GapProblem, theta: np.ndarray, free) -> tuple[
     eng = _engine_problem(problem, np.ones(problem.m, dtype=bool))
     m, K = problem.m, _pad(problem)
     w = 1.0 / problem.sigma
-    pred, cols = None, []
-    for start in range(0, max(len(free), 1), K):
-        chunk = free[start : start + K]
+    pred, cols, done = None, [], []
+    for chunk in _chunks(free, K, eng.model.readout, inner_slots(eng.model, K)):
         out = linearize(eng, theta, tuple(names[i] for i in chunk), pad_to=K)
         pred = np.asarray(out.aux)[:m] if pred is None else pred
         dtheta_du = np.array([theta[i] if coords[i].kind == LOG else coords[i].scale for i in chunk])
         cols.append(out.jacobian[:m] / w[:, None] / dtheta_du[None, :])
+        done.extend(chunk)
     J = np.concatenate(cols, axis=1)
+    if done != list(free):  # chunks grouped by stage: back to the order of ``free``
+        J = J[:, [done.index(i) for i in free]]
     if problem.huber and problem.robust is not None:
         # the engine's rows are ψ(z): undo ψ'(z) = c/|ψ(z)| on robust rows beyond c, so J is ∂pred/∂θ
         c = float(problem.huber)
@@ -151,6 +173,22 @@ def predict_and_jacobian(problem: GapProblem, theta: np.ndarray, free) -> tuple[
         beyond = np.asarray(problem.robust, dtype=bool) & (a > c)
         J = J * np.where(beyond, np.sqrt(np.maximum(2 * c * a - c * c, 0.0)) / c, 1.0)[:, None]
     return pred, J
+
+
+def _chunks(free, K: int, readout=(), n_inner: int = 0) -> list[list[int]]:
+    """``free`` (θ indices) in chunks of at most ``K``; with ``n_inner`` > 0 (a two-stage predictor) each
+    chunk takes at most that many non-``readout`` indices, the readout ones filling the chunks' other slots."""
+    free = [int(i) for i in free]
+    if not n_inner:
+        return [free[s : s + K] for s in range(0, max(len(free), 1), K)]
+    inner = [i for i in free if i not in readout]
+    rest = [i for i in free if i in readout]
+    out = []
+    while inner or rest or not out:
+        chunk, inner = inner[:n_inner], inner[n_inner:]
+        chunk, rest = chunk + rest[: K - len(chunk)], rest[K - len(chunk) :]
+        out.append(chunk)
+    return out
 
 
 def theta_names(problem: GapProblem) -> tuple[str, ...]:
