@@ -272,6 +272,14 @@ class RidgeProfile:
     cov_u: np.ndarray
     free: tuple
 
+    def to_record(self, kappa: float = 1.0) -> dict:
+        """``ridge`` of docs/formats.md §7.1: each slice's depth [mm], deviance Δ and weight (with κ)."""
+        def finite(x):
+            return [float(v) if math.isfinite(v) else None for v in x]
+
+        return {"tread_depth_mm": finite(1e3 * self.depth), "deviance": finite(self.deviance),
+                "weight": finite(self.weights(kappa)), "converged": [bool(c) for c in self.converged]}
+
     def weights(self, kappa: float = 1.0) -> np.ndarray:
         """Each slice's share of the posterior along the ridge: exp(−Δ/2κ)·√det C (integrated Laplace over the
         other parameters; the slices evenly spaced in ln d), converged slices only, normalised."""
@@ -399,7 +407,11 @@ class StateEstimate:
     - ``untold``: sentences naming what the data could not tell (apart).
     - ``status``, ``converged``, ``rms`` ``{radial, tangential}`` [m/s²], ``flags``; ``nuisances``.
     - ``fit``: the engine's :class:`~ringfit.fit.result.FitResult`; ``load``: the load estimate that started it.
-    - ``theta``, ``cov_u``: θ (natural) and the covariance of the free parameters' solver coordinates;
+    - ``discrepancy``: §11's discrepancy ratio κ ≥ 1 of the fit's harmonic bands (every statistical variance × κ);
+      ``ridge``: the :class:`RidgeProfile` in tread depth (None with d held); ``spread_u``: its slices' spread about
+      the fit in the free parameters' solver coordinates.
+    - ``theta``, ``cov_u``: θ (natural) and the covariance of the free parameters' solver coordinates (κ × the
+      Laplace covariance + ``spread_u``: what every revolution's held quantities carry);
       ``gradient_u`` ``(Q, k)``: d quantity/du; ``ring_sd`` ``(Q,)`` the ring's part of each σ (SI).
     """
 
@@ -420,6 +432,9 @@ class StateEstimate:
     omega: float = 0.0
     k_max: int = 0
     fixed: dict = field(default_factory=dict)
+    discrepancy: float = 1.0
+    ridge: RidgeProfile | None = None
+    spread_u: np.ndarray | None = None
 
     def value(self, key: str) -> float:
         """The estimate of quantity ``key`` (:data:`QUANTITIES`), SI."""
@@ -429,8 +444,10 @@ class StateEstimate:
         """The ``state`` object of docs/formats.md §7.1."""
         return {"quantities": self.quantities, "correlation": self.correlation, "not_told_apart": list(self.untold),
                 "fit": {"status": self.status, "converged": self.converged, "rms_ms2": self.rms,
-                        "channels": ["radial", "tangential"], "harmonics": [2, self.k_max], "flags": list(self.flags)},
-                "nuisances": self.nuisances}
+                        "channels": ["radial", "tangential"], "harmonics": [2, self.k_max], "flags": list(self.flags),
+                        "discrepancy_ratio": float(self.discrepancy)},
+                "nuisances": self.nuisances,
+                **({"ridge": self.ridge.to_record(self.discrepancy)} if self.ridge is not None else {})}
 
 
 def profile_rows(profile, n_grid: int, k_max: int) -> np.ndarray:
@@ -586,8 +603,10 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
         var = var + ring_var
     sd = np.sqrt(np.maximum(var, 0.0))
     z = float(ndtri(0.975))
-    along = _along_ridge(ridge, kappa, theta, free, geometry, ring, laws, omega, road1, settings,
-                         ring_sd if names and finite else np.zeros(len(value))) if ridge is not None and finite else None
+    along = None
+    if ridge is not None and finite:
+        along = _along_ridge(ridge, kappa, theta, free, geometry, ring, laws, omega, road1, settings,
+                             ring_sd if names else np.zeros(len(value)))
     cov_u = cov
     if along is not None:  # the held quantities of every revolution carry the spread along the ridge (§13.4)
         cov_u = cov + along["spread_u"]
@@ -660,7 +679,8 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     return StateEstimate(quantities=quantities, correlation={"names": corr_names, "matrix": corr.tolist()},
                          untold=untold, status=fit.status, converged=converged, rms=rms, flags=flags,
                          nuisances=nuisances, fit=fit, load=load, theta=theta, cov_u=cov_u, gradient_u=G,
-                         ring_sd=ring_sd, omega=float(omega), k_max=int(k_max), fixed=dict(fixed))
+                         ring_sd=ring_sd, omega=float(omega), k_max=int(k_max), fixed=dict(fixed),
+                         discrepancy=float(kappa), ridge=ridge, spread_u=None if along is None else along["spread_u"])
 
 
 # --------------------------------------------------------------------------- per revolution
@@ -775,6 +795,13 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
     C_h = np.asarray(reference.cov_u)[np.ix_(hd, hd)]
     T = G_f @ S + G_h
     var = np.einsum("qi,ij,qj->q", G_f, cov, G_f) + np.einsum("qi,ij,qj->q", T, C_h, T)
+    # the model's form error (κ > 1, §11) is the same in every revolution: the averaged fit's discrepancy variance
+    # of the stepped quantities, (κ − 1) × their statistical variance there, is added to each revolution's
+    kappa = float(reference.discrepancy)
+    if kappa > 1.0:
+        spread = 0.0 if reference.spread_u is None else np.asarray(reference.spread_u)
+        C_f = ((np.asarray(reference.cov_u) - spread) / kappa)[np.ix_(fr, fr)]
+        var = var + (kappa - 1.0) * np.einsum("qi,ij,qj->q", G_f, C_f, G_f)
     sd = np.sqrt(np.maximum(var, 0.0))
     z = float(ndtri(0.975))
     omega_r = 2 * math.pi * np.asarray(rotation_hz, dtype=np.float64)
