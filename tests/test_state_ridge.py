@@ -62,7 +62,7 @@ def test_ridge_weights_are_the_integrated_laplace_of_the_slices():
 
 @pytest.mark.slow
 def test_each_slice_is_the_fit_with_the_depth_held():
-    """A light load (the ridge is flat): every converged slice's deviance against a separate fit of the same rows
+    """A light load (the ridge is flat): the weighted slices' deviance against a separate fit of the same rows
     with d held there, started from the truth, its −2 ln(L·prior) summed by hand from the residual rows and the
     weak priors; and the reported intervals are at least the Laplace ones."""
     truth = TyreState(1500.0, 2.2e5, 0.005, 0.004, OMEGA)
@@ -91,7 +91,11 @@ def test_each_slice_is_the_fit_with_the_depth_held():
     best = total(fit.theta, fit.names)
     rest = tuple(n for n in fit.names if n != TREAD)
     start = np.array([1500.0, 2.2e5, 0.004, 0.005, *fit.theta[4:]])
-    for j in np.flatnonzero(ridge.converged)[::3]:
+    # the slices that carry weight (Δ < 20; far up the walls a warm-started chain and a fit from elsewhere may stop
+    # in different local minima, of no weight either way)
+    near = np.flatnonzero(ridge.converged & (ridge.deviance < 20.0))
+    assert near.size >= 2
+    for j in near[:: max(1, near.size // 3)]:
         th = start.copy()
         th[STATE_PARAMETERS.index(TREAD)] = ridge.depth[j]
         alone = least_squares(prob, th, rest, max_steps=200, rtol=1e-10, atol=1e-10)
