@@ -1,8 +1,8 @@
 """The tyre's state from one accelerometer (issue 33 items 4 and 6): a blind check on the independent simulator,
 and the Fisher table.
 
-Run ``python benchmarks/bench_state.py`` (default: 3 seeds × 6 blind recordings of 10 s, about 5–8 minutes of CPU
-on the shared machine, most of it the simulator). It prints:
+Run ``python benchmarks/bench_state.py`` (default: 3 seeds × 6 blind recordings of 10 s, about 8 minutes of CPU
+on the shared machine: the simulator about 1.5, the averaged fits with the ridge profile about 6). It prints:
 
 1. **Blind accuracy** on recordings of :mod:`ringfit.synth.state` (the *independent* simulator: its own finite
    differences, a memory brush at its fixed point, coloured noise, tilt, the IEPE high-pass in time) written by

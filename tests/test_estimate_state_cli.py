@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -119,3 +120,36 @@ def test_bad_state_options_are_refused_before_anything_is_written(tmp_path, caps
     assert code == 2
     assert match in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_batch_runs_the_state_estimate_over_many_recordings(case, tmp_path, monkeypatch, capsys):
+    """issue 33 item 7: ``ringfit batch estimate … -- --state`` on a worker gives each input's state, the same
+    as the serial command (a profile and a continuous recording)."""
+    import os
+
+    from ringfit.batch import local_cluster
+    from ringfit.cli.batch import plan_batch
+
+    root, q_p, q_r = case
+    monkeypatch.chdir(tmp_path)
+    inputs = [os.path.relpath(root / "p.profile.csv"), os.path.relpath(root / "r.records.npz")]
+    opts = ["--tyre", str(root / "t.tyre.toml"), "--state"]
+    cl = local_cluster(1, memory_limit="4GB")
+    try:
+        status = main(["batch", "estimate", *inputs, "--out", "batch", "--scheduler", cl.scheduler_address,
+                       "--quiet", "--", *opts])
+    finally:
+        cl.close()
+    assert status == 0, capsys.readouterr().out
+    serial = tmp_path / "serial"
+    serial.mkdir()
+    for plan in plan_batch("estimate", inputs, serial, opts):
+        assert main(plan.argv) == 0
+        name = Path(plan.outputs[0]).name
+        got, want = (json.loads((d / name).read_text())["state"]["quantities"] for d in (Path("batch"), serial))
+        for key in ("load_n", "pressure_bar", "fx_n", "tread_depth_mm", "speed_kmh"):
+            assert got[key]["value"] == pytest.approx(want[key]["value"], rel=1e-9), (name, key)
+            assert got[key]["lo"] == pytest.approx(want[key]["lo"], rel=1e-9), (name, key)
+    truth = json.loads((Path("batch") / "r.estimate.json").read_text())["state"]["quantities"]
+    assert truth["load_n"]["lo"] <= 4200.0 <= truth["load_n"]["hi"]

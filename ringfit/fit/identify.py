@@ -1074,11 +1074,18 @@ def block_folds(name: str, sl: slice, rows: _Rows) -> list[np.ndarray]:
     rows in :data:`DISCREPANCY_BANDS` contiguous bands of revolution harmonics (every profile, channel and part)."""
     idx = np.arange(sl.start, sl.stop)
     if name == "profiles":
-        H = rows.profiles["measured"].shape[-1] // 2
-        k = np.tile(np.arange(H), idx.size // H)  # rows: profile, channel, (Re k…, Im k…)
-        edges = np.linspace(0, H, DISCREPANCY_BANDS + 1).round().astype(int)
-        return [idx[(k >= a) & (k < b)] for a, b in zip(edges[:-1], edges[1:])]
+        return band_folds(idx, rows.profiles["measured"].shape[-1] // 2)
     return [idx[j::DISCREPANCY_FOLDS] for j in range(min(DISCREPANCY_FOLDS, idx.size))]
+
+
+def band_folds(idx: np.ndarray, H: int, bands: int = DISCREPANCY_BANDS) -> list[np.ndarray]:
+    """Rows ``idx`` of revolution harmonics laid out in runs of ``H`` (profile, channel, Re k…, Im k…) split into
+    ``bands`` contiguous bands of harmonics, each band every run's rows of those harmonics (docs/physics.md §11;
+    the state estimate's rows, §13.4, likewise)."""
+    idx = np.asarray(idx)
+    k = np.tile(np.arange(H), idx.size // H)
+    edges = np.linspace(0, H, bands + 1).round().astype(int)
+    return [idx[(k >= a) & (k < b)] for a, b in zip(edges[:-1], edges[1:])]
 
 
 def discrepancy_ratio(J: np.ndarray, r: np.ndarray, folds: list[np.ndarray]) -> float:
@@ -1332,6 +1339,6 @@ def _json_safe(x):
 
 
 __all__ = ["identify", "read_identify_folder", "log_interval", "cap_unbounded", "load_check", "IdentifyInputs",
-           "discrepancy_ratio", "block_folds",
+           "discrepancy_ratio", "block_folds", "band_folds",
            "Identification", "identification_report",
            "JointResiduals", "harmonic_rows", "standing_half_angle", "BLOCKS"]

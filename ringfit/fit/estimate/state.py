@@ -30,9 +30,11 @@ import numpy as np
 from scipy.special import ndtri
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares, linearize
+from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
+                                least_squares_batch, linearize)
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows, smoothed_noise
 from ringfit.fit.estimate.load import LoadEstimate, estimate_load
+from ringfit.fit.identify import band_folds, discrepancy_ratio
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
                                           TILT_PRIOR, EstimateSettings, optimum_ring_shift)
 from ringfit.params import BAR, RingParams, TyreGeometry, TyreLaws
@@ -70,6 +72,13 @@ LINER_OFFSET_PRIOR = (1.0e-3, 3.0e-3)
 REVOLUTION_FREE = (LOAD, SLIP, GAIN, ANGLE_OFFSET)
 #: Correlation above which two quantities are reported as not told apart.
 RIDGE_CORRELATION = 0.95
+#: The ridge's profile (docs/physics.md §13.4 *intervals along the ridge*): fits at this many tread depths, evenly
+#: in ln d over the weak prior's mean ± RIDGE_SPAN σ (within the coordinate's range), the rest free.
+RIDGE_SLICES = 13
+RIDGE_SPAN = 2.5
+#: A slice this much (in −2 ln L) below the free fit: the free fit stopped on the flat ridge short of its optimum,
+#: and is redone from that slice.
+RIDGE_BETTER = 1.0
 
 STATE_COORDS = (
     Coordinate(LOAD, LOG, lo=LOAD_RANGE[0], hi=LOAD_RANGE[1]),
@@ -98,6 +107,8 @@ QUANTITIES = {
     "axle_height_m": ("m", 1.0, "axle height H"),
     "patch_length_mm": ("mm", 1e3, "contact patch length"),
 }
+#: Quantities of a log coordinate: intervals log-normal.
+LOG_QUANTITIES = ("load_n", "pressure_bar", "tread_depth_mm")
 #: The quantities whose correlation is reported.
 CORRELATED = ("load_n", "pressure_bar", "slip", "fx_n", "tread_depth_mm", "speed_kmh")
 #: Pairs that are one quantity in two forms (Fx = Fx(κ) through the brush): correlated by construction, never
@@ -244,6 +255,145 @@ def _du_dtheta(theta) -> np.ndarray:
     return np.array([t if c.kind == LOG else c.scale for c, t in zip(STATE_COORDS, theta)])
 
 
+# --------------------------------------------------------------------------- the ridge
+
+@dataclass
+class RidgeProfile:
+    """The likelihood along the load–pressure–tread-depth ridge (docs/physics.md §13.4 *intervals along the
+    ridge*): ``depth`` ``(B,)`` [m] the slices' tread depths; ``theta`` ``(B, p)`` the fits with d held there;
+    ``deviance`` ``(B,)`` −2 ln(L·prior) relative to the best fit (noise σ scaled as the fit's, the discrepancy
+    ratio not applied); ``converged`` ``(B,)``; ``cov_u`` ``(B, k−1, k−1)`` each slice's conditional covariance of the
+    other free parameters' solver coordinates (``free``)."""
+
+    depth: np.ndarray
+    theta: np.ndarray
+    deviance: np.ndarray
+    converged: np.ndarray
+    cov_u: np.ndarray
+    free: tuple
+
+    def to_record(self, kappa: float = 1.0) -> dict:
+        """``ridge`` of docs/formats.md §7.1: each slice's depth [mm], deviance Δ and weight (with κ)."""
+        def finite(x):
+            return [float(v) if math.isfinite(v) else None for v in x]
+
+        return {"tread_depth_mm": finite(1e3 * self.depth), "deviance": finite(self.deviance),
+                "weight": finite(self.weights(kappa)), "converged": [bool(c) for c in self.converged]}
+
+    def weights(self, kappa: float = 1.0) -> np.ndarray:
+        """Each slice's share of the posterior along the ridge: exp(−Δ/2κ)·√det C (integrated Laplace over the
+        other parameters; the slices evenly spaced in ln d), converged slices only, normalised."""
+        ok = self.converged & np.isfinite(self.deviance)
+        logw = np.full(self.depth.size, -np.inf)
+        if ok.any():
+            logdet = np.array([np.linalg.slogdet(kappa * c)[1] if o else -np.inf for c, o in zip(self.cov_u, ok)])
+            logw[ok] = -0.5 * self.deviance[ok] / kappa + 0.5 * logdet[ok]
+        w = np.exp(logw - np.max(logw)) if ok.any() else np.zeros(self.depth.size)
+        return w / w.sum() if w.sum() > 0 else w
+
+
+def _total_chi2(problem: Problem, theta, free) -> float:
+    """−2 ln(L·prior) of θ: the data rows' χ² and the prior's (solver coordinates of ``free``)."""
+    from ringfit.fit.engine import residuals
+
+    r = np.asarray(residuals(problem, theta)[0])
+    return float(r @ r) + _prior_chi2(problem, np.asarray(theta)[None], free)[0]
+
+
+def _prior_chi2(problem: Problem, thetas, free) -> np.ndarray:
+    if problem.prior is None:
+        return np.zeros(len(thetas))
+    W, mean = problem.prior.rows(free, len(free))
+    coords = [STATE_COORDS[STATE_PARAMETERS.index(n)] for n in free]
+    u = np.array([[c.to_u(float(t[STATE_PARAMETERS.index(n)])) for c, n in zip(coords, free)] for t in thetas])
+    r = (u - mean[None]) @ W.T
+    return np.sum(r**2, axis=1)
+
+
+def ridge_profile(problem: Problem, fit, *, max_steps: int = 256, rtol: float = 1e-10,
+                  atol: float = 1e-10) -> RidgeProfile:
+    """The profile of the fit's likelihood in tread depth (docs/physics.md §13.4): :data:`RIDGE_SLICES` fits with
+    d held at depths evenly spaced in ln d over the weak prior's ±:data:`RIDGE_SPAN` σ, every other free
+    parameter fitted, in two warm-started chains from the fit outwards (:func:`~ringfit.fit.engine.least_squares_batch`,
+    one compilation); the rows in units of the fit's noise (its σ scale s applied), so Δ is comparable to χ²₁."""
+    free = tuple(fit.names)
+    rest = tuple(n for n in free if n != TREAD)
+    c = STATE_COORDS[STATE_PARAMETERS.index(TREAD)]
+    j = STATE_PARAMETERS.index(TREAD)
+    mu, sd = problem.prior.mean[list(problem.prior.names).index(TREAD)], TREAD_PRIOR_SD
+    lo, hi = max(mu - RIDGE_SPAN * sd, c.to_u(c.lo) + 1e-3), min(mu + RIDGE_SPAN * sd, c.to_u(c.hi) - 1e-3)
+    grid = np.linspace(lo, hi, RIDGE_SLICES)
+    theta = np.asarray(fit.theta, dtype=np.float64)
+    u_hat = c.to_u(float(theta[j]))
+    s = float(fit.extra["sigma_scale"])
+    data = eqx.tree_at(lambda a: a.weight, problem.data, np.asarray(problem.data.weight) / s)
+    fixed = dataclasses.replace(problem, data=data, sigma="fixed")
+    B = RIDGE_SLICES
+    batch = jax.tree.map(lambda x: np.repeat(np.asarray(x)[None], B, axis=0), data)
+    out_theta, out_chi2, out_conv, out_cov = [], [], [], []
+    for chain in (grid[grid <= u_hat][::-1], grid[grid > u_hat]):
+        if chain.size == 0:
+            continue
+        pad = np.concatenate([chain, np.full(B - chain.size, chain[-1])])
+        th0 = np.repeat(theta[None], B, axis=0)
+        th0[:, j] = [c.from_u(u) for u in pad]
+        res = least_squares_batch(fixed, th0, rest, batch, warm_start=True, max_steps=max_steps, rtol=rtol, atol=atol)
+        n = chain.size
+        out_theta.append(res.theta[:n])
+        out_chi2.append(res.chi2_raw[:n])
+        out_conv.append(np.asarray(res.converged)[:n] & ~np.any(res.at_bound[:n], axis=1))
+        out_cov.append(res.covariance_log[:n])
+    th = np.concatenate(out_theta)
+    order = np.argsort(th[:, j])
+    th = th[order]
+    total = np.concatenate(out_chi2)[order] + _prior_chi2(fixed, th, free)
+    best = _total_chi2(fixed, theta, free)
+    return RidgeProfile(depth=th[:, j], theta=th, deviance=total - best, converged=np.concatenate(out_conv)[order],
+                        cov_u=np.concatenate(out_cov)[order], free=rest)
+
+
+def _along_ridge(ridge: RidgeProfile, kappa, theta, free, geometry, ring, laws, omega, road, settings, ring_sd):
+    """Each reported quantity's 95 % interval along the ridge (docs/physics.md §13.4): the mixture over the ridge's
+    slices (weights :meth:`RidgeProfile.weights` with the discrepancy ratio κ) of each slice's conditional normal
+    (κ × its statistical variance + the ring's part at the fit; log-normal for :data:`LOG_QUANTITIES`), its 2.5 and
+    97.5 % quantiles; and ``spread_u`` the slices' spread about the fit in the solver coordinates of ``free``."""
+    w = ridge.weights(kappa)
+    keys = list(QUANTITIES)
+    Q = len(keys)
+    use = np.flatnonzero(w > 1e-6 * w.max()) if w.sum() > 0 else np.zeros(0, int)
+    if use.size == 0:
+        return None
+    idx = [STATE_PARAMETERS.index(n) for n in ridge.free]
+    mean, sd = np.zeros((use.size, Q)), np.zeros((use.size, Q))
+    for a, b in enumerate(use):
+        value, jt, _ = state_quantities(ridge.theta[b], geometry, ring, laws, omega, road, settings=settings)
+        G = jt[:, idx] * _du_dtheta(ridge.theta[b])[idx][None, :]
+        var = kappa * np.einsum("qi,ij,qj->q", G, ridge.cov_u[b], G) + ring_sd**2
+        mean[a], sd[a] = value, np.sqrt(np.maximum(var, 0.0))
+    ww = w[use] / w[use].sum()
+    lo, hi = np.full(Q, np.nan), np.full(Q, np.nan)
+    for q, key in enumerate(keys):
+        m, s = mean[:, q], sd[:, q]
+        if key in LOG_QUANTITIES:
+            if np.any(m <= 0):
+                continue
+            m, s = np.log(m), s / m
+        span = np.linspace(np.min(m - 8 * s), np.max(m + 8 * s), 4001)
+        if not np.all(np.isfinite(span)) or span[-1] <= span[0]:
+            continue
+        from scipy.special import ndtr
+
+        cdf = np.sum(ww[:, None] * ndtr((span[None, :] - m[:, None]) / np.maximum(s[:, None], 1e-300)), axis=0)
+        lo[q], hi[q] = np.interp(0.025, cdf, span), np.interp(0.975, cdf, span)
+        if key in LOG_QUANTITIES:
+            lo[q], hi[q] = math.exp(lo[q]), math.exp(hi[q])
+    coords = [STATE_COORDS[STATE_PARAMETERS.index(n)] for n in free]
+    u_hat = np.array([c.to_u(float(theta[STATE_PARAMETERS.index(n)])) for c, n in zip(coords, free)])
+    du = np.array([[c.to_u(float(ridge.theta[b][STATE_PARAMETERS.index(n)])) for c, n in zip(coords, free)]
+                   for b in use]) - u_hat[None]
+    return {"lo": lo, "hi": hi, "spread_u": np.einsum("b,bi,bj->ij", ww, du, du), "weights": ww}
+
+
 # --------------------------------------------------------------------------- one profile
 
 @dataclass
@@ -257,7 +407,11 @@ class StateEstimate:
     - ``untold``: sentences naming what the data could not tell (apart).
     - ``status``, ``converged``, ``rms`` ``{radial, tangential}`` [m/s²], ``flags``; ``nuisances``.
     - ``fit``: the engine's :class:`~ringfit.fit.result.FitResult`; ``load``: the load estimate that started it.
-    - ``theta``, ``cov_u``: θ (natural) and the covariance of the free parameters' solver coordinates;
+    - ``discrepancy``: §11's discrepancy ratio κ ≥ 1 of the fit's harmonic bands (every statistical variance × κ);
+      ``ridge``: the :class:`RidgeProfile` in tread depth (None with d held); ``spread_u``: its slices' spread about
+      the fit in the free parameters' solver coordinates.
+    - ``theta``, ``cov_u``: θ (natural) and the covariance of the free parameters' solver coordinates (κ × the
+      Laplace covariance + ``spread_u``: what every revolution's held quantities carry);
       ``gradient_u`` ``(Q, k)``: d quantity/du; ``ring_sd`` ``(Q,)`` the ring's part of each σ (SI).
     """
 
@@ -278,6 +432,9 @@ class StateEstimate:
     omega: float = 0.0
     k_max: int = 0
     fixed: dict = field(default_factory=dict)
+    discrepancy: float = 1.0
+    ridge: RidgeProfile | None = None
+    spread_u: np.ndarray | None = None
 
     def value(self, key: str) -> float:
         """The estimate of quantity ``key`` (:data:`QUANTITIES`), SI."""
@@ -287,8 +444,10 @@ class StateEstimate:
         """The ``state`` object of docs/formats.md §7.1."""
         return {"quantities": self.quantities, "correlation": self.correlation, "not_told_apart": list(self.untold),
                 "fit": {"status": self.status, "converged": self.converged, "rms_ms2": self.rms,
-                        "channels": ["radial", "tangential"], "harmonics": [2, self.k_max], "flags": list(self.flags)},
-                "nuisances": self.nuisances}
+                        "channels": ["radial", "tangential"], "harmonics": [2, self.k_max], "flags": list(self.flags),
+                        "discrepancy_ratio": float(self.discrepancy)},
+                "nuisances": self.nuisances,
+                **({"ridge": self.ridge.to_record(self.discrepancy)} if self.ridge is not None else {})}
 
 
 def profile_rows(profile, n_grid: int, k_max: int) -> np.ndarray:
@@ -382,8 +541,25 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     for name in first.extra["at_bound"]:
         theta1[STATE_PARAMETERS.index(name)] = theta0[STATE_PARAMETERS.index(name)]
     fit = least_squares(problem, theta1, free, **opts)
+    ridge = None
+    if TREAD in free and np.all(np.isfinite(fit.theta)):
+        # the ridge's profile (§13.4 *intervals along the ridge*): on a flat, curved ridge the free fit can stop short
+        # of its optimum; a slice well below it restarts the fit there
+        ridge = ridge_profile(problem, fit, **opts)
+        ok = ridge.converged & np.isfinite(ridge.deviance)
+        if ok.any() and np.min(ridge.deviance[ok]) < -RIDGE_BETTER:
+            b = int(np.argmin(np.where(ok, ridge.deviance, np.inf)))
+            refit = least_squares(problem, ridge.theta[b], free, **opts)
+            if np.all(np.isfinite(refit.theta)):
+                s0 = float(fit.extra["sigma_scale"])
+                data = eqx.tree_at(lambda a: a.weight, problem.data, np.asarray(problem.data.weight) / s0)
+                scaled = dataclasses.replace(problem, data=data, sigma="fixed")
+                gain = _total_chi2(scaled, refit.theta, free) - _total_chi2(scaled, fit.theta, free)
+                if gain < 0:
+                    fit = refit
+                    ridge = dataclasses.replace(ridge, deviance=ridge.deviance - gain)
     est = _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fixed, ring_covariance, measured,
-                        prior, k_max)
+                        prior, k_max, ridge)
     if str(load.rotation_source).startswith("speed_kmh"):  # Ω from the nominal speed: V = Ω·r_road says it back
         est.quantities["speed_kmh"]["status"] = "not told"
         est.untold.append("speed_kmh: no encoder rate (rotation_hz): Ω came from the nominal speed_kmh, so the "
@@ -392,7 +568,7 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
 
 
 def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fixed, ring_covariance, measured, prior,
-                  k_max) -> StateEstimate:
+                  k_max, ridge: RidgeProfile | None = None) -> StateEstimate:
     free = tuple(fit.names)
     theta = np.asarray(fit.theta, dtype=np.float64)
     finite = bool(np.all(np.isfinite(theta)))
@@ -408,6 +584,11 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     idx = [STATE_PARAMETERS.index(n) for n in free]
     G = jt[:, idx] * _du_dtheta(theta)[idx][None, :]  # d quantity / du_free
     cov = np.asarray(fit.covariance_log)
+    # the model's form error as its held-out harmonic bands show it (§11's discrepancy ratio κ, §13.4): every
+    # statistical variance × κ
+    kappa = discrepancy_ratio(np.asarray(fit.jacobian), np.asarray(fit.residuals),
+                              band_folds(np.arange(fit.residuals.size), (k_max - 1))) if finite else 1.0
+    cov = kappa * cov
     var = np.einsum("qi,ij,qj->q", G, cov, G)
     ring_sd = np.zeros(len(value))
     if names and finite:
@@ -422,6 +603,13 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
         var = var + ring_var
     sd = np.sqrt(np.maximum(var, 0.0))
     z = float(ndtri(0.975))
+    along = None
+    if ridge is not None and finite:
+        along = _along_ridge(ridge, kappa, theta, free, geometry, ring, laws, omega, road1, settings,
+                             ring_sd if names else np.zeros(len(value)))
+    cov_u = cov
+    if along is not None:  # the held quantities of every revolution carry the spread along the ridge (§13.4)
+        cov_u = cov + along["spread_u"]
     # which quantities are held, which not told
     prior_sd = {PRESSURE: PRESSURE_PRIOR_SD, SLIP: SLIP_PRIOR_SD / 0.01, TREAD: TREAD_PRIOR_SD}
     held = {LOAD: LOAD not in free, PRESSURE: PRESSURE not in free, SLIP: SLIP not in free, TREAD: TREAD not in free}
@@ -445,9 +633,13 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
         else:
             status = "estimated"
         lo, hi = v - z * sd[q], v + z * sd[q]
-        if key in ("load_n", "pressure_bar", "tread_depth_mm") and v > 0:  # log-normal in the log coordinates
+        if key in LOG_QUANTITIES and v > 0:  # log-normal in the log coordinates
             s = sd[q] / v
             lo, hi = v * math.exp(-z * s), v * math.exp(z * s)
+        if along is not None and status != "fixed" and np.isfinite(along["lo"][q]):
+            lo, hi = min(lo, along["lo"][q]), max(hi, along["hi"][q])  # the wider: the ridge's or the Laplace's
+            sd[q] = max(sd[q], (hi - lo) / (2 * z) if key not in LOG_QUANTITIES or v <= 0 or lo <= 0
+                        else v * math.log(hi / lo) / (2 * z))
         quantities[key] = {"value": v * scale, "lo": lo * scale, "hi": hi * scale, "sd": float(sd[q]) * scale,
                            "unit": unit, "status": status, "what": what,
                            **({"ring_sd": float(ring_sd[q]) * scale} if names else {})}
@@ -486,8 +678,9 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
         nuisances[key] = {"value": float(fit.values[n]) * s, "stderr": float(fit.stderr.get(n, math.nan)) * s}
     return StateEstimate(quantities=quantities, correlation={"names": corr_names, "matrix": corr.tolist()},
                          untold=untold, status=fit.status, converged=converged, rms=rms, flags=flags,
-                         nuisances=nuisances, fit=fit, load=load, theta=theta, cov_u=cov, gradient_u=G,
-                         ring_sd=ring_sd, omega=float(omega), k_max=int(k_max), fixed=dict(fixed))
+                         nuisances=nuisances, fit=fit, load=load, theta=theta, cov_u=cov_u, gradient_u=G,
+                         ring_sd=ring_sd, omega=float(omega), k_max=int(k_max), fixed=dict(fixed),
+                         discrepancy=float(kappa), ridge=ridge, spread_u=None if along is None else along["spread_u"])
 
 
 # --------------------------------------------------------------------------- per revolution
@@ -602,6 +795,13 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
     C_h = np.asarray(reference.cov_u)[np.ix_(hd, hd)]
     T = G_f @ S + G_h
     var = np.einsum("qi,ij,qj->q", G_f, cov, G_f) + np.einsum("qi,ij,qj->q", T, C_h, T)
+    # the model's form error (κ > 1, §11) is the same in every revolution: the averaged fit's discrepancy variance
+    # of the stepped quantities, (κ − 1) × their statistical variance there, is added to each revolution's
+    kappa = float(reference.discrepancy)
+    if kappa > 1.0:
+        spread = 0.0 if reference.spread_u is None else np.asarray(reference.spread_u)
+        C_f = ((np.asarray(reference.cov_u) - spread) / kappa)[np.ix_(fr, fr)]
+        var = var + (kappa - 1.0) * np.einsum("qi,ij,qj->q", G_f, C_f, G_f)
     sd = np.sqrt(np.maximum(var, 0.0))
     z = float(ndtri(0.975))
     omega_r = 2 * math.pi * np.asarray(rotation_hz, dtype=np.float64)
