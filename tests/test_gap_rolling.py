@@ -168,9 +168,9 @@ def test_example_writes_a_rolling_case_folder(tmp_path, capsys):
 
     assert main(["example", "rolling", "--out", str(tmp_path), "--quiet"]) == 0
     case = read_case(tmp_path / "rolling")
-    assert [is_rolling(t) for t in case.tests] == [True, True, True]
-    assert sorted(t.condition["speed_kmh"] for t in case.tests) == [20.0, 40.0, 60.0]
-    assert all(t.condition["frame"] == "rotating" and not any(t.branch) for t in case.tests)
+    assert [is_rolling(t) for t in case.tables] == [True, True, True]
+    assert sorted(t.condition["speed_kmh"] for t in case.tables) == [20.0, 40.0, 60.0]
+    assert all(t.condition["frame"] == "rotating" and not any(t.branch) for t in case.tables)
     assert "rotation` and `ground_contact`" in (tmp_path / "README.md").read_text()
 
 

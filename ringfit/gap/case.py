@@ -11,38 +11,14 @@ a warning.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
-from pathlib import Path
 
 from ringfit.errors import InputError
-from ringfit.io.case import read_case_folder
-from ringfit.io.modes import ModeTable
-from ringfit.io.tyre import Tyre
+from ringfit.io.case import CaseFolder, read_case_folder
 
 
-@dataclass
-class Case:
-    """The parsed contents of a case folder.
-
-    - ``folder``: the path; ``tyre``: :class:`~ringfit.io.tyre.Tyre`.
-    - ``free``: the free-tyre table the ring is fitted to.
-    - ``tests``: other mode tables (test data), sorted by file name.
-    - ``profiles``: rolling profiles (objects of :mod:`ringfit.io.profiles`), sorted by load, then speed.
-    - ``records``: paths of ``*.records.npz`` files (not used by the diagnosis).
-    """
-
-    folder: Path
-    tyre: Tyre
-    free: ModeTable
-    tests: list[ModeTable] = field(default_factory=list)
-    profiles: list = field(default_factory=list)
-    records: list[Path] = field(default_factory=list)
-
-    @property
-    def data_files(self) -> list[str]:
-        names = [Path(t.source).name for t in [self.free, *self.tests]]
-        names += [Path(str(getattr(p, "source", ""))).name for p in self.profiles]
-        return names
+#: The parsed contents of a case folder: the one reader's :class:`ringfit.io.case.CaseFolder` (``free``; ``tables``,
+#: the test data; ``profiles``; ``records``), which the diagnosis uses as it is.
+Case = CaseFolder
 
 
 def read_case(folder: str | os.PathLike) -> Case:
@@ -54,7 +30,7 @@ an n; a measurement at another pressure than the tyre file's is used at the tyre
     if int(((c.free.kind == "structural") & (c.free.n >= 0)).sum()) < MIN_FREE_MODES:
         raise InputError(f"needs at least {MIN_FREE_MODES} structural modes with an assigned n to fit the ring "
                          "(rho_a, EI, kw, kv)", source=c.free.source)
-    return Case(folder=c.folder, tyre=c.tyre, free=c.free, tests=c.tables, profiles=c.profiles, records=c.records)
+    return c
 
 
 #: Structural modes with an n the diagnosis needs in free.modes.csv: it fits the ring's four eq. 18 parameters to it.

@@ -697,7 +697,7 @@ def build_problems(case, effects, noise=None, baseline: bool = False) -> list[Ga
     """
     from ringfit.gap.modal import build_modal_problems
 
-    problems = build_modal_problems([case.free, *case.tests], case.tyre, effects, noise=noise, baseline=baseline)
+    problems = build_modal_problems([case.free, *case.tables], case.tyre, effects, noise=noise, baseline=baseline)
     if case.profiles:
         from ringfit.gap.profile import build_profile_problem
 
@@ -794,7 +794,7 @@ def diagnose(folder, effects=None, progress: bool = True, noise: dict | None = N
         problems = build_problems(case, chosen, noise, baseline=tyre is not None)
         for prob in problems:
             # the mode-table parts are only a test when the folder holds test tables or nothing else
-            if prob.domain in ("modes", "damping") and case.profiles and not case.tests:
+            if prob.domain in ("modes", "damping") and case.profiles and not case.tables:
                 continue
             parts_.append(diagnose_problem(prob, progress, alpha, null_draws))
     content = _combine(parts_)
