@@ -437,7 +437,8 @@ class StateEstimate:
     spread_u: np.ndarray | None = None
 
     def value(self, key: str) -> float:
-        """The estimate of quantity ``key`` (:data:`QUANTITIES`), SI."""
+        """The estimate of quantity ``key`` (:data:`QUANTITIES`) in the unit its name says (the unit in
+        :data:`QUANTITIES`: ``tread_depth_mm`` in mm, ``pressure_bar`` in bar, ``speed_kmh`` in km/h)."""
         return float(self.quantities[key]["value"])
 
     def to_record(self) -> dict:
