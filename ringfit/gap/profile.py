@@ -169,9 +169,11 @@ class ProfilePredictor(eqx.Module):
         return tuple(i for i, n in enumerate(self.base) if _is_nuisance(n))
 
     def inner(self, theta, data):
+        """The expensive stage: the rolling solve's model channels (no per-run gain or offset in them)."""
         return _solved(theta, data, self.base, self.effects, self.sizes, self.solver)
 
     def outer(self, channels, theta, data):
+        """The cheap stage: each run's reading of ``channels`` through its own gain and angle offset."""
         return _read(channels, theta, self.base)
 
 

@@ -91,9 +91,11 @@ class GapResiduals(AbstractResiduals):
         return self.readout_index
 
     def inner(self, theta, data):
+        """The predictor's expensive stage (the two-stage model of :class:`ringfit.fit.engine.AbstractResiduals`)."""
         return self.predictor.inner(theta, data[0])
 
     def outer(self, inner, theta, data):
+        """The rows from the predictor's cheap stage on ``inner`` (as :meth:`__call__` from the whole prediction)."""
         return self._rows(self.predictor.outer(inner, theta, data[0]), data)
 
     def __call__(self, theta, data):
