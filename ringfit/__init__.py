@@ -118,7 +118,7 @@ _ELSEWHERE = {
     "sample": "ringfit.fit.posterior",
     "FitResult": "ringfit.fit.result",
     "source_study_fit": "ringfit.fit.source_procedure",
-    "Case": "ringfit.gap.case",
+    "CaseFolder": "ringfit.io.case",
     "Diagnosis": "ringfit.gap.diagnosis",
     "read_diagnosis": "ringfit.gap.diagnosis",
     "ContinuousRecord": "ringfit.io.continuous",
