@@ -105,17 +105,17 @@ def heldout_linear(lin: Linearised, y, w2, folds, idx=None) -> np.ndarray:
     ``(m,)``), fold by fold; ``idx`` ``(B, m)``: the line-problem row each row is matched to (None: row i)."""
     y = np.atleast_2d(np.asarray(y, dtype=np.float64))
     B, m = y.shape
-    if idx is None and np.ndim(w2) <= 1:
-        return _heldout_shared(lin, y, np.broadcast_to(w2, (m,)), folds)
+    shared = idx is None and np.ndim(w2) <= 1  # every draw the same rows and weights: one normal matrix per fold
     if idx is None:
-        pred = np.broadcast_to(lin.pred[:m], (B, m))
-        J = np.broadcast_to(lin.J[:m], (B, m, lin.J.shape[1]))
+        pred, J = lin.pred[:m], lin.J[:m]
+        if not shared:
+            J = np.broadcast_to(J, (B, m, J.shape[1]))
     else:
         pred, J = lin.pred[idx], lin.J[idx]
-    w2 = np.broadcast_to(w2, (B, m))
+    w2 = np.broadcast_to(w2, (m,) if shared else (B, m))
     r = y - pred
     e = np.empty_like(r)
-    k = J.shape[2]
+    k = J.shape[-1]
     ridge = 1e-10 * np.eye(k)
     for f in np.unique(folds):
         te = folds == f
@@ -123,35 +123,13 @@ def heldout_linear(lin: Linearised, y, w2, folds, idx=None) -> np.ndarray:
         if k == 0:
             e[:, te] = r[:, te]
             continue
-        Jt = J[:, tr]
-        A = np.einsum("bmi,bm,bmj->bij", Jt, w2[:, tr], Jt) + lin.lam + ridge * (1.0 + np.trace(lin.lam))
-        g = np.einsum("bmi,bm->bi", Jt, w2[:, tr] * r[:, tr]) - lin.prior_grad
-        d = np.linalg.solve(A, g[..., None])[..., 0]
-        e[:, te] = r[:, te] - np.einsum("bmi,bi->bm", J[:, te], d)
-    return e
-
-
-def _heldout_shared(lin: Linearised, y, w2, folds) -> np.ndarray:
-    """:func:`heldout_linear` where every draw shares the rows' Jacobian and weights ``w2`` ``(m,)``: one normal
-    matrix per fold for all B draws, the draws' right-hand sides as one matrix product (the refits of the
-    draws are the same linear map of their data)."""
-    B, m = y.shape
-    J = lin.J[:m]
-    r = y - lin.pred[:m]
-    e = np.empty_like(r)
-    k = J.shape[1]
-    ridge = 1e-10 * np.eye(k)
-    for f in np.unique(folds):
-        te = folds == f
-        tr = ~te
-        if k == 0:
-            e[:, te] = r[:, te]
-            continue
-        Jt, wt = J[tr], w2[tr]
-        A = Jt.T @ (wt[:, None] * Jt) + lin.lam + ridge * (1.0 + np.trace(lin.lam))
-        g = (r[:, tr] * wt) @ Jt - lin.prior_grad
-        d = np.linalg.solve(A, g.T).T
-        e[:, te] = r[:, te] - d @ J[te].T
+        Jt, wt = J[..., tr, :], w2[..., tr]
+        # normal equations of the fold's train rows: (k, k) shared, else (B, k, k); right-hand sides (B, k)
+        A = np.einsum("...mi,...m,...mj->...ij", Jt, wt, Jt) + lin.lam + ridge * (1.0 + np.trace(lin.lam))
+        wr = wt * r[:, tr]
+        g = (wr @ Jt if shared else np.einsum("bmi,bm->bi", Jt, wr)) - lin.prior_grad
+        d = np.linalg.solve(A, g.T).T if shared else np.linalg.solve(A, g[..., None])[..., 0]
+        e[:, te] = r[:, te] - (d @ J[te].T if shared else np.einsum("bmi,bi->bm", J[:, te], d))
     return e
 
 
