@@ -68,6 +68,7 @@ from ringfit.fit.priors import BOUNDS
 from ringfit.fit.profile_block import (harmonic_rows, noise_from_residual, nuisance_coords, nuisance_names,
                                        nuisance_start, profile_rows, read_through)
 from ringfit.fit.result import FitResult, covariance_from_jacobian
+from ringfit.io.case import CaseFolder, read_case_folder, sidecar_number
 from ringfit.io.conditions import pressure_conflict
 from ringfit.io.modes import ModeTable
 from ringfit.io.tyre import LINEAR_COVARIANCE, RingCovariance, Tyre
@@ -100,16 +101,14 @@ BLOCKS = ("free modes", "free damping", "loaded modes", "profiles", "torque")
 
 
 @dataclass
-class IdentifyInputs:
-    """What a case folder holds for the identification (see the module docstring)."""
+class IdentifyInputs(CaseFolder):
+    """What a case folder holds for the identification (see the module docstring): the reader's
+    :class:`~ringfit.io.case.CaseFolder` and how identify uses its tables — ``loaded`` (standing, with their
+    ``load_n``), ``skipped`` (why a table is not used), ``free_more`` (free tables at other pressures than
+    ``free``'s: identify across states, docs/physics.md §11)."""
 
-    folder: Path
-    tyre: Tyre
-    free: ModeTable
     loaded: list[ModeTable] = field(default_factory=list)
-    profiles: list = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
-    #: free tables at other pressures than ``free``'s (identify across states, docs/physics.md §11)
     free_more: list[ModeTable] = field(default_factory=list)
 
     @property
@@ -118,36 +117,23 @@ class IdentifyInputs:
             [Path(str(p.source)).name for p in self.profiles]
 
 
-def _number(cond: dict, key: str):
-    value = cond.get(key)
-    if value is None:
-        return None
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        return math.nan
-    return value
-
-
 def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
     """Read a case folder for :func:`identify` with the one case-folder reader
     (:func:`ringfit.io.case.read_case_folder`: its rules and messages), then identify's own use of it: a free table
     at another pressure is a state of its own (identify across states), a rolling table is listed as skipped, any
     other table must be ``loaded`` with its ``load_n`` (one line naming the sidecar and the key); every pressure is
     checked at the end (one: the tyre file's; several: the pressure law)."""
-    from ringfit.io.case import read_case_folder
-
     # the pressure is checked below, over every measurement (one pressure: the tyre file's; several: the law)
     case = read_case_folder(folder, other_pressure="refuse", pressure_law=True)
     tyre, free = case.tyre, case.free
-    inputs = IdentifyInputs(case.folder, tyre, free)
+    inputs = IdentifyInputs(case.folder, tyre, free, tables=case.tables, records=case.records)
     free_path = Path(str(free.source))
     stated = [(free.condition, free_path.with_suffix(".json"))]  # every measurement's condition: its pressure
     for table in case.tables:
         p = Path(str(table.source))
         sidecar = p.with_suffix(".json")
         cond = table.condition
-        speed = _number(cond, "speed_kmh") or _number(cond, "rotation_hz") or 0.0
+        speed = sidecar_number(cond, "speed_kmh") or sidecar_number(cond, "rotation_hz") or 0.0
         if table.state == "free" and not speed:
             # a free table at another pressure is a state of its own (identify across states); at a pressure
             # already measured it is a second copy of that state
@@ -167,7 +153,7 @@ def read_identify_folder(folder: str | os.PathLike) -> IdentifyInputs:
         if table.state != "loaded":
             raise InputError(f"state {table.state!r}: expected \"loaded\" (standing, with load_n) for a table "
                              "the identification uses", source=sidecar)
-        load = _number(cond, "load_n")
+        load = sidecar_number(cond, "load_n")
         if load is None:
             raise InputError("missing 'load_n': a loaded table's load [N] is needed to identify from it",
                              source=sidecar)
@@ -205,7 +191,7 @@ TREAD_DEPTH_TOL_MM = 0.05
 
 def measured_pressure(cond: dict, tyre: Tyre) -> float:
     """A measurement's pressure [Pa]: its stated ``pressure_bar``, else the tyre file's p_ref."""
-    p = _number(cond, "pressure_bar")
+    p = sidecar_number(cond, "pressure_bar")
     return float(tyre.geometry.pressure) if p is None or not (math.isfinite(p) and p > 0) else p * 1e5
 
 
@@ -244,7 +230,7 @@ def _check_pressures(stated: list, tyre: Tyre) -> None:
                                  source=source)
     d_ref = tyre.state_values.get("tread_depth_mm")
     for cond, source in stated:
-        d = _number(cond, "tread_depth_mm")
+        d = sidecar_number(cond, "tread_depth_mm")
         if d is not None and (d_ref is None or abs(d - d_ref) > TREAD_DEPTH_TOL_MM):
             at = "no tread_depth_mm" if d_ref is None else f"tread_depth_mm = {d_ref:g}"
             raise InputError(f"tread_depth_mm = {d:g}: identify reads every measurement at the tyre file's tread "
@@ -512,7 +498,7 @@ def _loaded_rows(tables: list[ModeTable], ring: RingParams, geometry: TyreGeomet
     n, sin, tab, freq, sigma, loads, drums, untagged = [], [], [], [], [], [], [], []
     for ti, t in enumerate(tables):
         loads.append(float(t.condition["load_n"]))
-        d = _number(t.condition, "drum_diameter_m")
+        d = sidecar_number(t.condition, "drum_diameter_m")
         drums.append(d if d and math.isfinite(d) and d > 0 else math.nan)
         std = t.freq_std_hz
         for i in range(len(t)):
@@ -645,10 +631,10 @@ def plan_states(inputs: IdentifyInputs) -> StatePlan:
     p_free = np.array([measured_pressure(t.condition, tyre) for t in [inputs.free, *inputs.free_more]])
     p_loaded = np.array([measured_pressure(t.condition, tyre) for t in inputs.loaded])
     p_prof = np.array([measured_pressure(pr.condition, tyre) for pr in inputs.profiles])
-    torque = np.array([_number(pr.condition, "torque_nm") or 0.0 for pr in inputs.profiles])
+    torque = np.array([sidecar_number(pr.condition, "torque_nm") or 0.0 for pr in inputs.profiles])
     sigma = np.zeros(torque.size)
     for i, pr in enumerate(inputs.profiles):
-        given = _number(pr.condition, "torque_std_nm")
+        given = sidecar_number(pr.condition, "torque_std_nm")
         if given is not None and not (math.isfinite(given) and given > 0):
             raise InputError(f"torque_std_nm = {pr.condition.get('torque_std_nm')!r}: expected a positive σ of the "
                              "stated torque [N m]", source=Path(str(pr.source)).with_suffix(".json"))

@@ -64,7 +64,7 @@ class CaseFolder:
             [Path(str(p.source)).name for p in self.profiles]
 
 
-def _number(cond: dict, key: str):
+def sidecar_number(cond: dict, key: str):
     """A sidecar value as a float; ``None`` when absent, NaN when not a number."""
     value = cond.get(key)
     if value is None:
@@ -97,7 +97,7 @@ def read_case_folder(folder: str | os.PathLike, *, other_pressure: str = "warn",
         raise InputError("missing free.modes.csv: the free, static tyre's modes the ring is fitted to "
                          "(docs/formats.md §6)", source=folder)
     free = read_mode_table(free_path)
-    speed, rotation = _number(free.condition, "speed_kmh") or 0.0, _number(free.condition, "rotation_hz") or 0.0
+    speed, rotation = sidecar_number(free.condition, "speed_kmh") or 0.0, sidecar_number(free.condition, "rotation_hz") or 0.0
     if free.state != "free" or speed > 0 or rotation > 0:
         raise InputError(f"free.modes.json says state {free.state!r}, speed {free.condition.get('speed_kmh', 0)}; "
                          "free.modes.csv must be the static, free tyre", source=free_path.with_suffix(".json"))
@@ -126,11 +126,11 @@ def read_case_folder(folder: str | os.PathLike, *, other_pressure: str = "warn",
             raise InputError(f"missing sidecar {sidecar.name} (speed_kmh, load_n, ...; docs/formats.md §3)", source=p)
         prof = read_profile(p)
         for key in ("load_n", "speed_kmh"):
-            v = _number(prof.condition, key)
+            v = sidecar_number(prof.condition, key)
             if v is None or not (math.isfinite(v) and v > 0):
                 raise InputError(f"missing or non-positive '{key}' = {prof.condition.get(key)!r}: a profile in a "
                                  f"case folder is modelled at its {key} (docs/formats.md §6)", source=sidecar)
-        torque = _number(prof.condition, "torque_nm")
+        torque = sidecar_number(prof.condition, "torque_nm")
         if torque is not None and torque != 0.0 and prof.rotation_hz is None:
             warnings.warn(f"{p.name}: a profile at a torque without rotation_hz: Ω = V/R_e of free rolling, off by "
                           "the slip (state the encoder's rotation_hz)", stacklevel=2)
