@@ -66,7 +66,7 @@ from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_F
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
 from ringfit.fit.profile_block import (harmonic_rows, noise_from_residual, nuisance_coords, nuisance_names,
-                                       nuisance_start, profile_rows, read_through)
+                                       nuisance_prior, nuisance_start, profile_rows, read_through)
 from ringfit.fit.result import FitResult, covariance_from_jacobian
 from ringfit.io.case import CaseFolder, read_case_folder, sidecar_number
 from ringfit.io.conditions import pressure_conflict
@@ -888,7 +888,7 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
                            across=plan.active)
     slices = _slices(rows)
     scales = {b: 1.0 for b in slices}
-    prior = None
+    prior = nuisance_prior(P)  # the runs share one sensor: their gains and offsets tied (profile block)
     if rows.loaded is None and rows.profiles is None:
         # a free tyre's frequencies hardly see EI (docs/physics.md §2.1: the bending term is ~10 % of the
         # pressure term): without loaded tables or profiles the fit would chase it to a bound and not converge

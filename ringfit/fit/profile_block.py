@@ -10,7 +10,10 @@ that reads profiles (docs/physics.md §11 "profiles").
 - **nuisances**: per profile an angle offset (linear, ±:data:`OFFSET_BOUND`) and a gain on the reading
   (log, in :data:`GAIN_RANGE`; the sensor's sensitivity and its offset from the belt), named by
   :func:`nuisance_names`, solved in :func:`nuisance_coords`, applied to the model's channels by
-  :func:`read_through`;
+  :func:`read_through`. The runs share one sensor: :func:`nuisance_prior` holds the gains to a common gain
+  (log sd :data:`GAIN_COMMON_SD`) with each run's own deviation of log sd :data:`GAIN_SPREAD` (a sensitivity's
+  drift with the liner's temperature over a session), and the angle offsets to a common offset with each
+  run's own of sd :data:`OFFSET_SPREAD` — so a run's amplitude and angle are evidence, not free scales;
 - **noise**: per profile, channel and harmonic, from the residual's spectrum (:func:`noise_spectrum`: a
   power law, then the ratio averaged over the ±:data:`NOISE_SMOOTHING` neighbouring harmonics with each
   harmonic's own residual left out), widened by ν/(ν − 4) for weights estimated from ν parts and by the
@@ -29,7 +32,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from ringfit.fit.engine import LINEAR, LOG, Coordinate
+from ringfit.fit.engine import LINEAR, LOG, Coordinate, GaussianPrior
 from ringfit.physics.sensor import shift_angle
 
 #: Harmonics averaged on either side for a profile's noise spectrum.
@@ -38,6 +41,17 @@ NOISE_SMOOTHING = 4
 PROFILE_K_MIN = 2
 #: Bounds of a profile's gain on the reading (sensor sensitivity, its offset from the belt).
 GAIN_RANGE = (0.5, 2.0)
+#: sd of a run's log gain about the session's common gain: one sensor, glued once, whose sensitivity drifts
+#: with the liner's temperature (piezoelectric sensitivity ~0.05–0.1 %/K over the 20–40 K a drum session's
+#: speeds heat the liner: 1–4 %) — docs/physics.md §11 "profiles".
+GAIN_SPREAD = 0.03
+#: sd of the common gain's log about 1 (the stated sensitivity): wide, the sensor's offset from the belt and its
+#: calibration are not known to better than tens of per cent.
+GAIN_COMMON_SD = 0.5
+#: sd of a run's angle offset about the session's common offset [rad]: one sensor on one wheel, whose angle
+#: origin (encoder zero or once-per-revolution trigger) moves between runs only by the trigger's latency × Ω
+#: and the processing's jitter — docs/physics.md §11 "profiles".
+OFFSET_SPREAD = math.radians(0.5)
 #: Bound of a profile's angle offset [rad], and its solver scale.
 OFFSET_BOUND = math.radians(10.0)
 OFFSET_SCALE = math.radians(1.0)
@@ -58,6 +72,27 @@ def nuisance_coords(P: int) -> tuple[Coordinate, ...]:
         out.append(Coordinate(f"angle_offset_{i + 1}", LINEAR, scale=OFFSET_SCALE, lo=-OFFSET_BOUND, hi=OFFSET_BOUND))
         out.append(Coordinate(f"gain_{i + 1}", LOG, lo=GAIN_RANGE[0], hi=GAIN_RANGE[1]))
     return tuple(out)
+
+
+def nuisance_prior_cov(P: int) -> np.ndarray:
+    """Covariance ``(2P, 2P)`` of the nuisances (:func:`nuisance_names` order; angle offsets in rad, gains in
+    log): per kind a common part shared by every run plus each run's own deviation, ``c²·11ᵀ + s²·I`` — offsets
+    c = :data:`OFFSET_BOUND`, s = :data:`OFFSET_SPREAD`; log gains c = :data:`GAIN_COMMON_SD`, s =
+    :data:`GAIN_SPREAD`. The runs share one sensor: a run's amplitude and angle are evidence, not free scales."""
+    cov = np.zeros((2 * P, 2 * P))
+    for k, (c, s) in enumerate(((OFFSET_BOUND, OFFSET_SPREAD), (GAIN_COMMON_SD, GAIN_SPREAD))):
+        cov[k::2, k::2] = c**2 * np.ones((P, P)) + s**2 * np.eye(P)
+    return cov
+
+
+def nuisance_prior(P: int) -> GaussianPrior | None:
+    """The engine's prior on the ``P`` runs' nuisances in their solver coordinates (:func:`nuisance_coords`:
+    offset/:data:`OFFSET_SCALE`, ln gain), mean 0 (no offset, the stated sensitivity), covariance
+    :func:`nuisance_prior_cov`; ``None`` for no profile."""
+    if P <= 0:
+        return None
+    d = np.tile([OFFSET_SCALE, 1.0], P)
+    return GaussianPrior(nuisance_names(P), np.zeros(2 * P), nuisance_prior_cov(P) / np.outer(d, d))
 
 
 def nuisance_start(P: int) -> np.ndarray:
@@ -158,5 +193,5 @@ def noise_from_residual(residual: np.ndarray, leverage: np.ndarray, k_min: int =
 
 
 __all__ = ["profile_rows", "harmonic_rows", "profile_band", "nuisance_names", "nuisance_coords", "nuisance_start",
-           "read_through", "noise_spectrum", "noise_from_residual", "GAIN_RANGE", "OFFSET_BOUND", "OFFSET_SCALE",
+           "read_through", "nuisance_prior", "nuisance_prior_cov", "GAIN_SPREAD", "GAIN_COMMON_SD", "OFFSET_SPREAD", "noise_spectrum", "noise_from_residual", "GAIN_RANGE", "OFFSET_BOUND", "OFFSET_SCALE",
            "PROFILE_K_MIN", "NOISE_SMOOTHING", "PROFILE_BAND_MARGIN"]

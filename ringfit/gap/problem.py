@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ringfit.gap.effects.base import Effect, Parameter
+from ringfit.fit.engine import LINEAR, LOG, Coordinate
 
 #: :attr:`ProblemMeta.line_problem` before :func:`ringfit.gap.modal_lines.line_problem` has looked (``None`` = looked, none).
 UNSET = object()
@@ -154,19 +155,32 @@ class GapProblem:
     def prior_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The baseline prior as whitened residual rows: ``(index, mean_u, W)`` with rows ``W (u[index] − mean_u)``.
 
-        ``u`` is the solver coordinate of each baseline parameter (log, or value/scale for a
-        linear nuisance); ``index`` the baseline parameters with a prior; ``W`` the inverse
-        Cholesky factor of their prior covariance.
+        ``u`` is the solver coordinate of each baseline parameter (:meth:`base_coordinate`: log, or
+        (value − center)/scale for a linear nuisance, whose prior covariance is in natural units); ``index`` the
+        baseline parameters with a prior; ``W`` the inverse Cholesky factor of their prior covariance.
         """
         nb = len(self.base)
         mean = np.asarray(self.base_values if self.base_prior_mean is None else self.base_prior_mean, dtype=np.float64)
         cov = (np.diag(np.asarray(self.base_prior_sd, dtype=np.float64) ** 2) if self.base_prior_cov is None
                else np.asarray(self.base_prior_cov, dtype=np.float64))
-        idx = np.array([i for i in range(nb) if np.isfinite(cov[i, i]) and not self.is_linear(i)], dtype=int)
+        idx = np.array([i for i in range(nb) if np.isfinite(cov[i, i])], dtype=int)
         if idx.size == 0:
             return idx, np.zeros(0), np.zeros((0, 0))
-        L = np.linalg.cholesky(cov[np.ix_(idx, idx)])
-        return idx, np.log(mean[idx]), np.linalg.inv(L)
+        coords = [self.base_coordinate(i) for i in idx]
+        # a linear nuisance's prior is given in natural units: its solver coordinate is (θ − center)/scale
+        d = np.array([1.0 if c.kind == LOG else c.scale for c in coords])
+        L = np.linalg.cholesky(cov[np.ix_(idx, idx)] / np.outer(d, d))
+        return idx, np.array([c.to_u(mean[i]) for c, i in zip(coords, idx)]), np.linalg.inv(L)
+
+    def base_coordinate(self, i: int) -> Coordinate:
+        """The solver coordinate of baseline parameter ``i`` (its :attr:`base_coords` entry, else linear with
+        :attr:`base_linear_scale` or log) — bounds aside, which the refits set (:func:`ringfit.gap.ranking.coordinates`)."""
+        name = self.base[i]
+        if self.base_coords and name in self.base_coords:
+            return self.base_coords[name]
+        if self.is_linear(i):
+            return Coordinate(name, LINEAR, scale=float(self.base_linear_scale[i]))
+        return Coordinate(name, LOG)
 
     def is_linear(self, i: int) -> bool:
         """Whether baseline parameter ``i`` is fitted linearly (a nuisance) rather than as a log."""

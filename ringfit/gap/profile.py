@@ -8,8 +8,9 @@ fit to ``free.modes.csv`` (:mod:`ringfit.gap.modal`), its damping ratio from
 that table's damping column (else ``tyre.toml``). Fitted to the profiles:
 the tread stiffness k_trd (starting at ``tyre.toml``'s value or 19e6 N/m²,
 weak log-normal prior σ = 1), per profile a recorded-angle offset (linear within
-±10°, docs/physics.md §5 layer 6) and a gain on the reading (log, 0.5–2) — the
-nuisances of the profile block :mod:`ringfit.fit.profile_block`, the same that
+±10°, docs/physics.md §5 layer 6) and a gain on the reading (log, 0.5–2; each held to the
+runs' common value by the block's :func:`~ringfit.fit.profile_block.nuisance_prior_cov`, 0.5° and
+3 % per run) — the nuisances of the profile block :mod:`ringfit.fit.profile_block`, the same that
 ``ringfit identify`` fits, applied by its :func:`~ringfit.fit.profile_block.read_through`
 — and EI, k_w, k_v, ζ
 with the free-table fit's Laplace posterior (correlated, log units) as their
@@ -64,7 +65,7 @@ import numpy as np
 from ringfit._cache import jit
 from ringfit.errors import InputError
 from ringfit.fit.engine import LINEAR
-from ringfit.fit.profile_block import nuisance_coords, nuisance_names, nuisance_start, read_through
+from ringfit.fit.profile_block import nuisance_coords, nuisance_prior_cov, nuisance_names, nuisance_start, read_through
 from ringfit.gap.effects.base import Effect
 from ringfit.gap.problem import GapProblem, ProblemMeta
 from ringfit.gap.profile_noise import noise_dof, profile_noise
@@ -264,7 +265,8 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
 
     k0 = float(ring.k_tread)
     values = np.concatenate([[k0], nuisance_start(P), [float(getattr(ring, n)) for n in ring_names]])
-    cov = np.diag([K_TREAD_PRIOR_SD**2] + [np.inf] * len(nuis) + [0.0] * len(ring_names))
+    cov = np.diag([K_TREAD_PRIOR_SD**2] + [0.0] * len(nuis) + [0.0] * len(ring_names))
+    cov[1 : 1 + len(nuis), 1 : 1 + len(nuis)] = nuisance_prior_cov(P)  # the runs share one sensor
     if ring_names:
         cov[1 + len(nuis):, 1 + len(nuis):] = np.asarray(ring_prior["cov"], dtype=np.float64)
     problem = GapProblem(

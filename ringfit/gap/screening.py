@@ -136,12 +136,14 @@ def objective(problem: GapProblem, fit: FitResult) -> float:
 
 def reference_start(problem: GapProblem, baseline: FitResult) -> np.ndarray:
     """``baseline.theta`` with every positive baseline parameter that has a prior put back at the prior's
-    mean (what independent data say: the free-table ring, ``tyre.toml``'s k_trd); nuisances (linear
-    parameters) and effect parameters as in ``baseline``."""
+    mean (what independent data say: the free-table ring, ``tyre.toml``'s k_trd); nuisances (the profile
+    block's gains and angle offsets, :attr:`~ringfit.gap.problem.GapProblem.base_coords`, whose prior only ties
+    the runs together) and effect parameters as in ``baseline``."""
     th = np.array(baseline.theta, dtype=np.float64)
     idx, mean_u, _ = problem.prior_rows()
     for i, mu in zip(idx, mean_u):
-        th[i] = float(np.exp(mu))
+        if not problem.is_linear(i) and not (problem.base_coords and problem.base[i] in problem.base_coords):
+            th[i] = float(np.exp(mu))
     return th
 
 
