@@ -78,6 +78,48 @@ def _small_joint_problem(T: int = 2, P: int = 3):
     return problem, theta, tuple(problem.names)[:6]
 
 
+@pytest.mark.slow
+def test_the_joint_jacobian_in_two_stages_is_the_one_stage_jacobian():
+    """identify's model in two stages (the contact solves, then each run's gain and angle offset on the reading):
+    its linearisation passes the 2P nuisances' tangents through the reading only — and gives the one-stage
+    Jacobian, whose nuisance columns are checked against central differences of the residuals written here."""
+    from ringfit.fit import engine
+    from ringfit.fit import identify as im
+
+    problem, theta, ring_free = _small_joint_problem(T=1, P=2)
+    theta = theta.copy()
+    theta[len(theta) - 4 :] = [0.01, 1.05, -0.02, 0.97]  # offsets [rad] and gains away from their start
+
+    class OneStage(im.JointResiduals):
+        @property
+        def readout(self):
+            return ()
+
+    one = engine.Problem(OneStage(2, problem.model.solver, problem.model.profile_model), problem.data, problem.coords)
+    from ringfit.fit.least_squares import RING_FIELDS
+
+    r = len(RING_FIELDS)
+    assert problem.model.readout == (r, r + 1, r + 2, r + 3) and one.model.readout == ()
+    free = ring_free + ("angle_offset_1", "gain_1", "angle_offset_2", "gain_2")
+    two_lin = engine.linearize(problem, theta, free)
+    one_lin = engine.linearize(one, theta, free)
+    scale = np.abs(one_lin.jacobian).max(axis=0)
+    np.testing.assert_allclose(two_lin.residuals, one_lin.residuals, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(two_lin.jacobian / scale, one_lin.jacobian / scale, rtol=0, atol=1e-10)
+    h = 1e-6
+    for j, name in enumerate(free[6:], start=6):
+        i = problem.names.index(name)
+        step = np.zeros_like(theta)
+        if name.startswith("gain"):  # log coordinate: d/d ln g
+            step[i] = h
+            hi, lo = theta * np.exp(step), theta * np.exp(-step)
+        else:  # linear coordinate: (θ − center)/scale, scale 1°
+            step[i] = h * problem.coords[i].scale
+            hi, lo = theta + step, theta - step
+        fd = (engine.residuals(problem, hi)[0] - engine.residuals(problem, lo)[0]) / (2 * h)
+        np.testing.assert_allclose(two_lin.jacobian[:, j], fd, rtol=0, atol=1e-6 * max(np.abs(fd).max(), 1.0))
+
+
 def test_the_joint_programs_hold_no_batched_lapack_call():
     """The hang of `ringfit identify` (jaxlib 0.10.2: concurrent batched LAPACK calls wait for each other on XLA's
     CPU pool): neither the joint least-squares solve nor the posterior's log-probability over a chunk of walkers

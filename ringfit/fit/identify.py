@@ -327,7 +327,21 @@ class JointResiduals(AbstractResiduals):
     #: (:func:`state_parameters`), every state is read through :func:`ringfit.physics.state.state_tyre`
     across: bool = eqx.field(static=True, default=False)
 
+    # two stages (the engine's two-stage model, :class:`ringfit.fit.engine.AbstractResiduals`): the solves (eq. 18,
+    # the loaded modes, the rolling profiles), then each run's reading through its gain and angle offset — so a
+    # linearisation passes the 2P nuisances' tangents through the reading only, not through the contact solves
+    @property
+    def readout(self) -> tuple[int, ...]:
+        """θ indices of the profiles' nuisances (angle offset, gain per profile): they act after the solves."""
+        return tuple(range(len(RING_FIELDS), len(RING_FIELDS) + 2 * self.n_profiles))
+
     def __call__(self, theta, data: JointArrays):
+        return self.outer(self.inner(theta, data), theta, data)
+
+    def inner(self, theta, data: JointArrays):
+        """The expensive stage: every block's model before the profiles' reading — ``(free model Hz, loaded model
+        Hz or None, profile channels (P, 2, M) or None, drive torques (P,) or None)``; it does not depend on the
+        :attr:`readout` entries of θ."""
         ring = ring_from_vector(theta)
         g = data.geometry
         laws, slips = state_parameters(theta, data, self.n_profiles) if self.across else (None, None)
@@ -344,10 +358,7 @@ class JointResiduals(AbstractResiduals):
         else:
             per = jax.vmap(lambda p: natural_frequencies(*at(p), data.f_n))(data.f_pressures)  # (F, mf)
             f_model = per[data.f_table, jnp.arange(data.f_n.shape[0])]
-        rows = [(f_model - data.f_freq) / data.f_sigma]
-        aux = [f_model, None, None]
-        if data.d_zeta is not None:  # free damping: one modal ζ (docs/physics.md §11)
-            rows.append((ring.damping_ratio - data.d_zeta) / data.d_sigma)
+        l_model = ch = torque = None
         if data.l_n is not None:
             # loaded modes: the patch half-angle from the static contact solve at load_n (docs/physics.md §4.3–4.4),
             # the modes from the patch foundation of §6 ground_contact (§11 "loaded modes"); one table after another
@@ -361,17 +372,10 @@ class JointResiduals(AbstractResiduals):
 
             pressures = data.l_load if data.l_pressure is None else data.l_pressure  # (unused without laws)
             freqs = serial_map(table_freqs, (data.l_load, data.l_roads, pressures))  # (T, 2, N)
-            model = freqs[data.l_table, data.l_sin, data.l_n]
-            rows.append((model - data.l_freq) / data.l_sigma)
-            aux[1] = model
+            l_model = freqs[data.l_table, data.l_sin, data.l_n]
         if data.p_omega is not None:
-            P = self.n_profiles
-            base = len(RING_FIELDS)
-            offset = theta[base : base + 2 * P : 2]
-            gain = theta[base + 1 : base + 2 * P : 2]
-            # profiles: the rolling ring read by the sensor (docs/physics.md §4–§5), per profile a gain and an
-            # angle offset, compared in revolution harmonics (§11 "profiles"); one profile after another (serial_map)
-
+            # profiles: the rolling ring read by the sensor (docs/physics.md §4–§5), one profile after another
+            # (serial_map); each run's gain and angle offset are the outer stage's
             def one_profile(args):
                 om, fz, road, band = args
                 return profile_channels(self.profile_model, ring, g, om[None], fz[None],
@@ -388,9 +392,27 @@ class JointResiduals(AbstractResiduals):
 
             if laws is None:
                 ch = serial_map(one_profile, (data.p_omega, data.p_load, data.p_roads, data.p_band))
-                torque = None
             else:
                 ch, torque = serial_map(one_state, (data.p_omega, data.p_load, data.p_roads, data.p_pressure, slips))
+        return f_model, l_model, ch, torque
+
+    def outer(self, inner, theta, data: JointArrays):
+        """The cheap stage: every block's rows, each divided by its σ, from :meth:`inner`'s models — the profiles
+        read through each run's gain and angle offset (:func:`ringfit.fit.profile_block.read_through`)."""
+        f_model, l_model, ch, torque = inner
+        ring = ring_from_vector(theta)
+        rows = [(f_model - data.f_freq) / data.f_sigma]
+        aux = [f_model, l_model, None]
+        if data.d_zeta is not None:  # free damping: one modal ζ (docs/physics.md §11)
+            rows.append((ring.damping_ratio - data.d_zeta) / data.d_sigma)
+        if l_model is not None:
+            rows.append((l_model - data.l_freq) / data.l_sigma)
+        if ch is not None:
+            P = self.n_profiles
+            base = len(RING_FIELDS)
+            offset = theta[base : base + 2 * P : 2]
+            gain = theta[base + 1 : base + 2 * P : 2]
+            # profiles compared in revolution harmonics (§11 "profiles")
             model = harmonic_rows(read_through(ch, offset, gain), rows_grid=self.rows_grid or None, k_top=self.k_top)
             rows.append(((model - data.p_measured) / data.p_sigma).ravel())
             aux[2] = model
