@@ -145,6 +145,40 @@ def test_linearised_refits_of_many_draws_with_a_prior():
             np.testing.assert_allclose(e[b, te], y[b, te] - pred[te] - X[te] @ d, rtol=1e-7, atol=1e-9)
 
 
+def test_a_held_out_runs_own_nuisances_are_fitted_to_its_rows():
+    """A fold's own nuisances (``Linearised.held``: a run's gain and offset under leave-one-speed-out) are fitted to
+    the fold's rows after the training refit — for B draws with shared and with per-draw weights — against an
+    independent two-step computation per draw and fold (numpy.linalg.lstsq: the refit on the train rows with the
+    fold's columns absent there, then the fold's own columns on its rows)."""
+    from ringfit.gap.calibration import Linearised, heldout_linear
+
+    rng = np.random.default_rng(11)
+    m, B = 60, 5
+    folds = np.repeat(np.arange(3), m // 3)
+    shared = rng.normal(size=(m, 2))  # parameters every run shares
+    own = np.zeros((m, 3))  # one nuisance per run, acting on its own rows only
+    own[np.arange(m), folds] = rng.normal(1.0, 0.2, m)
+    X = np.hstack([shared, own])
+    pred = rng.normal(size=m)
+    y = pred + rng.normal(size=(B, m))
+    sigma = rng.uniform(0.05, 0.2, m)
+    held = {0: [2], 1: [3], 2: [4]}
+    lin = Linearised(pred=pred, J=X, u_hat=np.zeros(5), lam=np.zeros((5, 5)), prior_grad=np.zeros(5), held=held)
+    e = heldout_linear(lin, y, 1.0 / sigma**2, folds)
+    np.testing.assert_allclose(heldout_linear(lin, y, np.broadcast_to(1.0 / sigma**2, (B, m)), folds), e,
+                               rtol=1e-9, atol=1e-12)
+    for b in range(B):
+        for f in range(3):
+            tr, te = folds != f, folds == f
+            keep = [c for c in range(5) if c != 2 + f]  # the fold's own column is zero on the train rows
+            d = np.linalg.lstsq(X[tr][:, keep] / sigma[tr, None], (y[b, tr] - pred[tr]) / sigma[tr], rcond=None)[0]
+            r = y[b, te] - pred[te] - X[te][:, keep] @ d
+            g = np.linalg.lstsq(X[te][:, [2 + f]] / sigma[te, None], r / sigma[te], rcond=None)[0]
+            np.testing.assert_allclose(e[b, te], r - X[te][:, [2 + f]] @ g, rtol=1e-7, atol=1e-9)
+            # fitted to its own rows: the held-out residual is orthogonal to the run's own column
+            assert abs(np.sum(e[b, te] * X[te, 2 + f] / sigma[te] ** 2)) < 1e-8 * np.sum(X[te, 2 + f] ** 2 / sigma[te] ** 2)
+
+
 @pytest.mark.slow  # > 10 s: CI runs it with -m slow (issue 24 item 3)
 def test_p_value_is_uniform_under_the_null(tmp_path):
     """200 data sets drawn from a small case's baseline (no effect), each with its p against an independent

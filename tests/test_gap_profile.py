@@ -384,3 +384,24 @@ def test_linearised_gain_and_offset_columns_match_central_differences():
         assert scale > 0
         np.testing.assert_allclose(lin.jacobian[:, j], fd, rtol=0, atol=(1e-4 if j == 0 else 1e-7) * scale,
                                    err_msg=c.name)
+
+
+@pytest.mark.slow
+def test_a_run_whose_sensor_reads_2_percent_high_is_not_an_effect(tmp_path):
+    """One sensor, one run's reading 2 % high (its sensitivity drifted with the liner's temperature): the held-out
+    prediction of that run fits its own gain and angle offset (``ProblemMeta.fold_nuisances``), so a case with no
+    effect stays ``none`` — and so does the same case read as recorded."""
+    from ringfit.io.profiles import Profile, read_profile, write_profile
+    from ringfit.synth.cases import make_profile_case
+
+    make_profile_case(tmp_path / "case", effect="none", seed=2008)
+    shutil.copytree(tmp_path / "case", tmp_path / "drift")
+    run = sorted((tmp_path / "drift").glob("*.profile.csv"))[2]
+    p = read_profile(run)
+    write_profile(Profile(p.angle_deg, 1.02 * p.acc_radial_ms2, 1.02 * p.acc_tangential_ms2, condition=p.condition),
+                  run, overwrite=True)
+    for name in ("case", "drift"):
+        d = diagnose(tmp_path / name, progress=False)
+        assert d.verdict["effect"] == "none", (name, d.verdict)
+    part = next(p for p in d.parts if p.problem.domain == "profiles")
+    assert part.problem.meta.fold_nuisances == {i: (1 + 2 * i, 2 + 2 * i) for i in range(len(part.problem.data_files))}

@@ -62,7 +62,7 @@ import numpy as np
 
 from ringfit.fit.engine import LOG
 from ringfit.gap.problem import GapProblem
-from ringfit.gap.ranking import coordinates, gap_prior, parts, predict_and_jacobian, theta_names
+from ringfit.gap.ranking import coordinates, fold_nuisance_step, gap_prior, parts, predict_and_jacobian, theta_names
 
 #: Default significance level of an acceptance (``ringfit diagnose --alpha``).
 ALPHA = 0.01
@@ -79,6 +79,8 @@ class Linearised:
     u_hat: np.ndarray  # (k,)
     lam: np.ndarray  # (k, k) prior precision
     prior_grad: np.ndarray  # (k,) Λ(û − μ)
+    #: {fold: columns of J} — nuisances fitted to the held-out fold's own rows (``ProblemMeta.fold_nuisances``)
+    held: dict = None
 
 
 def linearise(problem: GapProblem, fit) -> Linearised:
@@ -97,7 +99,9 @@ def linearise(problem: GapProblem, fit) -> Linearised:
     else:
         W, mean = np.zeros((k, k)), np.zeros(k)
     lam = W.T @ W
-    return Linearised(pred, J * dth_du[None, :], u_hat, lam, lam @ (u_hat - mean))
+    cols = list(free)
+    held = {f: [cols.index(i) for i in idx if i in cols] for f, idx in problem.meta.fold_nuisances.items()}
+    return Linearised(pred, J * dth_du[None, :], u_hat, lam, lam @ (u_hat - mean), {f: c for f, c in held.items() if c})
 
 
 def heldout_linear(lin: Linearised, y, w2, folds, idx=None) -> np.ndarray:
@@ -130,6 +134,9 @@ def heldout_linear(lin: Linearised, y, w2, folds, idx=None) -> np.ndarray:
         g = (wr @ Jt if shared else np.einsum("bmi,bm->bi", Jt, wr)) - lin.prior_grad
         d = np.linalg.solve(A, g.T).T if shared else np.linalg.solve(A, g[..., None])[..., 0]
         e[:, te] = r[:, te] - (d @ J[te].T if shared else np.einsum("bmi,bi->bm", J[:, te], d))
+        h = (lin.held or {}).get(int(f))
+        if h:  # the fold's own nuisances fitted to its rows, as the held-out refits do (ranking.heldout)
+            e[:, te] -= fold_nuisance_step(J[..., te, :][..., h], e[:, te], w2[..., te])
     return e
 
 

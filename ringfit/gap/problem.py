@@ -39,6 +39,10 @@ class ProblemMeta:
       its predictions (test rows). ``sigma_matched``: σ of the rows before any widening (the random-line null).
     - ``series_dof``: ``{series: effective dof}`` of a profile's noise; ``noise_slope``: its fitted power law.
     - ``prior_guarded``: baseline indices whose prior the candidate refits may not move far.
+    - ``fold_nuisances``: ``{fold: baseline indices}`` — nuisances that act on that fold's rows alone (a profile's
+      own gain and angle offset under leave-one-speed-out): a held-out prediction of the fold fits them to the
+      fold's own rows (:func:`ringfit.gap.ranking.fold_nuisance_step`), since the other runs do not determine a
+      run's calibration.
     - ``condition_sd``: stated-condition uncertainty per effect parameter (loaded tables' patches).
 
     *Modal problems*
@@ -64,6 +68,7 @@ class ProblemMeta:
     series_dof: dict | None = None
     noise_slope: Any = None
     prior_guarded: tuple = ()
+    fold_nuisances: dict = field(default_factory=dict)
     condition_sd: dict = field(default_factory=dict)
     padded_rows: int | None = None
     files: list | None = None

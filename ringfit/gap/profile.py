@@ -277,7 +277,9 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
         noise_method="", baseline_model="gong-rolling", not_applicable=dropped,
         meta=ProblemMeta(block=BLOCK, tangents=nb + EFFECT_TANGENTS, screen_min_fraction=SCREEN_MIN_FRACTION,
                          k_max=kmax, omega=rdata.omega, omega_source=list(rdata.omega_source),
-                         prior_guarded=(0,) + tuple(range(1 + len(nuis), nb))),
+                         prior_guarded=(0,) + tuple(range(1 + len(nuis), nb)),
+                         # leave-one-speed-out: a held-out run's own gain and offset are fitted to it
+                         fold_nuisances={i: (1 + 2 * i, 2 + 2 * i) for i in range(P)} if P >= 2 else {}),
         base_linear=(False,) + linear + (False,) * len(ring_names),
         base_linear_scale=(1.0,) + tuple(c.scale for c in nuis_coords) + (1.0,) * len(ring_names),
         base_linear_bound=(1.0,) + tuple(c.hi if c.kind == LINEAR else 1.0 for c in nuis_coords)

@@ -303,6 +303,10 @@ def heldout(problem: GapProblem, fit: FitResult, max_steps: int = 60, variance: 
                         max_steps=max_steps)
         unconverged += not sub.converged
         out[test] = sub.extra["pred"][test]
+        held = problem.meta.fold_nuisances.get(int(f), ())
+        if held:  # the held-out run's own calibration (gain, angle offset) fitted to its own rows
+            _, Jh = predict_and_jacobian(problem, sub.theta, held)
+            out[test] += fold_nuisance_step(Jh[test], problem.y[test] - out[test], 1.0 / problem.sigma[test] ** 2)
         if variance:
             free = sub.free_index
             _, J = predict_and_jacobian(problem, sub.theta, free)
@@ -317,6 +321,20 @@ def heldout(problem: GapProblem, fit: FitResult, max_steps: int = 60, variance: 
     if variance:
         fit.extra["heldout_var"] = var
     return out
+
+
+def fold_nuisance_step(J, r, w2):
+    """The change of a held-out prediction ``(..., t)`` when the fold's own nuisances are fitted to its rows: one
+    weighted Gauss–Newton step ``J (JᵀWJ)⁻¹ JᵀW r`` from the training refit's values (``J`` ``(..., t, h)`` their
+    columns on the fold's rows, ``r`` ``(..., t)`` its held-out residuals, ``w2`` = 1/σ²). A run's gain and angle
+    offset are near-linear over their small range, and a step has the same form in the held-out refits and in the
+    nulls' linearised ones (:func:`ringfit.gap.calibration.heldout_linear`)."""
+    Jw = J * w2[..., :, None]
+    A = np.swapaxes(Jw, -1, -2) @ J
+    A = A + 1e-12 * np.trace(A, axis1=-2, axis2=-1)[..., None, None] * np.eye(J.shape[-1])
+    g = np.einsum("...ti,...t->...i", Jw, r)
+    d = np.linalg.solve(A, g[..., None])[..., 0]
+    return np.einsum("...ti,...i->...t", J, d)
 
 
 def rms(problem: GapProblem, resid: np.ndarray, mask=None) -> float:
