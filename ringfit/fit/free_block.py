@@ -44,6 +44,9 @@ SCALE_PASSES = 4
 SCALE_TOLERANCE = 0.02
 #: The two-sided 95 % normal quantile.
 Z95 = 1.959963984540054
+#: The smallest σ/f the scale estimate gives a row: no measured frequency is known better than 1 ppm, and a table
+#: of exact model frequencies (residual ~1e-15) must not weight its rows by a σ the solver cannot resolve.
+SIGMA_FLOOR_REL = 1e-6
 #: The noise models of a frequency fit: ``"estimated"`` (the block's scale from its residual, this module's),
 #: ``"fixed"`` (the starting σ as it is: a known σ, e.g. the posterior's simulation-based calibration, or the
 #: profile likelihood's refits at a fit's settled σ).
@@ -154,14 +157,16 @@ def check_noise(noise: str) -> str:
     return noise
 
 
-def fit_free_block(fit_at, sigma0: np.ndarray, stated: bool, noise: str = "estimated", scale0: float = 1.0):
+def fit_free_block(fit_at, sigma0: np.ndarray, stated: bool, noise: str = "estimated", scale0: float = 1.0,
+                   freq_hz: np.ndarray | None = None):
     """A fit of one free-modes block with its noise model: refit with the rows' σ rescaled until the scale settles.
 
     ``fit_at(sigma (m,))`` fits (or evaluates) the problem with those σ and returns its
     :class:`~ringfit.fit.result.FitResult` (residual rows: the block's ``m`` rows, then the prior's; Jacobian
     likewise); ``sigma0`` ``(m,)`` the starting σ (:func:`frequency_data`); ``stated``: only scaled up;
     ``noise``: ``"estimated"`` (the scale, :func:`block_scale`, at most :data:`SCALE_PASSES` fits, until the
-    scale changes by less than :data:`SCALE_TOLERANCE`) or ``"fixed"`` (σ₀ × ``scale0``, one fit, no widening).
+    scale changes by less than :data:`SCALE_TOLERANCE`; with ``freq_hz`` no row's σ below :data:`SIGMA_FLOOR_REL` × f)
+    or ``"fixed"`` (σ₀ × ``scale0``, one fit, no widening).
 
     **Returns:** ``(fit, info)``: the last fit (its rows weighted by the σ it used) and ``info`` — ``scale`` (σ used
     / σ₀), ``dof`` (ν of the last fit's residual; ∞ for a stated σ that holds or a fixed one), ``t_widening``,
@@ -173,6 +178,7 @@ def fit_free_block(fit_at, sigma0: np.ndarray, stated: bool, noise: str = "estim
     if noise == "fixed":
         fit = fit_at(sigma0 * scale)
         return fit, dict(scale=scale, dof=math.inf, t_widening=1.0, passes=1, noise=noise, sigma_hz=sigma0 * scale)
+    floor = 0.0 if freq_hz is None else SIGMA_FLOOR_REL * float(np.max(np.asarray(freq_hz) / sigma0))
     fit, dof = None, math.inf
     for passes in range(1, SCALE_PASSES + 1):
         fit = fit_at(sigma0 * scale)
@@ -184,10 +190,10 @@ def fit_free_block(fit_at, sigma0: np.ndarray, stated: bool, noise: str = "estim
         if settled and (s == 1.0 or (passes > 1 and abs(s - 1.0) < SCALE_TOLERANCE)):
             break
         if passes < SCALE_PASSES:
-            scale *= s
+            scale = max(scale * s, floor)
     return fit, dict(scale=scale, dof=dof, t_widening=t_widening(dof), passes=passes, noise=noise,
                      sigma_hz=sigma0 * scale)
 
 
 __all__ = ["FrequencyData", "frequency_data", "hat_diagonal", "block_scale", "t_widening", "fit_free_block",
-           "check_noise", "DEFAULT_RELATIVE_STD", "SCALE_PASSES", "SCALE_TOLERANCE", "Z95", "NOISE_MODELS"]
+           "check_noise", "DEFAULT_RELATIVE_STD", "SIGMA_FLOOR_REL", "SCALE_PASSES", "SCALE_TOLERANCE", "Z95", "NOISE_MODELS"]

@@ -179,10 +179,8 @@ def fit_natural_frequencies(
     # free sets of up to the four eq. 18 parameters padded to four: the profile likelihood's refits (three
     # free) share the four-parameter fit's compiled solve
     pad_to = max(len(free), len(DEFAULT_FREE))
-    theta = base.copy()
 
     def fit_at(sigma):
-        nonlocal theta
         arrays = FrequencyArrays(geometry, np.concatenate([data.n, np.ones(pad)]),
                                  np.concatenate([data.freq_hz, np.full(pad, 100.0)]),
                                  np.concatenate([sigma, np.full(pad, np.inf)]))
@@ -190,14 +188,14 @@ def fit_natural_frequencies(
                           plausible=BOUNDS, data_label="these modes")
         if at_initial:
             return evaluate(problem, base, free, n_data=m, pad_to=pad_to)
-        fit = least_squares(problem, theta, free, max_steps=max_steps, rtol=rtol, atol=atol, n_data=m,
-                            pad_to=pad_to)
-        if fit.converged:  # the next pass starts from this optimum (as identify's passes do)
-            theta = fit.theta.copy()
-        return fit
+        # every pass starts from ``initial``: the solver started at the last pass's optimum takes no step it can
+        # call converged (its first steps are all rejected)
+        return least_squares(problem, base, free, max_steps=max_steps, rtol=rtol, atol=atol, n_data=m,
+                             pad_to=pad_to)
 
     # the free-modes block's noise model (docs/physics.md §11): σ scaled from the residual until it settles
-    result, noise_info = fit_free_block(fit_at, data.sigma_hz, data.stated, noise, noise_scale)
+    result, noise_info = fit_free_block(fit_at, data.sigma_hz, data.stated, noise, noise_scale,
+                                           freq_hz=data.freq_hz)
     model = np.asarray(result.extra.pop("aux"))[:m]
     result.residuals = result.residuals[:m]
     result.jacobian = np.concatenate([result.jacobian[:m], result.jacobian[m + pad:]])
