@@ -122,20 +122,20 @@ def hat_diagonal(J: np.ndarray) -> np.ndarray:
     return np.sum(U[:, keep] ** 2, axis=1)
 
 
-def block_scale(residual, leverage, stated: bool) -> tuple[float, float]:
+def block_scale(residual, leverage, stated: bool, scaled: float = 1.0) -> tuple[float, float]:
     """The σ scale of one block and its residual degrees of freedom ``(s, ν)`` (docs/physics.md §11).
 
     ``residual`` ``(m,)``: the block's weighted rows ``(model − data)/σ`` at the optimum; ``leverage`` ``(m,)``: their
     hat-matrix diagonal (:func:`hat_diagonal` of the whole problem's Jacobian, prior rows included). ``s² = Σ r² /
-    ν`` with ``ν = max(m − Σ h, 1)``. A ``stated`` σ is only scaled up: ``s = max(s, 1)``, and where it holds (s ≤ 1)
-    no scale was estimated (ν = ∞, no widening)."""
+    ν`` with ``ν = max(m − Σ h, 1)``: the factor to multiply the rows' present σ by. A ``stated`` σ is only scaled
+    up: ``scaled`` is the factor its present σ already carries (the passes before), and the stated σ's total
+    factor ``scaled · s`` stays ≥ 1; where the stated σ holds (total 1) no scale was estimated (ν = ∞, no
+    widening)."""
     r = np.asarray(residual, dtype=np.float64)
     dof = max(r.size - float(np.sum(leverage)), 1.0)
     s = math.sqrt(float(r @ r) / dof)
-    if stated:
-        if s <= 1.0:
-            return 1.0, math.inf
-        return s, dof
+    if stated and scaled * s <= 1.0:
+        return 1.0 / scaled, math.inf
     return s, dof
 
 
@@ -183,7 +183,7 @@ def fit_free_block(fit_at, sigma0: np.ndarray, stated: bool, noise: str = "estim
     for passes in range(1, SCALE_PASSES + 1):
         fit = fit_at(sigma0 * scale)
         r = np.asarray(fit.residuals, dtype=np.float64)[:m]
-        s, dof = block_scale(r, hat_diagonal(fit.jacobian)[:m], stated)
+        s, dof = block_scale(r, hat_diagonal(fit.jacobian)[:m], stated, scale)
         # settled: a σ that holds (s = 1, the refit would repeat this fit) or, after a refit, a scale that moved
         # less than the tolerance (identify's criterion)
         settled = fit.converged or fit.status == "evaluated"

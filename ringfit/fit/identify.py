@@ -915,7 +915,8 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
                 block_dof[name] = max(sl.stop - sl.start - float(h[sl].sum()), 1.0)
                 s = 1.0
             else:  # the free-modes block's noise model (free_block): a stated σ only scaled up
-                s, block_dof[name] = block_scale(r[sl], h[sl], bool(block is not None and block.get("given")))
+                s, block_dof[name] = block_scale(r[sl], h[sl], bool(block is not None and block.get("given")),
+                                                 scales[name])
                 if block is not None:
                     block["sigma"] = block["sigma"] * s
             change = max(change, abs(s - 1.0))
