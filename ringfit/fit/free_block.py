@@ -13,8 +13,13 @@ scale) read the same free table the same way, so the same table gives the same r
   the fit is repeated with the rescaled rows until the scale settles (:data:`SCALE_PASSES`,
   :data:`SCALE_TOLERANCE`): a prior (``--prior physical``'s EI) makes the optimum depend on the scale;
 - **intervals**: :func:`t_widening` — a scale estimated from ν residual degrees of freedom makes the parameters
-  it pins follow Student's t_ν: the block's rows are widened by ``t_{ν,0.975}/z_{0.975}`` in the covariance
-  and in the sampled likelihood (``row_scale``, docs/physics.md §12.3).
+  it pins follow Student's t_ν: the block's rows are widened by ``t_{ν,0.975}/z_{0.975}``; and by √κ, the
+  block's model-discrepancy ratio (:func:`discrepancy_ratio` on :func:`frequency_folds`: held-out rows predicted
+  worse than their noise allows) — in the covariance and in the sampled likelihood alike (``row_scale``,
+  :func:`row_widening`, docs/physics.md §12.3).
+
+:func:`fit_free_block` runs the whole model around any fit of the block (``ringfit fit``'s); ``ringfit identify``
+composes the same functions over its blocks in its joint passes.
 
 Example::
 
@@ -47,6 +52,10 @@ Z95 = 1.959963984540054
 #: The smallest σ/f the scale estimate gives a row: no measured frequency is known better than 1 ppm, and a table
 #: of exact model frequencies (residual ~1e-15) must not weight its rows by a σ the solver cannot resolve.
 SIGMA_FLOOR_REL = 1e-6
+#: Folds of a frequency block for its discrepancy ratio (rows dealt round-robin: each fold spans the harmonics n).
+DISCREPANCY_FOLDS = 3
+#: A fold direction whose leverage is above this is the fold's alone (held out, nothing predicts it): left out.
+FOLD_LEVERAGE_MAX = 0.99
 #: The noise models of a frequency fit: ``"estimated"`` (the block's scale from its residual, this module's),
 #: ``"fixed"`` (the starting σ as it is: a known σ, e.g. the posterior's simulation-based calibration, or the
 #: profile likelihood's refits at a fit's settled σ).
@@ -150,6 +159,43 @@ def t_widening(dof: float) -> float:
     return float(stdtrit(max(dof, 1.0), 0.975)) / Z95
 
 
+def frequency_folds(idx) -> list[np.ndarray]:
+    """The held-out groups of a frequency block's rows ``idx`` (indices into the residual vector): dealt round-robin
+    into :data:`DISCREPANCY_FOLDS`, so each fold spans the harmonics n (docs/physics.md §11, model discrepancy)."""
+    idx = np.asarray(idx)
+    return [idx[j::DISCREPANCY_FOLDS] for j in range(min(DISCREPANCY_FOLDS, idx.size))]
+
+
+def discrepancy_ratio(J: np.ndarray, r: np.ndarray, folds: list[np.ndarray]) -> float:
+    """κ_b ≥ 1: how much more each held-out fold of a block would move the fit than its noise allows
+    (docs/physics.md §11, *model discrepancy*).
+
+    ``J``: the weighted Jacobian of the fit (data and prior rows), ``r``: its weighted residuals (unit variance
+    where the noise model is right), ``folds``: the block's held-out groups (row indices). With H = J(JᵀJ)⁺Jᵀ,
+    a fold F's rows predicted from the fit without them have the residual (I − H_FF)⁻¹ r_F (linearised), and its
+    influence ``D_F = r_Fᵀ H_FF (I − H_FF)⁻¹ r_F`` has expectation tr H_FF under the noise model alone. A form
+    error the parameters absorb differently in each fold raises it, however well the block's σ was fitted. Returns
+    ``max(1, Σ_F D_F / Σ_F tr H_FF)`` (directions of leverage > :data:`FOLD_LEVERAGE_MAX` left out); the block's
+    σ is multiplied by √κ_b in the covariance, i.e. a discrepancy variance (κ_b − 1)σ² added in quadrature.
+    A fit without finite rows (not converged, said by its status) gets 1."""
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
+        return 1.0
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    keep = s > 1e-12 * (s[0] if s.size else 1.0)
+    L = Vt[keep].T / s[keep]  # (JᵀJ)⁺ = L Lᵀ
+    D = T = 0.0
+    for F in folds:
+        if F.size == 0:
+            continue
+        u, sv, _ = np.linalg.svd(J[F] @ L, full_matrices=False)  # H_FF = u diag(sv²) uᵀ
+        lam = sv**2
+        ok = lam < FOLD_LEVERAGE_MAX
+        c = u[:, ok].T @ r[F]
+        D += float(np.sum(lam[ok] / (1.0 - lam[ok]) * c**2))
+        T += float(np.sum(lam[ok]))
+    return max(1.0, D / T) if T > 0 else 1.0
+
+
 def check_noise(noise: str) -> str:
     """``noise`` if it is one of :data:`NOISE_MODELS`, else an :class:`~ringfit.errors.InputError`."""
     if noise not in NOISE_MODELS:
@@ -170,14 +216,17 @@ def fit_free_block(fit_at, sigma0: np.ndarray, stated: bool, noise: str = "estim
 
     **Returns:** ``(fit, info)``: the last fit (its rows weighted by the σ it used) and ``info`` — ``scale`` (σ used
     / σ₀), ``dof`` (ν of the last fit's residual; ∞ for a stated σ that holds or a fixed one), ``t_widening``,
-    ``passes``, ``noise``, ``sigma_hz`` (the σ used)."""
+    ``discrepancy`` (κ ≥ 1 of :func:`discrepancy_ratio` on :func:`frequency_folds`; 1 for a fixed σ), ``passes``,
+    ``noise``, ``sigma_hz`` (the σ used). The intervals' rows are widened by ``t_widening · √discrepancy``
+    (:func:`row_widening`)."""
     check_noise(noise)
     sigma0 = np.asarray(sigma0, dtype=np.float64)
     m = sigma0.size
     scale = float(scale0)
     if noise == "fixed":
         fit = fit_at(sigma0 * scale)
-        return fit, dict(scale=scale, dof=math.inf, t_widening=1.0, passes=1, noise=noise, sigma_hz=sigma0 * scale)
+        return fit, dict(scale=scale, dof=math.inf, t_widening=1.0, discrepancy=1.0, passes=1, noise=noise,
+                         sigma_hz=sigma0 * scale)
     floor = 0.0 if freq_hz is None else SIGMA_FLOOR_REL * float(np.max(np.asarray(freq_hz) / sigma0))
     fit, dof = None, math.inf
     for passes in range(1, SCALE_PASSES + 1):
@@ -191,9 +240,17 @@ def fit_free_block(fit_at, sigma0: np.ndarray, stated: bool, noise: str = "estim
             break
         if passes < SCALE_PASSES:
             scale = max(scale * s, floor)
-    return fit, dict(scale=scale, dof=dof, t_widening=t_widening(dof), passes=passes, noise=noise,
+    kappa = discrepancy_ratio(np.asarray(fit.jacobian), np.asarray(fit.residuals), frequency_folds(np.arange(m)))
+    return fit, dict(scale=scale, dof=dof, t_widening=t_widening(dof), discrepancy=kappa, passes=passes, noise=noise,
                      sigma_hz=sigma0 * scale)
 
 
+def row_widening(info: dict) -> float:
+    """The factor on the block's σ in its intervals and its sampled likelihood: ``t_widening · √discrepancy`` (as
+    identify's ``row_scale``, docs/physics.md §12.3)."""
+    return float(info["t_widening"]) * math.sqrt(float(info["discrepancy"]))
+
+
 __all__ = ["FrequencyData", "frequency_data", "hat_diagonal", "block_scale", "t_widening", "fit_free_block",
+           "frequency_folds", "discrepancy_ratio", "row_widening", "DISCREPANCY_FOLDS", "FOLD_LEVERAGE_MAX",
            "check_noise", "DEFAULT_RELATIVE_STD", "SIGMA_FLOOR_REL", "SCALE_PASSES", "SCALE_TOLERANCE", "Z95", "NOISE_MODELS"]

@@ -64,7 +64,8 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares, residuals
-from ringfit.fit.free_block import SCALE_PASSES, SCALE_TOLERANCE, Z95, block_scale, hat_diagonal, t_widening
+from ringfit.fit.free_block import (DISCREPANCY_FOLDS, FOLD_LEVERAGE_MAX, SCALE_PASSES, SCALE_TOLERANCE, Z95,
+                                    block_scale, discrepancy_ratio, frequency_folds, hat_diagonal, t_widening)
 from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, frequency_data,
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
@@ -1023,11 +1024,8 @@ def load_check(ring: RingParams, geometry: TyreGeometry, loaded: dict, sources, 
     return notes
 
 
-#: Folds of a frequency block for its discrepancy ratio (rows dealt round-robin), and harmonic bands of the profiles.
-DISCREPANCY_FOLDS = 3
+#: Harmonic bands of the profiles for their discrepancy ratio (a frequency block's folds: free_block.DISCREPANCY_FOLDS).
 DISCREPANCY_BANDS = 4
-#: A fold direction whose leverage is above this is the fold's alone (held out, nothing predicts it): left out.
-FOLD_LEVERAGE_MAX = 0.99
 
 
 def block_folds(name: str, sl: slice, rows: _Rows) -> list[np.ndarray]:
@@ -1037,7 +1035,7 @@ def block_folds(name: str, sl: slice, rows: _Rows) -> list[np.ndarray]:
     idx = np.arange(sl.start, sl.stop)
     if name == "profiles":
         return band_folds(idx, rows.profiles["measured"].shape[-1] // 2)
-    return [idx[j::DISCREPANCY_FOLDS] for j in range(min(DISCREPANCY_FOLDS, idx.size))]
+    return frequency_folds(idx)
 
 
 def band_folds(idx: np.ndarray, H: int, bands: int = DISCREPANCY_BANDS) -> list[np.ndarray]:
@@ -1048,36 +1046,6 @@ def band_folds(idx: np.ndarray, H: int, bands: int = DISCREPANCY_BANDS) -> list[
     k = np.tile(np.arange(H), idx.size // H)
     edges = np.linspace(0, H, bands + 1).round().astype(int)
     return [idx[(k >= a) & (k < b)] for a, b in zip(edges[:-1], edges[1:])]
-
-
-def discrepancy_ratio(J: np.ndarray, r: np.ndarray, folds: list[np.ndarray]) -> float:
-    """κ_b ≥ 1: how much more each held-out fold of a block would move the fit than its noise allows
-    (docs/physics.md §11, *model discrepancy*).
-
-    ``J``: the weighted Jacobian of the fit (data and prior rows), ``r``: its weighted residuals (unit variance
-    where the noise model is right), ``folds``: the block's held-out groups (row indices). With H = J(JᵀJ)⁺Jᵀ,
-    a fold F's rows predicted from the fit without them have the residual (I − H_FF)⁻¹ r_F (linearised), and its
-    influence ``D_F = r_Fᵀ H_FF (I − H_FF)⁻¹ r_F`` has expectation tr H_FF under the noise model alone. A form
-    error the parameters absorb differently in each fold raises it, however well the block's σ was fitted. Returns
-    ``max(1, Σ_F D_F / Σ_F tr H_FF)`` (directions of leverage > :data:`FOLD_LEVERAGE_MAX` left out); the block's
-    σ is multiplied by √κ_b in the covariance, i.e. a discrepancy variance (κ_b − 1)σ² added in quadrature.
-    A fit without finite rows (not converged, said by its status) gets 1."""
-    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
-        return 1.0
-    U, s, Vt = np.linalg.svd(J, full_matrices=False)
-    keep = s > 1e-12 * (s[0] if s.size else 1.0)
-    L = Vt[keep].T / s[keep]  # (JᵀJ)⁺ = L Lᵀ
-    D = T = 0.0
-    for F in folds:
-        if F.size == 0:
-            continue
-        u, sv, _ = np.linalg.svd(J[F] @ L, full_matrices=False)  # H_FF = u diag(sv²) uᵀ
-        lam = sv**2
-        ok = lam < FOLD_LEVERAGE_MAX
-        c = u[:, ok].T @ r[F]
-        D += float(np.sum(lam[ok] / (1.0 - lam[ok]) * c**2))
-        T += float(np.sum(lam[ok]))
-    return max(1.0, D / T) if T > 0 else 1.0
 
 
 def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: ContactSolver, P: int,

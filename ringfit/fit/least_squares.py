@@ -6,7 +6,7 @@ Model: static inextensible ring, eq. 18 (docs/physics.md §2.1), via
 (:mod:`ringfit.fit.free_block`, docs/physics.md §11 "Noise per block"), the same ``ringfit identify`` uses:
 ``freq_std_hz`` (or a stated relative σ) only scaled up, else :data:`DEFAULT_RELATIVE_STD` × f_i
 as a start, scaled by the residual's hat-matrix estimate until it settles, the intervals
-Student-t widened. Optional log-normal priors enter as extra residual rows
+widened by Student's t and the model-discrepancy ratio. Optional log-normal priors enter as extra residual rows
 ``(log θ − μ)/σ_ln``. The solver (optimistix Levenberg–Marquardt with an SVD linear solve,
 :mod:`ringfit.fit.engine`) works on ``log θ`` of the free parameters; all other ring parameters
 stay fixed at the initial values.
@@ -27,7 +27,7 @@ from ringfit.errors import InputError
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, evaluate,
                                 least_squares)
 from ringfit.fit.free_block import (DEFAULT_RELATIVE_STD, NOISE_MODELS, FrequencyData, check_noise, fit_free_block,
-                                    frequency_data)
+                                    frequency_data, row_widening)
 from ringfit.fit.priors import BOUNDS, LogNormalPrior, resolve_priors
 from ringfit.fit.result import FitResult, covariance_from_jacobian
 from ringfit.io.modes import ModeTable
@@ -133,7 +133,8 @@ def fit_natural_frequencies(
       stated ``freq_std_hz``); ``None`` (default): :data:`DEFAULT_RELATIVE_STD` as the start of the estimate.
     - ``noise``: ``"estimated"`` (default) — the free-modes block's noise model (:mod:`ringfit.fit.free_block`,
       docs/physics.md §11 "Noise per block", the one ``ringfit identify`` uses): the σ scale from the residual and
-      the hat matrix, refitted until it settles, the covariance Student-t widened; ``"fixed"`` — the starting σ ×
+      the hat matrix, refitted until it settles, the covariance Student-t widened and by the model-discrepancy
+      ratio κ; ``"fixed"`` — the starting σ ×
       ``noise_scale`` as a known σ (simulation-based calibration at a known σ; a profile likelihood's refits at a
       fit's settled σ, ``extra["noise_scale"]``).
     - ``at_initial``: no fit: residuals, Jacobian and covariance at ``initial`` (status ``"evaluated"``;
@@ -142,8 +143,9 @@ def fit_natural_frequencies(
     **Returns:** :class:`~ringfit.fit.result.FitResult` (residuals and Jacobian weighted by the σ used; its
     covariance with the t-widening); ``extra`` holds ``n``, ``freq_hz``, ``model_hz``, ``sigma_hz`` (the σ
     used, shape ``(m,)``), ``sigma_source`` (where the starting σ came from), ``noise_scale`` (σ used / starting
-    σ), ``noise_dof`` (ν, ∞ where no scale was estimated), ``t_widening``, ``row_scale`` (the widening per row
-    of the problem, padding included: what :func:`ringfit.fit.posterior.sample` samples), ``noise``, ``priors``
+    σ), ``noise_dof`` (ν, ∞ where no scale was estimated), ``t_widening``, ``discrepancy`` (κ − 1),
+    ``row_scale`` (t_widening · √κ per row of the problem, padding included: what
+    :func:`ringfit.fit.posterior.sample` samples), ``noise``, ``priors``
     and the data-only Fisher information (widened, as the covariance). Never raises on non-convergence: check
     ``result.converged``.
 
@@ -199,9 +201,9 @@ def fit_natural_frequencies(
     model = np.asarray(result.extra.pop("aux"))[:m]
     result.residuals = result.residuals[:m]
     result.jacobian = np.concatenate([result.jacobian[:m], result.jacobian[m + pad:]])
-    widen = noise_info["t_widening"]
+    widen = row_widening(noise_info)  # Student's t_ν of a scale from ν degrees of freedom, × √κ (discrepancy)
     J = result.jacobian[:m] / widen
-    if widen > 1.0:  # a scale from ν residual degrees of freedom: Student's t_ν for what the block pins
+    if widen > 1.0:
         cov = covariance_from_jacobian(np.concatenate([J, result.jacobian[m:]]))
         result.covariance_log = cov
         for j, name in enumerate(result.names):
@@ -214,7 +216,8 @@ def fit_natural_frequencies(
     result.extra.update(
         n=data.n, freq_hz=data.freq_hz, model_hz=model, sigma_hz=noise_info["sigma_hz"], rows=data.rows,
         sigma_source=data.sigma_source, noise=noise_info["noise"], noise_scale=noise_info["scale"],
-        noise_dof=noise_info["dof"], t_widening=widen, scale_passes=noise_info["passes"], row_scale=row_scale,
+        noise_dof=noise_info["dof"], t_widening=noise_info["t_widening"],
+        discrepancy=noise_info["discrepancy"] - 1.0, scale_passes=noise_info["passes"], row_scale=row_scale,
         priors=priors, ring=fitted_ring(result), geometry=geometry, fisher_data=J.T @ J,
     )
     return result
