@@ -664,7 +664,7 @@ def sample_posterior(
 
     **Returns:** :class:`Posterior` whose ``meta`` holds everything its report draws: the
     data (``n``, ``freq_hz``, ``sigma_hz``, ``sigma_source``, ``noise``, ``noise_scale``, ``noise_dof``,
-    ``t_widening``), ``geometry``, ``priors``,
+    ``t_widening``, ``discrepancy``), ``geometry``, ``priors``,
     ``source``, ``lsq`` (the least-squares fit with the prior: values, standard errors,
     status, flags, model frequencies), ``data_only`` (the fit without a prior) and
     ``identifiability`` (its Fisher analysis and profile likelihood).
@@ -690,7 +690,8 @@ def sample_posterior(
         model="eq18",
         data=dict(n=ex["n"], freq_hz=ex["freq_hz"], sigma_hz=ex["sigma_hz"], sigma_source=ex["sigma_source"],
                   noise=ex.get("noise", "fixed"), noise_scale=float(ex.get("noise_scale", 1.0)),
-                  noise_dof=float(ex.get("noise_dof", math.inf)), t_widening=float(ex.get("t_widening", 1.0))),
+                  noise_dof=float(ex.get("noise_dof", math.inf)), t_widening=float(ex.get("t_widening", 1.0)),
+                  discrepancy=float(ex.get("discrepancy", 0.0))),
         geometry=dict(radius=float(geometry.radius), width=float(geometry.width), pressure=float(geometry.pressure),
                       pressure_bar=float(geometry.pressure) / BAR, name=geometry.name),
         priors={k: dict(median=p.median, sigma_ln=p.sigma_ln, source=p.source) for k, p in ex["priors"].items()},

@@ -107,8 +107,9 @@ def _noise_note(data: dict) -> str:
     if scale == 1.0:
         return ""
     dof = float(data.get("noise_dof", math.inf))
-    return (f", × {scale:.3g} estimated from the residual (ν = {dof:.1f}; intervals × "
-            f"{float(data.get('t_widening', 1.0)):.3g}, Student's t)")
+    t, kappa = float(data.get("t_widening", 1.0)), 1.0 + float(data.get("discrepancy", 0.0))
+    return (f", × {scale:.3g} estimated from the residual (ν = {dof:.1f}; intervals × {t * math.sqrt(kappa):.3g}: "
+            f"Student's t {t:.3g}, model discrepancy √κ {math.sqrt(kappa):.3g})")
 
 
 def build_free_report(post) -> str:
