@@ -132,6 +132,7 @@ def check_well_posed(table, free, prior, modes, rel) -> None:
 def run_fit(args) -> int:
     from ringfit.cli import CommandFailed
     from ringfit.fit.identifiability import identifiability
+    from ringfit.fit.free_block import noise_summary
     from ringfit.fit.least_squares import fit_natural_frequencies, fitted_ring
     from ringfit.io.files import check_output_path
     from ringfit.io.tyre import write_tyre
@@ -146,6 +147,7 @@ def run_fit(args) -> int:
     result = fit_natural_frequencies(table, tyre.geometry, tyre.ring, free=free, prior=args.prior, modes=modes,
                                      default_relative_std=rel, max_steps=args.max_iterations)
     print(result.summary())
+    print(f"σ: {noise_summary(result.extra)}")
     print(identifiability(result).summary(known=result.flags))
     if not result.converged:
         raise CommandFailed(f"fit did not converge ({result.status}); nothing written. "

@@ -251,6 +251,20 @@ def row_widening(info: dict) -> float:
     return float(info["t_widening"]) * math.sqrt(float(info["discrepancy"]))
 
 
-__all__ = ["FrequencyData", "frequency_data", "hat_diagonal", "block_scale", "t_widening", "fit_free_block",
+def noise_summary(data: dict) -> str:
+    """One line on the noise model a fit used, from its ``extra`` (or a posterior's ``meta["data"]``): where σ
+    started, the scale estimated from the residual and its ν, and the intervals' widening (t and √κ)."""
+    source = str(data.get("sigma_source", ""))
+    scale = float(data.get("noise_scale", 1.0))
+    dof = float(data.get("noise_dof", math.inf))
+    t, kappa = float(data.get("t_widening", 1.0)), 1.0 + float(data.get("discrepancy", 0.0))
+    if data.get("noise", "estimated") == "fixed":
+        return f"{source}{f' × {scale:.3g}' if scale != 1.0 else ''} (taken as known)"
+    held = "stated σ holds" if math.isinf(dof) else f"× {scale:.3g} estimated from the residual (ν = {dof:.1f})"
+    return (f"{source}, {held}; intervals × {t * math.sqrt(kappa):.3g} (Student's t {t:.3g}, model discrepancy "
+            f"√κ {math.sqrt(kappa):.3g})")
+
+
+__all__ = ["noise_summary", "FrequencyData", "frequency_data", "hat_diagonal", "block_scale", "t_widening", "fit_free_block",
            "frequency_folds", "discrepancy_ratio", "row_widening", "DISCREPANCY_FOLDS", "FOLD_LEVERAGE_MAX",
            "check_noise", "DEFAULT_RELATIVE_STD", "SIGMA_FLOOR_REL", "SCALE_PASSES", "SCALE_TOLERANCE", "Z95", "NOISE_MODELS"]

@@ -102,14 +102,13 @@ def write_report(posterior, path, *, overwrite: bool = False, inputs=()):
 
 
 def _noise_note(data: dict) -> str:
-    """The free-modes block's estimated σ scale as the report states it (docs/physics.md §11 "Noise per block")."""
-    scale = float(data.get("noise_scale", 1.0))
-    if scale == 1.0:
-        return ""
-    dof = float(data.get("noise_dof", math.inf))
-    t, kappa = float(data.get("t_widening", 1.0)), 1.0 + float(data.get("discrepancy", 0.0))
-    return (f", × {scale:.3g} estimated from the residual (ν = {dof:.1f}; intervals × {t * math.sqrt(kappa):.3g}: "
-            f"Student's t {t:.3g}, model discrepancy √κ {math.sqrt(kappa):.3g})")
+    """The free-modes block's noise model as the report states it (docs/physics.md §11 "Noise per block"); older
+    files (no ``noise_scale``) say only where σ came from."""
+    if "noise_scale" not in data:
+        return esc(data["sigma_source"])
+    from ringfit.fit.free_block import noise_summary
+
+    return esc(noise_summary(data))
 
 
 def build_free_report(post) -> str:
@@ -148,7 +147,7 @@ def build_free_report(post) -> str:
         f"<p>Tyre <b>{esc(geo.get('name') or '—')}</b>, R = {geo['radius']:.4g} m, "
         f"b = {geo['width']:.4g} m, p0 = {geo['pressure_bar']:.3g} bar. "
         f"Data: {esc(source_name(meta.get('source')) or 'mode table')} ({n.size} modes; "
-        f"σ: {esc(data['sigma_source'])}{_noise_note(data)}).</p>",
+        f"σ: {_noise_note(data)}).</p>",
         f"<p>Model: static inextensible ring, eq. 18 (docs/physics.md §2.1); free parameters: "
         f"{', '.join(esc(k) for k in free)}. Least squares with the stated prior: <b>{esc(lsq['status'])}</b> "
         f"after {lsq['iterations']} iterations, χ² = {lsq['chi2']:.3g} for {lsq['dof']} degrees of freedom, "
