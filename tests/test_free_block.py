@@ -10,7 +10,7 @@ import pytest
 from scipy import stats
 
 from ringfit.data import path as data_path
-from ringfit.fit.free_block import block_scale, hat_diagonal, t_widening
+from ringfit.fit.free_block import block_scale, hat_diagonal
 from ringfit.fit.least_squares import fit_natural_frequencies
 from ringfit.io.modes import ModeTable, write_mode_table
 from ringfit.params import table9

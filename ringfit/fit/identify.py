@@ -24,12 +24,13 @@ ring parameters and each run keeps its own nuisances:
 Noise scales: each block's σ is estimated from its own residual, ``s_b² = χ²_b / (m_b − tr H_bb)``
 with ``H`` the hat matrix of the weighted fit (the block's share of the fitted degrees of
 freedom), and the fit is repeated with the rescaled rows until the scales settle
-(:data:`~ringfit.fit.free_block.SCALE_PASSES`): one data type cannot swamp another, whatever its row count or its
-stated σ. The scale, its degrees of freedom and its widening are the free-modes block's noise model
-(:func:`~ringfit.fit.free_block.block_scale`, :func:`~ringfit.fit.free_block.t_widening`), the one ``ringfit fit``
-uses, applied here to the free modes, the free damping and the loaded modes alike. Rolling mode tables (speed > 0) are not part of the joint model yet: they are listed
-with a warning. A block scale from ν residual degrees of freedom widens that block's share of the
-covariance by Student's t_ν (:func:`~ringfit.fit.free_block.t_widening`), and the model's own discretisation (contact grid,
+(:data:`~ringfit.fit.free_block.SCALE_PASSES`): one data type cannot swamp another, whatever its row count or
+its stated σ. The scale, its degrees of freedom and its widening are the free-modes block's noise model
+(:func:`~ringfit.fit.free_block.block_scale`, :func:`~ringfit.fit.free_block.t_widening`), the one ``ringfit
+fit`` uses, applied here to the free modes, the free damping and the loaded modes alike. Rolling mode tables
+(speed > 0) are not part of the joint model yet: they are listed with a warning. A block scale from ν residual
+degrees of freedom widens that block's share of the covariance by Student's t_ν
+(:func:`~ringfit.fit.free_block.t_widening`), and the model's own discretisation (contact grid,
 loaded-mode basis) is checked once at the optimum (:func:`grid_check`, refined ×2) and carried into the
 covariance as a rank-one term. A form error of the model that the parameters absorb differently in different
 parts of a block shows as held-out rows predicted worse than their noise: each block's σ is multiplied by the
@@ -64,8 +65,9 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares, residuals
-from ringfit.fit.free_block import (DISCREPANCY_FOLDS, FOLD_LEVERAGE_MAX, SCALE_PASSES, SCALE_TOLERANCE, Z95,
-                                    block_scale, discrepancy_ratio, frequency_folds, hat_diagonal, t_widening)
+from ringfit.fit.free_block import (DISCREPANCY_FOLDS, FOLD_LEVERAGE_MAX, SCALE_PASSES,  # noqa: F401 (re-exported)
+                                    SCALE_TOLERANCE, Z95, block_scale, discrepancy_ratio, frequency_folds,
+                                    hat_diagonal, t_widening)
 from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, frequency_data,
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
