@@ -42,7 +42,9 @@ def test_recovers_known_parameters_noise_free():
     assert res.converged, res.message
     for k in ("rho_a", "ei", "kw", "kv"):
         assert res.values[k] == pytest.approx(getattr(truth, k), rel=1e-6)
-    assert res.chi2 < 1e-12
+    # exact data: the estimated σ stops at its floor (1 ppm of f), the model meets every frequency far inside it
+    assert np.max(np.abs(res.extra["model_hz"] / res.extra["freq_hz"] - 1)) < 1e-9
+    assert res.extra["sigma_hz"] == pytest.approx(1e-6 * res.extra["freq_hz"], rel=1e-9)
 
 
 def test_fixed_parameters_stay_fixed_and_mode_selection():
@@ -64,10 +66,12 @@ def test_jacobian_matches_finite_differences():
     res = fit_natural_frequencies(SSI, GEO, RING, prior="physical")
     d = frequency_data(SSI)
     y = np.log([res.values[k] for k in res.names])
+    sigma = res.extra["sigma_hz"]  # the σ the fit's rows are weighted by (the block's settled scale × 1 %)
+    np.testing.assert_allclose(sigma, res.extra["noise_scale"] * d.sigma_hz, rtol=1e-12)
 
     def r(yy):
         ring = RING.replace(**dict(zip(res.names, np.exp(yy))))
-        return (np.asarray(natural_frequencies(ring, GEO, d.n)) - d.freq_hz) / d.sigma_hz
+        return (np.asarray(natural_frequencies(ring, GEO, d.n)) - d.freq_hz) / sigma
 
     h = 1e-6
     J = np.stack([(r(y + h * e) - r(y - h * e)) / (2 * h) for e in np.eye(4)], 1)

@@ -77,5 +77,7 @@ def test_report_names_its_input_by_file_name_and_has_units(report):
     assert header is not None
     assert re.search(r"<td[^>]*>rho_a</td><td[^>]*>kg/m</td>", html)
     assert re.search(r"<td[^>]*>kw</td><td[^>]*>N/m²</td>", html)
-    # n = 1 of the bundled table: 107.0 Hz with the default σ of 1 % (1.07 Hz) → one decimal, σ "1.1"
-    assert re.search(r"<td[^>]*>1</td><td[^>]*>107\.0</td><td[^>]*>1\.1</td>", html)
+    # n = 1 of the bundled table: 107.0 Hz with the σ the fit settled, 0.911 × 1 % (0.975 Hz) → two decimals,
+    # σ "0.97"; the σ's origin is stated beside the data
+    assert re.search(r"<td[^>]*>1</td><td[^>]*>107\.00</td><td[^>]*>0\.97</td>", html)
+    assert "σ: default 1.0% of frequency, × 0.911 estimated from the residual (ν = 5.7); intervals ×" in html

@@ -73,7 +73,8 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="which n take part, e.g. '1-6' or '1,3,7' (default: every structural mode with n)")
     p.add_argument("--default-std", type=number("a fraction between 0 and 1 (e.g. 0.01)", lo=0, hi=1, lo_open=True,
                                                 hi_open=True), default=None, metavar="REL",
-                   help="σ/f where the table has no freq_std_hz (default 0.01)")
+                   help="stated σ/f where the table has no freq_std_hz, only scaled up by the residual as a stated "
+                        "freq_std_hz (default: 0.01 as the start of the σ scale estimated from the residual)")
     force_flag(p)
 
 
@@ -98,12 +99,12 @@ def parse_n_list(text: str | None):
 
 
 def _inputs(args):
-    from ringfit.fit.least_squares import DEFAULT_RELATIVE_STD, check_free
+    from ringfit.fit.least_squares import check_free
     from ringfit.io.modes import read_mode_table
     from ringfit.io.tyre import read_tyre
 
     free = check_free([s.strip() for s in args.free.split(",") if s.strip()])
-    rel = DEFAULT_RELATIVE_STD if args.default_std is None else args.default_std
+    rel = args.default_std  # None: 1 % as the start of the estimated scale (docs/physics.md §11)
     table, tyre, modes = read_mode_table(args.modes), read_tyre(args.tyre), parse_n_list(args.modes_used)
     check_well_posed(table, free, args.prior, modes, rel)
     return table, tyre, free, modes, rel
@@ -131,6 +132,7 @@ def check_well_posed(table, free, prior, modes, rel) -> None:
 def run_fit(args) -> int:
     from ringfit.cli import CommandFailed
     from ringfit.fit.identifiability import identifiability
+    from ringfit.fit.free_block import noise_summary
     from ringfit.fit.least_squares import fit_natural_frequencies, fitted_ring
     from ringfit.io.files import check_output_path
     from ringfit.io.tyre import write_tyre
@@ -145,6 +147,7 @@ def run_fit(args) -> int:
     result = fit_natural_frequencies(table, tyre.geometry, tyre.ring, free=free, prior=args.prior, modes=modes,
                                      default_relative_std=rel, max_steps=args.max_iterations)
     print(result.summary())
+    print(f"σ: {noise_summary(result.extra)}")
     print(identifiability(result).summary(known=result.flags))
     if not result.converged:
         raise CommandFailed(f"fit did not converge ({result.status}); nothing written. "

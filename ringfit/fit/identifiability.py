@@ -148,13 +148,22 @@ def identifiability(result: FitResult, *, profile: tuple[str, ...] = (), fit_aga
     return out
 
 
-def profile_natural_frequencies(table, geometry, initial, free, prior="none", **kwargs):
-    """A ``fit_again`` callable for :func:`identifiability` on eq. 18 fits."""
+def profile_natural_frequencies(table, geometry, initial, free, prior="none", noise_scale=None, **kwargs):
+    """A ``fit_again`` callable for :func:`identifiability` on eq. 18 fits.
+
+    The refits hold the σ of the rows where the fit with every parameter free settled it (``noise="fixed"`` at
+    its ``extra["noise_scale"]``, docs/physics.md §11 "Noise per block"), so their χ² compare on one scale:
+    ``noise_scale`` — that scale (default: that fit, made once on the first call)."""
     from ringfit.fit.least_squares import fit_natural_frequencies
 
+    scale = [noise_scale]
+
     def fit_again(name, value):
+        if scale[0] is None:
+            full = fit_natural_frequencies(table, geometry, initial, free=free, prior=prior, **kwargs)
+            scale[0] = float(full.extra["noise_scale"])
         others = tuple(k for k in free if k != name)
         return fit_natural_frequencies(table, geometry, initial.replace(**{name: value}), free=others,
-                                       prior=prior, **kwargs)
+                                       prior=prior, noise="fixed", noise_scale=scale[0], **kwargs)
 
     return fit_again

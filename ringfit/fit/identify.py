@@ -24,10 +24,13 @@ ring parameters and each run keeps its own nuisances:
 Noise scales: each block's σ is estimated from its own residual, ``s_b² = χ²_b / (m_b − tr H_bb)``
 with ``H`` the hat matrix of the weighted fit (the block's share of the fitted degrees of
 freedom), and the fit is repeated with the rescaled rows until the scales settle
-(:data:`SCALE_PASSES`): one data type cannot swamp another, whatever its row count or its
-stated σ. Rolling mode tables (speed > 0) are not part of the joint model yet: they are listed
-with a warning. A block scale from ν residual degrees of freedom widens that block's share of the
-covariance by Student's t_ν (:func:`t_widening`), and the model's own discretisation (contact grid,
+(:data:`~ringfit.fit.free_block.SCALE_PASSES`): one data type cannot swamp another, whatever its row count or
+its stated σ. The scale, its degrees of freedom and its widening are the free-modes block's noise model
+(:func:`~ringfit.fit.free_block.block_scale`, :func:`~ringfit.fit.free_block.t_widening`), the one ``ringfit
+fit`` uses, applied here to the free modes, the free damping and the loaded modes alike. Rolling mode tables
+(speed > 0) are not part of the joint model yet: they are listed with a warning. A block scale from ν residual
+degrees of freedom widens that block's share of the covariance by Student's t_ν
+(:func:`~ringfit.fit.free_block.t_widening`), and the model's own discretisation (contact grid,
 loaded-mode basis) is checked once at the optimum (:func:`grid_check`, refined ×2) and carried into the
 covariance as a rank-one term. A form error of the model that the parameters absorb differently in different
 parts of a block shows as held-out rows predicted worse than their noise: each block's σ is multiplied by the
@@ -62,6 +65,9 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares, residuals
+from ringfit.fit.free_block import (DISCREPANCY_FOLDS, FOLD_LEVERAGE_MAX, SCALE_PASSES,  # noqa: F401 (re-exported)
+                                    SCALE_TOLERANCE, Z95, block_scale, discrepancy_ratio, frequency_folds,
+                                    hat_diagonal, t_widening)
 from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, frequency_data,
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
@@ -80,14 +86,8 @@ from ringfit.physics.operating import OperatingPoint
 from ringfit.physics.profile import FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels
 from ringfit.physics.state import TyreState, state_solution, state_tyre
 
-#: Passes of fit → block noise scales → refit (the scales settle in two or three).
-SCALE_PASSES = 4
-#: Stop re-weighting once every block scale changes by less than this fraction.
-SCALE_TOLERANCE = 0.02
 #: Relative σ of a damping ratio row before its block scale is estimated.
 DAMPING_RELATIVE_STD = 0.05
-#: The two-sided 95 % normal quantile.
-Z95 = 1.959963984540054
 #: Harmonics of the loaded-mode basis (docs/physics.md §6; N = 20 is within 0.2 Hz of N = 40).
 LOADED_HARMONICS = 24
 #: The grid check refines the contact grid and the loaded-mode basis by this factor (docs/physics.md §11).
@@ -495,11 +495,11 @@ def _free_rows(table: ModeTable, more: list[ModeTable] = ()) -> dict:
     """The free tables' rows (``free.modes.csv``, then each free table at another pressure); ``table`` says whose."""
     parts = [frequency_data(t) for t in [table, *more]]
     d = parts[0]
-    out = dict(n=d.n, freq=d.freq_hz, sigma=d.sigma_hz, given=d.sigma_source == "freq_std_hz", rows=d.rows)
+    out = dict(n=d.n, freq=d.freq_hz, sigma=d.sigma_hz, given=d.stated, rows=d.rows)
     if more:
         out.update(n=np.concatenate([q.n for q in parts]), freq=np.concatenate([q.freq_hz for q in parts]),
                    sigma=np.concatenate([q.sigma_hz for q in parts]),
-                   given=all(q.sigma_source == "freq_std_hz" for q in parts),
+                   given=all(q.stated for q in parts),
                    table=np.concatenate([np.full(q.n.size, j) for j, q in enumerate(parts)]),
                    sources=[t.source for t in [table, *more]])
     return out
@@ -742,7 +742,7 @@ class Identification:
     passes: int
     inputs: IdentifyInputs | None = None
     grid_check: dict | None = None
-    #: ``(m,)`` per data row: its block's Student-t widening (:func:`t_widening`) times √κ_b
+    #: ``(m,)`` per data row: its block's Student-t widening (:func:`~ringfit.fit.free_block.t_widening`) times √κ_b
     #: (:func:`discrepancy_ratio`), 1 elsewhere
     row_scale: np.ndarray | None = None
     #: ``(k,)`` the grid check's move δu (solver coordinates of ``fit.names``), None when not run
@@ -856,13 +856,6 @@ def log_interval(value: float, sd_ln, bounds: tuple[float, float] | None) -> dic
     return out
 
 
-def _hat_diagonal(J: np.ndarray) -> np.ndarray:
-    """Diagonal of the hat matrix ``J (JᵀJ)⁺ Jᵀ`` (leverage of each row)."""
-    U, s, _ = np.linalg.svd(J, full_matrices=False)
-    keep = s > 1e-12 * (s[0] if s.size else 1.0)
-    return np.sum(U[:, keep] ** 2, axis=1)
-
-
 def identify(inputs: IdentifyInputs, *, solver: ContactSolver = ContactSolver(), max_steps: int = 64,
              rtol: float = 1e-8, atol: float = 1e-8, progress: bool = False) -> Identification:
     """Joint weighted least squares of the ring (and per-run nuisances) over every block of ``inputs``.
@@ -933,27 +926,24 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
         if fit.converged:
             theta = fit.theta.copy()
         r = fit.residuals
-        h = _hat_diagonal(fit.jacobian)
+        h = hat_diagonal(fit.jacobian)
         change = 0.0
         block_dof = {}
         for name, sl in slices.items():
             if name == "torque":  # the stated torque's σ holds: no scale estimated (one row per slip nuisance)
                 block_dof[name] = math.inf
                 continue
-            m = sl.stop - sl.start
-            dof = max(m - float(h[sl].sum()), 1.0)
-            block_dof[name] = dof
-            s = math.sqrt(float(r[sl] @ r[sl]) / dof)
             block = {"free modes": rows.free, "free damping": rows.damping, "loaded modes": rows.loaded}.get(name)
             if name == "profiles":
                 pr = rows.profiles
                 pr["sigma"] = noise_from_residual(r[sl].reshape(pr["measured"].shape) * pr["sigma"], h[sl])
+                block_dof[name] = max(sl.stop - sl.start - float(h[sl].sum()), 1.0)
                 s = 1.0
-            elif block is not None:
-                if block.get("given") and s <= 1.0:
-                    block_dof[name] = math.inf  # the stated σ holds: no scale estimated
-                s = max(s, 1.0) if block.get("given") else s
-                block["sigma"] = block["sigma"] * s
+            else:  # the free-modes block's noise model (free_block): a stated σ only scaled up
+                s, block_dof[name] = block_scale(r[sl], h[sl], bool(block is not None and block.get("given")),
+                                                 scales[name])
+                if block is not None:
+                    block["sigma"] = block["sigma"] * s
             change = max(change, abs(s - 1.0))
             scales[name] *= s
         if fit.converged and change < SCALE_TOLERANCE and passes > 1:
@@ -1058,22 +1048,8 @@ def load_check(ring: RingParams, geometry: TyreGeometry, loaded: dict, sources, 
     return notes
 
 
-def t_widening(dof: float) -> float:
-    """``t_{ν, 0.975} / z_{0.975}``: how much wider a 95 % interval must be when the σ of its rows is estimated
-    from ν residual degrees of freedom (1 for ν = ∞). A block whose scale came from a few rows (9 free modes
-    less the ~4 parameters they pin leave ν ≈ 5: ×1.31) has its Fisher information divided by its square."""
-    if not math.isfinite(dof):
-        return 1.0
-    from scipy.special import stdtrit
-
-    return float(stdtrit(max(dof, 1.0), 0.975)) / Z95
-
-
-#: Folds of a frequency block for its discrepancy ratio (rows dealt round-robin), and harmonic bands of the profiles.
-DISCREPANCY_FOLDS = 3
+#: Harmonic bands of the profiles for their discrepancy ratio (a frequency block's folds: free_block.DISCREPANCY_FOLDS).
 DISCREPANCY_BANDS = 4
-#: A fold direction whose leverage is above this is the fold's alone (held out, nothing predicts it): left out.
-FOLD_LEVERAGE_MAX = 0.99
 
 
 def block_folds(name: str, sl: slice, rows: _Rows) -> list[np.ndarray]:
@@ -1083,7 +1059,7 @@ def block_folds(name: str, sl: slice, rows: _Rows) -> list[np.ndarray]:
     idx = np.arange(sl.start, sl.stop)
     if name == "profiles":
         return band_folds(idx, rows.profiles["measured"].shape[-1] // 2)
-    return [idx[j::DISCREPANCY_FOLDS] for j in range(min(DISCREPANCY_FOLDS, idx.size))]
+    return frequency_folds(idx)
 
 
 def band_folds(idx: np.ndarray, H: int, bands: int = DISCREPANCY_BANDS) -> list[np.ndarray]:
@@ -1094,36 +1070,6 @@ def band_folds(idx: np.ndarray, H: int, bands: int = DISCREPANCY_BANDS) -> list[
     k = np.tile(np.arange(H), idx.size // H)
     edges = np.linspace(0, H, bands + 1).round().astype(int)
     return [idx[(k >= a) & (k < b)] for a, b in zip(edges[:-1], edges[1:])]
-
-
-def discrepancy_ratio(J: np.ndarray, r: np.ndarray, folds: list[np.ndarray]) -> float:
-    """κ_b ≥ 1: how much more each held-out fold of a block would move the fit than its noise allows
-    (docs/physics.md §11, *model discrepancy*).
-
-    ``J``: the weighted Jacobian of the fit (data and prior rows), ``r``: its weighted residuals (unit variance
-    where the noise model is right), ``folds``: the block's held-out groups (row indices). With H = J(JᵀJ)⁺Jᵀ,
-    a fold F's rows predicted from the fit without them have the residual (I − H_FF)⁻¹ r_F (linearised), and its
-    influence ``D_F = r_Fᵀ H_FF (I − H_FF)⁻¹ r_F`` has expectation tr H_FF under the noise model alone. A form
-    error the parameters absorb differently in each fold raises it, however well the block's σ was fitted. Returns
-    ``max(1, Σ_F D_F / Σ_F tr H_FF)`` (directions of leverage > :data:`FOLD_LEVERAGE_MAX` left out); the block's
-    σ is multiplied by √κ_b in the covariance, i.e. a discrepancy variance (κ_b − 1)σ² added in quadrature.
-    A fit without finite rows (not converged, said by its status) gets 1."""
-    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
-        return 1.0
-    U, s, Vt = np.linalg.svd(J, full_matrices=False)
-    keep = s > 1e-12 * (s[0] if s.size else 1.0)
-    L = Vt[keep].T / s[keep]  # (JᵀJ)⁺ = L Lᵀ
-    D = T = 0.0
-    for F in folds:
-        if F.size == 0:
-            continue
-        u, sv, _ = np.linalg.svd(J[F] @ L, full_matrices=False)  # H_FF = u diag(sv²) uᵀ
-        lam = sv**2
-        ok = lam < FOLD_LEVERAGE_MAX
-        c = u[:, ok].T @ r[F]
-        D += float(np.sum(lam[ok] / (1.0 - lam[ok]) * c**2))
-        T += float(np.sum(lam[ok]))
-    return max(1.0, D / T) if T > 0 else 1.0
 
 
 def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: ContactSolver, P: int,

@@ -2,18 +2,21 @@
 
 Model: static inextensible ring, eq. 18 (docs/physics.md §2.1), via
 :func:`ringfit.physics.natural.natural_frequencies`. Residual of mode i:
-``(f_model(n_i) − f_i) / σ_i`` with σ_i from ``freq_std_hz`` or, where that is
-empty, :data:`DEFAULT_RELATIVE_STD` × f_i. Optional log-normal priors enter as
-extra residual rows ``(log θ − μ)/σ_ln``. The solver (optimistix
-Levenberg–Marquardt with an SVD linear solve, :mod:`ringfit.fit.engine`) works on
-``log θ`` of the free parameters; all other ring parameters stay fixed at the
-initial values.
+``(f_model(n_i) − f_i) / σ_i``. σ is the free-modes block's noise model
+(:mod:`ringfit.fit.free_block`, docs/physics.md §11 "Noise per block"), the same ``ringfit identify`` uses:
+``freq_std_hz`` (or a stated relative σ) only scaled up, else :data:`DEFAULT_RELATIVE_STD` × f_i
+as a start, scaled by the residual's hat-matrix estimate until it settles, the intervals
+widened by Student's t and the model-discrepancy ratio. Optional log-normal priors enter as extra residual rows
+``(log θ − μ)/σ_ln``. The solver (optimistix Levenberg–Marquardt with an SVD linear solve,
+:mod:`ringfit.fit.engine`) works on ``log θ`` of the free parameters; all other ring parameters
+stay fixed at the initial values.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-from typing import ClassVar
+import math
+from dataclasses import fields
+from typing import ClassVar, Literal
 
 import equinox as eqx
 import jax
@@ -23,76 +26,17 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, evaluate,
                                 least_squares)
+from ringfit.fit.free_block import (DEFAULT_RELATIVE_STD, NOISE_MODELS, FrequencyData, check_noise, fit_free_block,
+                                    frequency_data, row_widening)
 from ringfit.fit.priors import BOUNDS, LogNormalPrior, resolve_priors
-from ringfit.fit.result import FitResult
+from ringfit.fit.result import FitResult, covariance_from_jacobian
 from ringfit.io.modes import ModeTable
 from ringfit.params import RING_PARAMETERS, RingParams, TyreGeometry
 from ringfit.physics.natural import natural_frequencies
 
-#: σ_i / f_i used where a mode table has no ``freq_std_hz``. 1 % is the RMS
-#: relative difference between the source study's two identifications of the
-#: same nine modes (Table 2: SSI vs FRF peak picking, 0.9 %), i.e. the spread
-#: that the choice of identification method alone produces.
-DEFAULT_RELATIVE_STD = 0.01
 #: The parameters of eq. 18 that a free-tyre fit frees by default.
 DEFAULT_FREE = ("rho_a", "ei", "kw", "kv")
 RING_FIELDS = tuple(f.name for f in fields(RingParams))
-
-
-@dataclass(frozen=True)
-class FrequencyData:
-    """The rows of a mode table that take part in a fit.
-
-    Arrays of shape ``(m,)``: ``n`` (float), ``freq_hz``, ``sigma_hz``; ``rows``
-    are the indices into the table; ``sigma_source`` says where σ came from.
-    """
-
-    n: np.ndarray
-    freq_hz: np.ndarray
-    sigma_hz: np.ndarray
-    rows: np.ndarray
-    sigma_source: str
-
-
-def frequency_data(table: ModeTable, modes=None, default_relative_std: float = DEFAULT_RELATIVE_STD) -> FrequencyData:
-    """Select the rows of ``table`` a ring fit uses and give each its σ.
-
-    **Arguments:**
-
-    - ``modes``: ``None`` (every structural row with an assigned n), an
-      iterable of n values to keep (e.g. ``range(1, 7)``), or a bool mask of
-      shape ``(len(table),)``.
-    - ``default_relative_std``: σ/f where ``freq_std_hz`` is empty.
-    """
-    base = table.structural_with_n()
-    if modes is None:
-        mask = base
-    else:
-        modes = np.asarray(list(modes) if not isinstance(modes, np.ndarray) else modes)
-        if modes.dtype == bool:
-            if modes.shape != base.shape:
-                raise InputError(f"mode mask has {modes.size} entries, table has {base.size} rows")
-            mask = base & modes
-        else:
-            wanted = {int(x) for x in modes}
-            missing = wanted - set(table.n[base].tolist())
-            if missing:
-                raise InputError(f"{table.source or 'mode table'}: no structural mode with n in {sorted(missing)}")
-            mask = base & np.isin(table.n, list(wanted))
-    rows = np.flatnonzero(mask)
-    if rows.size == 0:
-        raise InputError(f"{table.source or 'mode table'}: no structural modes with an assigned n to fit")
-    std = table.freq_std_hz[rows]
-    f = table.freq_hz[rows]
-    have = np.isfinite(std) & (std > 0)
-    sigma = np.where(have, std, default_relative_std * f)
-    if have.all():
-        source = "freq_std_hz"
-    elif not have.any():
-        source = f"default {default_relative_std:.1%} of frequency"
-    else:
-        source = f"freq_std_hz where given, else {default_relative_std:.1%} of frequency"
-    return FrequencyData(table.n[rows].astype(np.float64), f, sigma, rows, source)
 
 
 def ring_vector(ring: RingParams) -> np.ndarray:
@@ -165,7 +109,9 @@ def fit_natural_frequencies(
     free=DEFAULT_FREE,
     prior="none",
     modes=None,
-    default_relative_std: float = DEFAULT_RELATIVE_STD,
+    default_relative_std: float | None = None,
+    noise: Literal["estimated", "fixed"] = "estimated",
+    noise_scale: float = 1.0,
     max_steps: int = 256,
     rtol: float = 1e-10,
     atol: float = 1e-10,
@@ -183,14 +129,25 @@ def fit_natural_frequencies(
     - ``prior``: ``"none"``, ``"physical"`` (the belt-plate prior on EI, see
       :mod:`ringfit.fit.priors`) or a dict name -> ``LogNormalPrior``/(median, σ_ln).
     - ``modes``: which rows take part (see :func:`frequency_data`).
-    - ``default_relative_std``: σ/f where the table gives no ``freq_std_hz``.
+    - ``default_relative_std``: a stated σ/f where the table gives no ``freq_std_hz`` (only scaled up, as a
+      stated ``freq_std_hz``); ``None`` (default): :data:`DEFAULT_RELATIVE_STD` as the start of the estimate.
+    - ``noise``: ``"estimated"`` (default) — the free-modes block's noise model (:mod:`ringfit.fit.free_block`,
+      docs/physics.md §11 "Noise per block", the one ``ringfit identify`` uses): the σ scale from the residual and
+      the hat matrix, refitted until it settles, the covariance Student-t widened and by the model-discrepancy
+      ratio κ; ``"fixed"`` — the starting σ ×
+      ``noise_scale`` as a known σ (simulation-based calibration at a known σ; a profile likelihood's refits at a
+      fit's settled σ, ``extra["noise_scale"]``).
     - ``at_initial``: no fit: residuals, Jacobian and covariance at ``initial`` (status ``"evaluated"``;
       a ring identified elsewhere, e.g. by ``ringfit identify``, used as it is).
 
-    **Returns:** :class:`~ringfit.fit.result.FitResult`; ``extra`` holds
-    ``n``, ``freq_hz``, ``model_hz``, ``sigma_hz`` (shape ``(m,)``),
-    ``sigma_source``, ``priors`` and the data-only Fisher information.
-    Never raises on non-convergence: check ``result.converged``.
+    **Returns:** :class:`~ringfit.fit.result.FitResult` (residuals and Jacobian weighted by the σ used; its
+    covariance with the t-widening); ``extra`` holds ``n``, ``freq_hz``, ``model_hz``, ``sigma_hz`` (the σ
+    used, shape ``(m,)``), ``sigma_source`` (where the starting σ came from), ``noise_scale`` (σ used / starting
+    σ), ``noise_dof`` (ν, ∞ where no scale was estimated), ``t_widening``, ``discrepancy`` (κ − 1),
+    ``row_scale`` (t_widening · √κ per row of the problem, padding included: what
+    :func:`ringfit.fit.posterior.sample` samples), ``noise``, ``priors``
+    and the data-only Fisher information (widened, as the covariance). Never raises on non-convergence: check
+    ``result.converged``.
 
     Examples
     --------
@@ -209,6 +166,7 @@ def fit_natural_frequencies(
     free = check_free(free)
     if geometry.pressure <= 0 or geometry.radius <= 0 or geometry.width <= 0:
         raise InputError("tyre geometry needs positive radius, width and pressure")
+    check_noise(noise)
     data = frequency_data(table, modes, default_relative_std)
     priors = resolve_priors(prior, free)
     base = ring_vector(initial)
@@ -219,30 +177,48 @@ def fit_natural_frequencies(
     # tables of 8, 9 … 16 modes share one compiled fit (and one compiled posterior)
     m = data.n.size
     pad = (-m) % ROW_BUCKET
-    arrays = FrequencyArrays(geometry, np.concatenate([data.n, np.ones(pad)]),
-                             np.concatenate([data.freq_hz, np.full(pad, 100.0)]),
-                             np.concatenate([data.sigma_hz, np.full(pad, np.inf)]))
-    problem = Problem(NaturalFrequencyResiduals(), arrays, RING_COORDS, prior=log_normal_prior(priors),
-                      plausible=BOUNDS, data_label="these modes")
+    prior_rows = log_normal_prior(priors)
     # free sets of up to the four eq. 18 parameters padded to four: the profile likelihood's refits (three
     # free) share the four-parameter fit's compiled solve
     pad_to = max(len(free), len(DEFAULT_FREE))
-    if at_initial:
-        result = evaluate(problem, base, free, n_data=m, pad_to=pad_to)
-    else:
-        result = least_squares(problem, base, free, max_steps=max_steps, rtol=rtol, atol=atol, n_data=m,
-                               pad_to=pad_to)
+
+    def fit_at(sigma):
+        arrays = FrequencyArrays(geometry, np.concatenate([data.n, np.ones(pad)]),
+                                 np.concatenate([data.freq_hz, np.full(pad, 100.0)]),
+                                 np.concatenate([sigma, np.full(pad, np.inf)]))
+        problem = Problem(NaturalFrequencyResiduals(), arrays, RING_COORDS, prior=prior_rows,
+                          plausible=BOUNDS, data_label="these modes")
+        if at_initial:
+            return evaluate(problem, base, free, n_data=m, pad_to=pad_to)
+        # every pass starts from ``initial``: the solver started at the last pass's optimum takes no step it can
+        # call converged (its first steps are all rejected)
+        return least_squares(problem, base, free, max_steps=max_steps, rtol=rtol, atol=atol, n_data=m,
+                             pad_to=pad_to)
+
+    # the free-modes block's noise model (docs/physics.md §11): σ scaled from the residual until it settles
+    result, noise_info = fit_free_block(fit_at, data.sigma_hz, data.stated, noise, noise_scale,
+                                           freq_hz=data.freq_hz)
     model = np.asarray(result.extra.pop("aux"))[:m]
     result.residuals = result.residuals[:m]
     result.jacobian = np.concatenate([result.jacobian[:m], result.jacobian[m + pad:]])
+    widen = row_widening(noise_info)  # Student's t_ν of a scale from ν degrees of freedom, × √κ (discrepancy)
+    J = result.jacobian[:m] / widen
+    if widen > 1.0:
+        cov = covariance_from_jacobian(np.concatenate([J, result.jacobian[m:]]))
+        result.covariance_log = cov
+        for j, name in enumerate(result.names):
+            sd = math.sqrt(cov[j, j]) if np.isfinite(cov[j, j]) and cov[j, j] >= 0 else math.inf
+            result.stderr[name] = result.values[name] * sd
     if table.state != "free" or float(table.condition.get("speed_kmh", 0) or 0) > 0:
         result.flags.append(f"table state is {table.state!r} (speed {table.condition.get('speed_kmh', 0)} km/h); "
                             "the eq. 18 model assumes a static, free tyre")
-    J = result.jacobian[:m]
+    row_scale = np.concatenate([np.full(m, widen), np.ones(pad)])
     result.extra.update(
-        n=data.n, freq_hz=data.freq_hz, model_hz=model, sigma_hz=data.sigma_hz, rows=data.rows,
-        sigma_source=data.sigma_source, priors=priors, ring=fitted_ring(result), geometry=geometry,
-        fisher_data=J.T @ J,
+        n=data.n, freq_hz=data.freq_hz, model_hz=model, sigma_hz=noise_info["sigma_hz"], rows=data.rows,
+        sigma_source=data.sigma_source, noise=noise_info["noise"], noise_scale=noise_info["scale"],
+        noise_dof=noise_info["dof"], t_widening=noise_info["t_widening"],
+        discrepancy=noise_info["discrepancy"] - 1.0, scale_passes=noise_info["passes"], row_scale=row_scale,
+        priors=priors, ring=fitted_ring(result), geometry=geometry, fisher_data=J.T @ J,
     )
     return result
 
@@ -253,5 +229,5 @@ def fitted_ring(result: FitResult) -> RingParams:
 
 
 __all__ = ["fit_natural_frequencies", "frequency_data", "FrequencyData", "DEFAULT_RELATIVE_STD",
-           "DEFAULT_FREE", "fitted_ring", "LogNormalPrior"]
+           "DEFAULT_FREE", "fitted_ring", "LogNormalPrior", "NOISE_MODELS"]
 

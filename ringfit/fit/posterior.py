@@ -650,8 +650,9 @@ def sample_posterior(
 ) -> Posterior:
     """Posterior of ring parameters given measured natural frequencies (eq. 18, docs/physics.md §2.1).
 
-    Likelihood: independent Gaussians on the frequencies with the σ of the least-squares
-    fit (:func:`ringfit.fit.least_squares.frequency_data`). Priors on ``log θ``: the
+    Likelihood: independent Gaussians on the frequencies with the noise model of the least-squares fit's
+    intervals (:mod:`ringfit.fit.free_block`, docs/physics.md §11 "Noise per block"): the σ it settled, each row
+    widened by its Student-t factor (``row_scale``). Priors on ``log θ``: the
     log-normal priors chosen (e.g. ``"physical"``), otherwise uniform in ``log θ`` within
     :data:`ringfit.fit.priors.BOUNDS` (every parameter is truncated there).
 
@@ -662,17 +663,18 @@ def sample_posterior(
     likelihood of EI when it is free).
 
     **Returns:** :class:`Posterior` whose ``meta`` holds everything its report draws: the
-    data (``n``, ``freq_hz``, ``sigma_hz``, ``sigma_source``), ``geometry``, ``priors``,
+    data (``n``, ``freq_hz``, ``sigma_hz``, ``sigma_source``, ``noise``, ``noise_scale``, ``noise_dof``,
+    ``t_widening``, ``discrepancy``), ``geometry``, ``priors``,
     ``source``, ``lsq`` (the least-squares fit with the prior: values, standard errors,
     status, flags, model frequencies), ``data_only`` (the fit without a prior) and
     ``identifiability`` (its Fisher analysis and profile likelihood).
     """
     from ringfit.fit.identifiability import identifiability, profile_natural_frequencies
-    from ringfit.fit.least_squares import DEFAULT_FREE, DEFAULT_RELATIVE_STD, fit_natural_frequencies
+    from ringfit.fit.least_squares import DEFAULT_FREE, fit_natural_frequencies
     from ringfit.params import BAR
 
     free = DEFAULT_FREE if free is None else free
-    rel = DEFAULT_RELATIVE_STD if default_relative_std is None else default_relative_std
+    rel = default_relative_std
     if lsq is None:
         lsq = fit_natural_frequencies(table, geometry, initial, free=free, prior=prior, modes=modes,
                                       default_relative_std=rel)
@@ -680,12 +682,16 @@ def sample_posterior(
         fit0 = fit_natural_frequencies(table, geometry, initial, free=free, prior="none", modes=modes,
                                        default_relative_std=rel)
         again = profile_natural_frequencies(table, geometry, initial, fit0.names, modes=modes,
-                                            default_relative_std=rel)
+                                            default_relative_std=rel,
+                                            noise_scale=float(fit0.extra.get("noise_scale", 1.0)))
         data_only = (fit0, identifiability(fit0, profile=("ei",) if "ei" in fit0.names else (), fit_again=again))
     ex = lsq.extra
     meta = dict(
         model="eq18",
-        data=dict(n=ex["n"], freq_hz=ex["freq_hz"], sigma_hz=ex["sigma_hz"], sigma_source=ex["sigma_source"]),
+        data=dict(n=ex["n"], freq_hz=ex["freq_hz"], sigma_hz=ex["sigma_hz"], sigma_source=ex["sigma_source"],
+                  noise=ex.get("noise", "fixed"), noise_scale=float(ex.get("noise_scale", 1.0)),
+                  noise_dof=float(ex.get("noise_dof", math.inf)), t_widening=float(ex.get("t_widening", 1.0)),
+                  discrepancy=float(ex.get("discrepancy", 0.0))),
         geometry=dict(radius=float(geometry.radius), width=float(geometry.width), pressure=float(geometry.pressure),
                       pressure_bar=float(geometry.pressure) / BAR, name=geometry.name),
         priors={k: dict(median=p.median, sigma_ln=p.sigma_ln, source=p.source) for k, p in ex["priors"].items()},
@@ -694,8 +700,10 @@ def sample_posterior(
         data_only=data_only[0].to_record(model_hz=np.asarray(data_only[0].extra["model_hz"]).tolist()),
         identifiability=data_only[1].to_record(),
     )
+    # the intervals' noise model (docs/physics.md §11 "Noise per block"): the settled σ (in the fit's rows) and
+    # the block's Student-t widening per row, as the least-squares covariance has them
     return sample(lsq, walkers=walkers, min_steps=min_steps, max_steps=max_steps, check_every=check_every, seed=seed,
-                  progress=progress, meta=meta, sampler=sampler, chains=chains,
+                  progress=progress, meta=meta, sampler=sampler, chains=chains, row_scale=ex.get("row_scale"),
                   tables={Path(str(table.source)).name or "modes": slice(None)})
 
 

@@ -101,6 +101,16 @@ def write_report(posterior, path, *, overwrite: bool = False, inputs=()):
     return path
 
 
+def _noise_note(data: dict) -> str:
+    """The free-modes block's noise model as the report states it (docs/physics.md §11 "Noise per block"); older
+    files (no ``noise_scale``) say only where σ came from."""
+    if "noise_scale" not in data:
+        return esc(data["sigma_source"])
+    from ringfit.fit.free_block import noise_summary
+
+    return esc(noise_summary(data))
+
+
 def build_free_report(post) -> str:
     """The free-tyre report page from a posterior and the fits saved with it (``post.meta``)."""
     from ringfit.errors import InputError
@@ -137,7 +147,7 @@ def build_free_report(post) -> str:
         f"<p>Tyre <b>{esc(geo.get('name') or '—')}</b>, R = {geo['radius']:.4g} m, "
         f"b = {geo['width']:.4g} m, p0 = {geo['pressure_bar']:.3g} bar. "
         f"Data: {esc(source_name(meta.get('source')) or 'mode table')} ({n.size} modes; "
-        f"σ: {esc(data['sigma_source'])}).</p>",
+        f"σ: {_noise_note(data)}).</p>",
         f"<p>Model: static inextensible ring, eq. 18 (docs/physics.md §2.1); free parameters: "
         f"{', '.join(esc(k) for k in free)}. Least squares with the stated prior: <b>{esc(lsq['status'])}</b> "
         f"after {lsq['iterations']} iterations, χ² = {lsq['chi2']:.3g} for {lsq['dof']} degrees of freedom, "
