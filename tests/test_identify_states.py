@@ -273,7 +273,9 @@ def test_one_pressure_folder_gives_the_ring_it_gave_before(tmp_path):
     assert any(n.startswith("one pressure: the pressure law is not identified") for n in ident.notes)
     before = BEFORE_SEED3
     for name, value in before.items():
-        assert ident.fit.values[name] == pytest.approx(value, rel=1e-5), name
+        # (the runs' gains and offsets tied to their common values by the profile block's prior since stop 38:
+        # the ring moved by ≤ 1e-4 relative on this case: EI 8.8e-5, ρA 1.4e-5)
+        assert ident.fit.values[name] == pytest.approx(value, rel=2e-4), name
         # the σ since widened by the blocks' model-discrepancy ratio √κ_b ≥ 1 (docs/physics.md §11, issue 32
         # item 4): never narrower than before, and within the issue's 2× where the model is right
         before_sd = BEFORE_SEED3_SD_LN[name]

@@ -154,7 +154,10 @@ def _reference_fit(free: ModeTable, geometry, ring, user_sigma_hz=None, fixed: b
     from ringfit.fit.least_squares import DEFAULT_RELATIVE_STD, frequency_data
     from ringfit.fit.least_squares import fit_natural_frequencies as _fit
 
-    fit_natural_frequencies = functools.partial(_fit, at_initial=fixed)
+    # the σ found here (stated, user, or the robust scales below) is the noise, taken as known: the free block's
+    # scale from the residual (fit's default) would take an effect's misfit in the free table for noise, and the
+    # nulls are calibrated on this σ (docs/physics.md §11 "Noise per block", §6 eq18-free)
+    fit_natural_frequencies = functools.partial(_fit, at_initial=fixed, noise="fixed")
 
     base = frequency_data(free)
     if base.sigma_source == "freq_std_hz":
