@@ -235,3 +235,34 @@ def test_random_line_machinery_fed_the_measured_rows_gives_the_observed_statisti
                            frequencies=lambda rows: np.broadcast_to(prob.y[rows], (2, rows.size)))
     assert res is not None
     np.testing.assert_allclose(res.t_null, res.observed[el], rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.slow  # ~35 s on a busy machine
+def test_the_damping_noise_rule_is_second_differences_per_table_and_the_null_repeats_it(tmp_path):
+    """The damping problem's σ is a function of its rows alone (``ProblemMeta.noise_rule``): per table 1.4826 ×
+    the median |second difference of ln ζ along n| / √6, floored at 0.1 — written out here — and the parametric
+    null applies it to every draw (its σ varies from draw to draw as the estimate would)."""
+    from ringfit.gap.calibration import parametric_null
+    from ringfit.gap.case import read_case
+    from ringfit.gap.diagnosis import build_problems, resolve_effects
+    from ringfit.gap.ranking import fit_chain
+    from ringfit.synth.cases import make_case
+
+    make_case(tmp_path / "c", "none", seed=1004)
+    prob = next(p for p in build_problems(read_case(tmp_path / "c"), resolve_effects(None)) if p.domain == "damping")
+    tab, n = np.asarray(prob.labels["table"]), np.array([float(s.split("n=")[1].split()[0])
+                                                         for s in prob.labels["label"]])
+    for t in np.unique(tab):
+        sel = np.flatnonzero(tab == t)
+        y = prob.y[sel][np.argsort(n[sel], kind="stable")]
+        d2 = np.abs(y[2:] - 2 * y[1:-1] + y[:-2])
+        want = max(1.4826 * np.median(d2) / np.sqrt(6.0), 0.1) if d2.size else 0.2
+        np.testing.assert_allclose(prob.sigma[sel], want, rtol=1e-12)
+    assert prob.meta.noise_rule is not None
+    np.testing.assert_allclose(prob.meta.noise_rule(prob.y[None, :])[0], prob.sigma, rtol=0, atol=0)
+    base = fit_chain(prob, ())
+    base.extra["heldout_pred"] = base.extra["pred"]
+    effects = [e.name for e in prob.effects]
+    fits = {(): base, **{(e,): fit_chain(prob, (e,)) for e in effects}}
+    null = parametric_null(prob, base, fits, (), effects, draws=50, seed=3)
+    assert "re-estimated" in null.kind and null.draws == 50

@@ -254,22 +254,33 @@ def parametric_null(problem: GapProblem, current, fits: dict, chain: tuple, elem
                 + ("; the reference table held as measured" if ref is not None else ""))
     lin_cur = linearise(problem, current)
     lins = [linearise(problem, fits[chain + parts(el)]) for el in elements]
-    t_null = np.max(candidate_shrinks(problem, lin_cur, lins, ystar), axis=1, initial=-np.inf)
+    rule = problem.meta.noise_rule
+    sigma_star = None
+    if rule is not None:  # the noise estimate repeated on every draw, as it was made on the data
+        sigma_star = np.asarray(rule(ystar), dtype=np.float64)
+        kind += "; σ re-estimated from every draw by the problem's own noise rule"
+    t_null = np.max(candidate_shrinks(problem, lin_cur, lins, ystar, sigma_star), axis=1, initial=-np.inf)
     obs = candidate_shrinks(problem, lin_cur, lins, y)[0]
     observed = {el: float(t) for el, t in zip(elements, obs)}
     return NullResult(kind, t_null, observed, _p_values(t_null, observed),
                       "held-out shrink of the best candidate of the round over the current model (linearised refits)")
 
 
-def candidate_shrinks(problem: GapProblem, lin_cur: Linearised, lins: list, y) -> np.ndarray:
+def candidate_shrinks(problem: GapProblem, lin_cur: Linearised, lins: list, y, sigma=None) -> np.ndarray:
     """``(B, C)`` held-out shrink ``1 − SS_c/SS_current`` of each linearised candidate on data ``y`` ``(B, m)`` (or
     ``(m,)``), the problem's σ and folds: the statistic of the parametric null and of the measured data alike.
 
     Where the problem has several row groups (profiles: the channels), a candidate may be accepted on the
     shrink of one group (:func:`ringfit.gap.verdict.acceptance`), so its statistic is the largest of its
-    shrink over all rows and over each group — in the null as in the data."""
+    shrink over all rows and over each group — in the null as in the data.
+
+    ``sigma``: optional ``(B, m)`` σ of each draw's rows (the problem's noise rule applied to the draw), in place
+    of the problem's (the held-out σ scaled with it)."""
     sig = problem.sigma_heldout if problem.sigma_heldout is not None else problem.sigma
     w2 = 1.0 / problem.sigma**2
+    if sigma is not None:
+        sig = sigma * (sig / problem.sigma)[None, :]
+        w2 = 1.0 / sigma**2
     groups = np.asarray(problem.labels.get("group", np.zeros(problem.m)))
     masks = [np.ones(problem.m, dtype=bool)]
     if len(set(groups.tolist())) > 1:

@@ -63,6 +63,7 @@ jackknife σ) is wider in ``ln ζ`` (δζ/ζ) takes that. Effects: those whose m
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax
@@ -125,6 +126,25 @@ def second_difference_sigma(residual: np.ndarray, sequence, n: np.ndarray) -> tu
     if not d2:
         return math.nan, 0
     return float(1.4826 * np.median(d2) / math.sqrt(6.0)), len(d2)
+
+
+def damping_sigma(rows, table, n, own) -> np.ndarray:
+    """σ ``(B, m)`` of ln ζ rows ``(B, m)`` by the damping problem's noise rule: per table, second differences of
+    ln ζ along n (:func:`second_difference_sigma`; twice :data:`DAMPING_SIGMA_FLOOR` for a table too short for
+    them), floored at :data:`DAMPING_SIGMA_FLOOR`; a row whose own identification σ ``own`` (δζ/ζ, ``ringfit
+    ssi``'s jackknife) is wider takes that. A function of the rows alone: the parametric null applies it to
+    every draw (``ProblemMeta.noise_rule``), so a σ that chance made small in the data is as likely in the null."""
+    rows = np.atleast_2d(np.asarray(rows, dtype=np.float64))
+    out = np.empty_like(rows)
+    zeros = {}
+    for i in np.unique(table):
+        sel = np.flatnonzero(table == i)
+        z = zeros.setdefault(sel.size, np.zeros(sel.size))
+        for b in range(rows.shape[0]):
+            s_, _ = second_difference_sigma(rows[b, sel], z, n[sel])
+            out[b, sel] = max(s_ if math.isfinite(s_) else 2 * DAMPING_SIGMA_FLOOR, DAMPING_SIGMA_FLOOR)
+    wider = np.isfinite(own) & (own[None, :] > out)
+    return np.where(wider, own[None, :], out)
 
 
 def _baseline_covariance(fit, tyre) -> None:
@@ -455,30 +475,27 @@ def _damping_problem(tables, rows, cavity_hz, geometry, ring_ref, effects, noise
     sizes = tuple(len(e.params_for("modes")) for e in usable)
     base = tuple(f"damping_ratio:{table_label(tables[t], t)}" for t in table_ids)
     levels = np.array([math.exp(float(np.median(y[tab == i]))) for i in range(len(table_ids))])
-    sigma = np.empty(m)
     notes = []
     user = noise.get("damping")
-    for i, t in enumerate(table_ids):
-        sel = tab == i
-        if user is not None:
-            s = float(user)
-            notes.append(f"{table_label(tables[t], t)}: user value {s:.3g}")
-        else:
-            s, cnt = second_difference_sigma(y[sel] - np.median(y[sel]), np.zeros(int(sel.sum())), n[sel])
-            if not math.isfinite(s):
-                s = 2 * DAMPING_SIGMA_FLOOR
-                notes.append(f"{table_label(tables[t], t)}: too few modes for second differences, {s:.3g}")
-            else:
-                notes.append(f"{table_label(tables[t], t)}: {max(s, DAMPING_SIGMA_FLOOR):.3g} from second "
-                             f"differences of ln(damping) along n ({cnt} values)")
-        sigma[sel] = max(s, DAMPING_SIGMA_FLOOR)
-    # a row's own identification σ (damping_std_pct, e.g. from `ringfit ssi`) in ln ζ (δζ/ζ): it can only
-    # widen the row's σ (the per-table scale already holds the identification noise of a typical row)
     own = np.array([r.get("damping_std", math.nan) / r["damping"] for r in rows])
-    wider = np.isfinite(own) & (own > sigma)
-    if user is None and wider.any():
-        sigma[wider] = own[wider]
-        notes.append(f"{int(wider.sum())} rows widened to their own damping_std_pct / damping_pct")
+    rule = None
+    if user is not None:
+        sigma = np.full(m, max(float(user), DAMPING_SIGMA_FLOOR))
+        notes += [f"{table_label(tables[t], t)}: user value {float(user):.3g}" for t in table_ids]
+    else:
+        # the noise rule, a function of the rows alone: the parametric null applies it to every draw
+        rule = functools.partial(damping_sigma, table=tab, n=n, own=own)
+        sigma = rule(y[None, :])[0]
+        for i, t in enumerate(table_ids):
+            sel = tab == i
+            cnt = second_difference_sigma(y[sel], np.zeros(int(sel.sum())), n[sel])[1]
+            notes.append(f"{table_label(tables[t], t)}: " + (f"too few modes for second differences, "
+                                                             f"{2 * DAMPING_SIGMA_FLOOR:.3g}" if cnt == 0 else
+                                                             f"{float(np.median(sigma[sel])):.3g} from second differences "
+                                                             f"of ln(damping) along n ({cnt} values)"))
+        wider = np.isfinite(own) & (own > damping_sigma(y[None, :], tab, n, np.full(m, np.nan))[0])
+        if wider.any():
+            notes.append(f"{int(wider.sum())} rows widened to their own damping_std_pct / damping_pct")
     notes.append(f"one damping level per table; Huber weighting beyond |z| = {HUBER:g}")
     labels = _labels(rows, " damping")
     data = ModalData(rows=pad_rows(mrows), ring=ring_ref, geometry=geometry)
@@ -492,7 +509,8 @@ def _damping_problem(tables, rows, cavity_hz, geometry, ring_ref, effects, noise
         base=base, base_values=levels, base_prior_sd=np.full(len(base), np.inf), effects=usable, data=data,
         noise_method="; ".join(notes), baseline_model="one damping ratio per table", not_applicable=dropped,
         meta=ProblemMeta(block=1, tangents=len(base) + MAX_CHAIN_PARAMETERS, padded_rows=int(data.rows.n.shape[0]),
-                         files=[str(tables[t].source).rsplit("/", 1)[-1] for t in table_ids], tables=table_ids),
+                         files=[str(tables[t].source).rsplit("/", 1)[-1] for t in table_ids], tables=table_ids,
+                         noise_rule=rule),
         predictor=DampingPredictor(effects=usable, base=base, sizes=sizes),
         robust=np.ones(m, dtype=bool), huber=HUBER,
     )

@@ -43,6 +43,9 @@ class ProblemMeta:
       own gain and angle offset under leave-one-speed-out): a held-out prediction of the fold fits them to the
       fold's own rows (:func:`ringfit.gap.ranking.fold_nuisance_step`), since the other runs do not determine a
       run's calibration.
+    - ``noise_rule``: optional ``rows (B, m) -> σ (B, m)``, the rule that estimated ``sigma`` from the rows alone
+      (the damping problem's): the parametric null applies it to every draw (the noise estimate is a
+      data-dependent choice the null repeats).
     - ``condition_sd``: stated-condition uncertainty per effect parameter (loaded tables' patches).
 
     *Modal problems*
@@ -69,6 +72,7 @@ class ProblemMeta:
     noise_slope: Any = None
     prior_guarded: tuple = ()
     fold_nuisances: dict = field(default_factory=dict)
+    noise_rule: Any = None
     condition_sd: dict = field(default_factory=dict)
     padded_rows: int | None = None
     files: list | None = None
