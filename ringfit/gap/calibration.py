@@ -127,14 +127,17 @@ def heldout_linear(lin: Linearised, y, w2, folds, idx=None) -> np.ndarray:
         if k == 0:
             e[:, te] = r[:, te]
             continue
-        Jt, wt = J[..., tr, :], w2[..., tr]
+        h = (lin.held or {}).get(int(f)) or []
+        keep = np.array([c for c in range(k) if c not in h], dtype=int)  # the fold's own nuisances held
+        Jt, wt = J[..., tr, :][..., keep], w2[..., tr]
+        lam = lin.lam[np.ix_(keep, keep)]
         # normal equations of the fold's train rows: (k, k) shared, else (B, k, k); right-hand sides (B, k)
-        A = np.einsum("...mi,...m,...mj->...ij", Jt, wt, Jt) + lin.lam + ridge * (1.0 + np.trace(lin.lam))
+        A = np.einsum("...mi,...m,...mj->...ij", Jt, wt, Jt) + lam + ridge[: keep.size, : keep.size] * (1.0 + np.trace(lam))
         wr = wt * r[:, tr]
-        g = (wr @ Jt if shared else np.einsum("bmi,bm->bi", Jt, wr)) - lin.prior_grad
+        g = (wr @ Jt if shared else np.einsum("bmi,bm->bi", Jt, wr)) - lin.prior_grad[keep]
         d = np.linalg.solve(A, g.T).T if shared else np.linalg.solve(A, g[..., None])[..., 0]
-        e[:, te] = r[:, te] - (d @ J[te].T if shared else np.einsum("bmi,bi->bm", J[:, te], d))
-        h = (lin.held or {}).get(int(f))
+        Jte = J[..., te, :][..., keep]
+        e[:, te] = r[:, te] - (d @ Jte.T if shared else np.einsum("bmi,bi->bm", Jte, d))
         if h:  # the fold's own nuisances fitted to its rows, as the held-out refits do (ranking.heldout)
             e[:, te] -= fold_nuisance_step(J[..., te, :][..., h], e[:, te], w2[..., te])
     return e

@@ -259,7 +259,7 @@ def chain_start(problem: GapProblem, chain, theta) -> np.ndarray:
 
 
 def fit_chain(problem: GapProblem, chain: tuple[str, ...] = (), train=None, start=None,
-              max_steps: int = 60) -> FitResult:
+              max_steps: int = 60, hold: tuple = ()) -> FitResult:
     """Refit the baseline + ``chain`` on the ``train`` rows (default all) with the engine.
 
     A chain element ``"name"`` frees the effect's parameters; ``"name@computed"`` holds them
@@ -276,6 +276,9 @@ def fit_chain(problem: GapProblem, chain: tuple[str, ...] = (), train=None, star
         if c.kind == LINEAR:
             theta0[i] = np.clip(theta0[i], c.lo, c.hi)
     free = _free_names(problem, chain)
+    if hold:  # held at their start (a held-out fold's own nuisances: no train row sees them)
+        names = theta_names(problem)
+        free = tuple(n for n in free if n not in {names[i] for i in hold})
     fit = least_squares(engine_problem, theta0, free, max_steps=max_steps, rtol=RTOL, atol=ATOL,
                         n_data=int(train.sum()), pad_to=_pad(problem))
     fit.extra.update(chain=tuple(chain), pred=np.asarray(fit.extra.pop("aux"))[:m], train=train)
@@ -299,11 +302,14 @@ def heldout(problem: GapProblem, fit: FitResult, max_steps: int = 60, variance: 
     unconverged = 0
     for f in folds:
         test = problem.folds == f
+        # the fold's own nuisances (a run's gain and angle offset) are seen by no train row: held at the fit's
+        # values in the refit, then fitted to the fold's own rows by one Gauss–Newton step — the same for the
+        # baseline and every candidate, and for the nulls' linearised refits (calibration.heldout_linear)
+        held = problem.meta.fold_nuisances.get(int(f), ())
         sub = fit_chain(problem, fit.extra["chain"], train=fit.extra["train"] & ~test, start=fit.theta,
-                        max_steps=max_steps)
+                        max_steps=max_steps, hold=held)
         unconverged += not sub.converged
         out[test] = sub.extra["pred"][test]
-        held = problem.meta.fold_nuisances.get(int(f), ())
         if held:  # the held-out run's own calibration (gain, angle offset) fitted to its own rows
             _, Jh = predict_and_jacobian(problem, sub.theta, held)
             out[test] += fold_nuisance_step(Jh[test], problem.y[test] - out[test], 1.0 / problem.sigma[test] ** 2)
