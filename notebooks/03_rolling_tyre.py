@@ -59,6 +59,9 @@ print("max |profile/Ω² − profile(10 km/h)/Ω²| =", max(np.abs(s - scaled[0]
 # ## Fit the tread stiffness
 # Synthetic measurements: truth k_trd = 25 MN/m², 2 m/s² white noise, four speeds.
 # The ring's stiffness and density are those of the natural-frequency fit (Table 9).
+# The profiles are read as `ringfit identify` reads them (the profile block, docs/physics.md §11):
+# revolution-harmonic rows, each run's gain and angle offset (one sensor's prior), and the noise
+# per profile, channel and harmonic estimated from the fit's own residual.
 
 # %%
 truth = ring.replace(k_tread=25e6)
@@ -68,6 +71,7 @@ t0 = time.perf_counter()
 result = fit_rolling(measured, geometry, ring)
 print(f"(first call includes compilation: {time.perf_counter() - t0:.1f} s)")
 print(result.summary())
+print("gains", np.round(result.extra["gain"], 4), "angle offsets [deg]", np.round(result.extra["angle_offset_deg"], 3))
 profiles_figure(result.extra["angle_deg"], result.extra["model"], result.extra["speed_kmh"],
                 result.extra["measured"], title="measured vs fitted").savefig(OUT / "03_fit.png")
 
@@ -75,7 +79,7 @@ profiles_figure(result.extra["angle_deg"], result.extra["model"], result.extra["
 # ## Posterior (emcee, vectorised over walkers)
 
 # %%
-post = sample_rolling_posterior(result, walkers=8, steps=150, seed=0)
+post = sample_rolling_posterior(result, steps=150, seed=0)  # k_trd and the 8 nuisances: 18 walkers
 row = next(r for r in post.summary_table(level=0.6827) if r["name"] == "k_tread")
 lo, med, hi = row["lo"], row["median"], row["hi"]
 print(f"k_trd posterior: {med:.5g} (68 %: {lo:.5g} … {hi:.5g}); least squares {result.values['k_tread']:.5g} "
@@ -86,7 +90,8 @@ print(f"k_trd posterior: {med:.5g} (68 %: {lo:.5g} … {hi:.5g}); least squares 
 # %% [markdown]
 # The source study instead swept k_trd over a grid at 50 km/h and kept the lowest error;
 # `benchmarks/bench_rolling.py` and `tests/test_rolling_fit.py` compare the two: the fit reaches
-# the same or a lower error with 12 model-evaluation equivalents against 301 sweep runs.
+# the same k_trd (within the grid step and its error) with a few model-evaluation equivalents against 301 sweep
+# runs.
 
 # %%
 assert math.isclose(result.values["k_tread"], 25e6, rel_tol=0.01)

@@ -58,15 +58,20 @@ def register(sub) -> None:
     p.set_defaults(run=run_roll)
 
     p = sub.add_parser("fit-rolling", help="fit the tread stiffness to rolling profiles",
-                       description="Least-squares fit (optimistix Levenberg–Marquardt, log-parameters) of the "
-                                   "tread stiffness — optionally damping and the angle offset — to one or more "
-                                   "profiles at different speeds, keeping the ring's other parameters from the tyre "
-                                   "file. Writes the tyre file with the fitted values. Exit 1 if it does not converge.")
+                       description="Weighted least-squares fit (optimistix Levenberg–Marquardt, log-parameters) of "
+                                   "the tread stiffness — optionally damping or other ring parameters — to one or more "
+                                   "profiles at different speeds, with the profile block's likelihood (as identify "
+                                   "reads profiles: revolution-harmonic rows, each run's angle offset and gain under "
+                                   "one sensor's prior, σ per profile, channel and harmonic from the residual; "
+                                   "docs/physics.md §11), keeping the ring's other parameters from the tyre file. "
+                                   "Writes the tyre file with the fitted ring values (the runs' offsets and gains are "
+                                   "printed only). Exit 1 if it does not converge.")
     p.add_argument("profiles", nargs="+", type=Path, help="*.profile.csv files (each with its .json sidecar)")
     p.add_argument("--tyre", required=True, type=Path, help="tyre TOML from the natural-frequency fit")
     p.add_argument("--out", required=True, type=Path, help="output tyre TOML with the fitted [ring] values")
     p.add_argument("--free", default="k_tread",
-                   help="comma-separated parameters: k_tread, damping_ratio, angle_offset, ... (default k_tread)")
+                   help="comma-separated ring parameters: k_tread, damping_ratio, ei, kw, kv, rho_a (default "
+                        "k_tread); each run's angle offset and gain are always fitted")
     p.add_argument("--grid", type=_grid, default=512, help="model grid M, even (default 512)")
     p.add_argument("--plot", type=Path, default=None, help="optional PNG: measured vs model per channel and speed")
     force_flag(p)
@@ -162,9 +167,7 @@ def run_fit_rolling(args) -> int:
     free = tuple(x.strip() for x in args.free.split(",") if x.strip())
     check_output_paths([args.out, args.plot], overwrite=args.force, inputs=[args.tyre, *args.profiles])
 
-    import math
-
-    from ringfit.fit.rolling import ANGLE_OFFSET, check_rolling_free, fit_rolling, fitted_ring
+    from ringfit.fit.rolling import check_rolling_free, fit_rolling, fitted_ring
     import warnings
 
     from ringfit.io.conditions import check_stated, unique_inputs
@@ -192,11 +195,14 @@ def run_fit_rolling(args) -> int:
     for src, speed, (om, how) in zip(args.profiles, result.extra["speed_kmh"],
                                      zip(result.extra["omega"], result.extra["omega_source"])):
         print(f"  {src.name}: {speed:g} km/h, Ω = {om:.3f} rad/s from {how}")
-    print(f"residual RMS {result.extra['rms_ms2']:.3g} m/s² over {result.n_data} samples; "
-          f"{result.extra['evaluations']} model-evaluation equivalents")
-    if ANGLE_OFFSET in result.names:
-        print(f"angle offset {math.degrees(result.values[ANGLE_OFFSET]):+.3f}° "
-              f"± {math.degrees(result.stderr[ANGLE_OFFSET]):.3f}° (not written to the tyre file)")
+    ex = result.extra
+    k = ex["harmonics"]
+    print(f"residual RMS {ex['rms_ms2']:.3g} m/s² over {result.n_data} harmonic rows (k = {k[0]} … {k[-1]}, "
+          f"{ex['passes']} noise passes); {ex['evaluations']} model-evaluation equivalents")
+    for src, g, gs, a, asd in zip(args.profiles, ex["gain"], ex["gain_sd"], ex["angle_offset_deg"],
+                                  ex["angle_offset_sd_deg"]):
+        print(f"  {src.name}: angle offset {a:+.3f}° ± {asd:.3f}°, gain {g:.4f} ± {gs:.4f} (not written to the "
+              f"tyre file)")
     if args.plot is not None:
         from ringfit.report.rolling_plots import profiles_figure
 
@@ -213,7 +219,7 @@ def run_fit_rolling(args) -> int:
     if explained < MIN_EXPLAINED:
         raise CommandFailed(f"the fitted model explains only {100 * explained:.1f} % of the profiles' variance "
                             f"(< {100 * MIN_EXPLAINED:g} %): pure noise, or not a rolling profile; nothing written")
-    ring_names = [k for k in result.names if k != ANGLE_OFFSET]
+    ring_names = list(free)
     write_tyre(tyre.with_ring(fitted_ring(result), ring_names), args.out, overwrite=args.force)
     print(f"wrote {args.out}")
     return 0

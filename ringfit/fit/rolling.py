@@ -1,4 +1,4 @@
-"""Fit the tread stiffness (and optionally damping, angle offset) to rolling acceleration profiles.
+"""Fit the tread stiffness (and optionally damping or other ring parameters) to rolling acceleration profiles.
 
 Model: steady rolling ring with tread-spring contact (docs/physics.md §4,
 :func:`ringfit.physics.contact.solve_rolling`) read by the sensor layers
@@ -6,20 +6,36 @@ Model: steady rolling ring with tread-spring contact (docs/physics.md §4,
 channels, per-revolution mean removed). The stiffness and density of the ring
 come from the natural-frequency fit and stay fixed unless freed.
 
-Residual rows: every profile (one per speed, any number), both channels, on
-the model grid φ_j (the measured profile is band-limited-resampled there,
-:func:`ringfit.io.profiles.resample_profile`; with the baseline sensor each
-measured channel's mean is removed too): ``model(φ_j + offset) − measured``
-[m/s²]. Positive parameters are fitted as logarithms; the angle offset
-(``angle_offset``, rad, one for all profiles) linearly. Solver: optimistix
-Levenberg–Marquardt; covariance from the Jacobian at the optimum scaled by the
-residual variance ``s² = χ²/dof`` (the residual is model error as much as
-noise, so σ is estimated, not assumed).
+The profiles are read with the profile block's likelihood (:mod:`ringfit.fit.profile_block`,
+docs/physics.md §11 "profiles"), the same ``ringfit identify`` and the diagnosis's profile baseline use:
 
-:func:`tread_stiffness_sweep` reproduces the source study's procedure (run the
-model for a grid of tread stiffnesses at one speed, keep the lowest error) for
-comparison; :func:`sample_rolling_posterior` samples the posterior with emcee
-(``vectorize=True`` on one jitted, vmapped log-probability).
+- **rows**: each profile band-limited-resampled onto the model grid (:func:`rolling_data`), then its
+  revolution harmonics k = :data:`~ringfit.fit.profile_block.PROFILE_K_MIN` …
+  :func:`~ringfit.fit.profile_block.profile_band` (real then imaginary parts,
+  :func:`~ringfit.fit.profile_block.harmonic_rows`), ``(model − measured)/σ``;
+- **nuisances**: per profile an angle offset and a gain on the reading
+  (:func:`~ringfit.fit.profile_block.read_through`), always fitted, tied by the block's prior
+  (:func:`~ringfit.fit.profile_block.nuisance_prior`: one sensor for every run). The model is in two stages
+  (the rolling solve, then each run's reading), so the 2P nuisances' tangents skip the solve;
+- **noise**: σ per profile, channel and harmonic from the fit's own residual
+  (:func:`~ringfit.fit.profile_block.noise_from_residual`: a power law, the neighbouring harmonics' average
+  with each harmonic's own residual left out, widened by ν/(ν − 4) and the degrees of freedom the fit took),
+  in passes as ``identify`` does (:data:`~ringfit.fit.free_block.SCALE_PASSES`): σ weights the fit, the
+  fit's residual gives σ.
+
+Positive parameters are fitted as logarithms, the offsets linearly. Solver: optimistix
+Levenberg–Marquardt; covariance from the weighted rows and the prior's at the optimum (σ known from the
+noise model: ``Problem(sigma="fixed")``).
+
+:func:`tread_stiffness_sweep` reproduces the source study's procedure (run the model for a grid of
+tread stiffnesses at one speed, keep the lowest sum of squared time-domain errors, no offset, no gain) for
+comparison; :func:`sample_rolling_posterior` samples the block's likelihood (its weighted rows and the
+nuisances' prior) with the compiled ensemble sampler.
+
+Example::
+
+    fit = fit_rolling(profiles, geometry, ring)          # k_tread, each run's gain and angle offset
+    fit.values["k_tread"], fit.extra["gain"], fit.extra["angle_offset_deg"]
 """
 
 from __future__ import annotations
@@ -32,9 +48,12 @@ import jax
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import LINEAR, AbstractResiduals, Coordinate, Problem, least_squares, sum_of_squares_batch
+from ringfit.fit.engine import AbstractResiduals, Problem, least_squares, sum_of_squares_batch
+from ringfit.fit.free_block import SCALE_PASSES, hat_diagonal
 from ringfit.fit.least_squares import RING_COORDS, RING_FIELDS, ring_from_vector, ring_vector
 from ringfit.fit.priors import BOUNDS
+from ringfit.fit.profile_block import (PROFILE_K_MIN, harmonic_rows, noise_from_residual, nuisance_coords,
+                                       nuisance_names, nuisance_prior, nuisance_start, profile_band, read_through)
 from ringfit.fit.result import FitResult
 from ringfit.io.profiles import grid_angles_deg, resample_profile
 from ringfit.params import RingParams, TyreGeometry
@@ -44,12 +63,11 @@ from ringfit.physics.profile import (FlatOrDrum, ProfileModel, effective_rolling
 from ringfit.physics.rolling import RingModel
 from ringfit.physics.sensor import SensorModel
 
-#: Name of the angle-offset nuisance parameter [rad] (docs/physics.md §5 layer 6).
+#: The one angle offset a rolling fit once freed for every profile; refused in ``free`` now that the profile
+#: block fits each run's angle offset and gain (:func:`ringfit.fit.profile_block.nuisance_names`).
 ANGLE_OFFSET = "angle_offset"
-#: Parameters a rolling fit may free: positive ring parameters (log) and the angle offset (linear).
-ROLLING_FREE = ("k_tread", "damping_ratio", "ei", "kw", "kv", "rho_a", ANGLE_OFFSET)
-#: Flat prior range of the angle offset in the posterior [rad].
-ANGLE_OFFSET_BOUND = math.radians(10.0)
+#: Ring parameters a rolling fit may free (log); each run's angle offset and gain are always fitted.
+ROLLING_FREE = ("k_tread", "damping_ratio", "ei", "kw", "kv", "rho_a")
 
 
 @dataclass(frozen=True)
@@ -59,6 +77,8 @@ class RollingData:
     - ``measured``: ``(P, 2, M)`` radial/tangential [m/s²] on φ_j (mean removed for the baseline sensor).
     - ``omega``, ``load``: ``(P,)`` Ω [rad/s] and Fz [N]; ``drum_diameter``: ``(P,)`` [m] or None (flat road).
     - ``speed_kmh``: ``(P,)``; ``omega_source``: per profile, where Ω came from; ``sources``: file names.
+    - ``n_samples``: per profile its number of recorded angles (the band its harmonic rows compare,
+      :func:`ringfit.fit.profile_block.profile_band`); empty: the grid's whole band.
     """
 
     measured: np.ndarray
@@ -68,6 +88,7 @@ class RollingData:
     speed_kmh: np.ndarray
     omega_source: tuple[str, ...]
     sources: tuple[str, ...]
+    n_samples: tuple[int, ...] = ()
 
 
 def rolling_data(
@@ -110,11 +131,13 @@ def rolling_data(
         speed_kmh=np.array([p.speed_kmh for p in profiles]),
         omega_source=tuple(sources),
         sources=tuple(p.source for p in profiles),
+        n_samples=tuple(len(p) for p in profiles),
     )
 
 
 class RollingArrays(eqx.Module):
-    """What the rolling residuals need besides θ: geometry, operating points ``(P,)`` and the profiles."""
+    """What the rolling residuals need besides θ: geometry, operating points ``(P,)``, the profiles' harmonic rows
+    ``measured`` ``(P, 2, 2H)`` (:func:`ringfit.fit.profile_block.harmonic_rows`) and their σ (same shape)."""
 
     geometry: TyreGeometry
     omega: jax.Array
@@ -122,36 +145,78 @@ class RollingArrays(eqx.Module):
     roads: FlatOrDrum
     band: jax.Array
     measured: jax.Array
+    sigma: jax.Array
 
 
 class RollingResiduals(AbstractResiduals):
-    """Rows ``model(φ_j) − measured(φ_j)`` [m/s²] of every profile and channel; aux: the model ``(P, 2, M)``.
+    """The profile block's rows ``(model − measured)/σ`` of every profile, channel and revolution harmonic (real
+    then imaginary parts); aux: the model's channels as each run reads them ``(P, 2, M)`` [m/s²].
 
-    θ = the ring fields (:data:`ringfit.fit.least_squares.RING_FIELDS`) then the angle offset [rad];
-    the model is the one forward model (:func:`ringfit.physics.profile.profile_channels`).
+    θ = the ring fields (:data:`ringfit.fit.least_squares.RING_FIELDS`) then per profile its angle offset [rad]
+    and gain (:func:`ringfit.fit.profile_block.nuisance_names`). Two stages (the engine's two-stage model, as
+    :class:`ringfit.fit.identify.JointResiduals`): the rolling solve of every profile (the one forward model,
+    :func:`ringfit.physics.profile.profile_channels`), then each run's reading through its offset and gain
+    (:func:`ringfit.fit.profile_block.read_through`) — the 2P nuisances' tangents skip the solve.
     """
+
+    n_profiles: int = eqx.field(static=True)
+    model: ProfileModel = eqx.field(static=True)
+    solver: ContactSolver = eqx.field(static=True)
+    #: highest harmonic compared (:func:`ringfit.fit.profile_block.profile_band`; 0: M/2 − 1)
+    k_top: int = eqx.field(static=True, default=0)
+
+    @property
+    def readout(self) -> tuple[int, ...]:
+        """θ indices of the profiles' nuisances (angle offset, gain per profile): they act after the solve."""
+        return tuple(range(len(RING_FIELDS), len(RING_FIELDS) + 2 * self.n_profiles))
+
+    def __call__(self, theta, data: RollingArrays):
+        return self.outer(self.inner(theta, data), theta, data)
+
+    def inner(self, theta, data: RollingArrays):
+        """The expensive stage: the model's channels ``(P, 2, M)`` before each run's reading."""
+        ring = ring_from_vector(theta)
+        return profile_channels(self.model, ring, data.geometry, data.omega, data.load, data.roads, data.band, 0.0,
+                                self.solver)
+
+    def outer(self, channels, theta, data: RollingArrays):
+        """The cheap stage: each run's reading of ``channels`` and its harmonic rows, divided by their σ."""
+        base = len(RING_FIELDS)
+        P = self.n_profiles
+        read = read_through(channels, theta[base : base + 2 * P : 2], theta[base + 1 : base + 2 * P : 2])
+        rows = harmonic_rows(read, k_top=self.k_top)
+        return ((rows - data.measured) / data.sigma).ravel(), read
+
+
+class _GridResiduals(AbstractResiduals):
+    """The source study's error (:func:`tread_stiffness_sweep`): ``model(φ_j) − measured(φ_j)`` [m/s²] on the
+    model grid, no angle offset, no gain; θ = the ring fields."""
 
     model: ProfileModel = eqx.field(static=True)
     solver: ContactSolver = eqx.field(static=True)
 
     def __call__(self, theta, data: RollingArrays):
-        ring = ring_from_vector(theta)
-        ch = profile_channels(self.model, ring, data.geometry, data.omega, data.load, data.roads, data.band,
-                              theta[len(RING_FIELDS)], self.solver)
+        ch = profile_channels(self.model, ring_from_vector(theta), data.geometry, data.omega, data.load, data.roads,
+                              data.band, 0.0, self.solver)
         return (ch - data.measured).ravel(), ch
 
 
-#: Solver coordinates of a rolling fit: the ring's (log) and the angle offset (linear, in degrees, ±10°).
-ROLLING_COORDS = RING_COORDS + (Coordinate(ANGLE_OFFSET, LINEAR, scale=math.radians(1.0), lo=-ANGLE_OFFSET_BOUND,
-                                           hi=ANGLE_OFFSET_BOUND),)
+def rolling_coords(P: int):
+    """Solver coordinates of a rolling fit of ``P`` profiles: the ring's (log), then the profile block's
+    nuisances (:func:`ringfit.fit.profile_block.nuisance_coords`)."""
+    return RING_COORDS + nuisance_coords(P)
 
 
 def check_rolling_free(free) -> tuple[str, ...]:
-    """Validate the names of the parameters to fit (see :data:`ROLLING_FREE`)."""
+    """Validate the names of the ring parameters to fit (see :data:`ROLLING_FREE`)."""
     free = tuple(free)
     if not free:
         raise InputError("no free parameter to fit")
     for k in free:
+        if k == ANGLE_OFFSET:
+            raise InputError("cannot free 'angle_offset': fit-rolling now fits each run's angle offset and gain "
+                             "(the profile block's nuisances, always fitted); list ring parameters only: "
+                             f"{', '.join(ROLLING_FREE)}")
         if k not in ROLLING_FREE:
             raise InputError(f"cannot fit {k!r} to rolling profiles; choose from {', '.join(ROLLING_FREE)}")
     if len(set(free)) != len(free):
@@ -159,13 +224,35 @@ def check_rolling_free(free) -> tuple[str, ...]:
     return free
 
 
-def _problem(data: RollingData, geometry, free, model, sensor, solver) -> Problem:
+def block_rows(data: RollingData, k_min: int = PROFILE_K_MIN) -> dict:
+    """The profile block's rows of prepared profiles: ``measured`` ``(P, 2, 2H)`` harmonic rows
+    (:func:`ringfit.fit.profile_block.harmonic_rows`, k_min … ``k_top`` of
+    :func:`ringfit.fit.profile_block.profile_band`) and the starting ``sigma`` (a tenth of each profile and
+    channel's RMS row, as :func:`ringfit.fit.profile_block.profile_rows` starts it; replaced by
+    :func:`ringfit.fit.profile_block.noise_from_residual` after the first pass)."""
+    M = data.measured.shape[-1]
+    # profile_band reads each profile's number of angles (len): the recorded counts stand in for the profiles
+    k_top = profile_band([range(n) for n in data.n_samples], M) if data.n_samples else M // 2 - 1
+    if k_top < k_min:
+        raise InputError(f"the profiles resolve revolution harmonics up to {k_top} only; the rows start at "
+                         f"{k_min}: give profiles with more angles per revolution")
+    measured = np.asarray(harmonic_rows(jax.numpy.asarray(data.measured), k_min=k_min, k_top=k_top))
+    sigma = np.broadcast_to(np.sqrt(np.mean(measured**2, axis=-1, keepdims=True)) * 0.1, measured.shape).copy()
+    return dict(measured=measured, sigma=sigma, k_top=k_top, k_min=k_min)
+
+
+def _arrays(data: RollingData, geometry, measured, sigma, M) -> RollingArrays:
+    P = data.measured.shape[0]
+    return as_traced(RollingArrays(geometry=geometry, omega=data.omega, load=data.load,
+                                   roads=flat_or_drum(data.drum_diameter, P), band=full_band(P, M),
+                                   measured=measured, sigma=sigma))
+
+
+def _problem(data: RollingData, geometry, rows: dict, sigma, model, sensor, solver) -> Problem:
     P, _, M = data.measured.shape
-    arrays = RollingArrays(geometry=geometry, omega=data.omega, load=data.load,
-                           roads=flat_or_drum(data.drum_diameter, P), band=full_band(P, M), measured=data.measured)
-    residuals = RollingResiduals(ProfileModel(ring_model=model, sensor=sensor), solver)
-    return Problem(residuals, as_traced(arrays), ROLLING_COORDS, sigma="estimate", plausible=BOUNDS,
-                   data_label="these profiles")
+    residuals = RollingResiduals(P, ProfileModel(ring_model=model, sensor=sensor), solver, k_top=rows["k_top"])
+    return Problem(residuals, _arrays(data, geometry, rows["measured"], sigma, M), rolling_coords(P),
+                   prior=nuisance_prior(P), sigma="fixed", plausible=BOUNDS, data_label="these profiles")
 
 
 def fit_rolling(
@@ -174,16 +261,16 @@ def fit_rolling(
     ring: RingParams,
     *,
     free=("k_tread",),
-    initial_offset_deg: float = 0.0,
     model: RingModel = RingModel(),
     sensor: SensorModel = SensorModel(),
     solver: ContactSolver = ContactSolver(),
     rolling_radius_m: float | None = None,
     max_steps: int = 64,
     rtol: float = 1e-8,
-    atol: float = 1e-4,
+    atol: float = 1e-8,
 ) -> FitResult:
-    """Fit ring parameters (default: the tread stiffness) to one or more rolling profiles.
+    """Fit ring parameters (default: the tread stiffness) to one or more rolling profiles, with each run's angle
+    offset and gain, on the profile block's likelihood (module docstring).
 
     **Arguments:**
 
@@ -191,44 +278,70 @@ def fit_rolling(
       all on a flat road or all on drums), or a prepared :class:`RollingData`.
     - ``geometry``, ``ring``: the tyre and the ring from the natural-frequency
       fit; parameters not in ``free`` stay at these values, free ones start there.
-    - ``free``: subset of :data:`ROLLING_FREE`; ``angle_offset`` [rad] is the
-      recorded-angle offset (φ = α + offset), starting at ``initial_offset_deg``.
+    - ``free``: subset of :data:`ROLLING_FREE` (ring parameters); the nuisances
+      ``angle_offset_i`` [rad] (φ = α + offset) and ``gain_i`` are always fitted.
     - ``model``, ``sensor``, ``solver``: ring form, sensor layers (default §6
       baseline), grid (see :mod:`ringfit.physics`).
-    - ``rtol``, ``atol``: optimistix Cauchy termination (``atol`` applies to the
-      log-parameters and to the residuals in m/s²; the last Newton steps make the
-      optimum far more precise than ``atol``).
+    - ``rtol``, ``atol``: optimistix Cauchy termination (on the solver coordinates and the weighted rows),
+      as ``identify``'s.
 
-    **Returns:** :class:`~ringfit.fit.result.FitResult` (values SI; angle offset in
-    rad). ``extra``: ``model``, ``measured`` ``(P, 2, M)``, ``angle_deg`` ``(M,)``,
-    ``omega``, ``speed_kmh``, ``omega_source``, ``sigma_ms2`` (estimated residual
-    σ), ``rms_ms2``, ``evaluations`` (model-evaluation equivalents used),
-    ``data``, ``ring``, ``geometry``. Never raises on non-convergence.
+    **Returns:** :class:`~ringfit.fit.result.FitResult` of the last pass (values SI; angle offsets in rad).
+    ``extra``: ``model`` (the fitted model as each run reads it) and ``measured`` ``(P, 2, M)`` on the grid,
+    ``angle_deg`` ``(M,)``, ``omega``, ``speed_kmh``, ``omega_source``, ``harmonics`` ``(H,)`` (k compared),
+    ``model_rows``/``measured_rows`` ``(P, 2, 2H)``, ``sigma_ms2`` ``(P, 2, H)`` (the noise model's σ per
+    profile, channel and harmonic the last pass weighted by), ``rms_ms2`` (RMS of the unweighted harmonic
+    residual rows), ``gain``/``angle_offset_deg`` ``(P,)`` with ``gain_sd``/``angle_offset_sd_deg``,
+    ``passes``, ``evaluations`` (model-evaluation equivalents, all passes), ``data``, ``ring``, ``geometry``.
+    Never raises on non-convergence.
     """
     data = profiles if isinstance(profiles, RollingData) else rolling_data(
         profiles, geometry, ring, solver=solver, sensor=sensor, model=model, rolling_radius_m=rolling_radius_m)
-    free = check_rolling_free(free)
-    problem = _problem(data, geometry, free, model, sensor, solver)
-    theta0 = np.append(ring_vector(ring), math.radians(initial_offset_deg))
-    result = least_squares(problem, theta0, free, max_steps=max_steps, rtol=rtol, atol=atol)
-    M = data.measured.shape[-1]
-    k = len(free)
-    chi2 = result.extra["chi2_raw"]
-    result.extra.update(
-        model=np.asarray(result.extra.pop("aux")), measured=data.measured, angle_deg=grid_angles_deg(M),
+    free_ring = check_rolling_free(free)
+    P, _, M = data.measured.shape
+    rows = block_rows(data)
+    free = free_ring + nuisance_names(P)
+    theta = np.concatenate([ring_vector(ring), nuisance_start(P)])
+    sigma = rows["sigma"]
+    fit, evaluations = None, 0
+    # σ weights the fit, the fit's residual gives σ (the profile block's noise model, as identify's passes)
+    for passes in range(1, SCALE_PASSES + 1):
+        used = sigma
+        fit = least_squares(_problem(data, geometry, rows, used, model, sensor, solver), theta, free,
+                            max_steps=max_steps, rtol=rtol, atol=atol)
+        evaluations += evaluations_used(fit.iterations, len(free_ring))
+        if fit.converged:
+            theta = fit.theta.copy()
+        m = rows["measured"].size
+        sigma = noise_from_residual(fit.residuals[:m].reshape(rows["measured"].shape) * used,
+                                    hat_diagonal(fit.jacobian)[:m])
+        if fit.converged and passes > 1:
+            break
+    read = np.asarray(fit.extra.pop("aux"))
+    model_rows = np.asarray(harmonic_rows(jax.numpy.asarray(read), k_top=rows["k_top"]))
+    H = rows["measured"].shape[-1] // 2
+    names = nuisance_names(P)
+    fit.extra.update(
+        model=read, measured=data.measured, angle_deg=grid_angles_deg(M),
         omega=data.omega, speed_kmh=data.speed_kmh, omega_source=data.omega_source,
-        sigma_ms2=result.extra["sigma_scale"], rms_ms2=math.sqrt(chi2 / data.measured.size),
-        evaluations=evaluations_used(result.iterations, k), data=data, ring=fitted_ring(result), geometry=geometry,
+        harmonics=np.arange(rows["k_min"], rows["k_min"] + H), model_rows=model_rows, measured_rows=rows["measured"],
+        sigma_ms2=np.asarray(used)[..., :H],
+        rms_ms2=math.sqrt(float(np.mean((model_rows - rows["measured"]) ** 2))),
+        gain=np.array([fit.values[n] for n in names[1::2]]),
+        gain_sd=np.array([fit.stderr[n] for n in names[1::2]]),
+        angle_offset_deg=np.degrees([fit.values[n] for n in names[0::2]]),
+        angle_offset_sd_deg=np.degrees([fit.stderr[n] for n in names[0::2]]),
+        passes=passes, evaluations=evaluations, data=data, ring=fitted_ring(fit), geometry=geometry,
     )
-    return result
+    return fit
 
 
 def evaluations_used(steps: int, k: int) -> int:
-    """Model-evaluation equivalents of a Levenberg–Marquardt fit with k parameters.
+    """Model-evaluation equivalents of a Levenberg–Marquardt fit with k parameters through the solve.
 
     Each step evaluates the residuals and linearises them (one primal solve and
     k tangent solves, counted as 1 + k evaluations); the final Jacobian for the
-    covariance adds 1 + k.
+    covariance adds 1 + k. The readout's nuisances (each run's gain and offset) pass no tangent through the
+    solve and are not counted.
     """
     return (steps + 1) * (1 + k)
 
@@ -255,14 +368,20 @@ def tread_stiffness_sweep(
 ) -> SweepResult:
     """Run the model for every tread stiffness in ``k_grid`` [N/m²] and keep the lowest error (source study §5.3).
 
-    The error is the same sum of squared residuals that :func:`fit_rolling`
-    minimises, so the two optima compare directly.
+    The error is the study's: the sum of squared time-domain residuals on the model grid, no angle offset, no
+    gain (:func:`sum_of_squares` gives the same error of a :func:`fit_rolling` result, read through its fitted
+    nuisances).
     """
     data = profiles if isinstance(profiles, RollingData) else rolling_data(
         profiles, geometry, ring, solver=solver, sensor=sensor, model=model, rolling_radius_m=rolling_radius_m)
-    problem = _problem(data, geometry, ("k_tread",), model, sensor, solver)
+    P, _, M = data.measured.shape
+    arrays = as_traced(RollingArrays(geometry=geometry, omega=data.omega, load=data.load,
+                                     roads=flat_or_drum(data.drum_diameter, P), band=full_band(P, M),
+                                     measured=data.measured, sigma=np.ones(())))
+    problem = Problem(_GridResiduals(ProfileModel(ring_model=model, sensor=sensor), solver), arrays, RING_COORDS,
+                      sigma="estimate", plausible=BOUNDS, data_label="these profiles")
     k_grid = np.asarray(k_grid, dtype=np.float64)
-    thetas = np.tile(np.append(ring_vector(ring), 0.0), (k_grid.size, 1))
+    thetas = np.tile(ring_vector(ring), (k_grid.size, 1))
     thetas[:, RING_FIELDS.index("k_tread")] = k_grid
     sse = sum_of_squares_batch(problem, thetas, chunk=batch)
     i = int(np.argmin(sse))
@@ -270,23 +389,28 @@ def tread_stiffness_sweep(
 
 
 def sum_of_squares(result: FitResult) -> float:
-    """Unweighted sum of squared residuals [(m/s²)²] of a :func:`fit_rolling` result."""
-    return float(result.extra["chi2_raw"])
+    """The source study's error of a :func:`fit_rolling` result: the sum of squared time-domain residuals
+    [(m/s²)²] on the model grid of the fitted model as each run reads it (:func:`tread_stiffness_sweep`'s error)."""
+    return float(np.sum((np.asarray(result.extra["model"]) - np.asarray(result.extra["measured"])) ** 2))
 
 
-def sample_rolling_posterior(result: FitResult, *, walkers: int = 16, steps: int = 400, seed: int = 0,
+def sample_rolling_posterior(result: FitResult, *, walkers: int | None = None, steps: int = 400, seed: int = 0,
                              progress: bool = False):
-    """Posterior of a :func:`fit_rolling` result's free parameters: :func:`ringfit.fit.posterior.sample`
-    for exactly ``steps`` steps.
+    """Posterior of a :func:`fit_rolling` result's free parameters (the ring's and each run's gain and angle
+    offset): :func:`ringfit.fit.posterior.sample` for exactly ``steps`` steps.
 
-    Likelihood: independent Gaussians with the residual σ of the fit (``result.extra["sigma_ms2"]``);
-    prior: flat in ``log θ`` within :data:`ringfit.fit.priors.BOUNDS` (±10° for the angle offset);
-    walkers start in a small ball (¼ of the standard error) at the optimum.
+    Likelihood: the profile block's — independent Gaussian harmonic rows with the noise model's σ the fit's last
+    pass weighted by (``result.extra["sigma_ms2"]``) — and the nuisances' prior
+    (:func:`ringfit.fit.profile_block.nuisance_prior`); flat in ``log θ`` within
+    :data:`ringfit.fit.priors.BOUNDS` and the nuisances' bounds; walkers (default: the smallest even number ≥ 16
+    and ≥ twice the free parameters) start in a small ball (¼ of the standard error) at the optimum.
     """
     from ringfit.fit.posterior import sample
 
+    if walkers is None:
+        walkers = max(16, 2 * len(result.names))
     return sample(result, walkers=walkers, min_steps=steps, max_steps=steps, check_every=steps, seed=seed,
-                  progress=progress, spread=0.25, meta={"model": "rolling", "sigma_ms2": result.extra["sigma_ms2"]})
+                  progress=progress, spread=0.25, meta={"model": "rolling"})
 
 
 def fitted_ring(result: FitResult) -> RingParams:
@@ -297,5 +421,5 @@ def fitted_ring(result: FitResult) -> RingParams:
 __all__ = [
     "fit_rolling", "rolling_data", "RollingData", "RollingResiduals", "tread_stiffness_sweep", "SweepResult",
     "sample_rolling_posterior", "fitted_ring", "ROLLING_FREE", "ANGLE_OFFSET", "evaluations_used",
-    "sum_of_squares", "check_rolling_free",
+    "sum_of_squares", "check_rolling_free", "RollingArrays", "rolling_coords", "block_rows",
 ]
