@@ -160,8 +160,13 @@ def profile_nuisance(out: Path, seed: int) -> None:
         n = len(prof)
         jitter = rng.normal(0.0, 0.2)  # deg: the run's angle origin moves
         chans = []
+        step = np.diff(prof.angle_deg)
+        assert np.allclose(step, 360.0 / n), "the generator's profiles are on an even angle grid"
+        k = np.arange(n // 2 + 1)
         for ch in (prof.acc_radial_ms2, prof.acc_tangential_ms2):
-            x = np.interp(prof.angle_deg + jitter, prof.angle_deg, ch, period=360.0)
+            # the run's angle origin moved: a pure shift of the periodic record (band-limited; a linear
+            # interpolation would also low-pass the record, an effect of its own that sensor_mass can explain)
+            x = np.fft.irfft(np.fft.rfft(ch) * np.exp(1j * k * np.radians(jitter)), n=n)
             level = float(np.std(ch)) * rng.uniform(2e-4, 2e-3)  # heteroscedastic: per run and channel
             chans.append(gain * x + level * (_ar2(rng, n) + coloured_noise(rng, n, 1.0, "pink")))
         write_profile(Profile(prof.angle_deg, chans[0], chans[1], condition=prof.condition), path, overwrite=True)
