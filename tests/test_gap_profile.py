@@ -405,3 +405,20 @@ def test_a_run_whose_sensor_reads_2_percent_high_is_not_an_effect(tmp_path):
         assert d.verdict["effect"] == "none", (name, d.verdict)
     part = next(p for p in d.parts if p.problem.domain == "profiles")
     assert part.problem.meta.fold_nuisances == {i: (1 + 2 * i, 2 + 2 * i) for i in range(len(part.problem.data_files))}
+
+
+@pytest.mark.slow
+def test_held_out_refits_of_a_chain_that_fills_the_free_slots(tmp_path):
+    """The held-out refits hold the fold's own gain and offset out of the free set (``fit_chain(hold=…)``) and keep
+    the whole free set's slots: a chain whose parameters fill them (sensor_tilt's two and gravity's one beside the
+    ring's five and four runs' eight nuisances) refits every fold through the two-stage model (it raised before)."""
+    from ringfit.gap.case import read_case
+    from ringfit.gap.diagnosis import build_problems, resolve_effects
+    from ringfit.gap.ranking import fit_chain, heldout
+    from ringfit.synth.cases import make_profile_case
+
+    make_profile_case(tmp_path / "c", "sensor_tilt", seed=2001)
+    prob = next(p for p in build_problems(read_case(tmp_path / "c"), resolve_effects(None)) if p.domain == "profiles")
+    fit = fit_chain(prob, ("sensor_tilt", "gravity"))
+    ho = heldout(prob, fit)
+    assert np.all(np.isfinite(ho)) and fit.extra["heldout_refits"]["folds"] == 4

@@ -276,11 +276,15 @@ def fit_chain(problem: GapProblem, chain: tuple[str, ...] = (), train=None, star
         if c.kind == LINEAR:
             theta0[i] = np.clip(theta0[i], c.lo, c.hi)
     free = _free_names(problem, chain)
+    pad = _pad(problem)
     if hold:  # held at their start (a held-out fold's own nuisances: no train row sees them)
         names = theta_names(problem)
+        # the slots of the whole free set kept (padding in their place): the same compiled solve, and a
+        # two-stage model's inner-stage slots unchanged
+        pad = max(pad, len(free))
         free = tuple(n for n in free if n not in {names[i] for i in hold})
     fit = least_squares(engine_problem, theta0, free, max_steps=max_steps, rtol=RTOL, atol=ATOL,
-                        n_data=int(train.sum()), pad_to=_pad(problem))
+                        n_data=int(train.sum()), pad_to=pad)
     fit.extra.update(chain=tuple(chain), pred=np.asarray(fit.extra.pop("aux"))[:m], train=train)
     fit.residuals = fit.residuals[:m]
     return fit
