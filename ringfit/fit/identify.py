@@ -559,7 +559,7 @@ def _profile_rows(profiles, geometry, ring, solver, plan: "StatePlan | None" = N
     without ``rotation_hz`` at another pressure is V/R_e of the ring at that pressure (§13.1)."""
     if not profiles:
         return None
-    from ringfit.fit.rolling import rolling_data
+    from ringfit.fit.profile_block import rolling_data
 
     rows = profile_rows(profiles, geometry, ring, solver)
     if plan is not None and plan.active:

@@ -5,7 +5,7 @@ that reads profiles (docs/physics.md §11 "profiles").
 (:mod:`ringfit.gap.profile`) both compose this block, so the same profile is read the same way by both:
 
 - **rows**: :func:`profile_rows` — each ``*.profile.csv`` band-limited and resampled onto the model grid
-  (:func:`ringfit.fit.rolling.rolling_data`), Ω from the sidecar's ``rotation_hz`` else V/R_e;
+  (:func:`rolling_data`), Ω from the sidecar's ``rotation_hz`` else V/R_e;
   :func:`harmonic_rows` turns channels into revolution-harmonic rows (real then imaginary parts);
 - **nuisances**: per profile an angle offset (linear, ±:data:`OFFSET_BOUND`) and a gain on the reading
   (log, in :data:`GAIN_RANGE`; the sensor's sensitivity and its offset from the belt), named by
@@ -28,12 +28,19 @@ Example::
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import jax.numpy as jnp
 import numpy as np
 
+from ringfit.errors import InputError
 from ringfit.fit.engine import LINEAR, LOG, Coordinate, GaussianPrior
-from ringfit.physics.sensor import shift_angle
+from ringfit.io.profiles import resample_profile
+from ringfit.params import RingParams, TyreGeometry
+from ringfit.physics.contact import ContactSolver
+from ringfit.physics.profile import ProfileModel, effective_rolling_radius
+from ringfit.physics.rolling import RingModel
+from ringfit.physics.sensor import SensorModel, shift_angle
 
 #: Harmonics averaged on either side for a profile's noise spectrum.
 NOISE_SMOOTHING = 4
@@ -128,14 +135,77 @@ def profile_band(profiles, n_grid: int) -> int:
     return int(min(n_grid // 2 - 1, (n_min - 1) // 2 - PROFILE_BAND_MARGIN))
 
 
+@dataclass(frozen=True)
+class RollingData:
+    """Profiles on the model grid, ready for a fit.
+
+    - ``measured``: ``(P, 2, M)`` radial/tangential [m/s²] on φ_j (mean removed for the baseline sensor).
+    - ``omega``, ``load``: ``(P,)`` Ω [rad/s] and Fz [N]; ``drum_diameter``: ``(P,)`` [m] or None (flat road).
+    - ``speed_kmh``: ``(P,)``; ``omega_source``: per profile, where Ω came from; ``sources``: file names.
+    - ``n_samples``: per profile its number of recorded angles (the band its harmonic rows compare,
+      :func:`ringfit.fit.profile_block.profile_band`); empty: the grid's whole band.
+    """
+
+    measured: np.ndarray
+    omega: np.ndarray
+    load: np.ndarray
+    drum_diameter: np.ndarray | None
+    speed_kmh: np.ndarray
+    omega_source: tuple[str, ...]
+    sources: tuple[str, ...]
+    n_samples: tuple[int, ...] = ()
+
+
+def rolling_data(
+    profiles, geometry: TyreGeometry, ring: RingParams, *,
+    solver: ContactSolver = ContactSolver(), sensor: SensorModel = SensorModel(), model: RingModel = RingModel(),
+    rolling_radius_m: float | None = None,
+) -> RollingData:
+    """Put profiles on the model grid and work out Ω for each (docs/formats.md §3).
+
+    Ω is ``2π·rotation_hz`` when the sidecar has it, else ``V / R_e`` with
+    ``rolling_radius_m`` or, by default, ``R_e = R_out − δ/3`` where δ is the
+    standing deflection of ``ring`` at the profile's load.
+    """
+    profiles = list(profiles)
+    if not profiles:
+        raise InputError("no profile to fit")
+    drums = [p.drum_diameter_m for p in profiles]
+    if any(d is None for d in drums) and not all(d is None for d in drums):
+        raise InputError("profiles mix flat-road and drum conditions (drum_diameter_m); fit them separately")
+    M = solver.n_grid
+    measured, omega, sources = [], [], []
+    for p in profiles:
+        if p.rotation_hz is None and rolling_radius_m is None:
+            r_e = effective_rolling_radius(ring, geometry, p.load_n, p.drum_diameter_m,
+                                           model=ProfileModel(ring_model=model), solver=solver)
+        else:
+            r_e = rolling_radius_m
+        om, src = p.omega(r_e)
+        ch = resample_profile(p, M)
+        if sensor.remove_mean:
+            ch = ch - ch.mean(axis=-1, keepdims=True)
+        measured.append(ch)
+        omega.append(om)
+        sources.append(src)
+    return RollingData(
+        measured=np.stack(measured),
+        omega=np.array(omega),
+        load=np.array([p.load_n for p in profiles]),
+        drum_diameter=None if drums[0] is None else np.array(drums, dtype=np.float64),
+        speed_kmh=np.array([p.speed_kmh for p in profiles]),
+        omega_source=tuple(sources),
+        sources=tuple(p.source for p in profiles),
+        n_samples=tuple(len(p) for p in profiles),
+    )
+
+
 def profile_rows(profiles, geometry, ring, solver, k_min: int = PROFILE_K_MIN) -> dict:
     """The block's rows of ``profiles``: ``measured`` ``(P, 2, 2H)`` harmonic rows (:func:`harmonic_rows`, k_min …
     :func:`profile_band`), a starting ``sigma`` of the same shape (a tenth of each profile and channel's RMS row,
     replaced by :func:`noise_from_residual` after the first fit), and per profile ``omega``, ``load``, ``drum``,
     ``speed_kmh``, ``sources`` (``P``, ``M``, ``k_top``, ``k_min``, ``grid`` the channels ``(P, 2, M)`` on the model
     grid, ``omega_source``)."""
-    from ringfit.fit.rolling import rolling_data
-
     data = rolling_data(profiles, geometry, ring, solver=solver)
     k_top = profile_band(profiles, solver.n_grid)
     measured = np.asarray(harmonic_rows(jnp.asarray(data.measured), k_min=k_min, k_top=k_top))
@@ -192,6 +262,6 @@ def noise_from_residual(residual: np.ndarray, leverage: np.ndarray, k_min: int =
     return np.concatenate([sigma, sigma], axis=-1)
 
 
-__all__ = ["profile_rows", "harmonic_rows", "profile_band", "nuisance_names", "nuisance_coords", "nuisance_start",
+__all__ = ["RollingData", "rolling_data", "profile_rows", "harmonic_rows", "profile_band", "nuisance_names", "nuisance_coords", "nuisance_start",
            "read_through", "nuisance_prior", "nuisance_prior_cov", "GAIN_SPREAD", "GAIN_COMMON_SD", "OFFSET_SPREAD", "noise_spectrum", "noise_from_residual", "GAIN_RANGE", "OFFSET_BOUND", "OFFSET_SCALE",
            "PROFILE_K_MIN", "NOISE_SMOOTHING", "PROFILE_BAND_MARGIN"]

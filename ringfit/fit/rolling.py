@@ -52,14 +52,14 @@ from ringfit.fit.engine import AbstractResiduals, Problem, least_squares, sum_of
 from ringfit.fit.free_block import SCALE_PASSES, hat_diagonal
 from ringfit.fit.least_squares import RING_COORDS, RING_FIELDS, ring_from_vector, ring_vector
 from ringfit.fit.priors import BOUNDS
-from ringfit.fit.profile_block import (PROFILE_K_MIN, harmonic_rows, noise_from_residual, nuisance_coords,
-                                       nuisance_names, nuisance_prior, nuisance_start, profile_band, read_through)
+from ringfit.fit.profile_block import (PROFILE_K_MIN, RollingData, harmonic_rows, noise_from_residual, nuisance_coords,
+                                       nuisance_names, nuisance_prior, nuisance_start, profile_band, read_through,
+                                       rolling_data)
 from ringfit.fit.result import FitResult
-from ringfit.io.profiles import grid_angles_deg, resample_profile
+from ringfit.io.profiles import grid_angles_deg
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced
-from ringfit.physics.profile import (FlatOrDrum, ProfileModel, effective_rolling_radius, flat_or_drum, full_band,
-                                     profile_channels)
+from ringfit.physics.profile import FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels
 from ringfit.physics.rolling import RingModel
 from ringfit.physics.sensor import SensorModel
 
@@ -68,71 +68,6 @@ from ringfit.physics.sensor import SensorModel
 ANGLE_OFFSET = "angle_offset"
 #: Ring parameters a rolling fit may free (log); each run's angle offset and gain are always fitted.
 ROLLING_FREE = ("k_tread", "damping_ratio", "ei", "kw", "kv", "rho_a")
-
-
-@dataclass(frozen=True)
-class RollingData:
-    """Profiles on the model grid, ready for a fit.
-
-    - ``measured``: ``(P, 2, M)`` radial/tangential [m/s²] on φ_j (mean removed for the baseline sensor).
-    - ``omega``, ``load``: ``(P,)`` Ω [rad/s] and Fz [N]; ``drum_diameter``: ``(P,)`` [m] or None (flat road).
-    - ``speed_kmh``: ``(P,)``; ``omega_source``: per profile, where Ω came from; ``sources``: file names.
-    - ``n_samples``: per profile its number of recorded angles (the band its harmonic rows compare,
-      :func:`ringfit.fit.profile_block.profile_band`); empty: the grid's whole band.
-    """
-
-    measured: np.ndarray
-    omega: np.ndarray
-    load: np.ndarray
-    drum_diameter: np.ndarray | None
-    speed_kmh: np.ndarray
-    omega_source: tuple[str, ...]
-    sources: tuple[str, ...]
-    n_samples: tuple[int, ...] = ()
-
-
-def rolling_data(
-    profiles, geometry: TyreGeometry, ring: RingParams, *,
-    solver: ContactSolver = ContactSolver(), sensor: SensorModel = SensorModel(), model: RingModel = RingModel(),
-    rolling_radius_m: float | None = None,
-) -> RollingData:
-    """Put profiles on the model grid and work out Ω for each (docs/formats.md §3).
-
-    Ω is ``2π·rotation_hz`` when the sidecar has it, else ``V / R_e`` with
-    ``rolling_radius_m`` or, by default, ``R_e = R_out − δ/3`` where δ is the
-    standing deflection of ``ring`` at the profile's load.
-    """
-    profiles = list(profiles)
-    if not profiles:
-        raise InputError("no profile to fit")
-    drums = [p.drum_diameter_m for p in profiles]
-    if any(d is None for d in drums) and not all(d is None for d in drums):
-        raise InputError("profiles mix flat-road and drum conditions (drum_diameter_m); fit them separately")
-    M = solver.n_grid
-    measured, omega, sources = [], [], []
-    for p in profiles:
-        if p.rotation_hz is None and rolling_radius_m is None:
-            r_e = effective_rolling_radius(ring, geometry, p.load_n, p.drum_diameter_m,
-                                           model=ProfileModel(ring_model=model), solver=solver)
-        else:
-            r_e = rolling_radius_m
-        om, src = p.omega(r_e)
-        ch = resample_profile(p, M)
-        if sensor.remove_mean:
-            ch = ch - ch.mean(axis=-1, keepdims=True)
-        measured.append(ch)
-        omega.append(om)
-        sources.append(src)
-    return RollingData(
-        measured=np.stack(measured),
-        omega=np.array(omega),
-        load=np.array([p.load_n for p in profiles]),
-        drum_diameter=None if drums[0] is None else np.array(drums, dtype=np.float64),
-        speed_kmh=np.array([p.speed_kmh for p in profiles]),
-        omega_source=tuple(sources),
-        sources=tuple(p.source for p in profiles),
-        n_samples=tuple(len(p) for p in profiles),
-    )
 
 
 class RollingArrays(eqx.Module):

@@ -25,7 +25,7 @@ from (``baseline.sources``).
 
 **Rows**: every profile (one per speed), both channels, band-limited
 resampled onto the model grid φ_j (M = 512, docs/physics.md §4.5) with its mean
-removed (:func:`ringfit.fit.rolling.rolling_data`); the model is band-limited
+removed (:func:`ringfit.fit.profile_block.rolling_data`); the model is band-limited
 to the harmonics each measurement holds. Ω from the sidecar's
 ``rotation_hz``, else V/R_e with R_e = R_out − δ/3 of the fitted baseline
 (recomputed after the first baseline fit).
@@ -216,7 +216,7 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
     refitted to the profiles and the covariance of their logs from the free-table fit (the prior
     of the refit). ``None``: the ring stays as given and only k_trd and the angle offset are fitted.
     """
-    from ringfit.fit.rolling import rolling_data
+    from ringfit.fit.profile_block import rolling_data
     from ringfit.io.profiles import grid_angles_deg
     from ringfit.gap.ranking import fit_chain, predict
 
