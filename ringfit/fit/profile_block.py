@@ -200,6 +200,23 @@ def rolling_data(
     )
 
 
+def block_rows(data: RollingData, k_min: int = PROFILE_K_MIN) -> dict:
+    """The profile block's rows of prepared profiles: ``measured`` ``(P, 2, 2H)`` harmonic rows
+    (:func:`ringfit.fit.profile_block.harmonic_rows`, k_min … ``k_top`` of
+    :func:`ringfit.fit.profile_block.profile_band`) and the starting ``sigma`` (a tenth of each profile and
+    channel's RMS row, as :func:`ringfit.fit.profile_block.profile_rows` starts it; replaced by
+    :func:`ringfit.fit.profile_block.noise_from_residual` after the first pass)."""
+    M = data.measured.shape[-1]
+    # profile_band reads each profile's number of angles (len): the recorded counts stand in for the profiles
+    k_top = profile_band([range(n) for n in data.n_samples], M) if data.n_samples else M // 2 - 1
+    if k_top < k_min:
+        raise InputError(f"the profiles resolve revolution harmonics up to {k_top} only; the rows start at "
+                         f"{k_min}: give profiles with more angles per revolution")
+    measured = np.asarray(harmonic_rows(jnp.asarray(data.measured), k_min=k_min, k_top=k_top))
+    sigma = np.broadcast_to(np.sqrt(np.mean(measured**2, axis=-1, keepdims=True)) * 0.1, measured.shape).copy()
+    return dict(measured=measured, sigma=sigma, k_top=k_top, k_min=k_min)
+
+
 def profile_rows(profiles, geometry, ring, solver, k_min: int = PROFILE_K_MIN) -> dict:
     """The block's rows of ``profiles``: ``measured`` ``(P, 2, 2H)`` harmonic rows (:func:`harmonic_rows`, k_min …
     :func:`profile_band`), a starting ``sigma`` of the same shape (a tenth of each profile and channel's RMS row,
@@ -207,14 +224,10 @@ def profile_rows(profiles, geometry, ring, solver, k_min: int = PROFILE_K_MIN) -
     ``speed_kmh``, ``sources`` (``P``, ``M``, ``k_top``, ``k_min``, ``grid`` the channels ``(P, 2, M)`` on the model
     grid, ``omega_source``)."""
     data = rolling_data(profiles, geometry, ring, solver=solver)
-    k_top = profile_band(profiles, solver.n_grid)
-    measured = np.asarray(harmonic_rows(jnp.asarray(data.measured), k_min=k_min, k_top=k_top))
-    P = measured.shape[0]
-    sigma = np.broadcast_to(np.sqrt(np.mean(measured**2, axis=-1, keepdims=True)) * 0.1, measured.shape).copy()
-    return dict(measured=measured, sigma=sigma, omega=np.array(data.omega, dtype=np.float64), load=data.load,
-                drum=data.drum_diameter, P=P, M=data.measured.shape[-1], sources=data.sources,
-                speed_kmh=data.speed_kmh, k_top=k_top, k_min=k_min, grid=data.measured,
-                omega_source=list(data.omega_source))
+    rows = block_rows(data, k_min)
+    return dict(rows, omega=np.array(data.omega, dtype=np.float64), load=data.load, drum=data.drum_diameter,
+                P=rows["measured"].shape[0], M=data.measured.shape[-1], sources=data.sources,
+                speed_kmh=data.speed_kmh, grid=data.measured, omega_source=list(data.omega_source))
 
 
 def noise_spectrum(power: np.ndarray, k_min: int = PROFILE_K_MIN, half_width: int = NOISE_SMOOTHING) -> tuple:
@@ -262,6 +275,6 @@ def noise_from_residual(residual: np.ndarray, leverage: np.ndarray, k_min: int =
     return np.concatenate([sigma, sigma], axis=-1)
 
 
-__all__ = ["RollingData", "rolling_data", "profile_rows", "harmonic_rows", "profile_band", "nuisance_names", "nuisance_coords", "nuisance_start",
+__all__ = ["RollingData", "rolling_data", "block_rows", "profile_rows", "harmonic_rows", "profile_band", "nuisance_names", "nuisance_coords", "nuisance_start",
            "read_through", "nuisance_prior", "nuisance_prior_cov", "GAIN_SPREAD", "GAIN_COMMON_SD", "OFFSET_SPREAD", "noise_spectrum", "noise_from_residual", "GAIN_RANGE", "OFFSET_BOUND", "OFFSET_SCALE",
            "PROFILE_K_MIN", "NOISE_SMOOTHING", "PROFILE_BAND_MARGIN"]

@@ -52,9 +52,8 @@ from ringfit.fit.engine import AbstractResiduals, Problem, least_squares, sum_of
 from ringfit.fit.free_block import SCALE_PASSES, hat_diagonal
 from ringfit.fit.least_squares import RING_COORDS, RING_FIELDS, ring_from_vector, ring_vector
 from ringfit.fit.priors import BOUNDS
-from ringfit.fit.profile_block import (PROFILE_K_MIN, RollingData, harmonic_rows, noise_from_residual, nuisance_coords,
-                                       nuisance_names, nuisance_prior, nuisance_start, profile_band, read_through,
-                                       rolling_data)
+from ringfit.fit.profile_block import (RollingData, block_rows, harmonic_rows, noise_from_residual, nuisance_coords,
+                                       nuisance_names, nuisance_prior, nuisance_start, read_through, rolling_data)
 from ringfit.fit.result import FitResult
 from ringfit.io.profiles import grid_angles_deg
 from ringfit.params import RingParams, TyreGeometry
@@ -157,23 +156,6 @@ def check_rolling_free(free) -> tuple[str, ...]:
     if len(set(free)) != len(free):
         raise InputError(f"parameter listed twice in {list(free)}")
     return free
-
-
-def block_rows(data: RollingData, k_min: int = PROFILE_K_MIN) -> dict:
-    """The profile block's rows of prepared profiles: ``measured`` ``(P, 2, 2H)`` harmonic rows
-    (:func:`ringfit.fit.profile_block.harmonic_rows`, k_min … ``k_top`` of
-    :func:`ringfit.fit.profile_block.profile_band`) and the starting ``sigma`` (a tenth of each profile and
-    channel's RMS row, as :func:`ringfit.fit.profile_block.profile_rows` starts it; replaced by
-    :func:`ringfit.fit.profile_block.noise_from_residual` after the first pass)."""
-    M = data.measured.shape[-1]
-    # profile_band reads each profile's number of angles (len): the recorded counts stand in for the profiles
-    k_top = profile_band([range(n) for n in data.n_samples], M) if data.n_samples else M // 2 - 1
-    if k_top < k_min:
-        raise InputError(f"the profiles resolve revolution harmonics up to {k_top} only; the rows start at "
-                         f"{k_min}: give profiles with more angles per revolution")
-    measured = np.asarray(harmonic_rows(jax.numpy.asarray(data.measured), k_min=k_min, k_top=k_top))
-    sigma = np.broadcast_to(np.sqrt(np.mean(measured**2, axis=-1, keepdims=True)) * 0.1, measured.shape).copy()
-    return dict(measured=measured, sigma=sigma, k_top=k_top, k_min=k_min)
 
 
 def _arrays(data: RollingData, geometry, measured, sigma, M) -> RollingArrays:
