@@ -49,10 +49,9 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.fit.engine import AbstractResiduals, Problem, least_squares, sum_of_squares_batch
-from ringfit.fit.free_block import SCALE_PASSES, hat_diagonal
 from ringfit.fit.least_squares import RING_COORDS, RING_FIELDS, ring_from_vector, ring_vector
 from ringfit.fit.priors import BOUNDS
-from ringfit.fit.profile_block import (RollingData, block_rows, harmonic_rows, noise_from_residual, nuisance_coords,
+from ringfit.fit.profile_block import (RollingData, block_rows, fit_profile_block, harmonic_rows, nuisance_coords,
                                        nuisance_names, nuisance_prior, nuisance_start, read_through, rolling_data)
 from ringfit.fit.result import FitResult
 from ringfit.io.profiles import grid_angles_deg
@@ -217,22 +216,19 @@ def fit_rolling(
     P, _, M = data.measured.shape
     rows = block_rows(data)
     free = free_ring + nuisance_names(P)
-    theta = np.concatenate([ring_vector(ring), nuisance_start(P)])
-    sigma = rows["sigma"]
-    fit, evaluations = None, 0
-    # σ weights the fit, the fit's residual gives σ (the profile block's noise model, as identify's passes)
-    for passes in range(1, SCALE_PASSES + 1):
-        used = sigma
-        fit = least_squares(_problem(data, geometry, rows, used, model, sensor, solver), theta, free,
+    state = dict(theta=np.concatenate([ring_vector(ring), nuisance_start(P)]), evaluations=0)
+
+    def fit_at(sigma):  # one pass, warm-started from the last converged one
+        fit = least_squares(_problem(data, geometry, rows, sigma, model, sensor, solver), state["theta"], free,
                             max_steps=max_steps, rtol=rtol, atol=atol)
-        evaluations += evaluations_used(fit.iterations, len(free_ring))
+        state["evaluations"] += evaluations_used(fit.iterations, len(free_ring))
         if fit.converged:
-            theta = fit.theta.copy()
-        m = rows["measured"].size
-        sigma = noise_from_residual(fit.residuals[:m].reshape(rows["measured"].shape) * used,
-                                    hat_diagonal(fit.jacobian)[:m])
-        if fit.converged and passes > 1:
-            break
+            state["theta"] = fit.theta.copy()
+        return fit
+
+    # σ weights the fit, the fit's residual gives σ (the profile block's noise model, as identify's passes)
+    fit, used, passes = fit_profile_block(fit_at, rows["sigma"], k_min=rows["k_min"])
+    evaluations = state["evaluations"]
     read = np.asarray(fit.extra.pop("aux"))
     model_rows = np.asarray(harmonic_rows(jax.numpy.asarray(read), k_top=rows["k_top"]))
     H = rows["measured"].shape[-1] // 2
