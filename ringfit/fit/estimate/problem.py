@@ -198,8 +198,10 @@ def nuisance_priors() -> dict:
 
 
 def estimate_problem(arrays: EstimateArrays, settings: EstimateSettings, k_max: int,
-                     prior: GaussianPrior | None = None) -> Problem:
-    """The engine :class:`~ringfit.fit.engine.Problem` of an estimate (σ estimated from the residual)."""
+                     prior: GaussianPrior | None = None, sigma: str = "estimate") -> Problem:
+    """The engine :class:`~ringfit.fit.engine.Problem` of an estimate. ``sigma``: ``"fixed"`` where the weights are
+    the profile block's σ (:func:`ringfit.fit.profile_block.fit_profile_block`, the averaged profile), ``"estimate"``
+    where they give only the noise's shape and one revolution's residual its scale (the per-revolution fits)."""
     residuals = EstimateResiduals(settings.profile_model(), settings.solver, 2, int(k_max))
-    return Problem(residuals, as_traced(arrays), COORDS, prior=prior, sigma="estimate",
+    return Problem(residuals, as_traced(arrays), COORDS, prior=prior, sigma=sigma,
                    plausible={LOAD: LOAD_RANGE}, data_label="this profile")
