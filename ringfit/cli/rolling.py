@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ringfit.cli._args import drum_diameter, force_flag, integer, number
+from ringfit.units import KMH
 
 #: Largest model grid and written profile accepted (a profile of 2^20 angles is 16 MB of CSV already).
 MAX_GRID = 1 << 14
@@ -112,7 +113,7 @@ def run_roll(args) -> int:
     write_profile(Profile(grid_angles_deg(args.points), values[0], values[1], condition=condition), args.out,
                   overwrite=args.force, inputs=[args.tyre])
     lead, trail = (np.degrees(float(x)) for x in patch_edges(sol))
-    r_e = args.speed / 3.6 / omega if omega > 0 else float("nan")
+    r_e = args.speed * KMH / omega if omega > 0 else float("nan")
     omega_src = "--rotation-hz" if args.rotation_hz is not None else f"V/R_e, R_e = R_out − δ/3 = {r_e:.4f} m"
     print(f"{args.speed:g} km/h, Fz = {args.load:g} N on {'a %.4g m drum' % args.drum if args.drum else 'a flat road'}: "
           f"Ω = {omega:.3f} rad/s ({omega_src})")

@@ -32,6 +32,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.checks import check_condition_field, csv_columns, number_in_range, read_json_object, short_repr
 from ringfit.io.files import atomic_write, check_output_path, read_text_file
+from ringfit.units import KMH
 
 #: Columns of docs/formats.md §3, in the order ringfit writes them.
 COLUMNS = ("angle_deg", "acc_radial_ms2", "acc_tangential_ms2")
@@ -115,7 +116,7 @@ class Profile:
         if rolling_radius is None:
             raise InputError("no rotation_hz in the sidecar and no rolling radius given to turn speed_kmh into Ω",
                              source=self.source or None)
-        return self.speed_kmh / 3.6 / rolling_radius, f"speed_kmh / R_e with R_e = {rolling_radius:.5g} m"
+        return self.speed_kmh * KMH / rolling_radius, f"speed_kmh / R_e with R_e = {rolling_radius:.5g} m"
 
     @property
     def channels(self) -> np.ndarray:

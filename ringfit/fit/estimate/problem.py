@@ -19,6 +19,7 @@ import jax.numpy as jnp
 
 from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows
+from ringfit.fit.profile_block import GAIN_RANGE  # the profile block's: one sensor gain range for every reader
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced
 from ringfit.physics.profile import FlatOrDrum, ProfileModel, full_band, profile_channels
@@ -29,8 +30,6 @@ LOAD, GAIN, ANGLE_OFFSET, CORNER, TILT, K_TREAD = "load_n", "gain", "angle_offse
 PARAMETERS = (LOAD, GAIN, ANGLE_OFFSET, CORNER, TILT, K_TREAD)
 #: Plausible loads [N]: the load's bounds (a fit that ends there has failed).
 LOAD_RANGE = (200.0, 20000.0)
-#: Range of the gain on the reading.
-GAIN_RANGE = (0.5, 2.0)
 #: Weak priors on the sensor nuisances (natural units): the high-pass corner's median [Hz] and σ of
 #: its logarithm (0.005–16 Hz at 2σ; below ~0.01 Hz it has no effect on harmonics k ≥ 2), the tilt's
 #: mean and σ (γ ∈ 0–1.1 with gravity, 0 without, docs/physics.md §6). They keep the nuisances finite
