@@ -73,3 +73,46 @@ def test_log_probability_batch_and_nan_handling():
     lp = fn(y)
     assert lp[0] == pytest.approx(0.0, abs=1e-12) and lp[1] < lp[0]
     assert lp[2] == -np.inf and lp[3] == -np.inf
+
+
+@pytest.mark.parametrize("stated", [False, True], ids=["no-sigma", "stated-sigma"])
+def test_the_scale_integrated_out_is_the_integral_over_s(stated):
+    """The free block's estimated scale is integrated out of the sampled density (docs/physics.md §12.3): between
+    any two parameter points its log density changes as ln ∫ s^(−m) exp(−χ²/(2 s²)) ds/s over s ≥ s_min does —
+    the integral done here by quadrature, not by the code's closed form — and the prior rows as −½ |W u|²."""
+    from scipy.integrate import quad
+
+    from ringfit.fit.engine import residuals
+
+    f = np.asarray(natural_frequencies(RING, GEO, N9))
+    f = f * (1 + 0.004 * np.random.default_rng(7).standard_normal(9))
+    # stated σ smaller than the scatter, so the block scales it up and estimates a scale (ν finite)
+    table = ModeTable(freq_hz=f, n=N9, freq_std_hz=0.001 * f if stated else None)
+    lsq = fit_natural_frequencies(table, GEO, RING, free=("kw", "kv"), prior="none")
+    marg = lsq.extra["scale_marginal"]
+    assert marg is not None and marg["rows"] == 9
+    assert (marg["s_min"] > 0) == stated
+    log_prob, _, _ = log_probability_function(lsq, row_scale=marg["row_scale"], scale_marginal=marg)
+    names = lsq.names
+    coords = [lsq.problem.coordinate(n) for n in names]
+    u0 = np.array([c.to_u(lsq.values[n]) for c, n in zip(coords, names)])
+    sd = np.array([lsq.stderr[n] / lsq.values[n] for n in names])  # log coordinates
+    points = u0[None] + np.array([[0.0, 0.0], [2.0, -1.0], [-1.5, 2.5]]) * sd[None]
+    lp = log_prob(points)
+
+    def exact(u):
+        theta = np.asarray(lsq.theta, dtype=np.float64).copy()
+        for j, c in enumerate(coords):
+            theta[list(lsq.problem.coords).index(c)] = c.from_u(u[j])
+        r, _ = residuals(lsq.problem, theta)
+        chi2 = float(np.sum((np.asarray(r)[:9] / marg["row_scale"][:9]) ** 2))
+        smin = marg["s_min"]
+        # substitute s = e^t: ∫ s^(−m−1) e^(−χ²/2s²) ds = ∫ e^(−m t − χ² e^(−2t)/2) dt, peaked at e^(2t) = χ²/m
+        t0 = 0.5 * np.log(chi2 / 9)
+        g = lambda t: np.exp(-9 * (t - t0) - 0.5 * chi2 * np.exp(-2 * t) + 0.5 * 9)  # noqa: E731 (scaled by the peak)
+        lo = np.log(smin) if smin > 0 else t0 - 12.0
+        val, _ = quad(g, lo, t0 + 12.0, points=[t0] if lo < t0 else None, limit=200)
+        return np.log(val) - 9 * t0 - 0.5 * 9
+
+    want = np.array([exact(u) for u in points])
+    assert np.allclose(lp - lp[0], want - want[0], atol=1e-6), (lp - lp[0], want - want[0])

@@ -52,6 +52,7 @@ from typing import ClassVar, Literal, get_args
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import jax.scipy.special
 import lineax as lx
 import numpy as np
 import optimistix as optx
@@ -828,17 +829,25 @@ class DensityKernel:
     treedef: object
 
     def __call__(self, u, consts):
-        leaves, theta0, free_arrays, prior_w, prior_mean, lo, hi, inv_s2 = consts
+        leaves, theta0, free_arrays, prior_w, prior_mean, lo, hi, inv_s2, marginal = consts
         data = jax.tree.unflatten(self.treedef, leaves)
         free = _Free(*free_arrays)
         k = u.shape[1]
+        on, half_m, s_min = marginal[0], 0.5 * marginal[1], marginal[2]
 
         def one(ui):
             # u itself (the free set is unbounded: no sine transform) and the prior rows as a sum of products
             # (k ≤ 15; a dot here is a library call per evaluation in the sampler's loop)
             r, _ = self.model(_theta_at(ui, theta0, free), data)
             prior = jnp.sum(prior_w[:k, :k] * (ui - prior_mean[:k])[None, :], axis=1)
-            value = -0.5 * (jnp.sum(inv_s2 * r**2) + jnp.sum(prior**2))
+            chi2 = jnp.sum(inv_s2 * r**2)
+            # the rows' common σ scale s integrated out (prior 1/s on s ≥ s_min, docs/physics.md §12.3):
+            # −(m/2) ln χ² + ln P(m/2, χ²/(2 s_min²)), P the regularised lower incomplete gamma (1 for s_min = 0)
+            tiny = jnp.finfo(jnp.float64).tiny
+            cut = jnp.where(s_min > 0, jax.scipy.special.gammainc(half_m, 0.5 * chi2 / jnp.maximum(s_min, tiny) ** 2),
+                            1.0)
+            data_term = jnp.where(on > 0, -half_m * jnp.log(jnp.maximum(chi2, tiny)) + jnp.log(cut), -0.5 * chi2)
+            value = data_term - 0.5 * jnp.sum(prior**2)
             inside = jnp.all((ui >= lo) & (ui <= hi))
             value = jnp.where(inside, value, -jnp.inf)
             return jnp.where(jnp.isnan(value), -jnp.inf, value)
@@ -847,13 +856,16 @@ class DensityKernel:
 
 
 def log_density(problem: Problem, theta, free: tuple[str, ...], *, lo_u=None, hi_u=None,
-                sigma_scale: float = 1.0, row_scale=None) -> tuple[DensityKernel, tuple]:
+                sigma_scale: float = 1.0, row_scale=None, scale_marginal: dict | None = None) -> tuple[DensityKernel, tuple]:
     """``(kernel, consts)``: the log posterior density of the free parameters' solver coordinates, traceable.
 
-    ``kernel(u (n, k), consts) -> (n,)`` is ``−½ (Σ_i r_i²/(s² c_i²) + prior rows²)`` with ``r`` the model's
-    weighted rows, ``s`` = ``sigma_scale`` (the fit's residual σ when the problem's ``sigma`` is
+    ``kernel(u (n, k), consts) -> (n,)`` is ``−½ (χ² + prior rows²)``, χ² = ``Σ_i r_i²/(s² c_i²)``, with ``r`` the
+    model's weighted rows, ``s`` = ``sigma_scale`` (the fit's residual σ when the problem's ``sigma`` is
     ``"estimate"``) and ``c`` = ``row_scale`` (``(m,)`` per-row widening of the σ, e.g. identify's Student-t
-    widening per block; default 1); ``−inf`` outside ``[lo_u, hi_u]`` (default: the coordinates' bounds) or
+    widening per block; default 1). ``scale_marginal`` = ``dict(rows=m, s_min=…)``: the rows' σ is known only up
+    to a common scale, integrated out under a 1/s prior on s ≥ ``s_min`` (0: none), so the data term is
+    ``−(m/2) ln χ² + ln P(m/2, χ²/(2 s_min²))`` (docs/physics.md §12.3: the Student-t shape at every level, where
+    a fixed t-widening of σ fits one level). ``−inf`` outside ``[lo_u, hi_u]`` (default: the coordinates' bounds) or
     where the model is not finite. The fixed parameters stay at ``theta``. The density is over u itself (no
     sine transform of bounded coordinates). ``consts`` is a tuple of arrays (traced by whatever compiles the
     kernel).
@@ -867,9 +879,11 @@ def log_density(problem: Problem, theta, free: tuple[str, ...], *, lo_u=None, hi
     inv_s2 = 1.0 / float(sigma_scale) ** 2
     if row_scale is not None:
         inv_s2 = inv_s2 / np.asarray(row_scale, dtype=np.float64) ** 2
+    marginal = (np.zeros(3) if scale_marginal is None else
+                np.array([1.0, float(scale_marginal["rows"]), float(scale_marginal.get("s_min", 0.0))]))
     consts = (tuple(jnp.asarray(x) for x in leaves), jnp.asarray(np.append(np.asarray(theta, np.float64), 0.0)),
               free_arrays, jnp.asarray(fs.prior_w), jnp.asarray(fs.prior_mean), jnp.asarray(lo), jnp.asarray(hi),
-              jnp.asarray(inv_s2, dtype=jnp.float64))
+              jnp.asarray(inv_s2, dtype=jnp.float64), jnp.asarray(marginal))
     return DensityKernel(problem.model, treedef), consts
 
 
@@ -880,15 +894,16 @@ def _batched_log_probability(u, consts, *, kernel):
 
 
 def log_probability(problem: Problem, theta, free: tuple[str, ...], *, lo_u=None, hi_u=None,
-                    sigma_scale: float = 1.0, chunk: int | None = None, row_scale=None):
+                    sigma_scale: float = 1.0, chunk: int | None = None, row_scale=None,
+                    scale_marginal: dict | None = None):
     """``u (n, k) -> (n,)``: the log posterior density of the free parameters' solver coordinates (NumPy).
 
-    :func:`log_density` (see there for ``lo_u``, ``hi_u``, ``sigma_scale``, ``row_scale``) as one jitted,
+    :func:`log_density` (see there for ``lo_u``, ``hi_u``, ``sigma_scale``, ``row_scale``, ``scale_marginal``) as one jitted,
     vmapped region; ``chunk`` evaluates in chunks of exactly that many rows (padded), so one compilation
     serves every batch size.
     """
     kernel, consts = log_density(problem, theta, free, lo_u=lo_u, hi_u=hi_u, sigma_scale=sigma_scale,
-                                 row_scale=row_scale)
+                                 row_scale=row_scale, scale_marginal=scale_marginal)
 
     def evaluate_u(u):
         return np.asarray(_batched_log_probability(u, consts, kernel=kernel), dtype=np.float64)

@@ -213,7 +213,15 @@ def fit_natural_frequencies(
         result.flags.append(f"table state is {table.state!r} (speed {table.condition.get('speed_kmh', 0)} km/h); "
                             "the eq. 18 model assumes a static, free tyre")
     row_scale = np.concatenate([np.full(m, widen), np.ones(pad)])
-    result.extra.update(
+    # a scale estimated from ν residual degrees of freedom: the posterior integrates it out (1/s prior; a stated σ
+    # only scaled up, s ≥ the stated σ), which gives the t shape at every level (docs/physics.md §12.3)
+    marginal = None
+    if math.isfinite(noise_info["dof"]):
+        kappa = math.sqrt(max(float(noise_info["discrepancy"]), 1.0))
+        marginal = dict(rows=m, s_min=1.0 / float(noise_info["scale"]) if data.stated else 0.0,
+                        row_scale=np.concatenate([np.full(m, kappa), np.ones(pad)]))
+    result.extra.update(scale_marginal=marginal,
+
         n=data.n, freq_hz=data.freq_hz, model_hz=model, sigma_hz=noise_info["sigma_hz"], rows=data.rows,
         sigma_source=data.sigma_source, noise=noise_info["noise"], noise_scale=noise_info["scale"],
         noise_dof=noise_info["dof"], t_widening=noise_info["t_widening"],

@@ -442,30 +442,33 @@ def _support(result, bounds: dict | None = None):
     return lo, hi
 
 
-def log_probability_function(result, bounds: dict | None = None, chunk: int | None = None, row_scale=None):
+def log_probability_function(result, bounds: dict | None = None, chunk: int | None = None, row_scale=None,
+                             scale_marginal: dict | None = None):
     """``(n, k) -> (n,)`` NumPy log-posterior of a fit's free parameters (see the module docstring).
 
     **Arguments:** ``result`` — a FitResult of the engine; ``bounds`` — name -> (lo, hi)
     natural-unit bounds that replace or add to the coordinates' bounds and the problem's
     plausible ranges; ``chunk`` — evaluate in chunks of exactly this many rows (padded),
     so one compilation serves every batch size; ``row_scale`` — ``(m,)`` per-row widening
-    of the rows' σ (:func:`ringfit.fit.engine.log_density`).
+    of the rows' σ; ``scale_marginal`` — the rows' common σ scale integrated out
+    (:func:`ringfit.fit.engine.log_density`).
 
     **Returns:** ``(log_prob_fn, lo_u (k,), hi_u (k,))``.
     """
     lo, hi = _support(result, bounds)
     log_prob = log_probability(result.problem, result.theta, tuple(result.names), lo_u=lo, hi_u=hi,
                                sigma_scale=float(result.extra.get("sigma_scale", 1.0)), chunk=chunk,
-                               row_scale=row_scale)
+                               row_scale=row_scale, scale_marginal=scale_marginal)
     return log_prob, lo, hi
 
 
-def log_density_function(result, bounds: dict | None = None, row_scale=None):
+def log_density_function(result, bounds: dict | None = None, row_scale=None, scale_marginal: dict | None = None):
     """The same density as :func:`log_probability_function`, traceable: ``(kernel, consts, lo_u, hi_u)``
     (:func:`ringfit.fit.engine.log_density`), for the compiled sampler."""
     lo, hi = _support(result, bounds)
     kernel, consts = log_density(result.problem, result.theta, tuple(result.names), lo_u=lo, hi_u=hi,
-                                 sigma_scale=float(result.extra.get("sigma_scale", 1.0)), row_scale=row_scale)
+                                 sigma_scale=float(result.extra.get("sigma_scale", 1.0)), row_scale=row_scale,
+                                 scale_marginal=scale_marginal)
     return kernel, consts, lo, hi
 
 
@@ -543,7 +546,7 @@ DEFAULT_CHAINS = 1
 def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int = 20000, check_every: int = 1000,
            seed: int = 0, progress: bool = True, bounds: dict | None = None, spread: float = 0.1,
            meta: dict | None = None, sampler: str = "compiled", chains: int = DEFAULT_CHAINS, row_scale=None,
-           shift_u=None, tables: dict | None = None) -> "Posterior":
+           shift_u=None, tables: dict | None = None, scale_marginal="auto") -> "Posterior":
     """Sample the posterior of a least-squares fit's free parameters with the affine-invariant stretch move.
 
     **Arguments:** ``result`` — a :class:`~ringfit.fit.result.FitResult` of the engine;
@@ -559,7 +562,10 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
     (identify's Student-t widening); ``shift_u`` — ``(k,)`` one systematic direction in u (identify's grid
     check) convolved into the draws (:attr:`Posterior.log_samples`); ``tables`` — name → data rows of each
     measured table for the posterior predictive check (:func:`predictive_check`, kept in
-    ``meta["predictive_check"]``; default one block of every row).
+    ``meta["predictive_check"]``; default one block of every row); ``scale_marginal`` — ``dict(rows, s_min,
+    row_scale)``: the rows' common σ scale integrated out (:func:`ringfit.fit.engine.log_density`; ``"auto"``: the
+    fit's own, ``result.extra["scale_marginal"]``, which the free-modes block sets where it estimated a scale), its
+    ``row_scale`` (√κ) then replacing ``row_scale`` (the t-widening is the marginal itself).
 
     **Returns:** :class:`Posterior`. Warns (``RuntimeWarning``) when the chain did not reach
     :data:`TAU_FACTOR` autocorrelation times by ``max_steps``.
@@ -579,6 +585,10 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
     if chains < 1:
         raise InputError(f"chains = {chains}: expected at least 1")
     problem = result.problem
+    if isinstance(scale_marginal, str):
+        scale_marginal = result.extra.get("scale_marginal")
+    if scale_marginal is not None:
+        row_scale = scale_marginal.get("row_scale")
     lo, hi = _support(result, bounds)
     coords = [problem.coordinate(n) for n in free]
     y_opt = np.array([c.to_u(result.values[n]) for c, n in zip(coords, free)])
@@ -589,14 +599,15 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
     p0 = y_opt + spread * step * rng.standard_normal((chains, walkers, k))
     p0 = np.clip(p0, lo + 1e-9 * np.minimum(width, 1.0), hi - 1e-9 * np.minimum(width, 1.0))
     if sampler == "emcee":
-        log_prob, _, _ = log_probability_function(result, bounds, chunk=walkers // 2, row_scale=row_scale)
+        log_prob, _, _ = log_probability_function(result, bounds, chunk=walkers // 2, row_scale=row_scale,
+                                                  scale_marginal=scale_marginal)
         ens, tau = run_ensemble(log_prob, p0[0], min_steps=min_steps, max_steps=max_steps, check_every=check_every,
                                 seed=int(rng.integers(2**31)), progress=progress)
         chain, log_p, acceptance = ens.get_chain(), ens.get_log_prob(), ens.acceptance_fraction
     else:
         from ringfit.fit.ensemble import run_compiled
 
-        kernel, consts, _, _ = log_density_function(result, bounds, row_scale=row_scale)
+        kernel, consts, _, _ = log_density_function(result, bounds, row_scale=row_scale, scale_marginal=scale_marginal)
         with _interrupt_between_steps() as interrupted:
             run = run_compiled(kernel, consts, p0, min_steps=min_steps, max_steps=max_steps,
                                block=min(check_every, max_steps),
@@ -615,7 +626,8 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
     )
     post.meta["predictive_check"] = predictive_check(result, post.chain[post.burn :: post.thin].reshape(-1, k),
                                                      tables, row_scale=row_scale, seed=seed,
-                                                     log_prob=post.log_prob[post.burn :: post.thin].reshape(-1))
+                                                     log_prob=None if scale_marginal is not None else
+                                                     post.log_prob[post.burn :: post.thin].reshape(-1))
     if not post.converged:
         warnings.warn(
             f"posterior chain of {post.steps} steps is only {post.steps / max(tmax, 1e-9):.1f} autocorrelation "
