@@ -179,6 +179,44 @@ def test_a_held_out_runs_own_nuisances_are_fitted_to_its_rows():
             assert abs(np.sum(e[b, te] * X[te, 2 + f] / sigma[te] ** 2)) < 1e-8 * np.sum(X[te, 2 + f] ** 2 / sigma[te] ** 2)
 
 
+@pytest.mark.parametrize("groups_max", [64, 0], ids=["grouped", "general"])
+def test_draws_with_their_own_weight_per_run_and_channel(monkeypatch, groups_max):
+    """A profile null re-estimates σ per run and channel on every draw: each draw weights its rows by one value per
+    group. ``heldout_linear`` (its grouped path, and the general per-draw path it replaces) against an independent
+    lstsq refit per draw and fold with that draw's weights, the prior's rows and a fold's own nuisance."""
+    import ringfit.gap.calibration as cal
+
+    monkeypatch.setattr(cal, "MAX_WEIGHT_GROUPS", groups_max)
+    rng = np.random.default_rng(21)
+    m, B, G = 72, 6, 8
+    folds = np.repeat(np.arange(3), m // 3)
+    group = np.arange(m) // (m // G)  # 8 series of 9 rows
+    shared = rng.normal(size=(m, 2))
+    own = np.zeros((m, 3))
+    own[np.arange(m), folds] = rng.normal(1.0, 0.2, m)
+    X = np.hstack([shared, own])
+    pred = rng.normal(size=m)
+    y = pred + rng.normal(size=(B, m))
+    sig_g = rng.uniform(0.05, 0.3, (B, G))
+    sigma = sig_g[:, group]  # (B, m)
+    Lam = np.diag([0.5, 1.0, 0.0, 0.0, 0.0]) + 0.05 * np.eye(5)
+    grad = rng.normal(size=5)
+    held = {0: [2], 1: [3], 2: [4]}
+    lin = cal.Linearised(pred=pred, J=X, u_hat=np.zeros(5), lam=Lam, prior_grad=grad, held=held)
+    e = cal.heldout_linear(lin, y, 1.0 / sigma**2, folds)
+    for b in range(B):
+        for f in range(3):
+            tr, te = folds != f, folds == f
+            keep = [c for c in range(5) if c != 2 + f]
+            Lk = np.linalg.cholesky(Lam[np.ix_(keep, keep)]).T
+            A = np.vstack([X[tr][:, keep] / sigma[b, tr, None], Lk])
+            rhs = np.concatenate([(y[b, tr] - pred[tr]) / sigma[b, tr], -np.linalg.solve(Lk.T, grad[keep])])
+            d = np.linalg.lstsq(A, rhs, rcond=None)[0]
+            r = y[b, te] - pred[te] - X[te][:, keep] @ d
+            g = np.linalg.lstsq(X[te][:, [2 + f]] / sigma[b, te, None], r / sigma[b, te], rcond=None)[0]
+            np.testing.assert_allclose(e[b, te], r - X[te][:, [2 + f]] @ g, rtol=1e-7, atol=1e-9)
+
+
 @pytest.mark.slow  # > 10 s: CI runs it with -m slow (issue 24 item 3)
 def test_p_value_is_uniform_under_the_null(tmp_path):
     """200 data sets drawn from a small case's baseline (no effect), each with its p against an independent

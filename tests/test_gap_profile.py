@@ -405,6 +405,13 @@ def test_a_run_whose_sensor_reads_2_percent_high_is_not_an_effect(tmp_path):
         assert d.verdict["effect"] == "none", (name, d.verdict)
     part = next(p for p in d.parts if p.problem.domain == "profiles")
     assert part.problem.meta.fold_nuisances == {i: (1 + 2 * i, 2 + 2 * i) for i in range(len(part.problem.data_files))}
+    # the parametric null's noise rule is the estimate the data got: applied to the data about the baseline it made
+    # them from, it gives the problem's σ back (and a draw's σ from its own residual)
+    from ringfit.gap.ranking import predict
+
+    prob = part.problem
+    center = predict(prob, prob.null_theta())
+    np.testing.assert_allclose(prob.meta.noise_rule(prob.y[None, :], center)[0], prob.sigma, rtol=1e-2)
 
 
 @pytest.mark.slow

@@ -110,6 +110,10 @@ def heldout_linear(lin: Linearised, y, w2, folds, idx=None) -> np.ndarray:
     y = np.atleast_2d(np.asarray(y, dtype=np.float64))
     B, m = y.shape
     shared = idx is None and np.ndim(w2) <= 1  # every draw the same rows and weights: one normal matrix per fold
+    if idx is None and not shared:
+        groups = _weight_groups(np.broadcast_to(w2, (B, m)))
+        if groups is not None:  # each draw's weights constant within a few row groups (a run's channel)
+            return _heldout_grouped(lin, y, np.broadcast_to(w2, (B, m)), folds, groups)
     if idx is None:
         pred, J = lin.pred[:m], lin.J[:m]
         if not shared:
@@ -140,6 +144,57 @@ def heldout_linear(lin: Linearised, y, w2, folds, idx=None) -> np.ndarray:
         e[:, te] = r[:, te] - (d @ Jte.T if shared else np.einsum("bmi,bi->bm", Jte, d))
         if h:  # the fold's own nuisances fitted to its rows, as the held-out refits do (ranking.heldout)
             e[:, te] -= fold_nuisance_step(J[..., te, :][..., h], e[:, te], w2[..., te])
+    return e
+
+
+#: Most distinct weight patterns over the rows for which :func:`heldout_linear` takes the grouped path.
+MAX_WEIGHT_GROUPS = 64
+
+
+def _weight_groups(w2: np.ndarray) -> np.ndarray | None:
+    """Group index ``(m,)`` of rows whose weight is the same in every draw (``w2`` ``(B, m)``), or None when there
+    are more than :data:`MAX_WEIGHT_GROUPS` such groups."""
+    _, inverse = np.unique(np.ascontiguousarray(w2.T), axis=0, return_inverse=True)
+    inverse = np.asarray(inverse).reshape(-1)
+    return inverse if inverse.max(initial=0) < MAX_WEIGHT_GROUPS else None
+
+
+def _heldout_grouped(lin: Linearised, y, w2, folds, groups) -> np.ndarray:
+    """:func:`heldout_linear` where each draw weights its rows by one value per group (a profile null's σ
+    re-estimated per run and channel): the train rows' normal matrix of a draw is Σ_g w_g JᵀJ over the groups'
+    rows, so the (B, m, k) Jacobian of the general path is never formed. Same result (to rounding)."""
+    B, m = y.shape
+    pred, J = lin.pred[:m], lin.J[:m]
+    r = y - pred
+    e = np.empty_like(r)
+    k = J.shape[-1]
+    G = int(groups.max(initial=-1)) + 1
+    first = np.array([np.flatnonzero(groups == g)[0] for g in range(G)])
+    wg = w2[:, first]  # (B, G)
+    ridge = 1e-10 * np.eye(k)
+    for f in np.unique(folds):
+        te = folds == f
+        tr = ~te
+        if k == 0:
+            e[:, te] = r[:, te]
+            continue
+        h = (lin.held or {}).get(int(f)) or []
+        keep = np.array([c for c in range(k) if c not in h], dtype=int)
+        Jk = J[:, keep]
+        lam = lin.lam[np.ix_(keep, keep)]
+        gram = np.zeros((G, keep.size, keep.size))
+        g = np.zeros((B, keep.size))
+        for gi in range(G):
+            rows = tr & (groups == gi)
+            Jg = Jk[rows]
+            gram[gi] = Jg.T @ Jg
+            g += wg[:, gi : gi + 1] * (r[:, rows] @ Jg)
+        A = np.einsum("bg,gij->bij", wg, gram) + lam + ridge[: keep.size, : keep.size] * (1.0 + np.trace(lam))
+        g = g - lin.prior_grad[keep]
+        d = np.linalg.solve(A, g[..., None])[..., 0]
+        e[:, te] = r[:, te] - d @ Jk[te].T
+        if h:  # the fold's own nuisances fitted to its rows, as the held-out refits do (ranking.heldout)
+            e[:, te] -= fold_nuisance_step(J[te][:, h], e[:, te], w2[:, te])
     return e
 
 
@@ -260,7 +315,7 @@ def parametric_null(problem: GapProblem, current, fits: dict, chain: tuple, elem
     rule = problem.meta.noise_rule
     sigma_star = None
     if rule is not None:  # the noise estimate repeated on every draw, as it was made on the data
-        sigma_star = np.asarray(rule(ystar), dtype=np.float64)
+        sigma_star = np.asarray(rule(ystar, pred), dtype=np.float64)
         kind += "; σ re-estimated from every draw by the problem's own noise rule"
     t_null = np.max(candidate_shrinks(problem, lin_cur, lins, ystar, sigma_star), axis=1, initial=-np.inf)
     obs = candidate_shrinks(problem, lin_cur, lins, y)[0]

@@ -147,6 +147,11 @@ def damping_sigma(rows, table, n, own) -> np.ndarray:
     return np.where(wider, own[None, :], out)
 
 
+def _damping_rule(rows, center=None, *, table, n, own) -> np.ndarray:
+    """:func:`damping_sigma` as the problem's ``noise_rule`` (rows alone: the draw's ``center`` is not needed)."""
+    return damping_sigma(rows, table, n, own)
+
+
 def _baseline_covariance(fit, tyre) -> None:
     """A given baseline's uncertainty: the tyre file's ``[ring.covariance]`` (ln θ) for the parameters it holds."""
     cov = getattr(tyre, "covariance", None)
@@ -484,7 +489,7 @@ def _damping_problem(tables, rows, cavity_hz, geometry, ring_ref, effects, noise
         notes += [f"{table_label(tables[t], t)}: user value {float(user):.3g}" for t in table_ids]
     else:
         # the noise rule, a function of the rows alone: the parametric null applies it to every draw
-        rule = functools.partial(damping_sigma, table=tab, n=n, own=own)
+        rule = functools.partial(_damping_rule, table=tab, n=n, own=own)
         sigma = rule(y[None, :])[0]
         for i, t in enumerate(table_ids):
             sel = tab == i

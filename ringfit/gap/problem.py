@@ -43,9 +43,10 @@ class ProblemMeta:
       own gain and angle offset under leave-one-speed-out): a held-out prediction of the fold fits them to the
       fold's own rows (:func:`ringfit.gap.ranking.fold_nuisance_step`), since the other runs do not determine a
       run's calibration.
-    - ``noise_rule``: optional ``rows (B, m) -> σ (B, m)``, the rule that estimated ``sigma`` from the rows alone
-      (the damping problem's): the parametric null applies it to every draw (the noise estimate is a
-      data-dependent choice the null repeats).
+    - ``noise_rule``: optional ``(rows (B, m), center (m,)) -> σ (B, m)``, the rule that estimated ``sigma`` from
+      the data (the damping problem's from the rows alone; the profiles' from the far side of each run's residual
+      about ``center``, the model the draw was made from): the parametric null applies it to every draw (the noise
+      estimate is a data-dependent choice the null repeats).
     - ``condition_sd``: stated-condition uncertainty per effect parameter (loaded tables' patches).
 
     *Modal problems*

@@ -319,6 +319,9 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
             problem.noise_method += f"; spectral slope {slope:.2f}"
         problem.sigma = np.repeat(sigma.reshape(-1), M)
         problem.meta.series_dof = {2 * i + c: noise_dof(slope, kmax[i]) for i in range(P) for c in range(2)}
+    if user is None:  # the far-side estimate repeated on every parametric-null draw, as it was made on the data
+        problem.meta.noise_rule = partial(_profile_rule, phi=phi, kmax=np.asarray(kmax), floor=floor,
+                                                    shape=(P, 2, M))
     problem.meta.sources = dict(sources or {})
     problem.meta.sources["k_tread"] = "fitted to the profiles"
     for n in ring_names:
@@ -326,6 +329,19 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
                                       + "; refitted to the profiles with that fit's uncertainty as prior")
     problem.meta.sources["omega"] = sorted(set(rdata.omega_source))
     return problem
+
+
+def _profile_rule(rows, center, *, phi, kmax, floor, shape) -> np.ndarray:
+    """σ ``(B, m)`` of profile rows ``(B, m)`` by the problem's noise rule (:func:`profile_noise` of each run and
+    channel's residual about ``center`` ``(m,)``, the model the draw was made from, with the model-resolution
+    ``floor`` ``(P, 2)`` in quadrature): the ``noise_rule`` the parametric null applies to every draw."""
+    rows = np.atleast_2d(np.asarray(rows, dtype=np.float64))
+    P, C, M = shape
+    out = np.empty_like(rows)
+    for b in range(rows.shape[0]):
+        sigma, _ = profile_noise((rows[b] - center).reshape(P, C, M), phi, kmax)
+        out[b] = np.repeat(np.sqrt(sigma**2 + floor**2).reshape(-1), M)
+    return out
 
 
 __all__ = ["build_profile_problem", "profile_predict", "ProfilePredictor", "ProfileData",
