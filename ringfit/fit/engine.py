@@ -384,11 +384,18 @@ class AbstractPasses(eqx.Module):
     - ``update(state, residuals, jacobian, converged, passes, consts) -> (state, done)``: after a pass, from its
       weighted rows ``(m + K,)`` (the model's, then the prior's), their Jacobian ``(m + K, K)`` in the free
       parameters' solver coordinates, whether it converged and how many passes were made; ``done`` ends the
-      passes (the last pass's fit is returned).
+      passes (the last pass's fit is returned);
+    - ``uniform(state, consts) -> bool``: the next pass's weights are one factor on every row that carries data
+      (default ``False``). Without a prior, such a pass has the last pass's optimum (a sum of squares times a
+      constant): it is not solved again but evaluated there (its rows and Jacobian at the new weights; the last
+      solve's status and steps).
     """
 
     def weights(self, state, consts):
         raise NotImplementedError
+
+    def uniform(self, state, consts):
+        return jnp.array(False)
 
     def update(self, state, residuals, jacobian, converged, passes, consts):
         raise NotImplementedError
@@ -397,8 +404,9 @@ class AbstractPasses(eqx.Module):
 def _solve_passes_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, state0, consts,
                       max_passes, *, model, treedef, method, passes):
     """Up to ``max_passes`` fits of one problem in one compiled region, each from ``z0`` with the rows weighted by
-    ``passes`` (an :class:`AbstractPasses`) from the fit before: ``(the last fit as :func:`_solve_one` returns it,
-    the passes' state, the passes made)``. The model is traced once (the loop's body)."""
+    ``passes`` (an :class:`AbstractPasses`) from the fit before — or, where the new weights only rescale a problem
+    without a prior (``passes.uniform``), evaluated at the last optimum: ``(the last fit as :func:`_solve_one`
+    returns it, the passes' state, the passes made)``. The model is traced once (the loop's body)."""
     successful = int(optx.RESULTS.successful._value)
     data = jax.tree.unflatten(treedef, leaves)
     K = z0.shape[0]
@@ -407,12 +415,21 @@ def _solve_passes_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_
     zeros = (jnp.zeros(K, z0.dtype), jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), jnp.zeros(rows.shape),
              jnp.zeros(rows.shape + (K,)), jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), aux))
 
+    no_prior = jnp.all(prior_w == 0)
+    free = _Free(*free_arrays)
+
     def body(carry):
-        state, _, made, _ = carry
-        u, code, steps, res, jac, aux = _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps,
-                                                   rtol, atol, model=model, treedef=treedef, method=method,
+        state, last, made, _ = carry
+        # a pass that only rescales every data row of a problem without a prior: the last optimum, evaluated
+        same = (made > 0) & no_prior & passes.uniform(state, consts)
+        z_last = jnp.where(free.bounded, jnp.arcsin(jnp.clip((last[0] - free.mid) / free.half, -1.0, 1.0)), last[0])
+        u, code, steps, res, jac, aux = _solve_one(leaves, jnp.where(same, z_last, z0), theta0, free_arrays, prior_w,
+                                                   prior_mean, jnp.where(same, 0, max_steps), rtol, atol,
+                                                   model=model, treedef=treedef, method=method,
                                                    row_weight=passes.weights(state, consts))
-        out = (u, code.astype(jnp.int32), steps.astype(jnp.int32), res, jac, aux)
+        code = jnp.where(same, last[1], code.astype(jnp.int32))
+        steps = jnp.where(same, last[2], steps.astype(jnp.int32))
+        out = (u, code, steps, res, jac, aux)
         state, done = passes.update(state, res, jac, code == successful, made + 1, consts)
         return state, out, made + 1, done
 

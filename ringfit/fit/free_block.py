@@ -269,10 +269,15 @@ class ScalePasses(AbstractPasses):
     diagonal of the whole weighted Jacobian) until it settles — the same rule, traced.
 
     ``state``: ``(scale for the next pass, scale of the last pass, ν of the last pass)``; ``consts``: ``(block
-    (m,) bool: the block's rows, rows: their count, stated, floor: the smallest scale, tolerance)``."""
+    (m,) bool: the block's rows, every row with data — the others are padding —, rows: their count, stated,
+    floor: the smallest scale, tolerance)``. Without a prior, a new scale leaves the optimum where it was: the
+    engine evaluates the next pass there instead of solving again (:class:`ringfit.fit.engine.AbstractPasses`)."""
 
     def weights(self, state, consts):
         return jnp.where(consts[0], 1.0 / state[0], 1.0)
+
+    def uniform(self, state, consts):
+        return jnp.array(True)  # one scale on the block, the problem's only rows with data
 
     def update(self, state, residuals, jacobian, converged, passes, consts):
         block, rows, stated, floor, tolerance = consts
@@ -295,7 +300,7 @@ def fit_free_block_compiled(problem, theta0, free, sigma0: np.ndarray, stated: b
     same settling rule, the same ``(fit, info)`` (to rounding), without a call per pass.
 
     ``problem``: the :class:`~ringfit.fit.engine.Problem` with the rows weighted by ``sigma0`` (its model's rows:
-    ``rows`` ``(m_all,)`` bool, the block's rows among them, padding not); ``theta0``, ``free`` and ``solve``
+    ``rows`` ``(m_all,)`` bool, the block's rows among them; the others are padding, no data); ``theta0``, ``free`` and ``solve``
     (``max_steps``, ``rtol``, ``atol``, ``n_data``, ``pad_to``): :func:`ringfit.fit.engine.least_squares`'s.
     The returned fit's rows are weighted by the σ used, ``sigma0 · info["scale"]``; its ``problem`` is still
     ``problem`` (weighted by ``sigma0``): the caller rebuilds it at the σ used where it keeps it."""
