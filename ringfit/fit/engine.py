@@ -23,6 +23,10 @@ coordinated — handed to :func:`least_squares`:
   correlated); its marginal over the free parameters enters as whitened residual
   rows ``W (u − mean)``.
 
+A noise model estimated from the fit's own residual (a block's σ, :mod:`ringfit.fit.free_block`) refits with
+the rows reweighted until it settles: :func:`least_squares_passes` runs those passes in the same one compiled
+region (an :class:`AbstractPasses` says how the rows are reweighted and when to stop).
+
 The solve is one jitted region (:class:`ringfit._cache.jit`, with XLA's compile options of
 :func:`ringfit._cache.compiler_options`): optimistix Levenberg–Marquardt (or,
 on request, undamped Gauss–Newton) with an SVD linear solve, the model linearised once per step by a forward-mode pass
