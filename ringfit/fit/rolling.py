@@ -212,8 +212,9 @@ def fit_rolling(
 
     Runs with one BLAS thread (as ``identify``): the contact solves' small LU factorisations run on XLA's own
     threads and the noise passes' algebra is on tall, thin matrices (thousands of rows × ≤ 15 columns), where a
-    threaded BLAS only synchronises — on a loaded two-core machine it tripled the warm fit's CPU time
-    (``benchmarks/bench_rolling.py``).
+    threaded BLAS only synchronises — on a loaded two-core machine it made the warm four-speed fit of
+    ``benchmarks/bench_rolling.py`` take 1.3–2.1 s of CPU instead of 0.25–0.33 s (not on every run: when the
+    BLAS threads found the cores busy).
     """
     from ringfit._threads import small_matrix_threads  # noqa: PLC0415 (as identify's)
 
