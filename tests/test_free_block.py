@@ -219,3 +219,85 @@ def test_the_fits_95_percent_intervals_cover_the_truth_over_many_free_tables():
         lo, hi = _clopper_pearson(hits[k], n)
         assert 0.90 <= hits[k] / n <= 0.98 and lo <= 0.95 <= hi, (k, hits[k], lo, hi)
     assert plain_hits / (3 * n) < 0.93  # the widening matters
+
+
+# ----------------------------------------------------------------------------- the passes in one compiled fit
+
+
+def test_the_traced_leverage_is_the_hat_diagonal():
+    """leverage_traced (Gram eigen-decomposition of unit columns) against Householder QR's Q (rows squared), on
+    random Jacobians with columns of very different scales, two nearly collinear columns (condition ~1e3 after
+    scaling: the Gram's rounding grows as its square) and a padding column of zeros."""
+    import jax
+    import jax.numpy as jnp
+
+    from ringfit.fit.free_block import leverage_traced
+
+    traced = jax.jit(leverage_traced)
+    rng = np.random.default_rng(3)
+    for trial in range(8):
+        m, k = (20, 4) if trial % 2 else (9, 3)
+        J = rng.standard_normal((m, k)) * np.geomspace(1e-3, 1e4, k)[rng.permutation(k)]
+        if trial % 4 < 2:
+            J[:, 1] = J[:, 0] * 2.0 + 1e-3 * np.linalg.norm(J[:, 0]) * rng.standard_normal(m) / math.sqrt(m)
+        Q = np.linalg.qr(J)[0]  # Householder: orthonormal to rounding, whatever the columns' scales
+        expected = np.sum(Q**2, axis=1)
+        np.testing.assert_allclose(np.asarray(traced(jnp.asarray(J))), expected, atol=1e-10)
+        padded = np.concatenate([J, np.zeros((m, 1))], axis=1)  # a padding slot: no information, left out
+        np.testing.assert_allclose(np.asarray(traced(jnp.asarray(padded))), expected, atol=1e-10)
+
+
+def _loop_fit(table, **kw):
+    """The free block's passes as separate fits (fit_free_block's Python loop: numpy hat_diagonal and
+    block_scale) on the same problem as fit_natural_frequencies — an independent implementation of the rule
+    that the compiled passes trace."""
+    from ringfit.fit.engine import Problem, least_squares
+    from ringfit.fit.free_block import fit_free_block, frequency_data
+    from ringfit.fit.least_squares import (DEFAULT_FREE, RING_COORDS, FrequencyArrays, NaturalFrequencyResiduals,
+                                           log_normal_prior, ring_vector)
+    from ringfit.fit.priors import BOUNDS, resolve_priors
+
+    data = frequency_data(table, None, kw.get("default_relative_std"))
+    prior = log_normal_prior(resolve_priors(kw.get("prior", "none"), DEFAULT_FREE))
+    m = data.n.size
+    pad = (-m) % 16
+
+    def fit_at(sigma):
+        arrays = FrequencyArrays(GEO, np.concatenate([data.n, np.ones(pad)]),
+                                 np.concatenate([data.freq_hz, np.full(pad, 100.0)]),
+                                 np.concatenate([sigma, np.full(pad, np.inf)]))
+        problem = Problem(NaturalFrequencyResiduals(), arrays, RING_COORDS, prior=prior, plausible=BOUNDS)
+        return least_squares(problem, ring_vector(RING), DEFAULT_FREE, n_data=m, pad_to=4)
+
+    return fit_free_block(fit_at, data.sigma_hz, data.stated, freq_hz=data.freq_hz)
+
+
+@pytest.mark.parametrize("case", ["ssi-physical", "frf-physical", "frf-none", "noisy-physical", "stated-holds",
+                                  "stated-small"])
+def test_the_compiled_passes_are_the_loops_passes(case):
+    """fit_natural_frequencies (every pass in one compiled fit) against the passes made one fit at a time: the
+    same number of passes, the same scale, ν and κ, the same ring (within the fit's own reproducibility: a
+    one-ulp change of a frequency moves the weakly determined EI of the bundled table by ~2e-7)."""
+    from ringfit.io.modes import read_mode_table
+
+    tables = {"ssi": read_mode_table(data_path("free-ssi.modes.csv")),
+              "frf": read_mode_table(data_path("free-frf.modes.csv")),
+              "noisy": _table(0.02, 11), "stated": _table(0.002, 12, std=0.01)}
+    name, kind = case.split("-")
+    kw = {"prior": "physical" if kind in ("physical", "holds") else "none"}
+    if kind == "small":
+        name, kw = "noisy", dict(kw, default_relative_std=0.002)
+    table = tables[name]
+    fit = fit_natural_frequencies(table, GEO, RING, **kw)
+    loop, info = _loop_fit(table, **kw)
+    assert fit.status == loop.status == "converged"
+    assert fit.extra["scale_passes"] == info["passes"]
+    if kind == "holds":
+        assert fit.extra["noise_scale"] == 1.0 and math.isinf(fit.extra["noise_dof"]) and info["passes"] == 1
+    if kind == "small":
+        assert fit.extra["noise_scale"] > 1.5  # a stated σ five times too small: scaled up
+    np.testing.assert_allclose(fit.extra["noise_scale"], info["scale"], rtol=1e-6)
+    np.testing.assert_allclose(fit.extra["noise_dof"], info["dof"], rtol=1e-6)
+    np.testing.assert_allclose(1.0 + fit.extra["discrepancy"], info["discrepancy"], rtol=1e-5)
+    np.testing.assert_allclose(fit.theta[:4], loop.theta[:4], rtol=1e-5)
+    np.testing.assert_allclose(fit.problem.data.sigma[: info["sigma_hz"].size], info["sigma_hz"], rtol=1e-6)

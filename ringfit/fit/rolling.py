@@ -209,7 +209,22 @@ def fit_rolling(
     residual rows), ``gain``/``angle_offset_deg`` ``(P,)`` with ``gain_sd``/``angle_offset_sd_deg``,
     ``passes``, ``evaluations`` (model-evaluation equivalents, all passes), ``data``, ``ring``, ``geometry``.
     Never raises on non-convergence.
+
+    Runs with one BLAS thread (as ``identify``): the contact solves' small LU factorisations run on XLA's own
+    threads and the noise passes' algebra is on tall, thin matrices (thousands of rows × ≤ 15 columns), where a
+    threaded BLAS only synchronises — on a loaded two-core machine it made the warm four-speed fit of
+    ``benchmarks/bench_rolling.py`` take 1.3–2.1 s of CPU instead of 0.25–0.33 s (not on every run: when the
+    BLAS threads found the cores busy).
     """
+    from ringfit._threads import small_matrix_threads  # noqa: PLC0415 (as identify's)
+
+    with small_matrix_threads():
+        return _fit_rolling(profiles, geometry, ring, free=free, model=model, sensor=sensor, solver=solver,
+                            rolling_radius_m=rolling_radius_m, max_steps=max_steps, rtol=rtol, atol=atol)
+
+
+def _fit_rolling(profiles, geometry, ring, *, free, model, sensor, solver, rolling_radius_m, max_steps, rtol,
+                 atol) -> FitResult:
     data = profiles if isinstance(profiles, RollingData) else rolling_data(
         profiles, geometry, ring, solver=solver, sensor=sensor, model=model, rolling_radius_m=rolling_radius_m)
     free_ring = check_rolling_free(free)
