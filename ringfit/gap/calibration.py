@@ -106,21 +106,26 @@ def linearise(problem: GapProblem, fit) -> Linearised:
 
 def heldout_linear(lin: Linearised, y, w2, folds, idx=None) -> np.ndarray:
     """Held-out residuals ``(B, m)`` of the linearised refits to ``y`` ``(B, m)`` (``w2`` = 1/σ², ``(B, m)`` or
-    ``(m,)``), fold by fold; ``idx`` ``(B, m)``: the line-problem row each row is matched to (None: row i)."""
+    ``(m,)``), fold by fold; ``idx`` ``(B, m)``: the line-problem row each row is matched to (None: row i).
+
+    The train rows' normal equations of each fold are formed one of three ways, the same equations each:
+    *shared* (every draw the same rows and weights: one ``(k, k)`` matrix), *grouped* (every draw the same rows,
+    each draw's weights constant within a few row groups — a profile null's σ re-estimated per run and channel:
+    ``Σ_g w_g JᵀJ`` over the groups' rows, no ``(B, m, k)`` Jacobian) or *per draw*."""
     y = np.atleast_2d(np.asarray(y, dtype=np.float64))
     B, m = y.shape
-    shared = idx is None and np.ndim(w2) <= 1  # every draw the same rows and weights: one normal matrix per fold
+    shared = idx is None and np.ndim(w2) <= 1
+    groups = None
     if idx is None and not shared:
         groups = _weight_groups(np.broadcast_to(w2, (B, m)))
-        if groups is not None:  # each draw's weights constant within a few row groups (a run's channel)
-            return _heldout_grouped(lin, y, np.broadcast_to(w2, (B, m)), folds, groups)
     if idx is None:
         pred, J = lin.pred[:m], lin.J[:m]
-        if not shared:
+        if not shared and groups is None:
             J = np.broadcast_to(J, (B, m, J.shape[1]))
     else:
         pred, J = lin.pred[idx], lin.J[idx]
     w2 = np.broadcast_to(w2, (m,) if shared else (B, m))
+    batched = not shared and groups is None  # J carries the draws' axis
     r = y - pred
     e = np.empty_like(r)
     k = J.shape[-1]
@@ -133,15 +138,22 @@ def heldout_linear(lin: Linearised, y, w2, folds, idx=None) -> np.ndarray:
             continue
         h = (lin.held or {}).get(int(f)) or []
         keep = np.array([c for c in range(k) if c not in h], dtype=int)  # the fold's own nuisances held
-        Jt, wt = J[..., tr, :][..., keep], w2[..., tr]
-        lam = lin.lam[np.ix_(keep, keep)]
-        # normal equations of the fold's train rows: (k, k) shared, else (B, k, k); right-hand sides (B, k)
-        A = np.einsum("...mi,...m,...mj->...ij", Jt, wt, Jt) + lam + ridge[: keep.size, : keep.size] * (1.0 + np.trace(lam))
-        wr = wt * r[:, tr]
-        g = (wr @ Jt if shared else np.einsum("bmi,bm->bi", Jt, wr)) - lin.prior_grad[keep]
-        d = np.linalg.solve(A, g.T).T if shared else np.linalg.solve(A, g[..., None])[..., 0]
+        Jt = J[..., tr, :][..., keep]
+        lam = lin.lam[np.ix_(keep, keep)] + ridge[: keep.size, : keep.size] * (1.0 + np.trace(lin.lam[np.ix_(keep, keep)]))
+        # normal equations of the fold's train rows: A (k, k) or (B, k, k), right-hand sides g (B, k)
+        if groups is not None:
+            A, g = _grouped_normal(Jt, w2[:, tr], r[:, tr], groups[tr])
+        else:
+            wt = w2[..., tr]
+            A = np.einsum("...mi,...m,...mj->...ij", Jt, wt, Jt)
+            g = (wt * r[:, tr]) @ Jt if shared else np.einsum("bmi,bm->bi", Jt, wt * r[:, tr])
+        A, g = A + lam, g - lin.prior_grad[keep]
         Jte = J[..., te, :][..., keep]
-        e[:, te] = r[:, te] - (d @ Jte.T if shared else np.einsum("bmi,bi->bm", Jte, d))
+        if A.ndim == 2:
+            d = np.linalg.solve(A, g.T).T
+        else:
+            d = np.linalg.solve(A, g[..., None])[..., 0]
+        e[:, te] = r[:, te] - (np.einsum("bmi,bi->bm", Jte, d) if batched else d @ Jte.T)
         if h:  # the fold's own nuisances fitted to its rows, as the held-out refits do (ranking.heldout)
             e[:, te] -= fold_nuisance_step(J[..., te, :][..., h], e[:, te], w2[..., te])
     return e
@@ -159,43 +171,15 @@ def _weight_groups(w2: np.ndarray) -> np.ndarray | None:
     return inverse if inverse.max(initial=0) < MAX_WEIGHT_GROUPS else None
 
 
-def _heldout_grouped(lin: Linearised, y, w2, folds, groups) -> np.ndarray:
-    """:func:`heldout_linear` where each draw weights its rows by one value per group (a profile null's σ
-    re-estimated per run and channel): the train rows' normal matrix of a draw is Σ_g w_g JᵀJ over the groups'
-    rows, so the (B, m, k) Jacobian of the general path is never formed. Same result (to rounding)."""
-    B, m = y.shape
-    pred, J = lin.pred[:m], lin.J[:m]
-    r = y - pred
-    e = np.empty_like(r)
-    k = J.shape[-1]
-    G = int(groups.max(initial=-1)) + 1
-    first = np.array([np.flatnonzero(groups == g)[0] for g in range(G)])
-    wg = w2[:, first]  # (B, G)
-    ridge = 1e-10 * np.eye(k)
-    for f in np.unique(folds):
-        te = folds == f
-        tr = ~te
-        if k == 0:
-            e[:, te] = r[:, te]
-            continue
-        h = (lin.held or {}).get(int(f)) or []
-        keep = np.array([c for c in range(k) if c not in h], dtype=int)
-        Jk = J[:, keep]
-        lam = lin.lam[np.ix_(keep, keep)]
-        gram = np.zeros((G, keep.size, keep.size))
-        g = np.zeros((B, keep.size))
-        for gi in range(G):
-            rows = tr & (groups == gi)
-            Jg = Jk[rows]
-            gram[gi] = Jg.T @ Jg
-            g += wg[:, gi : gi + 1] * (r[:, rows] @ Jg)
-        A = np.einsum("bg,gij->bij", wg, gram) + lam + ridge[: keep.size, : keep.size] * (1.0 + np.trace(lam))
-        g = g - lin.prior_grad[keep]
-        d = np.linalg.solve(A, g[..., None])[..., 0]
-        e[:, te] = r[:, te] - d @ Jk[te].T
-        if h:  # the fold's own nuisances fitted to its rows, as the held-out refits do (ranking.heldout)
-            e[:, te] -= fold_nuisance_step(J[te][:, h], e[:, te], w2[:, te])
-    return e
+def _grouped_normal(Jt, wt, rt, groups):
+    """``(A (B, k, k), g (B, k))`` of rows ``Jt`` ``(t, k)`` shared by every draw, weighted per draw by one value
+    per group (``wt`` ``(B, t)``, ``groups`` ``(t,)``): ``A_b = Σ_g w_bg J_gᵀJ_g``, ``g_b = Σ_g w_bg J_gᵀ r_bg``."""
+    labels = np.unique(groups)
+    first = np.array([np.flatnonzero(groups == gi)[0] for gi in labels])
+    wg = wt[:, first]  # (B, G)
+    gram = np.stack([Jt[groups == gi].T @ Jt[groups == gi] for gi in labels])
+    rhs = np.stack([rt[:, groups == gi] @ Jt[groups == gi] for gi in labels], axis=1)  # (B, G, k)
+    return np.einsum("bg,gij->bij", wg, gram), np.einsum("bg,bgi->bi", wg, rhs)
 
 
 def sum_of_squares(problem: GapProblem, e, sigma) -> np.ndarray:
