@@ -102,3 +102,23 @@ def test_a_fit_that_goes_deeper_than_the_new_tread_is_held_within_it():
     assert Q["status"] == "estimated"
     assert any("tread_depth_new_mm" in f for f in bounded.flags)
     assert bounded.ridge.depth.max() == pytest.approx(0.008, rel=1e-9)  # the slices end at the new tread
+
+
+def test_the_cli_refuses_a_fixed_depth_deeper_than_the_new_tread(tmp_path, capsys):
+    from ringfit.cli import main
+    from ringfit.io.profiles import write_profile
+
+    from ringfit.data import path as data_path
+
+    tyre = write_tyre(read_tyre(data_path("table9.tyre.toml")).with_state_values(
+        tread_depth_mm=7.0, tread_depth_new_mm=8.0, kx_n_per_m2=15e6), tmp_path / "t9.toml")
+    angle = grid_angles_deg(64)
+    write_profile(Profile(angle, np.cos(np.radians(angle)), np.sin(np.radians(angle)), condition={"speed_kmh": 50.0}),
+                  tmp_path / "p.profile.csv")
+    out = tmp_path / "p.estimate.json"
+    code = main(["estimate", str(tmp_path / "p.profile.csv"), "--tyre", str(tyre), "--out", str(out), "--state",
+                 "--fix", "tread_depth_mm=8.5"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "deeper than the tyre file's new tread (tread_depth_new_mm = 8)" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
