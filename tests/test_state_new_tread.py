@@ -120,5 +120,6 @@ def test_the_cli_refuses_a_fixed_depth_deeper_than_the_new_tread(tmp_path, capsy
                  "--fix", "tread_depth_mm=8.5"])
     assert code == 2
     err = capsys.readouterr().err
-    assert "deeper than the tyre file's new tread (tread_depth_new_mm = 8)" in err and len(err.strip().splitlines()) == 1
+    assert "deeper than the tyre file's new tread (tread_depth_new_mm = 8)" in err
+    assert len(err.strip().splitlines()) == 1
     assert not out.exists()

@@ -258,7 +258,8 @@ def _parse(doc: dict, source: str) -> Tyre:
         if state_values["tread_depth_new_mm"] < state_values["tread_depth_mm"]:
             raise InputError(f"[tyre] tread_depth_new_mm = {state_values['tread_depth_new_mm']:g} is below "
                              f"tread_depth_mm = {state_values['tread_depth_mm']:g}: the new tread is the deepest the "
-                             "tyre has been, so it is at least the depth at which [ring] holds (docs/physics.md §13.3)")
+                             "tyre has been, so it is at least the depth at which [ring] holds "
+                             "(docs/physics.md §13.3)")
     pressure_bar = _number(tyre, "pressure_bar", "tyre")
     name = tyre.get("name", "")
     if not isinstance(name, str):

@@ -573,9 +573,9 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     est = _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fixed, ring_covariance, measured,
                         prior, k_max, ridge, d_new)
     if ridge is not None and deeper and TREAD in fit.names:
-        est.flags.append(f"{TREAD}: the free fit went deeper ({deeper:.3g} mm) than the new tread ({1e3 * d_new:.3g} mm, "
-                         f"the tyre file's tread_depth_new_mm); refitted from the ridge's best depth within it "
-                         "(docs/physics.md §13.4)")
+        est.flags.append(f"{TREAD}: the free fit went deeper ({deeper:.3g} mm) than the new tread "
+                         f"({1e3 * d_new:.3g} mm, the tyre file's tread_depth_new_mm); refitted from the ridge's best "
+                         "depth within it (docs/physics.md §13.4)")
     if str(load.rotation_source).startswith("speed_kmh"):  # Ω from the nominal speed: V = Ω·r_road says it back
         est.quantities["speed_kmh"]["status"] = "not told"
         est.untold.append("speed_kmh: no encoder rate (rotation_hz): Ω came from the nominal speed_kmh, so the "
@@ -592,11 +592,11 @@ def new_tread_depth(laws: TyreLaws) -> float | None:
 
 
 def _at_new_depth(problem: Problem, fit, ridge: RidgeProfile, d_new: float, **opts):
-    """The fit within d ≤ d_new (docs/physics.md §13.4 *the new tread's bound*) when the free fit went deeper than the
-    new tread: the posterior's mode within the bound is either a minimum of the ridge below it — the best of the
-    ridge's slices (all at d ≤ d_new) is inside, and the free fit restarted there stays within — or on the bound, the
-    rest fitted with d held at the deepest slice, d_new. Returns ``(fit, ridge)``, the ridge's deviance relative to
-    the new fit; unchanged if no slice converged or the refit failed."""
+    """The fit within d ≤ d_new (docs/physics.md §13.4 *the new tread's bound*) when the free fit went deeper than
+    the new tread: the posterior's mode within the bound is either a minimum of the ridge below it — the best of
+    the ridge's slices (all at d ≤ d_new) is inside, and the free fit restarted there stays within — or on the
+    bound, the rest fitted with d held at the deepest slice, d_new. Returns ``(fit, ridge)``, the ridge's deviance
+    relative to the new fit; unchanged if no slice converged or the refit failed."""
     ok = ridge.converged & np.isfinite(ridge.deviance)
     if not ok.any():
         return fit, ridge
