@@ -415,7 +415,9 @@ class StateEstimate:
       the fit in the free parameters' solver coordinates.
     - ``theta``, ``cov_u``: θ (natural) and the covariance of the free parameters' solver coordinates (κ × the
       Laplace covariance + ``spread_u``: what every revolution's held quantities carry);
-      ``gradient_u`` ``(Q, k)``: d quantity/du; ``ring_sd`` ``(Q,)`` the ring's part of each σ (SI).
+      ``gradient_u`` ``(Q, k)``: d quantity/du; ``ring_sd`` ``(Q,)`` the ring's part of each σ (SI);
+      ``names_u``: the parameters of ``cov_u`` and ``gradient_u`` (the fit's, and the tread depth when the new
+      tread's bound holds it, §13.4).
     """
 
     quantities: dict
@@ -438,6 +440,7 @@ class StateEstimate:
     discrepancy: float = 1.0
     ridge: RidgeProfile | None = None
     spread_u: np.ndarray | None = None
+    names_u: tuple | None = None
 
     def value(self, key: str) -> float:
         """The estimate of quantity ``key`` (:data:`QUANTITIES`) in the unit its name says (the unit in
@@ -659,12 +662,21 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     sd = np.sqrt(np.maximum(var, 0.0))
     z = float(ndtri(0.975))
     along = None
+    # held on the new tread's bound, the depth is still uncertain along the ridge below it: every revolution's held
+    # quantities carry it (its column in the gradient, its spread over the slices; its Laplace variance is 0)
+    names_u, G_u, cov_l = free, G, cov
+    if bounded and finite:
+        names_u = free + (TREAD,)
+        idx_u = [STATE_PARAMETERS.index(n) for n in names_u]
+        G_u = jt[:, idx_u] * _du_dtheta(theta)[idx_u][None, :]
+        cov_l = np.zeros((len(names_u),) * 2)
+        cov_l[:-1, :-1] = cov
     if ridge is not None and finite:
-        along = _along_ridge(ridge, kappa, theta, free, geometry, ring, laws, omega, road1, settings,
+        along = _along_ridge(ridge, kappa, theta, names_u, geometry, ring, laws, omega, road1, settings,
                              ring_sd if names else np.zeros(len(value)))
-    cov_u = cov
+    cov_u = cov_l
     if along is not None:  # the held quantities of every revolution carry the spread along the ridge (§13.4)
-        cov_u = cov + along["spread_u"]
+        cov_u = cov_l + along["spread_u"]
     # which quantities are held, which not told
     prior_sd = {PRESSURE: PRESSURE_PRIOR_SD, SLIP: SLIP_PRIOR_SD / 0.01, TREAD: TREAD_PRIOR_SD}
     held = {LOAD: LOAD not in free, PRESSURE: PRESSURE not in free, SLIP: SLIP not in free,
@@ -743,9 +755,10 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
         nuisances[key] = {"value": float(fit.values[n]) * s, "stderr": float(fit.stderr.get(n, math.nan)) * s}
     return StateEstimate(quantities=quantities, correlation={"names": corr_names, "matrix": corr.tolist()},
                          untold=untold, status=fit.status, converged=converged, rms=rms, flags=flags,
-                         nuisances=nuisances, fit=fit, load=load, theta=theta, cov_u=cov_u, gradient_u=G,
+                         nuisances=nuisances, fit=fit, load=load, theta=theta, cov_u=cov_u, gradient_u=G_u,
                          ring_sd=ring_sd, omega=float(omega), k_max=int(k_max), fixed=dict(fixed),
-                         discrepancy=float(kappa), ridge=ridge, spread_u=None if along is None else along["spread_u"])
+                         discrepancy=float(kappa), ridge=ridge, spread_u=None if along is None else along["spread_u"],
+                         names_u=tuple(names_u))
 
 
 # --------------------------------------------------------------------------- per revolution
@@ -819,7 +832,8 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
     data = eqx.tree_at(lambda a: a.weight, problem.data, as_traced(weight[None]))
     data = eqx.tree_at(lambda a: a.measured, data, as_traced(np.mean(rows, axis=0)[None]))
     prob = dataclasses.replace(problem, data=data)
-    names = tuple(fit.names)
+    # the parameters of the reference's covariance: the fit's, and the tread depth held on the new tread's bound
+    names = tuple(reference.names_u or fit.names)
     theta = np.asarray(fit.theta, dtype=np.float64)
     lin = linearize(prob, theta, names)
     J_all = lin.jacobian / s_r
@@ -883,6 +897,12 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
         values[k] = v * s
         lo[k] = (v - z * sdk) * s
         hi[k] = (v + z * sdk) * s
+        if k != "speed_kmh" and not np.any(G_f[iq[k]]):
+            # not moved by the step (the pressure, the tread depth): every revolution's value is the averaged fit's,
+            # and so is its interval — the marginal along the ridge, cut at the new tread's depth (§13.4), of which
+            # the Gaussian of the held coordinates' covariance is only an approximation
+            lo[k] = np.full(R, float(reference.quantities[k]["lo"]))
+            hi[k] = np.full(R, float(reference.quantities[k]["hi"]))
     rms = np.sqrt(np.mean(E_lin**2, axis=1))
     return StateRevolutions(revolution=np.arange(R) if revolution is None else np.asarray(revolution),
                             t_s=np.zeros(R) if t_s is None else np.asarray(t_s), rotation_hz=np.asarray(rotation_hz),
