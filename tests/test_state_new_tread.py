@@ -102,6 +102,17 @@ def test_a_fit_that_goes_deeper_than_the_new_tread_is_held_within_it():
     assert Q["status"] == "estimated"
     assert any("tread_depth_new_mm" in f for f in bounded.flags)
     assert bounded.ridge.depth.max() == pytest.approx(0.008, rel=1e-9)  # the slices end at the new tread
+    # every revolution keeps the depth's uncertainty below the bound (held on it, the depth is no parameter of the
+    # fit: its revolutions' interval had collapsed to [8, 8] mm)
+    from ringfit.fit.estimate.state import profile_rows, state_revolutions
+    from ringfit.fit.estimate.problem import EstimateSettings
+
+    rows = np.stack([profile_rows(Profile(prof.angle_deg, *(ch + np.array([[0.5], [0.08]]) * rng.standard_normal(
+        ch.shape))), EstimateSettings().n_grid, bounded.k_max) for _ in range(6)])  # six revolutions about it
+    revs = state_revolutions(rows, np.full(6, OMEGA / (2 * math.pi)), bounded)
+    assert np.all(revs.hi["tread_depth_mm"] <= 8.0 * (1 + 1e-9))
+    assert np.all(revs.hi["tread_depth_mm"] - revs.lo["tread_depth_mm"] > 0.05)
+    assert np.all(revs.hi["load_n"] > revs.lo["load_n"])
 
 
 def test_the_cli_refuses_a_fixed_depth_deeper_than_the_new_tread(tmp_path, capsys):
