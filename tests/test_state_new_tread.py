@@ -111,7 +111,8 @@ def test_a_fit_that_goes_deeper_than_the_new_tread_is_held_within_it():
         ch.shape))), EstimateSettings().n_grid, bounded.k_max) for _ in range(6)])  # six revolutions about it
     revs = state_revolutions(rows, np.full(6, OMEGA / (2 * math.pi)), bounded)
     assert np.all(revs.hi["tread_depth_mm"] <= 8.0 * (1 + 1e-9))
-    assert np.all(revs.hi["tread_depth_mm"] - revs.lo["tread_depth_mm"] > 0.05)
+    assert np.all(revs.lo["tread_depth_mm"] < revs.hi["tread_depth_mm"])
+    assert revs.lo["tread_depth_mm"] == pytest.approx(np.full(6, Q["lo"]), rel=1e-12)  # the averaged marginal
     assert np.all(revs.hi["load_n"] > revs.lo["load_n"])
 
 
