@@ -27,6 +27,9 @@ on the shared machine: the simulator about 1.5, the averaged fits with the ridge
    σ = 0.5 % of Ω²R per sample (the example's range is 0.3–1 %) on 1024 samples per revolution, the nuisances
    free, the data alone; the load–pressure and Fx–κ correlations; "–" where σ exceeds the prior (not told).
 
+The example's tyre files state the new tread's depth (``tread_depth_new_mm`` = 8 mm, the blind depths' upper end):
+the estimate holds the tread depth within it (docs/physics.md §13.4 *the new tread's bound*).
+
 ``--quick``: one seed, two blind recordings of 4 s (a smoke run; its figures are not the targets').
 """
 
@@ -209,6 +212,9 @@ def blind():
                 write_state_example(folder, seed=seed, blind=ARGS.blind, seconds=ARGS.seconds, overwrite=True)
                 sim_cpu += time.process_time() - c
             tyre = read_tyre(folder / ("tyre.toml" if ARGS.tyre == "nominal" else "truth/tyre.truth.toml"))
+            if tyre.laws.tread_depth_new is None:  # an example kept (--examples) from before the key
+                print(f"   WARNING: {folder.name}'s tyre file has no tread_depth_new_mm: the tread depth is not "
+                      "bounded by the new tread's (docs/physics.md §13.3); delete the folder to rewrite it")
             for path in sorted((folder / "blind").glob("*.records.npz")):
                 name = path.name.removesuffix(".records.npz")
                 truth = truth_table(folder / "truth" / f"{name}.truth.csv")

@@ -107,7 +107,7 @@ def run_estimate(args) -> int:
             import warnings
 
             warnings.warn(note, stacklevel=2)
-        fixed = parse_fix(args.fix, profile.condition, source=args.input) if args.state else {}
+        fixed = parse_fix(args.fix, profile.condition, source=args.input, laws=tyre.laws) if args.state else {}
         est = estimate_load(profile, tyre.geometry, tyre.ring, settings=settings, k_tread_in_file=k_in_file,
                             ring_covariance=tyre.covariance, laws=tyre.laws)
         if args.state:
@@ -122,7 +122,7 @@ def run_estimate(args) -> int:
 
         want_revs = args.per_revolution is not None or args.plot is not None
         with read_continuous(args.input, channels=args.channel_map) as rec:
-            fixed = parse_fix(args.fix, rec.condition, source=args.input)
+            fixed = parse_fix(args.fix, rec.condition, source=args.input, laws=tyre.laws)
             est, state, revs = estimate_recording_state(rec, tyre.geometry, tyre.ring, tyre.laws, settings=settings,
                                                         fixed=fixed, k_tread_in_file=k_in_file,
                                                         per_revolution=want_revs, progress=not args.quiet,
@@ -186,11 +186,12 @@ FIXABLE = {"load_n": ("load_n", 1.0, (200.0, 20000.0)), "pressure_bar": ("pressu
            "slip": ("slip", 1.0, (-0.3, 0.3)), "tread_depth_mm": ("tread_depth_m", 1e-3, (0.2, 30.0))}
 
 
-def parse_fix(items, condition: dict, *, source=None) -> dict:
+def parse_fix(items, condition: dict, *, source=None, laws=None) -> dict:
     """``--fix NAME=VALUE`` items → ``{θ name: SI value}`` (:data:`FIXABLE`; VALUE ``stated``: the input's condition).
 
     **Raises** :class:`InputError` (exit 2) for an unknown name, a value that is not a number in its range, a
-    ``stated`` value the input does not state, or a name given twice."""
+    ``stated`` value the input does not state, a name given twice, or a tread depth deeper than the new tread's of
+    the tyre file's ``laws`` (``tread_depth_new_mm``, docs/physics.md §13.3)."""
     from ringfit.errors import InputError
 
     out = {}
@@ -213,6 +214,10 @@ def parse_fix(items, condition: dict, *, source=None) -> dict:
                 raise InputError(f"--fix {item!r}: {text!r} is not a number (or 'stated')") from None
         if not (lo <= value <= hi):
             raise InputError(f"--fix {name}={value:g}: outside the plausible range [{lo:g}, {hi:g}]")
+        new = None if laws is None or not laws.has_tread_depth else laws.tread_depth_new
+        if name == "tread_depth_mm" and new is not None and value * factor > float(new) * (1 + 1e-9):
+            raise InputError(f"--fix {name}={value:g}: deeper than the tyre file's new tread (tread_depth_new_mm = "
+                             f"{1e3 * float(new):g}): wear only removes tread")
         out[key] = value * factor
     return out
 

@@ -28,9 +28,9 @@ _TYRE_KEYS = {"radius_m": "radius", "width_m": "width", "tread_thickness_m": "tr
               "tread_rib_width_m": "tread_rib_width"}
 #: Keys of the [tyre] table.
 TYRE_KEYS = ("name", "radius_m", "width_m", "pressure_bar", "tread_thickness_m", "tread_rib_width_m",
-             "tread_depth_mm", "tread_density_kg_m3", "tread_land_ratio")
+             "tread_depth_mm", "tread_depth_new_mm", "tread_density_kg_m3", "tread_land_ratio")
 #: The state laws' keys (docs/formats.md §1, docs/physics.md §13): in [tyre], in [ring] and in [ring.pressure].
-STATE_TYRE_KEYS = ("tread_depth_mm", "tread_density_kg_m3", "tread_land_ratio")
+STATE_TYRE_KEYS = ("tread_depth_mm", "tread_depth_new_mm", "tread_density_kg_m3", "tread_land_ratio")
 STATE_RING_KEYS = ("kx_n_per_m2", "friction")
 PRESSURE_KEYS = ("kw_share", "kv_share", "k_tread_share")
 #: Top-level tables of a tyre file; ``meta`` is free-form (notes, provenance).
@@ -54,6 +54,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "ea_n": (1.0, 1e13),
     "chi": (-1.0, 2.0),
     "tread_depth_mm": (0.0, 50.0),
+    "tread_depth_new_mm": (0.0, 50.0),
     "tread_density_kg_m3": (100.0, 5000.0),
     "tread_land_ratio": (0.0, 1.0),
     "kx_n_per_m2": (1.0, 1e12),
@@ -96,6 +97,8 @@ class Tyre:
         kw = {}
         if "tread_depth_mm" in v:
             kw.update(tread_depth_ref=v["tread_depth_mm"] * 1e-3, has_tread_depth=True)
+        if "tread_depth_new_mm" in v:
+            kw.update(tread_depth_new=v["tread_depth_new_mm"] * 1e-3)
         if "kx_n_per_m2" in v:
             kw.update(k_x=v["kx_n_per_m2"], has_brush=True)
         for key, attr in (("tread_density_kg_m3", "tread_density"), ("tread_land_ratio", "land_ratio"),
@@ -248,6 +251,15 @@ def _parse(doc: dict, source: str) -> Tyre:
             raise InputError(f"[tyre] tread_depth_mm = {state_values['tread_depth_mm']:g} is not below the tread "
                              f"thickness {tau_mm:g} mm (tread_thickness_m): the depth is the grooves' part of the "
                              "tread (docs/physics.md §13.3)")
+    if "tread_depth_new_mm" in state_values:
+        if "tread_depth_mm" not in state_values:
+            raise InputError("[tyre] tread_depth_new_mm needs tread_depth_mm (the depth d_ref at which [ring] holds): "
+                             "without a tread law the depth is not estimated, and a bound on it says nothing")
+        if state_values["tread_depth_new_mm"] < state_values["tread_depth_mm"]:
+            raise InputError(f"[tyre] tread_depth_new_mm = {state_values['tread_depth_new_mm']:g} is below "
+                             f"tread_depth_mm = {state_values['tread_depth_mm']:g}: the new tread is the deepest the "
+                             "tyre has been, so it is at least the depth at which [ring] holds "
+                             "(docs/physics.md §13.3)")
     pressure_bar = _number(tyre, "pressure_bar", "tyre")
     name = tyre.get("name", "")
     if not isinstance(name, str):

@@ -67,7 +67,9 @@ RATED_LOAD = 4000.0
 # ============================================================================ the true tyre and its state
 @dataclass(frozen=True)
 class TrueTyre:
-    """The true tyre of a simulation, SI. Ring values hold at ``pressure_ref`` and ``depth_ref``."""
+    """The true tyre of a simulation, SI. Ring values hold at ``pressure_ref`` and ``depth_ref``; ``depth_new`` is
+    the new (unworn) tread's depth, the data sheet's, which the tyre file states (``tread_depth_new_mm``): the
+    example's blind tread depths are drawn up to it."""
 
     radius: float = 0.296
     width: float = 0.152
@@ -87,6 +89,7 @@ class TrueTyre:
     k_tread_share: float = 0.0
     tread_density: float = 1100.0
     land_ratio: float = 0.7
+    depth_new: float = 0.008
 
     def at(self, pressure: float, depth: float) -> dict:
         """The ring's values at pressure p [Pa] and tread depth d [m] (the laws of the module docstring)."""
@@ -113,7 +116,8 @@ class TrueTyre:
                                 tread_thickness=self.tread_ref, name=name)
         values = dict(rho_a=self.rho_a, ei=self.ei, kw=self.kw, kv=self.kv, damping_ratio=self.damping_ratio,
                       k_tread=self.k_tread)
-        extra = {"tyre": {"tread_depth_mm": 1e3 * self.depth_ref, "tread_density_kg_m3": self.tread_density,
+        extra = {"tyre": {"tread_depth_mm": 1e3 * self.depth_ref, "tread_depth_new_mm": 1e3 * self.depth_new,
+                          "tread_density_kg_m3": self.tread_density,
                           "tread_land_ratio": self.land_ratio},
                  "ring": {"kx_n_per_m2": self.kx, "friction": self.mu,
                           "pressure": {"kw_share": self.kw_share, "kv_share": self.kv_share,
@@ -726,7 +730,7 @@ def write_state_example(folder, *, seed: int = 0, blind: int = 6, seconds: float
         speed = float(rng.uniform(20.0, 120.0))
         load = float(rng.uniform(0.3, 1.2) * RATED_LOAD)
         pressure = float(nominal.pressure_ref * rng.uniform(0.8, 1.2))
-        depth = float(rng.uniform(2.0, 8.0) * 1e-3)
+        depth = float(rng.uniform(2.0, 1e3 * nominal.depth_new) * 1e-3)
         fx0 = float(rng.uniform(-0.3, 0.3) * load)
         fx1 = float(np.clip(fx0 + rng.uniform(-0.1, 0.1) * load, -0.3 * load, 0.3 * load))
         amp, freq, ph = float(rng.uniform(0.0, 0.04)), float(rng.uniform(0.6, 1.5)), float(rng.uniform(0, 2 * np.pi))

@@ -311,17 +311,20 @@ def _prior_chi2(problem: Problem, thetas, free) -> np.ndarray:
 
 
 def ridge_profile(problem: Problem, fit, *, max_steps: int = 256, rtol: float = 1e-10,
-                  atol: float = 1e-10) -> RidgeProfile:
+                  atol: float = 1e-10, depth_max: float | None = None) -> RidgeProfile:
     """The profile of the fit's likelihood in tread depth (docs/physics.md §13.4): :data:`RIDGE_SLICES` fits with
     d held at depths evenly spaced in ln d over the weak prior's ±:data:`RIDGE_SPAN` σ, every other free
     parameter fitted, in two warm-started chains from the fit outwards (:func:`~ringfit.fit.engine.least_squares_batch`,
-    one compilation); the rows in units of the fit's noise (its σ scale s applied), so Δ is comparable to χ²₁."""
+    one compilation); the rows in units of the fit's noise (its σ scale s applied), so Δ is comparable to χ²₁.
+    ``depth_max`` [m]: the new tread's depth d_new (§13.3), the deepest slice (the depth cannot exceed it)."""
     free = tuple(fit.names)
     rest = tuple(n for n in free if n != TREAD)
     c = STATE_COORDS[STATE_PARAMETERS.index(TREAD)]
     j = STATE_PARAMETERS.index(TREAD)
     mu, sd = problem.prior.mean[list(problem.prior.names).index(TREAD)], TREAD_PRIOR_SD
     lo, hi = max(mu - RIDGE_SPAN * sd, c.to_u(c.lo) + 1e-3), min(mu + RIDGE_SPAN * sd, c.to_u(c.hi) - 1e-3)
+    if depth_max is not None:
+        hi = min(hi, c.to_u(float(depth_max)))
     grid = np.linspace(lo, hi, RIDGE_SLICES)
     theta = np.asarray(fit.theta, dtype=np.float64)
     u_hat = c.to_u(float(theta[j]))
@@ -412,7 +415,9 @@ class StateEstimate:
       the fit in the free parameters' solver coordinates.
     - ``theta``, ``cov_u``: θ (natural) and the covariance of the free parameters' solver coordinates (κ × the
       Laplace covariance + ``spread_u``: what every revolution's held quantities carry);
-      ``gradient_u`` ``(Q, k)``: d quantity/du; ``ring_sd`` ``(Q,)`` the ring's part of each σ (SI).
+      ``gradient_u`` ``(Q, k)``: d quantity/du; ``ring_sd`` ``(Q,)`` the ring's part of each σ (SI);
+      ``names_u``: the parameters of ``cov_u`` and ``gradient_u`` (the fit's, and the tread depth when the new
+      tread's bound holds it, §13.4).
     """
 
     quantities: dict
@@ -435,6 +440,7 @@ class StateEstimate:
     discrepancy: float = 1.0
     ridge: RidgeProfile | None = None
     spread_u: np.ndarray | None = None
+    names_u: tuple | None = None
 
     def value(self, key: str) -> float:
         """The estimate of quantity ``key`` (:data:`QUANTITIES`) in the unit its name says (the unit in
@@ -486,6 +492,10 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     for name in fixed:
         if name not in STATE_NAMES:
             raise ValueError(f"cannot fix {name!r}; expected one of {STATE_NAMES}")
+    d_new = new_tread_depth(laws)
+    if d_new is not None and TREAD in fixed and float(fixed[TREAD]) > d_new * (1 + 1e-9):
+        raise InputError(f"the stated tread depth {1e3 * float(fixed[TREAD]):g} mm is deeper than the tyre file's new "
+                         f"tread (tread_depth_new_mm = {1e3 * d_new:g}): wear only removes tread")
     if np.allclose(profile.acc_tangential_ms2, 0.0):
         raise InputError("the tangential channel is all zeros: the state estimate reads both channels "
                          "(the load alone: ringfit estimate without --state)", source=profile.source or None)
@@ -542,11 +552,11 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     for name in first.extra["at_bound"]:
         theta1[STATE_PARAMETERS.index(name)] = theta0[STATE_PARAMETERS.index(name)]
     fit = least_squares(problem, theta1, free, **opts)
-    ridge = None
+    ridge, deeper = None, False
     if TREAD in free and np.all(np.isfinite(fit.theta)):
         # the ridge's profile (§13.4 *intervals along the ridge*): on a flat, curved ridge the free fit can stop short
         # of its optimum; a slice well below it restarts the fit there
-        ridge = ridge_profile(problem, fit, **opts)
+        ridge = ridge_profile(problem, fit, depth_max=d_new, **opts)
         ok = ridge.converged & np.isfinite(ridge.deviance)
         if ok.any() and np.min(ridge.deviance[ok]) < -RIDGE_BETTER:
             b = int(np.argmin(np.where(ok, ridge.deviance, np.inf)))
@@ -559,8 +569,16 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
                 if gain < 0:
                     fit = refit
                     ridge = dataclasses.replace(ridge, deviance=ridge.deviance - gain)
+        deeper = d_new is not None and float(fit.values[TREAD]) > d_new * (1 + 1e-9)
+        if deeper:
+            deeper = 1e3 * float(fit.values[TREAD])
+            fit, ridge = _at_new_depth(problem, fit, ridge, d_new, **opts)
     est = _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fixed, ring_covariance, measured,
-                        prior, k_max, ridge)
+                        prior, k_max, ridge, d_new)
+    if ridge is not None and deeper and TREAD in fit.names:
+        est.flags.append(f"{TREAD}: the free fit went deeper ({deeper:.3g} mm) than the new tread "
+                         f"({1e3 * d_new:.3g} mm, the tyre file's tread_depth_new_mm); refitted from the ridge's best "
+                         "depth within it (docs/physics.md §13.4)")
     if str(load.rotation_source).startswith("speed_kmh"):  # Ω from the nominal speed: V = Ω·r_road says it back
         est.quantities["speed_kmh"]["status"] = "not told"
         est.untold.append("speed_kmh: no encoder rate (rotation_hz): Ω came from the nominal speed_kmh, so the "
@@ -568,9 +586,48 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     return est
 
 
+def new_tread_depth(laws: TyreLaws) -> float | None:
+    """d_new [m], the new tread's depth the tyre file states (``tread_depth_new_mm``, docs/formats.md §1) — the bound
+    on the estimated depth (docs/physics.md §13.3) — or None (not stated, or no tread law)."""
+    if not laws.has_tread_depth or laws.tread_depth_new is None:
+        return None
+    return float(laws.tread_depth_new)
+
+
+def _at_new_depth(problem: Problem, fit, ridge: RidgeProfile, d_new: float, **opts):
+    """The fit within d ≤ d_new (docs/physics.md §13.4 *the new tread's bound*) when the free fit went deeper than
+    the new tread: the posterior's mode within the bound is either a minimum of the ridge below it — the best of
+    the ridge's slices (all at d ≤ d_new) is inside, and the free fit restarted there stays within — or on the
+    bound, the rest fitted with d held at the deepest slice, d_new. Returns ``(fit, ridge)``, the ridge's deviance
+    relative to the new fit; unchanged if no slice converged or the refit failed."""
+    ok = ridge.converged & np.isfinite(ridge.deviance)
+    if not ok.any():
+        return fit, ridge
+    b = int(np.argmin(np.where(ok, ridge.deviance, np.inf)))
+    j = STATE_PARAMETERS.index(TREAD)
+    new = None
+    if b < ridge.depth.size - 1:  # a minimum below the bound: the free fit from there
+        refit = least_squares(problem, ridge.theta[b], tuple(fit.names), **opts)
+        if np.all(np.isfinite(refit.theta)) and float(refit.theta[j]) <= d_new * (1 + 1e-9):
+            new = refit
+    if new is None:  # on the bound: d held at the slice, the rest fitted
+        b = ridge.depth.size - 1 if ok[-1] else b
+        held = least_squares(problem, ridge.theta[b], tuple(n for n in fit.names if n != TREAD), **opts)
+        if not np.all(np.isfinite(held.theta)):
+            return fit, ridge
+        new = held
+    s0 = float(fit.extra["sigma_scale"])
+    data = eqx.tree_at(lambda a: a.weight, problem.data, np.asarray(problem.data.weight) / s0)
+    scaled = dataclasses.replace(problem, data=data, sigma="fixed")
+    shift = _total_chi2(scaled, new.theta, tuple(new.names)) - _total_chi2(scaled, fit.theta, tuple(fit.names))
+    return new, dataclasses.replace(ridge, deviance=ridge.deviance - shift)
+
+
 def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fixed, ring_covariance, measured, prior,
-                  k_max, ridge: RidgeProfile | None = None) -> StateEstimate:
+                  k_max, ridge: RidgeProfile | None = None, d_new: float | None = None) -> StateEstimate:
     free = tuple(fit.names)
+    # the depth held at a ridge slice by the new tread's bound (not by the user or a missing law): still estimated
+    bounded = ridge is not None and TREAD not in free and TREAD not in fixed and laws.has_tread_depth
     theta = np.asarray(fit.theta, dtype=np.float64)
     finite = bool(np.all(np.isfinite(theta)))
     names = ()
@@ -605,15 +662,25 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     sd = np.sqrt(np.maximum(var, 0.0))
     z = float(ndtri(0.975))
     along = None
+    # held on the new tread's bound, the depth is still uncertain along the ridge below it: every revolution's held
+    # quantities carry it (its column in the gradient, its spread over the slices; its Laplace variance is 0)
+    names_u, G_u, cov_l = free, G, cov
+    if bounded and finite:
+        names_u = free + (TREAD,)
+        idx_u = [STATE_PARAMETERS.index(n) for n in names_u]
+        G_u = jt[:, idx_u] * _du_dtheta(theta)[idx_u][None, :]
+        cov_l = np.zeros((len(names_u),) * 2)
+        cov_l[:-1, :-1] = cov
     if ridge is not None and finite:
-        along = _along_ridge(ridge, kappa, theta, free, geometry, ring, laws, omega, road1, settings,
+        along = _along_ridge(ridge, kappa, theta, names_u, geometry, ring, laws, omega, road1, settings,
                              ring_sd if names else np.zeros(len(value)))
-    cov_u = cov
+    cov_u = cov_l
     if along is not None:  # the held quantities of every revolution carry the spread along the ridge (§13.4)
-        cov_u = cov + along["spread_u"]
+        cov_u = cov_l + along["spread_u"]
     # which quantities are held, which not told
     prior_sd = {PRESSURE: PRESSURE_PRIOR_SD, SLIP: SLIP_PRIOR_SD / 0.01, TREAD: TREAD_PRIOR_SD}
-    held = {LOAD: LOAD not in free, PRESSURE: PRESSURE not in free, SLIP: SLIP not in free, TREAD: TREAD not in free}
+    held = {LOAD: LOAD not in free, PRESSURE: PRESSURE not in free, SLIP: SLIP not in free,
+            TREAD: TREAD not in free and not bounded}
     untold_param = {}
     for n, psd in prior_sd.items():
         if n in free:
@@ -639,6 +706,10 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
             lo, hi = v * math.exp(-z * s), v * math.exp(z * s)
         if along is not None and status != "fixed" and np.isfinite(along["lo"][q]):
             lo, hi = min(lo, along["lo"][q]), max(hi, along["hi"][q])  # the wider: the ridge's or the Laplace's
+        if key == "tread_depth_mm" and d_new is not None and status != "fixed":
+            hi = min(hi, d_new)  # the new tread's depth bounds it (§13.3)
+            lo = min(lo, hi)
+        if along is not None and status != "fixed" and np.isfinite(along["lo"][q]):
             sd[q] = max(sd[q], (hi - lo) / (2 * z) if key not in LOG_QUANTITIES or v <= 0 or lo <= 0
                         else v * math.log(hi / lo) / (2 * z))
         quantities[key] = {"value": v * scale, "lo": lo * scale, "hi": hi * scale, "sd": float(sd[q]) * scale,
@@ -672,6 +743,11 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     at_bound += [n for n in near_bound(theta, free) if n not in at_bound]
     converged = bool(fit.converged and finite and not at_bound)
     flags = [f for f in fit.flags if "solver did not converge" in f or any(f.startswith(n) for n in STATE_NAMES)]
+    if bounded:
+        flags.append(f"{TREAD}: the free fit went deeper than the new tread ({1e3 * d_new:.3g} mm, the tyre file's "
+                     f"tread_depth_new_mm); held at the ridge's best depth within it, "
+                     f"{1e3 * float(theta[STATE_PARAMETERS.index(TREAD)]):.3g} mm, its interval along the ridge "
+                     "(docs/physics.md §13.4)")
     nuisances = {}
     for n, key, s in ((GAIN, "gain", 1.0), (ANGLE_OFFSET, "angle_offset_deg", 180 / math.pi), (CORNER, "corner_hz", 1.0),
                       (TILT, "tilt_gain", 1.0), (GAIN_TANGENTIAL, "gain_tangential", 1.0),
@@ -679,9 +755,10 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
         nuisances[key] = {"value": float(fit.values[n]) * s, "stderr": float(fit.stderr.get(n, math.nan)) * s}
     return StateEstimate(quantities=quantities, correlation={"names": corr_names, "matrix": corr.tolist()},
                          untold=untold, status=fit.status, converged=converged, rms=rms, flags=flags,
-                         nuisances=nuisances, fit=fit, load=load, theta=theta, cov_u=cov_u, gradient_u=G,
+                         nuisances=nuisances, fit=fit, load=load, theta=theta, cov_u=cov_u, gradient_u=G_u,
                          ring_sd=ring_sd, omega=float(omega), k_max=int(k_max), fixed=dict(fixed),
-                         discrepancy=float(kappa), ridge=ridge, spread_u=None if along is None else along["spread_u"])
+                         discrepancy=float(kappa), ridge=ridge, spread_u=None if along is None else along["spread_u"],
+                         names_u=tuple(names_u))
 
 
 # --------------------------------------------------------------------------- per revolution
@@ -755,7 +832,8 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
     data = eqx.tree_at(lambda a: a.weight, problem.data, as_traced(weight[None]))
     data = eqx.tree_at(lambda a: a.measured, data, as_traced(np.mean(rows, axis=0)[None]))
     prob = dataclasses.replace(problem, data=data)
-    names = tuple(fit.names)
+    # the parameters of the reference's covariance: the fit's, and the tread depth held on the new tread's bound
+    names = tuple(reference.names_u or fit.names)
     theta = np.asarray(fit.theta, dtype=np.float64)
     lin = linearize(prob, theta, names)
     J_all = lin.jacobian / s_r
@@ -819,6 +897,12 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
         values[k] = v * s
         lo[k] = (v - z * sdk) * s
         hi[k] = (v + z * sdk) * s
+        if k != "speed_kmh" and not np.any(G_f[iq[k]]):
+            # not moved by the step (the pressure, the tread depth): every revolution's value is the averaged fit's,
+            # and so is its interval — the marginal along the ridge, cut at the new tread's depth (§13.4), of which
+            # the Gaussian of the held coordinates' covariance is only an approximation
+            lo[k] = np.full(R, float(reference.quantities[k]["lo"]))
+            hi[k] = np.full(R, float(reference.quantities[k]["hi"]))
     rms = np.sqrt(np.mean(E_lin**2, axis=1))
     return StateRevolutions(revolution=np.arange(R) if revolution is None else np.asarray(revolution),
                             t_s=np.zeros(R) if t_s is None else np.asarray(t_s), rotation_hz=np.asarray(rotation_hz),
