@@ -254,8 +254,7 @@ def noise_spectrum(power: np.ndarray, k_min: int = PROFILE_K_MIN, half_width: in
     return trend * num / den, 2.0 * den
 
 
-def noise_from_residual(residual: np.ndarray, leverage: np.ndarray, k_min: int = PROFILE_K_MIN,
-                        series: int = 1) -> np.ndarray:
+def noise_from_residual(residual: np.ndarray, leverage: np.ndarray, k_min: int = PROFILE_K_MIN) -> np.ndarray:
     """The block's σ ``(P, 2, 2H)`` per profile, channel and harmonic from its residual rows ``(P, 2, 2H)``
     [m/s²] (:func:`noise_spectrum`) and the fit's leverage of those rows (the hat matrix's diagonal, any shape
     with their count; the degrees of freedom the fit took, shared out evenly).
@@ -263,16 +262,11 @@ def noise_from_residual(residual: np.ndarray, leverage: np.ndarray, k_min: int =
     Weights estimated from ν = ``dof`` residual parts make the weighted fit's actual variance larger than
     ``(JᵀŴJ)⁻¹`` says: with ŵ = w/c, c ~ χ²_ν/ν independent of the row, the estimator's variance is
     E[1/c²]/E[1/c]² / Σ J²w and the formula's E[1/c]⁻¹ / Σ J²w, a ratio ν/(ν − 4). The σ² of each row is
-    multiplied by it, so that the covariance of the fit is the weighted estimator's (docs/physics.md §11).
-
-    ``series``: how many independent residual series each row's power averages (``residual`` the RMS over
-    that many fits of the same rows, e.g. revolutions of one recording): the degrees of freedom are that many
-    times one series'."""
+    multiplied by it, so that the covariance of the fit is the weighted estimator's (docs/physics.md §11)."""
     res = np.asarray(residual, dtype=np.float64)
     H = res.shape[-1] // 2
     power = 0.5 * (res[..., :H] ** 2 + res[..., H:] ** 2)
     noise, dof = noise_spectrum(power, k_min=k_min)
-    dof = dof * max(int(series), 1)
     leverage = np.asarray(leverage, dtype=np.float64)
     used = float(leverage.sum()) / max(leverage.size, 1)
     inflate = dof / np.maximum(dof - 4.0, 1.0)

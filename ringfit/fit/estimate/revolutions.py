@@ -18,10 +18,9 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.fit.engine import least_squares, least_squares_batch
 from ringfit.fit.estimate.feature import _num, edge_peaks
-from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows
+from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows, smoothed_noise
 from ringfit.fit.estimate.load import LoadEstimate, estimate_load
 from ringfit.fit.estimate.problem import ANGLE_OFFSET, GAIN, LOAD, EstimateArrays, EstimateSettings, estimate_problem
-from ringfit.fit.profile_block import noise_from_residual
 from ringfit.io.profiles import grid_angles_deg
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import as_traced
@@ -381,11 +380,7 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
     theta_ref = np.asarray(fit.theta, dtype=np.float64).copy()
     first, take = fit_batch(0, theta_ref, np.ones(2 * K))
     n0 = min(batch, R)
-    # the profile block's noise spectrum (docs/physics.md §11 *profiles*), its power pooled over the first batch's
-    # revolutions (each fit took len(free) of its 2K rows); it gives the weights' shape, each revolution's own
-    # residual their scale (σ "estimate": the noise level may change along a recording)
-    sigma = noise_from_residual(np.sqrt(np.mean((first.aux[:n0, 0] - rows_all[take[:n0]]) ** 2, axis=0)),
-                                np.full(2 * K, len(free) / (2 * K)), k_min=2, series=n0)
+    sigma = smoothed_noise(np.sqrt(np.mean((first.aux[:n0, 0] - rows_all[take[:n0]]) ** 2, axis=0)))
     weight = (1.0 / sigma) / np.mean(1.0 / sigma)
 
     starts = np.arange(0, R, batch)
