@@ -40,7 +40,6 @@ def test_the_options_reach_the_programs_and_nothing_is_made_at_import():
     # the engine's solves and the contact solve are such programs
     assert engine._solve.jitted is not None and engine._solve._quick is False
     assert engine._solve_quick._quick is True
-    assert engine._passes_quick_kept.jitted._quick is True and engine._passes_kept.jitted._quick is False
     from ringfit.physics import contact
 
     assert contact._solve_rolling_compiled._quick is True
@@ -109,12 +108,11 @@ def test_a_kept_program_survives_a_refused_option(monkeypatch, tmp_path):
 
 
 def test_the_options_change_no_answer_beyond_the_fits_tolerance():
-    """eq. 18's fit (quick) and the same solve (the free block's noise passes in one program,
-    engine._solve_passes_one) compiled by a plain jax.jit, no options."""
+    """eq. 18's fit (quick) and the same solve compiled by a plain jax.jit, no options."""
     tyre = read_tyre(path("table9.tyre.toml"))
     table = read_mode_table(path("free-ssi.modes.csv"))
     captured = {}
-    real = engine._passes_program
+    real = engine._solve_program
 
     def capture(model):
         program = real(model)
@@ -125,15 +123,13 @@ def test_the_options_change_no_answer_beyond_the_fits_tolerance():
 
         return run
 
-    engine._passes_program = capture
+    engine._solve_program = capture
     try:
         fit = fit_natural_frequencies(table, tyre.geometry, tyre.ring, prior="physical")
     finally:
-        engine._passes_program = real
+        engine._solve_program = real
     assert fit.converged
-    plain, _, passes = jax.jit(engine._solve_passes_one, static_argnames=engine._PASSES_STATIC)(*captured["args"],
-                                                                                              **captured["static"])
-    assert int(passes) == fit.extra["scale_passes"]
+    plain = jax.jit(engine._solve_one, static_argnames=engine._STATIC)(*captured["args"], **captured["static"])
     u_plain, code = np.asarray(plain[0]), int(plain[1])
     assert code == 0
     u_ours = np.array([fit.problem.coordinate(k).to_u(fit.values[k]) for k in fit.names])

@@ -23,10 +23,6 @@ coordinated — handed to :func:`least_squares`:
   correlated); its marginal over the free parameters enters as whitened residual
   rows ``W (u − mean)``.
 
-A noise model estimated from the fit's own residual (a block's σ, :mod:`ringfit.fit.free_block`) refits with
-the rows reweighted until it settles: :func:`least_squares_passes` runs those passes in the same one compiled
-region (an :class:`AbstractPasses` says how the rows are reweighted and when to stop).
-
 The solve is one jitted region (:class:`ringfit._cache.jit`, with XLA's compile options of
 :func:`ringfit._cache.compiler_options`): optimistix Levenberg–Marquardt (or,
 on request, undamped Gauss–Newton) with an SVD linear solve, the model linearised once per step by a forward-mode pass
@@ -274,19 +270,16 @@ def _theta(z, theta0, free):
     return _theta_at(free.u_of(z), theta0, free)
 
 
-def _weighted(z, model, data, theta0, free, prior_w, prior_mean, inner=None, row_weight=None):
+def _weighted(z, model, data, theta0, free, prior_w, prior_mean, inner=None):
     """Residual rows (data, then prior) and the model's aux at solver point z; theta0 has p + 1 entries.
-    ``inner``: a two-stage model's inner stage as a function of z (:class:`AbstractResiduals`); ``row_weight``:
-    ``(m,)`` factors on the model's rows (a pass of :func:`least_squares_passes`), ``None``: as they are."""
+    ``inner``: a two-stage model's inner stage as a function of z (:class:`AbstractResiduals`)."""
     u = free.u_of(z)
     theta = _theta_at(u, theta0, free)
     res, aux = model(theta, data) if inner is None else model.outer(inner(z), theta, data)
-    if row_weight is not None:
-        res = res * row_weight
     return jnp.concatenate([res, prior_w @ (u - prior_mean)]), aux
 
 
-def _linearisation(model, data, theta0, free, prior_w, prior_mean, row_weight=None):
+def _linearisation(model, data, theta0, free, prior_w, prior_mean):
     """``linearise(z) -> (residuals, (aux, jacobian))``: the weighted rows, the model's aux and the rows' dense
     Jacobian in z from one forward-mode pass (primal, aux and k tangents; ``aux`` carries no tangent).
 
@@ -295,7 +288,7 @@ def _linearisation(model, data, theta0, free, prior_w, prior_mean, row_weight=No
     """
 
     def both(z):
-        r, aux = _weighted(z, model, data, theta0, free, prior_w, prior_mean, row_weight=row_weight)
+        r, aux = _weighted(z, model, data, theta0, free, prior_w, prior_mean)
         return r, (r, aux)
 
     def linearise(z):
@@ -322,8 +315,7 @@ def _linearisation(model, data, theta0, free, prior_w, prior_mean, row_weight=No
             return jax.tree.map(lambda x, j: x + j @ (zz[:S] - z_in), x0, j_in)
 
         def both_staged(zz):
-            r, aux = _weighted(zz, model, data, theta0, free, prior_w, prior_mean, inner=inner_lin,
-                               row_weight=row_weight)
+            r, aux = _weighted(zz, model, data, theta0, free, prior_w, prior_mean, inner=inner_lin)
             return r, (r, aux)
 
         jac, (res, aux) = jax.jacfwd(both_staged, has_aux=True)(z)
@@ -333,7 +325,7 @@ def _linearisation(model, data, theta0, free, prior_w, prior_mean, row_weight=No
 
 
 def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, *, model, treedef,
-               method="levenberg_marquardt", row_weight=None):
+               method="levenberg_marquardt"):
     """One fit (traced): ``data`` arrives as flat leaves (fast dispatch); ``max_steps`` and the tolerances are
     traced, so one compiled solve serves every step limit and tolerance, and with ``max_steps = 0`` every
     evaluation (:func:`linearize`, :func:`evaluate`).
@@ -343,7 +335,7 @@ def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, 
     """
     data = jax.tree.unflatten(treedef, leaves)
     free = _Free(*free_arrays)
-    linearise = _linearisation(model, data, theta0, free, prior_w, prior_mean, row_weight)
+    linearise = _linearisation(model, data, theta0, free, prior_w, prior_mean)
     solver = SOLVERS[method](rtol=rtol, atol=atol, linear_solver=lx.SVD())
     sol = optx.least_squares(lambda s, a: linearise(s / a[1]), solver, z0, args=(max_steps, jnp.ones_like(z0)),
                              has_aux=True, max_steps=STEP_CAP, throw=False)
@@ -375,84 +367,6 @@ def _solve_program(model):
     """The jitted solve of ``model``: :data:`_solve_quick` where it asks for a quick compile, else :data:`_solve`
     (each kept as an exported program where the compilation cache is on)."""
     return _solve_quick_kept if getattr(model, "compile_quick", False) else _solve_kept
-
-
-class AbstractPasses(eqx.Module):
-    """A noise model that reweights a fit's rows between passes of one compiled fit (:func:`least_squares_passes`):
-    a block's σ from the last pass's residual, the fit redone with it until it settles.
-
-    A hashable configuration (a static argument of the compiled fit; its fields, if any, static) with two
-    traceable methods over a ``state`` and ``consts`` (pytrees of arrays, traced: one program serves every
-    value):
-
-    - ``weights(state, consts) -> (m,)``: the factors on the model's ``m`` rows for the next pass;
-    - ``update(state, residuals, jacobian, converged, passes, consts) -> (state, done)``: after a pass, from its
-      weighted rows ``(m + K,)`` (the model's, then the prior's), their Jacobian ``(m + K, K)`` in the free
-      parameters' solver coordinates, whether it converged and how many passes were made; ``done`` ends the
-      passes (the last pass's fit is returned);
-    - ``uniform(state, consts) -> bool``: the next pass's weights are one factor on every row that carries data
-      (default ``False``). Without a prior, such a pass has the last pass's optimum (a sum of squares times a
-      constant): it is not solved again but evaluated there (its rows and Jacobian at the new weights; the last
-      solve's status and steps).
-    """
-
-    def weights(self, state, consts):
-        raise NotImplementedError
-
-    def uniform(self, state, consts):
-        return jnp.array(False)
-
-    def update(self, state, residuals, jacobian, converged, passes, consts):
-        raise NotImplementedError
-
-
-def _solve_passes_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, state0, consts,
-                      max_passes, *, model, treedef, method, passes):
-    """Up to ``max_passes`` fits of one problem in one compiled region, each from ``z0`` with the rows weighted by
-    ``passes`` (an :class:`AbstractPasses`) from the fit before — or, where the new weights only rescale a problem
-    without a prior (``passes.uniform``), evaluated at the last optimum: ``(the last fit as :func:`_solve_one`
-    returns it, the passes' state, the passes made)``. The model is traced once (the loop's body)."""
-    successful = int(optx.RESULTS.successful._value)
-    data = jax.tree.unflatten(treedef, leaves)
-    K = z0.shape[0]
-    rows, aux = jax.eval_shape(lambda z: _weighted(z, model, data, theta0, _Free(*free_arrays), prior_w,
-                                                   prior_mean), z0)
-    zeros = (jnp.zeros(K, z0.dtype), jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), jnp.zeros(rows.shape),
-             jnp.zeros(rows.shape + (K,)), jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), aux))
-
-    no_prior = jnp.all(prior_w == 0)
-    free = _Free(*free_arrays)
-
-    def body(carry):
-        state, last, made, _ = carry
-        # a pass that only rescales every data row of a problem without a prior: the last optimum, evaluated
-        same = (made > 0) & no_prior & passes.uniform(state, consts)
-        z_last = jnp.where(free.bounded, jnp.arcsin(jnp.clip((last[0] - free.mid) / free.half, -1.0, 1.0)), last[0])
-        u, code, steps, res, jac, aux = _solve_one(leaves, jnp.where(same, z_last, z0), theta0, free_arrays, prior_w,
-                                                   prior_mean, jnp.where(same, 0, max_steps), rtol, atol,
-                                                   model=model, treedef=treedef, method=method,
-                                                   row_weight=passes.weights(state, consts))
-        code = jnp.where(same, last[1], code.astype(jnp.int32))
-        steps = jnp.where(same, last[2], steps.astype(jnp.int32))
-        out = (u, code, steps, res, jac, aux)
-        state, done = passes.update(state, res, jac, code == successful, made + 1, consts)
-        return state, out, made + 1, done
-
-    state, out, made, _ = jax.lax.while_loop(lambda c: ~c[3] & (c[2] < max_passes), body,
-                                             (state0, zeros, jnp.array(0, jnp.int32), jnp.array(False)))
-    return out, state, made
-
-
-_PASSES_STATIC = ("model", "treedef", "method", "passes")
-#: The passes' fits compiled as :data:`_solve` and :data:`_solve_quick` (and kept alike).
-_passes_kept = ExportedJit(_solve_passes_one, jit(_solve_passes_one, static_argnames=_PASSES_STATIC))
-_passes_quick_kept = ExportedJit(_solve_passes_one, jit(_solve_passes_one, quick=True,
-                                                         static_argnames=_PASSES_STATIC), quick=True)
-
-
-def _passes_program(model):
-    """The jitted passes of ``model`` (:func:`_solve_passes_one`), quick or not as :func:`_solve_program`."""
-    return _passes_quick_kept if getattr(model, "compile_quick", False) else _passes_kept
 
 
 @functools.partial(jit, static_argnames=_STATIC)
@@ -580,44 +494,6 @@ def least_squares(
     non-convergence: check ``converged``.
     """
     require_x64("ringfit.fit.engine.least_squares")
-    return _least_squares(problem, theta0, free, max_steps=max_steps, rtol=rtol, atol=atol, n_data=n_data,
-                          pad_to=pad_to, method=method)
-
-
-def least_squares_passes(
-    problem: Problem,
-    theta0,
-    free: tuple[str, ...],
-    passes: AbstractPasses,
-    state,
-    consts,
-    *,
-    max_passes: int,
-    max_steps: int = 256,
-    rtol: float = 1e-10,
-    atol: float = 1e-10,
-    n_data: int | None = None,
-    pad_to: int | None = None,
-    method: SolverMethod = "levenberg_marquardt",
-) -> tuple[FitResult, object, int]:
-    """:func:`least_squares` repeated with its rows reweighted by a noise model, in one compiled region.
-
-    Each pass fits ``problem`` from ``theta0`` with the model's rows multiplied by ``passes.weights(state,
-    consts)``; ``passes.update`` then gives the next state from the pass's weighted rows and Jacobian, until it
-    says done or ``max_passes`` passes are made (:class:`AbstractPasses`). One program per problem structure
-    and ``passes`` (``state`` and ``consts`` traced), the model traced once: the passes cost their solver steps,
-    not a call each.
-
-    **Returns:** ``(fit, state, passes made)``: the last pass's :class:`~ringfit.fit.result.FitResult` (its rows
-    and Jacobian weighted as that pass weighted them; ``fit.problem`` is ``problem``, whose rows are not) and the
-    passes' state after it (NumPy).
-    """
-    require_x64("ringfit.fit.engine.least_squares_passes")
-    return _least_squares(problem, theta0, free, max_steps=max_steps, rtol=rtol, atol=atol, n_data=n_data,
-                          pad_to=pad_to, method=method, passes=(passes, state, consts, int(max_passes)))
-
-
-def _least_squares(problem, theta0, free, *, max_steps, rtol, atol, n_data, pad_to, method, passes=None):
     model, data, coords = problem.model, problem.data, problem.coords
     names = problem.names
     free = tuple(free)
@@ -635,15 +511,8 @@ def _least_squares(problem, theta0, free, *, max_steps, rtol, atol, n_data, pad_
         raise InputError(f"max_steps = {max_steps}: expected 1 … {STEP_CAP} (0: evaluate only)")
     args = (leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean)
     tol = (np.float64(rtol), np.float64(atol))
-    if passes is None:
-        out = _solve_program(model)(*args, np.int64(max_steps), *tol, model=model, treedef=treedef, method=method)
-        u_free, result, steps, res, jac = jax.device_get(out[:5])  # one transfer; the model's aux stays as it is
-    else:
-        rule, state, consts, max_passes = passes
-        out, state, made = _passes_program(model)(*args, np.int64(max_steps), *tol, state, consts,
-                                                  np.int32(max_passes), model=model, treedef=treedef, method=method,
-                                                  passes=rule)
-        (u_free, result, steps, res, jac), state, made = jax.device_get((out[:5], state, made))
+    out = _solve_program(model)(*args, np.int64(max_steps), *tol, model=model, treedef=treedef, method=method)
+    u_free, result, steps, res, jac = jax.device_get(out[:5])  # one transfer; the model's aux stays as it is
     aux = out[5]
     # back to the caller's order of ``free`` (prior rows stay whitened rows: their sum of squares is the same)
     u_free, jac = u_free[: len(free)][back], jac[:, : len(free)][:, back]
@@ -654,9 +523,7 @@ def _least_squares(problem, theta0, free, *, max_steps, rtol, atol, n_data, pad_
     result = _result(problem, free, index, theta0, u_free, status, message, int(steps), res, jac, m, aux,
                      n_data, lo_u, hi_u)
     result.problem = problem
-    if passes is None:
-        return result
-    return result, state, int(made)
+    return result
 
 
 def _result(problem, free, index, theta0, u_free, status, message, steps, res, jac, m, aux, n_data,
@@ -1068,6 +935,5 @@ def evaluate(problem: Problem, theta, free: tuple[str, ...], *, pad_to: int | No
     return result
 
 
-__all__ = ["least_squares", "least_squares_passes", "AbstractPasses",
-           "least_squares_batch", "SOLVERS", "evaluate", "sum_of_squares_batch", "linearize",
+__all__ = ["least_squares", "least_squares_batch", "SOLVERS", "evaluate", "sum_of_squares_batch", "linearize",
            "Linearization", "inner_slots", "residuals", "residuals_batch", "log_probability", "log_density", "DensityKernel", "free_set", "FreeSet", "in_fixed_chunks", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]

@@ -18,10 +18,8 @@ scale) read the same free table the same way, so the same table gives the same r
   worse than their noise allows) — in the covariance and in the sampled likelihood alike (``row_scale``,
   :func:`row_widening`, docs/physics.md §12.3).
 
-:func:`fit_free_block` runs the whole model around any fit of the block; :func:`fit_free_block_compiled` runs the
-same passes inside one compiled fit (:class:`ScalePasses` on :func:`ringfit.fit.engine.least_squares_passes`:
-``ringfit fit``'s, one call instead of one per pass); ``ringfit identify`` composes the same functions over its
-blocks in its joint passes.
+:func:`fit_free_block` runs the whole model around any fit of the block (``ringfit fit``'s); ``ringfit identify``
+composes the same functions over its blocks in its joint passes.
 
 Example::
 
@@ -35,11 +33,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import jax.numpy as jnp
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import AbstractPasses, least_squares_passes
 from ringfit.io.modes import ModeTable
 
 #: σ_i / f_i where a mode table has no ``freq_std_hz``, as the *start* of the block's scale estimate (the scale is
@@ -249,81 +245,6 @@ def fit_free_block(fit_at, sigma0: np.ndarray, stated: bool, noise: str = "estim
                      sigma_hz=sigma0 * scale)
 
 
-def leverage_traced(J):
-    """:func:`hat_diagonal` traced, for a compiled fit: the rows of ``J (JᵀJ)^{-1/2}`` squared and summed, from the
-    eigen-decomposition of the Gram matrix of ``J``'s columns scaled to unit norm (the hat matrix does not depend
-    on the columns' scales; scaled, the Gram's condition is the columns' collinearity alone), directions of
-    eigenvalue below 1e-24 of the largest (singular value 1e-12) left out, as :func:`hat_diagonal`'s SVD. A
-    compiled SVD of ``J`` itself would add half a second to a cold ``ringfit fit``'s compile; this, a tenth."""
-    norms = jnp.sqrt(jnp.sum(J**2, axis=0))
-    Js = J / jnp.where(norms > 0, norms, 1.0)[None, :]
-    w, V = jnp.linalg.eigh(Js.T @ Js)
-    keep = w > 1e-24 * w[-1]
-    L = V * jnp.where(keep, 1.0 / jnp.sqrt(jnp.where(keep, w, 1.0)), 0.0)[None, :]
-    return jnp.sum((Js @ L) ** 2, axis=1)
-
-
-class ScalePasses(AbstractPasses):
-    """:func:`fit_free_block`'s passes inside one compiled fit (:func:`ringfit.fit.engine.least_squares_passes`):
-    the block's rows weighted by 1/scale, the scale from each pass's residual (:func:`block_scale`, the hat
-    diagonal of the whole weighted Jacobian) until it settles — the same rule, traced.
-
-    ``state``: ``(scale for the next pass, scale of the last pass, ν of the last pass)``; ``consts``: ``(block
-    (m,) bool: the block's rows, every row with data — the others are padding —, rows: their count, stated,
-    floor: the smallest scale, tolerance)``. Without a prior, a new scale leaves the optimum where it was: the
-    engine evaluates the next pass there instead of solving again (:class:`ringfit.fit.engine.AbstractPasses`)."""
-
-    def weights(self, state, consts):
-        return jnp.where(consts[0], 1.0 / state[0], 1.0)
-
-    def uniform(self, state, consts):
-        return jnp.array(True)  # one scale on the block, the problem's only rows with data
-
-    def update(self, state, residuals, jacobian, converged, passes, consts):
-        block, rows, stated, floor, tolerance = consts
-        scale = state[0]
-        leverage = leverage_traced(jacobian)[: block.shape[0]]
-        r = jnp.where(block, residuals[: block.shape[0]], 0.0)
-        dof = jnp.maximum(rows - jnp.sum(jnp.where(block, leverage, 0.0)), 1.0)
-        s = jnp.sqrt(jnp.sum(r * r) / dof)
-        holds = stated & (scale * s <= 1.0)  # a stated σ that holds: no scale estimated (block_scale)
-        s = jnp.where(holds, 1.0 / scale, s)
-        dof = jnp.where(holds, jnp.inf, dof)
-        done = converged & ((s == 1.0) | ((passes > 1) & (jnp.abs(s - 1.0) < tolerance)))
-        return (jnp.maximum(scale * s, floor), scale, dof), done
-
-
-def fit_free_block_compiled(problem, theta0, free, sigma0: np.ndarray, stated: bool, noise: str = "estimated",
-                            scale0: float = 1.0, freq_hz: np.ndarray | None = None, *, rows: np.ndarray,
-                            **solve):
-    """:func:`fit_free_block` of a least-squares problem with its passes in one compiled fit: the same passes, the
-    same settling rule, the same ``(fit, info)`` (to rounding), without a call per pass.
-
-    ``problem``: the :class:`~ringfit.fit.engine.Problem` with the rows weighted by ``sigma0`` (its model's rows:
-    ``rows`` ``(m_all,)`` bool, the block's rows among them; the others are padding, no data); ``theta0``, ``free`` and ``solve``
-    (``max_steps``, ``rtol``, ``atol``, ``n_data``, ``pad_to``): :func:`ringfit.fit.engine.least_squares`'s.
-    The returned fit's rows are weighted by the σ used, ``sigma0 · info["scale"]``; its ``problem`` is still
-    ``problem`` (weighted by ``sigma0``): the caller rebuilds it at the σ used where it keeps it."""
-    check_noise(noise)
-    sigma0 = np.asarray(sigma0, dtype=np.float64)
-    m = sigma0.size
-    block = np.asarray(rows, dtype=bool)
-    fixed = noise == "fixed"
-    floor = 0.0 if fixed or freq_hz is None else SIGMA_FLOOR_REL * float(np.max(np.asarray(freq_hz) / sigma0))
-    state0 = (np.float64(scale0), np.float64(scale0), np.float64(math.inf))
-    consts = (block, np.float64(m), np.bool_(stated), np.float64(floor), np.float64(SCALE_TOLERANCE))
-    fit, state, passes = least_squares_passes(problem, theta0, free, ScalePasses(), state0, consts,
-                                              max_passes=1 if fixed else SCALE_PASSES, **solve)
-    scale = float(state[1])
-    if fixed:
-        return fit, dict(scale=scale, dof=math.inf, t_widening=1.0, discrepancy=1.0, passes=1, noise=noise,
-                         sigma_hz=sigma0 * scale)
-    dof = float(state[2])
-    kappa = discrepancy_ratio(np.asarray(fit.jacobian), np.asarray(fit.residuals), frequency_folds(np.arange(m)))
-    return fit, dict(scale=scale, dof=dof, t_widening=t_widening(dof), discrepancy=kappa, passes=passes, noise=noise,
-                     sigma_hz=sigma0 * scale)
-
-
 def row_widening(info: dict) -> float:
     """The factor on the block's σ in its intervals and its sampled likelihood: ``t_widening · √discrepancy`` (as
     identify's ``row_scale``, docs/physics.md §12.3)."""
@@ -345,7 +266,6 @@ def noise_summary(data: dict) -> str:
 
 
 __all__ = ["FrequencyData", "frequency_data", "hat_diagonal", "block_scale", "t_widening", "fit_free_block",
-           "fit_free_block_compiled", "ScalePasses", "leverage_traced",
            "frequency_folds", "discrepancy_ratio", "row_widening", "noise_summary", "check_noise",
            "DEFAULT_RELATIVE_STD", "SIGMA_FLOOR_REL", "SCALE_PASSES", "SCALE_TOLERANCE", "Z95", "NOISE_MODELS",
            "DISCREPANCY_FOLDS", "FOLD_LEVERAGE_MAX"]

@@ -24,9 +24,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, evaluate
+from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, evaluate,
+                                least_squares)
 from ringfit.fit.free_block import (DEFAULT_RELATIVE_STD, NOISE_MODELS, FrequencyData, check_noise, fit_free_block,
-                                    fit_free_block_compiled, frequency_data, row_widening)
+                                    frequency_data, row_widening)
 from ringfit.fit.priors import BOUNDS, LogNormalPrior, resolve_priors
 from ringfit.fit.result import FitResult, covariance_from_jacobian
 from ringfit.io.modes import ModeTable
@@ -181,26 +182,22 @@ def fit_natural_frequencies(
     # free) share the four-parameter fit's compiled solve
     pad_to = max(len(free), len(DEFAULT_FREE))
 
-    def problem_at(sigma):
+    def fit_at(sigma):
         arrays = FrequencyArrays(geometry, np.concatenate([data.n, np.ones(pad)]),
                                  np.concatenate([data.freq_hz, np.full(pad, 100.0)]),
                                  np.concatenate([sigma, np.full(pad, np.inf)]))
-        return Problem(NaturalFrequencyResiduals(), arrays, RING_COORDS, prior=prior_rows,
-                       plausible=BOUNDS, data_label="these modes")
+        problem = Problem(NaturalFrequencyResiduals(), arrays, RING_COORDS, prior=prior_rows,
+                          plausible=BOUNDS, data_label="these modes")
+        if at_initial:
+            return evaluate(problem, base, free, n_data=m, pad_to=pad_to)
+        # every pass starts from ``initial``: the solver started at the last pass's optimum takes no step it can
+        # call converged (its first steps are all rejected)
+        return least_squares(problem, base, free, max_steps=max_steps, rtol=rtol, atol=atol, n_data=m,
+                             pad_to=pad_to)
 
     # the free-modes block's noise model (docs/physics.md §11): σ scaled from the residual until it settles
-    if at_initial:
-        result, noise_info = fit_free_block(lambda sigma: evaluate(problem_at(sigma), base, free, n_data=m,
-                                                                   pad_to=pad_to),
-                                            data.sigma_hz, data.stated, noise, noise_scale, freq_hz=data.freq_hz)
-    else:
-        # every pass starts from ``initial`` (the solver started at the last pass's optimum takes no step it can
-        # call converged: its first steps are all rejected), all passes in one compiled fit
-        result, noise_info = fit_free_block_compiled(
-            problem_at(data.sigma_hz), base, free, data.sigma_hz, data.stated, noise, noise_scale,
-            freq_hz=data.freq_hz, rows=np.arange(m + pad) < m, max_steps=max_steps, rtol=rtol, atol=atol,
-            n_data=m, pad_to=pad_to)
-        result.problem = problem_at(noise_info["sigma_hz"])
+    result, noise_info = fit_free_block(fit_at, data.sigma_hz, data.stated, noise, noise_scale,
+                                           freq_hz=data.freq_hz)
     model = np.asarray(result.extra.pop("aux"))[:m]
     result.residuals = result.residuals[:m]
     result.jacobian = np.concatenate([result.jacobian[:m], result.jacobian[m + pad:]])
