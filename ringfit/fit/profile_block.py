@@ -275,7 +275,7 @@ def noise_from_residual(residual: np.ndarray, leverage: np.ndarray, k_min: int =
     return np.concatenate([sigma, sigma], axis=-1)
 
 
-def fit_profile_block(fit_at, sigma0: np.ndarray, k_min: int = PROFILE_K_MIN, passes: int | None = None):
+def fit_profile_block(fit_at, sigma0: np.ndarray, k_min: int = PROFILE_K_MIN):
     """A fit of one profile block with its noise model: σ weights the fit, the fit's residual gives σ
     (:func:`noise_from_residual`), and the fit is redone with it — the same passes as ``identify``'s profile block
     (docs/physics.md §11 *profiles*).
@@ -283,8 +283,8 @@ def fit_profile_block(fit_at, sigma0: np.ndarray, k_min: int = PROFILE_K_MIN, pa
     ``fit_at(sigma)`` fits the problem with rows weighted by ``sigma`` (the shape of ``sigma0``: ``(..., 2H)``
     harmonic rows, k = ``k_min`` …) and returns its :class:`~ringfit.fit.result.FitResult` (the block's rows
     first, in ``sigma0``'s order, then any prior's; Jacobian likewise); a caller that warm-starts its passes keeps
-    θ in the closure. At least two fits (the first σ is only a starting guess), at most ``passes``
-    (:data:`ringfit.fit.free_block.SCALE_PASSES`), stopping at the first converged fit after the first.
+    θ in the closure. At least two fits (the first σ is only a starting guess), at most
+    :data:`ringfit.fit.free_block.SCALE_PASSES`, stopping at the first converged fit after the first.
 
     **Returns:** ``(fit, sigma_used, passes)``: the last fit, the σ it was weighted by, and the fits made.
 
@@ -296,17 +296,16 @@ def fit_profile_block(fit_at, sigma0: np.ndarray, k_min: int = PROFILE_K_MIN, pa
     from ringfit._threads import small_matrix_threads  # noqa: PLC0415 (as identify's)
 
     with small_matrix_threads():
-        return _profile_passes(fit_at, sigma0, k_min, passes)
+        return _profile_passes(fit_at, sigma0, k_min)
 
 
-def _profile_passes(fit_at, sigma0, k_min, passes):
+def _profile_passes(fit_at, sigma0, k_min):
     from ringfit.fit.free_block import SCALE_PASSES, hat_diagonal  # noqa: PLC0415 (free_block sits beside)
 
-    passes = SCALE_PASSES if passes is None else int(passes)
     sigma = np.asarray(sigma0, dtype=np.float64)
     m = sigma.size
     fit, used, done = None, sigma, 0
-    for done in range(1, passes + 1):
+    for done in range(1, SCALE_PASSES + 1):
         used = sigma
         fit = fit_at(used)
         residual = np.asarray(fit.residuals, dtype=np.float64)[:m].reshape(sigma.shape) * used
