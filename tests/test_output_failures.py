@@ -199,3 +199,15 @@ def test_group_velocity_sync_refuses_a_record_too_coarse_for_the_round_trip():
         round_trip_time(x[:5], 100.0)
     with pytest.raises(InputError, match="positive time"):
         group_velocity(0.3, 0.0)
+
+
+def test_a_missing_font_does_not_bury_the_error_line():
+    """CI's stop-39 run: a font cache without the mathtext fonts logged ~20 ``findfont`` warnings on stderr beside
+    the one error line. ringfit's plot helpers quiet matplotlib's font fallback (the figure is drawn regardless)."""
+    code = ("import ringfit.report.targets_plots\n"
+            "from matplotlib import font_manager\n"
+            "font_manager.findfont('NoSuchFontFamilyForRingfit')\n")
+    proc = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, PYTHONPATH=str(ROOT), MPLBACKEND="Agg"),
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "findfont" not in proc.stderr

@@ -285,14 +285,16 @@ def test_recording_angles_follow_the_encoder_and_the_truth_follows_the_drift():
 
 
 def _strip_state_keys(src: Path, dst: Path) -> Path:
-    """The tyre file without the STATE_CONTRACT keys (read by the state estimator's reader, i33est's), so that
-    this check holds on either side of that merge; tomli_w writes it back."""
+    """The tyre file without the state laws' keys (io/tyre's STATE_TYRE_KEYS, STATE_RING_KEYS and [ring.pressure]):
+    the file a user without those laws would hold; tomli_w writes it back."""
     import tomli_w
 
+    from ringfit.io.tyre import STATE_RING_KEYS, STATE_TYRE_KEYS
+
     d = tomllib.loads(src.read_text())
-    for k in ("tread_depth_mm", "tread_density_kg_m3", "tread_land_ratio"):
+    for k in STATE_TYRE_KEYS:
         d["tyre"].pop(k, None)
-    for k in ("kx_n_per_m2", "friction", "pressure"):
+    for k in (*STATE_RING_KEYS, "pressure"):
         d["ring"].pop(k, None)
     dst.write_text(tomli_w.dumps(d))
     return dst

@@ -20,16 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ringfit.report.figures import pyplot
 from ringfit.units import GRAVITY as G
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _orient(ax):
@@ -44,7 +36,7 @@ def plot_coverage(phi_tau_by_passes: dict, path=None, *, title: str = ""):
     tau_s)`` arrays (from :func:`ringfit.targets.cleat.coverage_points`);
     ``path`` — write a PNG there (else return the figure).
     """
-    plt = _pyplot()
+    plt = pyplot()
     k = len(phi_tau_by_passes)
     fig, axes = plt.subplots(1, k, subplot_kw={"projection": "polar"}, figsize=(4.2 * k, 4.4), squeeze=False)
     for ax, (passes, (phi, tau)) in zip(axes[0], phi_tau_by_passes.items()):
@@ -113,7 +105,7 @@ def plot_polar_snapshots(field, times_s, path=None, *, axis: str = "radial", sca
     too); ``path`` PNG output. Each panel: the dashed reference circle is zero
     acceleration, the patch centre φ = 0 at the bottom, angles φ from it.
     """
-    plt = _pyplot()
+    plt = pyplot()
     times_s = list(times_s)
     ncols = min(ncols, len(times_s))
     nrows = -(-len(times_s) // ncols)
@@ -145,7 +137,7 @@ def animate_field(field, path, *, axis: str = "radial", tau_max_s: float | None 
     ``scale`` as in :func:`plot_polar_snapshots`. Writes ``path`` (via a
     temporary file, so no partial GIF is left) and returns it.
     """
-    plt = _pyplot()
+    plt = pyplot()
     from matplotlib.animation import FuncAnimation, PillowWriter
 
     from ringfit.io.files import atomic_write
@@ -187,7 +179,7 @@ def _save_gif(anim, tmp, fps, writer):
 
 def plot_field_map(field, path=None, *, axis: str = "radial", tau_max_s: float | None = None):
     """The field as an image: sector angle (x) × time since arrival (y) [m/s²]."""
-    plt = _pyplot()
+    plt = pyplot()
     tau_max = float(field.tau_s[-1] if tau_max_s is None else tau_max_s)
     sel = field.tau_s <= tau_max
     a = field.channel(axis)[:, sel]
@@ -204,7 +196,7 @@ def plot_field_map(field, path=None, *, axis: str = "radial", tau_max_s: float |
 
 def plot_stabilization(modes, path=None, *, f_max: float | None = None):
     """Stabilization diagram of :func:`ringfit.targets.rolling_modes.identify_rolling_modes` (order vs frequency)."""
-    plt = _pyplot()
+    plt = pyplot()
     poles, stab = modes.poles, modes.stability
     fig, ax = plt.subplots(figsize=(7, 4))
     lab = stab.label

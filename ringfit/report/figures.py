@@ -9,6 +9,22 @@ from __future__ import annotations
 
 import base64
 import io
+import logging
+
+# A missing font falls back to DejaVu Sans (shipped with matplotlib); matplotlib logs each fallback as a
+# WARNING, which on a machine whose font cache lacks the mathtext fonts is a score of lines on stderr that
+# would bury the one line an error or a warning of ours gives. The figure is drawn all the same.
+logging.getLogger("matplotlib.font_manager").setLevel(logging.ERROR)
+
+
+def pyplot():
+    """``matplotlib.pyplot`` on the Agg backend (for code that still draws through pyplot)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, *, figsize=(7, 4), layout=None, **kwargs):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ringfit.report.figures import pyplot
 from ringfit.report.numbers import fmt_value
 
 
@@ -19,15 +20,6 @@ def _freq_text(t, i: int) -> str:
     """Row ``i``'s frequency to the digits its ``freq_std_hz`` warrants (4 significant digits without one)."""
     sd = None if t.freq_std_hz is None else float(t.freq_std_hz[i])
     return fmt_value(t.freq_hz[i], sd if sd is not None and np.isfinite(sd) and sd > 0 else None)
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _stagger(x, width, rows=3):
@@ -58,7 +50,7 @@ def plot_stabilization(result, *, f_range=(0.0, 400.0), ax=None, source_symbols:
     (``ac`` for acoustic candidates), staggered so that labels never overlap.
     **Returns:** the figure.
     """
-    plt = _plt()
+    plt = pyplot()
     own = ax is None
     fig, ax = (plt.subplots(figsize=(10, 5.5)) if own else (ax.figure, ax))
     poles, stab = result.poles, result.stability
@@ -110,7 +102,7 @@ def plot_mac(result, *, ax=None):
     """
     from ringfit.targets.stabilization import mac
 
-    plt = _plt()
+    plt = pyplot()
     fig, ax = (plt.subplots(figsize=(5, 4.5)) if ax is None else (ax.figure, ax))
     t = result.table
     shapes = np.array([m.shape for m in result.modes])
@@ -129,7 +121,7 @@ def plot_mac(result, *, ax=None):
 def plot_ssi_summary(result, *, f_range=(0.0, 400.0)):
     """What ``ringfit ssi --plot`` writes: stabilization diagram with the PSD singular values (top),
     MAC matrix (bottom left) and the mode shapes around the tyre (bottom right). **Returns:** the figure."""
-    plt = _plt()
+    plt = pyplot()
     t = result.table
     cols = 4
     nrow = max(1, int(np.ceil(len(t) / cols)))
@@ -151,7 +143,7 @@ def plot_mode_shapes(result, *, rows=None, scale: float = 0.25, real: str = "pri
     (most-real rotation) or ``"source"`` (v_r = sign(Im v)|v|).
     **Returns:** the figure.
     """
-    plt = _plt()
+    plt = pyplot()
     t = result.table
     rows = list(range(len(t))) if rows is None else list(rows)
     nrow = max(1, int(np.ceil(len(rows) / cols)))
@@ -214,7 +206,7 @@ def plot_frf(result, *, f_range=(0.0, 400.0)):
     point (radial axis when there is one), with the mean coherence on the
     right axis when it was estimated. Bottom: the phase of that same FRF.
     """
-    plt = _plt()
+    plt = pyplot()
     fig, (ax, axp) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, gridspec_kw={"height_ratios": (2.2, 1)})
     frf = result.frf
     f = frf.freq_hz
