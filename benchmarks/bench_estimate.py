@@ -193,7 +193,7 @@ def accuracy():
                   f"s.e.), coverage {100 * np.mean([r['cover'] for r in band]):5.1f} %")
     times, cpu = [r["time"] for r in rows[1:]], [r["cpu"] for r in rows[1:]]
     print(f"   one profile, warm: median {statistics.median(times):.2f} s wall, {statistics.median(cpu):.2f} s CPU "
-          f"(two Levenberg–Marquardt fits + load curves)")
+          f"(the profile block's noise passes, two or more Levenberg–Marquardt fits, + load curves)")
 
 
 #: Load bands [N] of the independent truth's table (down to 1.5 kN: light loads are the issue's concern).

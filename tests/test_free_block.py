@@ -219,3 +219,35 @@ def test_the_fits_95_percent_intervals_cover_the_truth_over_many_free_tables():
         lo, hi = _clopper_pearson(hits[k], n)
         assert 0.90 <= hits[k] / n <= 0.98 and lo <= 0.95 <= hi, (k, hits[k], lo, hi)
     assert plain_hits / (3 * n) < 0.93  # the widening matters
+
+
+def test_noise_passes_stop_rule():
+    """The one pass loop (free block, profile block, identify): scripted fits and noise changes."""
+    from types import SimpleNamespace
+
+    from ringfit.fit.free_block import SCALE_PASSES, SCALE_TOLERANCE, noise_passes
+
+    def run(converged, changes, holds=None):
+        log = []
+        holds = holds or [False] * len(changes)
+
+        def fit_once():
+            i = len(log)
+            log.append(i)
+            return SimpleNamespace(converged=converged[i], status="converged" if converged[i] else "max_steps")
+
+        def renoise(fit):
+            i = log[-1]
+            return changes[i], holds[i]
+
+        fit, passes = noise_passes(fit_once, renoise)
+        assert passes == len(log)
+        return passes
+
+    small, big = 0.5 * SCALE_TOLERANCE, 10 * SCALE_TOLERANCE
+    assert run([True] * 4, [big, small, small, small]) == 2  # settles on the refit
+    assert run([True] * 4, [small] * 4) == 2  # never stops on the first pass: its σ was only a start
+    assert run([True] * 4, [big] * 4, holds=[True, False, False, False]) == 1  # a stated σ that held: no refit
+    assert run([False, False, True, True], [small] * 4) == 3  # an unconverged fit is refitted
+    assert run([True] * 4, [big] * 4) == SCALE_PASSES  # at most SCALE_PASSES fits
+    assert run([True, False, False, True], [big, small, small, small]) == 4 == SCALE_PASSES

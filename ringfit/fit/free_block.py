@@ -203,6 +203,30 @@ def check_noise(noise: str) -> str:
     return noise
 
 
+def noise_passes(fit_once, renoise) -> tuple:
+    """The blocks' noise passes (docs/physics.md §11 *Noise per block*), the one loop of every block and of
+    ``identify``: fit, re-estimate each block's noise from that fit, refit.
+
+    ``fit_once()`` fits with the noise as it stands and returns its :class:`~ringfit.fit.result.FitResult`;
+    ``renoise(fit)`` estimates each block's noise from ``fit``, sets it for the next fit and returns
+    ``(change, holds)``: the largest relative change of a block's scale (0 for a block whose noise model has no
+    single scale, the profiles'), and whether the noise held as it was (a stated σ the residual does not exceed:
+    the refit would repeat the fit). The passes stop at the first settled fit (converged, or evaluated where
+    nothing is free) whose noise held, or, after the first pass, whose scales moved by less than
+    :data:`SCALE_TOLERANCE`; at most :data:`SCALE_PASSES` fits. The caller keeps what the last fit used.
+
+    **Returns:** ``(fit, passes)``: the last fit and the fits made.
+    """
+    fit, passes = None, 0
+    for passes in range(1, SCALE_PASSES + 1):
+        fit = fit_once()
+        change, holds = renoise(fit)
+        settled = fit.converged or fit.status == "evaluated"
+        if settled and (holds or (passes > 1 and change < SCALE_TOLERANCE)):
+            break
+    return fit, passes
+
+
 def fit_free_block(fit_at, sigma0: np.ndarray, stated: bool, noise: str = "estimated", scale0: float = 1.0,
                    freq_hz: np.ndarray | None = None):
     """A fit of one free-modes block with its noise model: refit with the rows' σ rescaled until the scale settles.
@@ -228,18 +252,20 @@ def fit_free_block(fit_at, sigma0: np.ndarray, stated: bool, noise: str = "estim
         return fit, dict(scale=scale, dof=math.inf, t_widening=1.0, discrepancy=1.0, passes=1, noise=noise,
                          sigma_hz=sigma0 * scale)
     floor = 0.0 if freq_hz is None else SIGMA_FLOOR_REL * float(np.max(np.asarray(freq_hz) / sigma0))
-    fit, dof = None, math.inf
-    for passes in range(1, SCALE_PASSES + 1):
-        fit = fit_at(sigma0 * scale)
+    state = dict(scale=scale, used=scale, dof=math.inf)
+
+    def fit_once():
+        state["used"] = state["scale"]
+        return fit_at(sigma0 * state["used"])
+
+    def renoise(fit):
         r = np.asarray(fit.residuals, dtype=np.float64)[:m]
-        s, dof = block_scale(r, hat_diagonal(fit.jacobian)[:m], stated, scale)
-        # settled: a σ that holds (s = 1, the refit would repeat this fit) or, after a refit, a scale that moved
-        # less than the tolerance (identify's criterion)
-        settled = fit.converged or fit.status == "evaluated"
-        if settled and (s == 1.0 or (passes > 1 and abs(s - 1.0) < SCALE_TOLERANCE)):
-            break
-        if passes < SCALE_PASSES:
-            scale = max(scale * s, floor)
+        s, state["dof"] = block_scale(r, hat_diagonal(fit.jacobian)[:m], stated, state["used"])
+        state["scale"] = max(state["used"] * s, floor)
+        return abs(s - 1.0), s == 1.0
+
+    fit, passes = noise_passes(fit_once, renoise)
+    scale, dof = state["used"], state["dof"]
     kappa = discrepancy_ratio(np.asarray(fit.jacobian), np.asarray(fit.residuals), frequency_folds(np.arange(m)))
     return fit, dict(scale=scale, dof=dof, t_widening=t_widening(dof), discrepancy=kappa, passes=passes, noise=noise,
                      sigma_hz=sigma0 * scale)

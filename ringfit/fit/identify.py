@@ -67,7 +67,7 @@ from ringfit.errors import InputError
 from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares, residuals
 from ringfit.fit.free_block import (DISCREPANCY_FOLDS, FOLD_LEVERAGE_MAX, SCALE_PASSES,  # noqa: F401 (re-exported)
                                     SCALE_TOLERANCE, Z95, block_scale, discrepancy_ratio, frequency_folds,
-                                    hat_diagonal, t_widening)
+                                    hat_diagonal, noise_passes, t_widening)
 from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, frequency_data,
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
@@ -914,21 +914,26 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
         notes.append("only free modes: EI is barely pinned by a free tyre's frequencies, so the belt-plate prior on "
                      f"EI ({PHYSICAL_PRIORS['ei'].source}; `ringfit fit --prior physical`, its default) is used; "
                      "add loaded tables or profiles to identify it from data")
-    fit = None
-    for passes in range(1, SCALE_PASSES + 1):
+    state = dict(theta=theta, passes=0)
+    block_dof = {}
+
+    def fit_once():
+        state["passes"] += 1
         data = _arrays(geometry, rows, solver)
         problem = Problem(model, data, coords, prior=prior, plausible=BOUNDS, data_label="these measurements")
-        fit = least_squares(problem, theta, free, max_steps=max_steps, rtol=rtol, atol=atol)
+        fit = least_squares(problem, state["theta"], free, max_steps=max_steps, rtol=rtol, atol=atol)
         if progress:
-            print(f"identify: pass {passes}: {fit.status} after {fit.iterations} steps, "
+            print(f"identify: pass {state['passes']}: {fit.status} after {fit.iterations} steps, "
                   f"χ²/m = {fit.extra['chi2_raw'] / fit.residuals.size:.3g}",
                   flush=True)
         if fit.converged:
-            theta = fit.theta.copy()
+            state["theta"] = fit.theta.copy()
+        return fit
+
+    def renoise(fit):  # every block's noise model from this fit (free_block's scale; the profiles' spectrum)
         r = fit.residuals
         h = hat_diagonal(fit.jacobian)
         change = 0.0
-        block_dof = {}
         for name, sl in slices.items():
             if name == "torque":  # the stated torque's σ holds: no scale estimated (one row per slip nuisance)
                 block_dof[name] = math.inf
@@ -946,8 +951,9 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
                     block["sigma"] = block["sigma"] * s
             change = max(change, abs(s - 1.0))
             scales[name] *= s
-        if fit.converged and change < SCALE_TOLERANCE and passes > 1:
-            break
+        return change, False
+
+    fit, passes = noise_passes(fit_once, renoise)
     # the final weights are those the last fit used: evaluate blocks with them
     # a scale estimated from ν residual degrees of freedom: its parameters follow Student's t_ν, not the normal
     widen = {n: t_widening(d) for n, d in block_dof.items() if n != "profiles"}

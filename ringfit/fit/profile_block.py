@@ -254,7 +254,8 @@ def noise_spectrum(power: np.ndarray, k_min: int = PROFILE_K_MIN, half_width: in
     return trend * num / den, 2.0 * den
 
 
-def noise_from_residual(residual: np.ndarray, leverage: np.ndarray, k_min: int = PROFILE_K_MIN) -> np.ndarray:
+def noise_from_residual(residual: np.ndarray, leverage: np.ndarray, k_min: int = PROFILE_K_MIN,
+                        series: int = 1) -> np.ndarray:
     """The block's σ ``(P, 2, 2H)`` per profile, channel and harmonic from its residual rows ``(P, 2, 2H)``
     [m/s²] (:func:`noise_spectrum`) and the fit's leverage of those rows (the hat matrix's diagonal, any shape
     with their count; the degrees of freedom the fit took, shared out evenly).
@@ -262,11 +263,16 @@ def noise_from_residual(residual: np.ndarray, leverage: np.ndarray, k_min: int =
     Weights estimated from ν = ``dof`` residual parts make the weighted fit's actual variance larger than
     ``(JᵀŴJ)⁻¹`` says: with ŵ = w/c, c ~ χ²_ν/ν independent of the row, the estimator's variance is
     E[1/c²]/E[1/c]² / Σ J²w and the formula's E[1/c]⁻¹ / Σ J²w, a ratio ν/(ν − 4). The σ² of each row is
-    multiplied by it, so that the covariance of the fit is the weighted estimator's (docs/physics.md §11)."""
+    multiplied by it, so that the covariance of the fit is the weighted estimator's (docs/physics.md §11).
+
+    ``series``: how many independent residual series each row's power averages (``residual`` the RMS over
+    that many fits of the same rows, e.g. revolutions of one recording): the degrees of freedom are that many
+    times one series'."""
     res = np.asarray(residual, dtype=np.float64)
     H = res.shape[-1] // 2
     power = 0.5 * (res[..., :H] ** 2 + res[..., H:] ** 2)
     noise, dof = noise_spectrum(power, k_min=k_min)
+    dof = dof * max(int(series), 1)
     leverage = np.asarray(leverage, dtype=np.float64)
     used = float(leverage.sum()) / max(leverage.size, 1)
     inflate = dof / np.maximum(dof - 4.0, 1.0)
@@ -300,19 +306,22 @@ def fit_profile_block(fit_at, sigma0: np.ndarray, k_min: int = PROFILE_K_MIN):
 
 
 def _profile_passes(fit_at, sigma0, k_min):
-    from ringfit.fit.free_block import SCALE_PASSES, hat_diagonal  # noqa: PLC0415 (free_block sits beside)
+    from ringfit.fit.free_block import hat_diagonal, noise_passes  # noqa: PLC0415 (free_block sits beside)
 
-    sigma = np.asarray(sigma0, dtype=np.float64)
-    m = sigma.size
-    fit, used, done = None, sigma, 0
-    for done in range(1, SCALE_PASSES + 1):
-        used = sigma
-        fit = fit_at(used)
-        residual = np.asarray(fit.residuals, dtype=np.float64)[:m].reshape(sigma.shape) * used
-        sigma = noise_from_residual(residual, hat_diagonal(np.asarray(fit.jacobian))[:m], k_min=k_min)
-        if fit.converged and done > 1:
-            break
-    return fit, used, done
+    state = dict(sigma=np.asarray(sigma0, dtype=np.float64))
+    m = state["sigma"].size
+
+    def fit_once():
+        state["used"] = state["sigma"]
+        return fit_at(state["used"])
+
+    def renoise(fit):  # σ per harmonic: no single scale to settle, and never "held" (the first σ only starts it)
+        residual = np.asarray(fit.residuals, dtype=np.float64)[:m].reshape(state["used"].shape) * state["used"]
+        state["sigma"] = noise_from_residual(residual, hat_diagonal(np.asarray(fit.jacobian))[:m], k_min=k_min)
+        return 0.0, False
+
+    fit, done = noise_passes(fit_once, renoise)
+    return fit, state["used"], done
 
 
 __all__ = ["RollingData", "fit_profile_block", "rolling_data", "block_rows", "profile_rows", "harmonic_rows", "profile_band", "nuisance_names", "nuisance_coords", "nuisance_start",

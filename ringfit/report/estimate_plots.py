@@ -60,7 +60,7 @@ def draw_load_against_time(ax, revs, est=None) -> None:
     ax.plot(t, np.where(ok, load, np.nan) / 1e3, color="C0", lw=1.0, label="model fit per revolution")
     if (~ok).any():
         ax.plot(t[~ok], np.clip(load[~ok], y_lo, y_hi) / 1e3, "x", color="C3", ms=4,
-                label=f"rejected ({int((~ok).sum())}: not converged or on a bound)")
+                label=f"rejected ({int((~ok).sum())}: not converged, on a bound or an outlier)")
     ax.set_ylim(y_lo / 1e3, y_hi / 1e3)
     feat = np.asarray(revs.feature_load_n)
     ax.plot(t, feat / 1e3, ".", color="C2", ms=2, label="edge-peak feature method")

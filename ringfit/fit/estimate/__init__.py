@@ -43,12 +43,11 @@ their coordinates and the fitting procedure; no solver of its own.
   (``ringfit fit-rolling`` at known loads). ``k_tread_sd`` (σ of ln k_trd) frees it with
   a log-normal prior, so its uncertainty is propagated into the load's interval; a tyre
   file without k_trd gets :data:`DEFAULT_K_TREAD_SD` and a warning.
-- **Weights.** Two passes (feasible generalised least squares): a first fit with equal
-  weights; then each harmonic is weighted by 1/σ_k, σ_k² the first fit's residual power
-  averaged over ±:data:`NOISE_SMOOTHING` neighbouring harmonics. Periodic stationary noise
-  has independent Fourier coefficients, so coloured noise (and harmonics where the model
-  is poorer) is whitened, and the Laplace interval of the second fit (engine covariance,
-  σ estimated from the residual) holds for coloured noise too.
+- **Weights.** The profile block's noise model (:func:`ringfit.fit.profile_block.fit_profile_block`, the same
+  passes as ``fit-rolling`` and ``identify``): each harmonic weighted by 1/σ_k from the fit's residual spectrum
+  (a power law, the ±4 neighbouring harmonics' average, ν/(ν − 4) and the fit's degrees of freedom), refitted.
+  Periodic stationary noise has independent Fourier coefficients, so coloured noise is whitened and the
+  Laplace interval holds for it too (docs/physics.md §10, §11 *profile noise*).
 
 **Starting values and the classic method.** :func:`feature_estimate` is the
 tyre-sensor field's method: the two edge peaks of the (band-limited) radial reading,

@@ -1,8 +1,8 @@
 """The load and contact patch from one profile (docs/physics.md §10; docs/formats.md §3 → §7).
 
 :func:`estimate_load`: Ω from the sidecar, the load curves and the feature method for starting values,
-then two passes of the engine on :func:`~ringfit.fit.estimate.problem.estimate_problem` (equal weights,
-then whitened per harmonic), and :class:`LoadEstimate` with the interval, the patch, the fit's quality
+then the engine on :func:`~ringfit.fit.estimate.problem.estimate_problem` in the profile block's noise passes
+(:func:`~ringfit.fit.profile_block.fit_profile_block`: whitened per harmonic), and :class:`LoadEstimate` with the interval, the patch, the fit's quality
 and its flags.
 """
 
@@ -20,9 +20,10 @@ from ringfit.errors import InputError
 from ringfit.fit.engine import GaussianPrior, least_squares, residuals
 from ringfit.fit.estimate.curves import LoadCurves, load_curves
 from ringfit.fit.estimate.feature import FeatureEstimate, _num, feature_estimate
-from ringfit.fit.estimate.harmonics import band_signal, grid_signal, harmonic_amplitudes, harmonic_rows, smoothed_noise
+from ringfit.fit.estimate.harmonics import band_signal, grid_signal, harmonic_amplitudes, harmonic_rows
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, GAIN, K_TREAD, LOAD, LOAD_RANGE, TILT, EstimateArrays,
                                           EstimateSettings, estimate_problem, nuisance_priors, optimum_ring_shift)
+from ringfit.fit.profile_block import fit_profile_block
 from ringfit.fit.result import FitResult
 from ringfit.params import BAR, RingParams, TyreGeometry
 from ringfit.physics.operating import KMH
@@ -251,17 +252,20 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
     arrays = EstimateArrays(geometry=geometry, ring=ring, omega=np.array([omega]), roads=flat_or_drum(drum, 1),
                             response=resp[None], measured=measured, weight=np.ones((1, 2 * K)))
     theta0 = np.array([load0, curves.gain_at(load0, amp), offset0, 0.3, 0.5, float(ring.k_tread)])
-    problem = estimate_problem(arrays, settings, k_max, prior)
-    first = least_squares(problem, theta0, tuple(free), max_steps=settings.max_steps, rtol=settings.rtol,
-                          atol=settings.atol)
-    # second pass: whiten the residual spectrum
-    resid_rows = np.asarray(first.extra["aux"])[0] - measured[0]
-    weight = 1.0 / smoothed_noise(resid_rows)
-    weight = weight / np.mean(weight)
-    arrays = eqx.tree_at(lambda a: a.weight, arrays, weight[None])
-    problem = estimate_problem(arrays, settings, k_max, prior)
-    fit = least_squares(problem, first.theta, tuple(free), max_steps=settings.max_steps, rtol=settings.rtol,
-                        atol=settings.atol)
+    state = dict(theta=theta0)
+
+    def fit_at(sigma):  # one pass of the profile block's noise passes, warm-started from the last converged one
+        weighted = eqx.tree_at(lambda a: a.weight, arrays, 1.0 / sigma)
+        fit = least_squares(estimate_problem(weighted, settings, k_max, prior, sigma="fixed"), state["theta"],
+                            tuple(free), max_steps=settings.max_steps, rtol=settings.rtol, atol=settings.atol)
+        if fit.converged:
+            state["theta"] = fit.theta.copy()
+        return fit
+
+    # the profile block's noise model (docs/physics.md §11 *profiles*): σ per harmonic from the residual's
+    # spectrum, refitted; the first σ (a tenth of the rows' RMS, every row alike) only starts it
+    sigma0 = np.full_like(measured, 0.1 * max(float(np.sqrt(np.mean(measured**2))), 1e-300))
+    fit, _, _ = fit_profile_block(fit_at, sigma0, k_min=2)
     finite = bool(np.all(np.isfinite(fit.theta)))
     shift = grid_shift(fit, settings) if settings.grid_check and finite else None
     propagated = ring_propagation(fit, ring, spread) if spread is not None and spread["names"] and finite else None

@@ -61,7 +61,10 @@ class EstimateSettings:
     - ``k_tread_sd``: σ of ln k_trd; ``None`` = fixed at the tyre file's value (when the file has one).
     - ``highpass_order``: stages of the modelled high-pass (1: the IEPE sensor).
     - ``max_steps``, ``rtol``, ``atol``: Levenberg–Marquardt step cap and Cauchy tolerances (solver
-      coordinates: log load, degrees of offset; residual rows in m/s²).
+      coordinates: log load, degrees of offset; residual rows in units of their σ). A nuisance that only its
+      prior holds (the high-pass corner at a high speed, the tilt without gravity) lies on a cost flat to
+      ~1e-4 of χ², along which the solver creeps: a reweighted pass took up to ~170 steps to meet the tolerances
+      on ``benchmarks/bench_estimate.py``'s red-noise profiles, hence the cap of 300.
     - ``revolution_window_deg``: candidate window for the per-revolution fits (the patch must fit; a
       smaller window is a smaller dense contact solve: 20° holds loads up to ~10 kN on the Table 9 tyre
       and is widened automatically when a recording's patch needs more).
@@ -75,7 +78,7 @@ class EstimateSettings:
     window_deg: float = 35.0
     k_tread_sd: float | None = None
     highpass_order: int = 1
-    max_steps: int = 100
+    max_steps: int = 300
     rtol: float = 1e-6
     atol: float = 1e-6
     revolution_window_deg: float = 20.0
@@ -197,8 +200,10 @@ def nuisance_priors() -> dict:
 
 
 def estimate_problem(arrays: EstimateArrays, settings: EstimateSettings, k_max: int,
-                     prior: GaussianPrior | None = None) -> Problem:
-    """The engine :class:`~ringfit.fit.engine.Problem` of an estimate (σ estimated from the residual)."""
+                     prior: GaussianPrior | None = None, sigma: str = "estimate") -> Problem:
+    """The engine :class:`~ringfit.fit.engine.Problem` of an estimate. ``sigma``: ``"fixed"`` where the weights are
+    the profile block's σ (:func:`ringfit.fit.profile_block.fit_profile_block`, the averaged profile), ``"estimate"``
+    where they give only the noise's shape and one revolution's residual its scale (the per-revolution fits)."""
     residuals = EstimateResiduals(settings.profile_model(), settings.solver, 2, int(k_max))
-    return Problem(residuals, as_traced(arrays), COORDS, prior=prior, sigma="estimate",
+    return Problem(residuals, as_traced(arrays), COORDS, prior=prior, sigma=sigma,
                    plausible={LOAD: LOAD_RANGE}, data_label="this profile")
