@@ -127,11 +127,11 @@ def harmonic_rows(channels, k_min: int = PROFILE_K_MIN, rows_grid: int | None = 
     return jnp.concatenate([spec.real, spec.imag], axis=-1)
 
 
-def profile_band(profiles, n_grid: int) -> int:
+def profile_band(n_samples, n_grid: int) -> int:
     """The highest revolution harmonic the profile rows compare: below the grid's Nyquist (M/2 − 1) and
-    :data:`PROFILE_BAND_MARGIN` below what the coarsest profile resolves ((N − 1)/2 for N angles) — a
-    profile holds nothing above that, and a model row there would be compared with a zero."""
-    n_min = min(len(p) for p in profiles)
+    :data:`PROFILE_BAND_MARGIN` below what the coarsest profile resolves ((N − 1)/2 for N angles; ``n_samples``
+    each profile's N) — a profile holds nothing above that, and a model row there would be compared with a zero."""
+    n_min = min(int(n) for n in n_samples)
     return int(min(n_grid // 2 - 1, (n_min - 1) // 2 - PROFILE_BAND_MARGIN))
 
 
@@ -207,8 +207,7 @@ def block_rows(data: RollingData, k_min: int = PROFILE_K_MIN) -> dict:
     channel's RMS row, as :func:`ringfit.fit.profile_block.profile_rows` starts it; replaced by
     :func:`ringfit.fit.profile_block.noise_from_residual` after the first pass)."""
     M = data.measured.shape[-1]
-    # profile_band reads each profile's number of angles (len): the recorded counts stand in for the profiles
-    k_top = profile_band([range(n) for n in data.n_samples], M) if data.n_samples else M // 2 - 1
+    k_top = profile_band(data.n_samples, M) if data.n_samples else M // 2 - 1
     if k_top < k_min:
         raise InputError(f"the profiles resolve revolution harmonics up to {k_top} only; the rows start at "
                          f"{k_min}: give profiles with more angles per revolution")
