@@ -268,9 +268,9 @@ class BrushShearLoad(eqx.Module):
 
     The tip sticks at the leading edge φ_L (the penetration's interpolated zero crossing) and then moves with
     the road; base position ``x_b(φ) = (R+τ+w) sin φ + v cos φ``; shear
-    ``Δx = x_b(φ) − x_b(φ_L) − R_e(φ − φ_L)``; ``q_x = −k_x Δx`` clipped at ``|q_x| ≤ μ p``; loads
-    ``q_w += q_x sin φ``, ``q_v += q_x cos φ``. Free rolling fixes R_e: the clipped tip forces drive no
-    torque (:func:`free_rolling_radius`). ``k_x`` [N/m²].
+    ``Δx = x_b(φ) − x_b(φ_L) − R_e(φ − φ_L)``; ``q_x = −k_x Δx`` while ``|q_x| < μ p``, sliding at μp (with
+    memory, below); loads ``q_w += q_x sin φ``, ``q_v += q_x cos φ``. Free rolling fixes R_e: the tip forces
+    drive no torque (:func:`free_rolling_radius`). ``k_x`` [N/m²].
 
     ``lever`` (static, default off): the tread element stays normal to the belt, so its tip
     sits at ``(R + w) sin φ + v cos φ + τ sin(φ − ψ)`` (τ = R_out − R, ψ = (w′ − v)/R the belt slope,
@@ -302,7 +302,7 @@ class BrushShearLoad(eqx.Module):
         Free rolling (``r_road`` and ``slip`` None): the road moves R_e = r_free per radian, the root of the
         clipped tips' torque (:func:`free_rolling_radius`). Driven or braked (docs/physics.md §13): the road
         moves ``r_road`` per radian when given, else ``r_free/(1 + slip)`` (slip ratio κ = r_free/r_road − 1,
-        SAE: κ > 0 driving); the tips stick at the leading edge and are clipped at μp as before.
+        SAE: κ > 0 driving); the tips stick at the leading edge and slide at μp as before.
         """
         phi = sol.phi
         p = sol.pressure
@@ -400,6 +400,11 @@ def brush_tip_forces(D, s, k_x, lim, inside, r, *, memory: bool = True):
     return jax.lax.scan(step, (zero, zero), (q_s, jnp.broadcast_to(lim, q_s.shape), inside))[1]
 
 
+#: At most this many safeguarded Newton steps for the memory brush's free-rolling root, started at the clipped
+#: brush's root (the same root on a one-humped pressure: one step; two to four where tips stick again).
+MEMORY_NEWTON_STEPS = 24
+
+
 def free_rolling_radius(D, s, c, k_x, lim, inside, steps: int = 60, *, memory: bool = False):
     """R_e of free rolling: the tip forces ``q_x`` inside the patch drive no torque, ``Σ q_x c = 0`` (docs/physics.md
     §6 tread_shear; ``c = cos φ``, the arm of a tangential tip force). ``memory`` False (this function's
@@ -407,12 +412,13 @@ def free_rolling_radius(D, s, c, k_x, lim, inside, steps: int = 60, *, memory: b
     (:func:`brush_tip_forces`; each q_x is still non-decreasing in R_e, so is T).
 
     The torque is piecewise linear and non-decreasing in R_e (s > 0 in the patch): bisection on a bracket around
-    the unclipped closed-form root, then one Newton step at the bisected root with the derivatives flowing, so
+    the unclipped closed-form root (on the clipped torque; with ``memory`` then :data:`MEMORY_NEWTON_STEPS`
+    bracketed Newton steps at most on the memory brush's torque from there), then one Newton step at the bisected root with the derivatives flowing, so
     that ∂R_e/∂θ is the implicit function's ``−(∂T/∂θ)/(∂T/∂R_e)`` (the bisection itself is not differentiated).
     Without clipping the root is ``Σ D c / Σ s c`` (the bracket's centre); with the tips sliding near the exit
     (|q_x| at μp) it differs from that formula, which would leave the real tip forces a net torque.
     """
-    def torque(r):
+    def torque(r, memory=memory):
         return jnp.sum(brush_tip_forces(D, s, k_x, lim, inside, r, memory=memory) * c)
 
     sg = jax.lax.stop_gradient
@@ -424,13 +430,34 @@ def free_rolling_radius(D, s, c, k_x, lim, inside, steps: int = 60, *, memory: b
     def bisect(_, ab):
         a, b = ab
         m = 0.5 * (a + b)
-        above = torque(m) > 0.0  # the root lies below m
+        above = torque(m, False) > 0.0  # the root lies below m
         return jnp.where(above, a, m), jnp.where(above, m, b)
 
     lo, hi = jax.lax.fori_loop(0, steps, bisect, (r_ls - span, r_ls + span))
+    r_clip = sg(0.5 * (lo + hi))
+    if memory:
+        # the memory torque from the clipped one's root (the same root wherever μp never rises behind a sliding
+        # tip): Newton on the piecewise-linear T, kept inside the bracket it narrows, bisecting where a step
+        # would leave it — a few sequential scans instead of `steps`
+        Ds, ss, cs, ks, ls = (sg(x) for x in (D, s, c, k_x, lim))  # the root's value only (its derivative: below)
+
+        def t_fixed(r):
+            return jnp.sum(brush_tip_forces(Ds, ss, ks, ls, inside, r, memory=True) * cs)
+
+        def newton(state):
+            i, r, a, b, _ = state
+            t, dt = jax.jvp(t_fixed, (r,), (jnp.ones_like(r),))
+            a, b = jnp.where(t <= 0.0, r, a), jnp.where(t >= 0.0, r, b)
+            nr = r - t / jnp.where(dt > 0, dt, 1.0)
+            ok = (dt > 0) & (nr >= a) & (nr <= b)  # (at the root nr = r = a or b in floating point)
+            nr = jnp.where(t == 0.0, r, jnp.where(ok, nr, 0.5 * (a + b)))
+            return i + 1, nr, a, b, (t == 0.0) | (jnp.abs(nr - r) <= 1e-15 * jnp.abs(r))
+
+        start = (0, r_clip, r_ls - span, r_ls + span, False)
+        r_clip = jax.lax.while_loop(lambda st: (st[0] < MEMORY_NEWTON_STEPS) & ~st[4], newton, start)[1]
     # k_x = 0 (the effect's null): T ≡ 0; R_e is then the limit k_x → 0⁺, where no tip slides: the closed form
     # (what the linearised screen's derivative ∂q_x/∂k_x = −(D − R_e s) needs)
-    r0 = jnp.where(sg(k_x) > 0, sg(0.5 * (lo + hi)), r_ls)
+    r0 = jnp.where(sg(k_x) > 0, r_clip, r_ls)
     if memory:  # the torque's slope in R_e: each sticking tip's k_x (s − s at its last slide), by forward mode
         t0, slope = jax.jvp(torque, (r0,), (jnp.ones_like(r0),))
     else:
