@@ -268,8 +268,8 @@ class BrushShearLoad(eqx.Module):
 
     The tip sticks at the leading edge φ_L (the penetration's interpolated zero crossing) and then moves with
     the road; base position ``x_b(φ) = (R+τ+w) sin φ + v cos φ``; shear
-    ``Δx = x_b(φ) − x_b(φ_L) − R_e(φ − φ_L)``; ``q_x = −k_x Δx`` while ``|q_x| < μ p``, sliding at μp (with
-    memory, below); loads ``q_w += q_x sin φ``, ``q_v += q_x cos φ``. Free rolling fixes R_e: the tip forces
+    ``Δx = x_b(φ) − x_b(φ_L) − R_e(φ − φ_L)``; ``q_x = −k_x Δx`` while ``|q_x| < μ p``, sliding at μp
+    (with memory, below); loads ``q_w += q_x sin φ``, ``q_v += q_x cos φ``. Free rolling fixes R_e: the tip forces
     drive no torque (:func:`free_rolling_radius`). ``k_x`` [N/m²].
 
     ``lever`` (static, default off): the tread element stays normal to the belt, so its tip
@@ -413,8 +413,9 @@ def free_rolling_radius(D, s, c, k_x, lim, inside, steps: int = 60, *, memory: b
 
     The torque is piecewise linear and non-decreasing in R_e (s > 0 in the patch): bisection on a bracket around
     the unclipped closed-form root (on the clipped torque; with ``memory`` then :data:`MEMORY_NEWTON_STEPS`
-    bracketed Newton steps at most on the memory brush's torque from there), then one Newton step at the bisected root with the derivatives flowing, so
-    that ∂R_e/∂θ is the implicit function's ``−(∂T/∂θ)/(∂T/∂R_e)`` (the bisection itself is not differentiated).
+    bracketed Newton steps at most on the memory brush's torque from there), then one Newton step at that root
+    with the derivatives flowing, so that ∂R_e/∂θ is the implicit function's ``−(∂T/∂θ)/(∂T/∂R_e)`` (the search
+    itself is not differentiated).
     Without clipping the root is ``Σ D c / Σ s c`` (the bracket's centre); with the tips sliding near the exit
     (|q_x| at μp) it differs from that formula, which would leave the real tip forces a net torque.
     """
