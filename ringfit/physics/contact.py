@@ -268,9 +268,9 @@ class BrushShearLoad(eqx.Module):
 
     The tip sticks at the leading edge φ_L (the penetration's interpolated zero crossing) and then moves with
     the road; base position ``x_b(φ) = (R+τ+w) sin φ + v cos φ``; shear
-    ``Δx = x_b(φ) − x_b(φ_L) − R_e(φ − φ_L)``; ``q_x = −k_x Δx`` clipped at ``|q_x| ≤ μ p``; loads
-    ``q_w += q_x sin φ``, ``q_v += q_x cos φ``. Free rolling fixes R_e: the clipped tip forces drive no
-    torque (:func:`free_rolling_radius`). ``k_x`` [N/m²].
+    ``Δx = x_b(φ) − x_b(φ_L) − R_e(φ − φ_L)``; ``q_x = −k_x Δx`` while ``|q_x| < μ p``, sliding at μp
+    (with memory, below); loads ``q_w += q_x sin φ``, ``q_v += q_x cos φ``. Free rolling fixes R_e: the tip forces
+    drive no torque (:func:`free_rolling_radius`). ``k_x`` [N/m²].
 
     ``lever`` (static, default off): the tread element stays normal to the belt, so its tip
     sits at ``(R + w) sin φ + v cos φ + τ sin(φ − ψ)`` (τ = R_out − R, ψ = (w′ − v)/R the belt slope,
@@ -282,6 +282,11 @@ class BrushShearLoad(eqx.Module):
     Drive and brake (docs/physics.md §13): ``r_road`` [m], the road length per radian of wheel rotation
     (V/Ω), given instead of the free-rolling one; or ``slip`` κ, with ``r_road = r_free/(1 + κ)`` and r_free
     the free-rolling radius of the same tips (κ > 0 driving). Both None (the default): free rolling.
+
+    ``memory`` (static, default on: the physical brush, docs/physics.md §6 ``tread_shear``, Pacejka §3.2): a tip
+    that slid keeps the deflection it slid with and sticks again from there when μp rises above its force
+    (:func:`brush_tip_forces`); off: the memoryless ``clip(−k_x Δx, ±μp)``, which equals it wherever μp does not
+    rise behind a sliding tip (a one-humped pressure) and differs behind a dip of a two-humped one.
     """
 
     k_x: float
@@ -289,6 +294,7 @@ class BrushShearLoad(eqx.Module):
     lever: bool = eqx.field(static=True, default=False)
     r_road: object = None
     slip: object = None
+    memory: bool = eqx.field(static=True, default=True)
 
     def tips(self, sol, ring, geometry) -> "BrushTips":
         """The tip forces q_x [N/m] on the grid and the radii of the brush at a radial contact solution.
@@ -296,7 +302,7 @@ class BrushShearLoad(eqx.Module):
         Free rolling (``r_road`` and ``slip`` None): the road moves R_e = r_free per radian, the root of the
         clipped tips' torque (:func:`free_rolling_radius`). Driven or braked (docs/physics.md §13): the road
         moves ``r_road`` per radian when given, else ``r_free/(1 + slip)`` (slip ratio κ = r_free/r_road − 1,
-        SAE: κ > 0 driving); the tips stick at the leading edge and are clipped at μp as before.
+        SAE: κ > 0 driving); the tips stick at the leading edge and slide at μp as before.
         """
         phi = sol.phi
         p = sol.pressure
@@ -318,15 +324,14 @@ class BrushShearLoad(eqx.Module):
         s = phi - (phi[first - 1] + t * (phi[first] - phi[first - 1]))
         D = x_b - (x_b[first - 1] + t * (x_b[first] - x_b[first - 1]))
         lim = self.mu * p
-        r_free = free_rolling_radius(D, s, jnp.cos(phi), self.k_x, lim, inside)
+        r_free = free_rolling_radius(D, s, jnp.cos(phi), self.k_x, lim, inside, memory=self.memory)
         if self.r_road is not None:
             r_road = self.r_road
         elif self.slip is not None:
             r_road = r_free / (1.0 + self.slip)
         else:
             r_road = r_free
-        q_x = -self.k_x * (D - r_road * s)
-        q_x = jnp.where(inside, jnp.clip(q_x, -lim, lim), 0.0)
+        q_x = brush_tip_forces(D, s, self.k_x, lim, inside, r_road, memory=self.memory)
         return BrushTips(q_x=q_x, r_free=r_free, r_road=r_road, tau=tau, psi=psi)
 
     def loads(self, tips: "BrushTips", sol, geometry):
@@ -368,19 +373,54 @@ class BrushTips(eqx.Module):
         return -geometry.radius * dphi * jnp.sum(self.q_x)
 
 
-def free_rolling_radius(D, s, c, k_x, lim, inside, steps: int = 60):
-    """R_e of free rolling: the clipped tip forces ``q_x = clip(−k_x (D − R_e s), ±lim)`` inside the patch drive no
-    torque, ``Σ q_x c = 0`` (docs/physics.md §6 tread_shear; ``c = cos φ``, the arm of a tangential tip force).
+def brush_tip_forces(D, s, k_x, lim, inside, r, *, memory: bool = True):
+    """Tip forces q_x [N/m] of the brush on the grid (docs/physics.md §6 tread_shear), the road advancing ``r`` per
+    radian; ``D`` the tips' displacement from the leading edge's, ``s = φ − φ_L``, ``lim`` = μp ≥ 0.
+
+    The sticking force is ``q_s = −k_x (D − r s)``. ``memory`` (Pacejka, *Tire and Vehicle Dynamics*, §3.2, the
+    brush model): walking from the leading edge to the trailing one, a tip's force changes as the sticking force
+    does, ``q_j = clip(q_{j−1} + q_s,j − q_s,j−1, ±lim_j)`` (q = 0 before the patch): it sticks while
+    |q| < μp, slides at μp, and a tip that slid sticks again from the force it has when μp rises: a
+    ``jax.lax.scan`` along the grid (differentiable; a parallel prefix of the same maps compiles ~10× slower inside
+    :func:`free_rolling_radius`'s bisection and runs slower on a CPU).
+    Without ``memory``: ``clip(q_s, ±lim)`` inside the patch (equal to the above while μp never rises behind a
+    sliding tip). Outside the patch 0.
+    """
+    q_s = jnp.where(inside, -k_x * (D - r * s), 0.0)
+    if not memory:
+        return jnp.where(inside, jnp.clip(q_s, -lim, lim), 0.0)
+
+    def step(carry, x):
+        q, before = carry  # the previous tip's force and sticking force (0, 0 outside the patch)
+        stick, limit, here = x
+        q = jnp.where(here, jnp.clip(q + stick - before, -limit, limit), 0.0)
+        return (q, stick), q
+
+    zero = jnp.zeros((), q_s.dtype)
+    return jax.lax.scan(step, (zero, zero), (q_s, jnp.broadcast_to(lim, q_s.shape), inside))[1]
+
+
+#: At most this many safeguarded Newton steps for the memory brush's free-rolling root, started at the clipped
+#: brush's root (the same root on a one-humped pressure: one step; two to four where tips stick again).
+MEMORY_NEWTON_STEPS = 24
+
+
+def free_rolling_radius(D, s, c, k_x, lim, inside, steps: int = 60, *, memory: bool = False):
+    """R_e of free rolling: the tip forces ``q_x`` inside the patch drive no torque, ``Σ q_x c = 0`` (docs/physics.md
+    §6 tread_shear; ``c = cos φ``, the arm of a tangential tip force). ``memory`` False (this function's
+    default): the clipped ``q_x = clip(−k_x (D − R_e s), ±lim)``; True: the brush with memory
+    (:func:`brush_tip_forces`; each q_x is still non-decreasing in R_e, so is T).
 
     The torque is piecewise linear and non-decreasing in R_e (s > 0 in the patch): bisection on a bracket around
-    the unclipped closed-form root, then one Newton step at the bisected root with the derivatives flowing, so
-    that ∂R_e/∂θ is the implicit function's ``−(∂T/∂θ)/(∂T/∂R_e)`` (the bisection itself is not differentiated).
+    the unclipped closed-form root (on the clipped torque; with ``memory`` then :data:`MEMORY_NEWTON_STEPS`
+    bracketed Newton steps at most on the memory brush's torque from there), then one Newton step at that root
+    with the derivatives flowing, so that ∂R_e/∂θ is the implicit function's ``−(∂T/∂θ)/(∂T/∂R_e)`` (the search
+    itself is not differentiated).
     Without clipping the root is ``Σ D c / Σ s c`` (the bracket's centre); with the tips sliding near the exit
     (|q_x| at μp) it differs from that formula, which would leave the real tip forces a net torque.
     """
-    def torque(r):
-        q = jnp.where(inside, jnp.clip(-k_x * (D - r * s), -lim, lim), 0.0)
-        return jnp.sum(q * c)
+    def torque(r, memory=memory):
+        return jnp.sum(brush_tip_forces(D, s, k_x, lim, inside, r, memory=memory) * c)
 
     sg = jax.lax.stop_gradient
     num = jnp.sum(jnp.where(inside, D * c, 0.0))
@@ -391,17 +431,42 @@ def free_rolling_radius(D, s, c, k_x, lim, inside, steps: int = 60):
     def bisect(_, ab):
         a, b = ab
         m = 0.5 * (a + b)
-        above = torque(m) > 0.0  # the root lies below m
+        above = torque(m, False) > 0.0  # the root lies below m
         return jnp.where(above, a, m), jnp.where(above, m, b)
 
     lo, hi = jax.lax.fori_loop(0, steps, bisect, (r_ls - span, r_ls + span))
+    r_clip = sg(0.5 * (lo + hi))
+    if memory:
+        # the memory torque from the clipped one's root (the same root wherever μp never rises behind a sliding
+        # tip): Newton on the piecewise-linear T, kept inside the bracket it narrows, bisecting where a step
+        # would leave it — a few sequential scans instead of `steps`
+        Ds, ss, cs, ks, ls = (sg(x) for x in (D, s, c, k_x, lim))  # the root's value only (its derivative: below)
+
+        def t_fixed(r):
+            return jnp.sum(brush_tip_forces(Ds, ss, ks, ls, inside, r, memory=True) * cs)
+
+        def newton(state):
+            i, r, a, b, _ = state
+            t, dt = jax.jvp(t_fixed, (r,), (jnp.ones_like(r),))
+            a, b = jnp.where(t <= 0.0, r, a), jnp.where(t >= 0.0, r, b)
+            nr = r - t / jnp.where(dt > 0, dt, 1.0)
+            ok = (dt > 0) & (nr >= a) & (nr <= b)  # (at the root nr = r = a or b in floating point)
+            nr = jnp.where(t == 0.0, r, jnp.where(ok, nr, 0.5 * (a + b)))
+            return i + 1, nr, a, b, (t == 0.0) | (jnp.abs(nr - r) <= 1e-15 * jnp.abs(r))
+
+        start = (0, r_clip, r_ls - span, r_ls + span, False)
+        r_clip = jax.lax.while_loop(lambda st: (st[0] < MEMORY_NEWTON_STEPS) & ~st[4], newton, start)[1]
     # k_x = 0 (the effect's null): T ≡ 0; R_e is then the limit k_x → 0⁺, where no tip slides: the closed form
     # (what the linearised screen's derivative ∂q_x/∂k_x = −(D − R_e s) needs)
-    r0 = jnp.where(sg(k_x) > 0, sg(0.5 * (lo + hi)), r_ls)
-    q = -k_x * (D - r0 * s)
-    free = inside & (jnp.abs(q) < lim)  # tips sticking at r0: the torque's slope in R_e
-    slope = jnp.sum(jnp.where(free, k_x * s * c, 0.0))
-    step = torque(r0) / jnp.where(slope > 0, slope, 1.0)
+    r0 = jnp.where(sg(k_x) > 0, r_clip, r_ls)
+    if memory:  # the torque's slope in R_e: each sticking tip's k_x (s − s at its last slide), by forward mode
+        t0, slope = jax.jvp(torque, (r0,), (jnp.ones_like(r0),))
+    else:
+        q = -k_x * (D - r0 * s)
+        free = inside & (jnp.abs(q) < lim)  # tips sticking at r0: the torque's slope in R_e
+        slope = jnp.sum(jnp.where(free, k_x * s * c, 0.0))
+        t0 = torque(r0)
+    step = t0 / jnp.where(slope > 0, slope, 1.0)
     return r0 - jnp.where(slope > 0, step - sg(step), 0.0)  # value r0; derivative −T_θ/T_r
 
 
@@ -458,7 +523,7 @@ def contact_length(solution: RollingSolution):
 
 
 __all__ = [
-    "BrushShearLoad", "BrushTips", "FRICTION", "free_rolling_radius",
+    "BrushShearLoad", "BrushTips", "FRICTION", "brush_tip_forces", "free_rolling_radius",
     "ContactSolver", "RollingSolution", "tread_pressure", "circulant_block", "solve_rolling",
     "solve_rolling_jit", "as_traced", "patch_edges", "contact_length",
 ]
