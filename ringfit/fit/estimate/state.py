@@ -31,7 +31,7 @@ from scipy.special import ndtri
 
 from ringfit.errors import InputError
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
-                                least_squares_batch, linearize)
+                                least_squares_batch, linearize, residuals)
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows, smoothed_noise
 from ringfit.fit.estimate.load import LoadEstimate, estimate_load
 from ringfit.fit.identify import band_folds, discrepancy_ratio
@@ -441,18 +441,27 @@ class StateEstimate:
     ridge: RidgeProfile | None = None
     spread_u: np.ndarray | None = None
     names_u: tuple | None = None
+    #: the grid check (docs/physics.md §13.4 *the model's grid*): ``{"grid": [M, 2M], "shift": (Q,) SI}`` — how far
+    #: each quantity moves when the model's grid is refined at the fit; in every interval in quadrature
+    grid_check: dict | None = None
 
     def value(self, key: str) -> float:
         """The estimate of quantity ``key`` (:data:`QUANTITIES`) in the unit its name says (the unit in
         :data:`QUANTITIES`: ``tread_depth_mm`` in mm, ``pressure_bar`` in bar, ``speed_kmh`` in km/h)."""
         return float(self.quantities[key]["value"])
 
+    def _grid_record(self) -> dict:
+        shift = np.asarray(self.grid_check["shift"])
+        return {"grid": list(self.grid_check["grid"]),
+                "shift": {k: float(shift[i]) * QUANTITIES[k][1] for i, k in enumerate(QUANTITIES)}}
+
     def to_record(self) -> dict:
         """The ``state`` object of docs/formats.md §7.1."""
         return {"quantities": self.quantities, "correlation": self.correlation, "not_told_apart": list(self.untold),
                 "fit": {"status": self.status, "converged": self.converged, "rms_ms2": self.rms,
                         "channels": ["radial", "tangential"], "harmonics": [2, self.k_max], "flags": list(self.flags),
-                        "discrepancy_ratio": float(self.discrepancy)},
+                        "discrepancy_ratio": float(self.discrepancy),
+                        **({"grid_check": self._grid_record()} if self.grid_check is not None else {})},
                 "nuisances": self.nuisances,
                 **({"ridge": self.ridge.to_record(self.discrepancy)} if self.ridge is not None else {})}
 
@@ -659,6 +668,13 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
         ring_var = np.einsum("qi,ij,qj->q", total, sigma_q, total)
         ring_sd = np.sqrt(np.maximum(ring_var, 0.0))
         var = var + ring_var
+    grid = None
+    if settings.grid_check and finite:
+        # the model's own grid (§13.4, as §10's load estimate): how far each quantity moves when the grid is refined
+        # at the fit; its square joins every variance (the revolutions' too: the same error in each)
+        shift_u = state_grid_shift(fit, problem, settings, k_max)
+        grid = {"grid": [settings.n_grid, 2 * settings.n_grid], "shift": G @ shift_u}
+        var = var + grid["shift"] ** 2
     sd = np.sqrt(np.maximum(var, 0.0))
     z = float(ndtri(0.975))
     along = None
@@ -758,7 +774,22 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
                          nuisances=nuisances, fit=fit, load=load, theta=theta, cov_u=cov_u, gradient_u=G_u,
                          ring_sd=ring_sd, omega=float(omega), k_max=int(k_max), fixed=dict(fixed),
                          discrepancy=float(kappa), ridge=ridge, spread_u=None if along is None else along["spread_u"],
-                         names_u=tuple(names_u))
+                         names_u=tuple(names_u), grid_check=grid)
+
+
+def state_grid_shift(fit, problem: Problem, settings: EstimateSettings, k_max: int, factor: int = 2) -> np.ndarray:
+    """The change of the free parameters' solver coordinates ``(k,)`` when the model's grid M is refined to
+    ``factor``·M at the fit (docs/physics.md §13.4 *the model's grid*; §10's :func:`grid_shift` for every free
+    parameter): one Gauss–Newton step from the fit, with its Jacobian (prior rows included, σ scale as fitted), on
+    the same data's residual rows under the refined model, ``δu = −J⁺ Δr``. One residual evaluation at factor·M."""
+    fine = state_problem(problem.data, dataclasses.replace(settings, n_grid=factor * settings.n_grid), k_max,
+                         problem.prior)
+    r_fine, _ = residuals(fine, fit.theta)
+    scale = float(fit.extra["sigma_scale"])
+    m = fit.residuals.size
+    delta = np.zeros(fit.jacobian.shape[0])
+    delta[:m] = np.asarray(r_fine)[:m] / scale - fit.residuals
+    return -np.linalg.lstsq(fit.jacobian, delta, rcond=None)[0]
 
 
 # --------------------------------------------------------------------------- per revolution
@@ -881,6 +912,8 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
         spread = 0.0 if reference.spread_u is None else np.asarray(reference.spread_u)
         C_f = ((np.asarray(reference.cov_u) - spread) / kappa)[np.ix_(fr, fr)]
         var = var + (kappa - 1.0) * np.einsum("qi,ij,qj->q", G_f, C_f, G_f)
+    if reference.grid_check is not None:  # the model's grid error (§13.4) is the averaged fit's in every revolution
+        var = var + np.asarray(reference.grid_check["shift"]) ** 2
     sd = np.sqrt(np.maximum(var, 0.0))
     z = float(ndtri(0.975))
     omega_r = 2 * math.pi * np.asarray(rotation_hz, dtype=np.float64)
