@@ -467,12 +467,13 @@ def residual_outliers(scale: np.ndarray, fitted: np.ndarray, dof: int, z: float 
     outlier = np.zeros(R, bool)
     if good.sum() < 3:
         return ratio, outlier
-    ln = np.log(np.where(good, scale, 1.0))
-    ref = np.empty(R)
-    for r in range(R):
-        near = good[max(r - neighbours, 0) : r + neighbours + 1]
-        window = ln[max(r - neighbours, 0) : r + neighbours + 1][near]
-        ref[r] = np.median(window) if window.size else np.median(ln[good])
+    ln = np.where(good, np.log(np.where(good, scale, 1.0)), np.nan)
+    padded = np.pad(ln, neighbours, constant_values=np.nan)
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * neighbours + 1)  # (R, 2·neighbours + 1)
+    with warnings.catch_warnings():  # a window without a settled fit: the recording's median instead
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ref = np.nanmedian(windows, axis=1)
+    ref = np.where(np.isfinite(ref), ref, np.nanmedian(ln))
     d = np.where(good, ln - ref, np.nan)
     spread = max(1.4826 * float(np.median(np.abs(d[good]))), 1.0 / math.sqrt(2.0 * max(int(dof), 1)))
     ratio[good] = np.exp(d[good])
