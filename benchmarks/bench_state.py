@@ -197,6 +197,7 @@ def blind():
     avg = {q: [] for q in quantities}       # (error, inside, status)
     per = {q: [] for q in quantities}       # arrays of errors, inside per revolution
     per_told = {q: [] for q in quantities}
+    onestep = {q: [] for q in quantities}   # the value moved by its grid shift (docs/physics.md §13.4): diagnostic
     speed_rows, sim_cpu, lines = [], 0.0, []
     print(f"\n1. Blind state on the independent simulator: seeds {ARGS.seeds}, {ARGS.blind} blind recordings of "
           f"{ARGS.seconds:g} s each; tyre: " + ("the example's NOMINAL tyre.toml (the truth is jittered around it; "
@@ -238,6 +239,9 @@ def blind():
                     true = truth_over(truth, key, t_lo, t_hi)
                     e = error_of(q, Q["value"], true, true_load)
                     avg[q].append((e, Q["lo"] <= true <= Q["hi"], Q["status"]))
+                    if state.grid_check is not None:
+                        moved = Q["value"] + state.to_record()["fit"]["grid_check"]["shift"][key]
+                        onestep[q].append(error_of(q, moved, true, true_load))
                     line.append(f"{q} {e:+.2f}{'' if Q['lo'] <= true <= Q['hi'] else '!'}"
                                 f"{'' if Q['status'] == 'estimated' else '(' + Q['status'] + ')'}")
                     # per revolution
@@ -282,6 +286,10 @@ def blind():
                   f"{coverage_text(int(it.sum()), it.size)}")
     print("   (per-revolution coverage pools revolutions that share one recording's bias: its Clopper–Pearson "
           "interval is narrower than the evidence; the averaged coverage counts recordings)")
+    if any(onestep.values()):
+        print("   the value moved by its grid shift (one Gauss–Newton step at 2M, docs/physics.md §13.4; a diagnostic, "
+              "not what ringfit reports): median |err| " + ", ".join(
+                  f"{q} {float(np.median(np.abs(onestep[q]))):.3f}" for q in quantities if onestep[q]))
     R = sum(r[0] for r in speed_rows)
     c_rev = sum(r[1] for r in speed_rows)
     c_avg = sum(r[2] for r in speed_rows)
