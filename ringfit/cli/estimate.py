@@ -193,6 +193,7 @@ def parse_fix(items, condition: dict, *, source=None, laws=None) -> dict:
     ``stated`` value the input does not state, a name given twice, or a tread depth deeper than the new tread's of
     the tyre file's ``laws`` (``tread_depth_new_mm``, docs/physics.md §13.3)."""
     from ringfit.errors import InputError
+    from ringfit.fit.estimate.state import new_tread_depth
 
     out = {}
     for item in items:
@@ -214,7 +215,7 @@ def parse_fix(items, condition: dict, *, source=None, laws=None) -> dict:
                 raise InputError(f"--fix {item!r}: {text!r} is not a number (or 'stated')") from None
         if not (lo <= value <= hi):
             raise InputError(f"--fix {name}={value:g}: outside the plausible range [{lo:g}, {hi:g}]")
-        new = None if laws is None or not laws.has_tread_depth else laws.tread_depth_new
+        new = None if laws is None else new_tread_depth(laws)
         if name == "tread_depth_mm" and new is not None and value * factor > float(new) * (1 + 1e-9):
             raise InputError(f"--fix {name}={value:g}: deeper than the tyre file's new tread (tread_depth_new_mm = "
                              f"{1e3 * float(new):g}): wear only removes tread")

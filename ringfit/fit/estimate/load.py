@@ -336,13 +336,19 @@ def grid_shift(fit: FitResult, settings: EstimateSettings, factor: int = 2) -> f
     coarse = fit.problem
     fine = estimate_problem(coarse.data, dataclasses.replace(settings, n_grid=factor * settings.n_grid),
                             coarse.model.k_max, coarse.prior)
+    return float(grid_step(fit, fine)[list(fit.names).index(LOAD)])
+
+
+def grid_step(fit: FitResult, fine) -> np.ndarray:
+    """One Gauss–Newton step ``δu = −J⁺ Δr`` (the free parameters' solver coordinates) from ``fit`` to the optimum of
+    the ``fine`` problem — the same data and weights under a refined model: ``Δr`` the rows' change at the fit (σ
+    scale as fitted; the prior's rows unchanged), ``J`` the fit's Jacobian (docs/physics.md §10, §13.4)."""
     r_fine, _ = residuals(fine, fit.theta)
     scale = float(fit.extra["sigma_scale"])
     m = fit.residuals.size
     delta = np.zeros(fit.jacobian.shape[0])
-    delta[:m] = r_fine / scale - fit.residuals
-    du = -np.linalg.lstsq(fit.jacobian, delta, rcond=None)[0]
-    return float(du[list(fit.names).index(LOAD)])
+    delta[:m] = np.asarray(r_fine)[:m] / scale - fit.residuals
+    return -np.linalg.lstsq(fit.jacobian, delta, rcond=None)[0]
 
 
 def _finish(fit, profile, curves, feature, amp, omega, omega_source, flags, k_max, drum, settings,

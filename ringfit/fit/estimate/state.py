@@ -31,9 +31,9 @@ from scipy.special import ndtri
 
 from ringfit.errors import InputError
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
-                                least_squares_batch, linearize, residuals)
+                                least_squares_batch, linearize)
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows, smoothed_noise
-from ringfit.fit.estimate.load import LoadEstimate, estimate_load
+from ringfit.fit.estimate.load import LoadEstimate, estimate_load, grid_step
 from ringfit.fit.identify import band_folds, discrepancy_ratio
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
                                           TILT_PRIOR, EstimateSettings, optimum_ring_shift)
@@ -782,14 +782,8 @@ def state_grid_shift(fit, problem: Problem, settings: EstimateSettings, k_max: i
     ``factor``·M at the fit (docs/physics.md §13.4 *the model's grid*; §10's :func:`grid_shift` for every free
     parameter): one Gauss–Newton step from the fit, with its Jacobian (prior rows included, σ scale as fitted), on
     the same data's residual rows under the refined model, ``δu = −J⁺ Δr``. One residual evaluation at factor·M."""
-    fine = state_problem(problem.data, dataclasses.replace(settings, n_grid=factor * settings.n_grid), k_max,
-                         problem.prior)
-    r_fine, _ = residuals(fine, fit.theta)
-    scale = float(fit.extra["sigma_scale"])
-    m = fit.residuals.size
-    delta = np.zeros(fit.jacobian.shape[0])
-    delta[:m] = np.asarray(r_fine)[:m] / scale - fit.residuals
-    return -np.linalg.lstsq(fit.jacobian, delta, rcond=None)[0]
+    return grid_step(fit, state_problem(problem.data, dataclasses.replace(settings, n_grid=factor * settings.n_grid),
+                                        k_max, problem.prior))
 
 
 # --------------------------------------------------------------------------- per revolution
