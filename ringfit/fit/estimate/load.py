@@ -344,11 +344,15 @@ def grid_step(fit: FitResult, fine) -> np.ndarray:
     the ``fine`` problem — the same data and weights under a refined model: ``Δr`` the rows' change at the fit (σ
     scale as fitted; the prior's rows unchanged), ``J`` the fit's Jacobian (docs/physics.md §10, §13.4)."""
     r_fine, _ = residuals(fine, fit.theta)
-    scale = float(fit.extra["sigma_scale"])
-    m = fit.residuals.size
-    delta = np.zeros(fit.jacobian.shape[0])
-    delta[:m] = np.asarray(r_fine)[:m] / scale - fit.residuals
-    return -np.linalg.lstsq(fit.jacobian, delta, rcond=None)[0]
+    return step_for(fit, np.asarray(r_fine)[:fit.residuals.size] / float(fit.extra["sigma_scale"]) - fit.residuals)
+
+
+def step_for(fit: FitResult, delta: np.ndarray) -> np.ndarray:
+    """The Gauss–Newton step ``δu = −J⁺ Δr`` of the fit's free solver coordinates for a change ``delta`` ``(m,)``
+    of its data rows (as ``fit.residuals``, σ scale as fitted; the prior's rows unchanged)."""
+    full = np.zeros(fit.jacobian.shape[0])
+    full[:fit.residuals.size] = delta
+    return -np.linalg.lstsq(fit.jacobian, full, rcond=None)[0]
 
 
 def _finish(fit, profile, curves, feature, amp, omega, omega_source, flags, k_max, drum, settings,

@@ -31,9 +31,9 @@ from scipy.special import ndtri
 
 from ringfit.errors import InputError
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
-                                least_squares_batch, linearize)
+                                least_squares_batch, linearize, residuals)
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows, smoothed_noise
-from ringfit.fit.estimate.load import LoadEstimate, estimate_load, grid_step
+from ringfit.fit.estimate.load import LoadEstimate, estimate_load, step_for
 from ringfit.fit.identify import band_folds, discrepancy_ratio
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
                                           TILT_PRIOR, EstimateSettings, optimum_ring_shift)
@@ -121,7 +121,8 @@ class StateArrays(eqx.Module):
 
     ``geometry``, ``ring``, ``laws``: the reference tyre; ``omega`` ``(P,)`` Ω [rad/s]; ``roads``; ``response``
     ``(P, K)`` the acquisition's gain on harmonics 2…k_max; ``measured`` ``(P, 4K)`` rows radial (Re, Im) then
-    tangential (Re, Im) [m/s²]; ``weight`` ``(P, 4K)`` 1/σ per row.
+    tangential (Re, Im) [m/s²]; ``weight`` ``(P, 4K)`` 1/σ per row; ``correction`` ``(P, 4K)`` the model grid's
+    defect correction added to the model's rows (docs/physics.md §13.4 *the model's grid*; zeros: none).
     """
 
     geometry: TyreGeometry
@@ -132,6 +133,7 @@ class StateArrays(eqx.Module):
     response: jax.Array
     measured: jax.Array
     weight: jax.Array
+    correction: jax.Array
 
 
 def state_of(theta, omega) -> TyreState:
@@ -161,15 +163,15 @@ class StateResiduals(AbstractResiduals):
         return jnp.concatenate([harmonic_rows(amp[:, 0]), harmonic_rows(amp[:, 1])], axis=-1)
 
     def __call__(self, theta, data: StateArrays):
-        rows = self.rows(theta, data)
+        rows = self.rows(theta, data) + data.correction
         return ((rows - data.measured) * data.weight).ravel(), rows
 
 
 def state_problem(arrays: StateArrays, settings: EstimateSettings, k_max: int, prior: GaussianPrior | None = None,
                   sigma: str = "estimate") -> Problem:
     """The engine :class:`~ringfit.fit.engine.Problem` of a state estimate."""
-    residuals = StateResiduals(settings.profile_model(), settings.solver, 2, int(k_max))
-    return Problem(residuals, as_traced(arrays), STATE_COORDS, prior=prior, sigma=sigma,
+    model = StateResiduals(settings.profile_model(), settings.solver, 2, int(k_max))
+    return Problem(model, as_traced(arrays), STATE_COORDS, prior=prior, sigma=sigma,
                    plausible={LOAD: LOAD_RANGE}, data_label="this profile")
 
 
@@ -519,7 +521,7 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     measured = profile_rows(profile, settings.n_grid, k_max)
     arrays = StateArrays(geometry=geometry, ring=ring, laws=laws, omega=np.array([omega]),
                          roads=flat_or_drum(load.drum_diameter_m, 1), response=resp[None], measured=measured[None],
-                         weight=np.ones((1, 4 * K)))
+                         weight=np.ones((1, 4 * K)), correction=np.zeros((1, 4 * K)))
     free = free_parameters(laws, fixed)
     entries = {k: v for k, v in state_priors(geometry, laws).items() if k in free}
     prior = GaussianPrior.independent(entries)
@@ -561,6 +563,8 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     for name in first.extra["at_bound"]:
         theta1[STATE_PARAMETERS.index(name)] = theta0[STATE_PARAMETERS.index(name)]
     fit = least_squares(problem, theta1, free, **opts)
+    if settings.grid_check and np.all(np.isfinite(fit.theta)):
+        problem, fit = grid_corrected(problem, fit, settings, k_max, **opts)
     ridge, deeper = None, False
     if TREAD in free and np.all(np.isfinite(fit.theta)):
         # the ridge's profile (§13.4 *intervals along the ridge*): on a flat, curved ridge the free fit can stop short
@@ -673,7 +677,7 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
         # the model's own grid (§13.4, as §10's load estimate): how far each quantity moves when the grid is refined
         # at the fit; its square joins every variance (the revolutions' too: the same error in each)
         shift_u = state_grid_shift(fit, problem, settings, k_max)
-        grid = {"grid": [settings.n_grid, 2 * settings.n_grid], "shift": G @ shift_u}
+        grid = {"grid": [settings.n_grid, GRID_FINE * settings.n_grid], "shift": G @ shift_u}
         var = var + grid["shift"] ** 2
     sd = np.sqrt(np.maximum(var, 0.0))
     z = float(ndtri(0.975))
@@ -777,13 +781,70 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
                          names_u=tuple(names_u), grid_check=grid)
 
 
-def state_grid_shift(fit, problem: Problem, settings: EstimateSettings, k_max: int, factor: int = 2) -> np.ndarray:
-    """The change of the free parameters' solver coordinates ``(k,)`` when the model's grid M is refined to
-    ``factor``·M at the fit (docs/physics.md §13.4 *the model's grid*; §10's :func:`grid_shift` for every free
-    parameter): one Gauss–Newton step from the fit, with its Jacobian (prior rows included, σ scale as fitted), on
-    the same data's residual rows under the refined model, ``δu = −J⁺ Δr``. One residual evaluation at factor·M."""
-    return grid_step(fit, state_problem(problem.data, dataclasses.replace(settings, n_grid=factor * settings.n_grid),
-                                        k_max, problem.prior))
+#: The state's model grid (docs/physics.md §13.4 *the model's grid*): the fit's model is the one at GRID_FINE × M,
+#: by defect correction of the M model; at most GRID_PASSES corrections, until the fit moves less than GRID_MOVE
+#: of its σ in every free coordinate.
+GRID_FINE = 4
+GRID_PASSES = 4
+GRID_MOVE = 0.05
+
+
+def _rows_at(problem: Problem, theta, settings: EstimateSettings, k_max: int, n_grid: int) -> np.ndarray:
+    """The model's rows ``(P, 4K)`` at θ on the grid ``n_grid``, without the defect correction."""
+    data = eqx.tree_at(lambda a: a.correction, problem.data, as_traced(np.zeros(np.shape(problem.data.correction))))
+    prob = state_problem(data, dataclasses.replace(settings, n_grid=int(n_grid)), k_max, problem.prior)
+    return np.asarray(residuals(prob, theta)[1])
+
+
+def grid_correction(problem: Problem, theta, settings: EstimateSettings, k_max: int, factor: int = GRID_FINE):
+    """The defect correction ``(P, 4K)`` at θ: the rows on the grid factor·M less those on M (§13.4)."""
+    return (_rows_at(problem, theta, settings, k_max, factor * settings.n_grid)
+            - _rows_at(problem, theta, settings, k_max, settings.n_grid))
+
+
+def with_correction(problem: Problem, correction) -> Problem:
+    """``problem`` with the model rows' defect correction ``correction`` ``(P, 4K)``."""
+    return dataclasses.replace(problem, data=eqx.tree_at(lambda a: a.correction, problem.data,
+                                                         as_traced(np.asarray(correction, dtype=np.float64))))
+
+
+def grid_corrected(problem: Problem, fit, settings: EstimateSettings, k_max: int, factor: int = GRID_FINE, **opts):
+    """The fit of the model on the grid factor·M by defect correction (docs/physics.md §13.4 *the model's grid*):
+    the M model's rows plus the difference factor·M − M evaluated at the last fit, refitted from it, until the fit
+    moves less than :data:`GRID_MOVE` σ (at most :data:`GRID_PASSES` times). The correction changes slowly with the
+    state, so each pass takes the fit most of the way; the Jacobian stays the M model's. Returns ``(problem with the
+    last correction, fit)``; the input fit if a pass fails."""
+    free = tuple(fit.names)
+    for _ in range(GRID_PASSES):
+        prob = with_correction(problem, grid_correction(problem, fit.theta, settings, k_max, factor))
+        new = least_squares(prob, fit.theta, free, **opts)
+        if not np.all(np.isfinite(new.theta)):
+            break
+        u0 = np.array([STATE_COORDS[STATE_PARAMETERS.index(n)].to_u(float(fit.theta[STATE_PARAMETERS.index(n)]))
+                       for n in free])
+        u1 = np.array([STATE_COORDS[STATE_PARAMETERS.index(n)].to_u(float(new.theta[STATE_PARAMETERS.index(n)]))
+                       for n in free])
+        sd = np.sqrt(np.maximum(np.diag(np.asarray(new.covariance_log)), 1e-300))
+        problem, fit = prob, new
+        if np.max(np.abs(u1 - u0) / sd) < GRID_MOVE:
+            break
+    return problem, fit
+
+
+def state_grid_shift(fit, problem: Problem, settings: EstimateSettings, k_max: int) -> np.ndarray:
+    """The change of the free parameters' solver coordinates ``(k,)`` still to come when the model's grid is refined
+    beyond the fit's, GRID_FINE·M (docs/physics.md §13.4 *the model's grid*), by Richardson's rule: the rows' change
+    from GRID_FINE/2·M to GRID_FINE·M, divided by (ρ − 1) where ρ is the ratio of the last two refinements' changes
+    (M → 2M … against the last; clipped to [2, 16]: at worst a first-order error, as large as the last change), as one
+    Gauss–Newton step from the fit with its Jacobian. Three residual evaluations at the fit."""
+    M = settings.n_grid
+    grids = [M * 2**j for j in range(int(round(math.log2(GRID_FINE))) + 1)]
+    rows = [_rows_at(problem, fit.theta, settings, k_max, g) for g in grids]
+    w = np.asarray(problem.data.weight) / float(fit.extra["sigma_scale"])
+    last = ((rows[-1] - rows[-2]) * w).ravel()
+    before = ((rows[-2] - rows[-3]) * w).ravel()
+    rho = float(np.clip(np.linalg.norm(before) / max(np.linalg.norm(last), 1e-300), 2.0, 16.0))
+    return step_for(fit, last / (rho - 1.0))
 
 
 # --------------------------------------------------------------------------- per revolution
@@ -1016,7 +1077,8 @@ def state_fisher(geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, state
     omega = float(state.omega)
     arrays = StateArrays(geometry=geometry, ring=ring, laws=laws, omega=np.array([omega]),
                          roads=flat_or_drum(drum_diameter_m, 1), response=np.ones((1, K)),
-                         measured=np.zeros((1, 4 * K)), weight=np.full((1, 4 * K), 1.0 / sigma_row))
+                         measured=np.zeros((1, 4 * K)), weight=np.full((1, 4 * K), 1.0 / sigma_row),
+                         correction=np.zeros((1, 4 * K)))
     free = free_parameters(laws, {n: None for n in fixed})
     prior = GaussianPrior.independent({k: v for k, v in state_priors(geometry, laws).items() if k in free}) \
         if with_priors else None
