@@ -565,6 +565,7 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     fit = least_squares(problem, theta1, free, **opts)
     if settings.grid_check and np.all(np.isfinite(fit.theta)):
         problem, fit = grid_corrected(problem, fit, settings, k_max, **opts)
+    corrected = fit
     ridge, deeper = None, False
     if TREAD in free and np.all(np.isfinite(fit.theta)):
         # the ridge's profile (§13.4 *intervals along the ridge*): on a flat, curved ridge the free fit can stop short
@@ -586,6 +587,8 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
         if deeper:
             deeper = 1e3 * float(fit.values[TREAD])
             fit, ridge = _at_new_depth(problem, fit, ridge, d_new, **opts)
+    if settings.grid_check and fit is not corrected and np.all(np.isfinite(fit.theta)):
+        problem, fit = grid_corrected(problem, fit, settings, k_max, **opts)  # moved along the ridge: at its state
     est = _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fixed, ring_covariance, measured,
                         prior, k_max, ridge, d_new)
     if ridge is not None and deeper and TREAD in fit.names:
