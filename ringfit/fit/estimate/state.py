@@ -836,18 +836,21 @@ def grid_corrected(problem: Problem, fit, settings: EstimateSettings, k_max: int
 
 def state_grid_shift(fit, problem: Problem, settings: EstimateSettings, k_max: int) -> np.ndarray:
     """The change of the free parameters' solver coordinates ``(k,)`` still to come when the model's grid is refined
-    beyond the fit's, GRID_FINE·M (docs/physics.md §13.4 *the model's grid*), by Richardson's rule: the rows' change
-    from GRID_FINE/2·M to GRID_FINE·M, divided by (ρ − 1) where ρ is the ratio of the last two refinements' changes
-    (M → 2M … against the last; clipped to [2, 16]: at worst a first-order error, as large as the last change), as one
-    Gauss–Newton step from the fit with its Jacobian. Three residual evaluations at the fit."""
+    beyond the fit's, GRID_FINE·M (docs/physics.md §13.4 *the model's grid*), by Richardson's rule on the fit's own
+    moves: δu_a and δu_b, the Gauss–Newton steps of the rows' change M → GRID_FINE/2·M and GRID_FINE/2·M →
+    GRID_FINE·M at the fit (its Jacobian, σ scale as fitted), and ρ = |δu_a|/|δu_b| in the metric of the fit's
+    covariance, clipped to [2, 16] (at worst a first-order error, as large as the last move): δu_b/(ρ − 1). Three
+    residual evaluations at the fit."""
     M = settings.n_grid
     grids = [M * 2**j for j in range(int(round(math.log2(GRID_FINE))) + 1)]
     rows = [_rows_at(problem, fit.theta, settings, k_max, g) for g in grids]
     w = np.asarray(problem.data.weight) / float(fit.extra["sigma_scale"])
-    last = ((rows[-1] - rows[-2]) * w).ravel()
-    before = ((rows[-2] - rows[-3]) * w).ravel()
-    rho = float(np.clip(np.linalg.norm(before) / max(np.linalg.norm(last), 1e-300), 2.0, 16.0))
-    return step_for(fit, last / (rho - 1.0))
+    step_a = step_for(fit, ((rows[-2] - rows[-3]) * w).ravel())
+    step_b = step_for(fit, ((rows[-1] - rows[-2]) * w).ravel())
+    prec = np.linalg.pinv(np.asarray(fit.covariance_log))
+    size = lambda d: math.sqrt(max(float(d @ prec @ d), 0.0))  # noqa: E731
+    rho = float(np.clip(size(step_a) / max(size(step_b), 1e-300), 2.0, 16.0))
+    return step_b / (rho - 1.0)
 
 
 # --------------------------------------------------------------------------- per revolution
