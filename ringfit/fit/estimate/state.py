@@ -32,7 +32,8 @@ from scipy.special import ndtri
 from ringfit.errors import InputError
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
                                 least_squares_batch, linearize, residuals)
-from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows, smoothed_noise
+from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows
+from ringfit.fit.profile_block import fit_profile_block, noise_from_residual
 from ringfit.fit.estimate.load import LoadEstimate, estimate_load, step_for
 from ringfit.fit.identify import band_folds, discrepancy_ratio
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
@@ -476,13 +477,17 @@ def profile_rows(profile, n_grid: int, k_max: int) -> np.ndarray:
     return np.concatenate([harmonic_rows(harmonic_amplitudes(grid[i], 2, k_max)) for i in (0, 1)])
 
 
-def channel_weights(resid_rows: np.ndarray) -> np.ndarray:
-    """1/σ per row ``(4K,)`` [s²/m] from residual rows: each channel's smoothed spectrum (:func:`smoothed_noise`).
+def channel_weights(resid_rows: np.ndarray, leverage: float = 0.0, series: int = 1) -> np.ndarray:
+    """1/σ per row ``(4K,)`` [s²/m] from residual rows ``(4K,)`` (radial Re, Im, tangential Re, Im): the profile
+    block's noise model (:func:`ringfit.fit.profile_block.noise_from_residual`, docs/physics.md §11 *profiles*) of
+    each channel, ``leverage`` the share of the rows' degrees of freedom the fit took, ``series`` the residual series
+    each row's power averages.
 
     Absolute (not normalised): the rows are then in units of their noise, as the priors are (§13.4)."""
-    half = resid_rows.shape[-1] // 2
-    sigma = np.concatenate([smoothed_noise(resid_rows[..., :half]), smoothed_noise(resid_rows[..., half:])], axis=-1)
-    return 1.0 / sigma
+    rows = np.asarray(resid_rows, dtype=np.float64)
+    two = rows.reshape(rows.shape[:-1] + (2, rows.shape[-1] // 2))
+    sigma = noise_from_residual(two, np.array([float(leverage)]), k_min=2, series=series)
+    return 1.0 / sigma.reshape(rows.shape)
 
 
 def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *,
@@ -553,18 +558,31 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
         freed = least_squares(prob0, first.theta, free, **opts)
         if np.all(np.isfinite(freed.theta)) and not near_bound(freed.theta, free):
             first = freed
-    # second pass: whiten each channel's residual spectrum
-    weight = channel_weights(np.asarray(first.extra["aux"])[0] - measured)
-    arrays = eqx.tree_at(lambda a: a.weight, arrays, weight[None])
-    problem = state_problem(arrays, settings, k_max, prior)
     # a parameter the first pass left on a bound (or not finite) restarts from its start: on a bound the solver's
     # sine transform has no slope, and the second pass's priors are what hold a weakly told quantity
     theta1 = np.where(np.isfinite(first.theta), first.theta, theta0)
     for name in first.extra["at_bound"]:
         theta1[STATE_PARAMETERS.index(name)] = theta0[STATE_PARAMETERS.index(name)]
-    fit = least_squares(problem, theta1, free, **opts)
-    if settings.grid_check and np.all(np.isfinite(fit.theta)):
-        problem, fit = grid_corrected(problem, fit, settings, k_max, **opts)
+    # then the profile block's noise passes (docs/physics.md §11 *profiles*, §13.4): σ per channel and harmonic from
+    # the first pass's residual, the fit (the 4M model's, by the grid's defect correction), σ from its residual, the
+    # fit again — each warm from the last fit and its correction
+    sigma0 = 1.0 / channel_weights(np.asarray(first.extra["aux"])[0] - measured, leverage=len(free0) / (4 * K))
+    last = dict(theta=theta1, correction=None)
+
+    def fit_at(sigma):
+        arr = eqx.tree_at(lambda a: a.weight, arrays, (1.0 / np.asarray(sigma)).reshape(1, 4 * K))
+        prob = state_problem(arr, settings, k_max, prior)
+        if last["correction"] is not None:
+            prob = with_correction(prob, last["correction"])
+        new = least_squares(prob, last["theta"], free, **opts)
+        if settings.grid_check and np.all(np.isfinite(new.theta)):
+            prob, new = grid_corrected(prob, new, settings, k_max, **opts)
+        if np.all(np.isfinite(new.theta)):
+            last.update(theta=np.asarray(new.theta), correction=np.asarray(prob.data.correction))
+        return new
+
+    fit, _, _ = fit_profile_block(fit_at, sigma0.reshape(1, 2, 2 * K), k_min=2)
+    problem = fit.problem
     corrected = fit
     ridge, deeper = None, False
     if TREAD in free and np.all(np.isfinite(fit.theta)):
@@ -919,7 +937,7 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
     if R < 2:
         raise InputError(f"{R} revolution(s): the per-revolution state needs at least 2")
     diff = np.diff(rows, axis=0) / math.sqrt(2.0)
-    weight = channel_weights(np.sqrt(np.mean(diff**2, axis=0)))
+    weight = channel_weights(np.sqrt(np.mean(diff**2, axis=0)), series=R - 1)
     s_r = float(np.sqrt(np.mean((diff * weight) ** 2)))
     data = eqx.tree_at(lambda a: a.weight, problem.data, as_traced(weight[None]))
     data = eqx.tree_at(lambda a: a.measured, data, as_traced(np.mean(rows, axis=0)[None]))
