@@ -3,8 +3,8 @@
 The load estimate fits harmonics k = 2 … k_max of the radial reading on a grid of angles
 φ_j = −π + 2πj/M. This module converts between grid signals and complex amplitudes
 (:func:`harmonic_amplitudes`, :func:`band_signal`, :func:`grid_signal`), lays amplitudes out as real
-residual rows (:func:`harmonic_rows`) and estimates σ per harmonic from a residual
-(:func:`smoothed_noise`: the second pass's whitening weights). NumPy and JAX arrays alike.
+residual rows (:func:`harmonic_rows`) and gives σ per harmonic of a residual (:func:`smoothed_noise`: the profile
+block's noise spectrum, the one noise model of profiles). NumPy and JAX arrays alike.
 """
 
 from __future__ import annotations
@@ -13,8 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-#: Harmonics averaged on either side for the second pass's noise spectrum.
-NOISE_SMOOTHING = 4
+from ringfit.fit.profile_block import NOISE_SMOOTHING, noise_spectrum
 
 
 def harmonic_amplitudes(signal, k_min: int, k_max: int):
@@ -53,12 +52,13 @@ def grid_signal(amplitudes, k_min: int, n_points: int) -> np.ndarray:
 
 
 def smoothed_noise(rows: np.ndarray, half_width: int = NOISE_SMOOTHING) -> np.ndarray:
-    """σ per row ``(..., 2K)`` from residual rows ``(..., 2K)``: power per harmonic averaged over ±half_width harmonics."""
+    """σ per row ``(..., 2K)`` from residual rows ``(..., 2K)`` of harmonics 2 … K + 1: the profile block's noise
+    spectrum (:func:`ringfit.fit.profile_block.noise_spectrum`: a power law, then the ratio averaged over the
+    ±half_width neighbouring harmonics, each harmonic's own left out), without its degrees-of-freedom inflation
+    (:func:`ringfit.fit.profile_block.noise_from_residual` has it)."""
     K = rows.shape[-1] // 2
     power = 0.5 * (rows[..., :K] ** 2 + rows[..., K:] ** 2)
-    kernel = np.ones(2 * half_width + 1)
-    num = np.apply_along_axis(lambda p: np.convolve(p, kernel, mode="same"), -1, power)
-    den = np.convolve(np.ones(K), kernel, mode="same")
-    sigma = np.sqrt(num / den)
+    noise, _ = noise_spectrum(power, k_min=2, half_width=half_width)
+    sigma = np.sqrt(noise)
     sigma = np.maximum(sigma, 1e-6 * max(float(np.max(sigma)), 1e-300))
     return np.concatenate([sigma, sigma], axis=-1)
