@@ -198,6 +198,7 @@ def blind():
     per = {q: [] for q in quantities}       # arrays of errors, inside per revolution
     per_told = {q: [] for q in quantities}
     onestep = {q: [] for q in quantities}   # the value moved by its grid shift (docs/physics.md §13.4): diagnostic
+    spread = {q: [] for q in quantities}    # the estimate's own σ, in the error's unit: what the data could tell
     speed_rows, sim_cpu, lines = [], 0.0, []
     print(f"\n1. Blind state on the independent simulator: seeds {ARGS.seeds}, {ARGS.blind} blind recordings of "
           f"{ARGS.seconds:g} s each; tyre: " + ("the example's NOMINAL tyre.toml (the truth is jittered around it; "
@@ -239,11 +240,13 @@ def blind():
                     true = truth_over(truth, key, t_lo, t_hi)
                     e = error_of(q, Q["value"], true, true_load)
                     avg[q].append((e, Q["lo"] <= true <= Q["hi"], Q["status"]))
+                    spread[q].append(abs(error_of(q, Q["value"] + Q["sd"], true, true_load) - e))
                     if state.grid_check is not None:
                         moved = Q["value"] + state.to_record()["fit"]["grid_check"]["shift"][key]
                         onestep[q].append(error_of(q, moved, true, true_load))
                     line.append(f"{q} {e:+.2f}{'' if Q['lo'] <= true <= Q['hi'] else '!'}"
-                                f"{'' if Q['status'] == 'estimated' else '(' + Q['status'] + ')'}")
+                                f"{'' if Q['status'] == 'estimated' else '(' + Q['status'] + ')'}"
+                                f" ±{spread[q][-1]:.2f}")
                     # per revolution
                     period = 1.0 / revs.rotation_hz
                     tv = np.array([truth_over(truth, key, t - p / 2, t + p / 2) for t, p in zip(revs.t_s, period)])
@@ -286,8 +289,11 @@ def blind():
                   f"{coverage_text(int(it.sum()), it.size)}")
     print("   (per-revolution coverage pools revolutions that share one recording's bias: its Clopper–Pearson "
           "interval is narrower than the evidence; the averaged coverage counts recordings)")
+    print("   the estimates' own σ (median over the recordings; a calibrated estimate's median |error| is about 0.67 σ, "
+          "so a target below that is below what these recordings tell): " + ", ".join(
+              f"{q} {float(np.median(spread[q])):.3f}" for q in quantities if spread[q]))
     if any(onestep.values()):
-        print("   the value moved by its grid shift (one Gauss–Newton step at 2M, docs/physics.md §13.4; a diagnostic, "
+        print("   the value moved by its remaining grid shift (docs/physics.md §13.4 *the model's grid*; a diagnostic, "
               "not what ringfit reports): median |err| " + ", ".join(
                   f"{q} {float(np.median(np.abs(onestep[q]))):.3f}" for q in quantities if onestep[q]))
     R = sum(r[0] for r in speed_rows)
