@@ -17,6 +17,7 @@ from ringfit.fit.estimate.state import (PRESSURE, REVOLUTION_FREE, SLIP, TREAD, 
                                         free_parameters, profile_rows, state_fisher, state_revolutions)
 from ringfit.io.profiles import Profile, grid_angles_deg
 from ringfit.params import TyreLaws, table9
+from ringfit.physics.contact import ContactSolver
 from ringfit.physics.profile import ProfileModel
 from ringfit.physics.sensor import STANDARD_GRAVITY
 from ringfit.physics.state import TyreState, solve_state
@@ -28,7 +29,11 @@ SENSOR = ProfileModel().with_sensor(gravity=STANDARD_GRAVITY, tilt_gain=0.8, cor
 
 
 def _channels(state):
-    return solve_state(GEO, RING, LAWS, state, model=SENSOR)
+    """The forward model's channels at ``state`` on 512 angles, solved on 2048 (four times the estimate's grid: the
+    estimate fits the 4M model, docs/physics.md §13.4 *the model's grid*; data of the 512 model itself would carry
+    that grid's error as a bias of a few σ)."""
+    sol, ch, q = solve_state(GEO, RING, LAWS, state, model=SENSOR, solver=ContactSolver(n_grid=2048))
+    return sol, np.asarray(ch)[:, ::4], q
 
 
 def _coloured(rng, shape, sd, corr=0.9):
