@@ -163,7 +163,7 @@ def identify_case(i: int, seed: int, sampler: str, max_steps: int, rng, folder: 
             out["message"] = str(ident.fit.message)
             return out
         k = len(ident.fit.names)
-        post = sample(ident.fit, sampler=sampler, walkers=2 * k, min_steps=min(500, max_steps), max_steps=max_steps,
+        post = sample(ident.posterior_fit(), sampler=sampler, walkers=2 * k, min_steps=min(500, max_steps), max_steps=max_steps,
                       check_every=250, seed=i, progress=False, spread=0.25, **ident.posterior_likelihood())
     out.update(posterior_converged=bool(post.converged), steps=int(post.steps), tau_max=float(np.max(post.tau)),
                walkers=2 * k, wall_s=clock.wall, cpu_s=clock.cpu)
