@@ -121,6 +121,23 @@ def test_a_strict_window_gives_nan_for_a_clipped_patch_and_the_same_solution_oth
     np.testing.assert_allclose(narrow.w, wide.w, rtol=0, atol=1e-12 * float(np.max(np.abs(wide.w))) + 1e-18)
 
 
+def test_a_start_from_a_nearby_patch_takes_fewer_iterations_to_the_same_solution():
+    """start_compliance (identify's posterior): the active set started at the patch a nearby solution had (its
+    extent a: deflection (R+τ)(1 − cos a), here read off the solution at 4 kN and used at 3.6 kN) reaches the
+    same solution as the fixed 1 cm start in fewer iterations."""
+    ref = solve_rolling_jit(RING, GEOMETRY, OperatingPoint(OMEGA_30, FZ), solver=ContactSolver())
+    lo, hi = grid_extent_deg(ref)
+    a = math.radians(max(-lo, hi))
+    compliance = float(GEOMETRY.outer_radius) * (1.0 - math.cos(a)) / FZ
+    op = OperatingPoint(OMEGA_30, 0.9 * FZ)
+    plain = solve_rolling_jit(RING, GEOMETRY, op, solver=ContactSolver())
+    started = solve_rolling_jit(RING, GEOMETRY, op, solver=ContactSolver(start_compliance=compliance))
+    assert bool(plain.converged) and bool(started.converged)
+    assert int(started.iterations) < int(plain.iterations)
+    assert float(started.axle_height) == pytest.approx(float(plain.axle_height), rel=1e-13)
+    np.testing.assert_allclose(started.pressure, plain.pressure, rtol=0, atol=1e-9 * float(np.max(plain.pressure)))
+
+
 @pytest.mark.parametrize("road", [FlatRoad(), Drum(diameter=2.0)], ids=["flat", "drum"])
 def test_the_solve_without_its_derivative_step_is_the_same_solution(road):
     """differentiable=False returns the iteration's last solve instead of one more at the frozen set: the same

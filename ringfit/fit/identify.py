@@ -298,10 +298,11 @@ POSTERIOR_WINDOW_MARGIN = 1.5
 
 
 @eqx.filter_jit
-def contact_extent(model: "JointResiduals", theta, data: "JointArrays"):
-    """Largest |φ| [rad] of a loaded grid point over every contact solve of the joint model at θ (the loaded
-    tables' standing solves, the profiles' rolling ones; docs/physics.md §4.4), one condition after another
-    (:func:`serial_map`). Not for a model across states (its solves are the state solution's)."""
+def contact_extents(model: "JointResiduals", theta, data: "JointArrays"):
+    """``(extent (E,) [rad], load (E,) [N])`` over every contact solve of the joint model at θ (the loaded tables'
+    standing solves, then the profiles' rolling ones; docs/physics.md §4.4): the largest |φ| of a loaded grid
+    point, and the condition's load; one condition after another (:func:`serial_map`). Not for a model across
+    states (its solves are the state solution's)."""
     ring = ring_from_vector(theta)
     g = data.geometry
     phi = model.solver.grid()
@@ -309,36 +310,41 @@ def contact_extent(model: "JointResiduals", theta, data: "JointArrays"):
     def extent(sol):
         return jnp.max(jnp.where(sol.pressure > 0.0, jnp.abs(phi), 0.0))
 
-    out = [jnp.zeros(())]
+    ext, loads = [], []
     if data.l_n is not None:
-        out.append(jnp.max(serial_map(
+        ext.append(serial_map(
             lambda a: extent(solve_rolling(ring, g, OperatingPoint(0.0, a[0], a[1]), solver=model.solver)),
-            (data.l_load, data.l_roads))))
+            (data.l_load, data.l_roads)))
+        loads.append(data.l_load)
     if data.p_omega is not None:
         pm = model.profile_model
         ring_p = pm.ring(ring)
-        out.append(jnp.max(serial_map(
+        ext.append(serial_map(
             lambda a: extent(rolling_state(pm, ring_p, g, OperatingPoint(a[0], a[1], a[2]), model.solver)[0]),
-            (data.p_omega, data.p_load, data.p_roads))))
-    return jnp.max(jnp.stack(out))
+            (data.p_omega, data.p_load, data.p_roads)))
+        loads.append(data.p_load)
+    return jnp.concatenate(ext), jnp.concatenate(loads)
 
 
 def posterior_solver(model: "JointResiduals", theta, data: "JointArrays") -> ContactSolver:
-    """The contact solver of identify's posterior (docs/physics.md §12.3): the fit's, its window narrowed to
-    :data:`POSTERIOR_WINDOW_MARGIN` times the widest patch at θ plus two grid steps, strict (a walker whose patch
-    reaches the narrowed edge has density 0, never a clipped patch) and without the derivative's extra solve
-    (``differentiable=False``: the sampler never differentiates). The dense bordered solves cost ∝ K³ in the
-    window's K points, so the posterior's density costs about half (docs/physics.md §12.5). The fit's solver
-    itself where the narrowed window would not be narrower, or across states."""
+    """The contact solver of identify's posterior (docs/physics.md §12.3, §12.5), from the patches at θ: the fit's,
+    its window narrowed to :data:`POSTERIOR_WINDOW_MARGIN` times the widest patch plus two grid steps, strict (a
+    walker whose patch reaches the narrowed edge has density 0, never a clipped patch), without the derivative's
+    extra solve (``differentiable=False``: the sampler never differentiates), and each active set started at
+    the patch the conditions have at θ (``start_compliance``: the mean of (R+τ)(1 − cos a)/Fz over the
+    conditions, a their patch extents). The dense bordered solves cost ∝ K³ in the window's K points, times
+    the iterations. The fit's solver itself where the narrowed window would not be narrower, or across states."""
     solver = model.solver
     if model.across or (data.l_n is None and data.p_omega is None):
         return solver
+    ext, loads = (np.asarray(a, dtype=np.float64) for a in contact_extents(model, jnp.asarray(theta), data))
     step = 360.0 / solver.n_grid
-    half = POSTERIOR_WINDOW_MARGIN * math.degrees(float(contact_extent(model, jnp.asarray(theta), data))) + 2 * step
-    if not half < solver.window_deg - step:
+    half = POSTERIOR_WINDOW_MARGIN * math.degrees(float(np.max(ext))) + 2 * step
+    if not (half < solver.window_deg - step and np.all(ext > 0) and np.all(loads > 0)):
         return solver
+    compliance = float(np.mean(float(data.geometry.outer_radius) * (1.0 - np.cos(ext)) / loads))
     return ContactSolver(n_grid=solver.n_grid, window_deg=half, max_iter=solver.max_iter, strict_window=True,
-                         differentiable=False)
+                         differentiable=False, start_compliance=compliance)
 
 
 def serial_map(f, xs):

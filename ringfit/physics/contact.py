@@ -66,6 +66,9 @@ class ContactSolver(eqx.Module):
       the iteration's last solve is the answer (the same to rounding: the set repeated and H settled to 1e-9),
       one dense solve fewer of the 3–6, but **no derivative** (every parameter's is 0). For evaluations that
       are never differentiated (a sampler's log density, docs/physics.md §12.1).
+    - ``start_compliance`` [m/N]: start the active set from the deflection Fz × this (0: the fixed
+      :data:`INITIAL_DEFLECTION`); a value read off a solution near by (identify's posterior) starts the set at
+      about its answer, two iterations instead of four or five. The answer is the same; only the path differs.
     """
 
     n_grid: int = eqx.field(static=True, default=DEFAULT_GRID)
@@ -73,6 +76,7 @@ class ContactSolver(eqx.Module):
     max_iter: int = eqx.field(static=True, default=30)
     strict_window: bool = eqx.field(static=True, default=False)
     differentiable: bool = eqx.field(static=True, default=True)
+    start_compliance: float = eqx.field(static=True, default=0.0)
 
     def grid(self):
         """φ_j = −π + 2πj/M [rad], shape ``(M,)``: the profile grid :func:`~ringfit.io.profiles.grid_angles_deg` in radians."""
@@ -211,7 +215,7 @@ def solve_rolling(
     # --- active-set iteration on stopped gradients --------------------------------
     sg = jax.lax.stop_gradient
     fixed = (sg(ckk), phi_k, sg(w_ext_k), sg(k), sg(outer), sg(load), sg(R), dphi, sg(road))
-    h_init = sg(outer) - INITIAL_DEFLECTION
+    h_init = sg(outer) - (INITIAL_DEFLECTION if solver.start_compliance <= 0 else solver.start_compliance * sg(load))
     mask0 = jnp.abs(phi_k) < jnp.arccos(jnp.clip(h_init / sg(outer), -1.0, 1.0))
 
     def penetration_k(p, h, args):
