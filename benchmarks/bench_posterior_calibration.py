@@ -31,12 +31,16 @@ Run: python benchmarks/bench_posterior_calibration.py [--n 200] [--noise both] [
    posterior intervals of every ring parameter, pooled over cases, with Clopper–Pearson bounds. Posteriors
    that did not reach 50 τ are counted and left out of both.
 
-   The cost, measured on case 100 (12 free parameters, a shared 2-core machine): the case 15 s of CPU, the
-   identification 29 s, and then the posterior ~9 ms of CPU per evaluation of the joint density (a model with
-   contact solves for the loaded tables and the profiles, evaluated serially over the walkers:
-   ``JointResiduals.serial_batches``; not broken down further),
-   i.e. 53 s of CPU per 250 steps of 24 walkers; τ ≈ 60–150 steps asks for 3,000–7,500 steps, 10–25 minutes
-   of CPU per case. The default is 0 cases; 20 cases are a few hours of one core.
+   Each case's record can be appended to a file as it finishes (``--identify-log``), so a run cut short, or
+   several runs over disjoint cases (``--identify-first``), are summarised together (``--identify-summary``).
+
+   The cost, measured on case 100 (12 free parameters, a shared 2-core machine): the case ~15 s of CPU, the
+   identification ~25 s, compilation ~30 s, then the posterior. Its density is the contact solves (5 per
+   evaluation, dense LU of the contact window's points): with the fit's solver 4.7–8.2 ms of CPU per evaluation
+   (the spread is the machine's load), with the posterior's (``Identification.posterior_fit``: the window
+   narrowed to the patches, no derivative step, the active sets started at the optimum's; docs/physics.md
+   §12.3) 2.9–3.7 ms, the same density to 1e-10. τ ≈ 60–150 steps of 24 walkers asks for 3,000–7,500 steps:
+   3–8 minutes of CPU per case. The default is 0 cases.
 
 CPU time beside wall time; the load average at the start and end.
 """
@@ -163,8 +167,9 @@ def identify_case(i: int, seed: int, sampler: str, max_steps: int, rng, folder: 
             out["message"] = str(ident.fit.message)
             return out
         k = len(ident.fit.names)
-        post = sample(ident.posterior_fit(), sampler=sampler, walkers=2 * k, min_steps=min(500, max_steps), max_steps=max_steps,
-                      check_every=250, seed=i, progress=False, spread=0.25, **ident.posterior_likelihood())
+        post = sample(ident.posterior_fit(), sampler=sampler, walkers=2 * k, min_steps=min(500, max_steps),
+                      max_steps=max_steps, check_every=250, seed=i, progress=False, spread=0.25,
+                      **ident.posterior_likelihood())
     out.update(posterior_converged=bool(post.converged), steps=int(post.steps), tau_max=float(np.max(post.tau)),
                walkers=2 * k, wall_s=clock.wall, cpu_s=clock.cpu)
     if not post.converged:
@@ -229,14 +234,15 @@ def coverage_identify(n: int, sampler: str, seed0: int = 100, max_steps: int = 5
                 with open(log, "a") as fh:
                     fh.write(json.dumps(r) + "\n")
             if not r["fit_converged"]:
-                print(f"   case {i} (seed {seed0 + i}): the joint fit did not converge ({r['message']}); left out", flush=True)
+                print(f"   case {i} (seed {seed0 + i}): the joint fit did not converge ({r['message']}); left out",
+                      flush=True)
             elif not r["posterior_converged"]:
-                print(f"   case {i} (seed {seed0 + i}): posterior not converged ({r['steps']} steps, τ max {r['tau_max']:.0f}); "
-                      f"left out", flush=True)
+                print(f"   case {i} (seed {seed0 + i}): posterior not converged ({r['steps']} steps, "
+                      f"τ max {r['tau_max']:.0f}); left out", flush=True)
             else:
                 case = ", ".join(f"{k} {'in' if q['cover']['0.95'] else 'OUT'}" for k, q in r["params"].items())
-                print(f"   case {i} (seed {seed0 + i}): {r['steps']} steps, τ max {r['tau_max']:.0f}, {r['cpu_s']:.0f} s CPU; "
-                      f"95 %: {case}", flush=True)
+                print(f"   case {i} (seed {seed0 + i}): {r['steps']} steps, τ max {r['tau_max']:.0f}, "
+                      f"{r['cpu_s']:.0f} s CPU; 95 %: {case}", flush=True)
     return identify_summary(records, sampler, clock.wall, clock.cpu)
 
 
@@ -245,7 +251,7 @@ def main(argv=None):
     ap.add_argument("--n", type=bc.count("a number of tyres", 0, 100_000), default=200,
                     help="synthetic tyres for `sample` (default 200; 0: part 1 skipped)")
     ap.add_argument("--n-identify", type=bc.count("a number of cases", 0, 10_000, ), default=0,
-                    help="joint cases for `identify --posterior` (default 0; 10–25 minutes of CPU each, see 2.)")
+                    help="joint cases for `identify --posterior` (default 0; 3–8 minutes of CPU each, see 2.)")
     ap.add_argument("--identify-max-steps", type=bc.count("a number of steps", 100, 10**6), default=5000,
                     help="posterior steps at most per joint case (default 5000, `identify`'s)")
     ap.add_argument("--sampler", choices=("compiled", "emcee"), default="compiled")
