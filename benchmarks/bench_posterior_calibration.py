@@ -31,16 +31,21 @@ Run: python benchmarks/bench_posterior_calibration.py [--n 200] [--noise both] [
    posterior intervals of every ring parameter, pooled over cases, with Clopper–Pearson bounds. Posteriors
    that did not reach 50 τ are counted and left out of both.
 
-   The cost, measured on case 100 (12 free parameters, a shared 2-core machine): the case 15 s of CPU, the
-   identification 29 s, and then the posterior ~9 ms of CPU per evaluation of the joint density (a model with
-   contact solves for the loaded tables and the profiles, evaluated serially over the walkers:
-   ``JointResiduals.serial_batches``; not broken down further),
-   i.e. 53 s of CPU per 250 steps of 24 walkers; τ ≈ 60–150 steps asks for 3,000–7,500 steps, 10–25 minutes
-   of CPU per case. The default is 0 cases; 20 cases are a few hours of one core.
+   Each case's record can be appended to a file as it finishes (``--identify-log``), so a run cut short, or
+   several runs over disjoint cases (``--identify-first``), are summarised together (``--identify-summary``).
+
+   The cost, measured on case 100 (12 free parameters, a shared 2-core machine): the case ~15 s of CPU, the
+   identification ~25 s, compilation ~30 s, then the posterior. Its density is the contact solves (5 per
+   evaluation, dense LU of the contact window's points): with the fit's solver 4.7–8.2 ms of CPU per evaluation
+   (the spread is the machine's load), with the posterior's (``Identification.posterior_fit``: the window
+   narrowed to the patches, no derivative step, the active sets started at the optimum's; docs/physics.md
+   §12.3) 2.9–3.7 ms, the same density to 1e-10. τ ≈ 60–150 steps of 24 walkers asks for 3,000–7,500 steps:
+   3–8 minutes of CPU per case. The default is 0 cases.
 
 CPU time beside wall time; the load average at the start and end.
 """
 
+import json
 import math
 import sys
 import tempfile
@@ -75,11 +80,16 @@ def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
 
 
 def rank_draws(post, rng) -> np.ndarray:
-    """``(L, k)`` effectively independent draws: thinned to one per τ after burn-in, L chosen evenly at random."""
+    """``(L, k)`` effectively independent draws: thinned to one per τ after burn-in, L chosen evenly at random;
+    with a systematic direction (identify's grid check, ``post.shift_u``) each moved by ε δu, ε ~ N(0, 1), as the
+    draws the intervals are read from (:attr:`~ringfit.fit.posterior.Posterior.log_samples`)."""
     step = max(1, int(math.ceil(np.max(post.tau))))
     u = post.chain[post.burn :: step].reshape(-1, len(post.names))
     pick = rng.choice(u.shape[0], RANK_DRAWS, replace=u.shape[0] < RANK_DRAWS)
-    return u[pick]
+    u = u[pick]
+    if post.shift_u is not None and np.any(post.shift_u != 0):
+        u = u + rng.standard_normal(u.shape[0])[:, None] * np.asarray(post.shift_u)[None, :]
+    return u
 
 
 def coverage_line(label, hits, n) -> tuple[str, bool]:
@@ -148,72 +158,113 @@ def sbc_sample(n: int, sampler: str, seed: int = 0, noise: str = "fixed") -> tup
     return lines, ok_bonf
 
 
-def coverage_identify(n: int, sampler: str, seed0: int = 100, max_steps: int = 5000) -> tuple[list[str], bool]:
+def identify_case(i: int, seed: int, sampler: str, max_steps: int, rng, folder: Path) -> dict:
+    """One joint case: made, identified and sampled as `identify --posterior` does; per ring parameter the truth's
+    rank among :data:`RANK_DRAWS` draws and whether each central interval of :data:`LEVELS` covers it."""
     from ringfit.fit.identify import identify, read_identify_folder
     from ringfit.synth.identify import make_identify_case
 
-    rng = np.random.default_rng(seed0)
-    hits, count, skipped, unconverged = {lv: 0 for lv in LEVELS}, 0, 0, 0
-    per_param, ranks = {}, {}
-    with bc.Clock() as clock, tempfile.TemporaryDirectory() as d:
-        for i in range(n):
-            folder = Path(d) / f"c{i}"
-            truth = make_identify_case(folder, seed=seed0 + i)
-            ident = identify(read_identify_folder(folder))
-            if not ident.converged:
-                skipped += 1
-                print(f"   case {i + 1}/{n}: the joint fit did not converge ({ident.fit.message}); left out", flush=True)
-                continue
-            k = len(ident.fit.names)
-            post = sample(ident.fit, sampler=sampler, walkers=2 * k, min_steps=min(500, max_steps), max_steps=max_steps,
-                          check_every=250, seed=i, progress=False, spread=0.25, **ident.posterior_likelihood())
-            if not post.converged:
-                unconverged += 1
-                print(f"   case {i + 1}/{n}: posterior not converged ({post.steps} steps, τ max "
-                      f"{np.max(post.tau):.0f}); left out", flush=True)
-                continue
-            s = post.log_samples
-            draws = rank_draws(post, rng)
-            ring_truth = truth["ring"] if "ring" in truth else truth
-            case = []
-            for j, name in enumerate(post.names):
-                if name not in ident.free or name not in ring_truth:
-                    continue
-                t = math.log(float(ring_truth[name]))
-                count += 1
-                ranks.setdefault(name, []).append(int(np.sum(draws[:, j] < t)))
-                for lv in LEVELS:
-                    lo, hi = np.percentile(s[:, j], [50 * (1 - lv), 50 * (1 + lv)])
-                    inside = lo <= t <= hi
-                    hits[lv] += inside
-                    per_param.setdefault(name, {x: 0 for x in LEVELS})
-                    per_param[name][lv] += inside
-                lo, hi = np.percentile(s[:, j], [2.5, 97.5])
-                case.append(f"{name} {'in' if lo <= t <= hi else 'OUT'}")
-            print(f"   case {i + 1}/{n}: {post.steps} steps, τ max {np.max(post.tau):.0f}; 95 %: {', '.join(case)}",
-                  flush=True)
-    used = n - skipped - unconverged
+    with bc.Clock() as clock:
+        truth = make_identify_case(folder, seed=seed)
+        ident = identify(read_identify_folder(folder))
+        out = dict(case=i, seed=seed, fit_converged=bool(ident.converged), params={})
+        if not ident.converged:
+            out["message"] = str(ident.fit.message)
+            return out
+        k = len(ident.fit.names)
+        post = sample(ident.posterior_fit(), sampler=sampler, walkers=2 * k, min_steps=min(500, max_steps),
+                      max_steps=max_steps, check_every=250, seed=i, progress=False, spread=0.25,
+                      **ident.posterior_likelihood())
+    out.update(posterior_converged=bool(post.converged), steps=int(post.steps), tau_max=float(np.max(post.tau)),
+               walkers=2 * k, wall_s=clock.wall, cpu_s=clock.cpu)
+    s = post.log_samples
+    draws = rank_draws(post, rng)
+    ring_truth = truth["ring"] if "ring" in truth else truth
+    for j, name in enumerate(post.names):
+        if name not in ident.free or name not in ring_truth:
+            continue
+        t = math.log(float(ring_truth[name]))
+        cover = {}
+        for lv in LEVELS:
+            lo, hi = np.percentile(s[:, j], [50 * (1 - lv), 50 * (1 + lv)])
+            cover[str(lv)] = bool(lo <= t <= hi)
+        out["params"][name] = dict(rank=int(np.sum(draws[:, j] < t)), cover=cover)
+    return out
+
+
+def identify_summary(records: list[dict], sampler: str, wall: float, cpu: float,
+                     min_tau: float | None = None) -> tuple[list[str], bool]:
+    """Coverage (pooled and per parameter, Clopper–Pearson) and rank χ² per parameter of the cases' records: those
+    whose chain reached 50 τ (the sampler's own criterion), or ``min_tau`` τ when given."""
+    n = len(records)
+
+    def long_enough(r):
+        if min_tau is None:
+            return r["posterior_converged"]
+        return bool(r["params"]) and r["steps"] >= min_tau * r["tau_max"]
+
+    skipped = sum(not r["fit_converged"] for r in records)
+    unconverged = sum(r["fit_converged"] and not long_enough(r) for r in records)
+    used = [r for r in records if r["fit_converged"] and long_enough(r)]
+    hits, count, per_param, ranks = {lv: 0 for lv in LEVELS}, 0, {}, {}
+    for r in used:
+        for name, q in r["params"].items():
+            count += 1
+            ranks.setdefault(name, []).append(q["rank"])
+            per_param.setdefault(name, {lv: 0 for lv in LEVELS})
+            for lv in LEVELS:
+                hits[lv] += q["cover"][str(lv)]
+                per_param[name][lv] += q["cover"][str(lv)]
     line, ok = coverage_line("all ring", hits, count) if count else ("   no converged case: no coverage", False)
+    tau = "50 τ" if min_tau is None else f"{min_tau:g} τ"
     lines = [f"2. `identify --posterior` ({sampler}): {n} joint cases (free + loaded + profiles), {skipped} fit(s) "
-             f"and {unconverged} posterior(s) not converged (left out), {count} parameter intervals from {used} "
-             f"case(s); {clock.wall:.0f} s wall, {clock.cpu:.0f} s CPU", line]
+             f"not converged and {unconverged} posterior(s) shorter than {tau} (left out), {count} parameter "
+             f"intervals from {len(used)} case(s); {wall:.0f} s wall, {cpu:.0f} s CPU", line]
     for name, r in ranks.items():
         r = np.asarray(r)
         counts = np.histogram(r, bins=5, range=(0, RANK_DRAWS + 1))[0]
         p = float(stats.chisquare(counts).pvalue) if len(r) >= 5 else math.nan
         cov, ok_p = coverage_line(name, per_param[name], len(r))
-        ok &= ok_p and not p <= 0.05 / len(ranks)
-        lines.append(f"   {name:14s} rank χ² (5 bins) p = {p:.3f}; bins {counts.tolist()}")
+        ok &= ok_p and p > 0.05 / len(ranks)  # fewer than 5 ranks: no test, no pass
+        lines.append(f"   {name:14s} rank χ² (5 bins) p = {p:.3f}{' (too few cases)' if len(r) < 5 else ''}; "
+                     f"bins {counts.tolist()}")
         lines.append(cov)
     return lines, ok
 
 
+def coverage_identify(n: int, sampler: str, seed0: int = 100, max_steps: int = 5000,
+                      log: Path | None = None, first: int = 0) -> tuple[list[str], bool]:
+    """``n`` joint cases (:func:`identify_case`; case i has seed ``seed0 + i``, i = ``first`` …), one line each as
+    it finishes; ``log``: each case's record appended as one JSON line (a run cut short, or several runs over
+    disjoint cases, are summarised with ``--identify-summary``)."""
+    rng = np.random.default_rng(seed0 + first)
+    records = []
+    with bc.Clock() as clock, tempfile.TemporaryDirectory() as d:
+        for i in range(first, first + n):
+            r = identify_case(i, seed0 + i, sampler, max_steps, rng, Path(d) / f"c{i}")
+            records.append(r)
+            if log is not None:
+                with open(log, "a") as fh:
+                    fh.write(json.dumps(r) + "\n")
+            if not r["fit_converged"]:
+                print(f"   case {i} (seed {seed0 + i}): the joint fit did not converge ({r['message']}); left out",
+                      flush=True)
+            else:
+                if not r["posterior_converged"]:
+                    print(f"   case {i} (seed {seed0 + i}): posterior not converged ({r['steps']} steps, τ max "
+                          f"{r['tau_max']:.0f}, {r['steps'] / r['tau_max']:.0f} τ); left out at 50 τ", flush=True)
+                case = ", ".join(f"{k} {'in' if q['cover']['0.95'] else 'OUT'}" for k, q in r["params"].items())
+                print(f"   case {i} (seed {seed0 + i}): {r['steps']} steps, τ max {r['tau_max']:.0f}, "
+                      f"{r['cpu_s']:.0f} s CPU; 95 %: {case}", flush=True)
+    return identify_summary(records, sampler, clock.wall, clock.cpu)
+
+
 def main(argv=None):
     ap = bc.parser(__doc__.splitlines()[0], quick_help="20 tyres, no identify cases (a smoke run)")
-    ap.add_argument("--n", type=bc.count("a number of tyres", 1, 100_000), default=200,
-                    help="synthetic tyres for `sample` (default 200)")
+    ap.add_argument("--n", type=bc.count("a number of tyres", 0, 100_000), default=200,
+                    help="synthetic tyres for `sample` (default 200; 0: part 1 skipped)")
     ap.add_argument("--n-identify", type=bc.count("a number of cases", 0, 10_000, ), default=0,
-                    help="joint cases for `identify --posterior` (default 0; 10–25 minutes of CPU each, see 2.)")
+                    help="joint cases for `identify --posterior` (default 0; 3–8 minutes of CPU each, see 2.)")
     ap.add_argument("--identify-max-steps", type=bc.count("a number of steps", 100, 10**6), default=5000,
                     help="posterior steps at most per joint case (default 5000, `identify`'s)")
     ap.add_argument("--sampler", choices=("compiled", "emcee"), default="compiled")
@@ -222,17 +273,41 @@ def main(argv=None):
                          "estimated scale (`ringfit sample`'s default), or both (default)")
     ap.add_argument("--seed", type=bc.count("a whole number >= 0", 0, 2**31), default=0,
                     help="seed of the synthetic tyres (default 0)")
+    ap.add_argument("--identify-first", type=bc.count("a case index >= 0", 0, 10**6), default=0,
+                    help="index of the first joint case (its seed: 100 + 1000 × seed + index; default 0)")
+    ap.add_argument("--identify-log", type=Path, default=None,
+                    help="append each joint case's record (ranks, coverage) to this file as one JSON line")
+    ap.add_argument("--identify-summary", type=Path, default=None,
+                    help="summarise the records of an --identify-log file (a partial run included) and stop")
+    ap.add_argument("--identify-min-tau", type=float, default=None,
+                    help="with --identify-summary: count chains at least this many τ long (default: the sampler's "
+                         "50 τ)")
     args = ap.parse_args(argv)
+    if args.identify_summary is not None:
+        try:
+            records = [json.loads(line) for line in args.identify_summary.read_text().splitlines() if line.strip()]
+        except (OSError, ValueError) as e:
+            print(f"error: {args.identify_summary}: expected an --identify-log file of JSON lines ({e})",
+                  file=sys.stderr)
+            sys.exit(2)
+        more, ok2 = identify_summary(records, args.sampler, sum(r.get("wall_s", 0.0) for r in records),
+                                     sum(r.get("cpu_s", 0.0) for r in records), min_tau=args.identify_min_tau)
+        for line in more:
+            print(line, flush=True)
+        print(f"   verdict (every coverage inside its Clopper–Pearson interval, every rank p > 0.05 / the parameters; "
+              f"at least one converged case): {'PASS' if ok2 else 'FAIL'}", flush=True)
+        return
     n = 20 if args.quick else args.n
     bc.start(f"bench_posterior_calibration: {n} tyres for sample, {args.n_identify} joint cases for identify"
              + (" [--quick]" if args.quick else ""))
-    for noise in (("fixed", "estimated") if args.noise == "both" else (args.noise,)):
+    for noise in (("fixed", "estimated") if args.noise == "both" and n else (args.noise,) if n else ()):
         lines, ok = sbc_sample(n, args.sampler, seed=args.seed, noise=noise)
         for line in lines:
             print(line, flush=True)
     if args.n_identify:
         more, ok2 = coverage_identify(args.n_identify, args.sampler, seed0=100 + 1000 * args.seed,
-                                      max_steps=args.identify_max_steps)
+                                      max_steps=args.identify_max_steps, log=args.identify_log,
+                                      first=args.identify_first)
         for line in more:
             print(line, flush=True)
         print(f"   verdict (every coverage inside its Clopper–Pearson interval, every rank p > 0.05 / the parameters; "

@@ -142,6 +142,42 @@ def test_the_joint_programs_hold_no_batched_lapack_call():
     assert batched_lapack_calls(logp) == []
 
 
+@pytest.mark.slow
+def test_the_posterior_window_gives_the_fits_density_and_refuses_a_clipped_patch():
+    """identify's posterior solves the contacts on a window narrowed to the patches at the optimum, strict and
+    without the derivative step (docs/physics.md §12.3, §12.5): its log density equals the fit window's to
+    rounding at random points around θ, and is −inf (not a clipped patch) where a much softer tread widens the
+    patch past the narrowed edge. The patch's extent checked against a standing solve written here."""
+    import dataclasses
+
+    from ringfit.fit import engine
+    from ringfit.fit import identify as im
+    from ringfit.physics.contact import solve_rolling_jit
+    from ringfit.physics.operating import OperatingPoint
+
+    problem, theta, free = _small_joint_problem()
+    wide_solver = problem.model.solver
+    solver = im.posterior_solver(problem.model, theta, problem.data)
+    assert solver.strict_window and not solver.differentiable and solver.n_grid == wide_solver.n_grid
+    ring = im.ring_from_vector(jnp.asarray(theta))
+    sol = solve_rolling_jit(ring, problem.data.geometry, OperatingPoint(0.0, 5000.0), solver=wide_solver)
+    phi = np.degrees(np.asarray(sol.phi))[np.asarray(sol.pressure) > 0]
+    extent = max(-phi.min(), phi.max())  # the 5 kN standing patch, the widest of the problem's conditions
+    assert im.POSTERIOR_WINDOW_MARGIN * extent <= solver.window_deg < 0.8 * wide_solver.window_deg
+    narrow = engine.Problem(dataclasses.replace(problem.model, solver=solver), problem.data, problem.coords)
+    u0 = np.array([problem.coordinate(n).to_u(theta[problem.names.index(n)]) for n in free])
+    u = u0 + 0.02 * np.random.default_rng(5).standard_normal((6, len(free)))
+    j = free.index("k_tread")
+    u[-1, j] = u0[j] - 2.5  # k_tread / 12: a deflection and a patch far past the narrowed window
+    kw, cw = engine.log_density(problem, theta, free)
+    kn, cn = engine.log_density(narrow, theta, free)
+    lw = np.asarray(engine._batched_log_probability(jnp.asarray(u), cw, kernel=kw))
+    ln = np.asarray(engine._batched_log_probability(jnp.asarray(u), cn, kernel=kn))
+    assert np.all(np.isfinite(lw)) and np.all(np.isfinite(ln[:-1]))
+    np.testing.assert_allclose(ln[:-1], lw[:-1], rtol=1e-11)
+    assert ln[-1] == -np.inf
+
+
 @pytest.fixture(scope="module")
 def joint_case(tmp_path_factory):
     folder = tmp_path_factory.mktemp("joint") / "case"
@@ -464,8 +500,8 @@ def test_posterior_samples_the_noise_model_of_the_intervals(tmp_path):
         assert np.allclose(like["row_scale"][sl], b["t_widening"] * math.sqrt(1.0 + b["discrepancy"]), rtol=1e-12)
     assert any(b["t_widening"] > 1.05 for b in ident.blocks.values())  # the case exercises the widening
     k = len(ident.fit.names)
-    post = sample(ident.fit, walkers=2 * k, chains=2, min_steps=1000, max_steps=1000, check_every=500, seed=2,
-                  progress=False, spread=0.25, **like)
+    post = sample(ident.posterior_fit(), walkers=2 * k, chains=2, min_steps=1000, max_steps=1000, check_every=500,
+                  seed=2, progress=False, spread=0.25, **like)
     ess = dict(zip(post.names, post.ess()))
     lsq = ident.parameters()
     for row in post.summary_table(0.95):

@@ -89,7 +89,7 @@ def run_identify(args) -> int:
         if walkers < 2 * k or walkers % 2:
             raise InputError(f"--walkers {walkers}: the stretch move needs an even number of at least {2 * k} "
                              f"(2 × {k} free parameters)")
-        posterior = sample(ident.fit, walkers=walkers, min_steps=args.min_steps, max_steps=args.max_steps,
+        posterior = sample(ident.posterior_fit(), walkers=walkers, min_steps=args.min_steps, max_steps=args.max_steps,
                            check_every=max(100, args.min_steps // 2), seed=args.seed, progress=not args.quiet,
                            spread=0.25, meta={"model": "identify", "folder": str(folder)}, sampler=args.sampler,
                            chains=args.chains, **ident.posterior_likelihood())

@@ -167,7 +167,9 @@ class AbstractResiduals(eqx.Module):
     ``serial_batches`` (class attribute): evaluate batches of parameter vectors (:func:`residuals_batch`,
     :func:`sum_of_squares_batch`, :func:`log_probability`) one vector after another instead of vmapped — for
     models with several independent LAPACK-backed solves, whose batched calls can hang XLA's CPU thread pool
-    (:func:`ringfit.fit.identify.serial_map`).
+    (:func:`ringfit.fit.identify.serial_map`). Serial costs nothing there: jaxlib's batched LAPACK kernels loop
+    over the batch either way, and such a model's evaluation is its solves (docs/physics.md §12.3: identify's
+    joint density, 3.0–3.7 ms per evaluation vmapped or serial after its posterior's narrowed contact window).
 
     ``compile_quick`` (class attribute, or a static field where it depends on the instance): a small model
     whose fits cost microseconds but whose solve, compiled in a cold process, costs seconds — its

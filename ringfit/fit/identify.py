@@ -51,6 +51,7 @@ parameters.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import warnings
@@ -83,7 +84,8 @@ from ringfit.physics.contact import ContactSolver, as_traced, patch_edges, solve
 from ringfit.physics.loaded import loaded_natural_frequencies
 from ringfit.physics.natural import natural_frequencies
 from ringfit.physics.operating import OperatingPoint
-from ringfit.physics.profile import FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels
+from ringfit.physics.profile import (FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels,
+                                     rolling_state)
 from ringfit.physics.state import TyreState, state_solution, state_tyre
 
 #: Relative σ of a damping ratio row before its block scale is estimated.
@@ -288,6 +290,61 @@ def standing_half_angle(ring: RingParams, geometry: TyreGeometry, load, road, so
     sol = solve_rolling(ring, geometry, OperatingPoint(0.0, load, road), solver=solver)
     lead, trail = patch_edges(sol)
     return 0.5 * (trail - lead)
+
+
+#: The posterior's contact window (docs/physics.md §12.3): this many times the widest patch's half-extent at the
+#: optimum (and two grid steps more), when that is narrower than the fit's window.
+POSTERIOR_WINDOW_MARGIN = 1.5
+
+
+@eqx.filter_jit
+def contact_extents(model: "JointResiduals", theta, data: "JointArrays"):
+    """``(extent (E,) [rad], load (E,) [N])`` over every contact solve of the joint model at θ (the loaded tables'
+    standing solves, then the profiles' rolling ones; docs/physics.md §4.4): the largest |φ| of a loaded grid
+    point, and the condition's load; one condition after another (:func:`serial_map`). Not for a model across
+    states (its solves are the state solution's)."""
+    ring = ring_from_vector(theta)
+    g = data.geometry
+    phi = model.solver.grid()
+
+    def extent(sol):
+        return jnp.max(jnp.where(sol.pressure > 0.0, jnp.abs(phi), 0.0))
+
+    ext, loads = [], []
+    if data.l_n is not None:
+        ext.append(serial_map(
+            lambda a: extent(solve_rolling(ring, g, OperatingPoint(0.0, a[0], a[1]), solver=model.solver)),
+            (data.l_load, data.l_roads)))
+        loads.append(data.l_load)
+    if data.p_omega is not None:
+        pm = model.profile_model
+        ring_p = pm.ring(ring)
+        ext.append(serial_map(
+            lambda a: extent(rolling_state(pm, ring_p, g, OperatingPoint(a[0], a[1], a[2]), model.solver)[0]),
+            (data.p_omega, data.p_load, data.p_roads)))
+        loads.append(data.p_load)
+    return jnp.concatenate(ext), jnp.concatenate(loads)
+
+
+def posterior_solver(model: "JointResiduals", theta, data: "JointArrays") -> ContactSolver:
+    """The contact solver of identify's posterior (docs/physics.md §12.3, §12.5), from the patches at θ: the fit's,
+    its window narrowed to :data:`POSTERIOR_WINDOW_MARGIN` times the widest patch plus two grid steps, strict (a
+    walker whose patch reaches the narrowed edge has density 0, never a clipped patch), without the derivative's
+    extra solve (``differentiable=False``: the sampler never differentiates), and each active set started at
+    the patch the conditions have at θ (``start_compliance``: the mean of (R+τ)(1 − cos a)/Fz over the
+    conditions, a their patch extents). The dense bordered solves cost ∝ K³ in the window's K points, times
+    the iterations. The fit's solver itself where the narrowed window would not be narrower, or across states."""
+    solver = model.solver
+    if model.across or (data.l_n is None and data.p_omega is None):
+        return solver
+    ext, loads = (np.asarray(a, dtype=np.float64) for a in contact_extents(model, jnp.asarray(theta), data))
+    step = 360.0 / solver.n_grid
+    half = POSTERIOR_WINDOW_MARGIN * math.degrees(float(np.max(ext))) + 2 * step
+    if not (half < solver.window_deg - step and np.all(ext > 0) and np.all(loads > 0)):
+        return solver
+    compliance = float(np.mean(float(data.geometry.outer_radius) * (1.0 - np.cos(ext)) / loads))
+    return ContactSolver(n_grid=solver.n_grid, window_deg=half, max_iter=solver.max_iter, strict_window=True,
+                         differentiable=False, start_compliance=compliance)
 
 
 def serial_map(f, xs):
@@ -771,6 +828,17 @@ class Identification:
         (docs/physics.md §12.3): ``row_scale`` (the t-widening and discrepancy per row) and ``shift_u`` (the grid
         check's systematic direction, convolved into the draws)."""
         return dict(row_scale=self.row_scale, shift_u=self.shift_u, tables=self.tables)
+
+    def posterior_fit(self) -> FitResult:
+        """The fit whose posterior `identify --posterior` samples: :attr:`fit` with its joint model's contact window
+        narrowed to the patches at the optimum (:func:`posterior_solver`; the same density to rounding wherever
+        it is not 0, at about half the cost)."""
+        model, data = self.fit.problem.model, self.fit.problem.data
+        solver = posterior_solver(model, self.fit.theta, data)
+        if solver is model.solver:
+            return self.fit
+        problem = dataclasses.replace(self.fit.problem, model=dataclasses.replace(model, solver=solver))
+        return dataclasses.replace(self.fit, problem=problem)
 
     @property
     def converged(self) -> bool:

@@ -58,11 +58,25 @@ class ContactSolver(eqx.Module):
     - ``window_deg``: half-width of the candidate window around φ = 0 [deg];
       the patch must lie strictly inside (checked: ``RollingSolution.window_ok``).
     - ``max_iter``: cap on active-set iterations (2–4 are typical).
+    - ``strict_window``: a solution whose patch reaches the window's edge (``window_ok`` false) is NaN (axle
+      height, pressure, displacements) instead of the window-clipped one — for a window narrowed to the patches
+      a problem has (identify's posterior, docs/physics.md §12.3), where a clipped patch would be a wrong
+      answer; NaN makes a log density −inf there.
+    - ``differentiable``: False skips step 3 (the solve at the frozen set, whose only purpose is the derivative):
+      the iteration's last solve is the answer (the same to rounding: the set repeated and H settled to 1e-9),
+      one dense solve fewer of the 3–6, but **no derivative** (every parameter's is 0). For evaluations that
+      are never differentiated (a sampler's log density, docs/physics.md §12.1).
+    - ``start_compliance`` [m/N]: start the active set from the deflection Fz × this (0: the fixed
+      :data:`INITIAL_DEFLECTION`); a value read off a solution near by (identify's posterior) starts the set at
+      about its answer, two iterations instead of four or five. The answer is the same; only the path differs.
     """
 
     n_grid: int = eqx.field(static=True, default=DEFAULT_GRID)
     window_deg: float = eqx.field(static=True, default=35.0)
     max_iter: int = eqx.field(static=True, default=30)
+    strict_window: bool = eqx.field(static=True, default=False)
+    differentiable: bool = eqx.field(static=True, default=True)
+    start_compliance: float = eqx.field(static=True, default=0.0)
 
     def grid(self):
         """φ_j = −π + 2πj/M [rad], shape ``(M,)``: the profile grid :func:`~ringfit.io.profiles.grid_angles_deg` in radians."""
@@ -201,7 +215,7 @@ def solve_rolling(
     # --- active-set iteration on stopped gradients --------------------------------
     sg = jax.lax.stop_gradient
     fixed = (sg(ckk), phi_k, sg(w_ext_k), sg(k), sg(outer), sg(load), sg(R), dphi, sg(road))
-    h_init = sg(outer) - INITIAL_DEFLECTION
+    h_init = sg(outer) - (INITIAL_DEFLECTION if solver.start_compliance <= 0 else solver.start_compliance * sg(load))
     mask0 = jnp.abs(phi_k) < jnp.arccos(jnp.clip(h_init / sg(outer), -1.0, 1.0))
 
     def penetration_k(p, h, args):
@@ -221,12 +235,18 @@ def solve_rolling(
         return (~state[4]) & (state[3] < solver.max_iter)
 
     p0 = jnp.zeros(K)
-    mask, h_conv, _, iters, done = jax.lax.while_loop(
+    mask, h_conv, p_conv, iters, done = jax.lax.while_loop(
         cond, body, (mask0, h_init, p0, jnp.asarray(0), jnp.asarray(False))
     )
 
     # --- differentiable solve at the frozen active set ----------------------------
-    p_k, H = _bordered_solve(mask, sg(h_conv), ckk, phi_k, w_ext_k, k, outer, load, R, dphi, road)
+    if solver.differentiable:
+        p_k, H = _bordered_solve(mask, sg(h_conv), ckk, phi_k, w_ext_k, k, outer, load, R, dphi, road)
+    else:  # the last iteration's solve (ContactSolver.differentiable)
+        p_k, H = p_conv, h_conv
+    window_ok = ~(mask[0] | mask[-1])
+    if solver.strict_window:  # a patch clipped by the window is no answer: NaN downstream (ContactSolver)
+        p_k, H = jnp.where(window_ok, p_k, jnp.nan), jnp.where(window_ok, H, jnp.nan)
     pressure = jnp.zeros(M).at[first : first + K].set(p_k)
     q_spec = jnp.fft.rfft(-pressure) + q_ext
     W, V = harmonic_response(G, q_spec, s_ext)
@@ -237,7 +257,6 @@ def solve_rolling(
     penetration = jnp.where(reach, outer + w - jnp.where(reach, s_full, 0.0), -jnp.inf)
     fx = -R * dphi * jnp.sum(pressure * jnp.sin(phi))
     fz = R * dphi * jnp.sum(pressure * jnp.cos(phi))
-    window_ok = ~(mask[0] | mask[-1])
     return RollingSolution(
         phi=phi, omega=omega, load=load, pressure=pressure, penetration=penetration, w=w, v=v,
         w_spectrum=W, v_spectrum=V, axle_height=H, outer_radius=outer, fx=fx, fz=fz,
