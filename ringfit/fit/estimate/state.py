@@ -926,8 +926,9 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
     averaged fit's covariance).
 
     ``rows`` ``(R, 4K)`` each revolution's radial and tangential harmonic rows (as :func:`profile_rows`);
-    ``rotation_hz`` ``(R,)`` from the encoder. The weights are each channel's smoothed spectrum of the
-    successive differences of revolutions (noise, blind to a state that changes slowly), and the noise scale
+    ``rotation_hz`` ``(R,)`` from the encoder. The weights are each channel's noise spectrum (:func:`channel_weights`, the
+    profile block's) of the successive differences of revolutions (noise, blind to a state that changes slowly), and
+    the noise scale
     s_r the whitened differences' RMS. **Returns:** :class:`StateRevolutions`.
     """
     fit = reference.fit
