@@ -84,7 +84,7 @@ def test_recovers_a_known_state_from_coloured_noise():
         assert Q[key]["status"] == "estimated"
     # each truth is inside its interval (above); and this profile tells each quantity to within (measured at stop 41,
     # the profile block's noise passes: σ load 1.05 %, pressure 1.19 %, Fx 0.44 % of Fz, depth 0.19 mm, speed
-    # 0.044 %; errors +1.06 %, +2.06 %, −0.0x % of Fz, +0.04 mm, all under 1.8 σ)
+    # 0.044 %; errors: load +1.06 %, pressure +2.06 %, depth +0.04 mm, each under 1.8 σ)
     assert Q["load_n"]["sd"] < 0.015 * 4500
     assert Q["pressure_bar"]["sd"] < 0.02 * 2.5
     assert Q["fx_n"]["sd"] < 0.01 * 4500
