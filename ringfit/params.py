@@ -127,7 +127,8 @@ class TyreLaws(eqx.Module):
     - ``tread_density``: ρ_t [kg/m³] of the tread rubber; ``land_ratio``: λ, the rubber share of the footprint.
     - ``k_x``: the tread's longitudinal (brush) stiffness per unit length [N/m²]; ``friction``: μ of the tips.
     - ``kw_share``, ``kv_share``, ``k_tread_share``: the pressure-proportional shares s of k_w, k_v, k_trd.
-    - ``tread_depth_new``: d_new [m], the new (unworn) tread's depth (the data sheet's; static, None = not stated):
+    - ``tread_depth_new``: d_new [m], the new (unworn) tread's depth (the data sheet's; None = not stated; traced
+      like the rest, so that tyre files differing only in it share one compilation):
       wear only removes tread, so the tread depth never exceeds it — the state estimate's bound on d
       (docs/physics.md §13.3–13.4).
 
@@ -144,7 +145,7 @@ class TyreLaws(eqx.Module):
     kw_share: float = 0.0
     kv_share: float = 0.0
     k_tread_share: float = 0.0
-    tread_depth_new: float | None = eqx.field(static=True, default=None)
+    tread_depth_new: float | None = None
     has_tread_depth: bool = eqx.field(static=True, default=False)
     has_brush: bool = eqx.field(static=True, default=False)
 

@@ -135,3 +135,20 @@ def test_the_cli_refuses_a_fixed_depth_deeper_than_the_new_tread(tmp_path, capsy
     assert "deeper than the tyre file's new tread (tread_depth_new_mm = 8)" in err
     assert len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_tyre_files_differing_only_in_the_new_tread_share_one_compilation():
+    """``TyreLaws.tread_depth_new`` is traced like the other laws (issue 31: no recompile per tyre file): a jitted
+    function of the laws traces once for three new-tread depths, and a second time only for a file without one
+    (another structure)."""
+    import equinox as eqx
+
+    from ringfit.physics.contact import as_traced
+
+    @eqx.filter_jit
+    @eqx.debug.assert_max_traces(max_traces=2)
+    def twice(laws):
+        return 2.0 * laws.tread_depth_ref
+
+    for d_new in (0.008, 0.009, 0.010, None, None):
+        twice(as_traced(TyreLaws(tread_depth_ref=0.007, has_tread_depth=True, tread_depth_new=d_new)))
