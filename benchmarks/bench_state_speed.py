@@ -44,6 +44,7 @@ def main() -> int:
     from ringfit.fit.estimate.state import estimate_state, state_revolutions
     from ringfit.io.continuous import ContinuousRecord
     from ringfit.params import TyreLaws, table9
+    from ringfit.physics.contact import ContactSolver
     from ringfit.physics.profile import ProfileModel
     from ringfit.physics.sensor import STANDARD_GRAVITY
     from ringfit.physics.state import TyreState, solve_state
@@ -54,8 +55,10 @@ def main() -> int:
                     has_brush=True)
     f_rot = 12.0
     om = 2 * math.pi * f_rot
+    # solved on 2048 angles: the model the estimate fits (the 4M model by defect correction, docs/physics.md §13.4)
     _, ch, q = solve_state(geo, ring, laws, TyreState(4200.0, 2.0e5, 0.005, -0.006, om),
-                           model=ProfileModel().with_sensor(gravity=STANDARD_GRAVITY, tilt_gain=0.8, corner_hz=0.5))
+                           model=ProfileModel().with_sensor(gravity=STANDARD_GRAVITY, tilt_gain=0.8, corner_hz=0.5),
+                           solver=ContactSolver(n_grid=2048))
     spec = np.fft.rfft(ch, axis=1) * 2 / ch.shape[1]
     fs = f_rot * 512
     t = np.arange(int(args.revolutions * fs / f_rot)) / fs
