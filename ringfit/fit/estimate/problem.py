@@ -70,7 +70,9 @@ class EstimateSettings:
       and is widened automatically when a recording's patch needs more).
     - ``curve_points``, ``curve_grid``: loads and model grid of the load curves (patch, feature).
     - ``grid_check``: refine the grid once at the fit (M → 2M) and carry the load's shift into its
-      interval (docs/physics.md §10, *the estimator's own grid*); ``False`` leaves the interval statistical.
+      interval (docs/physics.md §10, *the estimator's own grid*); for the state estimate, fit the 4M model by
+      defect correction and carry the grid error left (§13.4 *the model's grid*); ``False`` leaves the M model
+      and the interval statistical.
     """
 
     n_grid: int = 512

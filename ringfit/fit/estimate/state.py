@@ -31,7 +31,7 @@ from scipy.special import ndtri
 
 from ringfit.errors import InputError
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
-                                least_squares_batch, linearize, residuals)
+                                free_set, least_squares_batch, linearize, residuals)
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows
 from ringfit.fit.profile_block import fit_profile_block, noise_from_residual
 from ringfit.fit.estimate.load import LoadEstimate, estimate_load, step_for
@@ -841,13 +841,11 @@ def grid_corrected(problem: Problem, fit, settings: EstimateSettings, k_max: int
         new = least_squares(prob, fit.theta, free, **opts)
         if not np.all(np.isfinite(new.theta)):
             break
-        u0 = np.array([STATE_COORDS[STATE_PARAMETERS.index(n)].to_u(float(fit.theta[STATE_PARAMETERS.index(n)]))
-                       for n in free])
-        u1 = np.array([STATE_COORDS[STATE_PARAMETERS.index(n)].to_u(float(new.theta[STATE_PARAMETERS.index(n)]))
-                       for n in free])
+        fs = free_set(prob, free)
+        moved = fs.u_of_theta(prob, new.theta) - fs.u_of_theta(prob, fit.theta)
         sd = np.sqrt(np.maximum(np.diag(np.asarray(new.covariance_log)), 1e-300))
         problem, fit = prob, new
-        if np.max(np.abs(u1 - u0) / sd) < GRID_MOVE:
+        if np.max(np.abs(moved) / sd) < GRID_MOVE:
             break
     return problem, fit
 
