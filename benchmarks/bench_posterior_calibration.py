@@ -121,8 +121,7 @@ def sbc_sample(n: int, sampler: str, seed: int = 0, noise: str = "fixed") -> tup
                               freq_std_hz=sd if noise == "fixed" else None)
             lsq = fit_natural_frequencies(table, geo, ring, free=FREE, prior=prior, noise=noise)
             # the fit's noise model sampled as `ringfit sample` does (sample_posterior): its σ and its row widening
-            post = sample(lsq, sampler=sampler, walkers=32, min_steps=2000, max_steps=20000, seed=i, progress=False,
-                          row_scale=lsq.extra["row_scale"])
+            post = sample(lsq, sampler=sampler, walkers=32, min_steps=2000, max_steps=20000, seed=i, progress=False)
             bad += not (lsq.converged and post.converged)
             u = rank_draws(post, rng)
             t = np.log([truth[k] for k in post.names])
@@ -173,8 +172,7 @@ def identify_case(i: int, seed: int, sampler: str, max_steps: int, rng, folder: 
             return out
         k = len(ident.fit.names)
         post = sample(ident.posterior_fit(), sampler=sampler, walkers=2 * k, min_steps=min(500, max_steps),
-                      max_steps=max_steps, check_every=250, seed=i, progress=False, spread=0.25,
-                      **ident.posterior_likelihood())
+                      max_steps=max_steps, check_every=250, seed=i, progress=False, spread=0.25)
     out.update(posterior_converged=bool(post.converged), steps=int(post.steps), tau_max=float(np.max(post.tau)),
                walkers=2 * k, wall_s=clock.wall, cpu_s=clock.cpu)
     s = post.log_samples
@@ -265,8 +263,8 @@ def main(argv=None):
                     help="synthetic tyres for `sample` (default 200; 0: part 1 skipped)")
     ap.add_argument("--n-identify", type=bc.count("a number of cases", 0, 10_000, ), default=0,
                     help="joint cases for `identify --posterior` (default 0; 3–8 minutes of CPU each, see 2.)")
-    ap.add_argument("--identify-max-steps", type=bc.count("a number of steps", 100, 10**6), default=5000,
-                    help="posterior steps at most per joint case (default 5000, `identify`'s)")
+    ap.add_argument("--identify-max-steps", type=bc.count("a number of steps", 100, 10**6), default=10000,
+                    help="posterior steps at most per joint case (default 10000, `identify`'s)")
     ap.add_argument("--sampler", choices=("compiled", "emcee"), default="compiled")
     ap.add_argument("--noise", choices=("both", "fixed", "estimated"), default="both",
                     help="the free block's noise model of part 1: a stated σ taken as known (SBC proper), the "

@@ -82,6 +82,8 @@ def parse_args(argv=None):
     p.add_argument("--fisher-only", action="store_true", help="print only the Fisher table")
     p.add_argument("--steps", type=bc.count("1 or 2", hi=2), default=1,
                    help="Gauss–Newton steps per revolution (default 1)")
+    p.add_argument("--harmonics", type=bc.count("a number of harmonics >= 8", lo=8, hi=1000), default=None,
+                   metavar="K", help="revolution harmonics 2…K of both channels (default: `ringfit estimate`'s)")
     args = p.parse_args(argv)
     if args.quick:
         args.seeds, args.blind, args.seconds = args.seeds[:1], 2, 4.0
@@ -107,7 +109,7 @@ def coverage_text(k: int, n: int) -> str:
 
 
 # --------------------------------------------------------------------------- reading a recording
-def read_state(path: Path, tyre, steps: int = 1, fixed: dict | None = None):
+def read_state(path: Path, tyre, steps: int = 1, fixed: dict | None = None, settings=None):
     """``(load estimate, state estimate, per-revolution state, CPU s of the per-revolution stage, of the averaged
     fits)`` of one continuous recording, read as ``ringfit estimate --state`` does."""
     from ringfit.fit.estimate import state as st
@@ -116,16 +118,20 @@ def read_state(path: Path, tyre, steps: int = 1, fixed: dict | None = None):
     record = read_continuous(path)
     geometry, ring, laws = tyre.geometry, tyre.ring, tyre.laws
     c0 = time.process_time()
-    data = _recording_revolutions(record, geometry)
+    from ringfit.fit.estimate.problem import EstimateSettings
+
+    settings = EstimateSettings() if settings is None else settings
+    data = _recording_revolutions(record, geometry, settings.k_max)
     c1 = time.process_time()
     omega = 2 * math.pi * float(np.mean(data.rotation_hz))
     from ringfit.fit.estimate.load import estimate_load
 
     load = estimate_load(data.profile, geometry, ring, omega=omega, omega_source=data.rotation_source,
                          response=data.response, noise_per_angle=data.noise, noise_source=data.noise_source,
-                         ring_covariance=tyre.covariance)
+                         ring_covariance=tyre.covariance, settings=settings)
     state = st.estimate_state(data.profile, geometry, ring, laws, omega=omega, omega_source=data.rotation_source,
-                              response=data.response, ring_covariance=tyre.covariance, load=load, fixed=fixed)
+                              response=data.response, ring_covariance=tyre.covariance, load=load, fixed=fixed,
+                              settings=settings)
     c2 = time.process_time()
     rows = np.concatenate([data.rows, data.rows_tangential], axis=1)
     revs = st.state_revolutions(rows, data.rotation_hz, state, revolution=data.revolution, t_s=data.t_s, steps=steps)
@@ -133,35 +139,11 @@ def read_state(path: Path, tyre, steps: int = 1, fixed: dict | None = None):
     return load, state, revs, (c1 - c0) + (c3 - c2), c2 - c1
 
 
-def _recording_revolutions(record, geometry):
-    """One pass over the recording for both channels: ringfit's ``recording_revolutions(tangential=True)`` where
-    this checkout has it (issue 33's CLI); else the radial pass and a second pass for the tangential channel's
-    rows and mean (the same grid, :func:`ringfit.targets.rolling_profile.revolution_grids`)."""
-    import inspect
-
+def _recording_revolutions(record, geometry, k_max):
+    """One pass over the recording for both channels (``ringfit estimate --state``'s)."""
     from ringfit.fit.estimate.revolutions import recording_revolutions
 
-    if "tangential" in inspect.signature(recording_revolutions).parameters:
-        return recording_revolutions(record, geometry=geometry, tangential=True)
-    import dataclasses
-
-    from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows
-    from ringfit.io.profiles import Profile
-    from ringfit.targets.rolling_profile import revolution_grids
-
-    data = recording_revolutions(record, geometry=geometry)
-    p = data.profile
-    rows, total, count = [], np.zeros(p.angle_deg.size), 0
-    for block in revolution_grids(record, points=p.angle_deg.size, axes=("tangential",)):
-        v = block.values[0]
-        rows.append(harmonic_rows(harmonic_amplitudes(v, 2, data.k_max)))
-        total += v.sum(axis=0)
-        count += v.shape[0]
-    cond = {k: v for k, v in p.condition.items() if k != "missing_axes"}
-    profile = Profile(p.angle_deg, p.acc_radial_ms2, total / count, condition=cond, source=p.source, extra=p.extra)
-    data = dataclasses.replace(data, profile=profile)
-    data.rows_tangential = np.concatenate(rows)
-    return data
+    return recording_revolutions(record, geometry=geometry, tangential=True, k_max=k_max)
 
 
 def truth_table(path: Path) -> dict:
@@ -205,6 +187,10 @@ def blind():
                                                 "its laws are the nominal ones, not the truth's)" if ARGS.tyre ==
                                                 "nominal" else "the TRUE tyre file (a diagnosis, not a user's case)")
           + (f"; held at the truth: {', '.join(ARGS.hold)}" if ARGS.hold else ""))
+    from ringfit.fit.estimate.problem import EstimateSettings
+
+    settings = EstimateSettings() if ARGS.harmonics is None else EstimateSettings(k_max=ARGS.harmonics)
+    print(f"   harmonics 2…{settings.k_max} of both channels, model grid {settings.n_grid}")
     with tempfile.TemporaryDirectory() as tmp:
         for seed in ARGS.seeds:
             folder = (ARGS.examples or Path(tmp)) / f"seed{seed}-b{ARGS.blind}-{ARGS.seconds:g}s"
@@ -228,7 +214,7 @@ def blind():
                 w = time.perf_counter()
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    load, state, revs, cpu_rev, cpu_avg = read_state(path, tyre, ARGS.steps, fixed)
+                    load, state, revs, cpu_rev, cpu_avg = read_state(path, tyre, ARGS.steps, fixed, settings)
                 wall = time.perf_counter() - w
                 speed_rows.append((len(revs), cpu_rev, cpu_avg, wall))
                 t_lo, t_hi = float(truth["t_start_s"][0]), float(truth["t_end_s"][-1])

@@ -116,3 +116,31 @@ def test_the_scale_integrated_out_is_the_integral_over_s(stated):
 
     want = np.array([exact(u) for u in points])
     assert np.allclose(lp - lp[0], want - want[0], atol=1e-6), (lp - lp[0], want - want[0])
+
+
+def test_sample_reads_the_fits_own_likelihood():
+    """sample() takes the noise model the fit recorded (issue 31: one likelihood per data type): the free block's
+    scale marginal and its widening when it estimated a scale, its row widening when the scale was stated, an
+    identify-style ``shift_u``/``tables`` from ``extra``; an explicit row_scale beside a marginal is refused (two
+    widenings of the same rows), and explicit values replace the fit's."""
+    from ringfit.fit.posterior import fit_likelihood
+
+    f = np.asarray(natural_frequencies(RING, GEO, N9))
+    f = f * (1 + 0.004 * np.random.default_rng(7).standard_normal(9))
+    est = fit_natural_frequencies(ModeTable(freq_hz=f, n=N9), GEO, RING, free=("kw", "kv"), prior="none")
+    row, du, tables, marg = fit_likelihood(est)
+    assert marg is est.extra["scale_marginal"] and marg is not None
+    assert row is marg["row_scale"] and du is None and tables is None
+    with pytest.raises(ValueError, match="beside a scale marginal"):
+        fit_likelihood(est, row_scale=np.ones(9))
+    row, _, _, marg = fit_likelihood(est, row_scale=np.full(9, 2.0), scale_marginal=None)
+    assert marg is None and np.all(row == 2.0)
+    # a stated σ the data agree with: no scale estimated, no marginal; the widening is the fit's row_scale
+    fixed = fit_natural_frequencies(ModeTable(freq_hz=f, n=N9, freq_std_hz=0.004 * f), GEO, RING, free=("kw", "kv"),
+                                    prior="none", noise="fixed")
+    row, _, _, marg = fit_likelihood(fixed)
+    assert marg is None and row is fixed.extra["row_scale"]
+    fixed.extra.update(shift_u=np.array([0.1, 0.0]), tables={"t": slice(0, 9)})
+    _, du, tables, _ = fit_likelihood(fixed)
+    assert np.all(du == [0.1, 0.0]) and tables == {"t": slice(0, 9)}
+    assert fit_likelihood(fixed, shift_u=None)[1] is None

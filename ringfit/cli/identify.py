@@ -32,8 +32,8 @@ def register(sub) -> None:
     sampler_flags(p)
     p.add_argument("--min-steps", type=integer("a whole number of steps >= 100", lo=100), default=500,
                    help="posterior chain steps before the first convergence check (default 500)")
-    p.add_argument("--max-steps", type=integer("a whole number of steps >= 100", lo=100), default=5000,
-                   help="posterior chain steps at most (default 5000)")
+    p.add_argument("--max-steps", type=integer("a whole number of steps >= 100", lo=100), default=10000,
+                   help="posterior chain steps at most (default 10000: joint cases need 7,000–8,500 for the 50 τ the sampler stops at)")
     p.add_argument("--seed", type=integer("a whole number >= 0", lo=0), default=0, help="random seed (default 0)")
     force_flag(p)
     quiet_flag(p)
@@ -92,7 +92,7 @@ def run_identify(args) -> int:
         posterior = sample(ident.posterior_fit(), walkers=walkers, min_steps=args.min_steps, max_steps=args.max_steps,
                            check_every=max(100, args.min_steps // 2), seed=args.seed, progress=not args.quiet,
                            spread=0.25, meta={"model": "identify", "folder": str(folder)}, sampler=args.sampler,
-                           chains=args.chains, **ident.posterior_likelihood())
+                           chains=args.chains)
         doc["posterior"] = {"file": args.posterior.name, **_posterior_summary(posterior)}
         _print_predictive(posterior)
     write_tyre(tyre, args.out, overwrite=args.force)

@@ -832,13 +832,16 @@ class Identification:
     def posterior_fit(self) -> FitResult:
         """The fit whose posterior `identify --posterior` samples: :attr:`fit` with its joint model's contact window
         narrowed to the patches at the optimum (:func:`posterior_solver`; the same density to rounding wherever
-        it is not 0, at about half the cost)."""
+        it is not 0, at about half the cost), and :meth:`posterior_likelihood` in its ``extra``, where
+        :func:`~ringfit.fit.posterior.sample` reads the noise model it samples."""
         model, data = self.fit.problem.model, self.fit.problem.data
         solver = posterior_solver(model, self.fit.theta, data)
+        # the intervals' noise model travels with the fit: sample() reads it (docs/physics.md §12.3)
+        extra = {**self.fit.extra, **self.posterior_likelihood()}
         if solver is model.solver:
-            return self.fit
+            return dataclasses.replace(self.fit, extra=extra)
         problem = dataclasses.replace(self.fit.problem, model=dataclasses.replace(model, solver=solver))
-        return dataclasses.replace(self.fit, problem=problem)
+        return dataclasses.replace(self.fit, problem=problem, extra=extra)
 
     @property
     def converged(self) -> bool:

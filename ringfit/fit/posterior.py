@@ -543,10 +543,34 @@ Sampler = Literal["compiled", "emcee"]
 DEFAULT_CHAINS = 1
 
 
+def fit_likelihood(result, row_scale="auto", shift_u="auto", tables="auto", scale_marginal="auto"):
+    """``(row_scale, shift_u, tables, scale_marginal)`` that :func:`sample` uses: each ``"auto"`` one read from
+    ``result.extra`` (the fit's own noise model; None where the fit recorded none), the others as given; with a
+    scale marginal the rows' widening is the marginal's ``row_scale``. Raises ``ValueError`` for an explicit
+    ``row_scale`` beside a marginal (two widenings of the same rows)."""
+    extra = result.extra or {}
+
+    def auto(v):
+        return isinstance(v, str) and v == "auto"
+
+    if auto(scale_marginal):
+        scale_marginal = extra.get("scale_marginal")
+    if scale_marginal is not None:
+        if not auto(row_scale) and row_scale is not None:
+            raise ValueError("sample: row_scale given beside a scale marginal, whose own row_scale is the rows' "
+                             "widening; pass scale_marginal=None to sample with a fixed scale")
+        row_scale = scale_marginal.get("row_scale")
+    elif auto(row_scale):
+        row_scale = extra.get("row_scale")
+    shift_u = extra.get("shift_u") if auto(shift_u) else shift_u
+    tables = extra.get("tables") if auto(tables) else tables
+    return row_scale, shift_u, tables, scale_marginal
+
+
 def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int = 20000, check_every: int = 1000,
            seed: int = 0, progress: bool = True, bounds: dict | None = None, spread: float = 0.1,
-           meta: dict | None = None, sampler: str = "compiled", chains: int = DEFAULT_CHAINS, row_scale=None,
-           shift_u=None, tables: dict | None = None, scale_marginal="auto") -> "Posterior":
+           meta: dict | None = None, sampler: str = "compiled", chains: int = DEFAULT_CHAINS, row_scale="auto",
+           shift_u="auto", tables="auto", scale_marginal="auto") -> "Posterior":
     """Sample the posterior of a least-squares fit's free parameters with the affine-invariant stretch move.
 
     **Arguments:** ``result`` — a :class:`~ringfit.fit.result.FitResult` of the engine;
@@ -558,14 +582,19 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
     ``meta`` — kept with the draws (saved by :meth:`Posterior.save`); ``sampler`` — ``"compiled"``
     (:func:`ringfit.fit.ensemble.run_compiled`, the default) or ``"emcee"`` (the reference backend);
     ``chains`` — independent ensembles of ``walkers`` run side by side (compiled sampler only; the
-    posterior's walker axis holds them one after another); ``row_scale`` — ``(m,)`` widening of the rows' σ
-    (identify's Student-t widening); ``shift_u`` — ``(k,)`` one systematic direction in u (identify's grid
-    check) convolved into the draws (:attr:`Posterior.log_samples`); ``tables`` — name → data rows of each
-    measured table for the posterior predictive check (:func:`predictive_check`, kept in
-    ``meta["predictive_check"]``; default one block of every row); ``scale_marginal`` — ``dict(rows, s_min,
-    row_scale)``: the rows' common σ scale integrated out (:func:`ringfit.fit.engine.log_density`; ``"auto"``: the
-    fit's own, ``result.extra["scale_marginal"]``, which the free-modes block sets where it estimated a scale), its
-    ``row_scale`` (√κ) then replacing ``row_scale`` (the t-widening is the marginal itself).
+    posterior's walker axis holds them one after another).
+
+    **The likelihood is the fit's own** (docs/physics.md §12.3): ``"auto"`` (the default) reads each of these from
+    ``result.extra``, where the fit that made ``result`` records its noise model (the free-modes block, identify's
+    :meth:`~ringfit.fit.identify.Identification.posterior_fit`); an explicit value replaces the fit's.
+    ``row_scale`` — ``(m,)`` widening of the rows' σ (a block's Student-t widening × √κ); ``shift_u`` — ``(k,)``
+    one systematic direction in u (identify's grid check) convolved into the draws (:attr:`Posterior.log_samples`);
+    ``tables`` — name → data rows of each measured table for the posterior predictive check
+    (:func:`predictive_check`, kept in ``meta["predictive_check"]``; None: one block of every row);
+    ``scale_marginal`` — ``dict(rows, s_min, row_scale)``: the rows' common σ scale integrated out
+    (:func:`ringfit.fit.engine.log_density`), set by the free-modes block where it estimated a scale; its own
+    ``row_scale`` (√κ) is then the rows' widening (the t-widening is the marginal itself), so an explicit
+    ``row_scale`` beside a marginal is refused (pass ``scale_marginal=None`` to sample a fixed scale).
 
     **Returns:** :class:`Posterior`. Warns (``RuntimeWarning``) when the chain did not reach
     :data:`TAU_FACTOR` autocorrelation times by ``max_steps``.
@@ -585,10 +614,7 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
     if chains < 1:
         raise InputError(f"chains = {chains}: expected at least 1")
     problem = result.problem
-    if isinstance(scale_marginal, str):
-        scale_marginal = result.extra.get("scale_marginal")
-    if scale_marginal is not None:
-        row_scale = scale_marginal.get("row_scale")
+    row_scale, shift_u, tables, scale_marginal = fit_likelihood(result, row_scale, shift_u, tables, scale_marginal)
     lo, hi = _support(result, bounds)
     coords = [problem.coordinate(n) for n in free]
     y_opt = np.array([c.to_u(result.values[n]) for c, n in zip(coords, free)])
@@ -715,7 +741,7 @@ def sample_posterior(
     # the intervals' noise model (docs/physics.md §11 "Noise per block"): the settled σ (in the fit's rows) and
     # the block's Student-t widening per row, as the least-squares covariance has them
     return sample(lsq, walkers=walkers, min_steps=min_steps, max_steps=max_steps, check_every=check_every, seed=seed,
-                  progress=progress, meta=meta, sampler=sampler, chains=chains, row_scale=ex.get("row_scale"),
+                  progress=progress, meta=meta, sampler=sampler, chains=chains,
                   tables={Path(str(table.source)).name or "modes": slice(None)})
 
 
