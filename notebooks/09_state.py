@@ -77,7 +77,7 @@ def read_state(path, fixed=None):
         # (this checkout predates estimate_recording_state: the same steps by hand)
         import dataclasses
 
-        from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows
+        from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
         from ringfit.fit.estimate.load import estimate_load
         from ringfit.fit.estimate.revolutions import recording_revolutions
         from ringfit.io.profiles import Profile
@@ -86,7 +86,7 @@ def read_state(path, fixed=None):
         data = recording_revolutions(record, geometry=geometry)
         p = data.profile
         blocks = [b.values[0] for b in revolution_grids(record, points=p.angle_deg.size, axes=("tangential",))]
-        rows_t = np.array([harmonic_rows(harmonic_amplitudes(v, 2, data.k_max)) for b in blocks for v in b])
+        rows_t = np.array([amplitude_rows(harmonic_amplitudes(v, 2, data.k_max)) for b in blocks for v in b])
         cond = {k: v for k, v in p.condition.items() if k != "missing_axes"}
         profile = Profile(p.angle_deg, p.acc_radial_ms2, np.concatenate(blocks).mean(axis=0), condition=cond,
                           source=p.source)

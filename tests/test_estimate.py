@@ -417,7 +417,7 @@ def test_every_name_of_the_old_module_is_importable_from_the_package():
     REVOLUTION_MAX_STEPS REVOLUTION_TOL TILT TILT_PRIOR EstimateArrays EstimateResiduals EstimateSettings
     FeatureEstimate LoadCurves LoadEstimate RecordingRevolutions RevolutionEstimates band_signal check_sign
     edge_peaks estimate_load estimate_problem estimate_recording estimate_revolutions feature_estimate
-    first_rotation_hz grid_signal harmonic_amplitudes harmonic_rows load_curves nuisance_priors
+    first_rotation_hz grid_signal harmonic_amplitudes amplitude_rows load_curves nuisance_priors
     profile_amplitudes recording_revolutions rotation_from_profile smoothed_noise""".split()
     assert [n for n in old if not hasattr(pkg, n)] == []
     assert set(pkg.__all__) <= set(old)

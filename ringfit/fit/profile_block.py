@@ -6,7 +6,8 @@ that reads profiles (docs/physics.md §11 "profiles").
 
 - **rows**: :func:`profile_rows` — each ``*.profile.csv`` band-limited and resampled onto the model grid
   (:func:`rolling_data`), Ω from the sidecar's ``rotation_hz`` else V/R_e;
-  :func:`harmonic_rows` turns channels into revolution-harmonic rows (real then imaginary parts);
+  :func:`harmonic_rows` turns channels into revolution-harmonic rows (real then imaginary parts), from the one
+  transform :func:`harmonic_amplitudes` that the load and state estimates use too;
 - **nuisances**: per profile an angle offset (linear, ±:data:`OFFSET_BOUND`) and a gain on the reading
   (log, in :data:`GAIN_RANGE`; the sensor's sensitivity and its offset from the belt), named by
   :func:`nuisance_names`, solved in :func:`nuisance_coords`, applied to the model's channels by
@@ -30,6 +31,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -113,18 +115,42 @@ def read_through(channels, offset, gain):
     return shift_angle(channels, offset[:, None, None]) * gain[:, None, None]
 
 
+def harmonic_amplitudes(signal, k_min: int, k_max: int):
+    """Complex amplitudes ``a_k`` (k = k_min … k_max) of grid signals ``(..., M)`` on φ_j = −π + 2πj/M: the one
+    revolution-harmonic transform of ringfit's profile rows (docs/physics.md §10).
+
+    ``x(α) = Σ_k Re(a_k e^{ikα})`` (k ≥ 1): ``a_k = (2/M)(−1)^k rfft(x)_k``. Works on JAX and
+    NumPy arrays (returns the same kind). **Returns:** ``(..., k_max − k_min + 1)`` [units of x].
+    """
+    xp = jnp if isinstance(signal, jax.Array) else np
+    M = signal.shape[-1]
+    k = np.arange(k_min, k_max + 1)
+    spec = xp.fft.rfft(signal, axis=-1)[..., k_min : k_max + 1]
+    return spec * (2.0 / M) * np.where(k % 2, -1.0, 1.0)
+
+
+def amplitude_rows(amplitudes):
+    """Real residual rows ``[Re a_k …, Im a_k …]`` ``(..., 2K)`` of complex amplitudes ``(..., K)``."""
+    xp = jnp if isinstance(amplitudes, jax.Array) else np
+    return xp.concatenate([amplitudes.real, amplitudes.imag], axis=-1)
+
+
 def harmonic_rows(channels, k_min: int = PROFILE_K_MIN, rows_grid: int | None = None, k_top: int = 0):
-    """Rows ``(..., 2H)`` of revolution harmonics k_min … M/2 − 1 of ``channels`` ``(..., M)``: real then imaginary
-    parts of ``rfft · √(2/M)`` (white noise of σ per sample gives each row variance σ²).
+    """Rows ``(..., 2H)`` of revolution harmonics k_min … M/2 − 1 of ``channels`` ``(..., M)`` in the profile
+    block's normalisation: :func:`amplitude_rows` of ``(−1)^k √(M/2) a_k`` (:func:`harmonic_amplitudes`), i.e. of
+    ``rfft · √(2/M)``, so that white noise of σ per sample gives each row variance σ² (the load and state
+    estimates fit the amplitudes ``a_k`` themselves, σ per row from :func:`noise_spectrum`).
 
     ``rows_grid``: the rows of the same revolution band-limited to that many points (harmonics k_min …
     rows_grid/2 − 1), for a model evaluated on a finer grid than the data's (the grid check). ``k_top`` > 0: the
     rows stop at harmonic k_top (the profiles' band, :func:`profile_band`)."""
+    channels = jnp.asarray(channels)
     M = channels.shape[-1]
     R = M if rows_grid is None else int(rows_grid)
     top = R // 2 if k_top <= 0 else min(R // 2, int(k_top) + 1)
-    spec = jnp.fft.rfft(channels, axis=-1)[..., k_min:top] * (R / M) * math.sqrt(2.0 / R)
-    return jnp.concatenate([spec.real, spec.imag], axis=-1)
+    k = np.arange(k_min, top)
+    return amplitude_rows(harmonic_amplitudes(channels, k_min, top - 1) * (np.where(k % 2, -1.0, 1.0)
+                                                                            * math.sqrt(R / 2.0)))
 
 
 def profile_band(n_samples, n_grid: int) -> int:

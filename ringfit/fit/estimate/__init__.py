@@ -80,7 +80,7 @@ previous one).
 """
 
 from ringfit.fit.estimate.harmonics import (NOISE_SMOOTHING, band_signal, grid_signal, harmonic_amplitudes,
-                                            harmonic_rows, smoothed_noise)
+                                            amplitude_rows, smoothed_noise)
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, COORDS, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, K_TREAD, LOAD,
                                           LOAD_RANGE, PARAMETERS, TILT, TILT_PRIOR, EstimateArrays, EstimateResiduals,
                                           EstimateSettings, estimate_problem, nuisance_priors)
@@ -98,7 +98,7 @@ __all__ = [
     "estimate_load", "estimate_revolutions", "estimate_recording", "recording_revolutions", "RevolutionEstimates",
     "RecordingRevolutions", "LoadEstimate", "EstimateSettings", "EstimateResiduals", "EstimateArrays", "estimate_problem",
     "load_curves", "LoadCurves", "feature_estimate", "FeatureEstimate", "edge_peaks", "harmonic_amplitudes",
-    "harmonic_rows", "band_signal", "PARAMETERS", "COORDS", "LOAD_RANGE", "DEFAULT_K_TREAD_SD",
+    "amplitude_rows", "band_signal", "PARAMETERS", "COORDS", "LOAD_RANGE", "DEFAULT_K_TREAD_SD",
 ]
 # the state estimate's names (ringfit.fit.estimate.state) are importable from here too; __all__ keeps the load
 # estimate's (tests/test_estimate.py pins it to the names of the old module)

@@ -2,37 +2,17 @@
 
 The load estimate fits harmonics k = 2 … k_max of the radial reading on a grid of angles
 φ_j = −π + 2πj/M. This module converts between grid signals and complex amplitudes
-(:func:`harmonic_amplitudes`, :func:`band_signal`, :func:`grid_signal`), lays amplitudes out as real
-residual rows (:func:`harmonic_rows`) and gives σ per harmonic of a residual (:func:`smoothed_noise`: the profile
+(:func:`harmonic_amplitudes`, the profile block's one transform, :func:`band_signal`, :func:`grid_signal`), lays
+amplitudes out as real residual rows (:func:`amplitude_rows`; the profile block's ``harmonic_rows`` are the same
+rows scaled to σ per sample) and gives σ per harmonic of a residual (:func:`smoothed_noise`: the profile
 block's noise spectrum, the one noise model of profiles). NumPy and JAX arrays alike.
 """
 
 from __future__ import annotations
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from ringfit.fit.profile_block import NOISE_SMOOTHING, noise_spectrum
-
-
-def harmonic_amplitudes(signal, k_min: int, k_max: int):
-    """Complex amplitudes ``a_k`` (k = k_min … k_max) of grid signals ``(..., M)`` on φ_j = −π + 2πj/M.
-
-    ``x(α) = Σ_k Re(a_k e^{ikα})`` (k ≥ 1): ``a_k = (2/M)(−1)^k rfft(x)_k``. Works on JAX and
-    NumPy arrays (returns the same kind). **Returns:** ``(..., k_max − k_min + 1)`` [units of x].
-    """
-    xp = jnp if isinstance(signal, jax.Array) else np
-    M = signal.shape[-1]
-    k = np.arange(k_min, k_max + 1)
-    spec = xp.fft.rfft(signal, axis=-1)[..., k_min : k_max + 1]
-    return spec * (2.0 / M) * np.where(k % 2, -1.0, 1.0)
-
-
-def harmonic_rows(amplitudes) -> np.ndarray:
-    """Real residual rows ``[Re a_k …, Im a_k …]`` ``(..., 2K)`` of complex amplitudes ``(..., K)``."""
-    xp = jnp if isinstance(amplitudes, jax.Array) else np
-    return xp.concatenate([amplitudes.real, amplitudes.imag], axis=-1)
+from ringfit.fit.profile_block import NOISE_SMOOTHING, amplitude_rows, harmonic_amplitudes, noise_spectrum  # noqa: F401 (re-exported)
 
 
 def band_signal(amplitudes, k_min: int, angle_rad) -> np.ndarray:

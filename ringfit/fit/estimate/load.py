@@ -20,7 +20,7 @@ from ringfit.errors import InputError
 from ringfit.fit.engine import GaussianPrior, least_squares, residuals
 from ringfit.fit.estimate.curves import LoadCurves, load_curves
 from ringfit.fit.estimate.feature import FeatureEstimate, _num, feature_estimate
-from ringfit.fit.estimate.harmonics import band_signal, grid_signal, harmonic_amplitudes, harmonic_rows
+from ringfit.fit.estimate.harmonics import band_signal, grid_signal, harmonic_amplitudes, amplitude_rows
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, GAIN, K_TREAD, LOAD, LOAD_RANGE, TILT, EstimateArrays,
                                           EstimateSettings, estimate_problem, nuisance_priors, optimum_ring_shift)
 from ringfit.fit.profile_block import fit_profile_block
@@ -248,7 +248,7 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
         free.append(K_TREAD)
     prior = GaussianPrior.independent(entries)
     K = amp.shape[-1]
-    measured = harmonic_rows(amp)[None]
+    measured = amplitude_rows(amp)[None]
     arrays = EstimateArrays(geometry=geometry, ring=ring, omega=np.array([omega]), roads=flat_or_drum(drum, 1),
                             response=resp[None], measured=measured, weight=np.ones((1, 2 * K)))
     theta0 = np.array([load0, curves.gain_at(load0, amp), offset0, 0.3, 0.5, float(ring.k_tread)])

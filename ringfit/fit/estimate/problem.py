@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem
-from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows
+from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
 from ringfit.fit.profile_block import GAIN_RANGE  # the profile block's: one sensor gain range for every reader
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced
@@ -140,7 +140,7 @@ class EstimateResiduals(AbstractResiduals):
 
     def __call__(self, theta, data: EstimateArrays):
         radial = self.channels(theta, data)[:, 0]
-        rows = harmonic_rows(harmonic_amplitudes(radial, self.k_min, self.k_max) * data.response)
+        rows = amplitude_rows(harmonic_amplitudes(radial, self.k_min, self.k_max) * data.response)
         return ((rows - data.measured) * data.weight).ravel(), rows
 
 

@@ -18,7 +18,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.fit.engine import least_squares, least_squares_batch
 from ringfit.fit.estimate.feature import _num, edge_peaks
-from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows
+from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
 from ringfit.fit.estimate.load import LoadEstimate, estimate_load
 from ringfit.fit.estimate.problem import ANGLE_OFFSET, GAIN, LOAD, EstimateArrays, EstimateSettings, estimate_problem
 from ringfit.fit.profile_block import noise_from_residual
@@ -108,7 +108,7 @@ class RevolutionEstimates:
 class RecordingRevolutions:
     """One pass over a continuous recording: each whole revolution's radial harmonics and the average.
 
-    ``rows`` ``(R, 2K)`` harmonic rows k = 2…k_max (:func:`harmonic_rows`) [m/s²]; ``revolution``,
+    ``rows`` ``(R, 2K)`` harmonic rows k = 2…k_max (:func:`amplitude_rows`) [m/s²]; ``revolution``,
     ``t_s``, ``rotation_hz`` ``(R,)``; ``profile``: the averaged profile (docs/formats.md §3, the
     revolution-to-revolution spread as ``acc_radial_spread_ms2``); ``response`` ``(K,)``: the resampling's
     gain on the harmonics (sinc²(k/samples per revolution), linear interpolation); ``k_max``; ``noise``
@@ -193,7 +193,7 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     axes = ("radial", "tangential") if tangential else ("radial",)
     for block in revolution_grids(record, points=points, axes=axes, passages=passages, progress=progress):
         values = block.values[0]
-        rows.append(harmonic_rows(harmonic_amplitudes(values, 2, k_max)))
+        rows.append(amplitude_rows(harmonic_amplitudes(values, 2, k_max)))
         rev.append(block.revolution)
         t_s.append(block.t_s)
         rate.append(block.rotation_hz)
@@ -201,7 +201,7 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
         hit.append(1.0 - quiet.mean(axis=1))
         if tangential:
             tv = block.values[1]
-            rows_t.append(harmonic_rows(harmonic_amplitudes(tv, 2, k_max)))
+            rows_t.append(amplitude_rows(harmonic_amplitudes(tv, 2, k_max)))
             t1[0] += tv.sum(axis=0)
             t1[1] += (quiet * tv).sum(axis=0)
         chain = values if previous is None else np.concatenate([previous[0], values])

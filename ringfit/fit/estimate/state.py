@@ -32,7 +32,7 @@ from scipy.special import ndtri
 from ringfit.errors import InputError
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
                                 free_set, least_squares_batch, linearize, residuals)
-from ringfit.fit.estimate.harmonics import harmonic_amplitudes, harmonic_rows
+from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
 from ringfit.fit.profile_block import fit_profile_block, noise_from_residual
 from ringfit.fit.estimate.load import LoadEstimate, estimate_load, step_for
 from ringfit.fit.identify import band_folds, discrepancy_ratio
@@ -161,7 +161,7 @@ class StateResiduals(AbstractResiduals):
                                      full_band(P, self.solver.n_grid), offset, self.solver)
         amp = harmonic_amplitudes(ch, self.k_min, self.k_max) * data.response[:, None, :]
         amp = amp * jnp.stack([jnp.ones_like(theta[8]), theta[8]])[None, :, None]  # the tangential axis's own gain
-        return jnp.concatenate([harmonic_rows(amp[:, 0]), harmonic_rows(amp[:, 1])], axis=-1)
+        return jnp.concatenate([amplitude_rows(amp[:, 0]), amplitude_rows(amp[:, 1])], axis=-1)
 
     def __call__(self, theta, data: StateArrays):
         rows = self.rows(theta, data) + data.correction
@@ -474,7 +474,7 @@ def profile_rows(profile, n_grid: int, k_max: int) -> np.ndarray:
     from ringfit.io.profiles import resample_profile
 
     grid = resample_profile(profile, n_grid)
-    return np.concatenate([harmonic_rows(harmonic_amplitudes(grid[i], 2, k_max)) for i in (0, 1)])
+    return np.concatenate([amplitude_rows(harmonic_amplitudes(grid[i], 2, k_max)) for i in (0, 1)])
 
 
 def channel_weights(resid_rows: np.ndarray, leverage: float = 0.0, series: int = 1) -> np.ndarray:
