@@ -179,7 +179,7 @@ def blind():
     avg = {q: [] for q in quantities}       # (error, inside, status)
     per = {q: [] for q in quantities}       # arrays of errors, inside per revolution
     per_told = {q: [] for q in quantities}
-    onestep = {q: [] for q in quantities}   # the value moved by its grid shift (docs/physics.md §13.4): diagnostic
+    onestep = {q: [] for q in quantities}   # the value the other side of its grid extrapolation (§13.4): diagnostic
     spread = {q: [] for q in quantities}    # the estimate's own σ, in the error's unit: what the data could tell
     speed_rows, sim_cpu, lines = [], 0.0, []
     print(f"\n1. Blind state on the independent simulator: seeds {ARGS.seeds}, {ARGS.blind} blind recordings of "
@@ -228,7 +228,10 @@ def blind():
                     avg[q].append((e, Q["lo"] <= true <= Q["hi"], Q["status"]))
                     spread[q].append(abs(error_of(q, Q["value"] + Q["sd"], true, true_load) - e))
                     if state.grid_check is not None:
-                        moved = Q["value"] + state.to_record()["fit"]["grid_check"]["shift"][key]
+                        g = state.to_record()["fit"]["grid_check"]
+                        # the other side of Richardson's extrapolation: without it where ringfit applied it, with it
+                        # where it did not
+                        moved = Q["value"] + (-1.0 if g.get("applied") else 1.0) * g["shift"][key]
                         onestep[q].append(error_of(q, moved, true, true_load))
                     line.append(f"{q} {e:+.2f}{'' if Q['lo'] <= true <= Q['hi'] else '!'}"
                                 f"{'' if Q['status'] == 'estimated' else '(' + Q['status'] + ')'}"
@@ -279,8 +282,8 @@ def blind():
           "so a target below that is below what these recordings tell): " + ", ".join(
               f"{q} {float(np.median(spread[q])):.3f}" for q in quantities if spread[q]))
     if any(onestep.values()):
-        print("   the value moved by its remaining grid shift (docs/physics.md §13.4 *the model's grid*; a diagnostic, "
-              "not what ringfit reports): median |err| " + ", ".join(
+        print("   the value the other side of Richardson's extrapolation (docs/physics.md §13.4 *the model's grid*; "
+              "without it where ringfit applies it; a diagnostic): median |err| " + ", ".join(
                   f"{q} {float(np.median(np.abs(onestep[q]))):.3f}" for q in quantities if onestep[q]))
     R = sum(r[0] for r in speed_rows)
     c_rev = sum(r[1] for r in speed_rows)

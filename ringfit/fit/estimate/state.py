@@ -456,7 +456,8 @@ class StateEstimate:
     def _grid_record(self) -> dict:
         shift = np.asarray(self.grid_check["shift"])
         return {"grid": list(self.grid_check["grid"]),
-                "shift": {k: float(shift[i]) * QUANTITIES[k][1] for i, k in enumerate(QUANTITIES)}}
+                "shift": {k: float(shift[i]) * QUANTITIES[k][1] for i, k in enumerate(QUANTITIES)},
+                "applied": bool(self.grid_check.get("applied", False))}
 
     def to_record(self) -> dict:
         """The ``state`` object of docs/formats.md §7.1."""
@@ -698,7 +699,10 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
         # the model's own grid (§13.4, as §10's load estimate): how far each quantity moves when the grid is refined
         # at the fit; its square joins every variance (the revolutions' too: the same error in each)
         shift_u = state_grid_shift(fit, problem, settings, k_max)
-        grid = {"grid": [settings.n_grid, GRID_FINE * settings.n_grid], "shift": G @ shift_u}
+        grid = {"grid": [settings.n_grid, GRID_FINE * settings.n_grid], "shift": G @ shift_u, "applied": True}
+        # Richardson's extrapolation to the continuum: the value is moved by the shift still to come, and the
+        # shift's square stays in the variance (the extrapolation's own error is of its order at worst)
+        value = value + grid["shift"]
         var = var + grid["shift"] ** 2
     sd = np.sqrt(np.maximum(var, 0.0))
     z = float(ndtri(0.975))
