@@ -83,7 +83,8 @@ def parse_args(argv=None):
     p.add_argument("--steps", type=bc.count("1 or 2", hi=2), default=1,
                    help="Gauss–Newton steps per revolution (default 1)")
     p.add_argument("--harmonics", type=bc.count("a number of harmonics >= 8", lo=8, hi=1000), default=None,
-                   metavar="K", help="revolution harmonics 2…K of both channels (default: `ringfit estimate`'s)")
+                   metavar="K", help="revolution harmonics 2…K of both channels (default: `ringfit estimate --state`'s, "
+                        "with its fall-back to 40 where the model's form error shows above)")
     args = p.parse_args(argv)
     if args.quick:
         args.seeds, args.blind, args.seconds = args.seeds[:1], 2, 4.0
@@ -120,7 +121,10 @@ def read_state(path: Path, tyre, steps: int = 1, fixed: dict | None = None, sett
     c0 = time.process_time()
     from ringfit.fit.estimate.problem import EstimateSettings
 
-    settings = EstimateSettings() if settings is None else settings
+    if settings is None:
+        from ringfit.fit.estimate.state import STATE_K_MAX
+
+        settings = EstimateSettings(k_max=STATE_K_MAX)
     data = _recording_revolutions(record, geometry, settings.k_max)
     c1 = time.process_time()
     omega = 2 * math.pi * float(np.mean(data.rotation_hz))
@@ -143,7 +147,7 @@ def _recording_revolutions(record, geometry, k_max):
     """One pass over the recording for both channels (``ringfit estimate --state``'s)."""
     from ringfit.fit.estimate.revolutions import recording_revolutions
 
-    return recording_revolutions(record, geometry=geometry, tangential=True, k_max=k_max)
+    return recording_revolutions(record, geometry=geometry, tangential=True, k_max=k_max, clamp=True)
 
 
 def truth_table(path: Path) -> dict:
@@ -189,7 +193,9 @@ def blind():
           + (f"; held at the truth: {', '.join(ARGS.hold)}" if ARGS.hold else ""))
     from ringfit.fit.estimate.problem import EstimateSettings
 
-    settings = EstimateSettings() if ARGS.harmonics is None else EstimateSettings(k_max=ARGS.harmonics)
+    from ringfit.fit.estimate.state import STATE_K_MAX
+
+    settings = EstimateSettings(k_max=STATE_K_MAX if ARGS.harmonics is None else ARGS.harmonics)
     print(f"   harmonics 2…{settings.k_max} of both channels, model grid {settings.n_grid}")
     with tempfile.TemporaryDirectory() as tmp:
         for seed in ARGS.seeds:
@@ -219,7 +225,9 @@ def blind():
                 speed_rows.append((len(revs), cpu_rev, cpu_avg, wall))
                 t_lo, t_hi = float(truth["t_start_s"][0]), float(truth["t_end_s"][-1])
                 true_load = truth_over(truth, "load_n", t_lo, t_hi)
-                line = [f"   s{seed} {name}: {len(revs)} rev, {state.status}"]
+                wider = "".join(f" (κ {v:.1f} on 2…{k})" for k, v in (state.band_kappa or {}).items())
+                line = [f"   s{seed} {name}: {len(revs)} rev, {state.status}, 2…{state.k_max} κ {state.discrepancy:.1f}"
+                        f"{wider}"]
                 for q in quantities:
                     key = KEYS[q]
                     Q = state.quantities[key]

@@ -305,3 +305,41 @@ def test_richardson_extrapolation_moves_the_value_toward_the_finer_model():
     print("from the 2048 optimum, in the estimate's σ: unmoved", (unmoved / sd).round(3), "moved", (moved / sd).round(3))
     assert np.linalg.norm(unmoved / sd) > 0.2  # the 512 model is materially off the 2048 one here
     assert np.linalg.norm(moved / sd) < 0.7 * np.linalg.norm(unmoved / sd)
+
+
+@pytest.mark.slow  # two state fits (2…80, then 2…40), each with its 4M correction: ~3 min CPU
+def test_a_form_error_above_the_limit_sends_the_fit_to_the_narrower_band(monkeypatch):
+    """docs/physics.md §13.4 *the harmonic band*: a fit on 2…80 whose discrepancy ratio κ exceeds the limit is redone
+    on 2…40 — flagged, with the wide band's κ in the JSON — and each revolution's rows (2…80) are cut to that band.
+    The limit is set to 0 here, so the rule acts on any data (the rule, not a data set that happens to trip it); the
+    narrower band's estimate covers the truth."""
+    from ringfit.fit.estimate import state as st
+
+    monkeypatch.setattr(st, "KAPPA_BAND_LIMIT", 0.0)
+    truth = TyreState(4000.0, 2.4e5, 0.006, -0.01, OMEGA)
+    _, ch, q = _channels(truth)
+    rng = np.random.default_rng(11)
+    N = ch.shape[-1]
+
+    def noise():
+        return np.stack([0.5 * rng.standard_normal(N), 0.1 * rng.standard_normal(N)])
+
+    data = ch + noise()
+    est = estimate_state(_profile(data), GEO, RING, LAWS)
+    assert est.converged and est.k_max == st.STATE_K_FALLBACK
+    assert set(est.band_kappa) == {st.STATE_K_MAX} and est.band_kappa[st.STATE_K_MAX] >= 1.0
+    rec = est.to_record()["fit"]
+    assert rec["harmonics"] == [2, st.STATE_K_FALLBACK] and rec["wider_band"]["harmonics"] == [2, st.STATE_K_MAX]
+    assert any(f.startswith(f"harmonics 2…{st.STATE_K_MAX}: the model's form error") for f in est.flags)
+    Q = est.quantities
+    for key, value in {"load_n": 4000.0, "pressure_bar": 2.4, "fx_n": q["fx"], "tread_depth_mm": 6.0}.items():
+        assert Q[key]["lo"] <= value <= Q[key]["hi"], (key, Q[key], value)
+    # each revolution's rows, read on 2…80, are cut to the fit's band: the same states as rows read on 2…40
+    revs = [data + 0.3 * noise() for _ in range(6)]
+    wide = np.stack([st.profile_rows(_profile(r), 512, st.STATE_K_MAX) for r in revs])
+    narrow = np.stack([st.profile_rows(_profile(r), 512, st.STATE_K_FALLBACK) for r in revs])
+    a = st.state_revolutions(wide, np.full(6, OMEGA / (2 * math.pi)), est)
+    b = st.state_revolutions(narrow, np.full(6, OMEGA / (2 * math.pi)), est)
+    np.testing.assert_allclose(a.values["load_n"], b.values["load_n"], rtol=1e-12)
+    with pytest.raises(ValueError, match="harmonics"):
+        st.band_rows(narrow[:, : 4 * 20], st.STATE_K_FALLBACK)

@@ -48,8 +48,9 @@ def register(sub) -> None:
     p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
                    help="with --state: hold one quantity at a value — load_n [N], pressure_bar [bar] (a TPMS), "
                         "slip, tread_depth_mm [mm] — or at the input's stated condition (NAME=stated); repeatable")
-    p.add_argument("--harmonics", type=integer("a number of harmonics >= 8", lo=8), default=40, metavar="K",
-                   help="highest revolution harmonic fitted (default 40)")
+    p.add_argument("--harmonics", type=integer("a number of harmonics >= 8", lo=8), default=None, metavar="K",
+                   help="highest revolution harmonic fitted (default 40; with --state 80, or 40 where the model's "
+                        "form error shows above 40, docs/physics.md §13.4)")
     p.add_argument("--grid", type=integer("an even grid size >= 128", lo=128, hi=1 << 16), default=512, help="model grid M of the contact solve (default 512)")
     force_flag(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar, no warnings on stderr")
@@ -65,6 +66,11 @@ def run_estimate(args) -> int:
     from ringfit.io.profiles import sidecar_path
 
     kind = _input_kind(args.input)
+    if args.harmonics is None:
+        from ringfit.fit.estimate.problem import EstimateSettings as _Settings
+        from ringfit.fit.estimate.state import STATE_K_MAX
+
+        args.harmonics = STATE_K_MAX if args.state else _Settings.k_max
     if args.grid % 2:
         raise InputError(f"--grid {args.grid}: expected an even number >= 128")
     if not 8 <= args.harmonics < args.grid // 2 - 1:

@@ -171,6 +171,12 @@ def check_sign(amplitudes, curves: LoadCurves, source) -> None:
                          "wants acc_radial_ms2 positive toward the wheel centre", source=source or None)
 
 
+def band_top(n_angles: int, settings: EstimateSettings) -> int:
+    """The top harmonic an estimate fits: ``settings.k_max``, below what ``n_angles`` angles resolve ((N − 1)/2 − 1)
+    and the model grid's Nyquist (M/2 − 2)."""
+    return int(min(settings.k_max, (int(n_angles) - 1) // 2 - 1, settings.n_grid // 2 - 2))
+
+
 def profile_amplitudes(profile, n_grid: int, k_max: int) -> np.ndarray:
     """Radial harmonic amplitudes ``(K,)`` (k = 2…k_max) of a profile (band-limited, trapezoid weights)."""
     from ringfit.io.profiles import resample_profile
@@ -210,7 +216,7 @@ def estimate_load(profile, geometry: TyreGeometry, ring: RingParams, *, settings
     """
     geometry, ring, flags = _geometry_at_pressure(geometry, profile, ring, laws)
     N = len(profile)
-    k_max = int(min(settings.k_max, (N - 1) // 2 - 1, settings.n_grid // 2 - 2))
+    k_max = band_top(N, settings)
     if k_max < 8:
         raise InputError(f"{N} angles resolve harmonics up to {(N - 1) // 2}; the estimate needs at least 8",
                          source=profile.source)

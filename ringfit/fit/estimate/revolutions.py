@@ -144,7 +144,8 @@ def first_rotation_hz(record, samples: int = 1 << 18) -> float:
 
 
 def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progress: bool = False,
-                          geometry: TyreGeometry | None = None, tangential: bool = False) -> RecordingRevolutions:
+                          geometry: TyreGeometry | None = None, tangential: bool = False,
+                          clamp: bool = False) -> RecordingRevolutions:
     """Walk a continuous recording once (bounded memory): every whole revolution's radial reading on
     the angle grid (:func:`ringfit.targets.rolling_profile.revolution_grids`, M = the power of two at or
     above the samples per revolution, so that every sample takes part), its harmonics 2…k_max, and
@@ -156,7 +157,8 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     the dip sits relative to the patch centre).
 
     ``tangential``: read the tangential channel too (the state estimate, docs/physics.md §13.4): its rows per
-    revolution and its average in the profile.
+    revolution and its average in the profile. ``clamp``: with too few samples per revolution for harmonic
+    ``k_max``, read the harmonics they resolve (at least 8) instead of raising (the state's wide default band).
 
     **Raises** :class:`InputError` without a radial axis (or, with ``tangential``, a tangential one), without an
     encoder and without clear patch passages, with fewer than 2 whole revolutions, or with too few samples per
@@ -179,6 +181,8 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
         passages = patch_passages(record, progress=progress)
         spr = float(np.median(np.diff(passages)))
         source = "patch passages in the radial reading (no encoder; mean over the recording)"
+    if clamp and spr < 4 * (k_max + 2):
+        k_max = max(8, int(spr // 4) - 2)
     if spr < 4 * (k_max + 2):
         raise InputError(f"{spr:.0f} samples per revolution are too few to resolve harmonic {k_max} "
                          f"(need ≥ {4 * (k_max + 2)})", source=record.source)

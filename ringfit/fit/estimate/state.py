@@ -34,7 +34,7 @@ from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, Gaus
                                 free_set, least_squares_batch, linearize, residuals)
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
 from ringfit.fit.profile_block import fit_profile_block, noise_from_residual
-from ringfit.fit.estimate.load import LoadEstimate, estimate_load, step_for
+from ringfit.fit.estimate.load import LoadEstimate, band_top, estimate_load, step_for
 from ringfit.fit.identify import band_folds, discrepancy_ratio
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
                                           TILT_PRIOR, EstimateSettings, optimum_ring_shift)
@@ -80,6 +80,12 @@ RIDGE_SPAN = 2.5
 #: A slice this much (in −2 ln L) below the free fit: the free fit stopped on the flat ridge short of its optimum,
 #: and is redone from that slice.
 RIDGE_BETTER = 1.0
+#: The harmonics the state fits (docs/physics.md §13.4 *the harmonic band*): 2…STATE_K_MAX of both channels (the
+#: patch's edges, what tells load from tread depth at light loads, live in the high ones) — unless the model's form
+#: error shows there: a fit whose discrepancy ratio κ exceeds KAPPA_BAND_LIMIT is redone on 2…STATE_K_FALLBACK.
+STATE_K_MAX = 80
+STATE_K_FALLBACK = 40
+KAPPA_BAND_LIMIT = 4.0
 
 STATE_COORDS = (
     Coordinate(LOAD, LOG, lo=LOAD_RANGE[0], hi=LOAD_RANGE[1]),
@@ -447,6 +453,9 @@ class StateEstimate:
     #: the grid check (docs/physics.md §13.4 *the model's grid*): ``{"grid": [M, 2M], "shift": (Q,) SI}`` — how far
     #: each quantity moves when the model's grid is refined at the fit; in every interval in quadrature
     grid_check: dict | None = None
+    #: the wider harmonic band tried first and its discrepancy ratio κ, ``{k_max: κ}``, when its form error sent the
+    #: fit to the narrower band (:data:`KAPPA_BAND_LIMIT`); None otherwise
+    band_kappa: dict | None = None
 
     def value(self, key: str) -> float:
         """The estimate of quantity ``key`` (:data:`QUANTITIES`) in the unit its name says (the unit in
@@ -465,9 +474,23 @@ class StateEstimate:
                 "fit": {"status": self.status, "converged": self.converged, "rms_ms2": self.rms,
                         "channels": ["radial", "tangential"], "harmonics": [2, self.k_max], "flags": list(self.flags),
                         "discrepancy_ratio": float(self.discrepancy),
+                        **({"wider_band": {"harmonics": [2, k], "discrepancy_ratio": v}
+                            for k, v in self.band_kappa.items()} if self.band_kappa else {}),
                         **({"grid_check": self._grid_record()} if self.grid_check is not None else {})},
                 "nuisances": self.nuisances,
                 **({"ridge": self.ridge.to_record(self.discrepancy)} if self.ridge is not None else {})}
+
+
+def band_rows(rows: np.ndarray, k_max: int) -> np.ndarray:
+    """Rows ``(..., 4K')`` (radial Re, Im, tangential Re, Im of harmonics 2…K' + 1) cut to harmonics 2…k_max
+    ``(..., 4(k_max − 1))``; the rows themselves when they have that band; a ``ValueError`` when they have less."""
+    K = int(k_max) - 1
+    Kr = rows.shape[-1] // 4
+    if rows.shape[-1] != 4 * Kr or Kr < K:
+        raise ValueError(f"rows of {rows.shape[-1]} columns: expected 4 × ({K} or more) harmonics")
+    if Kr == K:
+        return rows
+    return rows.reshape(rows.shape[:-1] + (4, Kr))[..., :K].reshape(rows.shape[:-1] + (4 * K,))
 
 
 def profile_rows(profile, n_grid: int, k_max: int) -> np.ndarray:
@@ -492,7 +515,7 @@ def channel_weights(resid_rows: np.ndarray, leverage: float = 0.0, series: int =
 
 
 def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *,
-                   settings: EstimateSettings = EstimateSettings(), fixed: dict | None = None,
+                   settings: EstimateSettings = EstimateSettings(k_max=STATE_K_MAX), fixed: dict | None = None,
                    omega: float | None = None, omega_source: str | None = None, response=None, ring_covariance=None,
                    load: LoadEstimate | None = None, k_tread_in_file: bool = True) -> StateEstimate:
     """The tyre's state from one rolling profile (docs/physics.md §13.4; docs/formats.md §3 → §7.1).
@@ -505,6 +528,26 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
 
     **Returns:** :class:`StateEstimate`. Never raises on non-convergence (check ``converged``).
     """
+    est = _estimate_state(profile, geometry, ring, laws, settings=settings, fixed=fixed, omega=omega,
+                          omega_source=omega_source, response=response, ring_covariance=ring_covariance, load=load,
+                          k_tread_in_file=k_tread_in_file)
+    if est.k_max > STATE_K_FALLBACK and est.discrepancy > KAPPA_BAND_LIMIT:
+        # the model's form error shows in the high harmonics: the narrower band, where it fits (§13.4)
+        narrow = dataclasses.replace(settings, k_max=STATE_K_FALLBACK)
+        low = _estimate_state(profile, geometry, ring, laws, settings=narrow, fixed=fixed, omega=omega,
+                              omega_source=omega_source, response=response, ring_covariance=ring_covariance,
+                              load=est.load, k_tread_in_file=k_tread_in_file)
+        low.flags.append(f"harmonics 2…{est.k_max}: the model's form error showed above harmonic "
+                         f"{STATE_K_FALLBACK} (discrepancy ratio κ = {est.discrepancy:.3g} > {KAPPA_BAND_LIMIT:g}); "
+                         f"fitted on 2…{low.k_max} (κ = {low.discrepancy:.3g}), docs/physics.md §13.4")
+        low.band_kappa = {int(est.k_max): float(est.discrepancy)}
+        return low
+    return est
+
+
+def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *, settings, fixed, omega,
+                    omega_source, response, ring_covariance, load, k_tread_in_file) -> StateEstimate:
+    """:func:`estimate_state` on the harmonics 2…``settings.k_max`` (within the profile's band)."""
     fixed = dict(fixed or {})
     for name in fixed:
         if name not in STATE_NAMES:
@@ -521,7 +564,7 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
                              k_tread_in_file=k_tread_in_file, omega=omega, omega_source=omega_source,
                              response=response, laws=laws)
     omega = load.omega
-    k_max = load.k_max
+    k_max = band_top(len(profile), settings)  # the state's own band (the load estimate is only its start)
     K = k_max - 1
     resp = np.ones(K) if response is None else np.asarray(response, dtype=np.float64)[:K]
     measured = profile_rows(profile, settings.n_grid, k_max)
@@ -935,7 +978,7 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
     """
     fit = reference.fit
     problem = fit.problem
-    rows = np.asarray(rows, dtype=np.float64)
+    rows = band_rows(np.asarray(rows, dtype=np.float64), reference.k_max)
     R = rows.shape[0]
     if R < 2:
         raise InputError(f"{R} revolution(s): the per-revolution state needs at least 2")
@@ -1025,7 +1068,8 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
 
 
 def estimate_recording_state(record, geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *,
-                             settings: EstimateSettings = EstimateSettings(), fixed: dict | None = None,
+                             settings: EstimateSettings = EstimateSettings(k_max=STATE_K_MAX),
+                             fixed: dict | None = None,
                              k_tread_in_file: bool = True, per_revolution: bool = True, progress: bool = False,
                              ring_covariance=None, steps: int = 1):
     """The state of a continuous recording (docs/physics.md §13.4): one pass over it for both channels
@@ -1037,7 +1081,8 @@ def estimate_recording_state(record, geometry: TyreGeometry, ring: RingParams, l
     """
     from ringfit.fit.estimate.revolutions import recording_revolutions
 
-    data = recording_revolutions(record, k_max=settings.k_max, progress=progress, geometry=geometry, tangential=True)
+    data = recording_revolutions(record, k_max=settings.k_max, progress=progress, geometry=geometry, tangential=True,
+                                 clamp=True)
     omega = 2 * math.pi * float(np.mean(data.rotation_hz))
     load = estimate_load(data.profile, geometry, ring, settings=settings, k_tread_in_file=k_tread_in_file, omega=omega,
                          omega_source=data.rotation_source, response=data.response, noise_per_angle=data.noise,
