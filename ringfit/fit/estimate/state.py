@@ -528,26 +528,32 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
 
     **Returns:** :class:`StateEstimate`. Never raises on non-convergence (check ``converged``).
     """
-    est = _estimate_state(profile, geometry, ring, laws, settings=settings, fixed=fixed, omega=omega,
-                          omega_source=omega_source, response=response, ring_covariance=ring_covariance, load=load,
-                          k_tread_in_file=k_tread_in_file)
-    if est.k_max > STATE_K_FALLBACK and est.discrepancy > KAPPA_BAND_LIMIT:
-        # the model's form error shows in the high harmonics: the narrower band, where it fits (§13.4)
-        narrow = dataclasses.replace(settings, k_max=STATE_K_FALLBACK)
-        low = _estimate_state(profile, geometry, ring, laws, settings=narrow, fixed=fixed, omega=omega,
-                              omega_source=omega_source, response=response, ring_covariance=ring_covariance,
-                              load=est.load, k_tread_in_file=k_tread_in_file)
-        low.flags.append(f"harmonics 2…{est.k_max}: the model's form error showed above harmonic "
-                         f"{STATE_K_FALLBACK} (discrepancy ratio κ = {est.discrepancy:.3g} > {KAPPA_BAND_LIMIT:g}); "
-                         f"fitted on 2…{low.k_max} (κ = {low.discrepancy:.3g}), docs/physics.md §13.4")
+    common = dict(fixed=fixed, omega=omega, omega_source=omega_source, response=response,
+                  ring_covariance=ring_covariance, k_tread_in_file=k_tread_in_file)
+    if settings.k_max <= STATE_K_FALLBACK or band_top(len(profile), settings) <= STATE_K_FALLBACK:
+        return _estimate_state(profile, geometry, ring, laws, settings=settings, load=load, **common)
+    # the wide band continued from the narrow band's fit (its first passes started from the priors' means stopped on
+    # the ridge far from the optimum at a high signal-to-noise ratio, §13.6), and the narrow one where the wide band's
+    # form error shows (§13.4 *the harmonic band*)
+    narrow = dataclasses.replace(settings, k_max=STATE_K_FALLBACK)
+    low = _estimate_state(profile, geometry, ring, laws, settings=narrow, load=load, **common)
+    start = np.asarray(low.fit.theta) if np.all(np.isfinite(low.fit.theta)) else None
+    est = _estimate_state(profile, geometry, ring, laws, settings=settings, load=low.load, start=start, **common)
+    if est.discrepancy > KAPPA_BAND_LIMIT or not est.converged:
+        why = (f"the model's form error showed above harmonic {STATE_K_FALLBACK} (discrepancy ratio κ = "
+               f"{est.discrepancy:.3g} > {KAPPA_BAND_LIMIT:g})" if est.converged else "the fit did not converge")
+        low.flags.append(f"harmonics 2…{est.k_max}: {why}; fitted on 2…{low.k_max} (κ = {low.discrepancy:.3g}), "
+                         "docs/physics.md §13.4")
         low.band_kappa = {int(est.k_max): float(est.discrepancy)}
         return low
     return est
 
 
 def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *, settings, fixed, omega,
-                    omega_source, response, ring_covariance, load, k_tread_in_file) -> StateEstimate:
-    """:func:`estimate_state` on the harmonics 2…``settings.k_max`` (within the profile's band)."""
+                    omega_source, response, ring_covariance, load, k_tread_in_file, start=None) -> StateEstimate:
+    """:func:`estimate_state` on the harmonics 2…``settings.k_max`` (within the profile's band); ``start``: θ
+    (:data:`STATE_PARAMETERS` order) the passes start from (default: the load estimate's load and nuisances, the
+    priors' means for the rest)."""
     fixed = dict(fixed or {})
     for name in fixed:
         if name not in STATE_NAMES:
@@ -579,11 +585,13 @@ def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyr
     prior0 = GaussianPrior.independent({k: v for k, v in entries.items()
                                         if k in (CORNER, TILT, GAIN_TANGENTIAL, LINER_OFFSET)})
     nv = load.fit.values
-    start = {LOAD: load.load_n, PRESSURE: float(geometry.pressure), SLIP: 0.0, TREAD: float(laws.tread_depth_ref),
-             GAIN: nv[GAIN], ANGLE_OFFSET: nv[ANGLE_OFFSET], CORNER: max(nv[CORNER], 1e-3), TILT: nv[TILT],
-             GAIN_TANGENTIAL: 1.0, LINER_OFFSET: LINER_OFFSET_PRIOR[0]}
-    start.update(fixed)
-    theta0 = np.array([start[n] for n in STATE_PARAMETERS])
+    at = {LOAD: load.load_n, PRESSURE: float(geometry.pressure), SLIP: 0.0, TREAD: float(laws.tread_depth_ref),
+          GAIN: nv[GAIN], ANGLE_OFFSET: nv[ANGLE_OFFSET], CORNER: max(nv[CORNER], 1e-3), TILT: nv[TILT],
+          GAIN_TANGENTIAL: 1.0, LINER_OFFSET: LINER_OFFSET_PRIOR[0]}
+    if start is not None:
+        at.update(zip(STATE_PARAMETERS, (float(v) for v in start)))
+    at.update(fixed)
+    theta0 = np.array([at[n] for n in STATE_PARAMETERS])
     # first pass: each channel's rows scaled by its RMS (the tangential reading is ~5× smaller than the radial)
     half = 2 * K
     scale = np.array([np.sqrt(np.mean(measured[:half] ** 2)), np.sqrt(np.mean(measured[half:] ** 2))])
