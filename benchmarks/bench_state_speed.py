@@ -69,7 +69,9 @@ def main() -> int:
     rec = ContinuousRecord(acc=x, axes=("radial", "tangential"), fs_hz=fs, encoder_angle_deg=ang, condition={},
                            source="bench")
     c0, w0 = time.process_time(), time.time()
-    data = recording_revolutions(rec, k_max=40, tangential=True)
+    from ringfit.fit.estimate.state import STATE_K_MAX
+
+    data = recording_revolutions(rec, k_max=STATE_K_MAX, tangential=True, clamp=True)
     c1, w1 = time.process_time(), time.time()
     state = estimate_state(data.profile, geo, ring, laws, omega=om, response=data.response)
     rows = np.concatenate([data.rows, data.rows_tangential], axis=1)

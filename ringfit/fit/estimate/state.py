@@ -530,7 +530,9 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     """
     common = dict(fixed=fixed, omega=omega, omega_source=omega_source, response=response,
                   ring_covariance=ring_covariance, k_tread_in_file=k_tread_in_file)
-    if settings.k_max <= STATE_K_FALLBACK or band_top(len(profile), settings) <= STATE_K_FALLBACK:
+    top = band_top(len(profile), settings) if response is None else min(band_top(len(profile), settings),
+                                                                          int(np.size(response)) + 1)
+    if top <= STATE_K_FALLBACK:
         return _estimate_state(profile, geometry, ring, laws, settings=settings, load=load, **common)
     # the wide band continued from the narrow band's fit (its first passes started from the priors' means stopped on
     # the ridge far from the optimum at a high signal-to-noise ratio, §13.6), and the narrow one where the wide band's
@@ -571,6 +573,8 @@ def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyr
                              response=response, laws=laws)
     omega = load.omega
     k_max = band_top(len(profile), settings)  # the state's own band (the load estimate is only its start)
+    if response is not None:  # no higher than the harmonics whose acquisition gain is known
+        k_max = min(k_max, int(np.size(response)) + 1)
     K = k_max - 1
     resp = np.ones(K) if response is None else np.asarray(response, dtype=np.float64)[:K]
     measured = profile_rows(profile, settings.n_grid, k_max)
