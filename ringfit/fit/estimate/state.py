@@ -530,9 +530,7 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     """
     common = dict(fixed=fixed, omega=omega, omega_source=omega_source, response=response,
                   ring_covariance=ring_covariance, k_tread_in_file=k_tread_in_file)
-    top = band_top(len(profile), settings) if response is None else min(band_top(len(profile), settings),
-                                                                          int(np.size(response)) + 1)
-    if top <= STATE_K_FALLBACK:
+    if state_band(profile, settings, response) <= STATE_K_FALLBACK:
         return _estimate_state(profile, geometry, ring, laws, settings=settings, load=load, **common)
     # the wide band continued from the narrow band's fit (its first passes started from the priors' means stopped on
     # the ridge far from the optimum at a high signal-to-noise ratio, §13.6), and the narrow one where the wide band's
@@ -549,6 +547,13 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
         low.band_kappa = {int(est.k_max): float(est.discrepancy)}
         return low
     return est
+
+
+def state_band(profile, settings: EstimateSettings, response=None) -> int:
+    """The top harmonic the state fits: :func:`~ringfit.fit.estimate.load.band_top` of the profile, and no higher than
+    the harmonics whose acquisition gain ``response`` (``(K,)``, harmonics 2…K + 1) is given."""
+    top = band_top(len(profile), settings)
+    return top if response is None else min(top, int(np.size(response)) + 1)
 
 
 def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *, settings, fixed, omega,
@@ -572,9 +577,7 @@ def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyr
                              k_tread_in_file=k_tread_in_file, omega=omega, omega_source=omega_source,
                              response=response, laws=laws)
     omega = load.omega
-    k_max = band_top(len(profile), settings)  # the state's own band (the load estimate is only its start)
-    if response is not None:  # no higher than the harmonics whose acquisition gain is known
-        k_max = min(k_max, int(np.size(response)) + 1)
+    k_max = state_band(profile, settings, response)  # the state's own band (the load estimate is only its start)
     K = k_max - 1
     resp = np.ones(K) if response is None else np.asarray(response, dtype=np.float64)[:K]
     measured = profile_rows(profile, settings.n_grid, k_max)
