@@ -621,3 +621,32 @@ def test_outlier_rule_needs_three_settled_fits():
 
     ratio, out = residual_outliers(np.array([1.0, 10.0, np.nan]), np.array([True, True, False]), 50)
     assert not out.any() and np.isnan(ratio).all()
+
+
+@pytest.mark.parametrize("samples, offset_deg", [(512.0, 0.0), (512.0, 37.0), (511.37, 11.0), (600.0, 0.3)])
+def test_the_acquisition_gain_is_what_the_interpolation_leaves(samples, offset_deg):
+    """recording_revolutions' ``response`` against the measured attenuation of known harmonics. Sampling locked to
+    the angle (512 per revolution, no offset: every grid point on a sample) leaves them untouched — the old
+    sinc²(k/512) rule took 8 % off harmonic 80 there; a fixed fraction (37°: 0.62 of a sample) and an
+    incommensurate rate leave other gains. The true amplitudes are the synthesis's, not the code's."""
+    from ringfit.io.continuous import ContinuousRecord
+
+    f_rot, revs = 10.0, 24
+    fs = f_rot * samples
+    t = np.arange(int(revs * fs / f_rot)) / fs
+    ang = offset_deg + 360.0 * f_rot * t
+    phi = np.radians(ang)
+    ks = np.array([2, 10, 25, 40, 60, 80])
+    amp = 1.0 + 0.1 * ks
+    x = np.sum(amp[:, None] * np.cos(ks[:, None] * phi[None, :] + 0.3 * ks[:, None]), axis=0)
+    rec = ContinuousRecord(acc=np.stack([x, 0.2 * x]), axes=("radial", "tangential"), fs_hz=fs,
+                           encoder_angle_deg=ang, condition={}, source="t")
+    data = recording_revolutions(rec, k_max=80, tangential=True)
+    grid = np.asarray(data.profile.acc_radial_ms2)
+    measured = np.abs(np.fft.rfft(grid))[ks] * 2 / grid.size / amp
+    response = np.asarray(data.response)[ks - 2]
+    assert measured == pytest.approx(response, abs=2e-4)
+    if offset_deg == 0.0 and samples == 512.0:
+        assert response == pytest.approx(1.0, abs=1e-9)
+    if samples == 511.37:  # fractions spread over [0, 1): the triangle kernel's sinc²
+        assert response == pytest.approx(np.sinc(ks / samples) ** 2, abs=2e-3)

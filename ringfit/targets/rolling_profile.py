@@ -281,7 +281,10 @@ class RevolutionGrid:
     **Fields** (r revolutions): ``revolution`` (r,) numbers (revolution n covers the unwrapped sensor
     angle [360 n − 180, 360 n + 180) deg); ``t_s`` (r,) time of its middle [s] from the first sample;
     ``rotation_hz`` (r,) its rotation rate [Hz] (angle fit); ``values`` (axes, r, M) the readings at
-    φ_j = −180 + 360 j/M [m/s²]; ``samples`` (r,) samples it holds.
+    φ_j = −180 + 360 j/M [m/s²]; ``samples`` (r,) samples it holds; ``fractions`` ``(2, B)`` over the block's
+    grid points, per bin of the interpolation's fraction f (:data:`FRACTION_BINS`): their count, the sum of
+    the sample spacings [deg] they fell between and the sum of their fractions (what
+    :func:`interpolation_response` reads), ``(3, B)``.
     """
 
     revolution: np.ndarray
@@ -289,9 +292,32 @@ class RevolutionGrid:
     rotation_hz: np.ndarray
     values: np.ndarray
     samples: np.ndarray
+    fractions: np.ndarray | None = None
 
     def __len__(self) -> int:
         return self.revolution.size
+
+
+#: Bins of the linear interpolation's fraction f ∈ [0, 1) that :func:`interpolation_response` averages over.
+FRACTION_BINS = 128
+
+
+def interpolation_response(fractions: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """The gain ``(K,)`` on the revolution harmonics ``k`` of linear interpolation at the grid points that
+    ``fractions`` (``RevolutionGrid.fractions`` summed over blocks: count, spacing sum and fraction sum per bin)
+    describes (docs/physics.md §10 *the acquisition's gain*). A grid point at fraction f of the way between
+    samples Δ apart reads harmonic k (θ = kΔ) with the complex gain H = (1 − f)e^{−iθf} + f e^{iθ(1−f)}; the
+    returned gain is the real part of H averaged over the grid points (the best real gain on their average;
+    the imaginary part is O(θ³)). Sampling locked to the angle (f = 0 everywhere) gives 1; fractions spread
+    evenly over [0, 1) give sinc²(kΔ/2π), the triangle kernel's transform."""
+    count, spacing, fsum = np.asarray(fractions, dtype=np.float64)
+    have = count > 0
+    n = count[have]
+    f = fsum[have] / n  # each bin at its points' mean fraction: exact where they share one (sampling locked)
+    delta = np.radians(spacing[have] / n)
+    theta = np.asarray(k, dtype=np.float64)[:, None] * delta[None, :]
+    h = (1 - f) * np.cos(theta * f) + f * np.cos(theta * (1 - f))
+    return h @ n / n.sum()
 
 
 def revolution_grids(record: ContinuousRecord, *, points: int, axes=("radial",), chunk: int = DEFAULT_CHUNK,
@@ -358,6 +384,7 @@ def revolution_grids(record: ContinuousRecord, *, points: int, axes=("radial",),
             out = np.empty((len(axes), numbers.size, points))
             t_mid = np.empty(numbers.size)
             rate = np.empty(numbers.size)
+            fractions = np.zeros((3, FRACTION_BINS))
             for j, (n, a, b) in enumerate(zip(numbers, lo, hi)):
                 s = slice(a - REVOLUTION_MARGIN, b + REVOLUTION_MARGIN)
                 t = idx[s] / fs
@@ -367,9 +394,17 @@ def revolution_grids(record: ContinuousRecord, *, points: int, axes=("radial",),
                 target = 360.0 * n - 180.0 + grid
                 for i in range(len(axes)):
                     out[i, j] = np.interp(target, smooth, x[i, s])
+                # where the grid points fell between samples: the interpolation's gain (interpolation_response)
+                at = np.clip(np.searchsorted(smooth, target, side="right"), 1, smooth.size - 1)
+                gap = smooth[at] - smooth[at - 1]
+                frac = np.clip((target - smooth[at - 1]) / np.where(gap > 0, gap, 1.0), 0.0, 1.0 - 1e-12)
+                b = (frac * FRACTION_BINS).astype(np.int64)
+                fractions[0] += np.bincount(b, minlength=FRACTION_BINS)
+                fractions[1] += np.bincount(b, weights=gap, minlength=FRACTION_BINS)
+                fractions[2] += np.bincount(b, weights=frac, minlength=FRACTION_BINS)
                 t_mid[j] = tc
                 rate[j] = c[1] / 360.0
-            yield RevolutionGrid(numbers, t_mid, rate, out, hi - lo)
+            yield RevolutionGrid(numbers, t_mid, rate, out, hi - lo, fractions)
             cut = max(int(hi[-1]) - REVOLUTION_MARGIN, 0)
         else:  # keep everything from the first candidate revolution on
             cut = max(int(np.searchsorted(rev, rev[0] + 1, side="left")) - REVOLUTION_MARGIN, 0)
@@ -464,4 +499,4 @@ def patch_passages(record: ContinuousRecord, *, axis: str = "radial", chunk: int
 
 
 __all__ = ["RollingProfile", "rolling_profile", "periodic_interpolator", "profile_rms_error", "DEFAULT_POINTS",
-           "revolution_grids", "RevolutionGrid", "patch_passages"]
+           "revolution_grids", "RevolutionGrid", "patch_passages", "interpolation_response", "FRACTION_BINS"]

@@ -111,7 +111,9 @@ class RecordingRevolutions:
     ``rows`` ``(R, 2K)`` harmonic rows k = 2…k_max (:func:`amplitude_rows`) [m/s²]; ``revolution``,
     ``t_s``, ``rotation_hz`` ``(R,)``; ``profile``: the averaged profile (docs/formats.md §3, the
     revolution-to-revolution spread as ``acc_radial_spread_ms2``); ``response`` ``(K,)``: the resampling's
-    gain on the harmonics (sinc²(k/samples per revolution), linear interpolation); ``k_max``; ``noise``
+    gain on the harmonics (linear interpolation at the grid points where they fell between samples,
+    :func:`~ringfit.targets.rolling_profile.interpolation_response`: 1 for sampling locked to the angle,
+    sinc²(k/samples per revolution) for fractions spread evenly); ``k_max``; ``noise``
     ``(M,)`` the standard error of the averaged profile per angle [m/s²], from the differences of
     successive revolutions (a load that changes does not count as noise, unlike in the spread).
     """
@@ -165,7 +167,8 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     revolution.
     """
     from ringfit.io.profiles import Profile
-    from ringfit.targets.rolling_profile import patch_passages, revolution_grids
+    from ringfit.targets.rolling_profile import (FRACTION_BINS, interpolation_response, patch_passages,
+                                                 revolution_grids)
 
     if "radial" not in record.axes:
         raise InputError(f"no 'radial' axis (have: {', '.join(record.axes)}); the estimate reads the radial channel",
@@ -190,6 +193,7 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     hits = cleat_windows(record, progress=progress)
     rows, rev, t_s, rate, hit, rows_t = [], [], [], [], [], []
     t1 = np.zeros((2, points))
+    fractions = np.zeros((3, FRACTION_BINS))
     # sums over revolutions per angle [0] of every revolution, [1] of those read outside a cleat hit's ringing
     s1, s2, sd = np.zeros((2, points)), np.zeros((2, points)), np.zeros((2, points))
     count, pairs = np.zeros((2, points)), np.zeros((2, points))
@@ -197,6 +201,7 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     axes = ("radial", "tangential") if tangential else ("radial",)
     for block in revolution_grids(record, points=points, axes=axes, passages=passages, progress=progress):
         values = block.values[0]
+        fractions += block.fractions
         rows.append(amplitude_rows(harmonic_amplitudes(values, 2, k_max)))
         rev.append(block.revolution)
         t_s.append(block.t_s)
@@ -270,7 +275,7 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
                       extra={"acc_radial_spread_ms2": np.array([repr(float(x)) for x in spread], dtype=object)})
     k = np.arange(2, k_max + 1)
     return RecordingRevolutions(rows=np.concatenate(rows), revolution=np.concatenate(rev), t_s=np.concatenate(t_s),
-                                rotation_hz=rate, profile=profile, response=np.sinc(k / spr) ** 2, k_max=k_max,
+                                rotation_hz=rate, profile=profile, response=interpolation_response(fractions, k), k_max=k_max,
                                 noise=noise / np.sqrt(count), rotation_source=source,
                                 cleat_share=None if hits is None else np.concatenate(hit),
                                 rows_tangential=np.concatenate(rows_t) if tangential else None,

@@ -1144,12 +1144,12 @@ class StateFisher:
 
 
 def state_fisher(geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, state: TyreState, noise_ms2: float, *,
-                 samples_per_revolution: int = 1024, settings: EstimateSettings = EstimateSettings(),
+                 samples_per_revolution: int = 1024, settings: EstimateSettings = EstimateSettings(k_max=STATE_K_MAX),
                  gain: float = 1.0, corner_hz: float = 0.3, tilt: float = 0.5, with_priors: bool = False,
                  fixed: tuple = (), drum_diameter_m=None) -> StateFisher:
     """The Fisher information of one revolution at white noise σ = ``noise_ms2`` per sample in each channel
     (docs/physics.md §13.5): harmonic k's Re and Im have variance 2σ²/N (N samples per revolution), the rows
-    are both channels' harmonics 2…k_max, the nuisances (gain, offset, corner, tilt) free. ``with_priors``
+    are both channels' harmonics 2…k_max (default the state's band, :data:`STATE_K_MAX`), the nuisances (gain, offset, corner, tilt) free. ``with_priors``
     adds §13.4's weak priors (default: the data alone); ``fixed``: θ names held.
 
     **Returns:** :class:`StateFisher`: σ per revolution of every quantity (load, pressure, κ, Fx, depth, speed …)
