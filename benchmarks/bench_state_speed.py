@@ -69,7 +69,8 @@ def main() -> int:
     t = np.arange(int(args.revolutions * fs / f_rot)) / fs
     ang = -37.0 + 360 * f_rot * t
     w = np.radians(ang) + np.pi
-    x = sum((spec[:, k, None] * np.exp(1j * k * w[None, :])).real for k in range(1, 256))  # below Nyquist: an anti-aliased acquisition
+    # harmonics below the acquisition's Nyquist (an anti-aliased acquisition)
+    x = sum((spec[:, k, None] * np.exp(1j * k * w[None, :])).real for k in range(1, 256))
     x = x + np.array([[2.0], [0.3]]) * np.random.default_rng(1).standard_normal(x.shape)
     rec = ContinuousRecord(acc=x, axes=("radial", "tangential"), fs_hz=fs, encoder_angle_deg=ang, condition={},
                            source="bench")
@@ -102,7 +103,7 @@ def main() -> int:
             rel = f"{np.median(err):.3f} mm"
         cover = np.mean((revs.lo[key] <= value) & (value <= revs.hi[key]))
         sd = (revs.hi[key] - revs.lo[key]) / (2 * 1.959964)
-        bias = np.mean(revs.values[key] - value) / np.median(sd)  # a shared offset (bias), against the σ per revolution
+        bias = np.mean(revs.values[key] - value) / np.median(sd)  # a shared offset, against the σ per revolution
         print(f"{key:16s} {rel:>16s} {100 * cover:13.1f}% {bias:+15.2f}")
     print(f"load average at end: {bc.loadavg()}")
     return 0

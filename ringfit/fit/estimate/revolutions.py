@@ -275,7 +275,8 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
                       extra={"acc_radial_spread_ms2": np.array([repr(float(x)) for x in spread], dtype=object)})
     k = np.arange(2, k_max + 1)
     return RecordingRevolutions(rows=np.concatenate(rows), revolution=np.concatenate(rev), t_s=np.concatenate(t_s),
-                                rotation_hz=rate, profile=profile, response=interpolation_response(fractions, k), k_max=k_max,
+                                rotation_hz=rate, profile=profile, response=interpolation_response(fractions, k),
+                                k_max=k_max,
                                 noise=noise / np.sqrt(count), rotation_source=source,
                                 cleat_share=None if hits is None else np.concatenate(hit),
                                 rows_tangential=np.concatenate(rows_t) if tangential else None,
