@@ -643,9 +643,17 @@ def test_the_acquisition_gain_is_what_the_interpolation_leaves(samples, offset_d
                            encoder_angle_deg=ang, condition={}, source="t")
     data = recording_revolutions(rec, k_max=80, tangential=True)
     grid = np.asarray(data.profile.acc_radial_ms2)
-    measured = np.abs(np.fft.rfft(grid))[ks] * 2 / grid.size / amp
+    # the profile's harmonics (a_k of x = Σ Re a_k e^{ikφ} on φ_j = −180° + 360° j/M) against the synthesis's
+    measured = harmonic_amplitudes(grid, 2, 80)[ks - 2] / (amp * np.exp(0.3j * ks))
     response = np.asarray(data.response)[ks - 2]
-    assert measured == pytest.approx(response, abs=2e-4)
+    assert np.abs(measured) == pytest.approx(response, abs=2e-4)
+    assert np.angle(measured) == pytest.approx(0.0, abs=2e-4)  # the interpolation's phase is turned back out
+    rows = np.asarray(data.rows)
+    per = (rows[:, :79] + 1j * rows[:, 79:])[:, ks - 2] / (amp * np.exp(0.3j * ks))
+    assert np.mean(per, axis=0) == pytest.approx(measured, abs=1e-9)  # the revolutions' rows average to the profile's
+    if samples == 512.0:  # locked: every revolution has the same fractions, so the same gain and phase
+        assert np.abs(per) == pytest.approx(np.broadcast_to(response, per.shape), abs=2e-4)
+        assert np.angle(per) == pytest.approx(np.zeros(per.shape), abs=2e-4)
     if offset_deg == 0.0 and samples == 512.0:
         assert response == pytest.approx(1.0, abs=1e-9)
     if samples == 511.37:  # fractions spread over [0, 1): the triangle kernel's sinc²

@@ -303,20 +303,19 @@ FRACTION_BINS = 128
 
 
 def interpolation_response(fractions: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """The gain ``(K,)`` on the revolution harmonics ``k`` of linear interpolation at the grid points that
+    """The complex gain ``(K,)`` on the revolution harmonics ``k`` of linear interpolation at the grid points that
     ``fractions`` (``RevolutionGrid.fractions`` summed over blocks: count, spacing sum and fraction sum per bin)
     describes (docs/physics.md §10 *the acquisition's gain*). A grid point at fraction f of the way between
-    samples Δ apart reads harmonic k (θ = kΔ) with the complex gain H = (1 − f)e^{−iθf} + f e^{iθ(1−f)}; the
-    returned gain is the real part of H averaged over the grid points (the best real gain on their average;
-    the imaginary part is O(θ³)). Sampling locked to the angle (f = 0 everywhere) gives 1; fractions spread
-    evenly over [0, 1) give sinc²(kΔ/2π), the triangle kernel's transform."""
+    samples Δ apart reads harmonic k (θ = kΔ) with H = (1 − f)e^{−iθf} + f e^{iθ(1−f)}; returned is H averaged
+    over the grid points. Sampling locked to the angle (f = 0 everywhere) gives 1; fractions spread evenly over
+    [0, 1) give sinc²(kΔ/2π), the triangle kernel's transform; a fixed f ≠ ½ adds a phase of O(θ³)."""
     count, spacing, fsum = np.asarray(fractions, dtype=np.float64)
     have = count > 0
     n = count[have]
     f = fsum[have] / n  # each bin at its points' mean fraction: exact where they share one (sampling locked)
     delta = np.radians(spacing[have] / n)
     theta = np.asarray(k, dtype=np.float64)[:, None] * delta[None, :]
-    h = (1 - f) * np.cos(theta * f) + f * np.cos(theta * (1 - f))
+    h = (1 - f) * np.exp(-1j * theta * f) + f * np.exp(1j * theta * (1 - f))
     return h @ n / n.sum()
 
 

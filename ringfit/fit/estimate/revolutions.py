@@ -104,6 +104,23 @@ class RevolutionEstimates:
                 "contact_window_deg": float(self.window_deg)}
 
 
+def _turned(grid_signal: np.ndarray, fractions: np.ndarray) -> np.ndarray:
+    """A signal on the revolution's grid with each harmonic's interpolation phase turned back (the modulus kept):
+    harmonic k times conj(H_k)/|H_k| (:func:`~ringfit.targets.rolling_profile.interpolation_response`)."""
+    from ringfit.targets.rolling_profile import interpolation_response
+
+    spec = np.fft.rfft(grid_signal)
+    gain = interpolation_response(fractions, np.arange(1, spec.size))
+    spec[1:] *= np.conj(gain) / np.abs(gain)
+    return np.fft.irfft(spec, n=grid_signal.size)
+
+
+def _turned_rows(rows: np.ndarray, turn: np.ndarray) -> np.ndarray:
+    """Amplitude rows ``(R, 2K)`` (:func:`amplitude_rows`) with each harmonic's complex amplitude times ``turn``."""
+    K = turn.size
+    return amplitude_rows((rows[:, :K] + 1j * rows[:, K:]) * turn)
+
+
 @dataclass
 class RecordingRevolutions:
     """One pass over a continuous recording: each whole revolution's radial harmonics and the average.
@@ -111,9 +128,10 @@ class RecordingRevolutions:
     ``rows`` ``(R, 2K)`` harmonic rows k = 2…k_max (:func:`amplitude_rows`) [m/s²]; ``revolution``,
     ``t_s``, ``rotation_hz`` ``(R,)``; ``profile``: the averaged profile (docs/formats.md §3, the
     revolution-to-revolution spread as ``acc_radial_spread_ms2``); ``response`` ``(K,)``: the resampling's
-    gain on the harmonics (linear interpolation at the grid points where they fell between samples,
-    :func:`~ringfit.targets.rolling_profile.interpolation_response`: 1 for sampling locked to the angle,
-    sinc²(k/samples per revolution) for fractions spread evenly); ``k_max``; ``noise``
+    gain on the harmonics (the modulus of linear interpolation's at the grid points where they fell between
+    samples, :func:`~ringfit.targets.rolling_profile.interpolation_response`: 1 for sampling locked to the angle,
+    sinc²(k/samples per revolution) for fractions spread evenly; its phase is turned back out of the rows and the
+    profile); ``k_max``; ``noise``
     ``(M,)`` the standard error of the averaged profile per angle [m/s²], from the differences of
     successive revolutions (a load that changes does not count as noise, unlike in the spread).
     """
@@ -271,12 +289,18 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
                 **({} if tangential else {"missing_axes": ["tangential"]}))
     angle = grid_angles_deg(points)
     mean_t = t1[use] / count if tangential else np.zeros(points)
+    # the interpolation's gain (docs/physics.md §10 *the acquisition's gain*): its modulus is the model's response,
+    # its phase (O(θ³), where the grid points sit at one fraction between samples) is turned back out of the data
+    k = np.arange(2, k_max + 1)
+    gain = interpolation_response(fractions, k)
+    turn = np.conj(gain) / np.abs(gain)
+    mean, mean_t = _turned(mean, fractions), _turned(mean_t, fractions)
+    rows = [_turned_rows(r, turn) for r in rows]
+    rows_t = [_turned_rows(r, turn) for r in rows_t]
     profile = Profile(angle, mean, mean_t, condition=cond, source=str(record.source),
                       extra={"acc_radial_spread_ms2": np.array([repr(float(x)) for x in spread], dtype=object)})
-    k = np.arange(2, k_max + 1)
     return RecordingRevolutions(rows=np.concatenate(rows), revolution=np.concatenate(rev), t_s=np.concatenate(t_s),
-                                rotation_hz=rate, profile=profile, response=interpolation_response(fractions, k),
-                                k_max=k_max,
+                                rotation_hz=rate, profile=profile, response=np.abs(gain), k_max=k_max,
                                 noise=noise / np.sqrt(count), rotation_source=source,
                                 cleat_share=None if hits is None else np.concatenate(hit),
                                 rows_tangential=np.concatenate(rows_t) if tangential else None,
