@@ -316,7 +316,7 @@ def interpolation_response(fractions: np.ndarray, k: np.ndarray) -> np.ndarray:
     delta = np.radians(spacing[have] / n)
     theta = np.asarray(k, dtype=np.float64)[:, None] * delta[None, :]
     h = (1 - f) * np.exp(-1j * theta * f) + f * np.exp(1j * theta * (1 - f))
-    return h @ n / n.sum()
+    return (h * n).sum(axis=1) / n.sum()  # not BLAS: its threads would spin on this small product
 
 
 def revolution_grids(record: ContinuousRecord, *, points: int, axes=("radial",), chunk: int = DEFAULT_CHUNK,
@@ -394,9 +394,10 @@ def revolution_grids(record: ContinuousRecord, *, points: int, axes=("radial",),
                 for i in range(len(axes)):
                     out[i, j] = np.interp(target, smooth, x[i, s])
                 # where the grid points fell between samples: the interpolation's gain (interpolation_response)
-                at = np.clip(np.searchsorted(smooth, target, side="right"), 1, smooth.size - 1)
+                at = np.minimum(np.maximum(np.searchsorted(smooth, target, side="right"), 1), smooth.size - 1)
                 gap = smooth[at] - smooth[at - 1]
-                frac = np.clip((target - smooth[at - 1]) / np.where(gap > 0, gap, 1.0), 0.0, 1.0 - 1e-12)
+                frac = np.minimum(np.maximum((target - smooth[at - 1]) / np.where(gap > 0, gap, 1.0), 0.0),
+                                  1.0 - 1e-12)
                 b = (frac * FRACTION_BINS).astype(np.int64)
                 fractions[0] += np.bincount(b, minlength=FRACTION_BINS)
                 fractions[1] += np.bincount(b, weights=gap, minlength=FRACTION_BINS)

@@ -104,13 +104,11 @@ class RevolutionEstimates:
                 "contact_window_deg": float(self.window_deg)}
 
 
-def _turned(grid_signal: np.ndarray, fractions: np.ndarray) -> np.ndarray:
-    """A signal on the revolution's grid with each harmonic's interpolation phase turned back (the modulus kept):
-    harmonic k times conj(H_k)/|H_k| (:func:`~ringfit.targets.rolling_profile.interpolation_response`)."""
-    from ringfit.targets.rolling_profile import interpolation_response
-
+def _turned(grid_signal: np.ndarray, gain: np.ndarray) -> np.ndarray:
+    """A signal on the revolution's grid (M points) with each harmonic's interpolation phase turned back, the modulus
+    kept: harmonic k times conj(H_k)/|H_k|, ``gain`` H of harmonics 1 … M/2
+    (:func:`~ringfit.targets.rolling_profile.interpolation_response`)."""
     spec = np.fft.rfft(grid_signal)
-    gain = interpolation_response(fractions, np.arange(1, spec.size))
     spec[1:] *= np.conj(gain) / np.abs(gain)
     return np.fft.irfft(spec, n=grid_signal.size)
 
@@ -291,10 +289,10 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     mean_t = t1[use] / count if tangential else np.zeros(points)
     # the interpolation's gain (docs/physics.md §10 *the acquisition's gain*): its modulus is the model's response,
     # its phase (O(θ³), where the grid points sit at one fraction between samples) is turned back out of the data
-    k = np.arange(2, k_max + 1)
-    gain = interpolation_response(fractions, k)
+    every = interpolation_response(fractions, np.arange(1, points // 2 + 1))  # harmonics 1 … M/2
+    gain = every[1:k_max]  # 2 … k_max
     turn = np.conj(gain) / np.abs(gain)
-    mean, mean_t = _turned(mean, fractions), _turned(mean_t, fractions)
+    mean, mean_t = _turned(mean, every), _turned(mean_t, every)
     rows = [_turned_rows(r, turn) for r in rows]
     rows_t = [_turned_rows(r, turn) for r in rows_t]
     profile = Profile(angle, mean, mean_t, condition=cond, source=str(record.source),
