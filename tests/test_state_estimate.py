@@ -350,3 +350,38 @@ def test_a_form_error_above_the_limit_sends_the_fit_to_the_narrower_band(monkeyp
     np.testing.assert_allclose(a.values["load_n"], b.values["load_n"], rtol=1e-12)
     with pytest.raises(ValueError, match="harmonics"):
         st.band_rows(narrow[:, : 4 * 20], st.STATE_K_FALLBACK)
+
+
+def _revolutions(t, fx, load):
+    from ringfit.fit.estimate.state import StateRevolutions
+
+    R = t.size
+    vals = {"fx_n": fx, "load_n": load}
+    return StateRevolutions(revolution=np.arange(R), t_s=t, rotation_hz=np.full(R, 10.0), values=vals,
+                            lo={k: v - 1 for k, v in vals.items()}, hi={k: v + 1 for k, v in vals.items()},
+                            rms=np.ones(R), noise_scale=1.0)
+
+
+def test_a_drifting_state_is_flagged_and_noise_alone_is_not():
+    """state_drift against its null and its power: 400 recordings of 80 revolutions whose per-revolution Fx and load
+    are the truth plus white scatter (3 % and 10 % of the load per revolution, what one revolution tells at light
+    loads) are flagged at most 8 times (the 3-SE rule on two trends: 0.5 % expected); a ramp of Fx by 8 % of the load
+    in the same scatter is flagged in ≥ 97.5 % (its change 2.6 SE above the 5 % share); a ramp of 2 % no more often
+    than noise alone."""
+    from ringfit.fit.estimate.state import state_drift
+
+    rng = np.random.default_rng(7)
+    t = np.arange(80) / 8.0
+    load = 3000.0
+    flagged = {"none": 0, "ramp 8 %": 0, "ramp 2 %": 0}
+    for _ in range(400):
+        noise_fx = 0.03 * load * rng.standard_normal(80)
+        noise_l = load * (1 + 0.10 * rng.standard_normal(80))
+        for name, change in (("none", 0.0), ("ramp 8 %", 0.08), ("ramp 2 %", 0.02)):
+            fx = -200.0 + change * load * (t / t[-1] - 0.5) + noise_fx
+            flagged[name] += state_drift(_revolutions(t, fx, noise_l), load) is not None
+    assert flagged["none"] <= 8, flagged
+    assert flagged["ramp 8 %"] >= 390, flagged
+    assert flagged["ramp 2 %"] <= 8, flagged
+    said = state_drift(_revolutions(t, -200.0 + 0.08 * load * (t / t[-1] - 0.5), np.full(80, load)), load)
+    assert said.startswith("the state drifted within the recording: Fx by +240 N (+8.0 % of the load)"), said

@@ -1082,6 +1082,45 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
                             values=values, lo=lo, hi=hi, rms=rms, noise_scale=s_r, steps=int(steps), free=sub)
 
 
+#: A drift of the state within a recording is flagged when its linear trend over the recording changes Fx or the load
+#: by more than this share of the load and by more than DRIFT_Z standard errors of the trend (docs/physics.md §13.6
+#: *what the misses are*: an Fx ramp of 8.5 % of the load biased the averaged fit by −4 % in load, one of 2.1 % did
+#: not).
+DRIFT_SHARE = 0.05
+DRIFT_Z = 3.0
+
+
+def state_drift(revs: StateRevolutions, load_n: float) -> str | None:
+    """A flag (or ``None``) when the per-revolution states drift within the recording (docs/physics.md §13.6): the
+    least-squares line of each revolution's Fx and load against time, its change over the recording against
+    :data:`DRIFT_SHARE` of the load and :data:`DRIFT_Z` standard errors of the slope (from the line's residual
+    scatter). The averaged fit assumes one state: a drift smears the patch's features in the averaged profile, and
+    the pressure and tread depth read from it — and every revolution's, which carry them — can be biased."""
+    t = np.asarray(revs.t_s, dtype=np.float64)
+    if t.size < 4 or np.ptp(t) <= 0:
+        return None
+    span = float(np.ptp(t))
+    tc = t - t.mean()
+    said = []
+    for key, what in (("fx_n", "Fx"), ("load_n", "the load")):
+        v = np.asarray(revs.values[key], dtype=np.float64)
+        ok = np.isfinite(v)
+        if ok.sum() < 4:
+            continue
+        x, y = tc[ok] - tc[ok].mean(), v[ok]
+        b = float(x @ (y - y.mean()) / (x @ x))
+        resid = y - y.mean() - b * x
+        se = math.sqrt(float(resid @ resid) / (y.size - 2) / float(x @ x))
+        change = b * span
+        if abs(change) > DRIFT_SHARE * abs(load_n) and abs(b) > DRIFT_Z * se:
+            said.append(f"{what} by {change:+.4g} N ({100 * change / abs(load_n):+.1f} % of the load)")
+    if not said:
+        return None
+    return (f"the state drifted within the recording: {' and '.join(said)} over {span:.3g} s (per-revolution trend); "
+            "the averaged fit assumes one state, and the pressure and tread depth read from a drifting recording can "
+            "be biased (docs/physics.md §13.6) — a shorter or steadier stretch reads them better")
+
+
 def estimate_recording_state(record, geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *,
                              settings: EstimateSettings = EstimateSettings(k_max=STATE_K_MAX),
                              fixed: dict | None = None,
@@ -1110,6 +1149,9 @@ def estimate_recording_state(record, geometry: TyreGeometry, ring: RingParams, l
         rows = np.concatenate([data.rows, data.rows_tangential], axis=1)
         revs = state_revolutions(rows, data.rotation_hz, state, settings=settings, revolution=data.revolution,
                                  t_s=data.t_s, steps=steps)
+        drift = state_drift(revs, float(state.quantities["load_n"]["value"]))
+        if drift:
+            state.flags.append(drift)
     return load, state, revs
 
 
@@ -1194,4 +1236,5 @@ def state_fisher(geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, state
 __all__ = ["STATE_PARAMETERS", "STATE_NAMES", "STATE_COORDS", "PRESSURE", "SLIP", "TREAD", "QUANTITIES", "StateArrays",
            "StateResiduals", "state_problem", "state_priors", "free_parameters", "state_quantities", "StateEstimate",
            "estimate_state", "profile_rows", "channel_weights", "StateRevolutions", "state_revolutions",
-           "StateFisher", "state_fisher", "state_of", "estimate_recording_state"]
+           "StateFisher", "state_fisher", "state_of", "estimate_recording_state", "state_drift", "DRIFT_SHARE",
+           "DRIFT_Z"]
