@@ -129,7 +129,7 @@ def test_bad_state_options_are_refused_before_anything_is_written(tmp_path, caps
 @pytest.mark.slow
 def test_batch_runs_the_state_estimate_over_many_recordings(case, tmp_path, monkeypatch, capsys):
     """issue 33 item 7: ``ringfit batch estimate … -- --state`` on a worker gives each input's state, the same
-    as the serial command (a profile and a continuous recording)."""
+    as the serial command to a tenth of its σ (a profile and a continuous recording)."""
     import os
 
     from ringfit.batch import local_cluster
@@ -153,7 +153,11 @@ def test_batch_runs_the_state_estimate_over_many_recordings(case, tmp_path, monk
         name = Path(plan.outputs[0]).name
         got, want = (json.loads((d / name).read_text())["state"]["quantities"] for d in (Path("batch"), serial))
         for key in ("load_n", "pressure_bar", "fx_n", "tread_depth_mm", "speed_kmh"):
-            assert got[key]["value"] == pytest.approx(want[key]["value"], rel=1e-9), (name, key)
-            assert got[key]["lo"] == pytest.approx(want[key]["lo"], rel=1e-9), (name, key)
+            # the same answer to a tenth of its σ: not to the bit, since the serial command's XLA reductions are
+            # multi-threaded (the workers' are not), and on the flat load–depth ridge their last bits moved the
+            # load by 0.04 % (0.08 σ) on a loaded machine
+            tol = 0.1 * want[key]["sd"]
+            assert got[key]["value"] == pytest.approx(want[key]["value"], abs=tol), (name, key)
+            assert got[key]["lo"] == pytest.approx(want[key]["lo"], abs=tol), (name, key)
     truth = json.loads((Path("batch") / "r.estimate.json").read_text())["state"]["quantities"]
     assert truth["load_n"]["lo"] <= 4200.0 <= truth["load_n"]["hi"]
