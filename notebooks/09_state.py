@@ -107,6 +107,8 @@ for key in ("load_n", "pressure_bar", "fx_n", "slip", "speed_kmh", "tread_depth_
     q = state.quantities[key]
     print(f"{key:17s} {q['value']:10.5g}  (95 %: {q['lo']:.5g} … {q['hi']:.5g} {q['unit']})  {q['status']}")
 print("\n".join(state.untold))
+for flag in state.flags:  # what the estimate warns of: a fall-back band, the new tread's bound, a drifting state
+    print(f"flag: {flag}")
 
 # %% [markdown]
 # ## Against the truth
@@ -140,7 +142,10 @@ for key in keys:
 # (`benchmarks/bench_state.py` measures it over many blind recordings): the load, pressure and tread depth move
 # together along the ridge the Fisher table shows, pushed by a model-form difference between the two codes of
 # about 2 % in load-equivalent (docs/physics.md §13.6). The per-revolution bands are statistical only: they are
-# as wide as the revolution's noise, not as the averaged estimate's model error.
+# as wide as the revolution's noise, not as the averaged estimate's model error. A recording whose Fx or load
+# drifts by more than 5 % of the load is flagged above ("the state drifted within the recording"): the averaged
+# fit assumes one state, and on the independent simulator such a ramp is what pushed the worst misses along the
+# ridge (§13.6).
 #
 # ## What a stated pressure and tread depth buy
 # A TPMS reading and a known wear (`ringfit estimate --fix pressure=… --fix tread_depth=…` in the CLI) hold two
