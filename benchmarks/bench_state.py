@@ -140,6 +140,9 @@ def read_state(path: Path, tyre, steps: int = 1, fixed: dict | None = None, sett
     rows = np.concatenate([data.rows, data.rows_tangential], axis=1)
     revs = st.state_revolutions(rows, data.rotation_hz, state, revolution=data.revolution, t_s=data.t_s, steps=steps)
     c3 = time.process_time()
+    drift = st.state_drift(revs, float(state.quantities["load_n"]["value"]))  # as estimate_recording_state flags it
+    if drift:
+        state.flags.append(drift)
     return load, state, revs, (c1 - c0) + (c3 - c2), c2 - c1
 
 
@@ -185,7 +188,7 @@ def blind():
     per_told = {q: [] for q in quantities}
     onestep = {q: [] for q in quantities}   # the value the other side of its grid extrapolation (§13.4): diagnostic
     spread = {q: [] for q in quantities}    # the estimate's own σ, in the error's unit: what the data could tell
-    speed_rows, sim_cpu, lines = [], 0.0, []
+    speed_rows, sim_cpu, lines, drift_rows = [], 0.0, [], []
     print(f"\n1. Blind state on the independent simulator: seeds {ARGS.seeds}, {ARGS.blind} blind recordings of "
           f"{ARGS.seconds:g} s each; tyre: " + ("the example's NOMINAL tyre.toml (the truth is jittered around it; "
                                                 "its laws are the nominal ones, not the truth's)" if ARGS.tyre ==
@@ -226,8 +229,10 @@ def blind():
                 t_lo, t_hi = float(truth["t_start_s"][0]), float(truth["t_end_s"][-1])
                 true_load = truth_over(truth, "load_n", t_lo, t_hi)
                 wider = "".join(f" (κ {v:.1f} on 2…{k})" for k, v in (state.band_kappa or {}).items())
+                drifted = any(f.startswith("the state drifted") for f in state.flags)
+                drift_rows.append(drifted)
                 line = [f"   s{seed} {name}: {len(revs)} rev, {state.status}, 2…{state.k_max} κ {state.discrepancy:.1f}"
-                        f"{wider}"]
+                        f"{wider}{' DRIFT' if drifted else ''}"]
                 for q in quantities:
                     key = KEYS[q]
                     Q = state.quantities[key]
@@ -289,6 +294,15 @@ def blind():
     print("   the estimates' own σ (median over the recordings; a calibrated estimate's median |error| is about 0.67 σ, "
           "so a target below that is below what these recordings tell): " + ", ".join(
               f"{q} {float(np.median(spread[q])):.3f}" for q in quantities if spread[q]))
+    if drift_rows:  # the drift flag (docs/physics.md §13.6): coverage of the flagged and the steady recordings
+        flagged = np.array(drift_rows)
+        parts = []
+        for q in quantities:
+            inside = np.array([bool(a[1]) for a in avg[q]])
+            parts.append(f"{q} {int(inside[flagged].sum())}/{int(flagged.sum())} vs "
+                         f"{int(inside[~flagged].sum())}/{int((~flagged).sum())}")
+        print(f"   drift flag ('the state drifted within the recording'): {int(flagged.sum())} of {flagged.size} "
+              "recordings; coverage flagged vs not: " + ", ".join(parts))
     if any(onestep.values()):
         print("   the value the other side of Richardson's extrapolation (docs/physics.md §13.4 *the model's grid*; "
               "without it where ringfit applies it; a diagnostic): median |err| " + ", ".join(
