@@ -113,12 +113,6 @@ def _turned(grid_signal: np.ndarray, gain: np.ndarray) -> np.ndarray:
     return np.fft.irfft(spec, n=grid_signal.size)
 
 
-def _turned_rows(rows: np.ndarray, turn: np.ndarray) -> np.ndarray:
-    """Amplitude rows ``(R, 2K)`` (:func:`amplitude_rows`) with each harmonic's complex amplitude times ``turn``."""
-    K = turn.size
-    return amplitude_rows((rows[:, :K] + 1j * rows[:, K:]) * turn)
-
-
 @dataclass
 class RecordingRevolutions:
     """One pass over a continuous recording: each whole revolution's radial harmonics and the average.
@@ -218,7 +212,7 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     for block in revolution_grids(record, points=points, axes=axes, passages=passages, progress=progress):
         values = block.values[0]
         fractions += block.fractions
-        rows.append(amplitude_rows(harmonic_amplitudes(values, 2, k_max)))
+        rows.append(harmonic_amplitudes(values, 2, k_max))  # complex: made rows once the gain's phase is known
         rev.append(block.revolution)
         t_s.append(block.t_s)
         rate.append(block.rotation_hz)
@@ -226,7 +220,7 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
         hit.append(1.0 - quiet.mean(axis=1))
         if tangential:
             tv = block.values[1]
-            rows_t.append(amplitude_rows(harmonic_amplitudes(tv, 2, k_max)))
+            rows_t.append(harmonic_amplitudes(tv, 2, k_max))
             t1[0] += tv.sum(axis=0)
             t1[1] += (quiet * tv).sum(axis=0)
         chain = values if previous is None else np.concatenate([previous[0], values])
@@ -293,15 +287,14 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     gain = every[1:k_max]  # 2 … k_max
     turn = np.conj(gain) / np.abs(gain)
     mean, mean_t = _turned(mean, every), _turned(mean_t, every)
-    rows = [_turned_rows(r, turn) for r in rows]
-    rows_t = [_turned_rows(r, turn) for r in rows_t]
     profile = Profile(angle, mean, mean_t, condition=cond, source=str(record.source),
                       extra={"acc_radial_spread_ms2": np.array([repr(float(x)) for x in spread], dtype=object)})
-    return RecordingRevolutions(rows=np.concatenate(rows), revolution=np.concatenate(rev), t_s=np.concatenate(t_s),
+    return RecordingRevolutions(rows=amplitude_rows(np.concatenate(rows) * turn), revolution=np.concatenate(rev),
+                                t_s=np.concatenate(t_s),
                                 rotation_hz=rate, profile=profile, response=np.abs(gain), k_max=k_max,
                                 noise=noise / np.sqrt(count), rotation_source=source,
                                 cleat_share=None if hits is None else np.concatenate(hit),
-                                rows_tangential=np.concatenate(rows_t) if tangential else None,
+                                rows_tangential=amplitude_rows(np.concatenate(rows_t) * turn) if tangential else None,
                                 **({} if use == 0 else {"noise_source": "the quiet revolutions (cleat hits left out): "
                                     "their successive differences, or their spread where no two successive ones are "
                                     "quiet, / √(revolutions), in the fitted band"}))

@@ -1100,14 +1100,13 @@ def state_drift(revs: StateRevolutions, load_n: float) -> str | None:
     if t.size < 4 or np.ptp(t) <= 0:
         return None
     span = float(np.ptp(t))
-    tc = t - t.mean()
     said = []
     for key, what in (("fx_n", "Fx"), ("load_n", "the load")):
         v = np.asarray(revs.values[key], dtype=np.float64)
         ok = np.isfinite(v)
         if ok.sum() < 4:
             continue
-        x, y = tc[ok] - tc[ok].mean(), v[ok]
+        x, y = t[ok] - t[ok].mean(), v[ok]
         b = float(x @ (y - y.mean()) / (x @ x))
         resid = y - y.mean() - b * x
         se = math.sqrt(float(resid @ resid) / (y.size - 2) / float(x @ x))
@@ -1191,8 +1190,9 @@ def state_fisher(geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, state
                  fixed: tuple = (), drum_diameter_m=None) -> StateFisher:
     """The Fisher information of one revolution at white noise σ = ``noise_ms2`` per sample in each channel
     (docs/physics.md §13.5): harmonic k's Re and Im have variance 2σ²/N (N samples per revolution), the rows
-    are both channels' harmonics 2…k_max (default the state's band, :data:`STATE_K_MAX`), the nuisances (gain, offset, corner, tilt) free. ``with_priors``
-    adds §13.4's weak priors (default: the data alone); ``fixed``: θ names held.
+    are both channels' harmonics 2…k_max (default the state's band, :data:`STATE_K_MAX`), the nuisances (gain,
+    offset, corner, tilt) free. ``with_priors`` adds §13.4's weak priors (default: the data alone); ``fixed``: θ
+    names held.
 
     **Returns:** :class:`StateFisher`: σ per revolution of every quantity (load, pressure, κ, Fx, depth, speed …)
     and their correlation (delta method through the inverse information).
