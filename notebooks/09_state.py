@@ -14,7 +14,6 @@
 
 # %%
 import csv
-import math
 import os
 import warnings
 from pathlib import Path
@@ -71,34 +70,8 @@ def read_state(path, fixed=None):
     record = read_continuous(path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        if hasattr(st, "estimate_recording_state"):
-            _, state, revs = st.estimate_recording_state(record, geometry, ring, laws, fixed=fixed)
-            return state, revs
-        # (this checkout predates estimate_recording_state: the same steps by hand)
-        import dataclasses
-
-        from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
-        from ringfit.fit.estimate.load import estimate_load
-        from ringfit.fit.estimate.revolutions import recording_revolutions
-        from ringfit.io.profiles import Profile
-        from ringfit.targets.rolling_profile import revolution_grids
-
-        data = recording_revolutions(record, geometry=geometry)
-        p = data.profile
-        blocks = [b.values[0] for b in revolution_grids(record, points=p.angle_deg.size, axes=("tangential",))]
-        rows_t = np.array([amplitude_rows(harmonic_amplitudes(v, 2, data.k_max)) for b in blocks for v in b])
-        cond = {k: v for k, v in p.condition.items() if k != "missing_axes"}
-        profile = Profile(p.angle_deg, p.acc_radial_ms2, np.concatenate(blocks).mean(axis=0), condition=cond,
-                          source=p.source)
-        data = dataclasses.replace(data, profile=profile)
-        omega = 2 * math.pi * float(np.mean(data.rotation_hz))
-        load = estimate_load(profile, geometry, ring, omega=omega, omega_source=data.rotation_source,
-                             response=data.response, noise_per_angle=data.noise)
-        state = st.estimate_state(profile, geometry, ring, laws, omega=omega, omega_source=data.rotation_source,
-                                  response=data.response, load=load, fixed=fixed)
-        revs = st.state_revolutions(np.concatenate([data.rows, rows_t], axis=1), data.rotation_hz, state,
-                                    revolution=data.revolution, t_s=data.t_s)
-        return state, revs
+        _, state, revs = st.estimate_recording_state(record, geometry, ring, laws, fixed=fixed)
+    return state, revs
 
 
 blind = example / "blind" / "blind_01.records.npz"
