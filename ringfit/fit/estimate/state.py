@@ -141,6 +141,11 @@ class StateArrays(eqx.Module):
     measured: jax.Array
     weight: jax.Array
     correction: jax.Array
+    #: stretches of one drifting recording (:func:`estimate_stretches`, docs/physics.md §13.4 *a drifting state*):
+    #: ``(P,)`` each profile's load as a share of θ's and its slip less θ's (the revolutions' own drift); None: every
+    #: profile at θ's load and slip
+    load_scale: jax.Array | None = None
+    slip_shift: jax.Array | None = None
 
 
 def state_of(theta, omega) -> TyreState:
@@ -158,6 +163,20 @@ class StateResiduals(AbstractResiduals):
 
     def rows(self, theta, data: StateArrays):
         """The model's radial and tangential harmonic rows at θ (before subtracting the measured and weighting)."""
+        if data.load_scale is None:
+            return self._rows(theta, data)
+        # stretches of a drifting recording: each profile at its own load and slip about θ's (one vmapped model)
+        per = (data.omega, data.roads, data.response)
+
+        def one(scale, shift, own):
+            sub = eqx.tree_at(lambda a: (a.omega, a.roads, a.response), data,
+                              jax.tree.map(lambda x: x[None], own))
+            th = theta.at[0].multiply(scale).at[2].add(shift)
+            return self._rows(th, sub)[0]
+
+        return jax.vmap(one)(data.load_scale, data.slip_shift, per)
+
+    def _rows(self, theta, data: StateArrays):
         gain, offset, corner, tilt = theta[4], theta[5], theta[6], theta[7]
         base = self.profile.with_sensor(corner_hz=corner, tilt_gain=tilt, offset=theta[9])
         model, ring, geometry = state_profile(data.geometry, data.ring, data.laws, state_of(theta, data.omega[0]),
@@ -456,6 +475,9 @@ class StateEstimate:
     #: the wider harmonic band tried first and its discrepancy ratio κ, ``{k_max: κ}``, when its form error sent the
     #: fit to the narrower band (:data:`KAPPA_BAND_LIMIT`); None otherwise
     band_kappa: dict | None = None
+    #: a drifting recording fitted as stretches (:func:`estimate_stretches`): ``{"revolutions": [...], "load_share":
+    #: [...], "slip_shift": [...]}`` per stretch; None: one averaged profile
+    stretches: dict | None = None
 
     def value(self, key: str) -> float:
         """The estimate of quantity ``key`` (:data:`QUANTITIES`) in the unit its name says (the unit in
@@ -476,7 +498,8 @@ class StateEstimate:
                         "discrepancy_ratio": float(self.discrepancy),
                         **({"wider_band": {"harmonics": [2, k], "discrepancy_ratio": v}
                             for k, v in self.band_kappa.items()} if self.band_kappa else {}),
-                        **({"grid_check": self._grid_record()} if self.grid_check is not None else {})},
+                        **({"grid_check": self._grid_record()} if self.grid_check is not None else {}),
+                        **({"stretches": self.stretches} if self.stretches is not None else {})},
                 "nuisances": self.nuisances,
                 **({"ridge": self.ridge.to_record(self.discrepancy)} if self.ridge is not None else {})}
 
@@ -626,10 +649,30 @@ def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyr
     # the first pass's residual, the fit (the 4M model's, by the grid's defect correction), σ from its residual, the
     # fit again — each warm from the last fit and its correction
     sigma0 = 1.0 / channel_weights(np.asarray(first.extra["aux"])[0] - measured, leverage=len(free0) / (4 * K))
+    est = _state_passes(arrays, theta1, sigma0, free, prior, load, geometry, ring, laws, omega, settings, fixed,
+                        ring_covariance, k_max, d_new, opts)
+    return _speed_source(est, load)
+
+
+def _speed_source(est: StateEstimate, load: LoadEstimate) -> StateEstimate:
+    if str(load.rotation_source).startswith("speed_kmh"):  # Ω from the nominal speed: V = Ω·r_road says it back
+        est.quantities["speed_kmh"]["status"] = "not told"
+        est.untold.append("speed_kmh: no encoder rate (rotation_hz): Ω came from the nominal speed_kmh, so the "
+                          "speed V = Ω·r_road only restates it; the rolling radius and slip do not rest on it")
+    return est
+
+
+def _state_passes(arrays: StateArrays, theta1, sigma0, free, prior, load, geometry, ring, laws, omega, settings, fixed,
+                  ring_covariance, k_max, d_new, opts) -> StateEstimate:
+    """The state fit from θ ``theta1`` and a first σ ``sigma0`` (the shape of ``arrays.measured``): the profile block's
+    noise passes with the grid's defect correction, the ridge in tread depth (and the new tread's bound), then
+    :func:`_finish_state` — one profile, or the stretches of a drifting recording (:func:`estimate_stretches`)."""
+    K = int(k_max) - 1
+    measured = np.asarray(arrays.measured)
     last = dict(theta=theta1, correction=None)
 
     def fit_at(sigma):
-        arr = eqx.tree_at(lambda a: a.weight, arrays, (1.0 / np.asarray(sigma)).reshape(1, 4 * K))
+        arr = eqx.tree_at(lambda a: a.weight, arrays, (1.0 / np.asarray(sigma)).reshape(np.shape(arrays.measured)))
         prob = state_problem(arr, settings, k_max, prior)
         if last["correction"] is not None:
             prob = with_correction(prob, last["correction"])
@@ -640,7 +683,8 @@ def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyr
             last.update(theta=np.asarray(new.theta), correction=np.asarray(prob.data.correction))
         return new
 
-    fit, _, _ = fit_profile_block(fit_at, sigma0.reshape(1, 2, 2 * K), k_min=2)
+    P = np.shape(arrays.measured)[0]
+    fit, _, _ = fit_profile_block(fit_at, np.asarray(sigma0).reshape(P, 2, 2 * K), k_min=2)
     problem = fit.problem
     corrected = fit
     ridge, deeper = None, False
@@ -672,10 +716,6 @@ def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyr
         est.flags.append(f"{TREAD}: the free fit went deeper ({deeper:.3g} mm) than the new tread "
                          f"({1e3 * d_new:.3g} mm, the tyre file's tread_depth_new_mm); refitted from the ridge's best "
                          "depth within it (docs/physics.md §13.4)")
-    if str(load.rotation_source).startswith("speed_kmh"):  # Ω from the nominal speed: V = Ω·r_road says it back
-        est.quantities["speed_kmh"]["status"] = "not told"
-        est.untold.append("speed_kmh: no encoder rate (rotation_hz): Ω came from the nominal speed_kmh, so the "
-                          "speed V = Ω·r_road only restates it; the rolling radius and slip do not rest on it")
     return est
 
 
@@ -837,11 +877,11 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
                 untold.append(f"{corr_names[a]} and {corr_names[b]} are not told apart (correlation "
                               f"{corr[a, b]:+.3f}): their intervals are along the ridge (marginal)")
     # fit quality per channel
-    model_rows = np.asarray(fit.extra["aux"])[0]
-    resid = model_rows - measured
-    half = resid.size // 2
-    rms = {"radial": float(np.sqrt(0.5 * np.sum(resid[:half] ** 2))),
-           "tangential": float(np.sqrt(0.5 * np.sum(resid[half:] ** 2)))}
+    model_rows = np.asarray(fit.extra["aux"])
+    resid = (model_rows - np.reshape(measured, model_rows.shape)).reshape(-1, model_rows.shape[-1])
+    half = resid.shape[-1] // 2  # per profile (a drifting recording's stretches: their mean)
+    rms = {"radial": float(np.sqrt(0.5 * np.mean(np.sum(resid[:, :half] ** 2, axis=1)))),
+           "tangential": float(np.sqrt(0.5 * np.mean(np.sum(resid[:, half:] ** 2, axis=1))))}
     at_bound = [n for n in fit.extra["at_bound"] if n in STATE_NAMES or n == GAIN]
     at_bound += [n for n in near_bound(theta, free) if n not in at_bound]
     converged = bool(fit.converged and finite and not at_bound)
@@ -971,6 +1011,19 @@ class StateRevolutions:
                 **{f"{k}_median": float(np.median(v)) for k, v in self.values.items()}}
 
 
+def _one_profile(data: StateArrays) -> StateArrays:
+    """``data`` as one profile at θ's state: a drifting recording's stretches (:func:`estimate_stretches`) collapsed to
+    their mean — Ω averaged, the grid's defect correction averaged (it changes slowly with the state), the measured
+    rows averaged; one profile's data unchanged."""
+    if data.load_scale is None:
+        return data
+    mean = lambda x: as_traced(np.mean(np.asarray(x), axis=0, keepdims=True))  # noqa: E731
+    first = lambda x: as_traced(np.asarray(x)[:1])  # noqa: E731
+    return StateArrays(geometry=data.geometry, ring=data.ring, laws=data.laws, omega=mean(data.omega),
+                       roads=jax.tree.map(first, data.roads), response=first(data.response),
+                       measured=mean(data.measured), weight=first(data.weight), correction=mean(data.correction))
+
+
 def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: StateEstimate, *,
                       settings: EstimateSettings = EstimateSettings(), revolution=None, t_s=None,
                       steps: int = 1, free: tuple = REVOLUTION_FREE) -> StateRevolutions:
@@ -1000,7 +1053,7 @@ def state_revolutions(rows: np.ndarray, rotation_hz: np.ndarray, reference: Stat
     diff = np.diff(rows, axis=0) / math.sqrt(2.0)
     weight = channel_weights(np.sqrt(np.mean(diff**2, axis=0)), series=R - 1)
     s_r = float(np.sqrt(np.mean((diff * weight) ** 2)))
-    data = eqx.tree_at(lambda a: a.weight, problem.data, as_traced(weight[None]))
+    data = eqx.tree_at(lambda a: a.weight, _one_profile(problem.data), as_traced(weight[None]))
     data = eqx.tree_at(lambda a: a.measured, data, as_traced(np.mean(rows, axis=0)[None]))
     prob = dataclasses.replace(problem, data=data)
     # the parameters of the reference's covariance: the fit's, and the tread depth held on the new tread's bound
@@ -1090,12 +1143,13 @@ DRIFT_SHARE = 0.05
 DRIFT_Z = 3.0
 
 
-def state_drift(revs: StateRevolutions, load_n: float) -> str | None:
+def state_drift(revs: StateRevolutions, load_n: float, stretches: int = 0) -> str | None:
     """A flag (or ``None``) when the per-revolution states drift within the recording (docs/physics.md §13.6): the
     least-squares line of each revolution's Fx and load against time, its change over the recording against
     :data:`DRIFT_SHARE` of the load and :data:`DRIFT_Z` standard errors of the slope (from the line's residual
     scatter). The averaged fit assumes one state: a drift smears the patch's features in the averaged profile, and
-    the pressure and tread depth read from it — and every revolution's, which carry them — can be biased."""
+    the pressure and tread depth read from it — and every revolution's, which carry them — can be biased.
+    ``stretches``: the fit was redone on that many stretches (:func:`estimate_stretches`), and the flag says so."""
     t = np.asarray(revs.t_s, dtype=np.float64)
     if t.size < 4 or np.ptp(t) <= 0:
         return None
@@ -1115,9 +1169,13 @@ def state_drift(revs: StateRevolutions, load_n: float) -> str | None:
             said.append(f"{what} by {change:+.4g} N ({100 * change / abs(load_n):+.1f} % of the load)")
     if not said:
         return None
-    return (f"the state drifted within the recording: {' and '.join(said)} over {span:.3g} s (per-revolution trend); "
-            "the averaged fit assumes one state, and the pressure and tread depth read from a drifting recording can "
-            "be biased (docs/physics.md §13.6) — a shorter or steadier stretch reads them better")
+    head = f"the state drifted within the recording: {' and '.join(said)} over {span:.3g} s (per-revolution trend); "
+    if stretches:
+        return head + (f"the state was fitted on {stretches} stretches of the recording, each at its own load and slip "
+                       "from the revolutions, sharing the pressure, tread depth and sensor (docs/physics.md §13.4 "
+                       "*a drifting state*)")
+    return head + ("the averaged fit assumes one state, and the pressure and tread depth read from a drifting "
+                   "recording can be biased (docs/physics.md §13.6) — a shorter or steadier stretch reads them better")
 
 
 def estimate_recording_state(record, geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *,
@@ -1148,10 +1206,93 @@ def estimate_recording_state(record, geometry: TyreGeometry, ring: RingParams, l
         rows = np.concatenate([data.rows, data.rows_tangential], axis=1)
         revs = state_revolutions(rows, data.rotation_hz, state, settings=settings, revolution=data.revolution,
                                  t_s=data.t_s, steps=steps)
-        drift = state_drift(revs, float(state.quantities["load_n"]["value"]))
-        if drift:
-            state.flags.append(drift)
+        state, revs = drifting_state(data, state, revs, geometry, ring, laws, settings=settings,
+                                     ring_covariance=ring_covariance, steps=steps)
     return load, state, revs
+
+
+#: A drifting recording (:func:`state_drift`) is fitted on at most DRIFT_STRETCHES stretches of consecutive
+#: revolutions, each of at least STRETCH_REVOLUTIONS (docs/physics.md §13.4 *a drifting state*): the smear of a ramp
+#: within a stretch falls as the square of its share of the recording (a quarter of the ramp: 1/16).
+DRIFT_STRETCHES = 4
+STRETCH_REVOLUTIONS = 8
+
+
+def drifting_state(data, state: StateEstimate, revs: StateRevolutions, geometry: TyreGeometry, ring: RingParams,
+                   laws: TyreLaws, *, settings: EstimateSettings, ring_covariance=None, steps: int = 1):
+    """``(state, revs)`` of a recording after its drift check (:func:`state_drift`): unchanged when the state held
+    still; when it drifted, the state fitted on stretches of the recording (:func:`estimate_stretches`) and every
+    revolution stepped from that fit, flagged either way. ``data``: the recording's
+    :func:`~ringfit.fit.estimate.revolutions.recording_revolutions`."""
+    load_n = float(state.quantities["load_n"]["value"])
+    drift = state_drift(revs, load_n)
+    if not drift:
+        return state, revs
+    rows = np.concatenate([data.rows, data.rows_tangential], axis=1)
+    new = estimate_stretches(rows, data.rotation_hz, state, revs, geometry, ring, laws, settings=settings,
+                             ring_covariance=ring_covariance)
+    if new is None or (state.converged and not new.converged):
+        why = ("" if new is None else
+               "; the fit on stretches did not converge and the averaged fit is kept")
+        state.flags.append(drift + why)
+        return state, revs
+    new_revs = state_revolutions(rows, data.rotation_hz, new, settings=settings, revolution=data.revolution,
+                                 t_s=data.t_s, steps=steps)
+    new.flags.append(state_drift(revs, load_n, stretches=len(new.stretches["revolutions"])))
+    return new, new_revs
+
+
+def estimate_stretches(rows: np.ndarray, rotation_hz: np.ndarray, reference: StateEstimate, revs: StateRevolutions,
+                       geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *,
+                       settings: EstimateSettings = EstimateSettings(k_max=STATE_K_MAX), ring_covariance=None,
+                       stretches: int = DRIFT_STRETCHES) -> StateEstimate | None:
+    """The state of a drifting recording (docs/physics.md §13.4 *a drifting state*): its revolutions in
+    ``stretches`` runs of consecutive revolutions, each run's averaged rows a profile of its own, at the load and
+    slip of the recording's mean state moved by the run's mean per-revolution drift (``revs``, stepped from the
+    averaged fit ``reference``: a drift the revolutions measure to first order), all sharing the pressure, tread
+    depth and sensor; the same fit, noise passes, ridge and intervals as :func:`estimate_state`, on the
+    reference's band, started from its θ. The reported state is the recording's mean.
+
+    ``rows`` ``(R, 4K)`` and ``rotation_hz`` ``(R,)`` as :func:`state_revolutions`'. **Returns:**
+    :class:`StateEstimate` with ``stretches``, or None when the recording has fewer than two stretches'
+    worth of revolutions (:data:`STRETCH_REVOLUTIONS` each) or the reference's fit is not finite."""
+    rows = band_rows(np.asarray(rows, dtype=np.float64), reference.k_max)
+    R = rows.shape[0]
+    S = min(int(stretches), R // STRETCH_REVOLUTIONS)
+    theta1 = np.asarray(reference.theta, dtype=np.float64)
+    if S < 2 or not np.all(np.isfinite(theta1)):
+        return None
+    parts = np.array_split(np.arange(R), S)
+    n = np.array([p.size for p in parts], dtype=np.float64)
+    load_r, slip_r = np.asarray(revs.values["load_n"]), np.asarray(revs.values["slip"])
+    mean_load = np.array([np.mean(load_r[p]) for p in parts])
+    mean_slip = np.array([np.mean(slip_r[p]) for p in parts])
+    scale = mean_load / (n @ mean_load / n.sum())
+    shift = mean_slip - n @ mean_slip / n.sum()
+    k_max = int(reference.k_max)
+    K = k_max - 1
+    settings = dataclasses.replace(settings, k_max=k_max)
+    base = reference.fit.problem.data
+    roads = jax.tree.map(lambda x: np.repeat(np.asarray(x)[:1], S, axis=0), base.roads)
+    omega = np.array([2 * math.pi * float(np.mean(np.asarray(rotation_hz)[p])) for p in parts])
+    measured = np.stack([np.mean(rows[p], axis=0) for p in parts])
+    arrays = StateArrays(geometry=geometry, ring=ring, laws=laws, omega=omega, roads=roads,
+                         response=np.repeat(np.asarray(base.response)[:1], S, axis=0), measured=measured,
+                         weight=np.ones((S, 4 * K)), correction=np.zeros((S, 4 * K)), load_scale=scale,
+                         slip_shift=shift)
+    fixed = dict(reference.fixed)
+    free = free_parameters(laws, fixed)
+    prior = GaussianPrior.independent({k: v for k, v in state_priors(geometry, laws).items() if k in free})
+    at = np.asarray(residuals(state_problem(arrays, settings, k_max, prior), theta1)[1])
+    sigma0 = 1.0 / channel_weights(at - measured, leverage=len(free) / (4 * K * S))
+    opts = dict(max_steps=settings.max_steps, rtol=settings.rtol, atol=settings.atol)
+    est = _state_passes(arrays, theta1, sigma0, free, prior, reference.load, geometry, ring, laws, reference.omega,
+                        settings, fixed, ring_covariance, k_max, new_tread_depth(laws), opts)
+    est.stretches = {"revolutions": [int(p.size) for p in parts], "load_share": [float(v) for v in scale],
+                     "slip_shift": [float(v) for v in shift]}
+    est.band_kappa = reference.band_kappa
+    est.flags = [f for f in reference.flags if f.startswith("harmonics 2…")] + est.flags
+    return _speed_source(est, reference.load)
 
 
 # --------------------------------------------------------------------------- Fisher information
@@ -1236,5 +1377,5 @@ def state_fisher(geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, state
 __all__ = ["STATE_PARAMETERS", "STATE_NAMES", "STATE_COORDS", "PRESSURE", "SLIP", "TREAD", "QUANTITIES", "StateArrays",
            "StateResiduals", "state_problem", "state_priors", "free_parameters", "state_quantities", "StateEstimate",
            "estimate_state", "profile_rows", "channel_weights", "StateRevolutions", "state_revolutions",
-           "StateFisher", "state_fisher", "state_of", "estimate_recording_state", "state_drift", "DRIFT_SHARE",
-           "DRIFT_Z"]
+           "StateFisher", "state_fisher", "state_of", "estimate_recording_state", "state_drift", "drifting_state",
+           "estimate_stretches", "DRIFT_STRETCHES", "STRETCH_REVOLUTIONS", "DRIFT_SHARE", "DRIFT_Z"]
