@@ -116,9 +116,10 @@ for key in keys:
 # together along the ridge the Fisher table shows, pushed by a model-form difference between the two codes of
 # about 2 % in load-equivalent (docs/physics.md §13.6). The per-revolution bands are statistical only: they are
 # as wide as the revolution's noise, not as the averaged estimate's model error. A recording whose Fx or load
-# drifts by more than 5 % of the load is flagged above ("the state drifted within the recording"): the averaged
-# fit assumes one state, and on the independent simulator such a ramp is what pushed the worst misses along the
-# ridge (§13.6).
+# drifts by more than 5 % of the load is flagged above ("the state drifted within the recording") and fitted on
+# stretches of the recording, each at its own load and slip, sharing pressure, tread depth and sensor: an averaged
+# profile over a drifting state smears the patch's trailing edge, and on the independent simulator such a ramp
+# pushed the worst misses along the ridge (docs/physics.md §13.4 *a drifting state*, §13.6).
 #
 # ## What a stated pressure and tread depth buy
 # A TPMS reading and a known wear (`ringfit estimate --fix pressure=… --fix tread_depth=…` in the CLI) hold two

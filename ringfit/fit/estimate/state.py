@@ -663,17 +663,18 @@ def _speed_source(est: StateEstimate, load: LoadEstimate) -> StateEstimate:
 
 
 def _state_passes(arrays: StateArrays, theta1, sigma0, free, prior, load, geometry, ring, laws, omega, settings, fixed,
-                  ring_covariance, k_max, d_new, opts) -> StateEstimate:
+                  ring_covariance, k_max, d_new, opts, passes: bool = True) -> StateEstimate:
     """The state fit from θ ``theta1`` and a first σ ``sigma0`` (the shape of ``arrays.measured``): the profile block's
     noise passes with the grid's defect correction, the ridge in tread depth (and the new tread's bound), then
-    :func:`_finish_state` — one profile, or the stretches of a drifting recording (:func:`estimate_stretches`)."""
+    :func:`_finish_state` — one profile, or the stretches of a drifting recording (:func:`estimate_stretches`).
+    ``passes=False``: σ is ``sigma0``, known up to an inflation (the engine's ``"inflate"``), no noise passes."""
     K = int(k_max) - 1
     measured = np.asarray(arrays.measured)
     last = dict(theta=theta1, correction=None)
 
     def fit_at(sigma):
         arr = eqx.tree_at(lambda a: a.weight, arrays, (1.0 / np.asarray(sigma)).reshape(np.shape(arrays.measured)))
-        prob = state_problem(arr, settings, k_max, prior)
+        prob = state_problem(arr, settings, k_max, prior, sigma="estimate" if passes else "inflate")
         if last["correction"] is not None:
             prob = with_correction(prob, last["correction"])
         new = least_squares(prob, last["theta"], free, **opts)
@@ -684,7 +685,10 @@ def _state_passes(arrays: StateArrays, theta1, sigma0, free, prior, load, geomet
         return new
 
     P = np.shape(arrays.measured)[0]
-    fit, _, _ = fit_profile_block(fit_at, np.asarray(sigma0).reshape(P, 2, 2 * K), k_min=2)
+    if passes:
+        fit, _, _ = fit_profile_block(fit_at, np.asarray(sigma0).reshape(P, 2, 2 * K), k_min=2)
+    else:
+        fit = fit_at(sigma0)
     problem = fit.problem
     corrected = fit
     ridge, deeper = None, False
@@ -1218,6 +1222,32 @@ DRIFT_STRETCHES = 4
 STRETCH_REVOLUTIONS = 8
 
 
+def _as_wide_as(est: StateEstimate, reference: StateEstimate, d_new: float | None) -> None:
+    """The stretches' intervals no narrower than the averaged fit's (docs/physics.md §13.4 *a drifting state*): each
+    quantity's interval is the wider of its own and the averaged fit's moved to the new value (by ratio for
+    :data:`LOG_QUANTITIES`), its σ the larger; the covariance the revolutions carry (``cov_u``, ``spread_u``, κ) the
+    averaged fit's where both fitted the same parameters. The stretches' slips are the revolutions' steps at the
+    averaged fit's tread depth: held fixed while the fit moves the depth, the force each stretch adds would tell the
+    depth through the brush's stiffness — information the data do not hold. They remove the smear's bias; they add
+    nothing to what the recording tells of the shared state."""
+    for key, q in est.quantities.items():
+        r = reference.quantities[key]
+        if q["status"] == "fixed" or r["status"] == "fixed":
+            continue
+        v, vr = q["value"], r["value"]
+        if key in LOG_QUANTITIES and v > 0 and vr > 0 and r["lo"] > 0:
+            lo, hi = v * r["lo"] / vr, v * r["hi"] / vr
+        else:
+            lo, hi = v - (vr - r["lo"]), v + (r["hi"] - vr)
+        q["lo"], q["hi"] = min(q["lo"], lo), max(q["hi"], hi)
+        if key == "tread_depth_mm" and d_new is not None:
+            q["hi"] = min(q["hi"], 1e3 * d_new)
+            q["lo"] = min(q["lo"], q["hi"])
+        q["sd"] = max(q["sd"], r["sd"])
+    if tuple(est.names_u or ()) == tuple(reference.names_u or ()) and reference.cov_u is not None:
+        est.cov_u, est.spread_u, est.discrepancy = reference.cov_u, reference.spread_u, reference.discrepancy
+
+
 def drifting_state(data, state: StateEstimate, revs: StateRevolutions, geometry: TyreGeometry, ring: RingParams,
                    laws: TyreLaws, *, settings: EstimateSettings, ring_covariance=None, steps: int = 1):
     """``(state, revs)`` of a recording after its drift check (:func:`state_drift`): unchanged when the state held
@@ -1283,11 +1313,16 @@ def estimate_stretches(rows: np.ndarray, rotation_hz: np.ndarray, reference: Sta
     fixed = dict(reference.fixed)
     free = free_parameters(laws, fixed)
     prior = GaussianPrior.independent({k: v for k, v in state_priors(geometry, laws).items() if k in free})
-    at = np.asarray(residuals(state_problem(arrays, settings, k_max, prior), theta1)[1])
-    sigma0 = 1.0 / channel_weights(at - measured, leverage=len(free) / (4 * K * S))
+    # σ of each stretch: the averaged fit's (its noise passes' σ × its residual scale), × √(R/n_s) — not each
+    # stretch's own residual: the model's form error is the same in every stretch, and a σ from each stretch's
+    # residual would count it as independent noise S times (intervals √S too narrow where it dominates); the
+    # engine's "inflate" widens them where the stretches' residual exceeds it
+    sigma_ref = float(reference.fit.extra["sigma_scale"]) / np.asarray(base.weight)[0]
+    sigma0 = sigma_ref[None, :] * np.sqrt(R / n)[:, None]
     opts = dict(max_steps=settings.max_steps, rtol=settings.rtol, atol=settings.atol)
     est = _state_passes(arrays, theta1, sigma0, free, prior, reference.load, geometry, ring, laws, reference.omega,
-                        settings, fixed, ring_covariance, k_max, new_tread_depth(laws), opts)
+                        settings, fixed, ring_covariance, k_max, new_tread_depth(laws), opts, passes=False)
+    _as_wide_as(est, reference, new_tread_depth(laws))
     est.stretches = {"revolutions": [int(p.size) for p in parts], "load_share": [float(v) for v in scale],
                      "slip_shift": [float(v) for v in shift]}
     est.band_kappa = reference.band_kappa
