@@ -14,6 +14,8 @@ A problem on the one engine (:mod:`ringfit.fit.engine`), like :mod:`ringfit.fit.
   and the quantities the data cannot tell apart;
 - :func:`state_revolutions` — every revolution of a recording by one linearised Gauss–Newton step from the
   averaged profile's fit (the Jacobian once), :class:`StateRevolutions`;
+- :func:`estimate_stretches` — a recording whose state drifted (:func:`state_drift`), fitted on stretches of it,
+  each at its own load and slip (:func:`drifting_state` decides);
 - :func:`state_fisher` — the per-revolution Fisher information of every state quantity at a noise level.
 """
 
