@@ -35,6 +35,7 @@ the estimate holds the tread depth within it (docs/physics.md §13.4 *the new tr
 
 from __future__ import annotations
 
+import copy
 import csv
 import math
 import os
@@ -112,7 +113,8 @@ def coverage_text(k: int, n: int) -> str:
 # --------------------------------------------------------------------------- reading a recording
 def read_state(path: Path, tyre, steps: int = 1, fixed: dict | None = None, settings=None):
     """``(load estimate, state estimate, per-revolution state, CPU s of the per-revolution stage, of the averaged
-    fits)`` of one continuous recording, read as ``ringfit estimate --state`` does."""
+    fits, the averaged fit's quantities before a drift's fit on stretches)`` of one continuous recording, read as
+    ``ringfit estimate --state`` does."""
     from ringfit.fit.estimate import state as st
     from ringfit.io.continuous import read_continuous
 
@@ -141,10 +143,11 @@ def read_state(path: Path, tyre, steps: int = 1, fixed: dict | None = None, sett
     revs = st.state_revolutions(rows, data.rotation_hz, state, revolution=data.revolution, t_s=data.t_s, steps=steps)
     c3 = time.process_time()
     # as estimate_recording_state: a drifting recording refitted on stretches (an averaged fit's cost)
+    averaged = copy.deepcopy(state.quantities)  # the averaged fit's alone, for the comparison
     state, revs = st.drifting_state(data, state, revs, geometry, ring, laws, settings=settings,
                                     ring_covariance=tyre.covariance, steps=steps)
     c4 = time.process_time()
-    return load, state, revs, (c1 - c0) + (c3 - c2), (c2 - c1) + (c4 - c3)
+    return load, state, revs, (c1 - c0) + (c3 - c2), (c2 - c1) + (c4 - c3), averaged
 
 
 def _recording_revolutions(record, geometry, k_max):
@@ -190,6 +193,7 @@ def blind():
     onestep = {q: [] for q in quantities}   # the value the other side of its grid extrapolation (§13.4): diagnostic
     spread = {q: [] for q in quantities}    # the estimate's own σ, in the error's unit: what the data could tell
     speed_rows, sim_cpu, lines, drift_rows = [], 0.0, [], []
+    alone = {q: [] for q in quantities}     # the averaged fit alone (before a drift's stretches): (error, inside)
     print(f"\n1. Blind state on the independent simulator: seeds {ARGS.seeds}, {ARGS.blind} blind recordings of "
           f"{ARGS.seconds:g} s each; tyre: " + ("the example's NOMINAL tyre.toml (the truth is jittered around it; "
                                                 "its laws are the nominal ones, not the truth's)" if ARGS.tyre ==
@@ -224,7 +228,8 @@ def blind():
                 w = time.perf_counter()
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    load, state, revs, cpu_rev, cpu_avg = read_state(path, tyre, ARGS.steps, fixed, settings)
+                    load, state, revs, cpu_rev, cpu_avg, averaged = read_state(path, tyre, ARGS.steps, fixed,
+                                                                                   settings)
                 wall = time.perf_counter() - w
                 speed_rows.append((len(revs), cpu_rev, cpu_avg, wall))
                 t_lo, t_hi = float(truth["t_start_s"][0]), float(truth["t_end_s"][-1])
@@ -263,6 +268,15 @@ def blind():
                         per_told[q].append((er, inside))
                 lines.append(" ".join(line))
                 print(lines[-1], flush=True)
+                before = []
+                for q in quantities:
+                    key = KEYS[q]
+                    A, true = averaged[key], truth_over(truth, key, t_lo, t_hi)
+                    e = error_of(q, A["value"], true, true_load)
+                    alone[q].append((e, A["lo"] <= true <= A["hi"]))
+                    before.append(f"{q} {e:+.2f}{'' if A['lo'] <= true <= A['hi'] else '!'}")
+                if state.stretches is not None:
+                    print(f"      (the averaged fit alone: {' '.join(before)})", flush=True)
     print("   (error: load, pressure, speed in %, Fx in % of Fz, tread in mm; '!' the truth outside the 95 % "
           "interval; (not told)/(fixed) the estimate's status)")
     print(f"\n   {'quantity':10s} {'target':>10s} | {'averaged: median |err|':>22s} {'bias':>7s}  {'coverage 95 %':38s}|"
@@ -304,6 +318,10 @@ def blind():
                          f"{int(inside[~flagged].sum())}/{int((~flagged).sum())}")
         print(f"   drift flag ('the state drifted within the recording'): {int(flagged.sum())} of {flagged.size} "
               "recordings; coverage flagged vs not: " + ", ".join(parts))
+    if any(alone[q] for q in quantities):  # what the drifting recordings' fit on stretches changed
+        print("   the averaged fit alone (no fit on stretches; docs/physics.md §13.4 *a drifting state*): " + ", ".join(
+            f"{q} median |err| {float(np.median(np.abs([a[0] for a in alone[q]]))):.3f}, "
+            f"{sum(bool(a[1]) for a in alone[q])}/{len(alone[q])} covered" for q in quantities))
     if any(onestep.values()):
         print("   the value the other side of Richardson's extrapolation (docs/physics.md §13.4 *the model's grid*; "
               "without it where ringfit applies it; a diagnostic): median |err| " + ", ".join(
