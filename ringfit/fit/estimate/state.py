@@ -1282,8 +1282,9 @@ def estimate_stretches(rows: np.ndarray, rotation_hz: np.ndarray, reference: Sta
     ``stretches`` runs of consecutive revolutions, each run's averaged rows a profile of its own, at the load and
     slip of the recording's mean state moved by the run's mean per-revolution drift (``revs``, stepped from the
     averaged fit ``reference``: a drift the revolutions measure to first order), all sharing the pressure, tread
-    depth and sensor; the same fit, noise passes, ridge and intervals as :func:`estimate_state`, on the
-    reference's band, started from its θ. The reported state is the recording's mean.
+    depth and sensor; the fit, ridge and new tread's bound of :func:`estimate_state` on the reference's band,
+    started from its θ, each stretch weighted by the reference's σ × √(R/n_s) (no noise passes), its intervals no
+    narrower than the reference's (:func:`_as_wide_as`). The reported state is the recording's mean.
 
     ``rows`` ``(R, 4K)`` and ``rotation_hz`` ``(R,)`` as :func:`state_revolutions`'. **Returns:**
     :class:`StateEstimate` with ``stretches``, or None when the recording has fewer than two stretches'
