@@ -148,6 +148,9 @@ class StateArrays(eqx.Module):
     #: profile at θ's load and slip
     load_scale: jax.Array | None = None
     slip_shift: jax.Array | None = None
+    #: ``(P·4K, r)`` orthonormal directions of the weighted residual taken out of it (:func:`estimate_stretches`: what
+    #: the stretches' own load and slip, about their mean, would explain); None: none
+    basis: jax.Array | None = None
 
 
 def state_of(theta, omega) -> TyreState:
@@ -192,7 +195,10 @@ class StateResiduals(AbstractResiduals):
 
     def __call__(self, theta, data: StateArrays):
         rows = self.rows(theta, data) + data.correction
-        return ((rows - data.measured) * data.weight).ravel(), rows
+        res = ((rows - data.measured) * data.weight).ravel()
+        if data.basis is not None:  # the stretches' own drift projected out (estimate_stretches)
+            res = res - data.basis @ (data.basis.T @ res)
+        return res, rows
 
 
 def state_problem(arrays: StateArrays, settings: EstimateSettings, k_max: int, prior: GaussianPrior | None = None,
@@ -665,11 +671,13 @@ def _speed_source(est: StateEstimate, load: LoadEstimate) -> StateEstimate:
 
 
 def _state_passes(arrays: StateArrays, theta1, sigma0, free, prior, load, geometry, ring, laws, omega, settings, fixed,
-                  ring_covariance, k_max, d_new, opts, passes: bool = True) -> StateEstimate:
+                  ring_covariance, k_max, d_new, opts, passes: bool = True, ridge: bool = True) -> StateEstimate:
     """The state fit from θ ``theta1`` and a first σ ``sigma0`` (the shape of ``arrays.measured``): the profile block's
     noise passes with the grid's defect correction, the ridge in tread depth (and the new tread's bound), then
     :func:`_finish_state` — one profile, or the stretches of a drifting recording (:func:`estimate_stretches`).
-    ``passes=False``: σ is ``sigma0``, known up to an inflation (the engine's ``"inflate"``), no noise passes."""
+    ``passes=False``: σ is ``sigma0``, known up to an inflation (the engine's ``"inflate"``), no noise passes.
+    ``ridge=False``: the ridge is profiled only where the fit went deeper than the new tread (to hold it there)."""
+    profile_ridge = ridge
     K = int(k_max) - 1
     measured = np.asarray(arrays.measured)
     last = dict(theta=theta1, correction=None)
@@ -694,7 +702,8 @@ def _state_passes(arrays: StateArrays, theta1, sigma0, free, prior, load, geomet
     problem = fit.problem
     corrected = fit
     ridge, deeper = None, False
-    if TREAD in free and np.all(np.isfinite(fit.theta)):
+    if TREAD in free and np.all(np.isfinite(fit.theta)) and (
+            profile_ridge or (d_new is not None and float(fit.values[TREAD]) > d_new * (1 + 1e-9))):
         # the ridge's profile (§13.4 *intervals along the ridge*): on a flat, curved ridge the free fit can stop short
         # of its optimum; a slice well below it restarts the fit there
         ridge = ridge_profile(problem, fit, depth_max=d_new, **opts)
@@ -1274,6 +1283,48 @@ def drifting_state(data, state: StateEstimate, revs: StateRevolutions, geometry:
     return new, new_revs
 
 
+#: Central-difference steps of a stretch's ln load and slip for :func:`_drift_basis` (about the drift's own size: the
+#: contact's active set makes the rows a fine staircase in the load).
+BASIS_STEP = (2e-3, 2e-4)
+
+
+def _drift_basis(arrays: StateArrays, weight, theta, settings, k_max, n) -> np.ndarray:
+    """The directions ``(S·4K, 2S − 2)`` (orthonormal) of the stretches' weighted rows that their own load and slip
+    move about their mean (docs/physics.md §13.4 *a drifting state*): the rows' derivative in each stretch's ln load
+    and slip (central differences at θ), combined so that the revolution-weighted mean load share and slip shift stay
+    put (the mean is θ's, fitted). Taken out of the residual, the differences between stretches — which the fixed
+    deviations would otherwise ask the shared state to explain through the model's response to load and force —
+    tell nothing; what the stretches share does."""
+    S = int(np.shape(arrays.omega)[0])
+    prob = state_problem(eqx.tree_at(lambda a: a.weight, arrays, weight), settings, k_max)
+    scale0, shift0 = np.asarray(arrays.load_scale, dtype=np.float64), np.asarray(arrays.slip_shift, dtype=np.float64)
+
+    def rows_at(scale, shift):
+        data = eqx.tree_at(lambda a: (a.load_scale, a.slip_shift), prob.data, as_traced((scale, shift)))
+        return np.asarray(residuals(dataclasses.replace(prob, data=data), theta)[1]) * weight
+
+    cols = []
+    for which, h in ((0, BASIS_STEP[0]), (1, BASIS_STEP[1])):
+        for s in range(S):
+            up, dn = [scale0.copy(), shift0.copy()], [scale0.copy(), shift0.copy()]
+            if which == 0:
+                up[0][s] *= math.exp(h)
+                dn[0][s] *= math.exp(-h)
+            else:
+                up[1][s] += h
+                dn[1][s] -= h
+            cols.append(((rows_at(*up) - rows_at(*dn)) / (2 * h)).ravel())
+    D = np.stack(cols, axis=1)  # (S·4K, 2S): ln load of each stretch, then slip of each
+    C = np.zeros((2, 2 * S))
+    C[0, :S], C[1, S:] = n, n
+    from scipy.linalg import null_space
+
+    A = D @ null_space(C)
+    u, sv, _ = np.linalg.svd(A, full_matrices=False)
+    keep = sv > 1e-9 * (sv[0] if sv.size else 0.0)
+    return u[:, keep]
+
+
 def estimate_stretches(rows: np.ndarray, rotation_hz: np.ndarray, reference: StateEstimate, revs: StateRevolutions,
                        geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *,
                        settings: EstimateSettings = EstimateSettings(k_max=STATE_K_MAX), ring_covariance=None,
@@ -1322,9 +1373,12 @@ def estimate_stretches(rows: np.ndarray, rotation_hz: np.ndarray, reference: Sta
     # engine's "inflate" widens them where the stretches' residual exceeds it
     sigma_ref = float(reference.fit.extra["sigma_scale"]) / np.asarray(base.weight)[0]
     sigma0 = sigma_ref[None, :] * np.sqrt(R / n)[:, None]
+    arrays = eqx.tree_at(lambda a: a.basis, eqx.tree_at(lambda a: a.weight, arrays, 1.0 / sigma0),
+                         _drift_basis(arrays, 1.0 / sigma0, theta1, settings, k_max, n), is_leaf=lambda x: x is None)
     opts = dict(max_steps=settings.max_steps, rtol=settings.rtol, atol=settings.atol)
     est = _state_passes(arrays, theta1, sigma0, free, prior, reference.load, geometry, ring, laws, reference.omega,
-                        settings, fixed, ring_covariance, k_max, new_tread_depth(laws), opts, passes=False)
+                        settings, fixed, ring_covariance, k_max, new_tread_depth(laws), opts, passes=False,
+                        ridge=False)  # its intervals are the averaged fit's (along its ridge) or wider
     _as_wide_as(est, reference, new_tread_depth(laws))
     est.stretches = {"revolutions": [int(p.size) for p in parts], "load_share": [float(v) for v in scale],
                      "slip_shift": [float(v) for v in shift]}
