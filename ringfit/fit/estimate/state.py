@@ -1288,7 +1288,7 @@ def drifting_state(data, state: StateEstimate, revs: StateRevolutions, geometry:
 BASIS_STEP = (2e-3, 2e-4)
 
 
-def _drift_basis(arrays: StateArrays, weight, theta, settings, k_max, n) -> np.ndarray:
+def _drift_basis(arrays: StateArrays, weight, theta, settings, k_max, n) -> np.ndarray | None:
     """The directions ``(S·4K, 2S − 2)`` (orthonormal) of the stretches' weighted rows that their own load and slip
     move about their mean (docs/physics.md §13.4 *a drifting state*): the rows' derivative in each stretch's ln load
     and slip (central differences at θ), combined so that the revolution-weighted mean load share and slip shift stay
@@ -1315,6 +1315,8 @@ def _drift_basis(arrays: StateArrays, weight, theta, settings, k_max, n) -> np.n
                 dn[1][s] -= h
             cols.append(((rows_at(*up) - rows_at(*dn)) / (2 * h)).ravel())
     D = np.stack(cols, axis=1)  # (S·4K, 2S): ln load of each stretch, then slip of each
+    if not np.all(np.isfinite(D)):  # a contact solve failed at a stretch's moved state: no basis, no stretches
+        return None
     C = np.zeros((2, 2 * S))
     C[0, :S], C[1, S:] = n, n
     from scipy.linalg import null_space
@@ -1339,7 +1341,8 @@ def estimate_stretches(rows: np.ndarray, rotation_hz: np.ndarray, reference: Sta
 
     ``rows`` ``(R, 4K)`` and ``rotation_hz`` ``(R,)`` as :func:`state_revolutions`'. **Returns:**
     :class:`StateEstimate` with ``stretches``, or None when the recording has fewer than two stretches'
-    worth of revolutions (:data:`STRETCH_REVOLUTIONS` each) or the reference's fit is not finite."""
+    worth of revolutions (:data:`STRETCH_REVOLUTIONS` each), the reference's fit is not finite, or the model fails at
+    a stretch's moved state."""
     rows = band_rows(np.asarray(rows, dtype=np.float64), reference.k_max)
     R = rows.shape[0]
     S = min(int(stretches), R // STRETCH_REVOLUTIONS)
@@ -1373,8 +1376,11 @@ def estimate_stretches(rows: np.ndarray, rotation_hz: np.ndarray, reference: Sta
     # engine's "inflate" widens them where the stretches' residual exceeds it
     sigma_ref = float(reference.fit.extra["sigma_scale"]) / np.asarray(base.weight)[0]
     sigma0 = sigma_ref[None, :] * np.sqrt(R / n)[:, None]
-    arrays = eqx.tree_at(lambda a: a.basis, eqx.tree_at(lambda a: a.weight, arrays, 1.0 / sigma0),
-                         _drift_basis(arrays, 1.0 / sigma0, theta1, settings, k_max, n), is_leaf=lambda x: x is None)
+    basis = _drift_basis(arrays, 1.0 / sigma0, theta1, settings, k_max, n)
+    if basis is None:
+        return None
+    arrays = eqx.tree_at(lambda a: a.basis, eqx.tree_at(lambda a: a.weight, arrays, 1.0 / sigma0), basis,
+                         is_leaf=lambda x: x is None)
     opts = dict(max_steps=settings.max_steps, rtol=settings.rtol, atol=settings.atol)
     est = _state_passes(arrays, theta1, sigma0, free, prior, reference.load, geometry, ring, laws, reference.omega,
                         settings, fixed, ring_covariance, k_max, new_tread_depth(laws), opts, passes=False,
