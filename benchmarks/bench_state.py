@@ -16,8 +16,8 @@ docs/physics.md §13.4 *a drifting state*); ``--seeds 0 1 2`` halves it). It pri
    the load estimate of the averaged profile, the state of the averaged profile
    (:func:`ringfit.fit.estimate.state.estimate_state`; the whole recording, "averaged over 10 s") and of every
    revolution (:func:`~ringfit.fit.estimate.state.state_revolutions`); a recording whose state drifted is fitted on
-   stretches (:func:`~ringfit.fit.estimate.state.drifting_state`), and the averaged fit alone is printed beside it. Per quantity (load, pressure, Fx as % of the
-   load, speed, tread depth): the median |error| against the issue's targets, the signed median (bias), and the
+   stretches (:func:`~ringfit.fit.estimate.state.drifting_state`), and the averaged fit alone is printed beside it.
+   Per quantity (load, pressure, Fx as % of the load, speed, tread depth): the median |error| against the issue's targets, the signed median (bias), and the
    coverage of the 95 % intervals with its Clopper–Pearson interval (target 90–98 %). The per-revolution truth is
    the simulator's revolutions' states averaged over each estimated revolution's time span (the two codes count
    revolutions from different angles). The tyre: ``--tyre nominal`` (default; what a user has: the example's
@@ -38,7 +38,6 @@ the estimate holds the tread depth within it (docs/physics.md §13.4 *the new tr
 
 from __future__ import annotations
 
-import copy
 import csv
 import math
 import os
@@ -146,9 +145,9 @@ def read_state(path: Path, tyre, steps: int = 1, fixed: dict | None = None, sett
     revs = st.state_revolutions(rows, data.rotation_hz, state, revolution=data.revolution, t_s=data.t_s, steps=steps)
     c3 = time.process_time()
     # as estimate_recording_state: a drifting recording refitted on stretches (an averaged fit's cost)
-    averaged = copy.deepcopy(state.quantities)  # the averaged fit's alone, for the comparison
+    averaged = state.quantities  # the averaged fit's alone, for the comparison (drifting_state leaves them)
     state, revs = st.drifting_state(data, state, revs, geometry, ring, laws, settings=settings,
-                                    ring_covariance=tyre.covariance, steps=steps)
+                                    ring_covariance=tyre.covariance, steps=steps, rows=rows)
     c4 = time.process_time()
     return load, state, revs, (c1 - c0) + (c3 - c2), (c2 - c1) + (c4 - c3), averaged
 

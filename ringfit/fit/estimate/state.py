@@ -1222,7 +1222,7 @@ def estimate_recording_state(record, geometry: TyreGeometry, ring: RingParams, l
         revs = state_revolutions(rows, data.rotation_hz, state, settings=settings, revolution=data.revolution,
                                  t_s=data.t_s, steps=steps)
         state, revs = drifting_state(data, state, revs, geometry, ring, laws, settings=settings,
-                                     ring_covariance=ring_covariance, steps=steps)
+                                     ring_covariance=ring_covariance, steps=steps, rows=rows)
     return load, state, revs
 
 
@@ -1260,16 +1260,19 @@ def _as_wide_as(est: StateEstimate, reference: StateEstimate, d_new: float | Non
 
 
 def drifting_state(data, state: StateEstimate, revs: StateRevolutions, geometry: TyreGeometry, ring: RingParams,
-                   laws: TyreLaws, *, settings: EstimateSettings, ring_covariance=None, steps: int = 1):
+                   laws: TyreLaws, *, settings: EstimateSettings, ring_covariance=None, steps: int = 1, rows=None):
     """``(state, revs)`` of a recording after its drift check (:func:`state_drift`): unchanged when the state held
     still; when it drifted, the state fitted on stretches of the recording (:func:`estimate_stretches`) and every
     revolution stepped from that fit, flagged either way. ``data``: the recording's
-    :func:`~ringfit.fit.estimate.revolutions.recording_revolutions`."""
+    :func:`~ringfit.fit.estimate.revolutions.recording_revolutions`; ``rows``: its radial and tangential rows side by
+    side, as :func:`state_revolutions` took them (default: joined here). ``state`` itself is left as it was but for a
+    flag (its quantities are the averaged fit's)."""
     load_n = float(state.quantities["load_n"]["value"])
     drift = state_drift(revs, load_n)
     if not drift:
         return state, revs
-    rows = np.concatenate([data.rows, data.rows_tangential], axis=1)
+    if rows is None:
+        rows = np.concatenate([data.rows, data.rows_tangential], axis=1)
     new = estimate_stretches(rows, data.rotation_hz, state, revs, geometry, ring, laws, settings=settings,
                              ring_covariance=ring_covariance)
     if new is None or (state.converged and not new.converged):
