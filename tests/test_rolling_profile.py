@@ -74,6 +74,20 @@ def test_profile_file_round_trip(tmp_path, rolling):
     assert back.condition["rotation_hz"] == prof.rotation_hz and back.condition["speed_kmh"] == 40.0
 
 
+def test_profile_keeps_every_stated_condition(tmp_path, rolling):
+    """A recording's stated state (torque, tread depth, pressure, load: what ``identify`` reads from a profile's
+    sidecar, docs/formats.md §3) reaches the profile it is averaged into; the rotation is the one measured."""
+    import dataclasses
+
+    stated = dict(rolling.condition, load_n=3200.0, pressure_bar=2.4, torque_nm=-195.5, tread_depth_mm=6.5,
+                  rotation_hz=99.0)
+    prof = rolling_profile(dataclasses.replace(rolling, condition=stated), points=POINTS)
+    back = read_profile(write_profile(prof.to_profile(), tmp_path / "s.profile.csv"))
+    for key in ("load_n", "pressure_bar", "torque_nm", "tread_depth_mm", "speed_kmh"):
+        assert back.condition[key] == stated[key], key
+    assert back.condition["rotation_hz"] == prof.rotation_hz != 99.0
+
+
 def test_profile_errors(bench):
     short = bench.record(0.2, cleat=False)
     with pytest.raises(InputError, match="at least 2"):

@@ -25,6 +25,7 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.io.continuous import DEFAULT_CHUNK, ContinuousRecord
+from ringfit.io.record_types import CONDITION_KEYS
 from ringfit.io.profiles import band_limited_resample, grid_angles_deg
 
 #: Default number of angle points of a profile (0.18° spacing).
@@ -91,8 +92,10 @@ class RollingProfile:
             else:
                 cols[axis] = np.zeros_like(self.angle_deg)
                 missing.append(axis)
-        cond = {k: float(self.condition[k]) for k in ("speed_kmh", "load_n", "pressure_bar", "drum_diameter_m")
-                if self.condition.get(k) is not None}
+        # every stated condition the recording carries (docs/formats.md §3): the state keys too (torque_nm,
+        # tread_depth_mm), which ``identify`` needs; the rotation is the one measured here, not the stated one
+        cond = {k: float(self.condition[k]) for k in CONDITION_KEYS
+                if k != "rotation_hz" and self.condition.get(k) is not None}
         cond.update(revolutions=self.full_revolutions, sample_rate_hz=float(self.fs_hz),
                     rotation_hz=float(self.rotation_hz))
         if missing:

@@ -64,6 +64,10 @@ TREAD_RANGE = (0.2e-3, 30e-3)
 #: about d_ref. A quantity whose posterior σ reaches :data:`UNTOLD_SHARE` of its prior's is "not told".
 PRESSURE_PRIOR_SD = 0.3
 SLIP_PRIOR_SD = 0.05
+#: The first pass is also started at slip ∓ SLIP_START (docs/physics.md §13.4 *the slip's basins*): beyond the slip
+#: of a drive or brake force of 0.3 × the load on the example tyre (about 1.2 % at its rated load), so that each side's
+#: basin has a start on its side.
+SLIP_START = 0.02
 TREAD_PRIOR_SD = 0.5
 UNTOLD_SHARE = 0.9
 #: Priors [A] of the two sensor nuisances: σ of ln(tangential/radial sensitivity) about 0, and the liner offset's
@@ -643,11 +647,28 @@ def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyr
     # of) a bound stays held in it
     prob0 = state_problem(arrays, settings, k_max, prior0)
     free0 = tuple(n for n in free if n not in (PRESSURE, TREAD))
-    first = least_squares(prob0, theta0, free0, **opts)
-    if free0 != free and np.all(np.isfinite(first.theta)):
-        freed = least_squares(prob0, first.theta, free, **opts)
-        if np.all(np.isfinite(freed.theta)) and not near_bound(freed.theta, free):
-            first = freed
+
+    def first_pass(theta):
+        first = least_squares(prob0, theta, free0, **opts)
+        if free0 != free and np.all(np.isfinite(first.theta)):
+            freed = least_squares(prob0, first.theta, free, **opts)
+            if np.all(np.isfinite(freed.theta)) and not near_bound(freed.theta, free):
+                first = freed
+        return first
+
+    first = first_pass(theta0)
+    if start is None and SLIP in free0:
+        # the slip has more than one basin (§13.4 *the slip's basins*): the patch's fore-aft asymmetry read as a
+        # drive at a heavier load, or as a brake at the right one. The first pass is also started at ± SLIP_STARTS;
+        # its weights and priors are the same for every start, so the lowest −2 ln L among them is the basin kept
+        same = dataclasses.replace(prob0, sigma="fixed")
+        best = _total_chi2(same, first.theta, tuple(first.names)) if np.all(np.isfinite(first.theta)) else np.inf
+        for s0 in (-SLIP_START, SLIP_START):
+            other = first_pass(np.where(np.arange(theta0.size) == STATE_PARAMETERS.index(SLIP), s0, theta0))
+            if np.all(np.isfinite(other.theta)):
+                cost = _total_chi2(same, other.theta, tuple(other.names))
+                if cost < best:
+                    first, best = other, cost
     # a parameter the first pass left on a bound (or not finite) restarts from its start: on a bound the solver's
     # sine transform has no slope, and the second pass's priors are what hold a weakly told quantity
     theta1 = np.where(np.isfinite(first.theta), first.theta, theta0)
