@@ -75,8 +75,9 @@ def parse_args(argv=None):
                    help="blind recordings per seed (default 6)")
     p.add_argument("--seconds", type=bc.number("a duration in seconds", lo=1.0, hi=600.0), default=10.0,
                    help="length of each recording (default 10 s: the issue's 'averaged over 10 s')")
-    p.add_argument("--tyre", choices=("nominal", "truth"), default="nominal",
-                   help="the tyre file the estimate reads (default: the example's nominal tyre.toml)")
+    p.add_argument("--tyre", choices=("nominal", "identified", "truth"), default="nominal",
+                   help="the tyre file the estimate reads (default: the example's nominal tyre.toml; 'identified': "
+                        "`ringfit identify` of the example's calibration/, what a user reads with)")
     p.add_argument("--hold", type=bc.choices_list(("pressure", "tread"), "quantities"), default=[],
                    help="hold these at the recording's true mean (a TPMS, a known wear): pressure,tread")
     p.add_argument("--examples", type=Path, default=None,
@@ -183,6 +184,50 @@ def error_of(q: str, est: float, true: float, true_load: float) -> float:
     return est - true  # tread depth [mm]
 
 
+def identified_tyre(folder: Path) -> Path:
+    """The tyre file a user identifies from the example's ``calibration/`` (docs/formats.md §6, §18), as the
+    example's README says: every calibration recording on the flat road at the tyre file's tread depth averaged
+    into a profile (``ringfit profile``, its stated load, pressure and torque in the sidecar), the free table at the
+    tyre file's pressure as ``free.modes.csv`` and those at other pressures beside it, then ``ringfit identify``.
+    Cached in ``folder/identified/`` (a case folder and ``tyre.toml``; delete it to identify again)."""
+    import json
+    import shutil
+
+    from ringfit.cli import main
+    from ringfit.io.continuous import read_continuous
+    from ringfit.io.tyre import read_tyre
+
+    out = folder / "identified" / "identified.tyre.toml"
+    if out.is_file():
+        return out
+    case = folder / "identified" / "case"
+    if case.exists():
+        shutil.rmtree(case)
+    case.mkdir(parents=True)
+    nominal = read_tyre(folder / "tyre.toml")
+    shutil.copy(folder / "tyre.toml", case / "tyre.toml")
+    depth = nominal.state_values.get("tread_depth_mm")
+    for table in sorted((folder / "calibration").glob("free_p*.modes.csv")):
+        side = table.with_name(table.name.removesuffix(".csv") + ".json")
+        bar = float(json.loads(side.read_text()).get("pressure_bar", nominal.geometry.pressure / 1e5))
+        name = "free.modes" if abs(bar - nominal.geometry.pressure / 1e5) < 1e-9 else table.name.removesuffix(".csv")
+        shutil.copy(table, case / f"{name}.csv")
+        shutil.copy(side, case / f"{name}.json")
+    for rec in sorted((folder / "calibration").glob("*.records.npz")):
+        with read_continuous(rec) as r:
+            cond = dict(r.condition)
+        if cond.get("drum_diameter_m") or (depth is not None and cond.get("tread_depth_mm") not in (None, depth)):
+            continue  # identify reads every measurement on one road and at the tyre file's tread depth
+        if main(["profile", str(rec), "--out", str(case / (rec.name.removesuffix(".records.npz") + ".profile.csv")),
+                 "--quiet"]) != 0:
+            raise RuntimeError(f"{folder.name}: ringfit profile failed on {rec}")
+    tmp = out.with_name("tmp.tyre.toml")
+    if main(["identify", str(case), "--out", str(tmp), "--quiet", "--force"]) != 0:
+        raise RuntimeError(f"{folder.name}: ringfit identify failed on {case}")
+    tmp.replace(out)
+    return out
+
+
 # --------------------------------------------------------------------------- the blind check
 def blind():
     from ringfit.io.tyre import read_tyre
@@ -199,7 +244,9 @@ def blind():
     print(f"\n1. Blind state on the independent simulator: seeds {ARGS.seeds}, {ARGS.blind} blind recordings of "
           f"{ARGS.seconds:g} s each; tyre: " + ("the example's NOMINAL tyre.toml (the truth is jittered around it; "
                                                 "its laws are the nominal ones, not the truth's)" if ARGS.tyre ==
-                                                "nominal" else "the TRUE tyre file (a diagnosis, not a user's case)")
+                                                "nominal" else "the tyre file `ringfit identify` writes from the "
+                                                "example's calibration/ (what a user reads with)" if ARGS.tyre ==
+                                                "identified" else "the TRUE tyre file (a diagnosis, not a user's case)")
           + (f"; held at the truth: {', '.join(ARGS.hold)}" if ARGS.hold else ""))
     from ringfit.fit.estimate.problem import EstimateSettings
 
@@ -215,7 +262,13 @@ def blind():
                 c = time.process_time()
                 write_state_example(folder, seed=seed, blind=ARGS.blind, seconds=ARGS.seconds, overwrite=True)
                 sim_cpu += time.process_time() - c
-            tyre = read_tyre(folder / ("tyre.toml" if ARGS.tyre == "nominal" else "truth/tyre.truth.toml"))
+            if ARGS.tyre == "identified":
+                c = time.process_time()
+                tyre = read_tyre(identified_tyre(folder))
+                print(f"   {folder.name}: identified from calibration/ ({time.process_time() - c:.0f} s CPU here; "
+                      f"cached in {folder.name}/identified/)")
+            else:
+                tyre = read_tyre(folder / ("tyre.toml" if ARGS.tyre == "nominal" else "truth/tyre.truth.toml"))
             if tyre.laws.tread_depth_new is None:  # an example kept (--examples) from before the key
                 print(f"   WARNING: {folder.name}'s tyre file has no tread_depth_new_mm: the tread depth is not "
                       "bounded by the new tread's (docs/physics.md §13.3); delete the folder to rewrite it")

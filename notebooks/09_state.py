@@ -8,9 +8,9 @@
 # the example's nominal `tyre.toml` jittered, and recordings whose state is hidden (`blind/`) with the truth
 # kept aside (`truth/`).
 #
-# The tyre we read them with is the nominal `tyre.toml`, what a user has before identifying anything. (`ringfit
-# identify` across pressures and torque, issue 33 item 3, turns `calibration/` into an identified tyre file; use
-# it in place of `tyre.toml` below once it is there.)
+# The tyre we first read them with is the nominal `tyre.toml`, what a user has before identifying anything; the
+# last section identifies the tyre from the example's `calibration/` (`ringfit identify` across pressures and
+# torque) and reads the same recording with it.
 
 # %%
 import csv
@@ -132,4 +132,45 @@ held, _ = read_state(blind, fixed=fixed)
 for key in ("load_n", "fx_n", "speed_kmh"):
     q, free = held.quantities[key], state.quantities[key]
     print(f"{key:10s} free: {free['value']:9.5g}   p, d held: {q['value']:9.5g} (95 %: {q['lo']:.5g} … "
+          f"{q['hi']:.5g})   truth {np.mean(truth[key]):9.5g}")
+
+# %% [markdown]
+# ## Identify the tyre first, then read its state
+# The nominal `tyre.toml` is what a user has before any measurement; `calibration/` holds what they measure
+# once per tyre: recordings at known states (two loads, three pressures, a drive and a brake at a stated axle
+# torque) and the free tyre's modes at three pressures. `ringfit identify` reads a case folder (docs/formats.md
+# §6): `tyre.toml`, the free table at the tyre file's pressure as `free.modes.csv`, the other pressures' free
+# tables beside it, and rolling *profiles* — so each calibration recording is first averaged into one with
+# `ringfit profile`, which keeps its stated load, pressure, torque and tread depth in the sidecar. identify reads
+# every measurement on one road and at the tyre file's tread depth: the drum and the worn-tread recordings stay
+# out. It identifies the ring, how it scales with pressure (`[ring.pressure]`) and the tread's k_x, with a
+# covariance (§11, §13).
+
+# %%
+import shutil
+
+case = OUT / "state-case"
+shutil.rmtree(case, ignore_errors=True)
+case.mkdir()
+shutil.copy(example / "tyre.toml", case / "tyre.toml")
+for suffix in (".csv", ".json"):
+    shutil.copy(example / "calibration" / f"free_p100.modes{suffix}", case / f"free.modes{suffix}")
+    for other in ("free_p080", "free_p120"):
+        shutil.copy(example / "calibration" / f"{other}.modes{suffix}", case / f"{other}.modes{suffix}")
+for name in ("cal_p080_l080", "cal_p100_l050", "cal_p100_l100", "cal_p100_drive", "cal_p100_brake", "cal_p120_l080"):
+    assert main(["profile", str(example / "calibration" / f"{name}.records.npz"), "--out",
+                 str(case / f"{name}.profile.csv"), "--quiet"]) == 0
+identified = OUT / "identified.tyre.toml"
+assert main(["identify", str(case), "--out", str(identified), "--force", "--quiet"]) == 0
+
+# %% [markdown]
+# The same blind recording read with the identified tyre, beside the nominal read and the truth:
+
+# %%
+tyre = read_tyre(identified)
+geometry, ring, laws = tyre.geometry, tyre.ring, tyre.laws
+known, _ = read_state(blind)
+for key in keys:
+    q, nominal_q = known.quantities[key], state.quantities[key]
+    print(f"{key:15s} nominal tyre {nominal_q['value']:9.5g}   identified {q['value']:9.5g} (95 %: {q['lo']:.5g} … "
           f"{q['hi']:.5g})   truth {np.mean(truth[key]):9.5g}")
