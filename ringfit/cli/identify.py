@@ -35,6 +35,10 @@ def register(sub) -> None:
     p.add_argument("--max-steps", type=integer("a whole number of steps >= 100", lo=100), default=10000,
                    help="posterior chain steps at most (default 10000: joint cases need 7,000–8,500 for the 50 τ the sampler stops at)")
     p.add_argument("--seed", type=integer("a whole number >= 0", lo=0), default=0, help="random seed (default 0)")
+    p.add_argument("--sensor", choices=("fitted", "ideal"), default="fitted",
+                   help="'fitted' (default): each profile is read through its sensor's own nuisances — tilt, IEPE "
+                        "corner, liner offset, tangential gain — as `ringfit estimate --state` reads a recording "
+                        "(docs/physics.md §11 *profiles*); 'ideal': a gain and an angle offset per profile only")
     force_flag(p)
     quiet_flag(p)
     p.set_defaults(run=run_identify)
@@ -65,7 +69,7 @@ def run_identify(args) -> int:
     inputs = read_identify_folder(folder)
     for note in inputs.skipped:
         print(f"WARNING: {note}")
-    ident = identify(inputs, progress=not args.quiet)
+    ident = identify(inputs, progress=not args.quiet, sensor=args.sensor == "fitted")
     doc = identification_report(ident)
     _print(ident, doc)
     for note in ident.notes[len(inputs.skipped):]:

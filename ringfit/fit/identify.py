@@ -72,8 +72,10 @@ from ringfit.fit.free_block import (DISCREPANCY_FOLDS, FOLD_LEVERAGE_MAX, SCALE_
 from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, frequency_data,
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
-from ringfit.fit.profile_block import (harmonic_rows, noise_from_residual, nuisance_coords, nuisance_names,
-                                       nuisance_prior, nuisance_start, profile_rows, read_through)
+from ringfit.fit.profile_block import (PROFILE_K_MAX, SENSOR_FIELDS, harmonic_rows, noise_from_residual, nuisance_coords,
+                                       nuisance_names, nuisance_prior, nuisance_start, profile_rows, read_through,
+                                       sensor_basis, sensor_coords, sensor_names, sensor_prior, sensor_reading,
+                                       sensor_start)
 from ringfit.fit.result import FitResult, covariance_from_jacobian
 from ringfit.io.case import CaseFolder, read_case_folder, sidecar_number
 from ringfit.io.conditions import pressure_conflict
@@ -85,8 +87,8 @@ from ringfit.physics.loaded import loaded_natural_frequencies
 from ringfit.physics.natural import natural_frequencies
 from ringfit.physics.operating import OperatingPoint
 from ringfit.physics.profile import (FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels,
-                                     rolling_state)
-from ringfit.physics.state import TyreState, state_solution, state_tyre
+                                     rolling_state, spectral_stage)
+from ringfit.physics.state import TyreState, state_profile, state_solution, state_tyre
 
 #: Relative σ of a damping ratio row before its block scale is estimated.
 DAMPING_RELATIVE_STD = 0.05
@@ -383,14 +385,30 @@ class JointResiduals(AbstractResiduals):
     #: identify across states (docs/physics.md §11): θ carries the state laws and the profiles' slips
     #: (:func:`state_parameters`), every state is read through :func:`ringfit.physics.state.state_tyre`
     across: bool = eqx.field(static=True, default=False)
+    #: each profile read through its sensor's own nuisances (:data:`~ringfit.fit.profile_block.SENSOR_FIELDS`: tilt,
+    #: IEPE corner, liner offset, tangential gain), θ's last 4P entries — as the state estimate reads a recording
+    sensor: bool = eqx.field(static=True, default=False)
 
     # two stages (the engine's two-stage model, :class:`ringfit.fit.engine.AbstractResiduals`): the solves (eq. 18,
     # the loaded modes, the rolling profiles), then each run's reading through its gain and angle offset — so a
     # linearisation passes the 2P nuisances' tangents through the reading only, not through the contact solves
     @property
     def readout(self) -> tuple[int, ...]:
-        """θ indices of the profiles' nuisances (angle offset, gain per profile): they act after the solves."""
-        return tuple(range(len(RING_FIELDS), len(RING_FIELDS) + 2 * self.n_profiles))
+        """θ indices of the profiles' nuisances (angle offset, gain per profile; with :attr:`sensor`, each run's sensor
+        nuisances): they act after the solves."""
+        base = len(RING_FIELDS)
+        out = tuple(range(base, base + 2 * self.n_profiles))
+        if self.sensor:
+            start = self.sensor_start
+            out += tuple(range(start, start + len(SENSOR_FIELDS) * self.n_profiles))
+        return out
+
+    @property
+    def sensor_start(self) -> int:
+        """θ index of the first sensor nuisance (after the ring, the runs' gains and offsets, and across states the
+        laws and slips)."""
+        P = self.n_profiles
+        return len(RING_FIELDS) + 2 * P + ((len(LAW_FIELDS) + P) if self.across else 0)
 
     def __call__(self, theta, data: JointArrays):
         return self.outer(self.inner(theta, data), theta, data)
@@ -435,6 +453,12 @@ class JointResiduals(AbstractResiduals):
             # (serial_map); each run's gain and angle offset are the outer stage's
             def one_profile(args):
                 om, fz, road, band = args
+                if self.sensor:  # the reading's bilinear basis in (e, γ), read in the outer stage
+                    pm = self.profile_model
+                    ring_p = pm.ring(ring)
+                    sol, _ = rolling_state(pm, ring_p, g, OperatingPoint(om, fz, road), self.solver)
+                    return spectral_stage(pm, sensor_basis(sol, g, pm.sensor), ring_p, g, jnp.full(4, om),
+                                          jnp.broadcast_to(band, (4,) + band.shape), 0.0)
                 return profile_channels(self.profile_model, ring, g, om[None], fz[None],
                                         jax.tree.map(lambda x: x[None], road), band[None], 0.0, self.solver)[0]
 
@@ -443,8 +467,13 @@ class JointResiduals(AbstractResiduals):
                 # state solution (the lever brush when the tyre has one); its drive torque T = Fx·H for the torque rows
                 om, fz, road, pressure, slip = args
                 state = TyreState(load=fz, pressure=pressure, tread_depth=laws.tread_depth_ref, slip=slip, omega=om)
-                _, channels, q = state_solution(g, ring, laws, state, model=self.profile_model, solver=self.solver,
-                                                road=road)
+                sol, channels, q = state_solution(g, ring, laws, state, model=self.profile_model, solver=self.solver,
+                                                  road=road)
+                if self.sensor:  # the reading's bilinear basis in (e, γ) at the state's geometry
+                    pm, ring_s, g_s = state_profile(g, ring, laws, state, model=self.profile_model)
+                    ring_s = pm.ring(ring_s)
+                    channels = spectral_stage(pm, sensor_basis(sol, g_s, pm.sensor), ring_s, g_s, jnp.full(4, om),
+                                              jnp.asarray(full_band(4, self.solver.n_grid)), 0.0)
                 return channels, q.torque
 
             if laws is None:
@@ -469,6 +498,9 @@ class JointResiduals(AbstractResiduals):
             base = len(RING_FIELDS)
             offset = theta[base : base + 2 * P : 2]
             gain = theta[base + 1 : base + 2 * P : 2]
+            if self.sensor:  # each run's sensor: (e, γ) on its basis, its high-pass and tangential gain
+                start, F = self.sensor_start, len(SENSOR_FIELDS)
+                ch = sensor_reading(ch, data.p_omega, theta[start : start + F * P].reshape(P, F))
             # profiles compared in revolution harmonics (§11 "profiles")
             model = harmonic_rows(read_through(ch, offset, gain), rows_grid=self.rows_grid or None, k_top=self.k_top)
             rows.append(((model - data.p_measured) / data.p_sigma).ravel())
@@ -618,7 +650,7 @@ def _profile_rows(profiles, geometry, ring, solver, plan: "StatePlan | None" = N
         return None
     from ringfit.fit.profile_block import rolling_data
 
-    rows = profile_rows(profiles, geometry, ring, solver)
+    rows = profile_rows(profiles, geometry, ring, solver, k_max=PROFILE_K_MAX)
     if plan is not None and plan.active:
         for i, prof in enumerate(profiles):
             if prof.rotation_hz is None and not _same_pressure(plan.p_pressure[i], float(geometry.pressure)):
@@ -928,10 +960,13 @@ def log_interval(value: float, sd_ln, bounds: tuple[float, float] | None) -> dic
 
 
 def identify(inputs: IdentifyInputs, *, solver: ContactSolver = ContactSolver(), max_steps: int = 64,
-             rtol: float = 1e-8, atol: float = 1e-8, progress: bool = False) -> Identification:
+             rtol: float = 1e-8, atol: float = 1e-8, progress: bool = False, sensor: bool = True) -> Identification:
     """Joint weighted least squares of the ring (and per-run nuisances) over every block of ``inputs``.
 
-    Starts from the tyre file's ``[ring]`` (Table 9 values where it has none). Returns
+    Starts from the tyre file's ``[ring]`` (Table 9 values where it has none). ``sensor`` (default): each profile
+    is read through its sensor's own nuisances (:data:`~ringfit.fit.profile_block.SENSOR_FIELDS`: tilt, IEPE corner,
+    liner offset, tangential gain, each run its own, the state estimate's priors), as the state estimate reads a
+    recording (docs/physics.md §11 *profiles*); ``False``: a gain and an angle offset per run only. Returns
     :class:`Identification`; never raises on non-convergence (check ``converged``).
 
     Runs with one BLAS thread: the contact solves' small LU factorisations run on XLA's own threads,
@@ -941,10 +976,11 @@ def identify(inputs: IdentifyInputs, *, solver: ContactSolver = ContactSolver(),
     from ringfit._threads import small_matrix_threads
 
     with small_matrix_threads():
-        return _identify(inputs, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, progress=progress)
+        return _identify(inputs, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, progress=progress,
+                         sensor=sensor)
 
 
-def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identification:
+def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor) -> Identification:
     tyre = inputs.tyre
     geometry, ring0 = tyre.geometry, tyre.ring
     notes = list(inputs.skipped)
@@ -970,11 +1006,15 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress) -> Identificat
     if plan.active:
         free, coords = free + plan.free_names(P), coords + state_coords(P)
         theta = np.concatenate([theta, plan.start(P)])
+    prior = nuisance_prior(P)  # the runs share one sensor: their gains and offsets tied (profile block)
+    if sensor and P:  # each run's sensor's own nuisances (tilt, corner, liner offset, tangential gain), last in θ
+        free, coords = free + sensor_names(P), coords + sensor_coords(P)
+        theta = np.concatenate([theta, sensor_start(P)])
+        prior = prior.combine(sensor_prior(P))
     model = JointResiduals(P, solver, ProfileModel(), k_top=0 if rows.profiles is None else rows.profiles["k_top"],
-                           across=plan.active)
+                           across=plan.active, sensor=bool(sensor and P))
     slices = _slices(rows)
     scales = {b: 1.0 for b in slices}
-    prior = nuisance_prior(P)  # the runs share one sensor: their gains and offsets tied (profile block)
     if rows.loaded is None and rows.profiles is None:
         # a free tyre's frequencies hardly see EI (docs/physics.md §2.1: the bending term is ~10 % of the
         # pressure term): without loaded tables or profiles the fit would chase it to a bound and not converge
@@ -1167,7 +1207,7 @@ def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: Cont
     fine = ContactSolver(n_grid=factor * solver.n_grid, window_deg=solver.window_deg, max_iter=solver.max_iter)
     model = JointResiduals(P, fine, ProfileModel(), n_harmonics=factor * LOADED_HARMONICS, rows_grid=solver.n_grid,
                            k_top=0 if rows.profiles is None else rows.profiles["k_top"],
-                           across=rows.states is not None)
+                           across=rows.states is not None, sensor=fit.problem.model.sensor)
     problem = Problem(model, _arrays(geometry, rows, fine), fit.coords, data_label="these measurements")
     r_fine, _ = residuals(problem, fit.theta)
     m = fit.residuals.size
@@ -1231,6 +1271,15 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
                               angle_offset_deg=math.degrees(fit.values[o]),
                               angle_offset_sd_deg=math.degrees(scale_o * math.sqrt(max(cov_u[io, io], 0.0))),
                               gain=fit.values[g], gain_sd=fit.values[g] * math.sqrt(max(cov_u[ig, ig], 0.0))))
+        for field_ in SENSOR_FIELDS:  # the run's sensor nuisances, where fitted (identify's ``sensor``)
+            name = f"{field_}_{i + 1}"
+            if name in names:
+                j = names.index(name)
+                coord = fit.coords[[c.name for c in fit.coords].index(name)]
+                sd_u = math.sqrt(max(cov_u[j, j], 0.0))
+                nuisances[-1][field_] = float(fit.values[name])
+                nuisances[-1][f"{field_}_sd"] = float(fit.values[name] * sd_u if coord.kind == LOG
+                                                      else coord.scale * sd_u)
         if rows.states is not None:
             nuisances[-1].update(_state_nuisances(fit, rows, cov_u, i))
     ring = RingParams(**{n: fit.values[n] for n in RING_FIELDS})

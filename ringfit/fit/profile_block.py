@@ -66,6 +66,26 @@ OFFSET_BOUND = math.radians(10.0)
 OFFSET_SCALE = math.radians(1.0)
 #: Harmonics kept below the coarsest profile's Nyquist harmonic (its resampling's edge).
 PROFILE_BAND_MARGIN = 8
+#: The top revolution harmonic identify compares, as the state estimate (docs/physics.md §13.4 *the harmonic band*,
+#: §11 *profiles*): above it the model's form error — its grid, the brush's discretisation — outweighs what the
+#: harmonics tell (identify on the state example's calibration: the profiles' discrepancy ratio 28 on 2…255 against
+#: 4.5 on 2…80, the damping +50 % against +3 %).
+PROFILE_K_MAX = 80
+#: Weak priors on the sensor's own nuisances (natural units; docs/physics.md §13.4, §11 *profiles*), the same for
+#: every reader of a profile (the load and state estimates, identify): the IEPE high-pass corner's median [Hz] and
+#: σ of its logarithm (0.005–16 Hz at 2σ; below ~0.01 Hz it has no effect on harmonics k ≥ 2), the tilt gain's
+#: mean and σ (γ ∈ 0–1.1 with gravity, 0 without, docs/physics.md §6), σ of the log of the tangential axis's gain
+#: relative to the radial one, and the liner offset e's mean and σ [m] (§5 layer 1).
+CORNER_PRIOR = (0.3, 2.0)
+TILT_PRIOR = (0.5, 0.5)
+GAIN_TANGENTIAL_PRIOR_SD = 0.05
+LINER_OFFSET_PRIOR = (1.0e-3, 3.0e-3)
+#: Per run, the sensor's own nuisances that identify fits beside the gain and angle offset (θ order per run):
+#: tilt gain γ, the high-pass corner f_c [Hz], the liner offset e [m] and the tangential axis's gain g_t/g_r.
+SENSOR_FIELDS = ("tilt_gain", "corner_hz", "liner_offset_m", "gain_tangential")
+#: The liner offset's step in :func:`sensor_reading`'s bilinear basis [m] (the reading is exactly bilinear in
+#: (e, γ): any step gives the same basis up to round-off).
+LINER_BASIS_STEP = 1.0e-3
 
 
 def nuisance_names(P: int) -> tuple[str, ...]:
@@ -107,6 +127,82 @@ def nuisance_prior(P: int) -> GaussianPrior | None:
 def nuisance_start(P: int) -> np.ndarray:
     """The nuisances' start ``(2P,)``: no offset, unit gain."""
     return np.tile([0.0, 1.0], P)
+
+
+def sensor_names(P: int) -> tuple[str, ...]:
+    """Names of the ``P`` runs' sensor nuisances (:data:`SENSOR_FIELDS`, ``tilt_gain_i`` … per run i = 1 … P)."""
+    return tuple(f"{f}_{i + 1}" for i in range(P) for f in SENSOR_FIELDS)
+
+
+def sensor_coords(P: int) -> tuple[Coordinate, ...]:
+    """Solver coordinates of :func:`sensor_names`: γ linear (scale 0.1), f_c log, e linear (scale 1 mm), g_t/g_r
+    log within :data:`GAIN_RANGE` (as the state estimate's)."""
+    out = []
+    for name in sensor_names(P):
+        if name.startswith("tilt_gain"):
+            out.append(Coordinate(name, LINEAR, scale=0.1))
+        elif name.startswith("corner_hz"):
+            out.append(Coordinate(name, LOG))
+        elif name.startswith("liner_offset_m"):
+            out.append(Coordinate(name, LINEAR, scale=1e-3))
+        else:
+            out.append(Coordinate(name, LOG, lo=GAIN_RANGE[0], hi=GAIN_RANGE[1]))
+    return tuple(out)
+
+
+def sensor_start(P: int) -> np.ndarray:
+    """θ of the sensor nuisances at their priors' centres ``(4P,)`` (natural units)."""
+    return np.tile([TILT_PRIOR[0], CORNER_PRIOR[0], LINER_OFFSET_PRIOR[0], 1.0], P)
+
+
+def sensor_prior(P: int) -> GaussianPrior | None:
+    """The engine's prior on the runs' sensor nuisances in their solver coordinates: each run's own, independent,
+    the priors above (a run may be a remounted sensor: nothing tied across runs). ``None`` for no profile."""
+    if P == 0:
+        return None
+    entries = {}
+    for coord in sensor_coords(P):
+        field_ = coord.name.rsplit("_", 1)[0]
+        if field_ == "tilt_gain":
+            entries[coord.name] = ((TILT_PRIOR[0] - coord.center) / coord.scale, TILT_PRIOR[1] / coord.scale)
+        elif field_ == "corner_hz":
+            entries[coord.name] = (math.log(CORNER_PRIOR[0]), CORNER_PRIOR[1])
+        elif field_ == "liner_offset_m":
+            entries[coord.name] = ((LINER_OFFSET_PRIOR[0] - coord.center) / coord.scale,
+                                   LINER_OFFSET_PRIOR[1] / coord.scale)
+        else:
+            entries[coord.name] = (0.0, GAIN_TANGENTIAL_PRIOR_SD)
+    return GaussianPrior.independent(entries)
+
+
+def sensor_basis(solution, geometry: TyreGeometry, sensor: SensorModel) -> jax.Array:
+    """The sensor's reading of one rolling ``solution`` as a bilinear basis in the liner offset e and the tilt gain
+    γ, ``(4, 2, M)``: the reading at (0, 0), (:data:`LINER_BASIS_STEP`, 0), (0, 1) and (step, 1), the rest of
+    ``sensor`` as given (docs/physics.md §5 layers 1 and 4: v_s = v + eψ, the axes turned by γψ; the reading is
+    exactly bilinear in (e, γ) once its per-revolution mean is removed). :func:`sensor_reading` combines it."""
+    import dataclasses
+
+    from ringfit.physics.sensor import sensor_signals
+
+    out = []
+    for e, g in ((0.0, 0.0), (LINER_BASIS_STEP, 0.0), (0.0, 1.0), (LINER_BASIS_STEP, 1.0)):
+        out.append(jnp.stack(sensor_signals(solution, geometry, dataclasses.replace(sensor, offset=e, tilt_gain=g))))
+    return jnp.stack(out)
+
+
+def sensor_reading(basis, omega, sensor):
+    """The runs' channels ``(P, 2, M)`` from their :func:`sensor_basis` ``(P, 4, 2, M)`` (after the spectral stage)
+    at their sensor nuisances ``sensor`` ``(P, 4)`` (:data:`SENSOR_FIELDS` order) and Ω ``(P,)``: the bilinear
+    combination in (e, γ), the IEPE high-pass at f_c (first order, docs/physics.md §5 layer 5), and the tangential
+    axis's gain."""
+    from ringfit.physics.sensor import iepe_highpass
+
+    g, fc, e, gt = (sensor[:, j][:, None, None] for j in range(4))
+    a = e / LINER_BASIS_STEP
+    b00, b10, b01, b11 = (basis[:, j] for j in range(4))
+    ch = b00 + a * (b10 - b00) + g * (b01 - b00) + a * g * (b11 - b10 - b01 + b00)
+    ch = jax.vmap(iepe_highpass)(ch, omega, fc[:, 0, 0])
+    return ch * jnp.concatenate([jnp.ones_like(gt), gt], axis=1)
 
 
 def read_through(channels, offset, gain):
@@ -226,7 +322,7 @@ def rolling_data(
     )
 
 
-def block_rows(data: RollingData, k_min: int = PROFILE_K_MIN) -> dict:
+def block_rows(data: RollingData, k_min: int = PROFILE_K_MIN, k_max: int | None = None) -> dict:
     """The profile block's rows of prepared profiles: ``measured`` ``(P, 2, 2H)`` harmonic rows
     (:func:`ringfit.fit.profile_block.harmonic_rows`, k_min … ``k_top`` of
     :func:`ringfit.fit.profile_block.profile_band`) and the starting ``sigma`` (a tenth of each profile and
@@ -234,6 +330,8 @@ def block_rows(data: RollingData, k_min: int = PROFILE_K_MIN) -> dict:
     :func:`ringfit.fit.profile_block.noise_from_residual` after the first pass)."""
     M = data.measured.shape[-1]
     k_top = profile_band(data.n_samples, M) if data.n_samples else M // 2 - 1
+    if k_max is not None:
+        k_top = min(k_top, int(k_max))
     if k_top < k_min:
         raise InputError(f"the profiles resolve revolution harmonics up to {k_top} only; the rows start at "
                          f"{k_min}: give profiles with more angles per revolution")
@@ -242,14 +340,14 @@ def block_rows(data: RollingData, k_min: int = PROFILE_K_MIN) -> dict:
     return dict(measured=measured, sigma=sigma, k_top=k_top, k_min=k_min)
 
 
-def profile_rows(profiles, geometry, ring, solver, k_min: int = PROFILE_K_MIN) -> dict:
+def profile_rows(profiles, geometry, ring, solver, k_min: int = PROFILE_K_MIN, k_max: int | None = None) -> dict:
     """The block's rows of ``profiles``: ``measured`` ``(P, 2, 2H)`` harmonic rows (:func:`harmonic_rows`, k_min …
     :func:`profile_band`), a starting ``sigma`` of the same shape (a tenth of each profile and channel's RMS row,
     replaced by :func:`noise_from_residual` after the first fit), and per profile ``omega``, ``load``, ``drum``,
     ``speed_kmh``, ``sources`` (``P``, ``M``, ``k_top``, ``k_min``, ``grid`` the channels ``(P, 2, M)`` on the model
     grid, ``omega_source``)."""
     data = rolling_data(profiles, geometry, ring, solver=solver)
-    rows = block_rows(data, k_min)
+    rows = block_rows(data, k_min, k_max)
     return dict(rows, omega=np.array(data.omega, dtype=np.float64), load=data.load, drum=data.drum_diameter,
                 P=rows["measured"].shape[0], M=data.measured.shape[-1], sources=data.sources,
                 speed_kmh=data.speed_kmh, grid=data.measured, omega_source=list(data.omega_source))

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 
 from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
-from ringfit.fit.profile_block import GAIN_RANGE  # the profile block's: one sensor gain range for every reader
+from ringfit.fit.profile_block import CORNER_PRIOR, GAIN_RANGE, TILT_PRIOR  # the profile block's: one sensor for every reader
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced
 from ringfit.physics.profile import FlatOrDrum, ProfileModel, full_band, profile_channels
@@ -30,12 +30,9 @@ LOAD, GAIN, ANGLE_OFFSET, CORNER, TILT, K_TREAD = "load_n", "gain", "angle_offse
 PARAMETERS = (LOAD, GAIN, ANGLE_OFFSET, CORNER, TILT, K_TREAD)
 #: Plausible loads [N]: the load's bounds (a fit that ends there has failed).
 LOAD_RANGE = (200.0, 20000.0)
-#: Weak priors on the sensor nuisances (natural units): the high-pass corner's median [Hz] and σ of
-#: its logarithm (0.005–16 Hz at 2σ; below ~0.01 Hz it has no effect on harmonics k ≥ 2), the tilt's
-#: mean and σ (γ ∈ 0–1.1 with gravity, 0 without, docs/physics.md §6). They keep the nuisances finite
-#: where the data say little (a high speed, no gravity) and are propagated like any other parameter.
-CORNER_PRIOR = (0.3, 2.0)
-TILT_PRIOR = (0.5, 0.5)
+# Weak priors on the sensor nuisances (the profile block's, :data:`ringfit.fit.profile_block.CORNER_PRIOR` and
+# :data:`~ringfit.fit.profile_block.TILT_PRIOR`): they keep the nuisances finite where the data say little (a high
+# speed, no gravity) and are propagated like any other parameter.
 
 COORDS = (
     Coordinate(LOAD, LOG, lo=LOAD_RANGE[0], hi=LOAD_RANGE[1]),

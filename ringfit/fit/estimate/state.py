@@ -35,7 +35,8 @@ from ringfit.errors import InputError
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
                                 free_set, least_squares_batch, linearize, residuals)
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
-from ringfit.fit.profile_block import fit_profile_block, noise_from_residual
+from ringfit.fit.profile_block import (GAIN_TANGENTIAL_PRIOR_SD, LINER_OFFSET_PRIOR, PROFILE_K_MAX, fit_profile_block,
+                                       noise_from_residual)
 from ringfit.fit.estimate.load import LoadEstimate, band_top, estimate_load, step_for
 from ringfit.fit.identify import band_folds, discrepancy_ratio
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
@@ -70,10 +71,9 @@ SLIP_PRIOR_SD = 0.05
 SLIP_START = 0.02
 TREAD_PRIOR_SD = 0.5
 UNTOLD_SHARE = 0.9
-#: Priors [A] of the two sensor nuisances: σ of ln(tangential/radial sensitivity) about 0, and the liner offset's
-#: mean and σ [m] (the sensor's centre sits a few mm inside the belt's neutral line).
-GAIN_TANGENTIAL_PRIOR_SD = 0.05
-LINER_OFFSET_PRIOR = (1.0e-3, 3.0e-3)
+# Priors [A] of the two sensor nuisances (the profile block's GAIN_TANGENTIAL_PRIOR_SD, LINER_OFFSET_PRIOR): σ of
+# ln(tangential/radial sensitivity) about 0, and the liner offset's mean and σ [m] (the sensor's centre sits a few
+# mm inside the belt's neutral line).
 #: What a revolution's step moves (:func:`state_revolutions`): what changes from one revolution to the next; the
 #: pressure, tread depth and the sensor's corner and tilt stay at the recording's averaged fit.
 REVOLUTION_FREE = (LOAD, SLIP, GAIN, ANGLE_OFFSET)
@@ -89,7 +89,7 @@ RIDGE_BETTER = 1.0
 #: The harmonics the state fits (docs/physics.md §13.4 *the harmonic band*): 2…STATE_K_MAX of both channels (the
 #: patch's edges, what tells load from tread depth at light loads, live in the high ones) — unless the model's form
 #: error shows there: a fit whose discrepancy ratio κ exceeds KAPPA_BAND_LIMIT is redone on 2…STATE_K_FALLBACK.
-STATE_K_MAX = 80
+STATE_K_MAX = PROFILE_K_MAX
 STATE_K_FALLBACK = 40
 KAPPA_BAND_LIMIT = 4.0
 
