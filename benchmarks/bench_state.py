@@ -185,17 +185,14 @@ def error_of(q: str, est: float, true: float, true_load: float) -> float:
 
 
 def identified_tyre(folder: Path) -> Path:
-    """The tyre file a user identifies from the example's ``calibration/`` (docs/formats.md §6, §18), as the
-    example's README says: every calibration recording on the flat road at the tyre file's tread depth averaged
-    into a profile (``ringfit profile``, its stated load, pressure and torque in the sidecar), the free table at the
-    tyre file's pressure as ``free.modes.csv`` and those at other pressures beside it, then ``ringfit identify``.
-    Cached in ``folder/identified/`` (a case folder and ``tyre.toml``; delete it to identify again)."""
-    import json
+    """The tyre file a user identifies from the example's ``calibration/`` (docs/formats.md §6, §18):
+    :func:`ringfit.synth.state.calibration_case` (the flat-road recordings at the tyre file's tread depth averaged
+    into profiles, the free tables), then ``ringfit identify``. Cached in ``folder/identified/`` (the case folder
+    and ``identified.tyre.toml``; delete it to identify again)."""
     import shutil
 
     from ringfit.cli import main
-    from ringfit.io.continuous import read_continuous
-    from ringfit.io.tyre import read_tyre
+    from ringfit.synth.state import calibration_case
 
     out = folder / "identified" / "identified.tyre.toml"
     if out.is_file():
@@ -203,24 +200,7 @@ def identified_tyre(folder: Path) -> Path:
     case = folder / "identified" / "case"
     if case.exists():
         shutil.rmtree(case)
-    case.mkdir(parents=True)
-    nominal = read_tyre(folder / "tyre.toml")
-    shutil.copy(folder / "tyre.toml", case / "tyre.toml")
-    depth = nominal.state_values.get("tread_depth_mm")
-    for table in sorted((folder / "calibration").glob("free_p*.modes.csv")):
-        side = table.with_name(table.name.removesuffix(".csv") + ".json")
-        bar = float(json.loads(side.read_text()).get("pressure_bar", nominal.geometry.pressure / 1e5))
-        name = "free.modes" if abs(bar - nominal.geometry.pressure / 1e5) < 1e-9 else table.name.removesuffix(".csv")
-        shutil.copy(table, case / f"{name}.csv")
-        shutil.copy(side, case / f"{name}.json")
-    for rec in sorted((folder / "calibration").glob("*.records.npz")):
-        with read_continuous(rec) as r:
-            cond = dict(r.condition)
-        if cond.get("drum_diameter_m") or (depth is not None and cond.get("tread_depth_mm") not in (None, depth)):
-            continue  # identify reads every measurement on one road and at the tyre file's tread depth
-        if main(["profile", str(rec), "--out", str(case / (rec.name.removesuffix(".records.npz") + ".profile.csv")),
-                 "--quiet"]) != 0:
-            raise RuntimeError(f"{folder.name}: ringfit profile failed on {rec}")
+    calibration_case(folder, case)
     tmp = out.with_name("tmp.tyre.toml")
     if main(["identify", str(case), "--out", str(tmp), "--quiet", "--force"]) != 0:
         raise RuntimeError(f"{folder.name}: ringfit identify failed on {case}")

@@ -15,6 +15,7 @@
 # %%
 import csv
 import os
+import shutil
 import warnings
 from pathlib import Path
 
@@ -143,23 +144,17 @@ for key in ("load_n", "fx_n", "speed_kmh"):
 # tables beside it, and rolling *profiles* — so each calibration recording is first averaged into one with
 # `ringfit profile`, which keeps its stated load, pressure, torque and tread depth in the sidecar. identify reads
 # every measurement on one road and at the tyre file's tread depth: the drum and the worn-tread recordings stay
-# out. It identifies the ring, how it scales with pressure (`[ring.pressure]`) and the tread's k_x, with a
-# covariance (§11, §13).
+# out (`ringfit.synth.state.calibration_case` does these steps). identify reads each profile through its sensor's
+# own nuisances (tilt, IEPE corner, liner offset, tangential gain; §11 *profiles*) and identifies the ring, how it
+# scales with pressure (`[ring.pressure]`) and the tread's k_x, with a covariance (§11, §13).
 
 # %%
-import shutil
+from ringfit.synth.state import calibration_case
 
 case = OUT / "state-case"
 shutil.rmtree(case, ignore_errors=True)
-case.mkdir()
-shutil.copy(example / "tyre.toml", case / "tyre.toml")
-for suffix in (".csv", ".json"):
-    shutil.copy(example / "calibration" / f"free_p100.modes{suffix}", case / f"free.modes{suffix}")
-    for other in ("free_p080", "free_p120"):
-        shutil.copy(example / "calibration" / f"{other}.modes{suffix}", case / f"{other}.modes{suffix}")
-for name in ("cal_p080_l080", "cal_p100_l050", "cal_p100_l100", "cal_p100_drive", "cal_p100_brake", "cal_p120_l080"):
-    assert main(["profile", str(example / "calibration" / f"{name}.records.npz"), "--out",
-                 str(case / f"{name}.profile.csv"), "--quiet"]) == 0
+left = calibration_case(example, case)  # `ringfit profile` of each recording kept, the free tables, tyre.toml
+print(sorted(p.name for p in case.iterdir()), "\nleft out:", left)
 identified = OUT / "identified.tyre.toml"
 assert main(["identify", str(case), "--out", str(identified), "--force", "--quiet"]) == 0
 

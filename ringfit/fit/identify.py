@@ -959,7 +959,7 @@ def log_interval(value: float, sd_ln, bounds: tuple[float, float] | None) -> dic
     return out
 
 
-def identify(inputs: IdentifyInputs, *, solver: ContactSolver = ContactSolver(), max_steps: int = 64,
+def identify(inputs: IdentifyInputs, *, solver: ContactSolver = ContactSolver(), max_steps: int = 128,
              rtol: float = 1e-8, atol: float = 1e-8, progress: bool = False, sensor: bool = True) -> Identification:
     """Joint weighted least squares of the ring (and per-run nuisances) over every block of ``inputs``.
 
