@@ -232,7 +232,9 @@ def state_case(tmp_path_factory):
 @pytest.mark.slow
 def test_identify_across_states_recovers_the_laws_and_writes_them(state_case, tmp_path, capsys):
     """The case at two pressures with a drive and a brake profile (truth at known laws, a finer grid): the ring,
-    the three shares and k_x inside their 95 % intervals; the tyre file carries them with their covariance."""
+    the three shares and k_x inside their 95 % intervals but at most one of the ten, and that one within 3 σ (one
+    case: the coverage over cases is test_the_laws_intervals_cover_over_random_cases); the tyre file carries them
+    with their covariance."""
     from ringfit.cli import main
 
     folder, truth = state_case
@@ -242,10 +244,14 @@ def test_identify_across_states_recovers_the_laws_and_writes_them(state_case, tm
     assert "k_x started from" in text
     doc = json.loads((tmp_path / "id.identify.json").read_text())
     params = doc["parameters"]
+    outside = []
     for name, value in {**truth["ring"], **truth["laws"]}.items():
         if name in params:
             p = params[name]
-            assert p["lo95"] <= value <= p["hi95"], (name, value, p)
+            if not p["lo95"] <= value <= p["hi95"]:
+                z = (math.log(p["value"] / value) / p["sd_ln"]) if "sd_ln" in p else (p["value"] - value) / p["sd"]
+                outside.append((name, value, p, z))
+    assert len(outside) <= 1 and all(abs(z) < 3 for *_, z in outside), outside
     assert set(truth["laws"]) <= set(params)
     assert params["k_x"]["sd_ln"] < 0.1 and params["kw_share"]["sd"] < 0.05  # identified, not just bounded
     assert "torque" in doc["blocks"] and doc["blocks"]["torque"]["rows"] == 2
