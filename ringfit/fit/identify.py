@@ -1075,6 +1075,8 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor) -> Ide
     # (θ holds EA = ∞ of the inextensible ring: only the free parameters need be finite)
     if all(math.isfinite(fit.values[n]) for n in fit.names) and (rows.loaded is not None or rows.profiles is not None):
         check = grid_check(fit, rows, geometry, solver, P)
+        if np.all(np.isfinite(check["shift_u"])):
+            fit = grid_moved(fit, check["shift_u"])
     warned = []
     if rows.loaded is not None and all(math.isfinite(fit.values[n]) for n in fit.names):
         laws = None
@@ -1216,6 +1218,27 @@ def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: Cont
     du = -np.linalg.lstsq(fit.jacobian, delta, rcond=None)[0]
     return dict(grid=[solver.n_grid, fine.n_grid], loaded_harmonics=[LOADED_HARMONICS, factor * LOADED_HARMONICS],
                 shift_u=du)
+
+
+def grid_moved(fit: FitResult, shift_u) -> FitResult:
+    """``fit`` moved by the grid check's step (:func:`grid_check`, docs/physics.md §11 *the model's grid*): every free
+    parameter at the refined model's optimum, as the state estimate reads a recording on its refined model (§13.4) —
+    so a tyre is identified and read by the same discretisation. The step stays in the covariance (``_finish``): how
+    far the grid's error goes beyond the refined grid is not known. A bounded parameter stays inside its range."""
+    theta = np.array(fit.theta, dtype=np.float64)
+    order = [c.name for c in fit.coords]
+    values, stderr = dict(fit.values), dict(fit.stderr)
+    for name, du in zip(fit.names, np.asarray(shift_u, dtype=np.float64)):
+        i = order.index(name)
+        c = fit.coords[i]
+        new = float(c.from_u(c.to_u(theta[i]) + du))
+        if math.isfinite(c.lo) or math.isfinite(c.hi):
+            span = (c.hi - c.lo) if math.isfinite(c.hi - c.lo) else abs(new)
+            new = float(np.clip(new, c.lo + 1e-9 * span, c.hi - 1e-9 * span))
+        if c.kind == LOG and name in stderr and values[name]:
+            stderr[name] = stderr[name] * new / values[name]
+        theta[i], values[name] = new, new
+    return dataclasses.replace(fit, theta=theta, values=values, stderr=stderr)
 
 
 def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, check=None, widen=None,
