@@ -186,13 +186,13 @@ def error_of(q: str, est: float, true: float, true_load: float) -> float:
 
 def identified_tyre(folder: Path) -> Path:
     """The tyre file a user identifies from the example's ``calibration/`` (docs/formats.md §6, §18):
-    :func:`ringfit.synth.state.calibration_case` (the flat-road recordings at the tyre file's tread depth averaged
+    :func:`ringfit.synth.examples.calibration_case` (the flat-road recordings at the tyre file's tread depth averaged
     into profiles, the free tables), then ``ringfit identify``. Cached in ``folder/identified/`` (the case folder
     and ``identified.tyre.toml``; delete it to identify again)."""
     import shutil
 
     from ringfit.cli import main
-    from ringfit.synth.state import calibration_case
+    from ringfit.synth.examples import calibration_case
 
     out = folder / "identified" / "identified.tyre.toml"
     if out.is_file():

@@ -144,12 +144,12 @@ for key in ("load_n", "fx_n", "speed_kmh"):
 # tables beside it, and rolling *profiles* — so each calibration recording is first averaged into one with
 # `ringfit profile`, which keeps its stated load, pressure, torque and tread depth in the sidecar. identify reads
 # every measurement on one road and at the tyre file's tread depth: the drum and the worn-tread recordings stay
-# out (`ringfit.synth.state.calibration_case` does these steps). identify reads each profile through its sensor's
+# out (`ringfit.synth.examples.calibration_case` does these steps). identify reads each profile through its sensor's
 # own nuisances (tilt, IEPE corner, liner offset, tangential gain; §11 *profiles*) and identifies the ring, how it
 # scales with pressure (`[ring.pressure]`) and the tread's k_x, with a covariance (§11, §13).
 
 # %%
-from ringfit.synth.state import calibration_case
+from ringfit.synth.examples import calibration_case
 
 case = OUT / "state-case"
 shutil.rmtree(case, ignore_errors=True)

@@ -359,10 +359,11 @@ def test_the_laws_intervals_cover_over_random_cases(tmp_path):
 def test_identify_reads_each_profile_through_its_own_sensor(tmp_path):
     """The state example's calibration recordings (the independent simulator, docs/physics.md §13.7), each with its
     own sensor — tilt, IEPE corner, liner offset, per-axis gains — averaged into profiles
-    (:func:`ringfit.synth.state.calibration_case`, as a user does with ``ringfit profile``). Read through each
+    (:func:`ringfit.synth.examples.calibration_case`, as a user does with ``ringfit profile``). Read through each
     profile's sensor nuisances (§11 *profiles*, the default) identify recovers the true ring; with a gain and an
     angle offset alone (``sensor=False``) the sensor's reading is taken up by the ring (seed 4: EI −52 %)."""
-    from ringfit.synth.state import calibration_case, write_state_example
+    from ringfit.synth.examples import calibration_case
+    from ringfit.synth.state import write_state_example
 
     example = tmp_path / "example"
     write_state_example(example, seed=4, blind=1, seconds=4.0)

@@ -505,4 +505,45 @@ ringfit campbell --tyre fitted.toml --load 4000 --speeds 0:60:5 --modes rolling/
 """)
 
 
-__all__ = ["KINDS", "write_example"]
+__all__ = ["KINDS", "write_example", "calibration_case"]
+
+
+def calibration_case(example, case) -> list[str]:
+    """The ``ringfit identify`` case folder (docs/formats.md §6) a user assembles from a state example's
+    ``calibration/``, written into the new folder ``case``: the example's ``tyre.toml``; the free table at its
+    pressure as ``free.modes.csv`` and those at other pressures beside it; and every calibration recording on the
+    flat road at the tyre file's tread depth averaged into a profile (``ringfit profile``: its stated load,
+    pressure, torque and tread depth in the sidecar) — identify reads every measurement on one road and at the
+    tyre file's depth, so the drum and the worn-tread recordings stay out. **Returns** the recordings left out.
+    (Here, not in :mod:`ringfit.synth.state`: the independent simulator imports nothing of ringfit's targets.)"""
+    import json
+    import shutil
+
+    from ringfit.io.continuous import read_continuous
+    from ringfit.io.profiles import write_profile
+    from ringfit.io.tyre import read_tyre
+    from ringfit.targets.rolling_profile import rolling_profile
+
+    example, case = Path(example), Path(case)
+    case.mkdir(parents=True)
+    nominal = read_tyre(example / "tyre.toml")
+    shutil.copy(example / "tyre.toml", case / "tyre.toml")
+    bar0 = float(nominal.geometry.pressure) / 1e5
+    for table in sorted((example / "calibration").glob("free_p*.modes.csv")):
+        side = table.with_name(table.name.removesuffix(".csv") + ".json")
+        bar = float(json.loads(side.read_text()).get("pressure_bar", bar0))
+        name = "free.modes" if abs(bar - bar0) < 1e-9 else table.name.removesuffix(".csv")
+        shutil.copy(table, case / f"{name}.csv")
+        shutil.copy(side, case / f"{name}.json")
+    depth = nominal.state_values.get("tread_depth_mm")
+    left = []
+    for path in sorted((example / "calibration").glob("*.records.npz")):
+        with read_continuous(path) as rec:
+            cond = dict(rec.condition)
+            if cond.get("drum_diameter_m") or (depth is not None and cond.get("tread_depth_mm") not in (None, depth)):
+                left.append(path.name)
+                continue
+            prof = rolling_profile(rec)
+        write_profile(prof.to_profile(), case / (path.name.removesuffix(".records.npz") + ".profile.csv"),
+                      inputs=[path])
+    return left
