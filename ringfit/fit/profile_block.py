@@ -78,6 +78,9 @@ PROFILE_K_MAX = 80
 #: relative to the radial one, and the liner offset e's mean and σ [m] (§5 layer 1).
 CORNER_PRIOR = (0.3, 2.0)
 TILT_PRIOR = (0.5, 0.5)
+#: The corner's range in identify [Hz]: below 0.01 Hz it changes no harmonic k ≥ 2 of a rolling tyre (its
+#: direction is flat, and a fit that follows it down does not converge), above 10 Hz it is no IEPE coupling.
+CORNER_RANGE = (0.01, 10.0)
 GAIN_TANGENTIAL_PRIOR_SD = 0.05
 LINER_OFFSET_PRIOR = (1.0e-3, 3.0e-3)
 #: Per run, the sensor's own nuisances that identify fits beside the gain and angle offset (θ order per run):
@@ -135,14 +138,14 @@ def sensor_names(P: int) -> tuple[str, ...]:
 
 
 def sensor_coords(P: int) -> tuple[Coordinate, ...]:
-    """Solver coordinates of :func:`sensor_names`: γ linear (scale 0.1), f_c log, e linear (scale 1 mm), g_t/g_r
-    log within :data:`GAIN_RANGE` (as the state estimate's)."""
+    """Solver coordinates of :func:`sensor_names`: γ linear (scale 0.1), f_c log within :data:`CORNER_RANGE`, e linear
+    (scale 1 mm), g_t/g_r log within :data:`GAIN_RANGE` (as the state estimate's)."""
     out = []
     for name in sensor_names(P):
         if name.startswith("tilt_gain"):
             out.append(Coordinate(name, LINEAR, scale=0.1))
-        elif name.startswith("corner_hz"):
-            out.append(Coordinate(name, LOG))
+        elif name.startswith("corner_hz"):  # below CORNER_RANGE[0] a corner has no effect on harmonics k ≥ 2
+            out.append(Coordinate(name, LOG, lo=CORNER_RANGE[0], hi=CORNER_RANGE[1]))
         elif name.startswith("liner_offset_m"):
             out.append(Coordinate(name, LINEAR, scale=1e-3))
         else:
