@@ -15,6 +15,6 @@ NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.py"))
 def test_notebook_runs(notebook, tmp_path):
     env = dict(os.environ, MPLBACKEND="Agg", RINGFIT_NOTEBOOK_OUT=str(tmp_path))
     proc = subprocess.run(
-        [sys.executable, str(notebook)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600
+        [sys.executable, str(notebook)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=1200
     )
     assert proc.returncode == 0, f"{notebook.name} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}"
