@@ -169,3 +169,10 @@ for key in keys:
     q, nominal_q = known.quantities[key], state.quantities[key]
     print(f"{key:15s} nominal tyre {nominal_q['value']:9.5g}   identified {q['value']:9.5g} (95 %: {q['lo']:.5g} … "
           f"{q['hi']:.5g})   truth {np.mean(truth[key]):9.5g}")
+
+# %% [markdown]
+# One recording is not a verdict, and the identified tyre can read it worse than the nominal one: its calibration
+# here is four seconds per state, and a ring identified from it carries its own errors into every reading (EI,
+# on which the load–pressure reading leans, is the least pinned). `benchmarks/bench_state.py --tyre identified`
+# measures this path over many recordings (docs/physics.md §13.6): about 1.7 % median load error, against 0.35 %
+# with the true tyre file.
