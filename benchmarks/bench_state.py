@@ -21,7 +21,9 @@ docs/physics.md §13.4 *a drifting state*); ``--seeds 0 1 2`` halves it). It pri
    coverage of the 95 % intervals with its Clopper–Pearson interval (target 90–98 %). The per-revolution truth is
    the simulator's revolutions' states averaged over each estimated revolution's time span (the two codes count
    revolutions from different angles). The tyre: ``--tyre nominal`` (default; what a user has: the example's
-   ``tyre.toml``) or ``--tyre truth`` (the true tyre file: a diagnosis — what is left is the model's form and the
+   ``tyre.toml``), ``--tyre identified`` (``ringfit identify`` of the example's ``calibration/`` through
+   :func:`ringfit.synth.examples.calibration_case`, cached in each example's ``identified/``: what a user reads
+   with) or ``--tyre truth`` (the true tyre file: a diagnosis — what is left is the model's form and the
    estimator, not the tyre file's values).
 2. **Speed**: revolutions per CPU second of the per-revolution stage (the pass over the recording + the
    linearised step) and end to end (with the averaged fits), CPU beside wall (target ≥ 500 on one core).
