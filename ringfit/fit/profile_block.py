@@ -137,25 +137,32 @@ def sensor_names(P: int) -> tuple[str, ...]:
     return tuple(f"{f}_{i + 1}" for i in range(P) for f in SENSOR_FIELDS)
 
 
+#: Per sensor field (:data:`SENSOR_FIELDS`): its solver coordinate's kind, scale and range, and its prior's mean
+#: (natural units: the start too) and σ (of the value for a linear coordinate, of its log for a log one). Below
+#: CORNER_RANGE[0] a corner has no effect on harmonics k ≥ 2.
+_SENSOR_TABLE = {
+    "tilt_gain": (LINEAR, 0.1, (-math.inf, math.inf), TILT_PRIOR[0], TILT_PRIOR[1]),
+    "corner_hz": (LOG, 1.0, CORNER_RANGE, CORNER_PRIOR[0], CORNER_PRIOR[1]),
+    "liner_offset_m": (LINEAR, 1e-3, (-math.inf, math.inf), LINER_OFFSET_PRIOR[0], LINER_OFFSET_PRIOR[1]),
+    "gain_tangential": (LOG, 1.0, GAIN_RANGE, 1.0, GAIN_TANGENTIAL_PRIOR_SD),
+}
+
+
 def sensor_coords(P: int) -> tuple[Coordinate, ...]:
     """Solver coordinates of :func:`sensor_names`: γ linear (scale 0.1), f_c log within :data:`CORNER_RANGE`, e linear
     (scale 1 mm), g_t/g_r log within :data:`GAIN_RANGE` (as the state estimate's)."""
     out = []
-    for name in sensor_names(P):
-        if name.startswith("tilt_gain"):
-            out.append(Coordinate(name, LINEAR, scale=0.1))
-        elif name.startswith("corner_hz"):  # below CORNER_RANGE[0] a corner has no effect on harmonics k ≥ 2
-            out.append(Coordinate(name, LOG, lo=CORNER_RANGE[0], hi=CORNER_RANGE[1]))
-        elif name.startswith("liner_offset_m"):
-            out.append(Coordinate(name, LINEAR, scale=1e-3))
-        else:
-            out.append(Coordinate(name, LOG, lo=GAIN_RANGE[0], hi=GAIN_RANGE[1]))
+    for i in range(P):
+        for f in SENSOR_FIELDS:
+            kind, scale, (lo, hi), _, _ = _SENSOR_TABLE[f]
+            out.append(Coordinate(f"{f}_{i + 1}", kind, scale=scale, lo=lo, hi=hi) if kind == LINEAR
+                       else Coordinate(f"{f}_{i + 1}", kind, lo=lo, hi=hi))
     return tuple(out)
 
 
 def sensor_start(P: int) -> np.ndarray:
     """θ of the sensor nuisances at their priors' centres ``(4P,)`` (natural units)."""
-    return np.tile([TILT_PRIOR[0], CORNER_PRIOR[0], LINER_OFFSET_PRIOR[0], 1.0], P)
+    return np.tile([_SENSOR_TABLE[f][3] for f in SENSOR_FIELDS], P)
 
 
 def sensor_prior(P: int) -> GaussianPrior | None:
@@ -164,17 +171,10 @@ def sensor_prior(P: int) -> GaussianPrior | None:
     if P == 0:
         return None
     entries = {}
-    for coord in sensor_coords(P):
-        field_ = coord.name.rsplit("_", 1)[0]
-        if field_ == "tilt_gain":
-            entries[coord.name] = ((TILT_PRIOR[0] - coord.center) / coord.scale, TILT_PRIOR[1] / coord.scale)
-        elif field_ == "corner_hz":
-            entries[coord.name] = (math.log(CORNER_PRIOR[0]), CORNER_PRIOR[1])
-        elif field_ == "liner_offset_m":
-            entries[coord.name] = ((LINER_OFFSET_PRIOR[0] - coord.center) / coord.scale,
-                                   LINER_OFFSET_PRIOR[1] / coord.scale)
-        else:
-            entries[coord.name] = (0.0, GAIN_TANGENTIAL_PRIOR_SD)
+    for coord, f in zip(sensor_coords(P), SENSOR_FIELDS * P):
+        mean, sd = _SENSOR_TABLE[f][3:]
+        entries[coord.name] = ((math.log(mean), sd) if coord.kind == LOG
+                               else ((mean - coord.center) / coord.scale, sd / coord.scale))
     return GaussianPrior.independent(entries)
 
 
