@@ -31,8 +31,9 @@ fit`` uses, applied here to the free modes, the free damping and the loaded mode
 (speed > 0) are not part of the joint model yet: they are listed with a warning. A block scale from ν residual
 degrees of freedom widens that block's share of the covariance by Student's t_ν
 (:func:`~ringfit.fit.free_block.t_widening`), and the model's own discretisation (contact grid,
-loaded-mode basis) is checked once at the optimum (:func:`grid_check`, refined ×2) and carried into the
-covariance as a rank-one term. A form error of the model that the parameters absorb differently in different
+loaded-mode basis) is checked once at the optimum (:func:`grid_check`, refined ×2 and ×4, extrapolated to the
+continuum): the values are moved there and the move beyond the first refinement is carried into the covariance as
+a rank-one term. A form error of the model that the parameters absorb differently in different
 parts of a block shows as held-out rows predicted worse than their noise: each block's σ is multiplied by the
 square root of its discrepancy ratio κ_b ≥ 1 in the covariance and the posterior (:func:`discrepancy_ratio`,
 :func:`block_folds`; docs/physics.md §11).
@@ -76,7 +77,7 @@ from ringfit.fit.profile_block import (PROFILE_K_MAX, SENSOR_FIELDS, harmonic_ro
                                        nuisance_names, nuisance_prior, nuisance_start, profile_rows, read_through,
                                        sensor_basis, sensor_coords, sensor_names, sensor_prior, sensor_reading,
                                        sensor_start)
-from ringfit.fit.result import FitResult, covariance_from_jacobian
+from ringfit.fit.result import FitResult, covariance_from_jacobian, gauss_newton_step, richardson_tail
 from ringfit.io.case import CaseFolder, read_case_folder, sidecar_number
 from ringfit.io.conditions import pressure_conflict
 from ringfit.io.modes import ModeTable
@@ -94,8 +95,9 @@ from ringfit.physics.state import TyreState, state_profile, state_solution, stat
 DAMPING_RELATIVE_STD = 0.05
 #: Harmonics of the loaded-mode basis (docs/physics.md §6; N = 20 is within 0.2 Hz of N = 40).
 LOADED_HARMONICS = 24
-#: The grid check refines the contact grid and the loaded-mode basis by this factor (docs/physics.md §11).
-GRID_CHECK_FACTOR = 2
+#: The grid check refines the contact grid and the loaded-mode basis twice, by 2 and by this factor, and
+#: extrapolates to the continuum by Richardson's rule, as the state estimate reads (docs/physics.md §11, §13.4).
+GRID_CHECK_FACTOR = 4
 #: Parameters of the ring the identification can free.
 RING_FREE = ("rho_a", "ei", "kw", "kv", "k_tread", "damping_ratio")
 BLOCKS = ("free modes", "free damping", "loaded modes", "profiles", "torque")
@@ -815,9 +817,10 @@ class Identification:
     - ``correlation``: ``(names, matrix)`` of the ring parameters' posterior correlation;
     - ``covariance``: :class:`~ringfit.io.tyre.RingCovariance` of the ring parameters (ln θ);
     - ``nuisances``: per profile its gain and angle offset (deg) with σ; ``notes``: what was skipped.
-    - ``grid_check``: the model's own discretisation (:func:`grid_check`): ``grid``, ``loaded_harmonics`` (coarse,
-      fine) and per parameter ``shift`` (the optimum's move when both are refined; ln θ, degrees for an angle
-      offset), carried into every σ and interval above as a rank-one term ``δu δuᵀ``; None when it was not run.
+    - ``grid_check``: the model's own discretisation (:func:`grid_check`): ``grid``, ``loaded_harmonics`` (coarse
+      to finest) and per parameter ``shift`` (the optimum's move to the continuum, applied to the values; solver
+      coordinates: ln θ of a positive parameter) and ``beyond`` (its part beyond the first refinement, carried into
+      every σ and interval above as a rank-one term ``δu δuᵀ``); None when it was not run.
     """
 
     fit: FitResult
@@ -834,7 +837,8 @@ class Identification:
     #: ``(m,)`` per data row: its block's Student-t widening (:func:`~ringfit.fit.free_block.t_widening`) times √κ_b
     #: (:func:`discrepancy_ratio`), 1 elsewhere
     row_scale: np.ndarray | None = None
-    #: ``(k,)`` the grid check's move δu (solver coordinates of ``fit.names``), None when not run
+    #: ``(k,)`` the grid check's systematic direction δu (its move beyond the first refinement, solver coordinates
+    #: of ``fit.names``), None when not run
     shift_u: np.ndarray | None = None
     #: the block of each data row, in order: name → slice of ``fit.residuals``
     slices: dict | None = None
@@ -1193,31 +1197,41 @@ def band_folds(idx: np.ndarray, H: int, bands: int = DISCREPANCY_BANDS) -> list[
 
 def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: ContactSolver, P: int,
                factor: int = GRID_CHECK_FACTOR) -> dict:
-    """How far the joint optimum moves when the model's discretisation is refined (docs/physics.md §11).
+    """How far the joint optimum moves when the model's discretisation is refined to the continuum (docs/physics.md
+    §11 *the model's grid*).
 
     The contact solve's discrete active set makes the patch (its edges, so the loaded modes' half-angle and
     the profiles' shape around the patch) a fine staircase in the parameters, and the loaded-mode basis is
     truncated at :data:`LOADED_HARMONICS`; both are systematic, the same in every row of a profile, so they
-    are not noise the block scales could absorb. One Gauss–Newton step from the fit, with its Jacobian, on the
-    same rows and weights under the model refined by ``factor`` (grid ``factor``·M, ``factor``·N harmonics;
-    the profiles' model rows band-limited to the data's harmonics) estimates the move: ``δu = −J⁺ Δr`` (the
-    estimate's grid check, docs/physics.md §10, for the joint model). One residual evaluation of the fine model.
+    are not noise the block scales could absorb. The same rows and weights are evaluated at the fit under the
+    model refined by 2, 4, … up to ``factor`` (grid ×M, harmonics ×N; the profiles' model rows band-limited to the
+    data's harmonics), each halving's move is one Gauss–Newton step with the fit's Jacobian
+    (:func:`~ringfit.fit.result.gauss_newton_step`), and the move still to come beyond the finest grid is
+    Richardson's on the last two moves (:func:`~ringfit.fit.result.richardson_tail`) — the rule the state estimate
+    reads a recording by (§13.4), so a tyre is identified and read on the same model. One residual evaluation per
+    refinement.
 
-    **Returns** ``dict(grid, loaded_harmonics, shift_u)`` (``shift_u`` ``(k,)`` in the solver coordinates
-    of ``fit.names``).
+    **Returns** ``dict(grid, loaded_harmonics, shift_u, beyond_u)`` (``(k,)`` in the solver coordinates of
+    ``fit.names``): ``shift_u`` the whole move to the continuum, ``beyond_u`` its part beyond the first refinement
+    (the last halving's move and the tail: the part a Gauss–Newton step from M and the extrapolation know least).
     """
-    fine = ContactSolver(n_grid=factor * solver.n_grid, window_deg=solver.window_deg, max_iter=solver.max_iter)
-    model = JointResiduals(P, fine, ProfileModel(), n_harmonics=factor * LOADED_HARMONICS, rows_grid=solver.n_grid,
-                           k_top=0 if rows.profiles is None else rows.profiles["k_top"],
-                           across=rows.states is not None, sensor=fit.problem.model.sensor)
-    problem = Problem(model, _arrays(geometry, rows, fine), fit.coords, data_label="these measurements")
-    r_fine, _ = residuals(problem, fit.theta)
+    levels = [2**j for j in range(int(round(math.log2(factor))) + 1)]
     m = fit.residuals.size
-    delta = np.zeros(fit.jacobian.shape[0])
-    delta[:m] = np.asarray(r_fine) - fit.residuals
-    du = -np.linalg.lstsq(fit.jacobian, delta, rcond=None)[0]
-    return dict(grid=[solver.n_grid, fine.n_grid], loaded_harmonics=[LOADED_HARMONICS, factor * LOADED_HARMONICS],
-                shift_u=du)
+    previous = np.asarray(fit.residuals)
+    steps = []
+    for f in levels[1:]:
+        fine = ContactSolver(n_grid=f * solver.n_grid, window_deg=solver.window_deg, max_iter=solver.max_iter)
+        model = JointResiduals(P, fine, ProfileModel(), n_harmonics=f * LOADED_HARMONICS, rows_grid=solver.n_grid,
+                               k_top=0 if rows.profiles is None else rows.profiles["k_top"],
+                               across=rows.states is not None, sensor=fit.problem.model.sensor)
+        problem = Problem(model, _arrays(geometry, rows, fine), fit.coords, data_label="these measurements")
+        r_fine = np.asarray(residuals(problem, fit.theta)[0])[:m]
+        steps.append(gauss_newton_step(fit, r_fine - previous))
+        previous = r_fine
+    tail = richardson_tail(steps[-2], steps[-1], fit.covariance_log) if len(steps) > 1 else steps[-1]
+    shift = np.sum(steps, axis=0) + tail
+    return dict(grid=[f * solver.n_grid for f in levels], loaded_harmonics=[f * LOADED_HARMONICS for f in levels],
+                shift_u=shift, beyond_u=shift - steps[0])
 
 
 def grid_moved(fit: FitResult, shift_u) -> FitResult:
@@ -1258,10 +1272,12 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
     shift_u = None
     if check is not None and np.all(np.isfinite(check["shift_u"])):
         du = check["shift_u"]
-        shift_u = np.asarray(du, dtype=np.float64)
-        cov_u = cov_u + np.outer(du, du)  # the discretisation's move: one systematic direction (grid_check)
+        # the discretisation's move beyond its first refinement: one systematic direction (grid_check)
+        shift_u = np.asarray(check.get("beyond_u", du), dtype=np.float64)
+        cov_u = cov_u + np.outer(shift_u, shift_u)
         grid = dict(grid=check["grid"], loaded_harmonics=check["loaded_harmonics"],
-                    shift={n: float(x) for n, x in zip(names, du)})
+                    shift={n: float(x) for n, x in zip(names, du)},
+                    beyond={n: float(x) for n, x in zip(names, shift_u)})
     fisher = {b: J[sl].T @ J[sl] for b, sl in slices.items()}
     total = np.diag(J.T @ J)  # data and prior rows
     # the covariance's parameters: the ring's, then the state laws identified across states (ln k_x; a share as

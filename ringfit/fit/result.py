@@ -217,6 +217,31 @@ def covariance_from_jacobian(jacobian: np.ndarray, rcond: float = 1e-12) -> np.n
     return cov
 
 
+def gauss_newton_step(fit: FitResult, delta: np.ndarray) -> np.ndarray:
+    """The Gauss–Newton step ``δu = −J⁺ Δr`` of the fit's free solver coordinates for a change ``delta`` ``(m,)``
+    of its data rows (as ``fit.residuals``, σ scale as fitted; the prior's rows unchanged): how far the optimum
+    moves when the rows change by ``delta`` at the fit (docs/physics.md §10 *the model's grid*)."""
+    full = np.zeros(fit.jacobian.shape[0])
+    full[:fit.residuals.size] = delta
+    return -np.linalg.lstsq(fit.jacobian, full, rcond=None)[0]
+
+
+#: The range of Richardson's ratio ρ = |δu_a|/|δu_b| of two successive grid halvings' moves (:func:`richardson_tail`):
+#: 2 is a first-order error (the tail as large as the last move), 16 a fourth-order one.
+RICHARDSON_RHO = (2.0, 16.0)
+
+
+def richardson_tail(step_a: np.ndarray, step_b: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+    """The move still to come beyond the finest of three grids (M, 2M, 4M), by Richardson's rule on the fit's own
+    moves ``step_a`` (M → 2M) and ``step_b`` (2M → 4M): ρ = |δu_a|/|δu_b| in the metric of ``covariance`` (the
+    fit's, solver coordinates), clipped to :data:`RICHARDSON_RHO` (at worst a first-order error, the tail as large
+    as the last move); the tail is δu_b/(ρ − 1) (docs/physics.md §13.4 *the model's grid*)."""
+    prec = np.linalg.pinv(np.asarray(covariance, dtype=np.float64))
+    size = lambda d: math.sqrt(max(float(d @ prec @ d), 0.0))  # noqa: E731
+    rho = float(np.clip(size(step_a) / max(size(step_b), 1e-300), *RICHARDSON_RHO))
+    return np.asarray(step_b, dtype=np.float64) / (rho - 1.0)
+
+
 def solver_status(result) -> tuple[str, str]:
     """``(status, message)`` from an ``optimistix.RESULTS`` item or its integer code (outside jit).
 

@@ -24,7 +24,7 @@ from ringfit.fit.estimate.harmonics import band_signal, grid_signal, harmonic_am
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, GAIN, K_TREAD, LOAD, LOAD_RANGE, TILT, EstimateArrays,
                                           EstimateSettings, estimate_problem, nuisance_priors, optimum_ring_shift)
 from ringfit.fit.profile_block import fit_profile_block
-from ringfit.fit.result import FitResult
+from ringfit.fit.result import FitResult, gauss_newton_step
 from ringfit.params import BAR, RingParams, TyreGeometry
 from ringfit.physics.operating import KMH
 from ringfit.physics.profile import effective_rolling_radius, flat_or_drum
@@ -350,15 +350,7 @@ def grid_step(fit: FitResult, fine) -> np.ndarray:
     the ``fine`` problem — the same data and weights under a refined model: ``Δr`` the rows' change at the fit (σ
     scale as fitted; the prior's rows unchanged), ``J`` the fit's Jacobian (docs/physics.md §10, §13.4)."""
     r_fine, _ = residuals(fine, fit.theta)
-    return step_for(fit, np.asarray(r_fine)[:fit.residuals.size] / float(fit.extra["sigma_scale"]) - fit.residuals)
-
-
-def step_for(fit: FitResult, delta: np.ndarray) -> np.ndarray:
-    """The Gauss–Newton step ``δu = −J⁺ Δr`` of the fit's free solver coordinates for a change ``delta`` ``(m,)``
-    of its data rows (as ``fit.residuals``, σ scale as fitted; the prior's rows unchanged)."""
-    full = np.zeros(fit.jacobian.shape[0])
-    full[:fit.residuals.size] = delta
-    return -np.linalg.lstsq(fit.jacobian, full, rcond=None)[0]
+    return gauss_newton_step(fit, np.asarray(r_fine)[:fit.residuals.size] / float(fit.extra["sigma_scale"]) - fit.residuals)
 
 
 def _finish(fit, profile, curves, feature, amp, omega, omega_source, flags, k_max, drum, settings,

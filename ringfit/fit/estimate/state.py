@@ -37,7 +37,8 @@ from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, Gaus
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
 from ringfit.fit.profile_block import (GAIN_TANGENTIAL_PRIOR_SD, LINER_OFFSET_PRIOR, PROFILE_K_MAX, fit_profile_block,
                                        noise_from_residual)
-from ringfit.fit.estimate.load import LoadEstimate, band_top, estimate_load, step_for
+from ringfit.fit.estimate.load import LoadEstimate, band_top, estimate_load
+from ringfit.fit.result import gauss_newton_step, richardson_tail
 from ringfit.fit.identify import band_folds, discrepancy_ratio
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
                                           TILT_PRIOR, EstimateSettings, optimum_ring_shift)
@@ -999,12 +1000,9 @@ def state_grid_shift(fit, problem: Problem, settings: EstimateSettings, k_max: i
     grids = [M * 2**j for j in range(int(round(math.log2(GRID_FINE))) + 1)]
     rows = [_rows_at(problem, fit.theta, settings, k_max, g) for g in grids]
     w = np.asarray(problem.data.weight) / float(fit.extra["sigma_scale"])
-    step_a = step_for(fit, ((rows[-2] - rows[-3]) * w).ravel())
-    step_b = step_for(fit, ((rows[-1] - rows[-2]) * w).ravel())
-    prec = np.linalg.pinv(np.asarray(fit.covariance_log))
-    size = lambda d: math.sqrt(max(float(d @ prec @ d), 0.0))  # noqa: E731
-    rho = float(np.clip(size(step_a) / max(size(step_b), 1e-300), 2.0, 16.0))
-    return step_b / (rho - 1.0)
+    step_a = gauss_newton_step(fit, ((rows[-2] - rows[-3]) * w).ravel())
+    step_b = gauss_newton_step(fit, ((rows[-1] - rows[-2]) * w).ravel())
+    return richardson_tail(step_a, step_b, fit.covariance_log)
 
 
 # --------------------------------------------------------------------------- per revolution
