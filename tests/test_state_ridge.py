@@ -60,6 +60,45 @@ def test_ridge_weights_are_the_integrated_laplace_of_the_slices():
         assert r.weights(kappa) == pytest.approx(np.array(raw) / sum(raw), rel=1e-12)
 
 
+def test_a_ridge_steeper_than_its_slices_keeps_its_width_at_the_new_tread():
+    """A depth held on the new tread's bound whose likelihood falls below it within a fraction of the slices'
+    spacing (the blind recordings whose true depth was 7.9 mm of 8 read [8.0, 8.0] mm): the ridge read as a curve
+    gives the truncated normal's interval — Δ(u) = ((u − u*)/σ)² in u = ln d, the free optimum u* one σ beyond the
+    bound, slices 10 σ apart — within a fifth of σ, where the slices alone put every weight on the last one."""
+    from scipy.stats import truncnorm
+
+    from ringfit.fit.estimate.problem import EstimateSettings
+    from ringfit.fit.estimate.state import ANGLE_OFFSET, GAIN, LOAD, PRESSURE, SLIP, _along_ridge
+
+    d_new, sigma = 0.008, 0.02
+    u_new = math.log(d_new)
+    u_star = u_new + sigma
+    u = u_new - 10 * sigma * np.arange(12, -1, -1)  # 13 slices ending at the bound
+    free = (LOAD, PRESSURE, SLIP, GAIN, ANGLE_OFFSET)
+    theta = np.array([[3000.0, 2.2e5, 0.0, math.exp(x), 1.0, 0.0, 0.5, 0.8, 1.0, 1e-3] for x in u])
+    assert [STATE_PARAMETERS[i] for i in (0, 1, 2, 3, 4, 5)] == [LOAD, PRESSURE, SLIP, TREAD, GAIN, ANGLE_OFFSET]
+    dev = ((u - u_star) / sigma) ** 2 - ((u_new - u_star) / sigma) ** 2
+    ridge = RidgeProfile(depth=np.exp(u), theta=theta, deviance=dev, converged=np.ones(u.size, bool),
+                         cov_u=np.repeat(1e-8 * np.eye(len(free))[None], u.size, axis=0), free=free)
+    assert ridge.weights()[-1] > 1 - 1e-12  # the slices alone: every weight on the bound
+    held = free + (TREAD,)
+    along = _along_ridge(ridge, 1.0, theta[-1], held, GEO, RING, LAWS, OMEGA, None, EstimateSettings(),
+                         np.zeros(len(QUANTITIES)))
+    q = list(QUANTITIES).index("tread_depth_mm")
+    lo_u, hi_u = math.log(along["lo"][q]), math.log(along["hi"][q])
+    b = (u_new - u_star) / sigma
+    want = truncnorm.ppf([0.025, 0.975], -np.inf, b, loc=u_star, scale=sigma)
+    assert lo_u == pytest.approx(want[0], abs=0.2 * sigma)
+    assert hi_u == pytest.approx(want[1], abs=0.2 * sigma)
+    # and every revolution's held depth carries that spread (its variance in u about the bound)
+    j = held.index(TREAD)
+    mean_sq = truncnorm.stats(-np.inf, b, loc=0.0, scale=1.0, moments="mv")
+    second = (float(mean_sq[1]) + float(mean_sq[0]) ** 2) * sigma**2  # E[(u − u*)²]
+    m1 = float(mean_sq[0]) * sigma
+    spread = second - 2 * m1 * (u_new - u_star) + (u_new - u_star) ** 2  # E[(u − u_new)²]
+    assert along["spread_u"][j, j] == pytest.approx(spread, rel=0.15)
+
+
 @pytest.mark.slow
 def test_each_slice_is_the_fit_with_the_depth_held():
     """A light load (the ridge is flat): the weighted slices' deviance against a separate fit of the same rows

@@ -87,6 +87,8 @@ RIDGE_SPAN = 2.5
 #: A slice this much (in −2 ln L) below the free fit: the free fit stopped on the flat ridge short of its optimum,
 #: and is redone from that slice.
 RIDGE_BETTER = 1.0
+#: Points per interval of two neighbouring slices at which the ridge is read as a curve (:func:`_along_ridge`).
+RIDGE_FINE = 64
 #: The harmonics the state fits (docs/physics.md §13.4 *the harmonic band*): 2…STATE_K_MAX of both channels (the
 #: patch's edges, what tells load from tread depth at light loads, live in the high ones) — unless the model's form
 #: error shows there: a fit whose discrepancy ratio κ exceeds KAPPA_BAND_LIMIT is redone on 2…STATE_K_FALLBACK.
@@ -397,44 +399,87 @@ def ridge_profile(problem: Problem, fit, *, max_steps: int = 256, rtol: float = 
 
 
 def _along_ridge(ridge: RidgeProfile, kappa, theta, free, geometry, ring, laws, omega, road, settings, ring_sd):
-    """Each reported quantity's 95 % interval along the ridge (docs/physics.md §13.4): the mixture over the ridge's
-    slices (weights :meth:`RidgeProfile.weights` with the discrepancy ratio κ) of each slice's conditional normal
-    (κ × its statistical variance + the ring's part at the fit; log-normal for :data:`LOG_QUANTITIES`), its 2.5 and
-    97.5 % quantiles; and ``spread_u`` the slices' spread about the fit in the solver coordinates of ``free``."""
-    w = ridge.weights(kappa)
+    """Each reported quantity's 95 % interval along the ridge (docs/physics.md §13.4 *intervals along the ridge*):
+    the marginal over the tread depth of the ridge's conditional normals (κ × the slice's statistical variance +
+    the ring's part at the fit; log-normal for :data:`LOG_QUANTITIES`), its 2.5 and 97.5 % quantiles; and
+    ``spread_u`` the ridge's spread about the fit in the solver coordinates of ``free``.
+
+    The ridge is read as a curve, not as its slices: between two converged slices the deviance Δ is interpolated
+    by Akima's local cubic in ln d (exact on a quadratic; no overshoot beyond its neighbours), ln det C, each quantity's conditional mean and σ and the other parameters
+    linearly, on :data:`RIDGE_FINE` points per interval, and the weights are :meth:`RidgeProfile.weights`' on that
+    grid. So a posterior narrower than the slices' spacing — a depth held on the new tread's bound, its likelihood
+    falling steeply below it — keeps its width, instead of collapsing onto one slice."""
+    from scipy.interpolate import Akima1DInterpolator
+    from scipy.special import ndtr
+
     keys = list(QUANTITIES)
     Q = len(keys)
-    use = np.flatnonzero(w > 1e-6 * w.max()) if w.sum() > 0 else np.zeros(0, int)
-    if use.size == 0:
+    ok = np.flatnonzero(ridge.converged & np.isfinite(ridge.deviance))
+    if ok.size == 0:
         return None
+    c_d = STATE_COORDS[STATE_PARAMETERS.index(TREAD)]
+    u_s = np.array([c_d.to_u(float(d)) for d in ridge.depth[ok]])
+    logdet = np.array([np.linalg.slogdet(kappa * np.asarray(ridge.cov_u[b]))[1] for b in ok])
+    log_w = -0.5 * np.asarray(ridge.deviance)[ok] / kappa + 0.5 * logdet
+    # the slices that bound an interval of non-negligible weight: their quantities are needed
+    near = log_w > np.max(log_w) + math.log(1e-8)
+    need = near.copy()
+    need[1:] |= near[:-1]
+    need[:-1] |= near[1:]
     idx = [STATE_PARAMETERS.index(n) for n in ridge.free]
-    mean, sd = np.zeros((use.size, Q)), np.zeros((use.size, Q))
-    for a, b in enumerate(use):
+    mean, sd = np.zeros((ok.size, Q)), np.zeros((ok.size, Q))
+    for a, b in enumerate(ok):
+        if not need[a]:
+            continue
         value, jt, _ = state_quantities(ridge.theta[b], geometry, ring, laws, omega, road, settings=settings)
         G = jt[:, idx] * _du_dtheta(ridge.theta[b])[idx][None, :]
         var = kappa * np.einsum("qi,ij,qj->q", G, ridge.cov_u[b], G) + ring_sd**2
         mean[a], sd[a] = value, np.sqrt(np.maximum(var, 0.0))
-    ww = w[use] / w[use].sum()
+    coords = [STATE_COORDS[STATE_PARAMETERS.index(n)] for n in free]
+    u_free = np.array([[c.to_u(float(ridge.theta[b][STATE_PARAMETERS.index(n)])) for c, n in zip(coords, free)]
+                       for b in ok])
+    # the fine grid: RIDGE_FINE points per interval of two neighbouring slices that both are needed
+    if ok.size == 1:
+        pts = [(0, 0, 0.0)]
+    else:
+        d_s = np.asarray(ridge.deviance)[ok]
+        dev = (Akima1DInterpolator(u_s, d_s) if ok.size >= 3 else lambda x: np.interp(x, u_s, d_s))  # noqa: E731
+        pts = [(a, a + 1, f) for a in range(ok.size - 1) if need[a] and need[a + 1]
+               for f in np.arange(RIDGE_FINE) / RIDGE_FINE]
+        pts += [(ok.size - 1, ok.size - 1, 0.0)] if need[-1] else []
+    a_i = np.array([p[0] for p in pts])
+    b_i = np.array([p[1] for p in pts])
+    f = np.array([p[2] for p in pts])
+    lerp = lambda x: (1 - f)[:, None] * x[a_i] + f[:, None] * x[b_i]  # noqa: E731
+    u_f = (1 - f) * u_s[a_i] + f * u_s[b_i]
+    dev_f = dev(u_f) if ok.size > 1 else np.asarray(ridge.deviance)[ok]
+    logw_f = -0.5 * dev_f / kappa + 0.5 * ((1 - f) * logdet[a_i] + f * logdet[b_i])
+    # each point's share of the ridge: its weight times its cell in ln d (trapezoid: half a step at either end; the
+    # slices need not be evenly spaced)
+    step = 0.5 * (np.diff(u_f, prepend=u_f[0]) + np.diff(u_f, append=u_f[-1])) if u_f.size > 1 else np.ones(1)
+    w = np.exp(logw_f - np.max(logw_f)) * np.maximum(step, 0.0)
+    if not np.isfinite(w).all() or w.sum() <= 0:
+        return None
+    ww = w / w.sum()
+    m_f, s_f = lerp(mean), lerp(sd)
     lo, hi = np.full(Q, np.nan), np.full(Q, np.nan)
     for q, key in enumerate(keys):
-        m, s = mean[:, q], sd[:, q]
+        m, s = m_f[:, q], s_f[:, q]
         if key in LOG_QUANTITIES:
             if np.any(m <= 0):
                 continue
             m, s = np.log(m), s / m
+        if m.size > 1:  # each point stands for its cell: its mean spread evenly over it (a density, not a staircase)
+            s = np.sqrt(s**2 + (0.5 * (np.diff(m, prepend=m[0]) + np.diff(m, append=m[-1]))) ** 2 / 12.0)
         span = np.linspace(np.min(m - 8 * s), np.max(m + 8 * s), 4001)
         if not np.all(np.isfinite(span)) or span[-1] <= span[0]:
             continue
-        from scipy.special import ndtr
-
         cdf = np.sum(ww[:, None] * ndtr((span[None, :] - m[:, None]) / np.maximum(s[:, None], 1e-300)), axis=0)
         lo[q], hi[q] = np.interp(0.025, cdf, span), np.interp(0.975, cdf, span)
         if key in LOG_QUANTITIES:
             lo[q], hi[q] = math.exp(lo[q]), math.exp(hi[q])
-    coords = [STATE_COORDS[STATE_PARAMETERS.index(n)] for n in free]
     u_hat = np.array([c.to_u(float(theta[STATE_PARAMETERS.index(n)])) for c, n in zip(coords, free)])
-    du = np.array([[c.to_u(float(ridge.theta[b][STATE_PARAMETERS.index(n)])) for c, n in zip(coords, free)]
-                   for b in use]) - u_hat[None]
+    du = lerp(u_free) - u_hat[None]
     return {"lo": lo, "hi": hi, "spread_u": np.einsum("b,bi,bj->ij", ww, du, du), "weights": ww}
 
 
