@@ -398,7 +398,8 @@ def ridge_profile(problem: Problem, fit, *, max_steps: int = 256, rtol: float = 
                         cov_u=np.concatenate(out_cov)[order], free=rest)
 
 
-def _along_ridge(ridge: RidgeProfile, kappa, theta, free, geometry, ring, laws, omega, road, settings, ring_sd):
+def _along_ridge(ridge: RidgeProfile, kappa, theta, free, geometry, ring, laws, omega, road, settings, ring_sd,
+                 anchor_cov=None):
     """Each reported quantity's 95 % interval along the ridge (docs/physics.md §13.4 *intervals along the ridge*):
     the marginal over the tread depth of the ridge's conditional normals (κ × the slice's statistical variance +
     the ring's part at the fit; log-normal for :data:`LOG_QUANTITIES`), its 2.5 and 97.5 % quantiles; and
@@ -408,19 +409,34 @@ def _along_ridge(ridge: RidgeProfile, kappa, theta, free, geometry, ring, laws, 
     by Akima's local cubic in ln d (exact on a quadratic; no overshoot beyond its neighbours), ln det C, each quantity's conditional mean and σ and the other parameters
     linearly, on :data:`RIDGE_FINE` points per interval, and the weights are :meth:`RidgeProfile.weights`' on that
     grid. So a posterior narrower than the slices' spacing — a depth held on the new tread's bound, its likelihood
-    falling steeply below it — keeps its width, instead of collapsing onto one slice."""
+    falling steeply below it — keeps its width, instead of collapsing onto one slice. ``anchor_cov``: the fit's own
+    conditional covariance of ``ridge.free`` given the depth (with the depth free): the fit joins the slices as the
+    ridge's point at its depth, Δ = 0, so the curve passes through the mode and its quantities exactly."""
     from scipy.interpolate import Akima1DInterpolator
     from scipy.special import ndtr
 
     keys = list(QUANTITIES)
     Q = len(keys)
-    ok = np.flatnonzero(ridge.converged & np.isfinite(ridge.deviance))
-    if ok.size == 0:
+    keep = np.flatnonzero(ridge.converged & np.isfinite(ridge.deviance))
+    if keep.size == 0:
         return None
     c_d = STATE_COORDS[STATE_PARAMETERS.index(TREAD)]
-    u_s = np.array([c_d.to_u(float(d)) for d in ridge.depth[ok]])
-    logdet = np.array([np.linalg.slogdet(kappa * np.asarray(ridge.cov_u[b]))[1] for b in ok])
-    log_w = -0.5 * np.asarray(ridge.deviance)[ok] / kappa + 0.5 * logdet
+    j_d = STATE_PARAMETERS.index(TREAD)
+    th_s = np.asarray(ridge.theta, dtype=np.float64)[keep]
+    d_s = np.asarray(ridge.deviance, dtype=np.float64)[keep]
+    cov_s = np.asarray(ridge.cov_u, dtype=np.float64)[keep]
+    u_s = np.array([c_d.to_u(float(x)) for x in th_s[:, j_d]])
+    if anchor_cov is not None and np.all(np.isfinite(theta)):
+        u_fit = c_d.to_u(float(theta[j_d]))
+        if np.min(np.abs(u_s - u_fit)) > 1e-9:  # the fit between the slices: the ridge's point at its depth
+            at = int(np.searchsorted(u_s, u_fit))
+            th_s = np.insert(th_s, at, np.asarray(theta, dtype=np.float64), axis=0)
+            d_s = np.insert(d_s, at, 0.0)  # Δ is relative to the fit (ridge_profile)
+            cov_s = np.insert(cov_s, at, np.asarray(anchor_cov, dtype=np.float64), axis=0)
+            u_s = np.insert(u_s, at, u_fit)
+    ok = np.arange(u_s.size)
+    logdet = np.array([np.linalg.slogdet(kappa * c)[1] for c in cov_s])
+    log_w = -0.5 * d_s / kappa + 0.5 * logdet
     # the slices that bound an interval of non-negligible weight: their quantities are needed
     near = log_w > np.max(log_w) + math.log(1e-8)
     need = near.copy()
@@ -428,21 +444,19 @@ def _along_ridge(ridge: RidgeProfile, kappa, theta, free, geometry, ring, laws, 
     need[:-1] |= near[1:]
     idx = [STATE_PARAMETERS.index(n) for n in ridge.free]
     mean, sd = np.zeros((ok.size, Q)), np.zeros((ok.size, Q))
-    for a, b in enumerate(ok):
+    for a in ok:
         if not need[a]:
             continue
-        value, jt, _ = state_quantities(ridge.theta[b], geometry, ring, laws, omega, road, settings=settings)
-        G = jt[:, idx] * _du_dtheta(ridge.theta[b])[idx][None, :]
-        var = kappa * np.einsum("qi,ij,qj->q", G, ridge.cov_u[b], G) + ring_sd**2
+        value, jt, _ = state_quantities(th_s[a], geometry, ring, laws, omega, road, settings=settings)
+        G = jt[:, idx] * _du_dtheta(th_s[a])[idx][None, :]
+        var = kappa * np.einsum("qi,ij,qj->q", G, cov_s[a], G) + ring_sd**2
         mean[a], sd[a] = value, np.sqrt(np.maximum(var, 0.0))
     coords = [STATE_COORDS[STATE_PARAMETERS.index(n)] for n in free]
-    u_free = np.array([[c.to_u(float(ridge.theta[b][STATE_PARAMETERS.index(n)])) for c, n in zip(coords, free)]
-                       for b in ok])
+    u_free = np.array([[c.to_u(float(th[STATE_PARAMETERS.index(n)])) for c, n in zip(coords, free)] for th in th_s])
     # the fine grid: RIDGE_FINE points per interval of two neighbouring slices that both are needed
     if ok.size == 1:
         pts = [(0, 0, 0.0)]
     else:
-        d_s = np.asarray(ridge.deviance)[ok]
         dev = (Akima1DInterpolator(u_s, d_s) if ok.size >= 3 else lambda x: np.interp(x, u_s, d_s))  # noqa: E731
         pts = [(a, a + 1, f) for a in range(ok.size - 1) if need[a] and need[a + 1]
                for f in np.arange(RIDGE_FINE) / RIDGE_FINE]
@@ -452,7 +466,7 @@ def _along_ridge(ridge: RidgeProfile, kappa, theta, free, geometry, ring, laws, 
     f = np.array([p[2] for p in pts])
     lerp = lambda x: (1 - f)[:, None] * x[a_i] + f[:, None] * x[b_i]  # noqa: E731
     u_f = (1 - f) * u_s[a_i] + f * u_s[b_i]
-    dev_f = dev(u_f) if ok.size > 1 else np.asarray(ridge.deviance)[ok]
+    dev_f = dev(u_f) if ok.size > 1 else d_s
     logw_f = -0.5 * dev_f / kappa + 0.5 * ((1 - f) * logdet[a_i] + f * logdet[b_i])
     # each point's share of the ridge: its weight times its cell in ln d (trapezoid: half a step at either end; the
     # slices need not be evenly spaced)
@@ -897,8 +911,15 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
         cov_l = np.zeros((len(names_u),) * 2)
         cov_l[:-1, :-1] = cov
     if ridge is not None and finite:
+        anchor = None
+        if TREAD in free and set(ridge.free) <= set(free):  # the fit's own point on the ridge (§13.4)
+            C = np.asarray(fit.covariance_log, dtype=np.float64)
+            i_r = [free.index(n) for n in ridge.free]
+            i_d = free.index(TREAD)
+            if np.all(np.isfinite(C)) and C[i_d, i_d] > 0:
+                anchor = C[np.ix_(i_r, i_r)] - np.outer(C[i_r, i_d], C[i_d, i_r]) / C[i_d, i_d]
         along = _along_ridge(ridge, kappa, theta, names_u, geometry, ring, laws, omega, road1, settings,
-                             ring_sd if names else np.zeros(len(value)))
+                             ring_sd if names else np.zeros(len(value)), anchor_cov=anchor)
     cov_u = cov_l
     if along is not None:  # the held quantities of every revolution carry the spread along the ridge (§13.4)
         cov_u = cov_l + along["spread_u"]
