@@ -1235,10 +1235,10 @@ def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: Cont
 
 
 def grid_moved(fit: FitResult, shift_u) -> FitResult:
-    """``fit`` moved by the grid check's step (:func:`grid_check`, docs/physics.md §11 *the model's grid*): every free
-    parameter at the refined model's optimum, as the state estimate reads a recording on its refined model (§13.4) —
-    so a tyre is identified and read by the same discretisation. The step stays in the covariance (``_finish``): how
-    far the grid's error goes beyond the refined grid is not known. A bounded parameter stays inside its range."""
+    """``fit`` moved by the grid check's move to the continuum (:func:`grid_check`, docs/physics.md §11 *the model's
+    grid*): every free parameter at the extrapolated model's optimum, as the state estimate reads a recording on its
+    extrapolated model (§13.4) — so a tyre is identified and read by the same discretisation. The move's part beyond
+    the first refinement stays in the covariance (``_finish``). A bounded parameter stays inside its range."""
     theta = np.array(fit.theta, dtype=np.float64)
     order = [c.name for c in fit.coords]
     values, stderr = dict(fit.values), dict(fit.stderr)
@@ -1273,7 +1273,7 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
     if check is not None and np.all(np.isfinite(check["shift_u"])):
         du = check["shift_u"]
         # the discretisation's move beyond its first refinement: one systematic direction (grid_check)
-        shift_u = np.asarray(check.get("beyond_u", du), dtype=np.float64)
+        shift_u = np.asarray(check["beyond_u"], dtype=np.float64)
         cov_u = cov_u + np.outer(shift_u, shift_u)
         grid = dict(grid=check["grid"], loaded_harmonics=check["loaded_harmonics"],
                     shift={n: float(x) for n, x in zip(names, du)},

@@ -155,8 +155,7 @@ def sensor_coords(P: int) -> tuple[Coordinate, ...]:
     for i in range(P):
         for f in SENSOR_FIELDS:
             kind, scale, (lo, hi), _, _ = _SENSOR_TABLE[f]
-            out.append(Coordinate(f"{f}_{i + 1}", kind, scale=scale, lo=lo, hi=hi) if kind == LINEAR
-                       else Coordinate(f"{f}_{i + 1}", kind, lo=lo, hi=hi))
+            out.append(Coordinate(f"{f}_{i + 1}", kind, scale=scale, lo=lo, hi=hi))
     return tuple(out)
 
 

@@ -329,10 +329,20 @@ class RidgeProfile:
         ok = self.converged & np.isfinite(self.deviance)
         logw = np.full(self.depth.size, -np.inf)
         if ok.any():
-            logdet = np.array([np.linalg.slogdet(kappa * c)[1] if o else -np.inf for c, o in zip(self.cov_u, ok)])
-            logw[ok] = -0.5 * self.deviance[ok] / kappa + 0.5 * logdet[ok]
+            logw[ok] = _ridge_log_weight(self.deviance[ok], _ridge_logdet(self.cov_u[ok], kappa), kappa)
         w = np.exp(logw - np.max(logw)) if ok.any() else np.zeros(self.depth.size)
         return w / w.sum() if w.sum() > 0 else w
+
+
+def _ridge_logdet(cov_u, kappa: float) -> np.ndarray:
+    """ln det(κC) of each ridge point's conditional covariance ``(B, k, k)`` → ``(B,)``."""
+    return np.array([np.linalg.slogdet(kappa * np.asarray(c))[1] for c in cov_u])
+
+
+def _ridge_log_weight(deviance, logdet, kappa: float) -> np.ndarray:
+    """ln of a ridge point's posterior density: −Δ/2κ + ½ ln det(κC) (the integrated Laplace over the other
+    parameters, docs/physics.md §13.4 *intervals along the ridge*; ``logdet`` from :func:`_ridge_logdet`)."""
+    return -0.5 * np.asarray(deviance, dtype=np.float64) / kappa + 0.5 * np.asarray(logdet, dtype=np.float64)
 
 
 def _total_chi2(problem: Problem, theta, free) -> float:
@@ -406,10 +416,11 @@ def _along_ridge(ridge: RidgeProfile, kappa, theta, free, geometry, ring, laws, 
     ``spread_u`` the ridge's spread about the fit in the solver coordinates of ``free``.
 
     The ridge is read as a curve, not as its slices: between two converged slices the deviance Δ is interpolated
-    by Akima's local cubic in ln d (exact on a quadratic; no overshoot beyond its neighbours), ln det C, each quantity's conditional mean and σ and the other parameters
-    linearly, on :data:`RIDGE_FINE` points per interval, and the weights are :meth:`RidgeProfile.weights`' on that
-    grid. So a posterior narrower than the slices' spacing — a depth held on the new tread's bound, its likelihood
-    falling steeply below it — keeps its width, instead of collapsing onto one slice. ``anchor_cov``: the fit's own
+    by Akima's local cubic in ln d (exact on a quadratic; no overshoot beyond its neighbours), ln det C, each
+    quantity's conditional mean and σ and the other parameters linearly, on :data:`RIDGE_FINE` points per interval,
+    each weighted as :meth:`RidgeProfile.weights` weights a slice, times its cell in ln d. So a posterior narrower
+    than the slices' spacing — a depth held on the new tread's bound, its likelihood falling steeply below it —
+    keeps its width, instead of collapsing onto one slice. ``anchor_cov``: the fit's own
     conditional covariance of ``ridge.free`` given the depth (with the depth free): the fit joins the slices as the
     ridge's point at its depth, Δ = 0, so the curve passes through the mode and its quantities exactly."""
     from scipy.interpolate import Akima1DInterpolator
@@ -434,40 +445,36 @@ def _along_ridge(ridge: RidgeProfile, kappa, theta, free, geometry, ring, laws, 
             d_s = np.insert(d_s, at, 0.0)  # Δ is relative to the fit (ridge_profile)
             cov_s = np.insert(cov_s, at, np.asarray(anchor_cov, dtype=np.float64), axis=0)
             u_s = np.insert(u_s, at, u_fit)
-    ok = np.arange(u_s.size)
-    logdet = np.array([np.linalg.slogdet(kappa * c)[1] for c in cov_s])
-    log_w = -0.5 * d_s / kappa + 0.5 * logdet
+    n_pts = u_s.size
+    logdet = _ridge_logdet(cov_s, kappa)
+    log_w = _ridge_log_weight(d_s, logdet, kappa)
     # the slices that bound an interval of non-negligible weight: their quantities are needed
     near = log_w > np.max(log_w) + math.log(1e-8)
     need = near.copy()
     need[1:] |= near[:-1]
     need[:-1] |= near[1:]
     idx = [STATE_PARAMETERS.index(n) for n in ridge.free]
-    mean, sd = np.zeros((ok.size, Q)), np.zeros((ok.size, Q))
-    for a in ok:
-        if not need[a]:
-            continue
+    mean, sd = np.zeros((n_pts, Q)), np.zeros((n_pts, Q))
+    for a in np.flatnonzero(need):
         value, jt, _ = state_quantities(th_s[a], geometry, ring, laws, omega, road, settings=settings)
         G = jt[:, idx] * _du_dtheta(th_s[a])[idx][None, :]
         var = kappa * np.einsum("qi,ij,qj->q", G, cov_s[a], G) + ring_sd**2
         mean[a], sd[a] = value, np.sqrt(np.maximum(var, 0.0))
     coords = [STATE_COORDS[STATE_PARAMETERS.index(n)] for n in free]
     u_free = np.array([[c.to_u(float(th[STATE_PARAMETERS.index(n)])) for c, n in zip(coords, free)] for th in th_s])
-    # the fine grid: RIDGE_FINE points per interval of two neighbouring slices that both are needed
-    if ok.size == 1:
-        pts = [(0, 0, 0.0)]
-    else:
-        dev = (Akima1DInterpolator(u_s, d_s) if ok.size >= 3 else lambda x: np.interp(x, u_s, d_s))  # noqa: E731
-        pts = [(a, a + 1, f) for a in range(ok.size - 1) if need[a] and need[a + 1]
-               for f in np.arange(RIDGE_FINE) / RIDGE_FINE]
-        pts += [(ok.size - 1, ok.size - 1, 0.0)] if need[-1] else []
-    a_i = np.array([p[0] for p in pts])
-    b_i = np.array([p[1] for p in pts])
-    f = np.array([p[2] for p in pts])
+    # the fine grid: RIDGE_FINE points per interval of two neighbouring slices that both are needed (point i of
+    # interval a at a + i/RIDGE_FINE), and the last slice
+    starts = np.flatnonzero(need[:-1] & need[1:])
+    a_i = np.concatenate([np.repeat(starts, RIDGE_FINE), [n_pts - 1] if need[-1] else []]).astype(int)
+    f = np.concatenate([np.tile(np.arange(RIDGE_FINE) / RIDGE_FINE, starts.size), [0.0] if need[-1] else []])
+    b_i = np.minimum(a_i + 1, n_pts - 1)
     lerp = lambda x: (1 - f)[:, None] * x[a_i] + f[:, None] * x[b_i]  # noqa: E731
     u_f = (1 - f) * u_s[a_i] + f * u_s[b_i]
-    dev_f = dev(u_f) if ok.size > 1 else d_s
-    logw_f = -0.5 * dev_f / kappa + 0.5 * ((1 - f) * logdet[a_i] + f * logdet[b_i])
+    if n_pts >= 3:
+        dev_f = Akima1DInterpolator(u_s, d_s)(u_f)
+    else:
+        dev_f = np.interp(u_f, u_s, d_s) if n_pts == 2 else d_s[a_i]
+    logw_f = _ridge_log_weight(dev_f, (1 - f) * logdet[a_i] + f * logdet[b_i], kappa)
     # each point's share of the ridge: its weight times its cell in ln d (trapezoid: half a step at either end; the
     # slices need not be evenly spaced)
     step = 0.5 * (np.diff(u_f, prepend=u_f[0]) + np.diff(u_f, append=u_f[-1])) if u_f.size > 1 else np.ones(1)
@@ -912,7 +919,7 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
         cov_l[:-1, :-1] = cov
     if ridge is not None and finite:
         anchor = None
-        if TREAD in free and set(ridge.free) <= set(free):  # the fit's own point on the ridge (§13.4)
+        if TREAD in free:  # the fit's own point on the ridge (§13.4; ridge.free: the fit's free but the depth)
             C = np.asarray(fit.covariance_log, dtype=np.float64)
             i_r = [free.index(n) for n in ridge.free]
             i_d = free.index(TREAD)
