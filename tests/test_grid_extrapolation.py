@@ -35,3 +35,23 @@ def test_the_ratio_is_clipped_to_a_first_and_a_fourth_order_error():
     assert richardson_tail(a, b, cov) == pytest.approx(b / 2.0)
     cov = np.diag([1.0, 9.0])  # a's length in this metric is 1: ρ = 1, clipped to 2
     assert richardson_tail(a, b, cov) == pytest.approx(b / 1.0)
+
+
+def test_grid_moves_steps_each_halving_and_extrapolates_the_rest():
+    """A linear least-squares fit (rows r = J u − y, so a change Δr at the fit moves the optimum by −J⁺Δr exactly)
+    whose data rows change with the grid as a second-order error: the steps are the exact optimum moves of each
+    halving, and step + tail reaches the continuum's optimum."""
+    from types import SimpleNamespace
+
+    from ringfit.fit.result import grid_moves
+
+    rng = np.random.default_rng(3)
+    J = rng.standard_normal((30, 3))
+    y0, dy = rng.standard_normal(30), rng.standard_normal(30)
+    rows_at = lambda h, u: J @ u - (y0 + dy * h**2)  # noqa: E731  (the grid's error ∝ h²)
+    u_star = lambda h: np.linalg.lstsq(J, y0 + dy * h**2, rcond=None)[0]  # noqa: E731
+    fit = SimpleNamespace(jacobian=J, residuals=rows_at(1.0, u_star(1.0)), covariance_log=np.linalg.inv(J.T @ J))
+    steps, tail = grid_moves(fit, [rows_at(h, u_star(1.0)) for h in (1.0, 0.5, 0.25)])
+    assert steps[0] == pytest.approx(u_star(0.5) - u_star(1.0), abs=1e-12)
+    assert steps[1] == pytest.approx(u_star(0.25) - u_star(0.5), abs=1e-12)
+    assert u_star(1.0) + sum(steps) + tail == pytest.approx(u_star(0.0), abs=1e-12)

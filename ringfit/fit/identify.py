@@ -77,7 +77,7 @@ from ringfit.fit.profile_block import (PROFILE_K_MAX, SENSOR_FIELDS, harmonic_ro
                                        nuisance_names, nuisance_prior, nuisance_start, profile_rows, read_through,
                                        sensor_basis, sensor_coords, sensor_names, sensor_prior, sensor_reading,
                                        sensor_start)
-from ringfit.fit.result import FitResult, covariance_from_jacobian, gauss_newton_step, richardson_tail
+from ringfit.fit.result import FitResult, covariance_from_jacobian, grid_moves
 from ringfit.io.case import CaseFolder, read_case_folder, sidecar_number
 from ringfit.io.conditions import pressure_conflict
 from ringfit.io.modes import ModeTable
@@ -1205,11 +1205,10 @@ def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: Cont
     truncated at :data:`LOADED_HARMONICS`; both are systematic, the same in every row of a profile, so they
     are not noise the block scales could absorb. The same rows and weights are evaluated at the fit under the
     model refined by 2, 4, … up to ``factor`` (grid ×M, harmonics ×N; the profiles' model rows band-limited to the
-    data's harmonics), each halving's move is one Gauss–Newton step with the fit's Jacobian
-    (:func:`~ringfit.fit.result.gauss_newton_step`), and the move still to come beyond the finest grid is
-    Richardson's on the last two moves (:func:`~ringfit.fit.result.richardson_tail`) — the rule the state estimate
-    reads a recording by (§13.4), so a tyre is identified and read on the same model. One residual evaluation per
-    refinement.
+    data's harmonics), each halving's move is one Gauss–Newton step with the fit's Jacobian, and the move still to
+    come beyond the finest grid is Richardson's on the last two moves (:func:`~ringfit.fit.result.grid_moves`) — the
+    rule the state estimate reads a recording by (§13.4), so a tyre is identified and read on the same model. One
+    residual evaluation per refinement.
 
     **Returns** ``dict(grid, loaded_harmonics, shift_u, beyond_u)`` (``(k,)`` in the solver coordinates of
     ``fit.names``): ``shift_u`` the whole move to the continuum, ``beyond_u`` its part beyond the first refinement
@@ -1217,18 +1216,15 @@ def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: Cont
     """
     levels = [2**j for j in range(int(round(math.log2(factor))) + 1)]
     m = fit.residuals.size
-    previous = np.asarray(fit.residuals)
-    steps = []
+    at = [np.asarray(fit.residuals)]
     for f in levels[1:]:
         fine = ContactSolver(n_grid=f * solver.n_grid, window_deg=solver.window_deg, max_iter=solver.max_iter)
         model = JointResiduals(P, fine, ProfileModel(), n_harmonics=f * LOADED_HARMONICS, rows_grid=solver.n_grid,
                                k_top=0 if rows.profiles is None else rows.profiles["k_top"],
                                across=rows.states is not None, sensor=fit.problem.model.sensor)
         problem = Problem(model, _arrays(geometry, rows, fine), fit.coords, data_label="these measurements")
-        r_fine = np.asarray(residuals(problem, fit.theta)[0])[:m]
-        steps.append(gauss_newton_step(fit, r_fine - previous))
-        previous = r_fine
-    tail = richardson_tail(steps[-2], steps[-1], fit.covariance_log) if len(steps) > 1 else steps[-1]
+        at.append(np.asarray(residuals(problem, fit.theta)[0])[:m])
+    steps, tail = grid_moves(fit, at)
     shift = np.sum(steps, axis=0) + tail
     return dict(grid=[f * solver.n_grid for f in levels], loaded_harmonics=[f * LOADED_HARMONICS for f in levels],
                 shift_u=shift, beyond_u=shift - steps[0])

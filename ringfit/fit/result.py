@@ -242,6 +242,18 @@ def richardson_tail(step_a: np.ndarray, step_b: np.ndarray, covariance: np.ndarr
     return np.asarray(step_b, dtype=np.float64) / (rho - 1.0)
 
 
+def grid_moves(fit: FitResult, rows) -> tuple[list, np.ndarray]:
+    """The fit's moves under a model refined M → 2M → 4M … (docs/physics.md §11, §13.4 *the model's grid*): ``rows``
+    the fit's weighted data rows ``(m,)`` at each grid, coarsest first (as ``fit.residuals``, σ scale as fitted);
+    each halving's move is one Gauss–Newton step of the rows' change (:func:`gauss_newton_step`), and the move still
+    to come beyond the finest grid Richardson's on the last two (:func:`richardson_tail`; with one halving, as large
+    as it). **Returns** ``(steps, tail)`` in the fit's free solver coordinates."""
+    rows = [np.asarray(r, dtype=np.float64).ravel() for r in rows]
+    steps = [gauss_newton_step(fit, b - a) for a, b in zip(rows[:-1], rows[1:])]
+    tail = richardson_tail(steps[-2], steps[-1], fit.covariance_log) if len(steps) > 1 else steps[-1]
+    return steps, tail
+
+
 def solver_status(result) -> tuple[str, str]:
     """``(status, message)`` from an ``optimistix.RESULTS`` item or its integer code (outside jit).
 

@@ -38,7 +38,7 @@ from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
 from ringfit.fit.profile_block import (GAIN_TANGENTIAL_PRIOR_SD, LINER_OFFSET_PRIOR, PROFILE_K_MAX, fit_profile_block,
                                        noise_from_residual)
 from ringfit.fit.estimate.load import LoadEstimate, band_top, estimate_load
-from ringfit.fit.result import gauss_newton_step, richardson_tail
+from ringfit.fit.result import grid_moves
 from ringfit.fit.identify import band_folds, discrepancy_ratio
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
                                           TILT_PRIOR, EstimateSettings, optimum_ring_shift)
@@ -1073,9 +1073,7 @@ def state_grid_shift(fit, problem: Problem, settings: EstimateSettings, k_max: i
     grids = [M * 2**j for j in range(int(round(math.log2(GRID_FINE))) + 1)]
     rows = [_rows_at(problem, fit.theta, settings, k_max, g) for g in grids]
     w = np.asarray(problem.data.weight) / float(fit.extra["sigma_scale"])
-    step_a = gauss_newton_step(fit, ((rows[-2] - rows[-3]) * w).ravel())
-    step_b = gauss_newton_step(fit, ((rows[-1] - rows[-2]) * w).ravel())
-    return richardson_tail(step_a, step_b, fit.covariance_log)
+    return grid_moves(fit, [r * w for r in rows])[1]
 
 
 # --------------------------------------------------------------------------- per revolution
