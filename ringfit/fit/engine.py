@@ -476,6 +476,7 @@ def least_squares(
     n_data: int | None = None,
     pad_to: int | None = None,
     method: SolverMethod = "levenberg_marquardt",
+    active_set: bool = True,
 ) -> FitResult:
     """Weighted least squares of ``problem`` over the ``free`` parameters (see the module docstring).
 
@@ -490,12 +491,98 @@ def least_squares(
       should not be counted).
     - ``pad_to``: pad the free set to this size (one compilation for several free-set sizes).
     - ``method``: ``"levenberg_marquardt"`` (default) or ``"gauss_newton"`` (:data:`SOLVERS`).
+    - ``active_set``: finish a solve that reaches its step limit with a bounded parameter on its bound by
+      holding it there (:func:`_hold_on_bounds`; docs/physics.md §11 *bounds*). ``False``: the solve as it ended.
 
     **Returns:** :class:`~ringfit.fit.result.FitResult` with ``theta`` (all parameters at the
-    optimum), the model's aux in ``extra["aux"]`` and ``problem``. Never raises on
-    non-convergence: check ``converged``.
+    optimum), the model's aux in ``extra["aux"]`` and ``problem``; ``extra["held"]`` names the parameters
+    the active set held on a bound. Never raises on non-convergence: check ``converged``.
     """
     require_x64("ringfit.fit.engine.least_squares")
+    kw = dict(max_steps=max_steps, rtol=rtol, atol=atol, n_data=n_data, method=method)
+    result = _least_squares(problem, theta0, free, pad_to=pad_to, **kw)
+    if active_set and result.status == "max_steps_reached" and max_steps > 0:
+        result = _hold_on_bounds(problem, result, tuple(free), pad_to, kw)
+    return result
+
+
+#: A solve that reaches its step limit with a bounded parameter within this share of its solver coordinate's
+#: range of a bound is finished by an active set (:func:`_hold_on_bounds`). The sine transform's slope vanishes
+#: on the bound, so Levenberg–Marquardt creeps there and never meets its tolerances (docs/physics.md §11 *bounds*).
+ACTIVE_SET_NEAR = 1e-3
+#: Rounds of hold, re-solve and release before the active set gives up (each round frees what the gradient
+#: pulls inwards).
+ACTIVE_SET_ROUNDS = 3
+
+
+def _hold_on_bounds(problem: Problem, fit: FitResult, free: tuple[str, ...], pad_to, kw) -> FitResult:
+    """The active set of bounds (docs/physics.md §11 *bounds*): a fit that ran out of steps with parameters on
+    their bounds, finished with those held there.
+
+    Each bounded free parameter within :data:`ACTIVE_SET_NEAR` of a bound is set on it; the others are solved
+    again from there (the same compiled program: the free set padded to its size). The Karush–Kuhn–Tucker
+    condition is then checked on the full free set: a held parameter whose cost gradient (data and prior
+    rows) points into its range is released a little inside it and the rest solved again, at most
+    :data:`ACTIVE_SET_ROUNDS` times. The answer is the full free set evaluated at the end point (its
+    covariance and flags as any fit's), ``converged`` with ``extra["held"]`` naming the held ones; when the
+    re-solve does not converge either, the original fit is returned as it was."""
+    coords, names = problem.coords, problem.names
+    K = pad_to if pad_to is not None else len(free)
+    bounds = {}
+    for n in free:
+        c = coords[names.index(n)]
+        lo, hi = c.u_bounds
+        if math.isfinite(lo) and math.isfinite(hi):
+            u, span = float(c.to_u(fit.values[n])), hi - lo
+            if u <= lo + ACTIVE_SET_NEAR * span:
+                bounds[n] = lo
+            elif u >= hi - ACTIVE_SET_NEAR * span:
+                bounds[n] = hi
+    if not bounds:
+        return fit
+    theta, held, steps = fit.theta.copy(), dict(bounds), fit.iterations
+    for _ in range(ACTIVE_SET_ROUNDS):
+        for n, u in held.items():
+            theta[names.index(n)] = coords[names.index(n)].from_u(u)
+        rest = tuple(n for n in free if n not in held)
+        if rest:
+            sub = _least_squares(problem, theta, rest, pad_to=K, **kw)
+            steps += sub.iterations
+            if not sub.converged:
+                return fit
+            theta = sub.theta.copy()
+        fs, u_all, res, jac, aux = _linearize_all(problem, theta, free, K)
+        grad = jac[:, : len(free)].T @ res  # d(½Σr²)/du over data and prior rows
+        # inwards: the cost falls as the parameter moves off its bound into its range
+        inward = [n for n, u in held.items()
+                  if (grad[free.index(n)] < 0) == (u == coords[names.index(n)].u_bounds[0])]
+        if not inward:
+            m = res.size - fs.size
+            res = np.concatenate([res[:m], res[m:][: len(free)]])
+            jac = np.concatenate([jac[:m, : len(free)], jac[m:][: len(free), : len(free)]])
+            index = list(fs.index[: len(free)])
+            u_free = np.array([coords[i].to_u(theta[i]) for i in index])
+            out = _result(problem, free, index, theta, u_free, "converged",
+                          f"converged with {', '.join(held)} held on the bound of its range (active set)", steps,
+                          res, jac, m, aux, kw["n_data"], *_u_bounds(problem, free), held=tuple(held))
+            out.problem = problem
+            return out
+        for n in inward:  # released a little inside its range, where the sine transform can move it
+            c = coords[names.index(n)]
+            lo, hi = c.u_bounds
+            u = held.pop(n)
+            theta[names.index(n)] = c.from_u(u + 10 * ACTIVE_SET_NEAR * (hi - lo) * (1 if u == lo else -1))
+    return fit
+
+
+def _u_bounds(problem: Problem, free) -> tuple[np.ndarray, np.ndarray]:
+    """Solver-coordinate bounds ``(lo_u, hi_u)`` of the ``free`` parameters, in their order."""
+    b = [problem.coords[problem.names.index(n)].u_bounds for n in free]
+    return np.array([x[0] for x in b]), np.array([x[1] for x in b])
+
+
+def _least_squares(problem: Problem, theta0, free, *, max_steps, rtol, atol, n_data, pad_to, method) -> FitResult:
+    """One solve of :func:`least_squares` (no active set)."""
     model, data, coords = problem.model, problem.data, problem.coords
     names = problem.names
     free = tuple(free)
@@ -529,7 +616,7 @@ def least_squares(
 
 
 def _result(problem, free, index, theta0, u_free, status, message, steps, res, jac, m, aux, n_data,
-            lo_u, hi_u) -> FitResult:
+            lo_u, hi_u, held: tuple[str, ...] = ()) -> FitResult:
     coords, sigma = problem.coords, problem.sigma
     priors = tuple(k for k in free if problem.prior is not None and k in problem.prior.names)
     theta = theta0.copy()
@@ -557,7 +644,9 @@ def _result(problem, free, index, theta0, u_free, status, message, steps, res, j
             at_bound.append(name)
             flags.append(f"{name} = {values[name]:.4g} is at the bound of its range "
                          f"[{c.from_u(lo) if math.isfinite(lo) else -math.inf:.4g}, "
-                         f"{c.from_u(hi) if math.isfinite(hi) else math.inf:.4g}]: the data do not bound it")
+                         f"{c.from_u(hi) if math.isfinite(hi) else math.inf:.4g}]: "
+                         + ("held there, the data pulling it beyond (active set)" if name in held
+                            else "the data do not bound it"))
     logs = tuple(n for j, n in enumerate(free) if coords[index[j]].kind == LOG)
     flags += parameter_flags(logs, values, stderr, data=problem.data_label, priors=priors,
                              plausible=problem.plausible)
@@ -568,7 +657,7 @@ def _result(problem, free, index, theta0, u_free, status, message, steps, res, j
         covariance_log=cov * infl**2, residuals=res[:m] / (s if sigma == "estimate" else 1.0),
         jacobian=J, n_data=data_rows, iterations=steps, flags=flags,
         extra={"aux": aux, "sigma_scale": s if sigma == "estimate" else 1.0, "chi2_raw": chi2,
-               "prior_chi2": float(res[m:] @ res[m:]), "at_bound": tuple(at_bound)},
+               "prior_chi2": float(res[m:] @ res[m:]), "at_bound": tuple(at_bound), "held": tuple(held)},
         theta=theta, coords=tuple(coords),
     )
 
