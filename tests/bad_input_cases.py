@@ -1340,3 +1340,25 @@ def run_all(cases=None, *, workdir: Path, fixtures: Path | None = None, verbose=
             print(f"{'ok ' if outcome.ok else 'BAD'} {case.id:<45} {outcome.status!s:<9} {outcome.why}", flush=True)
         shutil.rmtree(d, ignore_errors=True)
     return results
+
+
+# --- issue 33: a dead channel of a continuous recording ------------------------------------------------------------
+def _dead_channel(axis: int, noise: float = 0.0):
+    """cont.records.npz with channel ``axis`` (0 radial, 1 tangential) dead: zero, or ADC noise of ``noise`` m/s²."""
+    def setup(d: Path):
+        with np.load(d / "cont.records.npz", allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+        acc = arrays["acc"].copy()
+        acc[..., axis, :] = noise * np.random.default_rng(5).standard_normal(acc.shape[-1])
+        arrays["acc"] = acc
+        with open(d / "cont.records.npz", "wb") as fh:
+            np.savez(fh, **arrays)
+    return setup
+
+
+ESTIMATE = ["estimate", "{d}/cont.records.npz", "--tyre", "{d}/tyre.toml", "--out", "{d}/out.estimate.json"]
+for noise in (0.0, 0.05):
+    add(f"estimate-dead-radial-{noise:g}", ESTIMATE, setup=_dead_channel(0, noise),
+        names=("radial channel is dead",), issue=33)
+    add(f"estimate-state-dead-tangential-{noise:g}", ESTIMATE + ["--state"], setup=_dead_channel(1, noise),
+        names=("tangential channel is dead",), issue=33)

@@ -40,6 +40,12 @@ REVOLUTION_MAX_STEPS = 30
 #: revolution whose residual scale s_r departs from its neighbours' median (±:data:`OUTLIER_NEIGHBOURS`
 #: revolutions) by more than :data:`OUTLIER_Z` robust standard deviations of ln s is rejected.
 OUTLIER_Z = 5.0
+#: A channel whose largest swing within a revolution stays under this share of ω²R (the centripetal acceleration
+#: that the patch takes away from the radial reading, and of whose order the tangential reading swings there) is
+#: dead: its sensor axis, cable or amplifier gives nothing the model could read (docs/physics.md §10).
+DEAD_SWING_SHARE = 0.01
+#: R of that test when no tyre geometry is given: below any car tyre's outer radius [m].
+DEAD_SWING_RADIUS_M = 0.2
 OUTLIER_NEIGHBOURS = 10
 
 
@@ -209,7 +215,14 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     count, pairs = np.zeros((2, points)), np.zeros((2, points))
     previous = None
     axes = ("radial", "tangential") if tangential else ("radial",)
+    swing = np.zeros(len(axes))  # each channel's largest swing within one revolution [m/s²]
     for block in revolution_grids(record, points=points, axes=axes, passages=passages, progress=progress):
+        finite = np.all(np.isfinite(block.values), axis=(1, 2))
+        if not finite.all():
+            raise InputError(f"non-finite samples (NaN or ±inf) in the {axes[int(np.argmin(finite))]} channel near "
+                             f"t = {float(block.t_s[0]):.3f} s; expected finite accelerations [m/s²] (cut the "
+                             "recording around the dropout)", source=record.source)
+        swing = np.maximum(swing, np.max(np.ptp(block.values, axis=2), axis=1))
         values = block.values[0]
         fractions += block.fractions
         rows.append(harmonic_amplitudes(values, 2, k_max))  # complex: made rows once the gain's phase is known
@@ -237,6 +250,15 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     if R < 2:
         raise InputError(f"{R} whole revolution(s) in the recording; the estimate needs at least 2",
                          source=record.source)
+    radius = float(geometry.outer_radius) if geometry is not None else DEAD_SWING_RADIUS_M
+    floor = DEAD_SWING_SHARE * (2.0 * math.pi * float(np.mean(np.concatenate(rate)))) ** 2 * radius
+    for axis, sw in zip(axes, swing):
+        if sw < floor:
+            raise InputError(f"the {axis} channel is dead: its largest swing within a revolution is {sw:.3g} m/s², "
+                             f"under {100 * DEAD_SWING_SHARE:g} % of ω²R = {floor / DEAD_SWING_SHARE:.3g} m/s² (the "
+                             f"patch moves a working {axis} reading by about ω²R); check the sensor axis, its cable "
+                             "and amplifier" + (", or estimate the load alone (without --state)"
+                                                if axis == "tangential" else ""), source=record.source)
     use = 0
     if hits is not None:
         arrivals_s, quiet_s = hits
