@@ -160,43 +160,54 @@ def test_per_revolution_step_against_full_fits_and_the_fisher_information():
 
 
 @pytest.mark.slow
-def test_the_ring_covariance_is_carried_by_the_estimators_own_sensitivity():
+@pytest.mark.parametrize("sd", [{"k_tread": 0.05, "kw": 0.03}, {"k_x": 0.05, "kw_share": 0.06, "k_tread_share": 0.1}],
+                         ids=["ring", "laws"])
+def test_the_ring_covariance_is_carried_by_the_estimators_own_sensitivity(sd):
     """ring_sd of each state quantity against finite differences of the estimate (refitted, same weights, with the
-    ring parameter moved by ±h in ln) times the covariance's σ. The tread depth is held: on its ridge the
-    Gauss–Newton sensitivity −(JᵀJ)⁻¹Jᵀ∂r/∂q leaves out the residual's curvature, which there is not small
+    tyre's parameter moved by ±h in its covariance coordinate: ln of a ring parameter or of k_x, a pressure share
+    itself) times the covariance's σ. The state laws an identification across states puts into
+    ``[ring.covariance]`` are carried as the ring's are (docs/physics.md §13.4). The tread depth is held: on its
+    ridge the Gauss–Newton sensitivity −(JᵀJ)⁻¹Jᵀ∂r/∂q leaves out the residual's curvature, which there is not small
     (docs/physics.md §13.4: k_w's part of σ(load) came out at half the finite-difference value with the depth free)."""
-    from ringfit.io.tyre import RingCovariance
+    import dataclasses
+
+    import equinox as eqx
+
+    from ringfit.fit.estimate.state import state_quantities
+    from ringfit.io.tyre import LINEAR_COVARIANCE, RingCovariance
+    from ringfit.physics.contact import as_traced
 
     truth = TyreState(4300.0, 2.3e5, 0.007, 0.005, OMEGA)
     _, ch, _ = _channels(truth)
     rng = np.random.default_rng(21)
     noisy = ch + np.stack([_coloured(rng, (ch.shape[-1],), 1.0), _coloured(rng, (ch.shape[-1],), 0.15)])
     prof = _profile(noisy)
-    sd = {"k_tread": 0.05, "kw": 0.03}
-    cov = RingCovariance(("k_tread", "kw"), np.diag([sd["k_tread"] ** 2, sd["kw"] ** 2]))
+    names = tuple(sd)
+    cov = RingCovariance(names, np.diag([sd[n] ** 2 for n in names]))
     est = estimate_state(prof, GEO, RING, LAWS, ring_covariance=cov, fixed={TREAD: 0.007})
     assert est.converged
-    import dataclasses
 
-    import equinox as eqx
-
-    from ringfit.fit.estimate.state import state_quantities
-    from ringfit.physics.contact import as_traced
-
-    keys = ("load_n", "pressure_bar", "fx_n")
-    index = {"load_n": 0, "pressure_bar": 1, "fx_n": 3}
+    keys = ("load_n", "pressure_bar", "fx_n", "slip")
+    index = {"load_n": 0, "pressure_bar": 1, "slip": 2, "fx_n": 3}
     h = 0.005
     var = {k: 0.0 for k in keys}
     problem = est.fit.problem
-    for name in ("k_tread", "kw"):
+    for name in names:
         values = []
         for sign in (1, -1):
-            ring = RING.replace(**{name: getattr(RING, name) * math.exp(sign * h)})
+            ring, laws = RING, LAWS
+            if name in LINEAR_COVARIANCE:
+                laws = LAWS.replace(**{name: getattr(LAWS, name) + sign * h})
+            elif name == "k_x":
+                laws = LAWS.replace(k_x=LAWS.k_x * math.exp(sign * h))
+            else:
+                ring = RING.replace(**{name: getattr(RING, name) * math.exp(sign * h)})
             data = eqx.tree_at(lambda a: a.ring, problem.data, as_traced(ring))
+            data = eqx.tree_at(lambda a: a.laws, data, as_traced(laws))
             fit = least_squares(dataclasses.replace(problem, data=data), est.fit.theta, est.fit.names, max_steps=100,
                                 rtol=1e-10, atol=1e-10)
             assert fit.converged
-            values.append(state_quantities(fit.theta, GEO, ring, LAWS, OMEGA)[0])
+            values.append(state_quantities(fit.theta, GEO, ring, laws, OMEGA)[0])
         for k in keys:
             scale = 1e-5 if k == "pressure_bar" else 1.0
             d = (values[0][index[k]] - values[1][index[k]]) * scale / (2 * h)

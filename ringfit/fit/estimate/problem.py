@@ -10,6 +10,7 @@ makes the :class:`~ringfit.fit.engine.Problem` that :mod:`ringfit.fit.estimate.l
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -19,6 +20,7 @@ import jax.numpy as jnp
 
 from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
+from ringfit.io.tyre import LINEAR_COVARIANCE
 from ringfit.fit.profile_block import CORNER_PRIOR, GAIN_RANGE, TILT_PRIOR  # the profile block's: one sensor for every reader
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced
@@ -141,13 +143,41 @@ class EstimateResiduals(AbstractResiduals):
         return ((rows - data.measured) * data.weight).ravel(), rows
 
 
-class RingSensitivityResiduals(AbstractResiduals):
-    """An estimate's residuals with ring parameters appended to θ: θ = (the problem's own ``n_own`` parameters…,
-    ``ring_names``…) — the load estimate's (:class:`EstimateResiduals`) or the state's.
+#: The ring's parameters (:class:`~ringfit.params.RingParams`); every other name a ``[ring.covariance]`` may hold is a
+#: state law identified across states (:class:`~ringfit.params.TyreLaws`: k_x, the pressure shares).
+RING_FIELDS = frozenset(f.name for f in dataclasses.fields(RingParams))
 
-    Only for the Jacobian of the estimate's rows with respect to the tyre's ring parameters (ln θ), which
-    propagates the tyre file's ``[ring.covariance]`` into the estimate (:func:`optimum_ring_shift`,
-    docs/physics.md §10, §13.4); never fitted. ``k_tread`` is the load estimate's own θ, not a ring name there.
+
+def covariance_kind(name: str) -> str:
+    """The coordinate of ``name`` in a ``[ring.covariance]`` (docs/formats.md §1.1): the share itself for a pressure
+    share (:data:`ringfit.io.tyre.LINEAR_COVARIANCE`), else its logarithm."""
+    return LINEAR if name in LINEAR_COVARIANCE else LOG
+
+
+def tyre_with(ring: RingParams, laws, names: tuple[str, ...], values):
+    """``(ring, laws)`` with the parameters ``names`` at ``values`` (natural units): a ring parameter's in the ring,
+    a state law's in the laws (``laws`` None: ring names only)."""
+    on_ring = {n: values[i] for i, n in enumerate(names) if n in RING_FIELDS}
+    on_laws = {n: values[i] for i, n in enumerate(names) if n not in RING_FIELDS}
+    if on_laws and laws is None:
+        raise ValueError(f"{sorted(on_laws)}: state laws, but this estimate has none")
+    return (ring.replace(**on_ring) if on_ring else ring), (laws.replace(**on_laws) if on_laws else laws)
+
+
+def tyre_value(ring: RingParams, laws, name: str) -> float:
+    """The tyre file's value of a ``[ring.covariance]`` name: the ring's, or the state law's."""
+    return float(getattr(ring if name in RING_FIELDS else laws, name))
+
+
+class RingSensitivityResiduals(AbstractResiduals):
+    """An estimate's residuals with the tyre's parameters appended to θ: θ = (the problem's own ``n_own``
+    parameters…, ``ring_names``…) — the load estimate's (:class:`EstimateResiduals`) or the state's, whose
+    ``ring_names`` may name state laws too (k_x, the pressure shares: :func:`tyre_with`).
+
+    Only for the Jacobian of the estimate's rows with respect to the tyre's parameters (each in its
+    ``[ring.covariance]`` coordinate, :func:`covariance_kind`), which propagates the tyre file's covariance into the
+    estimate (:func:`optimum_ring_shift`, docs/physics.md §10, §13.4); never fitted. ``k_tread`` is the load
+    estimate's own θ, not a ring name there.
     """
 
     base: AbstractResiduals
@@ -156,31 +186,36 @@ class RingSensitivityResiduals(AbstractResiduals):
 
     def __call__(self, theta, data):
         n = self.n_own
-        ring = data.ring.replace(**{name: theta[n + i] for i, name in enumerate(self.ring_names)})
-        return self.base(theta[:n], eqx.tree_at(lambda a: a.ring, data, ring))
+        ring, laws = tyre_with(data.ring, getattr(data, "laws", None), self.ring_names, theta[n:])
+        data = eqx.tree_at(lambda a: a.ring, data, ring)
+        if laws is not getattr(data, "laws", None):
+            data = eqx.tree_at(lambda a: a.laws, data, laws)
+        return self.base(theta[:n], data)
 
 
 def ring_sensitivity_problem(problem: Problem, ring_names: tuple[str, ...]) -> Problem:
-    """The estimate ``problem`` with ``ring_names`` (log coordinates) appended to θ (:class:`RingSensitivityResiduals`)."""
-    coords = tuple(problem.coords) + tuple(Coordinate(n, LOG) for n in ring_names)
+    """The estimate ``problem`` with ``ring_names`` appended to θ, each in its ``[ring.covariance]`` coordinate
+    (:class:`RingSensitivityResiduals`)."""
+    coords = tuple(problem.coords) + tuple(Coordinate(n, covariance_kind(n)) for n in ring_names)
     model = RingSensitivityResiduals(problem.model, tuple(ring_names), len(problem.coords))
     return Problem(model, problem.data, coords, sigma=problem.sigma, data_label=problem.data_label)
 
 
-def optimum_ring_shift(fit, ring: RingParams, names: tuple[str, ...]):
-    """How a fit's optimum û moves with ring parameters q held fixed in it (docs/physics.md §10):
-    ``∂û/∂ln q = −(JᵀJ)⁻¹ Jᵀ ∂r/∂ln q``, J the Jacobian of the rows the solver minimised (prior rows
-    included; weights of mean 1, not divided by the fitted σ scale), ∂r/∂ln q the engine's Jacobian of the same rows
-    (:func:`ringfit.fit.engine.linearize` on :func:`ring_sensitivity_problem`).
+def optimum_ring_shift(fit, ring: RingParams, names: tuple[str, ...], laws=None):
+    """How a fit's optimum û moves with the tyre's parameters q held fixed in it (docs/physics.md §10):
+    ``∂û/∂q = −(JᵀJ)⁻¹ Jᵀ ∂r/∂q``, q each in its ``[ring.covariance]`` coordinate (ln q; a pressure share itself),
+    J the Jacobian of the rows the solver minimised (prior rows included; weights of mean 1, not divided by the
+    fitted σ scale), ∂r/∂q the engine's Jacobian of the same rows (:func:`ringfit.fit.engine.linearize` on
+    :func:`ring_sensitivity_problem`). ``laws``: the state's, where ``names`` holds state laws.
 
-    **Returns:** ``(du_dlnq (free, r), (JᵀJ)⁻¹ (free, free))``.
+    **Returns:** ``(du_dq (free, r), (JᵀJ)⁻¹ (free, free))``.
     """
     import numpy as np
 
     from ringfit.fit.engine import linearize
 
     problem = ring_sensitivity_problem(fit.problem, names)
-    theta = np.concatenate([np.asarray(fit.theta, dtype=np.float64), [float(getattr(ring, n)) for n in names]])
+    theta = np.concatenate([np.asarray(fit.theta, dtype=np.float64), [tyre_value(ring, laws, n) for n in names]])
     lin = linearize(problem, theta, names)
     m = fit.residuals.size
     J = np.asarray(fit.jacobian).copy()

@@ -41,7 +41,8 @@ from ringfit.fit.estimate.load import LoadEstimate, band_top, estimate_load
 from ringfit.fit.result import grid_moves
 from ringfit.fit.identify import band_folds, discrepancy_ratio
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
-                                          TILT_PRIOR, EstimateSettings, optimum_ring_shift)
+                                          RING_FIELDS, TILT_PRIOR, EstimateSettings, covariance_kind,
+                                          optimum_ring_shift, tyre_value, tyre_with)
 from ringfit.params import BAR, RingParams, TyreGeometry, TyreLaws
 from ringfit.physics.contact import ContactSolver, as_traced
 from ringfit.physics.operating import KMH
@@ -243,9 +244,11 @@ def free_parameters(laws: TyreLaws, fixed: dict) -> tuple[str, ...]:
 
 # --------------------------------------------------------------------------- derived quantities
 
-def _quantity_vector(theta, ring_ln, geometry, ring, laws, omega, road, names, solver, model):
-    """The reported quantities (SI, :data:`QUANTITIES` order) at θ and ln of the ring parameters ``names``."""
-    ring = ring.replace(**{n: jnp.exp(ring_ln[i]) for i, n in enumerate(names)})
+def _quantity_vector(theta, ring_q, geometry, ring, laws, omega, road, names, solver, model):
+    """The reported quantities (SI, :data:`QUANTITIES` order) at θ and the tyre's parameters ``names``, each in its
+    ``[ring.covariance]`` coordinate (ln q; a pressure share itself: :func:`covariance_kind`)."""
+    ring, laws = tyre_with(ring, laws, names, [ring_q[i] if covariance_kind(n) == LINEAR else jnp.exp(ring_q[i])
+                                               for i, n in enumerate(names)])
     _, _, q = state_solution(geometry, ring, laws, state_of(theta, omega), model=model, solver=solver, road=road)
     return jnp.stack([theta[0], theta[1], q.slip, q.fx, q.torque, theta[3], q.speed, q.r_road, q.r_free,
                       q.axle_height, q.patch_length])
@@ -260,12 +263,15 @@ def _quantities_and_jacobian(theta, ring_ln, geometry, ring, laws, omega, road, 
 
 
 def state_quantities(theta, geometry, ring, laws, omega, road=None, *, ring_names=(), settings=EstimateSettings()):
-    """The reported quantities at θ (SI, :data:`QUANTITIES` order), their Jacobian in θ (natural units) and in ln
-    of ``ring_names``: ``(value (Q,), d/dθ (Q, len(θ)), d/dln q (Q, r))``. One compiled program per structure."""
+    """The reported quantities at θ (SI, :data:`QUANTITIES` order), their Jacobian in θ (natural units) and in the
+    ``[ring.covariance]`` coordinates of ``ring_names`` (ring parameters and state laws: ln q, a pressure share
+    itself): ``(value (Q,), d/dθ (Q, len(θ)), d/dq (Q, r))``. One compiled program per structure."""
     from ringfit.physics.operating import FlatRoad
 
     names = tuple(ring_names)
-    ring_ln = np.log([float(getattr(ring, n)) for n in names]) if names else np.zeros(0)
+    values = [tyre_value(ring, laws, n) for n in names]
+    ring_ln = np.array([v if covariance_kind(n) == LINEAR else math.log(v) for n, v in zip(names, values)],
+                       dtype=np.float64)
     v, jt, jr = _quantities_and_jacobian(np.asarray(theta, dtype=np.float64), ring_ln,
                                          *as_traced((geometry, ring, laws)), np.float64(omega),
                                          as_traced(road or FlatRoad()), names, settings.solver,
@@ -867,9 +873,9 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     theta = np.asarray(fit.theta, dtype=np.float64)
     finite = bool(np.all(np.isfinite(theta)))
     names = ()
-    if ring_covariance is not None:
-        fields_ = {f.name for f in dataclasses.fields(RingParams)}
-        names = tuple(n for n in ring_covariance.names if n in fields_)
+    if ring_covariance is not None:  # the ring's parameters and the state laws identified with it (k_x, the shares)
+        laws_ = {f.name for f in dataclasses.fields(TyreLaws)}
+        names = tuple(n for n in ring_covariance.names if n in RING_FIELDS or n in laws_)
     from ringfit.physics.operating import Drum, FlatRoad
 
     drum = load.drum_diameter_m
@@ -888,7 +894,7 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     if names and finite:
         # the ring's covariance: û moves with ln q by −(JᵀJ)⁻¹ Jᵀ ∂r/∂ln q (the rows the solver minimised), and
         # the quantities depend on the ring directly too (docs/physics.md §13.4, as §10)
-        du_dq, _ = optimum_ring_shift(fit, ring, names)
+        du_dq, _ = optimum_ring_shift(fit, ring, names, laws)
         total = G @ du_dq + jr
         idx_c = [ring_covariance.names.index(n) for n in names]
         sigma_q = np.asarray(ring_covariance.ln)[np.ix_(idx_c, idx_c)]
