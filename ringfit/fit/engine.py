@@ -562,9 +562,10 @@ def _hold_on_bounds(problem: Problem, fit: FitResult, free: tuple[str, ...], pad
             jac = np.concatenate([jac[:m, : len(free)], jac[m:][: len(free), : len(free)]])
             index = list(fs.index[: len(free)])
             u_free = np.array([coords[i].to_u(theta[i]) for i in index])
-            out = _result(problem, free, index, theta, u_free, "converged",
-                          f"converged with {', '.join(held)} held on the bound of its range (active set)", steps,
-                          res, jac, m, aux, kw["n_data"], *_u_bounds(problem, free), held=tuple(held))
+            message = (f"converged with {', '.join(held)} held on the bound of its range (active set)" if held
+                       else "converged (the active set released every bound it had held)")
+            out = _result(problem, free, index, theta, u_free, "converged", message, steps, res, jac, m, aux,
+                          kw["n_data"], *_u_bounds(problem, free), held=tuple(held))
             out.problem = problem
             return out
         for n in inward:  # released a little inside its range, where the sine transform can move it
