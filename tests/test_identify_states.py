@@ -153,14 +153,13 @@ def test_a_profile_at_a_torque_plans_k_x_from_the_documented_start(tmp_path):
     inputs = im.read_identify_folder(folder)
     plan = im.plan_states(inputs)
     assert plan.active and plan.laws.has_brush and float(plan.laws.k_x) == im.K_X_START
-    assert plan.free == ("k_x", "friction") and plan.driven == (1,)
-    assert plan.free_names(2) == ("k_x", "friction", "slip_2")
+    assert plan.free == ("k_x",) and plan.driven == (1,)
+    assert plan.free_names(2) == ("k_x", "slip_2")
     assert plan.torque_sigma[1] == pytest.approx(max(0.02 * 300.0, 2.0))
     assert any("k_x started from 1.5e+07" in n for n in plan.notes)
     assert any("one pressure" in n for n in plan.notes)
     start = plan.start(2)
-    # k_x from the documented start, μ from the file's (1 without), every slip 0
-    assert start[3] == im.K_X_START and start[4] == 1.0 and np.all(start[5:] == 0.0)
+    assert start[3] == im.K_X_START and np.all(start[4:] == 0.0)
     (folder / "run2.profile.json").write_text(json.dumps({**base, "load_n": 4500.0, "torque_nm": 300.0,
                                                           "torque_std_nm": -1.0}))
     with pytest.raises(InputError, match=r"run2\.profile\.json.*torque_std_nm"):
@@ -344,8 +343,8 @@ def test_the_laws_intervals_cover_over_random_cases(tmp_path):
             if not ok:
                 misses.append((seed, name, value, params[name]))
     k = len(COVERAGE_SEEDS)
-    assert len(cover) == 11 and all(len(v) == k for v in cover.values())
-    ring_and_shares = [ok for n, v in cover.items() if n not in ("k_x", "friction") for ok in v]
+    assert len(cover) == 10 and all(len(v) == k for v in cover.values())
+    ring_and_shares = [ok for n, v in cover.items() if n != "k_x" for ok in v]
     assert sum(ring_and_shares) >= 0.85 * len(ring_and_shares), misses
     assert sum(ok for n in im.LAW_FIELDS[:3] for ok in cover[n]) >= 3 * k - 2, misses
     if sum(cover["k_x"]) < k - 1:

@@ -66,7 +66,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares, residuals
+from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares, residuals
 from ringfit.fit.free_block import (DISCREPANCY_FOLDS, FOLD_LEVERAGE_MAX, SCALE_PASSES,  # noqa: F401 (re-exported)
                                     SCALE_TOLERANCE, Z95, block_scale, discrepancy_ratio, frequency_folds,
                                     hat_diagonal, noise_passes, t_widening)
@@ -514,20 +514,10 @@ class JointResiduals(AbstractResiduals):
 
 
 #: The state laws identified across states, in θ after the profiles' nuisances (docs/physics.md §11): the pressure
-#: shares (linear, in [0, 1]), the tread's longitudinal stiffness k_x (log) and the tips' friction μ (log). Then one
-#: slip κ per profile.
-LAW_FIELDS = ("kw_share", "kv_share", "k_tread_share", "k_x", "friction")
-#: The pressure shares among :data:`LAW_FIELDS` (linear coordinates in [0, 1]).
-SHARE_FIELDS = LAW_FIELDS[:3]
+#: shares (linear, in [0, 1]) and the tread's longitudinal stiffness k_x (log). Then one slip κ per profile.
+LAW_FIELDS = ("kw_share", "kv_share", "k_tread_share", "k_x")
 #: k_x's plausible range [N/m²]: the bounded coordinate of the fit and the cap of its covariance.
 K_X_BOUNDS = (1.0e5, 1.0e9)
-#: μ's plausible range (tread rubber on a road, wet ice to a racing compound on dry asphalt): the bounded coordinate
-#: of the fit and the cap of its covariance.
-FRICTION_BOUNDS = (0.1, 3.0)
-#: σ of ln μ of the log-normal prior around the tyre file's μ (1 when it states none) under which profiles at a
-#: torque identify μ (docs/physics.md §11 *friction*): a dry road's μ of 0.8 … 1.2 at ±1σ about 1; the data move
-#: it where the brush's sliding zone shows, the prior holds it where they do not.
-FRICTION_PRIOR_SD_LN = 0.2
 #: k_x's start [N/m²] when profiles at a torque identify it and the tyre file has no ``kx_n_per_m2``
 #: (docs/formats.md §6): a passenger-car tread's order of magnitude; the data move it.
 K_X_START = 15.0e6
@@ -557,9 +547,8 @@ def state_coords(P: int) -> tuple[Coordinate, ...]:
     """Coordinates of the state laws and slips (after :func:`joint_coords`' when identifying across states): each
     pressure share linear in [0, 1], k_x log in :data:`K_X_BOUNDS`, each slip linear (scale 0.01) in ±
     :data:`SLIP_BOUND`. Every one of them bounded: a law the data do not bound stops at its range's edge, flagged."""
-    coords = [Coordinate(n, LINEAR, lo=0.0, hi=1.0) for n in SHARE_FIELDS]
+    coords = [Coordinate(n, LINEAR, lo=0.0, hi=1.0) for n in LAW_FIELDS[:3]]
     coords.append(Coordinate("k_x", LOG, lo=K_X_BOUNDS[0], hi=K_X_BOUNDS[1]))
-    coords.append(Coordinate("friction", LOG, lo=FRICTION_BOUNDS[0], hi=FRICTION_BOUNDS[1]))
     coords += [Coordinate(n, LINEAR, scale=0.01, lo=-SLIP_BOUND, hi=SLIP_BOUND) for n in slip_names(P)]
     return tuple(coords)
 
@@ -736,7 +725,7 @@ class StatePlan:
         law = []
         for name in LAW_FIELDS:
             v = float(getattr(self.laws, name))
-            if name in self.free and name in SHARE_FIELDS:
+            if name in self.free and name != "k_x":
                 v = 0.5 if v == 0.0 else min(max(v, 0.05), 0.95)
             law.append(v)
         return np.concatenate([law, np.zeros(P)])
@@ -777,17 +766,16 @@ def plan_states(inputs: IdentifyInputs) -> StatePlan:
                          f"(held at the tyre file's {held(['k_tread_share'])})")
     else:
         notes.append("one pressure: the pressure law is not identified (held at the tyre file's "
-                     f"{held(SHARE_FIELDS)}); give measurements at two or more pressures to identify it")
+                     f"{held(LAW_FIELDS[:3])}); give measurements at two or more pressures to identify it")
     if driven:
         if not laws.has_brush:
             laws = laws.replace(k_x=K_X_START, has_brush=True)
             notes.append(f"the tyre file has no kx_n_per_m2: k_x started from {K_X_START:g} N/m² (the profiles at a "
                          "torque identify it)")
-        free += ["k_x", "friction"]
+        free.append("k_x")
     else:
         kept = f" (held at the tyre file's {float(laws.k_x):g} N/m²)" if laws.has_brush else ""
-        notes.append(f"no profile at a known torque: the tread's longitudinal stiffness k_x is not identified{kept}, "
-                     "nor the friction μ")
+        notes.append(f"no profile at a known torque: the tread's longitudinal stiffness k_x is not identified{kept}")
     active = len(every) >= 2 or bool(driven) or laws.has_brush
     return StatePlan(laws, tuple(free), driven, p_free, p_loaded, p_prof, torque, sigma, notes, active)
 
@@ -869,7 +857,7 @@ class Identification:
         :meth:`ringfit.io.tyre.Tyre.with_state_values`; empty when none was identified."""
         if self.laws is None:
             return {}
-        return {("kx_n_per_m2" if n == "k_x" else n): float(getattr(self.laws, n)) for n in self.laws_free}  # μ: friction
+        return {("kx_n_per_m2" if n == "k_x" else n): float(getattr(self.laws, n)) for n in self.laws_free}
 
     def posterior_likelihood(self) -> dict:
         """What :func:`ringfit.fit.posterior.sample` needs to sample the noise model of the intervals
@@ -931,7 +919,7 @@ class Identification:
 
 #: Plausible ranges of every parameter identify reports: the ring's (:data:`ringfit.fit.priors.BOUNDS`), k_x's and
 #: the pressure shares' (docs/physics.md §11 *across states*).
-PARAMETER_BOUNDS = {**BOUNDS, "k_x": K_X_BOUNDS, "friction": FRICTION_BOUNDS, **{n: (0.0, 1.0) for n in LINEAR_COVARIANCE}}
+PARAMETER_BOUNDS = {**BOUNDS, "k_x": K_X_BOUNDS, **{n: (0.0, 1.0) for n in LINEAR_COVARIANCE}}
 
 
 def linear_interval(value: float, sd, bounds: tuple[float, float]) -> dict:
@@ -1023,9 +1011,6 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor) -> Ide
         free, coords = free + plan.free_names(P), coords + state_coords(P)
         theta = np.concatenate([theta, plan.start(P)])
     prior = nuisance_prior(P)  # the runs share one sensor: their gains and offsets tied (profile block)
-    if "friction" in free_laws:  # μ under its log-normal prior around the tyre file's (docs/physics.md §11 *friction*)
-        prior = prior.combine(GaussianPrior.independent(
-            {"friction": (math.log(float(plan.laws.friction)), FRICTION_PRIOR_SD_LN)}))
     if sensor and P:  # each run's sensor's own nuisances (tilt, corner, liner offset, tangential gain), last in θ
         free, coords = free + sensor_names(P), coords + sensor_coords(P)
         theta = np.concatenate([theta, sensor_start(P)])

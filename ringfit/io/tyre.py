@@ -302,10 +302,9 @@ def _pressure_laws(table) -> dict:
 #: Positive ring parameters a ``[ring.covariance]`` may name (it is a covariance of their logarithms).
 COVARIANCE_PARAMETERS = ("rho_a", "ei", "kw", "kv", "damping_ratio", "k_tread", "ea")
 #: The state laws ``ringfit identify`` identifies across states (docs/physics.md §11, §13) that a
-#: ``[ring.covariance]`` may name besides: name -> the key that must hold its value. ``k_x`` and ``friction``
-#: (positive) enter as their logarithms like the ring's; a pressure share s (in [0, 1], possibly 0) enters as s
-#: itself (:data:`LINEAR_COVARIANCE`).
-STATE_COVARIANCE_PARAMETERS = {"k_x": "kx_n_per_m2", "friction": "friction", "kw_share": "kw_share", "kv_share": "kv_share",
+#: ``[ring.covariance]`` may name besides: name -> the key that must hold its value. ``k_x`` (positive) enters as
+#: ln k_x like the ring's; a pressure share s (in [0, 1], possibly 0) enters as s itself (:data:`LINEAR_COVARIANCE`).
+STATE_COVARIANCE_PARAMETERS = {"k_x": "kx_n_per_m2", "kw_share": "kw_share", "kv_share": "kv_share",
                                "k_tread_share": "k_tread_share"}
 #: Names whose ``[ring.covariance]`` row is of the value itself, not of its logarithm (the pressure shares).
 LINEAR_COVARIANCE = ("kw_share", "kv_share", "k_tread_share")

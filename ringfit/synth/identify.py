@@ -200,7 +200,7 @@ def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_
                       folder / f"run{i + 1}.profile.csv")
         truth_profiles.append(truth_p)
     truth = dict(seed=seed, ring={k: float(v) for k, v in ring.as_dict().items() if math.isfinite(v)},
-                 laws={k: float(getattr(laws, k)) for k in ("kw_share", "kv_share", "k_tread_share", "k_x", "friction")},
+                 laws={k: float(getattr(laws, k)) for k in ("kw_share", "kv_share", "k_tread_share", "k_x")},
                  sigma_rel=sigma_rel, with_std=with_std, profiles=truth_profiles, truth_grid=fine.n_grid,
                  pressures_bar=[p_ref / BAR, LOW_PRESSURE * p_ref / BAR])
     if truth_file:
