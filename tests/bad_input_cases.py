@@ -1362,3 +1362,20 @@ for noise in (0.0, 0.05):
         names=("radial channel is dead",), issue=33)
     add(f"estimate-state-dead-tangential-{noise:g}", ESTIMATE + ["--state"], setup=_dead_channel(1, noise),
         names=("tangential channel is dead",), issue=33)
+
+
+def _dead_tangential_profile(noise: float):
+    """run1.profile.csv with its tangential column dead: zeros, or noise of ``noise`` m/s² (the sidecar as it was)."""
+    def setup(d: Path):
+        rows = (d / "run1.profile.csv").read_text().splitlines()
+        rng = np.random.default_rng(6)
+        out = [rows[0]] + [f"{line.rsplit(',', 1)[0]},{float(noise * rng.standard_normal())!r}" for line in rows[1:]]
+        (d / "run1.profile.csv").write_text("\n".join(out) + "\n")
+    return setup
+
+
+# the averaged profile's tangential channel, read by the state: the recording's rule (one line, exit 2)
+for noise in (0.0, 0.05):
+    add(f"estimate-state-profile-dead-tangential-{noise:g}",
+        ["estimate", "{d}/run1.profile.csv", "--tyre", "{d}/tyre.toml", "--out", "{d}/out.estimate.json", "--state"],
+        setup=_dead_tangential_profile(noise), names=("tangential channel is dead",), issue=33)

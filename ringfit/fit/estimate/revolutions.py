@@ -150,6 +150,21 @@ class RecordingRevolutions:
     rows_tangential: np.ndarray | None = None
 
 
+def refuse_dead_channel(axis: str, swing: float, omega: float, geometry: TyreGeometry | None, source) -> None:
+    """Refuse a channel whose largest swing within a revolution [m/s²] stays under :data:`DEAD_SWING_SHARE` of ω²R
+    (ω [rad/s]; R the tyre's outer radius, :data:`DEAD_SWING_RADIUS_M` without a geometry): one line naming the
+    channel (docs/physics.md §10 *a dead channel*). A recording's channels (:func:`recording_revolutions`) and a
+    profile's tangential channel for the state (:func:`ringfit.fit.estimate.state.estimate_state`) both."""
+    radius = float(geometry.outer_radius) if geometry is not None else DEAD_SWING_RADIUS_M
+    floor = DEAD_SWING_SHARE * omega**2 * radius
+    if not swing >= floor:
+        raise InputError(f"the {axis} channel is dead: its largest swing within a revolution is {swing:.3g} m/s², "
+                         f"under {100 * DEAD_SWING_SHARE:g} % of ω²R = {floor / DEAD_SWING_SHARE:.3g} m/s² (the patch "
+                         f"moves a working {axis} reading by about ω²R); check the sensor axis, its cable and "
+                         "amplifier" + (", or estimate the load alone (without --state)" if axis == "tangential"
+                                        else ""), source=source)
+
+
 def first_rotation_hz(record, samples: int = 1 << 18) -> float:
     """Rotation rate [Hz] over the first ``samples`` samples of a recording (from its encoder)."""
     n = int(min(samples, record.samples))
@@ -250,15 +265,9 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     if R < 2:
         raise InputError(f"{R} whole revolution(s) in the recording; the estimate needs at least 2",
                          source=record.source)
-    radius = float(geometry.outer_radius) if geometry is not None else DEAD_SWING_RADIUS_M
-    floor = DEAD_SWING_SHARE * (2.0 * math.pi * float(np.mean(np.concatenate(rate)))) ** 2 * radius
     for axis, sw in zip(axes, swing):
-        if sw < floor:
-            raise InputError(f"the {axis} channel is dead: its largest swing within a revolution is {sw:.3g} m/s², "
-                             f"under {100 * DEAD_SWING_SHARE:g} % of ω²R = {floor / DEAD_SWING_SHARE:.3g} m/s² (the "
-                             f"patch moves a working {axis} reading by about ω²R); check the sensor axis, its cable "
-                             "and amplifier" + (", or estimate the load alone (without --state)"
-                                                if axis == "tangential" else ""), source=record.source)
+        refuse_dead_channel(axis, float(sw), 2.0 * math.pi * float(np.mean(np.concatenate(rate))), geometry,
+                            record.source)
     use = 0
     if hits is not None:
         arrivals_s, quiet_s = hits

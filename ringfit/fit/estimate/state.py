@@ -677,14 +677,16 @@ def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyr
     if d_new is not None and TREAD in fixed and float(fixed[TREAD]) > d_new * (1 + 1e-9):
         raise InputError(f"the stated tread depth {1e3 * float(fixed[TREAD]):g} mm is deeper than the tyre file's new "
                          f"tread (tread_depth_new_mm = {1e3 * d_new:g}): wear only removes tread")
-    if np.allclose(profile.acc_tangential_ms2, 0.0):
-        raise InputError("the tangential channel is all zeros: the state estimate reads both channels "
-                         "(the load alone: ringfit estimate without --state)", source=profile.source or None)
     if load is None:
         load = estimate_load(profile, geometry, ring, settings=dataclasses.replace(settings, grid_check=False),
                              k_tread_in_file=k_tread_in_file, omega=omega, omega_source=omega_source,
                              response=response, laws=laws)
     omega = load.omega
+    from ringfit.fit.estimate.revolutions import refuse_dead_channel
+
+    # the state reads both channels: a dead tangential one is refused (the averaged revolution's swing)
+    refuse_dead_channel("tangential", float(np.ptp(np.asarray(profile.acc_tangential_ms2, dtype=np.float64))),
+                        float(omega), geometry, profile.source or None)
     k_max = state_band(profile, settings, response)  # the state's own band (the load estimate is only its start)
     K = k_max - 1
     resp = np.ones(K) if response is None else np.asarray(response, dtype=np.float64)[:K]
