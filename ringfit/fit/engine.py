@@ -528,22 +528,17 @@ def _hold_on_bounds(problem: Problem, fit: FitResult, free: tuple[str, ...], pad
     re-solve does not converge either, the original fit is returned as it was."""
     coords, names = problem.coords, problem.names
     K = pad_to if pad_to is not None else len(free)
-    bounds = {}
-    for n in free:
-        c = coords[names.index(n)]
-        lo, hi = c.u_bounds
-        if math.isfinite(lo) and math.isfinite(hi):
-            u, span = float(c.to_u(fit.values[n])), hi - lo
-            if u <= lo + ACTIVE_SET_NEAR * span:
-                bounds[n] = lo
-            elif u >= hi - ACTIVE_SET_NEAR * span:
-                bounds[n] = hi
+    lo_u, hi_u = _u_bounds(problem, free)
+    u = np.array([coords[names.index(n)].to_u(fit.values[n]) for n in free])
+    near = ACTIVE_SET_NEAR * (hi_u - lo_u)  # nan/inf where a side is open: never near
+    bounds = {n: (lo_u[j] if u[j] <= lo_u[j] + near[j] else hi_u[j]) for j, n in enumerate(free)
+              if np.isfinite(near[j]) and (u[j] <= lo_u[j] + near[j] or u[j] >= hi_u[j] - near[j])}
     if not bounds:
         return fit
     theta, held, steps = fit.theta.copy(), dict(bounds), fit.iterations
     for _ in range(ACTIVE_SET_ROUNDS):
-        for n, u in held.items():
-            theta[names.index(n)] = coords[names.index(n)].from_u(u)
+        for n, b in held.items():
+            theta[names.index(n)] = coords[names.index(n)].from_u(b)
         rest = tuple(n for n in free if n not in held)
         if rest:
             sub = _least_squares(problem, theta, rest, pad_to=K, **kw)
@@ -554,25 +549,21 @@ def _hold_on_bounds(problem: Problem, fit: FitResult, free: tuple[str, ...], pad
         fs, u_all, res, jac, aux = _linearize_all(problem, theta, free, K)
         grad = jac[:, : len(free)].T @ res  # d(½Σr²)/du over data and prior rows
         # inwards: the cost falls as the parameter moves off its bound into its range
-        inward = [n for n, u in held.items()
-                  if (grad[free.index(n)] < 0) == (u == coords[names.index(n)].u_bounds[0])]
+        inward = [n for n, b in held.items() if (grad[free.index(n)] < 0) == (b == lo_u[free.index(n)])]
         if not inward:
             m = res.size - fs.size
             res = np.concatenate([res[:m], res[m:][: len(free)]])
             jac = np.concatenate([jac[:m, : len(free)], jac[m:][: len(free), : len(free)]])
             index = list(fs.index[: len(free)])
-            u_free = np.array([coords[i].to_u(theta[i]) for i in index])
             message = (f"converged with {', '.join(held)} held on the bound of its range (active set)" if held
                        else "converged (the active set released every bound it had held)")
-            out = _result(problem, free, index, theta, u_free, "converged", message, steps, res, jac, m, aux,
-                          kw["n_data"], *_u_bounds(problem, free), held=tuple(held))
+            out = _result(problem, free, index, theta, u_all[: len(free)], "converged", message, steps, res, jac, m,
+                          aux, kw["n_data"], lo_u, hi_u, held=tuple(held))
             out.problem = problem
             return out
         for n in inward:  # released a little inside its range, where the sine transform can move it
-            c = coords[names.index(n)]
-            lo, hi = c.u_bounds
-            u = held.pop(n)
-            theta[names.index(n)] = c.from_u(u + 10 * ACTIVE_SET_NEAR * (hi - lo) * (1 if u == lo else -1))
+            j, b = free.index(n), held.pop(n)
+            theta[names.index(n)] = coords[names.index(n)].from_u(b + 10 * near[j] * (1 if b == lo_u[j] else -1))
     return fit
 
 

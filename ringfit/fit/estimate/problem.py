@@ -10,7 +10,6 @@ makes the :class:`~ringfit.fit.engine.Problem` that :mod:`ringfit.fit.estimate.l
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -20,6 +19,7 @@ import jax.numpy as jnp
 
 from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
+from ringfit.fit.least_squares import RING_FIELDS
 from ringfit.io.tyre import LINEAR_COVARIANCE
 from ringfit.fit.profile_block import CORNER_PRIOR, GAIN_RANGE, TILT_PRIOR  # the profile block's: one sensor for every reader
 from ringfit.params import RingParams, TyreGeometry
@@ -143,11 +143,6 @@ class EstimateResiduals(AbstractResiduals):
         return ((rows - data.measured) * data.weight).ravel(), rows
 
 
-#: The ring's parameters (:class:`~ringfit.params.RingParams`); every other name a ``[ring.covariance]`` may hold is a
-#: state law identified across states (:class:`~ringfit.params.TyreLaws`: k_x, the pressure shares).
-RING_FIELDS = frozenset(f.name for f in dataclasses.fields(RingParams))
-
-
 def covariance_kind(name: str) -> str:
     """The coordinate of ``name`` in a ``[ring.covariance]`` (docs/formats.md §1.1): the share itself for a pressure
     share (:data:`ringfit.io.tyre.LINEAR_COVARIANCE`), else its logarithm."""
@@ -155,8 +150,9 @@ def covariance_kind(name: str) -> str:
 
 
 def tyre_with(ring: RingParams, laws, names: tuple[str, ...], values):
-    """``(ring, laws)`` with the parameters ``names`` at ``values`` (natural units): a ring parameter's in the ring,
-    a state law's in the laws (``laws`` None: ring names only)."""
+    """``(ring, laws)`` with the parameters ``names`` at ``values`` (natural units): a ring parameter's
+    (:data:`ringfit.fit.least_squares.RING_FIELDS`) in the ring, every other ``[ring.covariance]`` name — a state law
+    identified across states (k_x, the pressure shares) — in the laws (``laws`` None: ring names only)."""
     on_ring = {n: values[i] for i, n in enumerate(names) if n in RING_FIELDS}
     on_laws = {n: values[i] for i, n in enumerate(names) if n not in RING_FIELDS}
     if on_laws and laws is None:

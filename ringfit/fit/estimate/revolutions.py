@@ -232,11 +232,6 @@ def recording_revolutions(record, *, k_max: int = EstimateSettings.k_max, progre
     axes = ("radial", "tangential") if tangential else ("radial",)
     swing = np.zeros(len(axes))  # each channel's largest swing within one revolution [m/s²]
     for block in revolution_grids(record, points=points, axes=axes, passages=passages, progress=progress):
-        finite = np.all(np.isfinite(block.values), axis=(1, 2))
-        if not finite.all():
-            raise InputError(f"non-finite samples (NaN or ±inf) in the {axes[int(np.argmin(finite))]} channel near "
-                             f"t = {float(block.t_s[0]):.3f} s; expected finite accelerations [m/s²] (cut the "
-                             "recording around the dropout)", source=record.source)
         swing = np.maximum(swing, np.max(np.ptp(block.values, axis=2), axis=1))
         values = block.values[0]
         fractions += block.fractions

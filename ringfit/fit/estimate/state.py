@@ -41,7 +41,7 @@ from ringfit.fit.estimate.load import LoadEstimate, band_top, estimate_load
 from ringfit.fit.result import grid_moves
 from ringfit.fit.identify import band_folds, discrepancy_ratio
 from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
-                                          RING_FIELDS, TILT_PRIOR, EstimateSettings, covariance_kind,
+                                          TILT_PRIOR, EstimateSettings, covariance_kind,
                                           optimum_ring_shift, tyre_value, tyre_with)
 from ringfit.params import BAR, RingParams, TyreGeometry, TyreLaws
 from ringfit.physics.contact import ContactSolver, as_traced
@@ -876,8 +876,7 @@ def _finish_state(fit, problem, load, geometry, ring, laws, omega, settings, fix
     finite = bool(np.all(np.isfinite(theta)))
     names = ()
     if ring_covariance is not None:  # the ring's parameters and the state laws identified with it (k_x, the shares)
-        laws_ = {f.name for f in dataclasses.fields(TyreLaws)}
-        names = tuple(n for n in ring_covariance.names if n in RING_FIELDS or n in laws_)
+        names = tuple(ring_covariance.names)
     from ringfit.physics.operating import Drum, FlatRoad
 
     drum = load.drum_diameter_m
