@@ -77,7 +77,7 @@ from ringfit.fit.profile_block import (PROFILE_K_MAX, SENSOR_FIELDS, harmonic_ro
                                        nuisance_names, nuisance_prior, nuisance_start, profile_rows, read_through,
                                        sensor_basis, sensor_coords, sensor_names, sensor_prior, sensor_reading,
                                        sensor_start)
-from ringfit.fit.result import FitResult, covariance_from_jacobian, grid_moves
+from ringfit.fit.result import FitResult, covariance_from_jacobian, gauss_newton_step, grid_moves
 from ringfit.io.case import CaseFolder, read_case_folder, sidecar_number
 from ringfit.io.conditions import pressure_conflict
 from ringfit.io.modes import ModeTable
@@ -851,19 +851,30 @@ class Identification:
     #: ``covariance`` after the ring's, and the laws at the optimum (None: one state, the file's laws untouched)
     laws_free: tuple = ()
     laws: TyreLaws | None = None
+    #: what identify held and carried as a consider direction (docs/physics.md §11 *friction*): ``friction`` →
+    #: value, ``sd_ln``, ``stated``, per free parameter its ``move`` for +1 σ and its σ ``sd_without``/``sd_with``
+    held: dict | None = None
 
     def law_values(self) -> dict:
         """The identified state laws by tyre-file key (``kw_share`` …, ``kx_n_per_m2``; docs/formats.md §1), for
         :meth:`ringfit.io.tyre.Tyre.with_state_values`; empty when none was identified."""
         if self.laws is None:
             return {}
-        return {("kx_n_per_m2" if n == "k_x" else n): float(getattr(self.laws, n)) for n in self.laws_free}
+        out = {("kx_n_per_m2" if n == "k_x" else n): float(getattr(self.laws, n)) for n in self.laws_free}
+        if self.held is not None:  # the held μ its covariance row names (docs/formats.md §1.1)
+            out["friction"] = float(self.held["friction"]["value"])
+        return out
 
     def posterior_likelihood(self) -> dict:
         """What :func:`ringfit.fit.posterior.sample` needs to sample the noise model of the intervals
         (docs/physics.md §12.3): ``row_scale`` (the t-widening and discrepancy per row) and ``shift_u`` (the grid
-        check's systematic direction, convolved into the draws)."""
-        return dict(row_scale=self.row_scale, shift_u=self.shift_u, tables=self.tables)
+        check's systematic direction, and the held friction's consider direction where there is one: ``(d, k)``,
+        each convolved into the draws)."""
+        shifts = [] if self.shift_u is None else [np.asarray(self.shift_u, dtype=np.float64)]
+        if self.held is not None:
+            shifts.append(np.array([self.held["friction"]["move"][n] for n in self.fit.names]))
+        shift = None if not shifts else (shifts[0] if len(shifts) == 1 else np.stack(shifts))
+        return dict(row_scale=self.row_scale, shift_u=shift, tables=self.tables)
 
     def posterior_fit(self) -> FitResult:
         """The fit whose posterior `identify --posterior` samples: :attr:`fit` with its joint model's contact window
@@ -1076,7 +1087,13 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor) -> Ide
     folds = {n: block_folds(n, sl, rows) for n, sl in slices.items()}
     ratio = {n: discrepancy_ratio(fit.jacobian, fit.residuals, f) for n, f in folds.items()}
     check = None
+    friction = None
     # (θ holds EA = ∞ of the inextensible ring: only the free parameters need be finite)
+    if plan.active and plan.laws.has_brush and all(math.isfinite(fit.values[n]) for n in fit.names):
+        # μ held at the file's: its doubt is carried as a consider direction (docs/physics.md §11 *friction*)
+        sd_ln = friction_sd_ln(tyre)
+        friction = dict(value=float(plan.laws.friction), sd_ln=sd_ln,
+                        move_u=friction_consider(fit, rows, geometry, solver, sd_ln))
     if all(math.isfinite(fit.values[n]) for n in fit.names) and (rows.loaded is not None or rows.profiles is not None):
         check = grid_check(fit, rows, geometry, solver, P)
         if np.all(np.isfinite(check["shift_u"])):
@@ -1092,11 +1109,46 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor) -> Ide
         for note in warned:
             warnings.warn(note, stacklevel=2)
     ident = _finish(fit, rows, slices, scales, free_ring, P, notes + warned, passes, inputs, check, widen, ratio,
-                    free_laws=free_laws)
+                    free_laws=free_laws, friction=friction)
     if plan.active:
         ident.laws = plan.laws.replace(**{n: float(fit.values[n]) for n in LAW_FIELDS})
     ident.warned = warned
     return ident
+
+
+#: σ of ln μ, the tread tips' friction, when the tyre file states no ``friction_sd`` (docs/physics.md §11
+#: *friction*): identify holds μ at the file's ``friction`` and carries this doubt into the covariance. A road's
+#: or a drum's μ is seldom known better than ±20 % (two σ) before it is measured.
+FRICTION_LN_SD = 0.1
+
+
+def friction_sd_ln(tyre: Tyre) -> float:
+    """σ of ln μ that identify holds μ with: the tyre file's ``friction_sd`` over its ``friction`` (docs/formats.md
+    §1), else :data:`FRICTION_LN_SD`."""
+    sd = tyre.state_values.get("friction_sd")
+    if sd is None:
+        return FRICTION_LN_SD
+    return float(sd) / float(tyre.laws.friction)
+
+
+def friction_consider(fit: FitResult, rows: "_Rows", geometry: TyreGeometry, solver: ContactSolver,
+                      sd_ln: float) -> np.ndarray:
+    """How far the fit's optimum moves when the held friction μ is one σ off (docs/physics.md §11 *friction*): the
+    Gauss–Newton step of the rows' change between μ·e^{+σ} and μ·e^{−σ}, halved (a secant over ±σ, not a
+    derivative: the brush's sliding zone is a staircase on the contact grid). **Returns** ``(k,)`` in the solver
+    coordinates of ``fit.names`` — the consider direction δu_μ: the held μ's doubt adds δu_μ δu_μᵀ to the
+    covariance, and σ·δu_μ is the covariance of the parameters with ln μ."""
+    laws = rows.states["laws"]
+    m = fit.residuals.size
+    at = []
+    for sign in (1.0, -1.0):
+        moved = dataclasses.replace(rows, states={**rows.states,
+                                                  "laws": laws.replace(friction=float(laws.friction)
+                                                                       * math.exp(sign * sd_ln))})
+        problem = Problem(fit.problem.model, _arrays(geometry, moved, solver), fit.coords,
+                          data_label="these measurements")
+        at.append(np.asarray(residuals(problem, fit.theta)[0])[:m])
+    return gauss_newton_step(fit, 0.5 * (at[0] - at[1]))
 
 
 #: Loads scanned per loaded table for its best-fit load, relative to its stated load_n (:func:`load_check`).
@@ -1252,7 +1304,7 @@ def grid_moved(fit: FitResult, shift_u) -> FitResult:
 
 
 def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, check=None, widen=None,
-            ratio=None, free_laws=()) -> Identification:
+            ratio=None, free_laws=(), friction=None) -> Identification:
     J, r = fit.jacobian, fit.residuals
     names = fit.names
     cov_u = fit.covariance_log
@@ -1274,6 +1326,18 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
         grid = dict(grid=check["grid"], loaded_harmonics=check["loaded_harmonics"],
                     shift={n: float(x) for n, x in zip(names, du)},
                     beyond={n: float(x) for n, x in zip(names, shift_u)})
+    held = None
+    if friction is not None and np.all(np.isfinite(friction["move_u"])):
+        # the held μ's doubt (docs/physics.md §11 *friction*): θ̂ is off by δu_μ·(ln μ − ln μ₀)/σ
+        move = np.asarray(friction["move_u"], dtype=np.float64)
+        before = np.sqrt(np.clip(np.diag(cov_u), 0.0, None))
+        cov_u = cov_u + np.outer(move, move)
+        after = np.sqrt(np.clip(np.diag(cov_u), 0.0, None))
+        held = dict(friction=dict(value=friction["value"], sd_ln=friction["sd_ln"],
+                                  stated=bool(inputs is not None and "friction_sd" in inputs.tyre.state_values),
+                                  move={n: float(x) for n, x in zip(names, move)},
+                                  sd_without={n: float(x) for n, x in zip(names, before)},
+                                  sd_with={n: float(x) for n, x in zip(names, after)}))
     fisher = {b: J[sl].T @ J[sl] for b, sl in slices.items()}
     total = np.diag(J.T @ J)  # data and prior rows
     # the covariance's parameters: the ring's, then the state laws identified across states (ln k_x; a share as
@@ -1289,6 +1353,14 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
                          fisher_share={n: float(share[j]) for j, n in enumerate(names) if n in cov_names})
     idx = [names.index(n) for n in cov_names]
     cov = cov_u[np.ix_(idx, idx)]
+    if held is not None:  # ln μ joins the covariance: its own σ², and σ·δu_μ with the rest
+        k = len(idx)
+        sd_mu = held["friction"]["sd_ln"]
+        full = np.zeros((k + 1, k + 1))
+        full[:k, :k] = cov
+        full[:k, k] = full[k, :k] = sd_mu * np.asarray(friction["move_u"], dtype=np.float64)[idx]
+        full[k, k] = sd_mu**2
+        cov, cov_names = full, cov_names + ("friction",)
     cov = 0.5 * (cov + cov.T)
     cov = cap_unbounded(cov, cov_names, bounds=PARAMETER_BOUNDS, linear=LINEAR_COVARIANCE)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
@@ -1321,6 +1393,15 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
     ident = Identification(fit, ring, free_ring, blocks, (cov_names, corr), covariance, nuisances, notes, passes,
                            inputs, grid, row_scale, shift_u, dict(slices), _table_rows(rows, slices, inputs, P))
     ident.laws_free = tuple(free_laws)
+    ident.held = held
+    if held is not None:
+        f = held["friction"]
+        grown = ", ".join(f"{n} {100 * f['sd_without'][n]:.2g} → {100 * f['sd_with'][n]:.2g} %"
+                          for n in ("ei", "k_tread", "k_x") if n in f["sd_with"])
+        notes.append(f"friction μ held at {f['value']:g} (σ of ln μ {f['sd_ln']:.3g}, "
+                     + ("the tyre file's friction_sd" if f["stated"] else
+                        "the default: state friction_sd in the tyre file when μ is known better")
+                     + f"); its doubt is carried in the covariance (σ of ln: {grown})")
     return ident
 
 
@@ -1435,6 +1516,7 @@ def identification_report(ident: Identification) -> dict:
         "correlation": {"names": list(names), "matrix": [[float(x) for x in row] for row in corr]},
         "nuisances": ident.nuisances,
         **({"grid_check": ident.grid_check} if ident.grid_check is not None else {}),
+        **({"held": ident.held} if ident.held is not None else {}),
         "files": [] if ident.inputs is None else ident.inputs.files,
         "notes": ident.notes,
     })

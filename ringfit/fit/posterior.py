@@ -103,13 +103,14 @@ class Posterior:
     def log_samples(self) -> np.ndarray:
         """``(draws, k)`` flattened draws of the solver coordinates after burn-in and thinning.
 
-        With ``shift_u`` (one systematic direction δu, identify's grid check, docs/physics.md §12.3) each draw
-        is moved by ε δu, ε ~ N(0, 1) drawn once per draw from ``seed``: the posterior convolved with the
-        discretisation's doubt, as the least-squares covariance adds δu δuᵀ."""
+        With ``shift_u`` (systematic directions δu, ``(k,)`` or ``(d, k)``: identify's grid check and its held
+        friction, docs/physics.md §12.3) each draw is moved by Σ ε_j δu_j, ε_j ~ N(0, 1) drawn once per draw from
+        ``seed``: the posterior convolved with those doubts, as the least-squares covariance adds Σ δu_j δu_jᵀ."""
         u = self.chain[self.burn :: self.thin].reshape(-1, len(self.names))
         if self.shift_u is not None and np.any(self.shift_u != 0):
-            eps = np.random.default_rng([int(self.seed), 7919]).standard_normal(u.shape[0])
-            u = u + eps[:, None] * np.asarray(self.shift_u)[None, :]
+            shifts = np.atleast_2d(np.asarray(self.shift_u, dtype=np.float64))
+            eps = np.random.default_rng([int(self.seed), 7919]).standard_normal((u.shape[0], shifts.shape[0]))
+            u = u + eps @ shifts
         return u
 
     @property
@@ -588,7 +589,7 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
     ``result.extra``, where the fit that made ``result`` records its noise model (the free-modes block, identify's
     :meth:`~ringfit.fit.identify.Identification.posterior_fit`); an explicit value replaces the fit's.
     ``row_scale`` — ``(m,)`` widening of the rows' σ (a block's Student-t widening × √κ); ``shift_u`` — ``(k,)``
-    one systematic direction in u (identify's grid check) convolved into the draws (:attr:`Posterior.log_samples`);
+    or ``(d, k)``: systematic directions in u (identify's grid check, its held friction) convolved into the draws (:attr:`Posterior.log_samples`);
     ``tables`` — name → data rows of each measured table for the posterior predictive check
     (:func:`predictive_check`, kept in ``meta["predictive_check"]``; None: one block of every row);
     ``scale_marginal`` — ``dict(rows, s_min, row_scale)``: the rows' common σ scale integrated out

@@ -31,7 +31,7 @@ TYRE_KEYS = ("name", "radius_m", "width_m", "pressure_bar", "tread_thickness_m",
              "tread_depth_mm", "tread_depth_new_mm", "tread_density_kg_m3", "tread_land_ratio")
 #: The state laws' keys (docs/formats.md §1, docs/physics.md §13): in [tyre], in [ring] and in [ring.pressure].
 STATE_TYRE_KEYS = ("tread_depth_mm", "tread_depth_new_mm", "tread_density_kg_m3", "tread_land_ratio")
-STATE_RING_KEYS = ("kx_n_per_m2", "friction")
+STATE_RING_KEYS = ("kx_n_per_m2", "friction", "friction_sd")
 PRESSURE_KEYS = ("kw_share", "kv_share", "k_tread_share")
 #: Top-level tables of a tyre file; ``meta`` is free-form (notes, provenance).
 TABLES = ("tyre", "ring", "meta")
@@ -59,6 +59,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "tread_land_ratio": (0.0, 1.0),
     "kx_n_per_m2": (1.0, 1e12),
     "friction": (0.0, 10.0),
+    "friction_sd": (0.0, 10.0),
     "kw_share": (0.0, 1.0),
     "kv_share": (0.0, 1.0),
     "k_tread_share": (0.0, 1.0),
@@ -303,9 +304,10 @@ def _pressure_laws(table) -> dict:
 COVARIANCE_PARAMETERS = ("rho_a", "ei", "kw", "kv", "damping_ratio", "k_tread", "ea")
 #: The state laws ``ringfit identify`` identifies across states (docs/physics.md §11, §13) that a
 #: ``[ring.covariance]`` may name besides: name -> the key that must hold its value. ``k_x`` (positive) enters as
-#: ln k_x like the ring's; a pressure share s (in [0, 1], possibly 0) enters as s itself (:data:`LINEAR_COVARIANCE`).
+#: ln k_x like the ring's; a pressure share s (in [0, 1], possibly 0) enters as s itself (:data:`LINEAR_COVARIANCE`);
+#: ``friction`` (μ, held by identify with its doubt carried, §11 *friction*) as ln μ.
 STATE_COVARIANCE_PARAMETERS = {"k_x": "kx_n_per_m2", "kw_share": "kw_share", "kv_share": "kv_share",
-                               "k_tread_share": "k_tread_share"}
+                               "k_tread_share": "k_tread_share", "friction": "friction"}
 #: Names whose ``[ring.covariance]`` row is of the value itself, not of its logarithm (the pressure shares).
 LINEAR_COVARIANCE = ("kw_share", "kv_share", "k_tread_share")
 #: Largest σ of a pressure share in a ``[ring.covariance]``: more than the share's whole range [0, 1] says nothing.
