@@ -217,6 +217,32 @@ def test_tyre_covariance_holds_the_laws_and_refuses_them_without_values(tmp_path
         read_tyre(tmp_path / "wide.tyre.toml")
 
 
+def test_the_held_friction_is_a_covariance_name_and_its_doubt_a_file_key(tmp_path):
+    """``[ring] friction_sd`` (σ of μ) sets the σ of ln μ that identify holds μ with (docs/physics.md §11
+    *friction*): friction_sd/friction, 0.1 without it; ``friction`` may be a ``[ring.covariance]`` name (ln μ), and
+    needs ``[ring] friction``; a friction_sd outside (0, 10] is refused naming the key."""
+    geometry, ring = table9()
+    base = Tyre(geometry, {"kw": float(ring.kw)}).with_state_values(kx_n_per_m2=1.2e7, friction=0.8)
+    assert im.friction_sd_ln(base) == im.FRICTION_LN_SD == 0.1
+    assert im.friction_sd_ln(base.with_state_values(friction_sd=0.04)) == pytest.approx(0.05)
+    names = ("kw", "k_x", "friction")
+    cov = np.array([[1e-4, 0.0, 0.0], [0.0, 9e-4, 6e-4], [0.0, 6e-4, 1e-2]])
+    tyre = Tyre(geometry, base.ring_values, {}, "", RingCovariance(names, cov, "test"),
+                {**base.state_values, "friction_sd": 0.04})
+    write_tyre(tyre, tmp_path / "t.tyre.toml")
+    back = read_tyre(tmp_path / "t.tyre.toml")
+    assert back.covariance.names == names and back.covariance.sd_ln("friction") == pytest.approx(0.1)
+    assert back.state_values["friction_sd"] == 0.04 and back.laws.friction == 0.8
+    assert back.covariance.ring_names == ("kw",)
+    text = (tmp_path / "t.tyre.toml").read_text()
+    (tmp_path / "bad.tyre.toml").write_text(text.replace("friction = 0.8\n", ""))
+    with pytest.raises(InputError, match=r"names 'friction', but \[ring\] has no friction"):
+        read_tyre(tmp_path / "bad.tyre.toml")
+    (tmp_path / "neg.tyre.toml").write_text(text.replace("friction_sd = 0.04", "friction_sd = -0.1"))
+    with pytest.raises(InputError, match="friction_sd"):
+        read_tyre(tmp_path / "neg.tyre.toml")
+
+
 # ----------------------------------------------------------------------------- whole identifications (slow)
 
 
@@ -260,8 +286,42 @@ def test_identify_across_states_recovers_the_laws_and_writes_them(state_case, tm
     tyre = read_tyre(out)
     assert tyre.laws.has_brush and tyre.laws.k_x == pytest.approx(params["k_x"]["value"])
     assert tyre.laws.kw_share == pytest.approx(params["kw_share"]["value"])
-    assert set(tyre.covariance.names) == set(params)
+    # the held friction's doubt joins them (docs/physics.md §11 *friction*: the file states none, σ of ln μ 0.1)
+    assert set(tyre.covariance.names) == set(params) | {"friction"}
+    assert tyre.covariance.sd_ln("friction") == pytest.approx(im.FRICTION_LN_SD) and tyre.laws.friction == 1.0
+    assert doc["held"]["friction"]["sd_ln"] == im.FRICTION_LN_SD and not doc["held"]["friction"]["stated"]
     assert tyre.covariance.sd_ln("kw_share") == pytest.approx(params["kw_share"]["sd"])
+
+
+@pytest.mark.slow
+def test_the_held_frictions_direction_is_the_refit_at_another_friction(state_case, tmp_path):
+    """The consider direction δu_μ (docs/physics.md §11 *friction*: the Gauss–Newton step of the rows' secant over
+    ±σ of ln μ) against the nonlinear answer: the same folder identified again with the tyre file's μ one σ higher
+    (e^{0.1}). Each free parameter's move agrees with δu_μ within a quarter of δu_μ's size or a quarter of the
+    parameter's own σ (the refit's grid check moves it a little too); the parameters that move most are k_x and EI
+    and they move by more than their σ without μ's doubt (the direction is not noise)."""
+    import shutil
+
+    folder, _ = state_case
+    base = im.identify(im.read_identify_folder(folder))
+    moved_folder = tmp_path / "case"
+    shutil.copytree(folder, moved_folder)
+    tyre = read_tyre(moved_folder / "tyre.toml")
+    write_tyre(tyre.with_state_values(friction=math.exp(im.FRICTION_LN_SD)), moved_folder / "tyre.toml",
+               overwrite=True)
+    moved = im.identify(im.read_identify_folder(moved_folder))
+    assert base.converged and moved.converged and base.held is not None
+    f = base.held["friction"]
+    coords = {c.name: c for c in base.fit.coords}
+    big = []
+    for name in tuple(base.free) + tuple(base.laws_free):
+        c = coords[name]
+        du = float(c.to_u(moved.fit.values[name]) - c.to_u(base.fit.values[name]))
+        expect = f["move"][name]
+        assert abs(du - expect) <= 0.25 * max(abs(expect), f["sd_without"][name]), (name, du, expect, f)
+        if abs(expect) > f["sd_without"][name]:
+            big.append(name)
+    assert {"k_x", "ei"} <= set(big), f
 
 
 @pytest.mark.slow

@@ -160,12 +160,13 @@ def test_per_revolution_step_against_full_fits_and_the_fisher_information():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sd", [{"k_tread": 0.05, "kw": 0.03}, {"k_x": 0.05, "kw_share": 0.06, "k_tread_share": 0.1}],
-                         ids=["ring", "laws"])
+@pytest.mark.parametrize("sd", [{"k_tread": 0.05, "kw": 0.03}, {"k_x": 0.05, "kw_share": 0.06, "k_tread_share": 0.1},
+                                {"friction": 0.1}],
+                         ids=["ring", "laws", "friction"])
 def test_the_ring_covariance_is_carried_by_the_estimators_own_sensitivity(sd):
     """ring_sd of each state quantity against finite differences of the estimate (refitted, same weights, with the
-    tyre's parameter moved by ±h in its covariance coordinate: ln of a ring parameter or of k_x, a pressure share
-    itself) times the covariance's σ. The state laws an identification across states puts into
+    tyre's parameter moved by ±h in its covariance coordinate: ln of a ring parameter, of k_x or of the friction μ
+    identify holds, a pressure share itself) times the covariance's σ. The state laws an identification across states puts into
     ``[ring.covariance]`` are carried as the ring's are (docs/physics.md §13.4). The tread depth is held: on its
     ridge the Gauss–Newton sensitivity −(JᵀJ)⁻¹Jᵀ∂r/∂q leaves out the residual's curvature, which there is not small
     (docs/physics.md §13.4: k_w's part of σ(load) came out at half the finite-difference value with the depth free)."""
@@ -198,8 +199,8 @@ def test_the_ring_covariance_is_carried_by_the_estimators_own_sensitivity(sd):
             ring, laws = RING, LAWS
             if name in LINEAR_COVARIANCE:
                 laws = LAWS.replace(**{name: getattr(LAWS, name) + sign * h})
-            elif name == "k_x":
-                laws = LAWS.replace(k_x=LAWS.k_x * math.exp(sign * h))
+            elif name in ("k_x", "friction"):  # ln k_x, ln μ (identify's held friction, §11)
+                laws = LAWS.replace(**{name: getattr(LAWS, name) * math.exp(sign * h)})
             else:
                 ring = RING.replace(**{name: getattr(RING, name) * math.exp(sign * h)})
             data = eqx.tree_at(lambda a: a.ring, problem.data, as_traced(ring))

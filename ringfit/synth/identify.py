@@ -109,7 +109,7 @@ STATE_TORQUE_STD = 0.02
 
 def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_colour: str | None = None,
                              truth_file: bool = True, profiles=STATE_PROFILES, loaded=STATE_LOADED,
-                             noise_scale: float = 1.0) -> dict:
+                             noise_scale: float = 1.0, friction: float = 1.0) -> dict:
     """A case folder across states (docs/physics.md §11 *across states*): the tyre at two pressures and at a drive
     and a brake torque, from a known ring **and known state laws** (pressure shares, k_x); returns the truth.
 
@@ -121,7 +121,8 @@ def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_
     at a slip is the lever brush's (:func:`~ringfit.physics.state.solve_state`), its sidecar stating the torque
     T = Fx·H of the truth plus a draw of its σ (``torque_std_nm``, :data:`STATE_TORQUE_STD` of it), the rotation
     Ω and the speed Ω·r_road. Noise, gains and angle offsets as :func:`make_identify_case`; ``noise_scale``
-    multiplies the profiles' noise (a small one isolates the model's own systematic errors).
+    multiplies the profiles' noise (a small one isolates the model's own systematic errors). ``friction``: the
+    truth's μ of the tread tips (the tyre file says none, so identify holds μ = 1: docs/physics.md §11 *friction*).
     """
     import jax.numpy as jnp
 
@@ -142,7 +143,7 @@ def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_
     geometry, ring, zeta = joint_ring(rng)
     laws = TyreLaws(kw_share=float(rng.uniform(0.3, 0.7)), kv_share=float(rng.uniform(0.2, 0.6)),
                     k_tread_share=float(rng.uniform(0.1, 0.5)), k_x=float(15e6 * np.exp(rng.normal(0.0, 0.2))),
-                    has_brush=True)
+                    friction=float(friction), has_brush=True)
     sigma_rel = float(rng.uniform(0.001, 0.003))
     with_std = bool(rng.random() < 0.5)
     write_tyre(Tyre(geometry, {}), folder / "tyre.toml")
@@ -202,7 +203,7 @@ def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_
     truth = dict(seed=seed, ring={k: float(v) for k, v in ring.as_dict().items() if math.isfinite(v)},
                  laws={k: float(getattr(laws, k)) for k in ("kw_share", "kv_share", "k_tread_share", "k_x")},
                  sigma_rel=sigma_rel, with_std=with_std, profiles=truth_profiles, truth_grid=fine.n_grid,
-                 pressures_bar=[p_ref / BAR, LOW_PRESSURE * p_ref / BAR])
+                 pressures_bar=[p_ref / BAR, LOW_PRESSURE * p_ref / BAR], friction=float(friction))
     if truth_file:
         (folder / "truth.json").write_text(json.dumps(truth, indent=1))
     truth.update(ring_object=ring, geometry=geometry, laws_object=laws)
