@@ -995,7 +995,8 @@ def identify(inputs: IdentifyInputs, *, solver: ContactSolver = ContactSolver(),
                          sensor=sensor)
 
 
-def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor, consider=True) -> Identification:
+def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor, consider=True,
+              start=None) -> Identification:
     tyre = inputs.tyre
     geometry, ring0 = tyre.geometry, tyre.ring
     notes = list(inputs.skipped)
@@ -1040,6 +1041,8 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor, consid
         notes.append("only free modes: EI is barely pinned by a free tyre's frequencies, so the belt-plate prior on "
                      f"EI ({PHYSICAL_PRIORS['ei'].source}; `ringfit fit --prior physical`, its default) is used; "
                      "add loaded tables or profiles to identify it from data")
+    if start is not None and np.shape(start) == np.shape(theta):  # again at another held μ: from the optimum found
+        theta = np.array(start, dtype=np.float64)
     state = dict(theta=theta, passes=0)
     block_dof = {}
 
@@ -1099,7 +1102,7 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor, consid
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 return _identify(other, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, progress=False,
-                                 sensor=sensor, consider=False)
+                                 sensor=sensor, consider=False, start=fit.theta)
 
         move, how = friction_consider(inputs, fit, sd_ln, again)
         if move is None:
@@ -1147,11 +1150,11 @@ def friction_consider(inputs: IdentifyInputs, fit: FitResult, sd_ln: float, agai
     """How far the identified tyre moves when the held friction μ is one σ off (docs/physics.md §11 *friction*):
     the folder identified again, whole (noise passes, grid check and its move to the continuum), with the tyre
     file's μ at μ·e^{+σ} and at μ·e^{−σ}, and half the difference of the two answers — a secant of the answer itself
-    over ±σ. Cheaper moves were measured and fall short, because the sliding zone near the patch's exit, where μ
-    acts, is resolved only as the contact grid is refined, and the noise model follows μ's misfit: on the
-    across-states case (seed 0) the Gauss–Newton step from the fit's Jacobian gave 60 % of k_x's move, a refit on
-    the base grid 63 %, and refits each moved by its own grid check 74 %. ``again(inputs)`` identifies ``inputs``
-    without this step.
+    over ±σ, each started from this fit's optimum. Cheaper moves were measured and fall short, because the sliding
+    zone near the patch's exit, where μ acts, is resolved only as the contact grid is refined, and the noise model
+    follows μ's misfit: on the across-states case (seed 0) the Gauss–Newton step from the fit's Jacobian gave 60 %
+    of k_x's move, a refit on the base grid 63 %, and refits each moved by its own grid check 74 %.
+    ``again(inputs)`` identifies ``inputs`` without this step.
 
     **Returns** ``(δu_μ, how)``: ``(k,)`` in the solver coordinates of ``fit.names`` — the consider direction: the
     held μ's doubt adds δu_μ δu_μᵀ to the covariance, and σ·δu_μ is the covariance of the parameters with ln μ —
