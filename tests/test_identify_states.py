@@ -385,9 +385,7 @@ def test_the_laws_intervals_cover_over_random_cases(tmp_path):
     cover = {}
     misses = []
     for seed in COVERAGE_SEEDS:
-        # the truth's μ drawn about the μ identify holds with its stated doubt (§11 *friction*: σ of ln μ 0.1)
-        mu = math.exp(im.FRICTION_LN_SD * np.random.default_rng([seed, 31]).standard_normal())
-        truth = make_state_identify_case(tmp_path / f"case{seed}", seed=seed, truth_file=False, friction=mu)
+        truth = make_state_identify_case(tmp_path / f"case{seed}", seed=seed, truth_file=False)
         ident = im.identify(im.read_identify_folder(tmp_path / f"case{seed}"))
         assert ident.converged, seed
         params = ident.parameters()
