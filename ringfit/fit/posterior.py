@@ -589,7 +589,8 @@ def sample(result, *, walkers: int = 32, min_steps: int = 2000, max_steps: int =
     ``result.extra``, where the fit that made ``result`` records its noise model (the free-modes block, identify's
     :meth:`~ringfit.fit.identify.Identification.posterior_fit`); an explicit value replaces the fit's.
     ``row_scale`` — ``(m,)`` widening of the rows' σ (a block's Student-t widening × √κ); ``shift_u`` — ``(k,)``
-    or ``(d, k)``: systematic directions in u (identify's grid check, its held friction) convolved into the draws (:attr:`Posterior.log_samples`);
+    or ``(d, k)``: systematic directions in u (identify's grid check, its held friction) convolved into the draws
+    (:attr:`Posterior.log_samples`);
     ``tables`` — name → data rows of each measured table for the posterior predictive check
     (:func:`predictive_check`, kept in ``meta["predictive_check"]``; None: one block of every row);
     ``scale_marginal`` — ``dict(rows, s_min, row_scale)``: the rows' common σ scale integrated out
