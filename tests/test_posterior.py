@@ -144,3 +144,27 @@ def test_sample_reads_the_fits_own_likelihood():
     _, du, tables, _ = fit_likelihood(fixed)
     assert np.all(du == [0.1, 0.0]) and tables == {"t": slice(0, 9)}
     assert fit_likelihood(fixed, shift_u=None)[1] is None
+
+
+def test_several_systematic_directions_are_convolved_into_the_draws(tmp_path):
+    """``shift_u`` of shape (d, k) (identify's grid check and its held friction, docs/physics.md §12.3): the draws'
+    covariance is the chain's plus Σ δu_j δu_jᵀ, and one direction given as (k,) or (1, k) draws the same numbers;
+    the directions survive a save and load."""
+    from ringfit.fit.posterior import Posterior, load_posterior
+
+    rng = np.random.default_rng(5)
+    steps, walkers, k = 4000, 8, 2
+    chain = rng.standard_normal((steps, walkers, k)) * np.array([0.01, 0.02])
+    base = dict(names=("a", "b"), kinds=("log", "log"), values0={"a": 1.0, "b": 2.0}, chain=chain,
+                log_prob=np.zeros((steps, walkers)), acceptance=np.full(walkers, 0.4), tau=np.full(k, 1.0), burn=0,
+                thin=1, seed=3)
+    shifts = np.array([[0.03, 0.0], [0.02, -0.04]])
+    post = Posterior(**base, shift_u=shifts)
+    cov = np.cov(post.log_samples.T)
+    expect = np.diag([0.01**2, 0.02**2]) + shifts.T @ shifts
+    assert np.allclose(cov, expect, rtol=0.06, atol=2e-5)
+    one = Posterior(**base, shift_u=shifts[1]).log_samples
+    assert np.array_equal(one, Posterior(**base, shift_u=shifts[1:]).log_samples)
+    post.save(tmp_path / "p.h5")
+    back = load_posterior(tmp_path / "p.h5")
+    assert np.array_equal(back.log_samples, post.log_samples)

@@ -325,7 +325,8 @@ def load_posterior(path) -> Posterior:
         if (kk != k or len(post.kinds) != k or len(post.centers) != k or len(post.scales) != k
                 or post.log_prob.shape != (steps, walkers) or post.acceptance.shape != (walkers,)
                 or post.tau.shape != (k,) or not 0 <= post.burn < steps or post.thin < 1
-                or post.chains < 1 or walkers % post.chains or (shift is not None and shift.shape != (k,))):
+                or post.chains < 1 or walkers % post.chains
+                or (shift is not None and (shift.ndim not in (1, 2) or shift.shape[-1] != k))):
             raise ValueError("arrays and metadata of inconsistent shapes")
     except InputError:
         raise
