@@ -1114,7 +1114,8 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor, consid
         if np.all(np.isfinite(check["shift_u"])):
             fit = grid_moved(fit, check["shift_u"])
     warned = []
-    if rows.loaded is not None and all(math.isfinite(fit.values[n]) for n in fit.names):
+    # (the identifications at μ·e^{±σ} give only their values: the base identification checks the tables' loads)
+    if consider and rows.loaded is not None and all(math.isfinite(fit.values[n]) for n in fit.names):
         laws = None
         if plan.active:
             laws = plan.laws.replace(**{n: float(fit.values[n]) for n in LAW_FIELDS})
@@ -1349,7 +1350,7 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
         grid = dict(grid=check["grid"], loaded_harmonics=check["loaded_harmonics"],
                     shift={n: float(x) for n, x in zip(names, du)},
                     beyond={n: float(x) for n, x in zip(names, shift_u)})
-    held = None
+    held = move = None
     if friction is not None and np.all(np.isfinite(friction["move_u"])):
         # the held μ's doubt (docs/physics.md §11 *friction*): θ̂ is off by δu_μ·(ln μ − ln μ₀)/σ
         move = np.asarray(friction["move_u"], dtype=np.float64)
@@ -1381,7 +1382,7 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
         sd_mu = held["friction"]["sd_ln"]
         full = np.zeros((k + 1, k + 1))
         full[:k, :k] = cov
-        full[:k, k] = full[k, :k] = sd_mu * np.asarray(friction["move_u"], dtype=np.float64)[idx]
+        full[:k, k] = full[k, :k] = sd_mu * move[idx]
         full[k, k] = sd_mu**2
         cov, cov_names = full, cov_names + ("friction",)
     cov = 0.5 * (cov + cov.T)
