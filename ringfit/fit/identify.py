@@ -854,6 +854,8 @@ class Identification:
     #: what identify held and carried as a consider direction (docs/physics.md §11 *friction*): ``friction`` →
     #: value, ``sd_ln``, ``stated``, per free parameter its ``move`` for +1 σ and its σ ``sd_without``/``sd_with``
     held: dict | None = None
+    #: θ at the base grid's optimum, before the grid check's move (the friction's profile reads the rows there)
+    at_grid: np.ndarray | None = None
 
     def law_values(self) -> dict:
         """The identified state laws by tyre-file key (``kw_share`` …, ``kx_n_per_m2``; docs/formats.md §1), for
@@ -996,7 +998,7 @@ def identify(inputs: IdentifyInputs, *, solver: ContactSolver = ContactSolver(),
 
 
 def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor, consider=True,
-              start=None) -> Identification:
+              start=None, friction=None) -> Identification:
     tyre = inputs.tyre
     geometry, ring0 = tyre.geometry, tyre.ring
     notes = list(inputs.skipped)
@@ -1090,32 +1092,49 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor, consid
     folds = {n: block_folds(n, sl, rows) for n, sl in slices.items()}
     ratio = {n: discrepancy_ratio(fit.jacobian, fit.residuals, f) for n, f in folds.items()}
     check = None
-    friction = None
+    pre = fit  # the base grid's optimum, before the move to the continuum (the friction's profile reads it)
     # (θ holds EA = ∞ of the inextensible ring: only the free parameters need be finite)
-    if consider and plan.active and plan.laws.has_brush and fit.converged:
-        # μ held at the file's: its doubt is carried as a consider direction (docs/physics.md §11 *friction*)
-        sd_ln = friction_sd_ln(tyre)
-        if progress:
-            print(f"identify: again at μ·e^(±{sd_ln:.3g}) (the held friction's doubt)", flush=True)
-
-        def again(other):  # the base identification has said its warnings (a table's load): not three times
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                return _identify(other, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, progress=False,
-                                 sensor=sensor, consider=False, start=fit.theta)
-
-        move, how = friction_consider(inputs, fit, sd_ln, again)
-        if move is None:
-            notes.append(f"friction μ held at {float(plan.laws.friction):g} without its doubt in the covariance: {how}")
-        else:
-            friction = dict(value=float(plan.laws.friction), sd_ln=sd_ln, move_u=move, how=how)
     if all(math.isfinite(fit.values[n]) for n in fit.names) and (rows.loaded is not None or rows.profiles is not None):
         check = grid_check(fit, rows, geometry, solver, P)
         if np.all(np.isfinite(check["shift_u"])):
             fit = grid_moved(fit, check["shift_u"])
+    if friction is None and consider and plan.active and plan.laws.has_brush and fit.converged:
+        # μ, which the brush needs and no row measures alone: the tyre file's value and doubt, then what the data
+        # say of it (docs/physics.md §11 *friction*)
+        sd_ln = friction_sd_ln(tyre)
+        if progress:
+            print(f"identify: again at μ·e^(±{sd_ln:.3g}) (the friction's doubt, and its profile)", flush=True)
+
+        def again(other):  # the base identification says its warnings (a table's load): not three times
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return _identify(other, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, progress=False,
+                                 sensor=sensor, consider=False, start=pre.theta)
+
+        ends, how = friction_ends(inputs, fit, sd_ln, again)
+        if ends is None:
+            notes.append(f"friction μ held at {float(plan.laws.friction):g} without its doubt in the covariance: {how}")
+        else:
+            row_scale = block_row_scale(fit.residuals.size, slices, widen, ratio)
+            friction = friction_read(pre, fit, ends, rows, geometry, solver, P, sd_ln, row_scale)
+            if friction["again"]:  # the tyre is the one identified at the μ the data and the file say
+                if progress:
+                    print(f"identify: again at μ = {friction['value']:.4g} (read from the data)", flush=True)
+                tyre_at = tyre.with_state_values(friction=friction["value"])
+                at = _identify(dataclasses.replace(inputs, tyre=tyre_at), solver=solver, max_steps=max_steps,
+                               rtol=rtol, atol=atol, progress=progress, sensor=sensor, consider=False,
+                               start=pre.theta, friction=friction)
+                if at.converged:
+                    return at
+                # not there: the tyre stays the one at the file's μ, with the file's doubt (said in a note)
+                notes.append(f"friction: the data read μ = {friction['value']:.4g}, but the identification there "
+                             f"did not converge ({at.fit.status}); μ held at {float(plan.laws.friction):g} with "
+                             "the tyre file's doubt")
+                friction = friction_held(ends, fit, float(plan.laws.friction), sd_ln)
     warned = []
     # (the identifications at μ·e^{±σ} give only their values: the base identification checks the tables' loads)
-    if consider and rows.loaded is not None and all(math.isfinite(fit.values[n]) for n in fit.names):
+    if (consider or friction is not None) and rows.loaded is not None and all(math.isfinite(fit.values[n])
+                                                                              for n in fit.names):
         laws = None
         if plan.active:
             laws = plan.laws.replace(**{n: float(fit.values[n]) for n in LAW_FIELDS})
@@ -1129,6 +1148,7 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor, consid
     if plan.active:
         ident.laws = plan.laws.replace(**{n: float(fit.values[n]) for n in LAW_FIELDS})
     ident.warned = warned
+    ident.at_grid = np.asarray(pre.theta, dtype=np.float64)
     return ident
 
 
@@ -1147,32 +1167,113 @@ def friction_sd_ln(tyre: Tyre) -> float:
     return float(sd) / float(tyre.laws.friction)
 
 
-def friction_consider(inputs: IdentifyInputs, fit: FitResult, sd_ln: float, again) -> tuple[np.ndarray, str]:
-    """How far the identified tyre moves when the held friction μ is one σ off (docs/physics.md §11 *friction*):
-    the folder identified again, whole (noise passes, grid check and its move to the continuum), with the tyre
-    file's μ at μ·e^{+σ} and at μ·e^{−σ}, and half the difference of the two answers — a secant of the answer itself
-    over ±σ, each started from this fit's optimum. Cheaper moves were measured and fall short, because the sliding
-    zone near the patch's exit, where μ acts, is resolved only as the contact grid is refined, and the noise model
-    follows μ's misfit: on the across-states case (seed 0) the Gauss–Newton step from the fit's Jacobian gave 60 %
-    of k_x's move, a refit on the base grid 63 %, and refits each moved by its own grid check 74 %.
-    ``again(inputs)`` identifies ``inputs`` without this step.
+def friction_ends(inputs: IdentifyInputs, fit: FitResult, sd_ln: float, again) -> tuple[list | None, str]:
+    """The folder identified again, whole (noise passes, grid check and its move to the continuum), with the tyre
+    file's μ at μ·e^{+σ} and at μ·e^{−σ} (docs/physics.md §11 *friction*). ``again(inputs)`` identifies ``inputs``
+    without this step, each from this fit's optimum. Whole identifications, because cheaper moves were measured and
+    fall short: the sliding zone near the patch's exit, where μ acts, is resolved only as the contact grid is
+    refined, and the noise model follows μ's misfit (on the across-states case, seed 0, the Gauss–Newton step from
+    the fit's Jacobian gave 60 % of k_x's move, a refit on the base grid 63 %, refits each moved by its own grid check
+    74 %).
 
-    **Returns** ``(δu_μ, how)``: ``(k,)`` in the solver coordinates of ``fit.names`` — the consider direction: the
-    held μ's doubt adds δu_μ δu_μᵀ to the covariance, and σ·δu_μ is the covariance of the parameters with ln μ —
-    and ``"identified at ±σ"``, or None and the reason where either identification did not converge."""
+    **Returns** ``([at +σ, at −σ], "identified at ±σ")`` (:class:`Identification` each), or ``(None, why)`` where
+    either did not converge."""
     mu = float(inputs.tyre.laws.friction)
-    coords = {c.name: c for c in fit.coords}
     ends = []
     for sign in (1.0, -1.0):
         tyre = inputs.tyre.with_state_values(friction=mu * math.exp(sign * sd_ln))
         other = again(dataclasses.replace(inputs, tyre=tyre))
         if not other.converged or tuple(other.fit.names) != tuple(fit.names):
             return None, f"the identification at μ·e^{{{sign * sd_ln:+.3g}}} did not converge ({other.fit.status})"
-        ends.append(np.array([coords[n].to_u(other.fit.values[n]) for n in fit.names], dtype=np.float64))
-    move = 0.5 * (ends[0] - ends[1])
-    if not np.all(np.isfinite(move)):
-        return None, "the identifications at μ·e^{±σ} gave no finite move"
-    return move, "identified at ±σ"
+        if not all(math.isfinite(other.fit.values[n]) for n in fit.names):
+            return None, f"the identification at μ·e^{{{sign * sd_ln:+.3g}}} gave no finite answer"
+        ends.append(other)
+    return ends, "identified at ±σ"
+
+
+def _answer_u(fit: FitResult, other: FitResult) -> np.ndarray:
+    """``other``'s free parameters in ``fit``'s solver coordinates (``fit.names`` order)."""
+    coords = {c.name: c for c in fit.coords}
+    return np.array([coords[n].to_u(other.values[n]) for n in fit.names], dtype=np.float64)
+
+
+def friction_held(ends: list, fit: FitResult, mu: float, sd_ln: float) -> dict:
+    """μ held at the tyre file's, its doubt a consider direction (docs/physics.md §11 *friction*): δu_μ half the
+    difference of the answers at μ·e^{±σ} (:func:`friction_ends`) — the covariance gains δu_μ δu_μᵀ, and σ·δu_μ is the
+    parameters' covariance with ln μ."""
+    move = 0.5 * (_answer_u(fit, ends[0].fit) - _answer_u(fit, ends[1].fit))
+    return dict(value=mu, sd_ln=sd_ln, move_u=move, how="identified at ±σ", prior=dict(value=mu, sd_ln=sd_ln),
+                again=False)
+
+
+#: The model refinements (contact grid and loaded-mode harmonics ×2, ×4) the friction's profile is read on
+#: (:func:`friction_read`): the finest gives the estimate, the last halving's change its grid term.
+FRICTION_PROFILE_GRIDS = (2, 4)
+#: Identify again at the μ the data read only when it is this many of its own σ from the file's (below, θ's move
+#: is a tenth of the doubt the covariance carries anyway).
+FRICTION_AGAIN_SD = 0.1
+
+
+def friction_profile(pre: FitResult, thetas: list, rows: _Rows, geometry: TyreGeometry, solver: ContactSolver, P: int,
+                     sd_ln: float, row_scale: np.ndarray, factor: int) -> dict | None:
+    """What the rows say of ln μ at one refinement of the model (docs/physics.md §11 *friction: read from the
+    data*): at each of the three answers ``thetas`` (base grid optima at ln μ₀ − σ, ln μ₀, ln μ₀ + σ) the rows, each
+    under its μ, under the base identification's weights and block widening (``row_scale``), evaluated on the
+    model refined ``factor`` times, less their projection on the base fit's Jacobian (the other parameters'
+    linear re-fit). The three costs are a parabola in ln μ: **returns** ``dict(ln, sd)`` of ln(μ/μ₀) at its
+    minimum and 1/√curvature, or None where the cost has no positive curvature (the rows cannot tell μ)."""
+    m = pre.residuals.size
+    J = np.asarray(pre.jacobian, dtype=np.float64)[:m] / row_scale[:, None]
+    Q, _ = np.linalg.qr(J)
+    laws = rows.states["laws"]
+    mu0 = float(laws.friction)
+    cost = []
+    for sign, theta in zip((-1.0, 0.0, 1.0), thetas):
+        at = dataclasses.replace(rows, states={**rows.states, "laws": laws.replace(friction=mu0 * math.exp(sign * sd_ln))})
+        r = refined_rows(pre, at, geometry, solver, P, factor, theta) / row_scale
+        cost.append(float(r @ r - np.sum((Q.T @ r) ** 2)))
+    a = (cost[0] + cost[2] - 2.0 * cost[1]) / (2.0 * sd_ln**2)
+    b = (cost[2] - cost[0]) / (2.0 * sd_ln)
+    if not (math.isfinite(a) and a > 0.0 and math.isfinite(b)):
+        return None
+    return dict(ln=-b / (2.0 * a), sd=1.0 / math.sqrt(a))
+
+
+def friction_read(pre: FitResult, fit: FitResult, ends: list, rows: _Rows, geometry: TyreGeometry,
+                  solver: ContactSolver, P: int, sd_ln: float, row_scale: np.ndarray) -> dict:
+    """μ read from the data, the tyre file's μ its prior (docs/physics.md §11 *friction: read from the data*).
+
+    The profile of ln μ (:func:`friction_profile`) on each model of :data:`FRICTION_PROFILE_GRIDS`: the finest its
+    estimate x̂ (ln μ/μ₀) and σ, the last halving's change |x̂_4M − x̂_2M| a grid term added in quadrature (the
+    profile's own discretisation error). With the file's N(0, σ₀²) as prior the posterior of ln μ/μ₀ is N(m, s²),
+    1/s² = 1/σ₀² + 1/σ_x², m = s² x̂/σ_x². The parameters' move with ln μ is the parabola through the three answers
+    (at −σ₀, 0, +σ₀; grid-moved, solver coordinates), its slope at m times s the consider direction δu_μ (the
+    covariance gains δu_μ δu_μᵀ). Where the rows have no curvature in ln μ, μ stays held (:func:`friction_held`).
+
+    **Returns** the ``friction`` dict of :func:`_finish` (``value`` μ₀·e^m, ``sd_ln`` s, ``move_u``, ``how``,
+    ``prior``, ``data``) and ``again``: whether |m| ≥ :data:`FRICTION_AGAIN_SD`·s (identify at μ₀·e^m)."""
+    mu0 = float(rows.states["laws"].friction)
+    thetas = [ends[1].at_grid, pre.theta, ends[0].at_grid]
+    per = {}
+    for f in FRICTION_PROFILE_GRIDS:
+        per[f] = friction_profile(pre, thetas, rows, geometry, solver, P, sd_ln, row_scale, f)
+        if per[f] is None:
+            held = friction_held(ends, fit, mu0, sd_ln)
+            held["how"] = (f"identified at ±σ; the rows have no curvature in ln μ on the model ×{f}, so μ is held "
+                           "at the tyre file's")
+            return held
+    fine, coarse = per[FRICTION_PROFILE_GRIDS[-1]], per[FRICTION_PROFILE_GRIDS[-2]]
+    grid = abs(fine["ln"] - coarse["ln"])
+    sd_x = math.hypot(fine["sd"], grid)
+    post_var = 1.0 / (1.0 / sd_ln**2 + 1.0 / sd_x**2)
+    m, s = post_var * fine["ln"] / sd_x**2, math.sqrt(post_var)
+    u0, up, um = _answer_u(fit, fit), _answer_u(fit, ends[0].fit), _answer_u(fit, ends[1].fit)
+    slope = (up - um) / (2.0 * sd_ln) + (up + um - 2.0 * u0) / sd_ln**2 * m
+    z = fine["ln"] / math.hypot(sd_ln, sd_x)
+    data = dict(ln_ratio=fine["ln"], sd=sd_x, sd_profile=fine["sd"], grid=grid, z_against_file=z,
+                grids={f"x{f}": dict(ln_ratio=v["ln"], sd=v["sd"]) for f, v in per.items()})
+    return dict(value=mu0 * math.exp(m), sd_ln=s, move_u=s * slope, how="read from the data (profile of ln μ)",
+                prior=dict(value=mu0, sd_ln=sd_ln), data=data, again=abs(m) >= FRICTION_AGAIN_SD * s)
 
 
 #: Loads scanned per loaded table for its best-fit load, relative to its stated load_n (:func:`load_check`).
@@ -1291,19 +1392,27 @@ def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: Cont
     (the last halving's move and the tail: the part a Gauss–Newton step from M and the extrapolation know least).
     """
     levels = [2**j for j in range(int(round(math.log2(factor))) + 1)]
-    m = fit.residuals.size
     at = [np.asarray(fit.residuals)]
     for f in levels[1:]:
-        fine = ContactSolver(n_grid=f * solver.n_grid, window_deg=solver.window_deg, max_iter=solver.max_iter)
-        model = JointResiduals(P, fine, ProfileModel(), n_harmonics=f * LOADED_HARMONICS, rows_grid=solver.n_grid,
-                               k_top=0 if rows.profiles is None else rows.profiles["k_top"],
-                               across=rows.states is not None, sensor=fit.problem.model.sensor)
-        problem = Problem(model, _arrays(geometry, rows, fine), fit.coords, data_label="these measurements")
-        at.append(np.asarray(residuals(problem, fit.theta)[0])[:m])
+        at.append(refined_rows(fit, rows, geometry, solver, P, f, fit.theta))
     steps, tail = grid_moves(fit, at)
     shift = np.sum(steps, axis=0) + tail
     return dict(grid=[f * solver.n_grid for f in levels], loaded_harmonics=[f * LOADED_HARMONICS for f in levels],
                 shift_u=shift, beyond_u=shift - steps[0])
+
+
+def refined_rows(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: ContactSolver, P: int, factor: int,
+                 theta) -> np.ndarray:
+    """The fit's weighted data rows ``(m,)`` (as ``fit.residuals``: the same rows and σ) at ``theta`` under the model
+    refined ``factor`` times: contact grid ×factor, loaded-mode harmonics ×factor, the profiles' model rows
+    band-limited to the data's harmonics (:func:`grid_check`, :func:`friction_profile`; docs/physics.md §11 *the
+    model's grid*)."""
+    fine = ContactSolver(n_grid=factor * solver.n_grid, window_deg=solver.window_deg, max_iter=solver.max_iter)
+    model = JointResiduals(P, fine, ProfileModel(), n_harmonics=factor * LOADED_HARMONICS, rows_grid=solver.n_grid,
+                           k_top=0 if rows.profiles is None else rows.profiles["k_top"],
+                           across=rows.states is not None, sensor=fit.problem.model.sensor)
+    problem = Problem(model, _arrays(geometry, rows, fine), fit.coords, data_label="these measurements")
+    return np.asarray(residuals(problem, jnp.asarray(theta, dtype=jnp.float64))[0])[:fit.residuals.size]
 
 
 def grid_moved(fit: FitResult, shift_u) -> FitResult:
@@ -1327,15 +1436,22 @@ def grid_moved(fit: FitResult, shift_u) -> FitResult:
     return dataclasses.replace(fit, theta=theta, values=values, stderr=stderr)
 
 
+def block_row_scale(m: int, slices: dict, widen: dict | None, ratio: dict | None) -> np.ndarray:
+    """Each data row's σ factor ``(m,)``: its block's t_ν/z (:func:`t_widening`) times √κ_b (its discrepancy ratio,
+    docs/physics.md §11 *model discrepancy*) — the likelihood the covariance, the posterior and the friction's
+    profile read the rows with."""
+    row_scale = np.ones(m)
+    for b, sl in slices.items():
+        row_scale[sl] = (widen or {}).get(b, 1.0) * math.sqrt((ratio or {}).get(b, 1.0))
+    return row_scale
+
+
 def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, check=None, widen=None,
             ratio=None, free_laws=(), friction=None) -> Identification:
     J, r = fit.jacobian, fit.residuals
     names = fit.names
     cov_u = fit.covariance_log
-    # each block's σ times t_ν/z (t_widening) and √κ_b (its discrepancy ratio): in the covariance and the posterior
-    row_scale = np.ones(r.size)
-    for b, sl in slices.items():
-        row_scale[sl] = (widen or {}).get(b, 1.0) * math.sqrt((ratio or {}).get(b, 1.0))
+    row_scale = block_row_scale(r.size, slices, widen, ratio)
     if np.any(row_scale > 1.0):
         Jw = J.copy()
         Jw[: r.size] /= row_scale[:, None]
@@ -1359,6 +1475,8 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
         after = np.sqrt(np.clip(np.diag(cov_u), 0.0, None))
         held = dict(friction=dict(value=friction["value"], sd_ln=friction["sd_ln"], how=friction["how"],
                                   stated=bool(inputs is not None and "friction_sd" in inputs.tyre.state_values),
+                                  prior=friction.get("prior"), **({"data": friction["data"]} if "data" in friction
+                                                                  else {}),
                                   move={n: float(x) for n, x in zip(names, move)},
                                   sd_without={n: float(x) for n, x in zip(names, before)},
                                   sd_with={n: float(x) for n, x in zip(names, after)}))
@@ -1422,10 +1540,24 @@ def _finish(fit, rows, slices, scales, free_ring, P, notes, passes, inputs, chec
         f = held["friction"]
         grown = ", ".join(f"{n} {100 * f['sd_without'][n]:.2g} → {100 * f['sd_with'][n]:.2g} %"
                           for n in ("ei", "k_tread", "k_x") if n in f["sd_with"])
-        notes.append(f"friction μ held at {f['value']:g} (σ of ln μ {f['sd_ln']:.3g}, "
-                     + ("the tyre file's friction_sd" if f["stated"] else
-                        "the default: state friction_sd in the tyre file when μ is known better")
-                     + f"); its doubt is carried in the covariance (σ of ln: {grown})")
+        file_doubt = ("the tyre file's friction_sd" if f["stated"] else
+                      "the default: state friction_sd in the tyre file when μ is known better")
+        if "data" in f:
+            d, pr = f["data"], f["prior"]
+            notes.append(f"friction μ read from the data: {f['value']:.4g} (σ of ln μ {f['sd_ln']:.2g}), the rows' "
+                         f"ln μ/μ₀ {d['ln_ratio']:+.3f} ± {d['sd']:.3f} (profile {d['sd_profile']:.3f}, grid "
+                         f"{d['grid']:.3f}) with the tyre file's μ₀ = {pr['value']:g} (σ of ln μ {pr['sd_ln']:.3g}, "
+                         f"{file_doubt}) as prior; its doubt is carried in the covariance (σ of ln: {grown})")
+            if abs(d["ln_ratio"]) > 1.5 * pr["sd_ln"]:
+                notes.append(f"friction: the rows' μ lies {abs(d['ln_ratio']) / pr['sd_ln']:.1f} σ of the file's "
+                             "doubt from μ₀, beyond the identifications at μ₀·e^(±σ) its profile was read from: "
+                             "its value is extrapolated; state a friction nearer it, or a wider friction_sd")
+            if abs(d["z_against_file"]) > 3.0:
+                notes.append(f"friction: the data and the tyre file disagree on μ ({d['z_against_file']:+.1f} σ)")
+        else:
+            notes.append(f"friction μ held at {f['value']:g} (σ of ln μ {f['sd_ln']:.3g}, {file_doubt}); its doubt "
+                         f"is carried in the covariance (σ of ln: {grown})"
+                         + ("" if f["how"] == "identified at ±σ" else f" [{f['how']}]"))
     return ident
 
 
