@@ -173,9 +173,9 @@ for key in keys:
 # %% [markdown]
 # One recording is not a verdict, and the identified tyre can read it worse than the nominal one: its calibration
 # here is four seconds per state, and a ring identified from it carries its own errors into every reading (EI,
-# on which the load–pressure reading leans, is the least pinned). identify holds the tread's friction μ at the
-# tyre file's value (the file says 1; the simulator's μ differs) and carries its doubt, σ of ln μ 0.1 unless the
-# file states `friction_sd`, into the covariance it writes, so the identified intervals above include it
-# (docs/physics.md §11 *friction*). `benchmarks/bench_state.py --tyre identified`
-# measures this path over many recordings (docs/physics.md §13.6): 0.7 % median load error on seeds 0–5 and 2.0 % on
-# held-out seeds 7–9, against 0.35 % and 0.9 % with the true tyre file.
+# on which the load–pressure reading leans, is the least pinned). identify reads the tread's friction μ from the
+# profiles at a torque, with the tyre file's value (1 here; the simulator's μ differs) as its prior, σ of ln μ 0.1
+# unless the file states `friction_sd`, and carries what is left of its doubt into the covariance it writes, so the
+# identified intervals above include it (docs/physics.md §11 *friction*). `benchmarks/bench_state.py --tyre
+# identified` measures this path over many recordings (docs/physics.md §13.6): 0.73 % median load error on seeds 0–5
+# and 0.83 % on held-out seeds 6–9, against 0.35 % (seeds 0–5) and 0.9 % (seeds 7–9) with the true tyre file.
