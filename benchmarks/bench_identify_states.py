@@ -54,6 +54,7 @@ def main() -> None:
     err = {n: [] for n in NAMES}
     cover = {n: [] for n in NAMES}
     cover0 = {n: [] for n in NAMES}
+    mu_z = []  # μ read from the data (docs/physics.md §11 *friction: read from the data*) against the truth's
     slip_z, times = [], None
     with tempfile.TemporaryDirectory() as tmp:
         for c in range(ARGS.cases):
@@ -79,6 +80,9 @@ def main() -> None:
                 sd0 = held["sd_without"][n] if held else (p.get("sd_ln") or p.get("sd"))
                 z0 = ((p["value"] - v) if n in LINEAR_COVARIANCE else math.log(p["value"] / v)) / sd0
                 cover0[n].append(abs(z0) <= 1.959964)
+            if ident.held and "data" in ident.held["friction"]:
+                f = ident.held["friction"]
+                mu_z.append((math.log(f["value"] / mu), f["sd_ln"]))
             by_source = {Path(x["source"]).name: x for x in ident.nuisances}
             for i, tp in enumerate(truth["profiles"]):
                 got = by_source.get(f"run{i + 1}.profile.csv", {})
@@ -94,6 +98,11 @@ def main() -> None:
     for n in NAMES:
         unit = "" if n in LINEAR_COVARIANCE else " (ln)"
         print(f"{n:14s} {statistics.median(err[n]):13.4g} {sum(cover[n]):4d}/{k} {sum(cover0[n]):12d}/{k}{unit}")
+    if mu_z:
+        errs = [abs(e) for e, _ in mu_z]
+        print(f"{'friction μ':14s} {statistics.median(errs):13.4g} {sum(abs(e) <= 1.959964 * sd for e, sd in mu_z):4d}/"
+              f"{len(mu_z)} {'(read from the data; held: σ 0.1)':>16s} (ln); its σ median "
+              f"{statistics.median(sd for _, sd in mu_z):.3g}, |z| max {max(abs(e) / sd for e, sd in mu_z):.2f}")
     total = sum(sum(v) for v in cover.values())
     total0 = sum(sum(v) for v in cover0.values())
     print(f"all parameters: {total}/{k * len(NAMES)} covered ({100 * total / (k * len(NAMES)):.1f} %); without the "
