@@ -41,6 +41,7 @@ if ARGS.cores:
     os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[: ARGS.cores]))
 
 import numpy as np  # noqa: E402
+from ringfit.fit.free_block import Z95  # noqa: E402
 from ringfit.fit.identify import LAW_FIELDS, identify, read_identify_folder  # noqa: E402
 from ringfit.io.tyre import LINEAR_COVARIANCE  # noqa: E402
 from ringfit.synth.identify import make_state_identify_case  # noqa: E402
@@ -100,7 +101,7 @@ def main() -> None:
         print(f"{n:14s} {statistics.median(err[n]):13.4g} {sum(cover[n]):4d}/{k} {sum(cover0[n]):12d}/{k}{unit}")
     if mu_z:
         errs = [abs(e) for e, _ in mu_z]
-        print(f"{'friction μ':14s} {statistics.median(errs):13.4g} {sum(abs(e) <= 1.959964 * sd for e, sd in mu_z):4d}/"
+        print(f"{'friction μ':14s} {statistics.median(errs):13.4g} {sum(abs(e) <= Z95 * sd for e, sd in mu_z):4d}/"
               f"{len(mu_z)} {'(read from the data; held: σ 0.1)':>16s} (ln); its σ median "
               f"{statistics.median(sd for _, sd in mu_z):.3g}, |z| max {max(abs(e) / sd for e, sd in mu_z):.2f}")
     total = sum(sum(v) for v in cover.values())

@@ -18,6 +18,7 @@ import pytest
 
 from ringfit.errors import InputError
 from ringfit.fit import identify as im
+from ringfit.fit.free_block import Z95
 from ringfit.io.tyre import RingCovariance, Tyre, read_tyre, write_tyre
 from ringfit.params import TyreLaws, table9
 
@@ -241,7 +242,7 @@ def test_friction_is_read_from_the_profile_with_the_files_mu_as_prior(monkeypatc
     profiles = {2: dict(ln=0.05, sd=0.02), 4: dict(ln=0.06, sd=0.01)}
     seen = []
 
-    def fake_profile(pre_, thetas, rows_, geometry, solver, P, sd_ln, row_scale, factor):
+    def fake_profile(pre_, thetas, rows_, geometry, solver, P, sd_ln, row_scale, factor, centre=None):
         seen.append([float(t[0]) for t in thetas])
         return profiles[factor]
 
@@ -430,7 +431,7 @@ def test_where_the_identification_at_the_mu_read_fails_mu_is_held_with_a_note(tm
 
     monkeypatch.setattr(im, "_identify", identify_at)
     monkeypatch.setattr(im, "friction_ends", ends)
-    monkeypatch.setattr(im, "friction_read", lambda *a: dict(value=1.07, sd_ln=0.01, again=True))
+    monkeypatch.setattr(im, "friction_read", lambda *a, **k: dict(value=1.07, sd_ln=0.01, again=True))
     ident = im.identify(im.read_identify_folder(tmp_path / "case"))
     assert asked == [1.07] and ident.converged
     f = ident.held["friction"]
@@ -516,7 +517,7 @@ def test_the_laws_intervals_cover_over_random_cases(tmp_path):
         ident = im.identify(im.read_identify_folder(tmp_path / f"case{seed}"))
         assert ident.converged, seed
         f = ident.held["friction"]
-        ok = abs(math.log(f["value"] / mu)) <= 1.959964 * f["sd_ln"]
+        ok = abs(math.log(f["value"] / mu)) <= Z95 * f["sd_ln"]
         cover.setdefault("friction", []).append(ok)
         if not ok:
             misses.append((seed, "friction", mu, f))

@@ -1123,7 +1123,8 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor, consid
             notes.append(f"friction μ held at {float(plan.laws.friction):g} without its doubt in the covariance: {how}")
         else:
             row_scale = block_row_scale(fit.residuals.size, slices, widen, ratio)
-            friction = friction_read(pre, fit, ends, rows, geometry, solver, P, sd_ln, row_scale)
+            friction = friction_read(pre, fit, ends, rows, geometry, solver, P, sd_ln, row_scale,
+                                     refined=None if check is None else check["refined"])
             if friction["again"]:  # the tyre is the one identified at the μ the data and the file say
                 if progress:
                     print(f"identify: again at μ = {friction['value']:.4g} (read from the data)", flush=True)
@@ -1222,13 +1223,14 @@ FRICTION_AGAIN_SD = 0.1
 
 
 def friction_profile(pre: FitResult, thetas: list, rows: _Rows, geometry: TyreGeometry, solver: ContactSolver, P: int,
-                     sd_ln: float, row_scale: np.ndarray, factor: int) -> dict | None:
+                     sd_ln: float, row_scale: np.ndarray, factor: int, centre=None) -> dict | None:
     """What the rows say of ln μ at one refinement of the model (docs/physics.md §11 *friction: read from the
     data*): at each of the three answers ``thetas`` (base grid optima at ln μ₀ − σ, ln μ₀, ln μ₀ + σ) the rows, each
     under its μ, under the base identification's weights and block widening (``row_scale``), evaluated on the
     model refined ``factor`` times, less their projection on the base fit's Jacobian (the other parameters'
     linear re-fit). The three costs are a parabola in ln μ: **returns** ``dict(ln, sd)`` of ln(μ/μ₀) at its
-    minimum and 1/√curvature, or None where the cost has no positive curvature (the rows cannot tell μ)."""
+    minimum and 1/√curvature, or None where the cost has no positive curvature (the rows cannot tell μ).
+    ``centre``: the rows at ``thetas[1]`` under μ₀ on this model where already evaluated (the grid check's)."""
     m = pre.residuals.size
     J = np.asarray(pre.jacobian, dtype=np.float64)[:m] / row_scale[:, None]
     Q, _ = np.linalg.qr(J)
@@ -1236,8 +1238,12 @@ def friction_profile(pre: FitResult, thetas: list, rows: _Rows, geometry: TyreGe
     mu0 = float(laws.friction)
     cost = []
     for sign, theta in zip((-1.0, 0.0, 1.0), thetas):
-        at = dataclasses.replace(rows, states={**rows.states, "laws": laws.replace(friction=mu0 * math.exp(sign * sd_ln))})
-        r = refined_rows(pre, at, geometry, solver, P, factor, theta) / row_scale
+        if sign == 0.0 and centre is not None:
+            r = np.asarray(centre, dtype=np.float64) / row_scale
+        else:
+            at = dataclasses.replace(rows, states={**rows.states,
+                                                   "laws": laws.replace(friction=mu0 * math.exp(sign * sd_ln))})
+            r = refined_rows(pre, at, geometry, solver, P, factor, theta) / row_scale
         cost.append(float(r @ r - np.sum((Q.T @ r) ** 2)))
     a = (cost[0] + cost[2] - 2.0 * cost[1]) / (2.0 * sd_ln**2)
     b = (cost[2] - cost[0]) / (2.0 * sd_ln)
@@ -1247,7 +1253,7 @@ def friction_profile(pre: FitResult, thetas: list, rows: _Rows, geometry: TyreGe
 
 
 def friction_read(pre: FitResult, fit: FitResult, ends: list, rows: _Rows, geometry: TyreGeometry,
-                  solver: ContactSolver, P: int, sd_ln: float, row_scale: np.ndarray) -> dict:
+                  solver: ContactSolver, P: int, sd_ln: float, row_scale: np.ndarray, refined=None) -> dict:
     """μ read from the data, the tyre file's μ its prior (docs/physics.md §11 *friction: read from the data*).
 
     The profile of ln μ (:func:`friction_profile`) on each model of :data:`FRICTION_PROFILE_GRIDS`: the finest its
@@ -1258,12 +1264,14 @@ def friction_read(pre: FitResult, fit: FitResult, ends: list, rows: _Rows, geome
     covariance gains δu_μ δu_μᵀ). Where the rows have no curvature in ln μ, μ stays held (:func:`friction_held`).
 
     **Returns** the ``friction`` dict of :func:`_finish` (``value`` μ₀·e^m, ``sd_ln`` s, ``move_u``, ``how``,
-    ``prior``, ``data``) and ``again``: whether |m| ≥ :data:`FRICTION_AGAIN_SD`·s (identify at μ₀·e^m)."""
+    ``prior``, ``data``) and ``again``: whether |m| ≥ :data:`FRICTION_AGAIN_SD`·s (identify at μ₀·e^m).
+    ``refined``: the grid check's rows at the base optimum per refinement (:func:`grid_check`), not evaluated again."""
     mu0 = float(rows.states["laws"].friction)
     thetas = [ends[1].at_grid, pre.theta, ends[0].at_grid]
     per = {}
     for f in FRICTION_PROFILE_GRIDS:
-        per[f] = friction_profile(pre, thetas, rows, geometry, solver, P, sd_ln, row_scale, f)
+        per[f] = friction_profile(pre, thetas, rows, geometry, solver, P, sd_ln, row_scale, f,
+                                  centre=(refined or {}).get(f))
         if per[f] is None:
             held = friction_held(ends, fit, mu0, sd_ln)
             held["how"] = (f"identified at ±σ; the rows have no curvature in ln μ on the model ×{f}, so μ is held "
@@ -1394,9 +1402,10 @@ def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: Cont
     rule the state estimate reads a recording by (§13.4), so a tyre is identified and read on the same model. One
     residual evaluation per refinement.
 
-    **Returns** ``dict(grid, loaded_harmonics, shift_u, beyond_u)`` (``(k,)`` in the solver coordinates of
+    **Returns** ``dict(grid, loaded_harmonics, shift_u, beyond_u, refined)`` (``(k,)`` in the solver coordinates of
     ``fit.names``): ``shift_u`` the whole move to the continuum, ``beyond_u`` its part beyond the first refinement
-    (the last halving's move and the tail: the part a Gauss–Newton step from M and the extrapolation know least).
+    (the last halving's move and the tail: the part a Gauss–Newton step from M and the extrapolation know least);
+    ``refined`` the rows at the fit per refinement factor (:func:`refined_rows`; the friction's profile reuses them).
     """
     levels = [2**j for j in range(int(round(math.log2(factor))) + 1)]
     at = [np.asarray(fit.residuals)]
@@ -1405,7 +1414,7 @@ def grid_check(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: Cont
     steps, tail = grid_moves(fit, at)
     shift = np.sum(steps, axis=0) + tail
     return dict(grid=[f * solver.n_grid for f in levels], loaded_harmonics=[f * LOADED_HARMONICS for f in levels],
-                shift_u=shift, beyond_u=shift - steps[0])
+                shift_u=shift, beyond_u=shift - steps[0], refined=dict(zip(levels[1:], at[1:])))
 
 
 def refined_rows(fit: FitResult, rows: _Rows, geometry: TyreGeometry, solver: ContactSolver, P: int, factor: int,
