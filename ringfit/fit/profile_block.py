@@ -28,6 +28,7 @@ Example::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -148,15 +149,31 @@ _SENSOR_TABLE = {
 }
 
 
+def sensor_coordinate(field: str, *, bounded: bool = True) -> Coordinate:
+    """The solver coordinate of one sensor nuisance ``field`` (:data:`SENSOR_FIELDS`), named ``field``: γ linear
+    (scale 0.1), f_c log within :data:`CORNER_RANGE`, e linear (scale 1 mm), g_t/g_r log within :data:`GAIN_RANGE`.
+    ``bounded=False`` leaves the corner's log coordinate without its range: the per-revolution readers (the load and
+    state estimates) solve in batches that have no active set, where a corner creeping to 0.01 Hz would end a
+    revolution's fit unconverged; identify holds it there (docs/physics.md §11 *bounds*)."""
+    kind, scale, (lo, hi), _, _ = _SENSOR_TABLE[field]
+    if not bounded:
+        lo, hi = -math.inf, math.inf
+    return Coordinate(field, kind, scale=scale, lo=lo, hi=hi)
+
+
+def sensor_prior_entry(coord: Coordinate, field: str) -> tuple[float, float]:
+    """``(mean, sd)`` of the prior on sensor nuisance ``field`` in ``coord``'s solver coordinate (ln for a log one,
+    (θ − center)/scale for a linear one): the one prior every reader of a profile puts on it."""
+    mean, sd = _SENSOR_TABLE[field][3:]
+    if coord.kind == LOG:
+        return math.log(mean), sd
+    return (mean - coord.center) / coord.scale, sd / coord.scale
+
+
 def sensor_coords(P: int) -> tuple[Coordinate, ...]:
-    """Solver coordinates of :func:`sensor_names`: γ linear (scale 0.1), f_c log within :data:`CORNER_RANGE`, e linear
-    (scale 1 mm), g_t/g_r log within :data:`GAIN_RANGE` (as the state estimate's)."""
-    out = []
-    for i in range(P):
-        for f in SENSOR_FIELDS:
-            kind, scale, (lo, hi), _, _ = _SENSOR_TABLE[f]
-            out.append(Coordinate(f"{f}_{i + 1}", kind, scale=scale, lo=lo, hi=hi))
-    return tuple(out)
+    """Solver coordinates of :func:`sensor_names` (:func:`sensor_coordinate` of each field, per run)."""
+    return tuple(dataclasses.replace(sensor_coordinate(f), name=f"{f}_{i + 1}")
+                 for i in range(P) for f in SENSOR_FIELDS)
 
 
 def sensor_start(P: int) -> np.ndarray:
@@ -169,12 +186,8 @@ def sensor_prior(P: int) -> GaussianPrior | None:
     the priors above (a run may be a remounted sensor: nothing tied across runs). ``None`` for no profile."""
     if P == 0:
         return None
-    entries = {}
-    for coord, f in zip(sensor_coords(P), SENSOR_FIELDS * P):
-        mean, sd = _SENSOR_TABLE[f][3:]
-        entries[coord.name] = ((math.log(mean), sd) if coord.kind == LOG
-                               else ((mean - coord.center) / coord.scale, sd / coord.scale))
-    return GaussianPrior.independent(entries)
+    return GaussianPrior.independent({coord.name: sensor_prior_entry(coord, f)
+                                      for coord, f in zip(sensor_coords(P), SENSOR_FIELDS * P)})
 
 
 def sensor_basis(solution, geometry: TyreGeometry, sensor: SensorModel) -> jax.Array:
@@ -182,7 +195,6 @@ def sensor_basis(solution, geometry: TyreGeometry, sensor: SensorModel) -> jax.A
     γ, ``(4, 2, M)``: the reading at (0, 0), (:data:`LINER_BASIS_STEP`, 0), (0, 1) and (step, 1), the rest of
     ``sensor`` as given (docs/physics.md §5 layers 1 and 4: v_s = v + eψ, the axes turned by γψ; the reading is
     exactly bilinear in (e, γ) once its per-revolution mean is removed). :func:`sensor_reading` combines it."""
-    import dataclasses
 
     from ringfit.physics.sensor import sensor_signals
 

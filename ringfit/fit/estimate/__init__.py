@@ -81,9 +81,10 @@ previous one).
 
 from ringfit.fit.estimate.harmonics import (NOISE_SMOOTHING, band_signal, grid_signal, harmonic_amplitudes,
                                             amplitude_rows, smoothed_noise)
-from ringfit.fit.estimate.problem import (ANGLE_OFFSET, COORDS, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, K_TREAD, LOAD,
-                                          LOAD_RANGE, PARAMETERS, TILT, TILT_PRIOR, EstimateArrays, EstimateResiduals,
-                                          EstimateSettings, estimate_problem, nuisance_priors)
+from ringfit.fit.estimate.problem import (ANGLE_OFFSET, COORDS, CORNER, GAIN, GAIN_RANGE, K_TREAD, LOAD, LOAD_RANGE,
+                                          PARAMETERS, TILT, EstimateArrays, EstimateResiduals, EstimateSettings,
+                                          estimate_problem, nuisance_priors)
+from ringfit.fit.profile_block import CORNER_PRIOR, TILT_PRIOR  # the sensor's priors, one for every reader
 from ringfit.fit.estimate.feature import PEAK_GRID, PEAK_SEARCH_DEG, FeatureEstimate, edge_peaks, feature_estimate
 from ringfit.fit.estimate.curves import LoadCurves, load_curves
 from ringfit.fit.estimate.load import (DEFAULT_K_TREAD_SD, MODEL_FLOOR, OFFSET_WARN_DEG, POOR_FIT_RATIO, LoadEstimate,

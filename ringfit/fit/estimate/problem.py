@@ -21,7 +21,7 @@ from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Gauss
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
 from ringfit.fit.least_squares import RING_FIELDS
 from ringfit.io.tyre import LINEAR_COVARIANCE
-from ringfit.fit.profile_block import CORNER_PRIOR, GAIN_RANGE, TILT_PRIOR  # the profile block's: one sensor for every reader
+from ringfit.fit.profile_block import GAIN_RANGE, sensor_coordinate, sensor_prior_entry  # one sensor for every reader
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced
 from ringfit.physics.profile import FlatOrDrum, ProfileModel, full_band, profile_channels
@@ -40,8 +40,8 @@ COORDS = (
     Coordinate(LOAD, LOG, lo=LOAD_RANGE[0], hi=LOAD_RANGE[1]),
     Coordinate(GAIN, LOG, lo=GAIN_RANGE[0], hi=GAIN_RANGE[1]),
     Coordinate(ANGLE_OFFSET, LINEAR, scale=math.radians(1.0)),
-    Coordinate(CORNER, LOG),
-    Coordinate(TILT, LINEAR, scale=0.1),
+    sensor_coordinate(CORNER, bounded=False),
+    sensor_coordinate(TILT),
     Coordinate(K_TREAD, LOG, lo=1e5, hi=1e9),
 )
 
@@ -224,9 +224,7 @@ def optimum_ring_shift(fit, ring: RingParams, names: tuple[str, ...], laws=None)
 
 def nuisance_priors() -> dict:
     """``name -> (mean, sd)`` in solver coordinates of the high-pass corner and tilt priors."""
-    tilt = COORDS[PARAMETERS.index(TILT)]
-    return {CORNER: (math.log(CORNER_PRIOR[0]), CORNER_PRIOR[1]),
-            TILT: ((TILT_PRIOR[0] - tilt.center) / tilt.scale, TILT_PRIOR[1] / tilt.scale)}
+    return {n: sensor_prior_entry(COORDS[PARAMETERS.index(n)], n) for n in (CORNER, TILT)}
 
 
 def estimate_problem(arrays: EstimateArrays, settings: EstimateSettings, k_max: int,

@@ -35,13 +35,13 @@ from ringfit.errors import InputError
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
                                 free_set, least_squares_batch, linearize, residuals)
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
-from ringfit.fit.profile_block import (GAIN_TANGENTIAL_PRIOR_SD, LINER_OFFSET_PRIOR, PROFILE_K_MAX, fit_profile_block,
-                                       noise_from_residual)
+from ringfit.fit.profile_block import (LINER_OFFSET_PRIOR, PROFILE_K_MAX, fit_profile_block, noise_from_residual,
+                                       sensor_coordinate, sensor_prior_entry)
 from ringfit.fit.estimate.load import LoadEstimate, band_top, estimate_load
 from ringfit.fit.result import grid_moves
 from ringfit.fit.identify import band_folds, discrepancy_ratio
-from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, CORNER_PRIOR, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
-                                          TILT_PRIOR, EstimateSettings, covariance_kind,
+from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, GAIN, GAIN_RANGE, LOAD, LOAD_RANGE, TILT,
+                                          EstimateSettings, covariance_kind,
                                           optimum_ring_shift, tyre_value, tyre_with)
 from ringfit.params import BAR, RingParams, TyreGeometry, TyreLaws
 from ringfit.physics.contact import ContactSolver, as_traced
@@ -104,10 +104,10 @@ STATE_COORDS = (
     Coordinate(TREAD, LOG, lo=TREAD_RANGE[0], hi=TREAD_RANGE[1]),
     Coordinate(GAIN, LOG, lo=GAIN_RANGE[0], hi=GAIN_RANGE[1]),
     Coordinate(ANGLE_OFFSET, LINEAR, scale=math.radians(1.0)),
-    Coordinate(CORNER, LOG),
-    Coordinate(TILT, LINEAR, scale=0.1),
-    Coordinate(GAIN_TANGENTIAL, LOG, lo=GAIN_RANGE[0], hi=GAIN_RANGE[1]),
-    Coordinate(LINER_OFFSET, LINEAR, scale=1e-3),
+    sensor_coordinate(CORNER, bounded=False),
+    sensor_coordinate(TILT),
+    sensor_coordinate(GAIN_TANGENTIAL),
+    sensor_coordinate(LINER_OFFSET),
 )
 
 #: Reported quantities: key → (unit, scale from SI, what) — the state, then the derived ones (docs/formats.md §7.1).
@@ -219,16 +219,12 @@ def state_problem(arrays: StateArrays, settings: EstimateSettings, k_max: int, p
 
 def state_priors(geometry: TyreGeometry, laws: TyreLaws) -> dict:
     """``name -> (mean, sd)`` in solver coordinates: §13.4's weak priors and §10's nuisance priors."""
-    tilt = STATE_COORDS[STATE_PARAMETERS.index(TILT)]
     slip = STATE_COORDS[STATE_PARAMETERS.index(SLIP)]
-    e = STATE_COORDS[STATE_PARAMETERS.index(LINER_OFFSET)]
     return {PRESSURE: (math.log(float(geometry.pressure)), PRESSURE_PRIOR_SD),
             SLIP: (0.0, SLIP_PRIOR_SD / slip.scale),
             TREAD: (math.log(float(laws.tread_depth_ref)), TREAD_PRIOR_SD),
-            CORNER: (math.log(CORNER_PRIOR[0]), CORNER_PRIOR[1]),
-            TILT: ((TILT_PRIOR[0] - tilt.center) / tilt.scale, TILT_PRIOR[1] / tilt.scale),
-            GAIN_TANGENTIAL: (0.0, GAIN_TANGENTIAL_PRIOR_SD),
-            LINER_OFFSET: ((LINER_OFFSET_PRIOR[0] - e.center) / e.scale, LINER_OFFSET_PRIOR[1] / e.scale)}
+            **{n: sensor_prior_entry(STATE_COORDS[STATE_PARAMETERS.index(n)], n)
+               for n in (CORNER, TILT, GAIN_TANGENTIAL, LINER_OFFSET)}}
 
 
 def free_parameters(laws: TyreLaws, fixed: dict) -> tuple[str, ...]:
