@@ -10,6 +10,7 @@ import numpy as np
 import jax.numpy as jnp
 import pytest
 
+from ringfit.fit import engine
 from ringfit.fit.engine import LINEAR, AbstractResiduals, Coordinate, Problem, _hold_on_bounds, least_squares
 
 T = np.linspace(0.0, 2.0, 30)
@@ -67,3 +68,33 @@ def test_a_fit_far_from_its_bounds_is_left_as_it_ended():
     problem, _ = _problem(0.4, seed=3)
     fit = least_squares(problem, np.array([0.9, 5.0]), ("a", "c"), max_steps=1)
     assert fit.status == "max_steps_reached" and fit.extra["held"] == ()
+
+
+def test_a_creeping_solve_is_finished_at_the_check_not_at_the_end_of_its_budget(monkeypatch):
+    """With a long budget the creep is caught at the check after ``ACTIVE_SET_AFTER`` steps: the slope is within
+    the active set's reach of its bound after 12 steps of this solve (a plain solve takes 26 to meet its
+    tolerances), so the answer is the constrained optimum in fewer steps than the plain solve's."""
+    monkeypatch.setattr(engine, "ACTIVE_SET_AFTER", 12)
+    problem, y = _problem(1.5)
+    plain = least_squares(problem, np.array([0.5, 0.0]), ("a", "c"), max_steps=400, active_set=False)
+    early = least_squares(problem, np.array([0.5, 0.0]), ("a", "c"), max_steps=12, active_set=False)
+    assert early.status == "max_steps_reached" and 1.0 - early.values["a"] < engine.ACTIVE_SET_NEAR
+    fit = least_squares(problem, np.array([0.5, 0.0]), ("a", "c"), max_steps=400)
+    assert fit.converged and fit.extra["held"] == ("a",), fit.message
+    assert fit.iterations < plain.iterations
+    assert fit.values["a"] == 1.0
+    np.testing.assert_allclose(fit.values["c"], np.mean(y - T), rtol=1e-8)
+
+
+def test_a_solve_with_nothing_on_a_bound_at_the_check_goes_on_from_where_it_is(monkeypatch):
+    """At a check after 4 steps the slope is still 4 % of its range from the bound (not the active set's
+    business): the solve goes on for the rest of its budget, its steps are counted across both parts, and it
+    ends at the same optimum as one uninterrupted solve."""
+    monkeypatch.setattr(engine, "ACTIVE_SET_AFTER", 4)
+    problem, y = _problem(1.5)
+    early = least_squares(problem, np.array([0.5, 0.0]), ("a", "c"), max_steps=4, active_set=False)
+    assert early.status == "max_steps_reached" and 1.0 - early.values["a"] > 10 * engine.ACTIVE_SET_NEAR
+    fit = least_squares(problem, np.array([0.5, 0.0]), ("a", "c"), max_steps=400)
+    assert fit.converged and fit.iterations > 4, fit.message
+    assert fit.values["a"] == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_allclose(fit.values["c"], np.mean(y - T), rtol=1e-8)

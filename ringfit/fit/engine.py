@@ -491,8 +491,10 @@ def least_squares(
       should not be counted).
     - ``pad_to``: pad the free set to this size (one compilation for several free-set sizes).
     - ``method``: ``"levenberg_marquardt"`` (default) or ``"gauss_newton"`` (:data:`SOLVERS`).
-    - ``active_set``: finish a solve that reaches its step limit with a bounded parameter on its bound by
-      holding it there (:func:`_hold_on_bounds`; docs/physics.md §11 *bounds*). ``False``: the solve as it ended.
+    - ``active_set``: finish a solve that has a bounded parameter on its bound and has not converged by holding
+      it there (:func:`_hold_on_bounds`; docs/physics.md §11 *bounds*), checked after :data:`ACTIVE_SET_AFTER`
+      steps and again at ``max_steps``; a solve with nothing on a bound goes on from where it is for the rest of
+      its budget. ``False``: one solve, as it ended.
 
     **Returns:** :class:`~ringfit.fit.result.FitResult` with ``theta`` (all parameters at the
     optimum), the model's aux in ``extra["aux"]`` and ``problem``; ``extra["held"]`` names the parameters
@@ -500,8 +502,23 @@ def least_squares(
     """
     require_x64("ringfit.fit.engine.least_squares")
     kw = dict(max_steps=max_steps, rtol=rtol, atol=atol, n_data=n_data, method=method)
-    result = _least_squares(problem, theta0, free, pad_to=pad_to, **kw)
-    if active_set and result.status == "max_steps_reached" and max_steps > 0:
+    if not (active_set and max_steps > ACTIVE_SET_AFTER):
+        result = _least_squares(problem, theta0, free, pad_to=pad_to, **kw)
+        if active_set and result.status == "max_steps_reached" and max_steps > 0:
+            result = _hold_on_bounds(problem, result, tuple(free), pad_to, kw)
+        return result
+    # A solve still running after ACTIVE_SET_AFTER steps with a parameter on its bound is creeping there: the
+    # active set finishes it now instead of after the whole budget. Otherwise the solve goes on from where it is.
+    first = _least_squares(problem, theta0, free, pad_to=pad_to, **{**kw, "max_steps": ACTIVE_SET_AFTER})
+    if first.status != "max_steps_reached":
+        return first
+    held = _hold_on_bounds(problem, first, tuple(free), pad_to, kw)
+    if held is not first:
+        return held
+    result = _least_squares(problem, first.theta, free, pad_to=pad_to,
+                            **{**kw, "max_steps": max_steps - first.iterations})
+    result.iterations += first.iterations
+    if result.status == "max_steps_reached":
         result = _hold_on_bounds(problem, result, tuple(free), pad_to, kw)
     return result
 
@@ -510,6 +527,9 @@ def least_squares(
 #: range of a bound is finished by an active set (:func:`_hold_on_bounds`). The sine transform's slope vanishes
 #: on the bound, so Levenberg–Marquardt creeps there and never meets its tolerances (docs/physics.md §11 *bounds*).
 ACTIVE_SET_NEAR = 1e-3
+#: Steps after which a solve that has not converged is checked for a parameter creeping to its bound (the active
+#: set then finishes it; a solve with no such parameter goes on, from where it is, for the rest of its budget).
+ACTIVE_SET_AFTER = 128
 #: Rounds of hold, re-solve and release before the active set gives up (each round frees what the gradient
 #: pulls inwards).
 ACTIVE_SET_ROUNDS = 3

@@ -979,8 +979,8 @@ def log_interval(value: float, sd_ln, bounds: tuple[float, float] | None) -> dic
 #: The solver's step budget per noise pass of :func:`identify`. A converging pass takes 5–100 steps; one whose
 #: valley is long and flat takes more: the across-states case of seed 6 with μ 0.90 (the file's 1) met its
 #: tolerances after 269 steps of its fourth pass (at 128 it was reported ``max_steps_reached``). Steps are a traced
-#: argument: a larger budget costs nothing where the pass converges sooner, but a pass creeping to a bound runs it
-#: out before the engine's active set starts (the state example's seed 6: 94 → 249 s CPU).
+#: argument: a larger budget costs nothing where the pass converges sooner, and a pass creeping to a bound is
+#: finished by the engine's active set after :data:`ringfit.fit.engine.ACTIVE_SET_AFTER` steps, not at the budget.
 IDENTIFY_MAX_STEPS = 512
 
 
