@@ -493,8 +493,8 @@ def least_squares(
     - ``method``: ``"levenberg_marquardt"`` (default) or ``"gauss_newton"`` (:data:`SOLVERS`).
     - ``active_set``: finish a solve that has a bounded parameter on its bound and has not converged by holding
       it there (:func:`_hold_on_bounds`; docs/physics.md §11 *bounds*), checked after :data:`ACTIVE_SET_AFTER`
-      steps and again at ``max_steps``; a solve with nothing on a bound goes on from where it is for the rest of
-      its budget. ``False``: one solve, as it ended.
+      steps and again at ``max_steps``; a solve with nothing on a bound at the check is run again from its start
+      with the whole budget (the answer it gives without the check). ``False``: one solve, as it ended.
 
     **Returns:** :class:`~ringfit.fit.result.FitResult` with ``theta`` (all parameters at the
     optimum), the model's aux in ``extra["aux"]`` and ``problem``; ``extra["held"]`` names the parameters
@@ -508,16 +508,15 @@ def least_squares(
             result = _hold_on_bounds(problem, result, tuple(free), pad_to, kw)
         return result
     # A solve still running after ACTIVE_SET_AFTER steps with a parameter on its bound is creeping there: the
-    # active set finishes it now instead of after the whole budget. Otherwise the solve goes on from where it is.
+    # active set finishes it now instead of after the whole budget. Otherwise the whole solve is run as it would be
+    # without the check (from its start: a Levenberg–Marquardt solve resumed from a later point is another solve).
     first = _least_squares(problem, theta0, free, pad_to=pad_to, **{**kw, "max_steps": ACTIVE_SET_AFTER})
     if first.status != "max_steps_reached":
         return first
     held = _hold_on_bounds(problem, first, tuple(free), pad_to, kw)
     if held is not first:
         return held
-    result = _least_squares(problem, first.theta, free, pad_to=pad_to,
-                            **{**kw, "max_steps": max_steps - first.iterations})
-    result.iterations += first.iterations
+    result = _least_squares(problem, theta0, free, pad_to=pad_to, **kw)
     if result.status == "max_steps_reached":
         result = _hold_on_bounds(problem, result, tuple(free), pad_to, kw)
     return result
@@ -528,7 +527,7 @@ def least_squares(
 #: on the bound, so Levenberg–Marquardt creeps there and never meets its tolerances (docs/physics.md §11 *bounds*).
 ACTIVE_SET_NEAR = 1e-3
 #: Steps after which a solve that has not converged is checked for a parameter creeping to its bound (the active
-#: set then finishes it; a solve with no such parameter goes on, from where it is, for the rest of its budget).
+#: set then finishes it; a solve with no such parameter is run again from its start with its whole budget).
 ACTIVE_SET_AFTER = 128
 #: Rounds of hold, re-solve and release before the active set gives up (each round frees what the gradient
 #: pulls inwards).
