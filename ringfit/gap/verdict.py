@@ -1,93 +1,16 @@
-"""The verdict: the best effect, ``none`` or ``unexplained`` — stated rules and thresholds.
+"""The verdict: the best effect, ``none`` or ``unexplained`` — stated rules and thresholds (docs/physics.md §6.3).
 
-**Is there a gap?** The test is on the *held-out* residual of the current
-model (baseline, then the accepted chain): each row predicted by a refit that
-did not see it (leave-one-speed-out, leave-modes-out), standardised by the
-noise σ. Held-out rather than in-sample, because a baseline with several free
-parameters (profiles: k_trd, EI, k_w, k_v, ζ) absorbs part of an effect
-in-sample; what it cannot carry from one speed to the next is what it misses.
+Whether there is a gap is read from the current model's *held-out* residual, per group of rows (reduced χ² and
+its p with coloured noise's effective degrees of freedom: :func:`residual_test`); a candidate is accepted when its
+held-out shrink, ΔBIC, effect interval, baseline drift and plausibility pass (:func:`acceptance`, §6.3 conditions
+1–5) and it beats its round's null (§6.4, :mod:`ringfit.gap.calibration`); the best accepted one joins a greedy
+chain. The thresholds are this module's constants, each with its reason beside it.
 
-Per group of rows (mode tables: frequency rows, damping rows; profiles: each
-channel), with χ² = Σz² over the group's rows:
+Example (the verdict of a diagnosed case folder, docs/formats.md §5)::
 
-- ``reduced χ²`` = χ² / (rows) — 1 for pure noise at the estimated level;
-- ``p`` of χ² under pure noise, with the **effective degrees of freedom** of
-  coloured noise (Satterthwaite): a series (one profile and channel) of M rows
-  whose noise has the power spectrum s_k (the fitted power law of
-  :mod:`ringfit.gap.profile_noise`) carries ν = 2(Σs_k)²/Σs_k² degrees of
-  freedom (M for white noise, ~10 for red); a group pools its series as
-  ν = (ΣM)²/Σ(M²/ν) and χ²·ν/ΣM ~ χ²_ν. Mode-table rows count one each.
-
-The most significant group decides. Two levels:
-
-- **excess** (the candidates are refitted): p < :data:`P_NOISE` / groups, the
-  χ² test alone (the damping family: p < :data:`P_TRY_DAMPING`). Below it the
-  residual is at the noise level: verdict ``none`` (or the chain stops),
-  candidates are listed with their screen figures only. This gate only spares
-  refits — whether an effect is real is decided by its held-out evidence and
-  its null — so it carries no fixed bar on the reduced χ² (a bar of 1.5 refused
-  a real effect whose residual was 1.48 × the noise at p = 4·10⁻⁵).
-- **structured** (a gap remains that must be explained): reduced χ² ≥
-  :data:`CHI2_RED_STRUCTURED` and p < :data:`P_NOISE` / groups — the RMS is ≥ 1.73×
-  the noise level, more than a noise level estimated from the data (coloured
-  noise included) can be wrong by. If nothing is accepted, a structured
-  residual gives ``unexplained``, an excess below it gives ``none``.
-
-An effect claimed between the two levels stands on its own held-out evidence
-(below), which does not depend on the noise level.
-
-Every acceptance is then tested against chance (:mod:`ringfit.gap.calibration`): p < α of
-the round's selection statistic under its null. Two parts of condition 1 below are fixed
-heuristic bars, not tests: the shrink bar :data:`MIN_HELDOUT_SHRINK_PCT` (a small effect at
-high noise has an *ideal* shrink below it, so no model could pass) and the lower end of the
-bootstrap interval (wide when few rows carry the effect). A candidate that passes every other
-condition and whose shrink reaches the floor :data:`MIN_HELDOUT_SHRINK_FLOOR_PCT` (a shrink
-worth reporting), but fails either bar, is put to the same null test and accepted when it
-beats it (:func:`null_decides`). Without a null (``null_draws=0``) the bars stand.
-
-**Is an effect accepted?** All of:
-
-1. held-out shrink ≥ :data:`MIN_HELDOUT_SHRINK_PCT` and the lower end of its
-   95 % bootstrap interval ≥ :data:`MIN_HELDOUT_SHRINK_LO_PCT` — or, decided by
-   the null (above), held-out shrink ≥ :data:`MIN_HELDOUT_SHRINK_FLOOR_PCT`
-   (it removes residual on data that took no part in fitting it) — over all
-   rows, or over the rows of the group whose residual decided the structure
-   test (e.g. the damping rows of a mode table: an effect that acts on the
-   damping alone is diluted by the frequency rows it cannot touch);
-2. ΔBIC ≤ :data:`MAX_DELTA_BIC` (strong evidence in-sample, with the
-   parameter-count penalty);
-3. at least one effect parameter's 95 % interval excludes its null value;
-4. the baseline does not drift to implausible values (the effect must not win
-   by dragging the baseline along):
-
-   - parameters whose prior comes from independent data (profiles: EI, k_w,
-     k_v, ζ from the free-table fit) must stay inside that prior's 99.9 %
-     ellipsoid — squared Mahalanobis distance D² ≤ χ²_k(0.999) — or at least
-     no further out than the baseline-only fit (D² ≤ D²_baseline);
-   - every other positive baseline parameter (mode tables: ρA, EI, k_w, k_v, ζ0;
-     profiles: k_trd) moves by at most :data:`MAX_DRIFT_RELATIVE` (relative)
-     from the reference baseline fit.
-
-   An effect's ``baseline_partners`` (e.g. ζ0 for a damping slope) are exempt.
-   The drift in standard errors is reported too, but not used: when the
-   baseline fit absorbed part of a real effect, adding the right effect moves
-   it back by many (small) standard errors.
-
-Among accepted candidates the best is the largest held-out shrink.
-**Greedy chain**: the best is added, the rest are refitted on top of it, and
-so on while the residual stays structured. If a structured residual remains
-and nothing is accepted, ``unexplained`` closes the chain.
-
-**``none`` only when the residual is noise.** Where the baseline's held-out residual fails the noise test
-with a material excess (``material``: reduced χ² without its largest row ≥ :data:`CHI2_RED_MATERIAL`, the
-share an accepted effect must remove, at p < :data:`P_NOISE`) and no candidate is accepted — every one
-screened out, refused, or implausible — the verdict is ``unexplained`` (``verdict.nearest`` names the refitted
-candidate that came closest), never ``none``. A smaller excess is below what any candidate could be accepted
-for, and the estimated noise level's own error produces such excesses in noise alone: ``none``.
-
-**Implausible parameters are not findings** (condition 5): a fitted effect parameter outside its physical
-range (:attr:`ringfit.gap.effects.base.Parameter.plausible`, e.g. ``ring_extensibility``'s EA below 10⁶ N where
-a belt's is ~10⁸ N) refuses the candidate.
+    from ringfit.gap import diagnose
+    d = diagnose("case/", null_draws=200)
+    print(d.verdict["effects"])  # e.g. ["rotation"], ["none"], ["ground_contact", "unexplained"]
 """
 
 from __future__ import annotations
