@@ -514,7 +514,7 @@ def least_squares(
     if first.status != "max_steps_reached":
         return first
     held = _hold_on_bounds(problem, first, tuple(free), pad_to, kw)
-    if held is not first:
+    if held.converged:
         return held
     result = _least_squares(problem, theta0, free, pad_to=pad_to, **kw)
     if result.status == "max_steps_reached":
