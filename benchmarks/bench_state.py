@@ -213,7 +213,7 @@ def identified_tyre(folder: Path) -> Path:
 # --------------------------------------------------------------------------- the blind check
 def blind():
     from ringfit.io.tyre import read_tyre
-    from ringfit.synth.state import write_state_example
+    from ringfit.synth.state import RATED_LOAD, write_state_example
 
     quantities = list(TARGETS)
     avg = {q: [] for q in quantities}       # (error, inside, status)
@@ -221,7 +221,7 @@ def blind():
     per_told = {q: [] for q in quantities}
     onestep = {q: [] for q in quantities}   # the value the other side of its grid extrapolation (§13.4): diagnostic
     spread = {q: [] for q in quantities}    # the estimate's own σ, in the error's unit: what the data could tell
-    speed_rows, sim_cpu, lines, drift_rows = [], 0.0, [], []
+    speed_rows, sim_cpu, lines, drift_rows, true_loads = [], 0.0, [], [], []
     alone = {q: [] for q in quantities}     # the averaged fit alone (before a drift's stretches): (error, inside)
     print(f"\n1. Blind state on the independent simulator: seeds {ARGS.seeds}, {ARGS.blind} blind recordings of "
           f"{ARGS.seconds:g} s each; tyre: " + ("the example's NOMINAL tyre.toml (the truth is jittered around it; "
@@ -274,6 +274,7 @@ def blind():
                 wider = "".join(f" (κ {v:.1f} on 2…{k})" for k, v in (state.band_kappa or {}).items())
                 drifted = any(f.startswith("the state drifted") for f in state.flags)
                 drift_rows.append(drifted)
+                true_loads.append(true_load)
                 line = [f"   s{seed} {name}: {len(revs)} rev, {state.status}, 2…{state.k_max} κ {state.discrepancy:.1f}"
                         f"{wider}{' DRIFT' if drifted else ''}"]
                 for q in quantities:
@@ -346,6 +347,18 @@ def blind():
     print("   the estimates' own σ (median over the recordings; a calibrated estimate's median |error| is about 0.67 σ, "
           "so a target below that is below what these recordings tell): " + ", ".join(
               f"{q} {float(np.median(spread[q])):.3f}" for q in quantities if spread[q]))
+    if true_loads:  # light loads: where one accelerometer tells the state least (the patch is short)
+        light = np.array(true_loads) < 0.5 * RATED_LOAD
+        parts = []
+        for q in quantities:
+            e, sd = np.abs([a[0] for a in avg[q]]), np.array(spread[q])
+            inside = np.array([bool(a[1]) for a in avg[q]])
+            parts.append(" / ".join(f"{float(np.median(e[m])):.3f} (σ {float(np.median(sd[m])):.3f}, "
+                                    f"{int(inside[m].sum())}/{int(m.sum())})" if m.any() else "—"
+                                    for m in (light, ~light)))
+        print(f"   by the true load, below / at or above half the rated load ({0.5 * RATED_LOAD:.0f} N; "
+              f"{int(light.sum())} / {int((~light).sum())} recordings): median |err| (median σ, covered): "
+              + ", ".join(f"{q} {t}" for q, t in zip(quantities, parts)))
     if drift_rows:  # the drift flag (docs/physics.md §13.6): coverage of the flagged and the steady recordings
         flagged = np.array(drift_rows)
         parts = []
