@@ -502,19 +502,16 @@ def least_squares(
     """
     require_x64("ringfit.fit.engine.least_squares")
     kw = dict(max_steps=max_steps, rtol=rtol, atol=atol, n_data=n_data, method=method)
-    if not (active_set and max_steps > ACTIVE_SET_AFTER):
-        result = _least_squares(problem, theta0, free, pad_to=pad_to, **kw)
-        if active_set and result.status == "max_steps_reached" and max_steps > 0:
-            result = _hold_on_bounds(problem, result, tuple(free), pad_to, kw)
-        return result
     # A solve still running after ACTIVE_SET_AFTER steps with a parameter on its bound is creeping there: the
     # active set finishes it now instead of after the whole budget. Otherwise the whole solve is run as it would be
     # without the check (from its start: a Levenberg–Marquardt solve resumed from a later point is another solve).
-    first = _least_squares(problem, theta0, free, pad_to=pad_to, **{**kw, "max_steps": ACTIVE_SET_AFTER})
-    if first.status != "max_steps_reached":
-        return first
-    held = _hold_on_bounds(problem, first, tuple(free), pad_to, kw)
-    if held.converged:
+    checked = active_set and max_steps > ACTIVE_SET_AFTER
+    result = _least_squares(problem, theta0, free, pad_to=pad_to,
+                            **{**kw, "max_steps": ACTIVE_SET_AFTER if checked else max_steps})
+    if not (active_set and result.status == "max_steps_reached" and max_steps > 0):
+        return result
+    held = _hold_on_bounds(problem, result, tuple(free), pad_to, kw)
+    if held.converged or not checked:
         return held
     result = _least_squares(problem, theta0, free, pad_to=pad_to, **kw)
     if result.status == "max_steps_reached":
