@@ -1,64 +1,25 @@
-"""The mode-table side of the gap diagnosis (docs/physics.md §2.1, §3, §6; docs/formats.md §2, §5, §6).
+"""The mode-table side of the gap diagnosis: the ``eq18-free`` baseline's frequency and damping problems
+(docs/physics.md §6 *baselines*; docs/formats.md §2, §5, §6).
 
-Two problems, one per family of observations, because frequencies and damping
-ratios are measured on different scales and a damping residual must never
-decide a structural verdict (only an effect that models damping,
-``wave_damping``, is tried on it):
+Frequencies and damping are two problems, because they are measured on different scales and a damping residual
+must never decide a structural verdict. The ring comes from the free table alone (``ringfit fit``'s fit); test
+tables see it through a stop-gradient, so with no effect their rows are pure predictions. What a table's condition
+fixes (the patch from ``load_n``, the speed from ``rotation_hz``) is computed, not fitted; loaded-tyre tags pick the
+cos- or sin-type mode; σ is a relative level per table (second differences and MAD of the free fit's residual, or
+``freq_std_hz``); test rows enter through Huber's function. Each rule, its floor and why it is so: docs/physics.md
+§6 (``eq18-free``). Row building is :mod:`ringfit.gap.modal_rows`, line matching :mod:`ringfit.gap.modal_lines`,
+computed conditions :mod:`ringfit.gap.modal_conditions`.
 
-**Frequencies** — every structural row of every table (``free.modes.csv``, the
-reference state, first; then the test tables: loaded, rolling, spinning).
+Example (the mode-table problems of ``ringfit example case --out ex``; docs/formats.md §6)::
 
-- *Baseline from the reference state only.* The ring (ρA, EI, k_w, k_v) is
-  :func:`ringfit.fit.least_squares.fit_natural_frequencies` on ``free.modes.csv``
-  — ``ringfit fit``'s engine, model, prior (the physical EI prior) and weights
-  (``freq_std_hz`` where given, else the relative σ estimated below: the same
-  fit as ``ringfit fit --default-std σ``). Test tables never refit it: their
-  rows see the ring through a stop-gradient, so in every refit the ring answers
-  to the free table (and its prior) alone, while an effect's parameters answer
-  to every row. With no effect, test rows are pure predictions (held out by
-  construction); the free rows are held out by leave-modes-out refits of the ring.
-- *Effects fixed by the measured condition are computed, not fitted*: the contact
-  patch of a loaded or rolling table from its ``load_n`` through the rolling
-  model's static contact solve (:func:`ringfit.physics.contact.solve_rolling` at
-  Ω = 0 with the fitted ring and ``k_tread`` from the tyre file — or, when it has
-  none, 19 MN/m² with a log-normal σ of :data:`K_TREAD_PRIOR_SD`, whose effect on
-  the patch is reported); the wheel speed of a spinning table from ``rotation_hz``
-  or ``speed_kmh``. Such a candidate (variant ``computed``) is a prediction with no
-  free parameter. The same effect with its parameter free (variant ``fitted``:
-  patch scale, speed gain) is tried beside it; both are reported.
-- *Loaded-tyre tags*: rows tagged ``extr``/``vert`` take the contact-symmetric
-  (cos-type) mode of their n, ``0``/``hort`` the contact-antisymmetric (sin-type)
-  one (:mod:`ringfit.physics.loaded`); rows without n are matched by frequency to
-  the nearest mode of the model their condition computes (eq. 18, the loaded modes
-  with the computed patch, eq. 25/26 at the condition's speed), and the match is
-  stated (``labels["matched"]``).
-- *Noise*: a relative σ per table. The free table's from its reference fit:
-  ``freq_std_hz`` where given; else the larger of two robust scales of the fit's
-  relative residual — second differences along n, ``1.4826·median|Δ²r|/√6`` (white
-  noise gives Var Δ²r = 6σ²; one outlying row moves the median little) and the MAD
-  ``1.4826·median|r − median r|·√(m/(m−4))`` (the misfit eq. 18 leaves on a real
-  tyre, which second differences would cancel, is part of what a prediction of
-  another state must be judged against) — floored at
-  :data:`FREQ_SIGMA_FLOOR_REL` and :data:`FREQ_SIGMA_FLOOR_HZ`; raised to the
-  identification spread ``|f_a − f_b|/√2`` (robust RMS over matched n) when the
-  folder holds a second table of the reference state (e.g. SSI and FRF of the same
-  free tyre). A test row's σ adds, in quadrature, the reference fit's prediction
-  uncertainty at that row (its covariance propagated through eq. 18) and the test
-  table's own measurement σ (``freq_std_hz`` where given, else the free table's, at least
-  :data:`TEST_SIGMA_FLOOR_REL` of the frequency).
-- *Heavy tails*: test rows enter refits and statistics through the Huber function
-  (``ψ(z) = z`` for ``|z| ≤`` :data:`HUBER`, ``sign(z)·√(2c|z| − c²)`` beyond), so
-  one outlying row counts linearly, not quadratically; rows with held-out
-  ``|z| >`` :data:`OUTLIER_Z` are named outliers.
+    from ringfit.gap import effects
+    from ringfit.gap.case import read_case
+    from ringfit.gap.modal import build_modal_problems
 
-**Damping** — every row with ``damping_pct``, as ``ln ζ`` (damping is scattered
-tenfold: logarithms make a factor the same size everywhere). Baseline: one level
-ζ0 per table (identification methods disagree on damping far more than on
-frequency; each table has its own level), Huber on every row. Noise per table:
-second differences of ``ln ζ`` along n (robust), floored at
-:data:`DAMPING_SIGMA_FLOOR`; a row whose own ``damping_std_pct`` (``ringfit ssi``'s
-jackknife σ) is wider in ``ln ζ`` (δζ/ζ) takes that. Effects: those whose modal hook changes ζ
-(``wave_damping``, using each row's measured frequency).
+    case = read_case("ex/case")
+    problems = build_modal_problems([case.free, *case.tables], case.tyre,
+                                    tuple(effects.get(n) for n in effects.available()))
+    print([(p.domain, p.baseline_model, p.y.size) for p in problems])   # frequencies, then damping rows
 """
 
 from __future__ import annotations

@@ -1,72 +1,30 @@
 """Modes of the rolling, loaded ring in the space-fixed frame, and what each observer sees (docs/physics.md §3.7).
 
-The contact patch is fixed in space, so in the space-fixed frame (angle α,
-measured from the patch centre in the direction of rotation, docs/physics.md
-§0) the rolling ring is a linear, time-invariant gyroscopic system. With the
-material-frame time derivative ``∂/∂t|θ = ∂/∂t + Ω ∂/∂α`` each harmonic
-``(W_k, V_k) e^{ikα} e^{λt}`` of the §3.1 equations becomes, with
-``μ = λ + ikΩ`` the rate the material sees,
+In the space-fixed frame the patch stands still, so the rolling ring on its tread springs is a linear,
+time-invariant gyroscopic system. Hill's method over harmonics k = −K…K (the patch couples k with j through the
+Fourier coefficient ĉ_{k−j} of its stiffness) gives the quadratic eigenproblem ``(λ² M + λ G + K + K_c) c = 0``,
+whose steady part is §4.2's operator (:func:`ringfit.physics.rolling.ring_operator`), solved as one Hermitian
+``eigh`` so that every frequency is differentiable in the ring, the load and the speed. Damping is a first-order
+perturbation; a co-rotating sensor sees each mode as lines at ``ω + kΩ`` weighted by |W_k|², |V_k|²
+(:func:`sensor_lines`); each mode carries its travel (backward/forward) and contact symmetry labels. The
+derivation, the limits the tests pin (eq. 25/26 at k_c = 0) and which branches survive under contact:
+docs/physics.md §3.7.
 
-    P_k(μ) = ρA (μ² I + 2Ωμ J) + K_k^Ω,     J = [[0, −1], [1, 0]],
+Shapes: K harmonics (static), H = 2K + 1 harmonics k = −K…K, ``dof`` = H (inextensible, the default) or 2H
+(``extensible=True``); every mode array has a leading mode axis of length ``dof``; :func:`campbell_modes` adds a
+leading speed axis.
 
-and at ``λ = 0`` (steady rolling, μ = ikΩ) ``P_k`` is the per-harmonic operator
-``D_k(Ω)`` of §4.2 (:func:`ringfit.physics.rolling.ring_operator`). Expanding
-in λ therefore needs nothing new:
+Example (Table 9's tyre at its rated 4 kN, rolling at 40 km/h on a flat road)::
 
-    P_k(λ + ikΩ) = λ² ρA I + λ · 2ρAΩ (ik I + J) + D_k(Ω).
+    from ringfit import data
+    from ringfit.io.tyre import read_tyre
+    from ringfit.physics.operating import OperatingPoint
+    from ringfit.physics.rolling_modes import loaded_rolling_modes
 
-The tread springs over the patch of the steady rolling solution add a radial
-foundation ``k_c(α)`` (k_trd on the contact arc, zero elsewhere; an optional
-tangential ``k_ct``) that couples harmonic k with j through the Fourier
-coefficient ``ĉ_{k−j}`` (Hill's method, |k| ≤ K). The result is the quadratic
-eigenproblem ``(λ² M + λ G + K + K_c) c = 0``.
-
-**Inextensible ring (default).** The constraint ``w + v′ = 0`` leaves one
-amplitude per harmonic: ``(W_k, V_k) = q_k u_k`` with ``u_k = [1, i/k]``
-(k ≠ 0) and ``u_0 = [0, 1]`` (the rigid rotation of the belt; W_0 = 0), the
-same reduction as §4.2 (:func:`ringfit.physics.rolling.inextensible_vector`).
-Projected on u_k: ``m_k = ρA(1 + 1/k²)``, ``G_k = 2iρAΩ(k − 1/k)``,
-``K_k = d_k(Ω)`` (``reduced_operator``); for k_c = 0 the roots are exactly
-eq. 26 and, shifted by kΩ, eq. 25 (§3.2–3.3). The extensible ring keeps
-both amplitudes per harmonic (``extensible=True``, finite ``ring.ea``).
-
-**Solution.** ``G`` is skew-Hermitian and ``M``, ``K + K_c`` Hermitian, so
-with ``λ = iω`` the problem is the Hermitian quadratic ``(ω² M + ω G̃ − K) c = 0``,
-``G̃ = −iG``. ``M`` is diagonal; with ``x = M^{1/2} c``, ``K̂ = M^{-1/2} K M^{-1/2}``,
-``Ĝ = M^{-1/2} G̃ M^{-1/2}`` and, below the critical speed (K + K_c positive
-definite), the Cholesky factor ``K̂ = L Lᴴ``,
-
-    [[0, Lᴴ], [L, −Ĝ]] [Lᴴx/ω; x] = ω [Lᴴx/ω; x]
-
-(the Hermitian form of the Hermitian-definite pencil
-``ω [[K, 0], [0, M]] [c; ωc] = [[0, K], [K, −G̃]] [c; ωc]``): one ``eigh`` of
-size 2·dof with real ω (ω and −ω pairs; the ω > 0 half is kept, one mode per
-degree of freedom). ``jax.numpy.linalg.eigh`` has a JVP, so every frequency
-is differentiable in the ring parameters, the load and the speed (exact away
-from repeated eigenvalues). No triangular solves: batched reverse-mode
-gradients of ``cholesky`` + ``solve_triangular`` of complex 130 × 130
-matrices deadlock in jaxlib 0.10.2 on CPU.
-
-**Damping** is a first-order perturbation of the undamped modes by the
-hysteretic loss ``iη K_el`` (η = 2ζ of ``ring.damping_ratio``, §4.2), with the
-sign of the frequency the material sees at each harmonic, ``ω + kΩ``:
-``σ = cᴴ E c / cᴴ(2ωM + G̃)c``, reported as ``damping_ratio = σ/ω``.
-
-**Observers** (§3.7). A fixed observer sees the mode at ω. The co-rotating
-sensor at material angle θ0 sits at α = θ0 + Ωt, so it sees the mode as lines
-at ``ω + kΩ`` (signed; a real sensor sees |ω + kΩ|) weighted by |W_k|²
-(radial) and |V_k|² (tangential): :func:`sensor_lines`.
-
-**Labels.** With ω > 0, harmonic k carries a backward wave (against the
-rotation in the material, seed eq. 25's ω_n1) when ``k (ω + kΩ) > 0`` and a
-forward wave otherwise; ``travel`` is the signed amplitude ratio of the
-dominant order's backward and forward parts. ``symmetry`` is the share of the
-radial content that is even about α = 0: 1 for a cos-type (``extr``/``vert``)
-standing mode, 0 for a sin-type (``0``/``hort``) one, ½ for a travelling wave.
-
-Shapes: K harmonics (static), H = 2K + 1 harmonics k = −K…K, ``dof`` = H
-(inextensible) or 2H (extensible); every mode array has a leading mode axis
-of length ``dof``; :func:`campbell_modes` adds a leading speed axis.
+    tyre = read_tyre(data.path("table9.tyre.toml"))
+    point = OperatingPoint.from_speed(40.0, 4000.0, float(tyre.geometry.outer_radius))
+    modes, steady = loaded_rolling_modes(tyre.ring, tyre.geometry, point)
+    print(modes.freq_hz[:8], modes.order[:8], modes.travel[:8])
 """
 
 from __future__ import annotations

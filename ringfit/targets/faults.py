@@ -1,62 +1,24 @@
-"""Rig faults in impact records, found on each channel of each record before anything is averaged.
+"""Rig faults in impact records, found on each channel of each record before anything is averaged
+(docs/physics.md §9 *rig faults*).
 
-A fault left in turns into modes that are not there (a spike train, a
-clipped channel and mains hum all put stable poles into an SSI) or hides the
-ones that are (hum makes every decay look noise-dominated). Each check works
-on one channel (record, axis) with its offset removed, and each finding is a
-one-line note for the sidecar's ``preprocessing`` list and a warning:
+A fault left in makes modes that are not there or hides those that are. Each check works on one channel (record,
+axis) with its offset removed and gives a one-line note for the sidecar's ``preprocessing`` list and a warning:
+**dead** (:data:`DEAD_REL`), **clipped** (:data:`CLIP_RUN`, :func:`clip_runs`), **spikes** (a robust z of the
+derivative scaled by the second difference, :func:`spike_segments`), **mains hum** (a steady line at h × 50 or
+h × 60 Hz in the record's late half, notched: :func:`hum_lines`), **sign-flipped** against the other repeats of
+an angle, and against the ring's mode shapes where a force channel is recorded (:func:`shape_scores`). Timing
+faults come first (:func:`repair_timing`; :class:`EncoderTiming` in continuous recordings). Hum is notched; a
+faulty channel is left out of its record where a clean repeat carries its angle, else bridged (spikes) or turned
+round (a flip against the shapes). Every threshold, and why it is where it is: docs/physics.md §9.
 
-- **dead**: the channel's rms is below :data:`DEAD_REL` × the median rms of
-  the same axis over the records (an unplugged sensor reads only a little
-  noise; the averaged SSI channel would hide it at half amplitude);
-- **clipped**: flat tops at the range — the channel's largest (or smallest)
-  value held for :data:`CLIP_RUN` samples or more, or reached again in a
-  second run of two or more (an unclipped decay touches its extreme once);
-  clipping that ends before the samples the method uses (SSI: within its
-  skip after the impact) is said and the channel kept;
-- **spikes**: the robust z of the derivative, ``z = (Δx − med Δx) / (1.4826 ·
-  MAD Δ²x)`` with medians over a running window of :data:`SPIKE_WINDOW`
-  samples (the scale from the second difference: on a densely sampled decay
-  the derivative is a ramp over the window and its own MAD falls far below
-  its noise), beyond :data:`SPIKE_Z` one way and then back
-  the other way within :data:`SPIKE_WIDTH` samples; the hammer impact
-  itself (from :data:`IMPACT_GUARD_S` before to the SSI's skip after) is
-  not searched;
-- **mains hum**: a line at h × 50 or h × 60 Hz (±0.4 %) that stands
-  :data:`HUM_RATIO` × above the local spectrum of the late half of the
-  record (after the decay) and keeps its amplitude over that half (the
-  ratio of its two quarters within 1/:data:`HUM_STEADY`…:data:`HUM_STEADY`;
-  a mode's tail decays) and reaching :data:`HUM_SHARE` of that half's rms.
-  It is notched: the channel's steady tone, fitted
-  there (frequency refined, amplitude and phase by least squares), is
-  subtracted from the whole record;
-- **sign-flipped**: a repeat whose response (from the impact on,
-  :data:`FLIP_WINDOW_S`) anti-correlates (below :data:`FLIP_CORR`) with the
-  other repeats at its angle (three or more: the odd one out); two repeats
-  that anti-correlate are both left out (which one is flipped cannot be
-  told from them: the neighbouring angles are no direct reference, a mode
-  of n ≥ 6 changes sign between sensors 15° apart);
-- **sign-flipped against the ring's mode shapes** (with a force channel,
-  any number of repeats): at each resonance a ring mode reads one
-  circumferential harmonic ``c·cos nθ + s·sin nθ`` on every axis, so the
-  other channels of the axis predict each channel's accelerance there
-  (:func:`shape_scores`); a channel that reads the other sign at the
-  resonances it sees is flipped. This tells which of two disagreeing
-  repeats is the flipped one, and finds a flip with a single repeat or with
-  every repeat of an angle flipped (a sensor mounted the other way round).
+Example (what ``ringfit ssi`` runs before the SSI)::
 
-Timing faults come before all of these: a stream that stalls (runs of frames repeated exactly; the repeats
-deleted where they were inserted, bridged where they were held: :func:`repair_timing`) and, in continuous
-recordings, stalls and dropped samples seen in the encoder's angle (:class:`EncoderTiming`); DC drift is taken
-out with the offsets (:func:`ringfit.targets.quality.remove_drift`).
+    from ringfit.io.records import read_records
+    from ringfit.targets.faults import repair_records
+    from ringfit.targets.quality import clean_records
 
-What is done: hum is notched; a dead, clipped or flipped channel of a record
-is left out of that record (the other repeats of its angle carry it, and
-without one the channel is lost, said so) — except a channel flipped against
-the mode shapes with no repeat of its angle that reads right: it is turned
-round; a channel with spikes is left out
-of its record where another repeat of the angle is clean, else the spike
-segments are bridged by straight lines.
+    records, use, notes, hum_hz = repair_records(clean_records(read_records("ex/impact.records.npz"))[0])
+    print(notes, use.sum(), "channels used")
 """
 
 from __future__ import annotations

@@ -1,63 +1,20 @@
 """How uncertain is each SSI mode: a leave-one-group-out jackknife over the sensor angles (docs/physics.md §9).
 
-``freq_std_hz`` and ``damping_std_pct`` of ``ringfit ssi`` (docs/formats.md §2)
-come from here. The rule, with its constants:
+``freq_std_hz`` and ``damping_std_pct`` of ``ringfit ssi`` (docs/formats.md §2) come from here. The sensor angles
+of a roving test are dealt into at most :data:`JACKKNIFE_GROUPS` groups (:func:`angle_groups`); each replicate is
+the SSI without one group, at :data:`JACKKNIFE_ORDERS` model orders, computed from the run's own rank-K Hankel
+factors (:class:`~ringfit.targets.ssi.HankelFactors`: no new pass over the data); the reported σ² is the
+jackknife's variance plus (:data:`ORDER_SPREAD_SHARE` × the spread over model orders)², which the jackknife cannot
+see. Fewer than :data:`MIN_GROUPS` angles: σ is the order spread alone, and the method text says so. Why each
+choice, and the coverage measured on synthetic records: docs/physics.md §9 *uncertainty of an SSI mode*.
 
-1. **Units of resampling: the sensor angles.** In a roving-sensor impact test
-   every angle is its own record (its own impact or impacts, its own noise):
-   those are the independent pieces of data. The channels of the angles
-   (all axes of one angle together) are dealt, angle by angle in order, into
-   G ≤ ``JACKKNIFE_GROUPS`` groups round robin (:func:`angle_groups`), so
-   that every replicate still spans the circumference. Time blocks of a
-   free decay are not exchangeable (the first one holds most of the
-   signal): their jackknife came out ~2× too wide on synthetic records. The
-   scatter of the poles over the model orders is no sampling uncertainty:
-   neighbouring orders see the same data (alone, it covered 91–92 % of the
-   true frequencies at 2σ in the tests below, and much less where a mode
-   is stable over the orders: 0.0004 Hz against errors of 0.001 Hz for
-   single poles).
-2. **Replicate g** = the SSI of the records without group g, at a few model
-   orders, from the run's own rank-K factors ``H ≈ U S Vᵀ``
-   (:class:`~ringfit.targets.ssi.HankelFactors`, K the largest order used):
-   leaving the group out deletes its rows of U and of V. The Gram matrices of
-   the kept rows are the full ones minus the group's rows, their Cholesky
-   factors R_U, R_V give the replicate's left singular vectors ``U_kept R_U⁻¹ A``
-   from the SVD ``A Σ Bᵀ`` of the K × K core ``R_U S R_Vᵀ``, and A_n of order n
-   follows by least squares on the shifted observability (eq. 11) through
-   K × K Gram matrices: no pass over the p·l rows per replicate. The one
-   approximation: the replicate is a submatrix of the rank-K model of H, not
-   of H (a new SVD of each submatrix gave σ ~10 % larger on synthetic
-   records, at twice the cost of the whole SSI).
-3. **The statistic**: per mode, the mean over ``JACKKNIFE_ORDERS`` model
-   orders (quantiles 1/4, 3/4 of the orders at which the modes were found,
-   pooled, at most ``max_order``; :func:`_statistic_orders`) of the pair
-   centre (mean frequency and damping of its poles at that order, as
-   :func:`ringfit.targets.clustering.summarize`). The cost is in the
-   eigen-decompositions (G × 2 of them, at orders ~55 and ~125 of a 2–160
-   sweep): about a third of the SSI's covariances + SVD + order sweep +
-   stabilization, a fifth of ``ringfit ssi`` end to end.
-   In a replicate the mode at order o is the poles within ``freq_tol`` of the
-   full-data value with subspace MAC ≥ ``mac_tol`` against the mode's shape
-   basis (kept channels), as many as the full data had there (1 or 2),
-   nearest first; a replicate that misses it at one of its orders is left out.
-4. ``σ_jack² = (g−1)/g Σ_i (θ_(i) − θ̄)²`` over the g replicates that found
-   the mode; unknown (NaN) when fewer than ``max(3, ⌈G/2⌉)`` did.
-5. **Reported** ``σ² = σ_jack² + (ORDER_SPREAD_SHARE · σ_orders)²``, σ_orders
-   the spread (std) over the model orders of the per-order pair centre
-   (:class:`~ringfit.targets.clustering.PhysicalMode`). The jackknife sees
-   the noise; it cannot see the model-order part — a double pole that some
-   orders resolve and others see as one pole puts the pair centre anywhere
-   inside the pair, the same in every replicate. With noise-free synthetic
-   records (split 0.2 %) that part alone was ~½ of σ_orders (rms z 0.49
-   against σ_orders), hence the share ½.
-6. Fewer than ``MIN_GROUPS`` sensor angles: no jackknife; σ = σ_orders, and
-   the method text says so.
+Example (the jackknife runs inside the SSI; its figures land in the mode table, ``ringfit example records``)::
 
-Measured on synthetic records with known truth (``tests/test_targets_uncertainty.py``;
-24 angles, 0.5 s at 6.4 kHz, noise 1, 2 and 4 % of the rms, 8 seeds × 10
-modes each): 2σ covers 94–95 % of the true frequencies and 96–98 % of the
-true dampings, rms(error/σ) = 0.95–1.08; the ring fit to such tables gives
-χ²/dof = 1.06–1.24.
+    from ringfit.io.records import read_records
+    from ringfit.targets.identify import ssi_modes
+
+    table = ssi_modes(read_records("ex/impact.records.npz")).table
+    print(table.freq_hz, table.freq_std_hz, table.extra_floats("damping_std_pct"))
 """
 
 from __future__ import annotations

@@ -1,70 +1,27 @@
-"""Wheel load and contact patch from the one accelerometer (docs/physics.md §4–5; docs/formats.md §7).
+"""Wheel load, contact patch and the tyre's state from the one accelerometer (docs/physics.md §10, §13;
+docs/formats.md §7).
 
-Once the ring is identified (ρA, EI, k_w, k_v, ζ, k_trd and the geometry from a
-fitted tyre file, all fixed here), the steady rolling model
-(:func:`ringfit.physics.profile.profile_channels`, the one forward model) is
-inverted for the vertical load Fz that the sensor's profile shows. This module is a
-*problem definition on the one engine* (:mod:`ringfit.fit.engine`): the residuals,
-their coordinates and the fitting procedure; no solver of its own.
+With the ring identified (a fitted tyre file, held fixed), the steady rolling model
+(:func:`ringfit.physics.profile.profile_channels`, the one forward model) is inverted for the load Fz (and, in
+:mod:`~ringfit.fit.estimate.state`, pressure, slip and Fx, tread depth and speed) that the sensor's profile shows.
+The rows are the radial harmonics 2 … k_max weighted by the profile block's noise model; gain, high-pass corner,
+tilt and angle offset are nuisances; the interval is the engine's Laplace approximation with the tyre's
+``[ring.covariance]`` carried into it. Why each of these choices, and what they cost, is docs/physics.md §10. This
+package is a *problem definition on the one engine* (:mod:`ringfit.fit.engine`): residuals, coordinates and
+procedure, no solver of its own.
 
-**What is fitted, and why these choices.**
+Example (a profile of ``ringfit example profiles --out ex``, read with its tyre file; docs/formats.md §3)::
 
-- **Radial channel only.** For the inextensible ring the tangential reading is
-  gravity plus terms that exist only through the sensor mounting (tilt γ, offset e)
-  and the tread's shear (docs/physics.md §5 identities, §6): its load content is
-  borrowed from the least certain parts of the model. The radial reading maps the belt
-  curvature, ``s_rad = Ω²R²κ + g cos(φ − ψ)``: its shape around the patch is set by the
-  ring's stiffness and the pressure it carries, i.e. by the load.
-- **Revolution harmonics k = 2 … k_max of that channel.** k = 0 (the mean, removed by
-  the model, docs/physics.md §6 baseline) and k = 1 are left out: for the inextensible
-  ring the k = 1 harmonic of the reading is gravity alone (``a_r,n ∝ (n² − 1)W_n``,
-  docs/physics.md §4.6), so its amplitude (1 g or a calibration error), its phase and
-  the high-pass's large effect on it carry no load information and cannot bias the load.
-  ``k_max`` (default 40) keeps nearly all of the information (the patch's bending
-  features sit below harmonic ~30 for a passenger tyre) while staying clear of the
-  model's grid resolution and of a data set's band limit or fine tread detail.
-- **Free gain.** A factor on the whole reading (log, 0.5–2). For χ = 1 and the
-  inextensible ring the rolling shape does not depend on Ω and the accelerations scale
-  with Ω² (docs/physics.md §4.1), so an error in Ω (a nominal ``speed_kmh``), in the
-  sensor's sensitivity, or its offset e inward of the belt (which enters the radial
-  channel as the factor 1 − 2e/R, to first order) is absorbed by the gain: **the load
-  comes from the shape of the reading around the patch, not from its amplitude.**
-  Ω then matters only through the high-pass, whose corner is fitted as well.
-- **Nuisances modelled** (docs/physics.md §5): the IEPE high-pass corner
-  ``corner_hz`` (first order, log, weak prior :data:`CORNER_PRIOR`; below ~0.01 Hz it has
-  no effect and is reported as unresolved), the axes' tilt ``tilt_gain`` γ (linear, weak
-  prior :data:`TILT_PRIOR`: in the radial channel it enters only through γψ·g sin φ, so it
-  also absorbs a data set without gravity, γ = 0) with gravity at 1 g, and the recorded-angle offset
-  ``angle_offset`` (φ = α + offset; unbounded, started from the patch found in the
-  data and flagged beyond 10°).
-- **Tread stiffness.** The tyre file's k_trd is fixed by default: in one profile the
-  load and k_trd are ~99 % correlated (a stiffer tread and a larger load make a similar
-  patch), so the load is only as good as the k_trd the tyre was fitted with
-  (``ringfit fit-rolling`` at known loads). ``k_tread_sd`` (σ of ln k_trd) frees it with
-  a log-normal prior, so its uncertainty is propagated into the load's interval; a tyre
-  file without k_trd gets :data:`DEFAULT_K_TREAD_SD` and a warning.
-- **Weights.** The profile block's noise model (:func:`ringfit.fit.profile_block.fit_profile_block`, the same
-  passes as ``fit-rolling`` and ``identify``): each harmonic weighted by 1/σ_k from the fit's residual spectrum
-  (a power law, the ±4 neighbouring harmonics' average, ν/(ν − 4) and the fit's degrees of freedom), refitted.
-  Periodic stationary noise has independent Fourier coefficients, so coloured noise is whitened and the
-  Laplace interval holds for it too (docs/physics.md §10, §11 *profile noise*).
+    from ringfit.fit.estimate import estimate_load
+    from ringfit.io.profiles import read_profile
+    from ringfit.io.tyre import read_tyre
 
-**Starting values and the classic method.** :func:`feature_estimate` is the
-tyre-sensor field's method: the two edge peaks of the (band-limited) radial reading,
-their spacing → load through the model's load–spacing curve (:func:`load_curves`, the
-same feature computed on the model at a grid of loads). It starts the fit and is
-reported beside it.
+    tyre = read_tyre("ex/tyre.toml")
+    est = estimate_load(read_profile("ex/run30.profile.csv"), tyre.geometry, tyre.ring)
+    print(est.load_n, (est.lo, est.hi), est.status)   # the load [N], its 95 % interval, the solver's status
 
-**Outputs.** The load and its 95 % Laplace interval (log-normal in the load), the
-contact patch of the model at that load (:func:`ringfit.physics.contact.patch_edges`,
-:func:`~ringfit.physics.contact.contact_length`, interpolated on the load curve), Ω with
-its source, the fit's status, residual RMS and the noise level in the fitted band
-(:class:`LoadEstimate`).
-
-Per revolution of a continuous recording: :func:`estimate_revolutions` (load and angle
-offset free, the nuisances fixed at the averaged profile's fit, batches of revolutions
-solved by :func:`ringfit.fit.engine.least_squares_batch`, each batch warm-started from the
-previous one).
+Per revolution of a continuous recording: :func:`estimate_recording` (the averaged profile, then each revolution
+with the nuisances held at its fit, batched by :func:`ringfit.fit.engine.least_squares_batch`).
 
 **Modules** (one concern each; every name below is importable from ``ringfit.fit.estimate``):
 
