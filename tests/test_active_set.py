@@ -88,15 +88,20 @@ def test_a_creeping_solve_is_finished_at_the_check_not_at_the_end_of_its_budget(
 
 def test_a_solve_with_nothing_on_a_bound_at_the_check_is_the_solve_without_it(monkeypatch):
     """At a check after 4 steps the slope is still 4 % of its range from the bound (not the active set's
-    business): the solve is run with its whole budget as it would be without the check, to the same point and in
-    the same steps (a solve resumed from step 4 would be another solve: Levenberg–Marquardt's damping starts
-    afresh)."""
+    business): the solve runs on with its whole budget as it would without the check, to the same point and in
+    the same steps (a solve stopped and resumed from step 4 would be another solve: Levenberg–Marquardt's
+    damping would start afresh), and it is compiled and run once."""
     problem, y = _problem(1.5)
     monkeypatch.setattr(engine, "ACTIVE_SET_AFTER", 4)
     early = least_squares(problem, np.array([0.5, 0.0]), ("a", "c"), max_steps=4, active_set=False)
     assert early.status == "max_steps_reached" and 1.0 - early.values["a"] > 10 * engine.ACTIVE_SET_NEAR
     plain = least_squares(problem, np.array([0.5, 0.0]), ("a", "c"), max_steps=400, active_set=False)
+    runs = []
+    program = engine._solve_program
+    monkeypatch.setattr(engine, "_solve_program", lambda model: lambda *a, **k: runs.append(a[6]) or program(model)(
+        *a, **k))
     fit = least_squares(problem, np.array([0.5, 0.0]), ("a", "c"), max_steps=400)
     assert fit.converged and fit.iterations == plain.iterations > 4, fit.message
+    assert [int(x) for x in runs] == [400]
     np.testing.assert_array_equal(fit.theta, plain.theta)
     np.testing.assert_allclose(fit.values["c"], np.mean(y - T), rtol=1e-8)

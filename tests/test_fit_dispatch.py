@@ -54,7 +54,7 @@ def test_a_levenberg_marquardt_fit_runs_the_compiled_solve_once(monkeypatch):
         solve = program(model)
 
         def run(*args, **kwargs):
-            runs.append(args[6])  # the step limit
+            runs.append((args[6], args[9]))  # the step limit and the creep check
             return solve(*args, **kwargs)
 
         return run
@@ -62,10 +62,10 @@ def test_a_levenberg_marquardt_fit_runs_the_compiled_solve_once(monkeypatch):
     monkeypatch.setattr(engine, "_solve_program", counting)
     fit = least_squares(problem, START, FREE)
     assert fit.converged
-    # the budget (256) is run in its first ACTIVE_SET_AFTER steps, where a creep to a bound is looked for: a fit
-    # that converges within them is solved once
+    # one compiled solve with the whole budget (256), told to look for a creep to a bound after
+    # ACTIVE_SET_AFTER steps (inside its loop): a fit that converges is solved once
     assert fit.iterations < engine.ACTIVE_SET_AFTER < 256
-    assert len(runs) == 1 and int(runs[0]) == engine.ACTIVE_SET_AFTER
+    assert len(runs) == 1 and [int(x) for x in runs[0]] == [256, engine.ACTIVE_SET_AFTER]
 
 
 def test_marquardt_scaling_makes_the_fit_independent_of_a_parameters_unit():

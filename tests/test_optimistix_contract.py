@@ -35,9 +35,9 @@ def test_cauchy_termination_signature():
                                                                       "f_diff"]
 
 
-def test_dense_state_is_the_gauss_newton_state_plus_scale():
+def test_dense_state_is_the_gauss_newton_state_plus_scale_and_the_accepted_point():
     from optimistix._solver.gauss_newton import _GaussNewtonState
 
     upstream = list(_GaussNewtonState.__dataclass_fields__)
     ours = list(engine._DenseState.__dataclass_fields__)
-    assert ours == upstream + ["scale"]
+    assert ours == upstream + ["scale", "accepted"]

@@ -30,16 +30,25 @@ JTJ_DIAGONAL = 1e3
 STEP_CAP = 100_000
 
 
-def _limited_terminate(done, result, state, max_steps):
-    """Stop at the traced step limit ``max_steps`` and, after two accepted steps, after STALL_STEPS rejections."""
+def _limited_terminate(done, result, state, args):
+    """Stop at the traced step limit ``max_steps`` and, after two accepted steps, after STALL_STEPS rejections.
+
+    ``args`` = ``(max_steps, _, check_at, bounded, near_sin)``: a solve still running after ``check_at`` steps
+    (> 0) whose accepted point has a bounded slot creeping onto its bound (``|sin z| ≥ near_sin``, z = s/scale:
+    the engine's sine transform, ``ringfit.fit.engine.ACTIVE_SET_NEAR``) stops there too, reported as
+    ``nonlinear_max_steps_reached`` (the engine's active set finishes it); otherwise it runs on uninterrupted."""
+    max_steps, _, check_at, bounded, near_sin = args
     stalled = (state.num_accepted_steps >= 2) & (state.num_steps_since_acceptance >= STALL_STEPS)
-    limit = (state.num_steps >= jnp.maximum(max_steps, 1)) & ~(done | stalled)
+    creeping = jnp.any(bounded & (jnp.abs(jnp.sin(state.accepted / state.scale)) >= near_sin))
+    at_check = (check_at > 0) & (state.num_steps == check_at) & creeping
+    limit = ((state.num_steps >= jnp.maximum(max_steps, 1)) | at_check) & ~(done | stalled)
     result = optx.RESULTS.where(limit & (max_steps > 0), optx.RESULTS.nonlinear_max_steps_reached, result)
     return done | stalled | limit, result
 
 
 class _DenseState(eqx.Module):
-    """optimistix's Gauss–Newton state (same fields, same meaning) plus the variable scaling ``scale`` (d)."""
+    """optimistix's Gauss–Newton state (same fields, same meaning) plus the variable scaling ``scale`` (d) and the
+    last accepted point ``accepted`` (for the creep check of :func:`_limited_terminate`)."""
 
     first_step: jax.Array
     y_eval: jax.Array
@@ -53,12 +62,14 @@ class _DenseState(eqx.Module):
     num_accepted_steps: jax.Array
     num_steps_since_acceptance: jax.Array
     scale: jax.Array
+    #: the last accepted point (optimistix's loop passes ``terminate`` the point before the step)
+    accepted: jax.Array
 
 
 class _DenseSteps:
     """The step of optimistix's Gauss–Newton family on a dense Jacobian, with Marquardt's scaling set in step one.
 
-    ``fn(s, (max_steps, d)) -> (residuals, (aux, J_z))`` evaluates the model at ``z = s / d`` and returns its
+    ``fn(s, (max_steps, d, …)) -> (residuals, (aux, J_z))`` evaluates the model at ``z = s / d`` and returns its
     Jacobian in z (:func:`_linearisation`); the step builds the Jacobian in s, ``J_z / d``, as a matrix
     operator, so every further product in the step (trust region, damped solve) is a small matrix product.
     Otherwise the step is optimistix's ``AbstractGaussNewton.step`` (search, descent, Cauchy termination).
@@ -85,11 +96,11 @@ class _DenseSteps:
             aux=jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), aux_struct),
             descent_state=self.descent.init(y, f_info), terminate=jnp.array(False), result=optx.RESULTS.successful,
             num_steps=jnp.array(0), num_accepted_steps=jnp.array(0), num_steps_since_acceptance=jnp.array(0),
-            scale=jnp.ones_like(y))
+            scale=jnp.ones_like(y), accepted=y)
 
     def step(self, fn, y, args, options, state, tags):
         max_steps = args[0]
-        res, fn_aux = fn(state.y_eval, (max_steps, state.scale))
+        res, fn_aux = fn(state.y_eval, (max_steps, state.scale, *args[2:]))
         jac_z = fn_aux[1]
         if self.scaled:
             norms = jnp.sqrt(jnp.sum(jac_z**2, axis=0))
@@ -125,11 +136,11 @@ class _DenseSteps:
             first_step=jnp.array(False), y_eval=y + y_descent, search_state=search_state, f_info=f_info, aux=aux,
             descent_state=descent_state, terminate=terminate, result=result, num_steps=num_steps,
             num_accepted_steps=num_accepted_steps, num_steps_since_acceptance=num_steps_since_acceptance,
-            scale=scale)
+            scale=scale, accepted=y)
         return y, state, prev_aux
 
     def terminate(self, fn, y, args, options, state, tags):
-        return _limited_terminate(state.terminate, state.result, state, args[0])
+        return _limited_terminate(state.terminate, state.result, state, args)
 
 
 class _LevenbergMarquardt(_DenseSteps, optx.LevenbergMarquardt):

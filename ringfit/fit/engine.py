@@ -326,11 +326,12 @@ def _linearisation(model, data, theta0, free, prior_w, prior_mean):
     return linearise_any
 
 
-def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, *, model, treedef,
-               method="levenberg_marquardt"):
+def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, check_at=0, *, model,
+               treedef, method="levenberg_marquardt"):
     """One fit (traced): ``data`` arrives as flat leaves (fast dispatch); ``max_steps`` and the tolerances are
     traced, so one compiled solve serves every step limit and tolerance, and with ``max_steps = 0`` every
-    evaluation (:func:`linearize`, :func:`evaluate`).
+    evaluation (:func:`linearize`, :func:`evaluate`). ``check_at`` (traced, 0 = never): the step after which a
+    solve with a bounded parameter creeping onto its bound stops for the active set (:func:`least_squares`).
 
     Levenberg–Marquardt works on ``s = d·z``, its scaling ``d`` set inside the first step
     (:class:`ringfit.fit._steps._DenseSteps`); a call with ``max_steps = 0`` works on z itself (``d = 1``).
@@ -339,8 +340,9 @@ def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, 
     free = _Free(*free_arrays)
     linearise = _linearisation(model, data, theta0, free, prior_w, prior_mean)
     solver = SOLVERS[method](rtol=rtol, atol=atol, linear_solver=lx.SVD())
-    sol = optx.least_squares(lambda s, a: linearise(s / a[1]), solver, z0, args=(max_steps, jnp.ones_like(z0)),
-                             has_aux=True, max_steps=STEP_CAP, throw=False)
+    creep = (max_steps, jnp.ones_like(z0), check_at, free.bounded, 1.0 - 2.0 * ACTIVE_SET_NEAR)
+    sol = optx.least_squares(lambda s, a: linearise(s / a[1]), solver, z0, args=creep, has_aux=True,
+                             max_steps=STEP_CAP, throw=False)
     d = sol.state.scale
     z = sol.value / d
     # residuals, Jacobian and aux at the returned point from the solver's last accepted
@@ -492,9 +494,9 @@ def least_squares(
     - ``pad_to``: pad the free set to this size (one compilation for several free-set sizes).
     - ``method``: ``"levenberg_marquardt"`` (default) or ``"gauss_newton"`` (:data:`SOLVERS`).
     - ``active_set``: finish a solve that has a bounded parameter on its bound and has not converged by holding
-      it there (:func:`_hold_on_bounds`; docs/physics.md §11 *bounds*), checked after :data:`ACTIVE_SET_AFTER`
-      steps and again at ``max_steps``; a solve with nothing on a bound at the check is run again from its start
-      with the whole budget (the answer it gives without the check). ``False``: one solve, as it ended.
+      it there (:func:`_hold_on_bounds`; docs/physics.md §11 *bounds*), checked inside the compiled solve after
+      :data:`ACTIVE_SET_AFTER` steps and again at ``max_steps``; a solve with nothing on a bound at the check
+      runs on uninterrupted (the answer it gives without the check). ``False``: one solve, as it ended.
 
     **Returns:** :class:`~ringfit.fit.result.FitResult` with ``theta`` (all parameters at the
     optimum), the model's aux in ``extra["aux"]`` and ``problem``; ``extra["held"]`` names the parameters
@@ -503,16 +505,17 @@ def least_squares(
     require_x64("ringfit.fit.engine.least_squares")
     kw = dict(max_steps=max_steps, rtol=rtol, atol=atol, n_data=n_data, method=method)
     # A solve still running after ACTIVE_SET_AFTER steps with a parameter on its bound is creeping there: the
-    # active set finishes it now instead of after the whole budget. Otherwise the whole solve is run as it would be
-    # without the check (from its start: a Levenberg–Marquardt solve resumed from a later point is another solve).
-    checked = active_set and max_steps > ACTIVE_SET_AFTER
-    result = _least_squares(problem, theta0, free, pad_to=pad_to,
-                            **{**kw, "max_steps": ACTIVE_SET_AFTER if checked else max_steps})
+    # compiled solve stops at that step and the active set finishes it, instead of after the whole budget. A solve
+    # with nothing on a bound there runs on, as it would without the check (checked inside the solve's loop: a
+    # Levenberg–Marquardt solve stopped and resumed would be another solve).
+    check_at = ACTIVE_SET_AFTER if active_set and max_steps > ACTIVE_SET_AFTER else 0
+    result = _least_squares(problem, theta0, free, pad_to=pad_to, check_at=check_at, **kw)
     if not (active_set and result.status == "max_steps_reached" and max_steps > 0):
         return result
     held = _hold_on_bounds(problem, result, tuple(free), pad_to, kw)
-    if held.converged or not checked:
+    if held.converged or result.iterations >= max_steps:
         return held
+    # stopped at the check, and the active set could not finish it: the whole solve, without the check
     result = _least_squares(problem, theta0, free, pad_to=pad_to, **kw)
     if result.status == "max_steps_reached":
         result = _hold_on_bounds(problem, result, tuple(free), pad_to, kw)
@@ -523,8 +526,8 @@ def least_squares(
 #: range of a bound is finished by an active set (:func:`_hold_on_bounds`). The sine transform's slope vanishes
 #: on the bound, so Levenberg–Marquardt creeps there and never meets its tolerances (docs/physics.md §11 *bounds*).
 ACTIVE_SET_NEAR = 1e-3
-#: Steps after which a solve that has not converged is checked for a parameter creeping to its bound (the active
-#: set then finishes it; a solve with no such parameter is run again from its start with its whole budget).
+#: Steps after which a solve that has not converged is checked, inside its compiled loop, for a bounded parameter
+#: creeping onto its bound (the solve then stops and the active set finishes it; without one it runs on).
 ACTIVE_SET_AFTER = 128
 #: Rounds of hold, re-solve and release before the active set gives up (each round frees what the gradient
 #: pulls inwards).
@@ -589,8 +592,9 @@ def _u_bounds(problem: Problem, free) -> tuple[np.ndarray, np.ndarray]:
     return np.array([x[0] for x in b]), np.array([x[1] for x in b])
 
 
-def _least_squares(problem: Problem, theta0, free, *, max_steps, rtol, atol, n_data, pad_to, method) -> FitResult:
-    """One solve of :func:`least_squares` (no active set)."""
+def _least_squares(problem: Problem, theta0, free, *, max_steps, rtol, atol, n_data, pad_to, method,
+                   check_at: int = 0) -> FitResult:
+    """One solve of :func:`least_squares` (no active set; ``check_at``: :func:`_solve_one`)."""
     model, data, coords = problem.model, problem.data, problem.coords
     names = problem.names
     free = tuple(free)
@@ -608,7 +612,8 @@ def _least_squares(problem: Problem, theta0, free, *, max_steps, rtol, atol, n_d
         raise InputError(f"max_steps = {max_steps}: expected 1 … {STEP_CAP} (0: evaluate only)")
     args = (leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean)
     tol = (np.float64(rtol), np.float64(atol))
-    out = _solve_program(model)(*args, np.int64(max_steps), *tol, model=model, treedef=treedef, method=method)
+    out = _solve_program(model)(*args, np.int64(max_steps), *tol, np.int64(check_at), model=model, treedef=treedef,
+                                method=method)
     u_free, result, steps, res, jac = jax.device_get(out[:5])  # one transfer; the model's aux stays as it is
     aux = out[5]
     # back to the caller's order of ``free`` (prior rows stay whitened rows: their sum of squares is the same)
@@ -861,7 +866,7 @@ def _linearize_all(problem: Problem, theta, free, pad_to):
     # (no sine transform), so its Jacobian is in u; no second program holding the model
     solve = _solve_program(problem.model)
     _, _, _, res, jac, aux = solve(leaves, u, np.append(theta, 0.0), fs.unbounded_arrays(), fs.prior_w,
-                                   fs.prior_mean, np.int64(0), np.float64(1e-10), np.float64(1e-10),
+                                   fs.prior_mean, np.int64(0), np.float64(1e-10), np.float64(1e-10), np.int64(0),
                                    model=problem.model, treedef=treedef, method="levenberg_marquardt")
     jac = np.asarray(jac)
     if solve_free != tuple(free):  # back to the caller's order (a two-stage model's free set was reordered)
