@@ -55,7 +55,7 @@ def _pytest(args: list[str], record: str | None = None) -> int:
 def _collected(args: list[str]) -> list[str]:
     out = subprocess.run([sys.executable, "-m", "pytest", *args, "--collect-only", "-q", "-n", "0"],
                          capture_output=True, text=True)
-    return [line.strip() for line in out.stdout.splitlines() if "::" in line and " " not in line.strip()]
+    return [line.rstrip("\n") for line in out.stdout.splitlines() if "::" in line and not line[:1].isspace()]
 
 
 def main(argv: list[str]) -> int:
