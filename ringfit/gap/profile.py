@@ -1,56 +1,22 @@
 """The rolling-profile side of the gap diagnosis: baseline ``gong-rolling`` fitted to ``*.profile.csv`` (docs/physics.md §4–6).
 
-**Baseline** (docs/physics.md §6): the inextensible ring with χ = 1, hysteretic
-damping and radial frictionless tread springs (§4), read through sensor
-layer 2 only (γ = 0, e = 0, no g, no high-pass), each channel's
-per-revolution mean removed. The ring's ρA, EI, k_w, k_v come from the eq. 18
-fit to ``free.modes.csv`` (:mod:`ringfit.gap.modal`), its damping ratio from
-that table's damping column (else ``tyre.toml``). Fitted to the profiles:
-the tread stiffness k_trd (starting at ``tyre.toml``'s value or 19e6 N/m²,
-weak log-normal prior σ = 1), per profile a recorded-angle offset (linear within
-±10°, docs/physics.md §5 layer 6) and a gain on the reading (log, 0.5–2; each held to the
-runs' common value by the block's :func:`~ringfit.fit.profile_block.nuisance_prior_cov`, 0.5° and
-3 % per run) — the nuisances of the profile block :mod:`ringfit.fit.profile_block`, the same that
-``ringfit identify`` fits, applied by its :func:`~ringfit.fit.profile_block.read_through`
-— and EI, k_w, k_v, ζ
-with the free-table fit's Laplace posterior (correlated, log units) as their
-prior. Why: eq. 18 pins the stiffnesses only relative to the pressure term
-P(n²−1), which dominates the free modes for n ≥ 3, so a free table leaves EI
-uncertain by 10–30 %, while the bending length sets the profile's edge
-features; a baseline that could not move EI within that uncertainty would
-leave a structured residual that no effect explains (and let effects absorb
-it). For χ = 1 the steady shape does not depend on ρA (docs/physics.md §4.1), so ρA
-stays at the free-table value. The JSON says which source each value came
-from (``baseline.sources``).
+The baseline is the inextensible ring with tread springs (§4) read through sensor layer 2 only, each channel's
+per-revolution mean removed; the ring comes from the free table's eq. 18 fit, refitted with that fit's posterior as
+its prior; k_trd and each run's gain and angle offset (the profile block's nuisances,
+:func:`~ringfit.fit.profile_block.read_through`, tied by one sensor's prior) are fitted. Rows are the profiles on
+the model grid; the noise is the far-side estimate (:mod:`ringfit.gap.profile_noise`) with a model-resolution
+floor (:data:`MODEL_PRECISION`); one speed is held out per fold. Each choice, and why: docs/physics.md §6
+(``gong-rolling``).
 
-**Rows**: every profile (one per speed), both channels, band-limited
-resampled onto the model grid φ_j (M = 512, docs/physics.md §4.5) with its mean
-removed (:func:`ringfit.fit.profile_block.rolling_data`); the model is band-limited
-to the harmonics each measurement holds. Ω from the sidecar's
-``rotation_hz``, else V/R_e with R_e = R_out − δ/3 of the fitted baseline
-(recomputed after the first baseline fit).
+Example (the profile problem of ``ringfit example case --effect sensor_tilt --out ex``; docs/formats.md §6)::
 
-**Noise**: from the far side of the wheel (:mod:`ringfit.gap.profile_noise`),
-per profile and channel, or the user's ``noise={"profile_ms2": σ}``; a
-model-resolution floor of :data:`MODEL_PRECISION` × the channel's RMS is added
-in quadrature (what the M = 512 grid misses against M = 4096, measured for the
-baseline sensor and the strongest sensor tilt; docs/physics.md §4.5). The fitted noise spectrum also gives each
-profile and channel its effective degrees of freedom (``meta.series_dof``)
-for the χ² test of :mod:`ringfit.gap.verdict`.
+    from ringfit.gap import effects
+    from ringfit.gap.case import read_case
+    from ringfit.gap.diagnosis import build_problems
 
-**Held-out**: leave-one-speed-out (one fold per profile); with a single
-profile, interleaved 16-sample angle blocks (4 folds).
-
-**Candidates**: every effect with a profile hook (sensor_tilt, gravity,
-iepe_highpass, wave_damping, tread_shear, rotation (χ), ring_extensibility
-(EA), sensor_mass); the model of each is composed by
-:class:`ringfit.physics.profile.ProfileModel`. One jitted function —
-the engine's refit (prediction and K forward-mode tangents per step), stopped after one
-linearisation for plain predictions and Jacobians — serves every candidate, chain and case
-with the same number of profiles (flat road or drum alike, :class:`ringfit.physics.profile.FlatOrDrum`): it is compiled once.
-The predictor is one of the engine's two-stage models (the rolling solve, then each run's reading through
-its gain and offset): of the K tangents only K − 2P pass through the solve, the 2P nuisances' through the
-reading alone (as many solve tangents per step as before the per-run nuisances).
+    case = read_case("ex/case")
+    *modes, profiles = build_problems(case, tuple(effects.get(n) for n in effects.available()))
+    print(profiles.domain, profiles.y.size, profiles.noise_method)
 """
 
 from __future__ import annotations
