@@ -1,56 +1,25 @@
-"""The null of a verdict: how much held-out shrink the diagnosis's own selection finds when no effect is there.
+"""The null of a verdict: how much held-out shrink the diagnosis's own selection finds when no effect is there
+(docs/physics.md §6.4; docs/formats.md §5 ``null``).
 
-A held-out shrink is only evidence if chance alone rarely produces it. Chance here
-includes the *selection*: several candidates are refitted and the best is kept, and
-rows without labels are matched to the nearest of many model lines — a model with more
-lines explains random frequencies better. So every acceptance is tested against the
-distribution of the **selection statistic** on data drawn with no effect in it
-(docs/formats.md §5 ``null``, docs/physics.md §6.4):
+A held-out shrink is evidence only if chance rarely produces it, and chance includes every choice the diagnosis
+makes on the data: the best of several candidates, the model lines rows are matched to, the labels the assignment
+may override. So an accepted candidate's statistic T (the round's best held-out shrink, ``1 − SS_c/SS_current``)
+is compared with T over N draws of data with no effect, ``p = (1 + #{T* ≥ T})/(N + 1)``, and stands only when
+p < α (:data:`ALPHA`). The nulls: **parametric** (rows redrawn from the current model with the row noise model,
+:func:`parametric_null`), **random-line** (rows whose line the data choose redrawn uniformly over their table's
+span with their labels, and matched again by the diagnosis's own rule, :func:`random_line_null`), **rig
+nuisances** for profiles; beside them :func:`label_permutation_test`. Refits are linearised at each candidate's
+fit and vectorised over draws (:func:`linearise`, :func:`heldout_linear`), so observed and null statistics are
+computed by one formula. Each null, what it repeats, and the audit of freedoms: docs/physics.md §6.4.
 
-    T = max over the round's candidates c of  1 − SS_c / SS_current,
+Example (the nulls behind an accepted candidate of ``ringfit example case --effect rotation --out ex``)::
 
-SS the held-out sum of ψ(residual/σ)² (the diagnosis's own definition). An accepted
-candidate with observed statistic T_c gets ``p = (1 + #{T* ≥ T_c}) / (N + 1)`` over N
-null draws (Monte-Carlo error √(p(1−p)/N) reported), and stands only when p < α
-(``--alpha``, default :data:`ALPHA`). Two nulls:
+    from ringfit.gap import diagnose
 
-- **parametric** (every kind of data): the rows are redrawn from the current model's
-  prediction (the baseline in the first round, the accepted chain later) with the row noise
-  model, labels kept as given — Gaussian with each row's σ for mode tables (the reference
-  table is held as measured: it is the baseline's data), the current residual
-  phase-randomised per run and channel for profiles (its spectrum kept: coloured noise stays
-  coloured). The candidates' statistics are those of linearised refits (below).
-- **random-line** (mode tables with rows whose line the data choose: rows without n, and every
-  matched row of a rolling table, whose n, tag or branch the assignment may override at a finite
-  penalty): those rows' frequencies are redrawn uniformly over their table's span at its row count,
-  **their labels kept as given**, and matched by the diagnosis's own rule (the rolling tables: the
-  model structure — rolling, loaded model or free spinning ring — chosen again for every draw by
-  the rule that chose it for the measured rows, τ maximised per draw, with the rows' label
-  penalties, then one assignment per table by cost — z², line weight, label penalties — on that
-  structure's lines at the computed condition; other tables: the nearest mode of the model their
-  condition computes); rows pinned to one line by their labels are drawn from the baseline. The
-  labels each draw overrode are counted beside the measured count.
-- **rig nuisances** (profiles, for a candidate the null accepts in place of the shrink bar): the
-  parametric null with the current model moved per draw by a gain drifting over the session and
-  a per-run angle jitter (:func:`_nuisances`).
-
-Beside the nulls, :func:`label_permutation_test` asks whether the labels of rolling tables carry
-information the model agrees with (labels shuffled among each table's rows, frequencies kept). Its
-  statistic is the total shrink of the chain so far plus each candidate against the baseline,
-  so a chain of two effects is judged as a whole.
-
-An effect must beat both (``p`` is the larger of the two).
-
-**Linearised refits, vectorised over draws.** Each candidate's fit θ̂ to the measured data
-gives its prediction p̂ and Jacobian J (solver coordinates u: logs of positive parameters,
-effect parameters scaled) at every row; a refit to data y* on the train rows of a fold is
-the Gauss–Newton step from θ̂ with the refit's own prior, ``Δu = (JᵀWJ + Λ)⁻¹(JᵀW(y* − p̂) −
-Λ(û − μ))``, and the held-out residual of the fold's rows is ``y* − p̂ − J Δu``. The same
-formula gives the observed statistic (y* = y), so observed and null are computed alike. For
-the random-line null the rows' predictions and Jacobians are gathered from a *line problem*:
-the frequency problem's rows plus one row per line a new frequency could be matched to,
-evaluated once per candidate by the diagnosis's own predictor. The Huber weighting of robust
-rows enters the sums (ψ), not the linearised refits.
+    d = diagnose("ex/case", null_draws=200)
+    for c in d.content["candidates"]:
+        if c["accepted"]:
+            print(c["effect"], c["p_value"], c["null_sentence"])
 """
 
 from __future__ import annotations
