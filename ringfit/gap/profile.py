@@ -34,7 +34,7 @@ from ringfit.fit.engine import LINEAR
 from ringfit.fit.profile_block import nuisance_coords, nuisance_prior_cov, nuisance_names, nuisance_start, read_through
 from ringfit.gap.effects.base import Effect
 from ringfit.gap.problem import GapProblem, ProblemMeta
-from ringfit.gap.profile_noise import noise_dof, profile_noise
+from ringfit.gap.profile_noise import profile_noise
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced
 from ringfit.physics.profile import ProfileModel, flat_or_drum, profile_channels
@@ -267,16 +267,18 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
         resid = (y - predict(problem, problem.null_theta())).reshape(P, 2, M)
         if user is not None:
             sigma, slope = np.full((P, 2), float(user)), 0.0
+            dof = np.array([[2.0 * kmax[i]] * 2 for i in range(P)])  # white noise of the stated σ
             problem.noise_method = f"user value {float(user):.3g} m/s^2 (white)"
         else:
-            sigma, slope = profile_noise(resid, phi, kmax)
+            sigma, slope, dof = profile_noise(resid, phi, kmax)
             # model-resolution floor: the M = 512 grid reproduces the sensor signals to ~0.1 % of their
             # peaks (docs/physics.md §4.5); below that a residual is discretisation, not physics
             floor = MODEL_PRECISION[None, :] * np.sqrt(np.mean(rdata.measured**2, axis=-1))
             sigma = np.sqrt(sigma**2 + floor**2)
             problem.noise_method = (
                 "per profile and channel from the far side of the wheel (|angle| > 90 deg, cos^4 taper): "
-                "power law fitted to the residual spectrum above harmonic 8, extrapolated to harmonic 1, "
+                "the residual's periodogram summed from harmonic 8 up, below it a power law fitted to octave-band "
+                "levels and extrapolated to harmonic 1, "
                 f"plus {MODEL_PRECISION[0]:g} (radial) / {MODEL_PRECISION[1]:g} (tangential) x channel RMS "
                 "(model resolution, M = 512 against M = 4096) in quadrature; "
                 "sigma [m/s^2] " + ", ".join(f"{s:g} km/h: {sigma[i, 0]:.3g}/{sigma[i, 1]:.3g}"
@@ -284,7 +286,7 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
             problem.meta.noise_slope = slope
             problem.noise_method += f"; spectral slope {slope:.2f}"
         problem.sigma = np.repeat(sigma.reshape(-1), M)
-        problem.meta.series_dof = {2 * i + c: noise_dof(slope, kmax[i]) for i in range(P) for c in range(2)}
+        problem.meta.series_dof = {2 * i + c: float(dof[i, c]) for i in range(P) for c in range(2)}
     if user is None:  # the far-side estimate repeated on every parametric-null draw, as it was made on the data
         problem.meta.noise_rule = partial(_profile_rule, phi=phi, kmax=np.asarray(kmax), floor=floor,
                                                     shape=(P, 2, M))
@@ -305,7 +307,7 @@ def _profile_rule(rows, center, *, phi, kmax, floor, shape) -> np.ndarray:
     P, C, M = shape
     out = np.empty_like(rows)
     for b in range(rows.shape[0]):
-        sigma, _ = profile_noise((rows[b] - center).reshape(P, C, M), phi, kmax)
+        sigma, _, _ = profile_noise((rows[b] - center).reshape(P, C, M), phi, kmax)
         out[b] = np.repeat(np.sqrt(sigma**2 + floor**2).reshape(-1), M)
     return out
 

@@ -1,30 +1,17 @@
-"""Noise level of averaged rolling profiles, estimated from the data itself (gap diagnosis, docs/formats.md §3).
+"""Noise level of averaged rolling profiles, estimated from the data itself (gap diagnosis, docs/physics.md §6
+*baselines*, ``gong-rolling``).
 
-A profile is deterministic physics plus noise (what is left of random
-vibration after averaging revolutions, DAQ noise). Far from the contact patch
-the belt's deformation — and whatever any effect does to it — is smooth, so
-there the residual's content above a few revolution harmonics is noise.
+Far from the contact patch the belt's deformation, and whatever an effect does to it, is smooth, so there the
+residual's content above a few revolution harmonics is noise. Per profile and channel: the far-side windowed
+periodogram ``s_k`` (:func:`far_side_window`, :func:`periodogram`); σ² = (2/M)·(Σ_{k ≥ 8} s_k, the measured
+part, plus a power law fitted to octave-band levels and extrapolated to k = 1…7, which the window cannot
+separate from smooth model error); the effective degrees of freedom of the χ² test from the same spectrum.
 
-Per profile and channel, with the baseline residual r(φ_j) on the model grid:
+Example (pure white noise of σ = 1 on four profiles, both channels)::
 
-1. taper to the far side of the wheel, ``w(φ) = cos⁴φ`` for |φ| > 90° and 0
-   inside (C³-smooth, so smooth residual content does not leak to high k);
-2. periodogram ``s_k = |FFT(r·w)_k|² / Σw²`` (for white noise E s_k = σ²);
-3. octave bands k ∈ [8, 16), [16, 32), … up to the measurement's band edge:
-   robust level ``median(s_k)/ln 2`` per band (a periodogram ordinate is
-   exponentially distributed);
-4. a power law ``s(k) = a·k^b`` fitted to the band levels — one slope b for
-   all profiles and channels (clipped to [−2, 0.5]: white, pink, red or mildly
-   blue noise), a level a per profile and channel — extrapolated to the low
-   harmonics 1…7 that the far-side window cannot separate from smooth model error;
-5. ``σ² = (2/M) Σ_{k=1}^{k_max} s(k)`` — the noise variance per grid sample.
-
-Coloured noise therefore counts in full, its low-harmonic part by
-extrapolation (stated in the JSON ``noise_method``). The same power law gives
-the effective degrees of freedom of a noise series, :func:`noise_dof`
-(2·k_max for white noise, far fewer for red), used by the χ² test of
-:mod:`ringfit.gap.verdict`. A user value (``noise=
-{"profile_ms2": σ}``) replaces the estimate.
+    phi = -np.pi + 2 * np.pi * np.arange(512) / 512
+    sigma, slope, dof = profile_noise(np.random.default_rng(0).normal(size=(4, 2, 512)), phi, np.full(4, 255))
+    # sigma ≈ 1 (4, 2); slope ≈ 0; dof ≈ 2·255 per series, a little fewer (a spectrum estimated, not known)
 """
 
 from __future__ import annotations
@@ -37,6 +24,9 @@ import numpy as np
 LOWEST_HARMONIC = 8
 #: Range of the fitted spectral slope.
 SLOPE_RANGE = (-2.0, 0.5)
+#: Harmonics per band over which the periodogram is averaged for the degrees of freedom (narrow enough to follow a
+#: resonance bump of a few harmonics).
+DOF_BAND = 8
 
 
 def far_side_window(phi: np.ndarray) -> np.ndarray:
@@ -45,14 +35,24 @@ def far_side_window(phi: np.ndarray) -> np.ndarray:
     return np.where(c < 0.0, c**4, 0.0)
 
 
-def band_levels(residual: np.ndarray, phi: np.ndarray, k_max: int) -> tuple[np.ndarray, np.ndarray]:
-    """Robust far-side periodogram levels in octave bands: ``(centres, levels)`` (steps 1–3 above).
-
-    ``residual`` shape ``(M,)`` [m/s²] on the grid ``phi`` [rad]; bands need ≥ 4 harmonics below ``k_max``.
-    """
+def periodogram(residual: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """Far-side windowed periodogram ``s_k = |FFT((r − r̄_w)·w)_k|² / Σw²`` ``(M//2 + 1,)`` of ``residual`` ``(M,)``
+    [m/s²] on the grid ``phi`` [rad]: for white noise of variance σ², E s_k = σ² at every k."""
     w = far_side_window(phi)
     X = np.fft.rfft((residual - np.sum(residual * w) / np.sum(w)) * w)
-    s = np.abs(X) ** 2 / np.sum(w**2)
+    return np.abs(X) ** 2 / np.sum(w**2)
+
+
+def band_levels(residual: np.ndarray, phi: np.ndarray, k_max: int, s: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Robust far-side periodogram levels in octave bands ``[8, 16), [16, 32), …``: ``(centres, levels)``, each
+    level ``median(s_k)/ln 2`` (a periodogram ordinate is exponentially distributed) — what the power law below
+    harmonic 8 is fitted to.
+
+    ``residual`` shape ``(M,)`` [m/s²] on the grid ``phi`` [rad]; bands need ≥ 4 harmonics below ``k_max``;
+    ``s``: its :func:`periodogram`, where already computed.
+    """
+    s = periodogram(residual, phi) if s is None else s
     centres, levels = [], []
     lo = LOWEST_HARMONIC
     while lo + 3 <= k_max:
@@ -67,21 +67,26 @@ def band_levels(residual: np.ndarray, phi: np.ndarray, k_max: int) -> tuple[np.n
     return np.asarray(centres), np.asarray(levels)
 
 
-def profile_noise(residual: np.ndarray, phi: np.ndarray, k_max) -> tuple[np.ndarray, float]:
-    """Noise σ [m/s²] per profile and channel from the baseline residual.
+def profile_noise(residual: np.ndarray, phi: np.ndarray, k_max) -> tuple[np.ndarray, float, np.ndarray]:
+    """Noise σ [m/s²] and effective degrees of freedom per profile and channel from the baseline residual
+    (docs/physics.md §6 *baselines*, ``gong-rolling``, *noise*).
 
-    The spectral slope b is common to all profiles and channels (one sensor, one
-    DAQ: one noise colour), fitted to the band levels with a free level per profile
-    and channel — far steadier than one slope per spectrum; the levels are per
-    profile and channel (noise grows with speed, channels differ).
+    σ² = (2/M)·Σ_{k=1}^{k_max} S_k with S_k the far-side periodogram itself from harmonic
+    :data:`LOWEST_HARMONIC` up (its sum is unbiased for any noise spectrum: a resonance bump counts in full,
+    where a power law through band medians missed a third of it) and, below, a power law ``a·k^b`` fitted to
+    the octave-band levels (:func:`band_levels`) — one slope b for all profiles and channels (one sensor, one
+    DAQ; clipped to :data:`SLOPE_RANGE`), a level a per profile and channel — extrapolated to k = 1 … 7.
+    ν = 2(ΣS_k)²/ΣS_k² (Satterthwaite, as :func:`spectrum_dof`), with S_k² ≥ 8 from the periodogram averaged
+    over :data:`DOF_BAND`-harmonic bands, squared and freed of its estimation noise (:func:`_band_power2`).
 
     **Arguments:** ``residual`` ``(P, 2, M)``; ``phi`` ``(M,)`` [rad]; ``k_max`` ``(P,)`` highest
     revolution harmonic each measurement holds.
 
-    **Returns:** ``(sigma (P, 2), slope b)``.
+    **Returns:** ``(sigma (P, 2), slope b, dof (P, 2))``.
     """
     P, C, M = residual.shape
-    bands = [[band_levels(residual[p, c], phi, int(k_max[p])) for c in range(C)] for p in range(P)]
+    spectra = [[periodogram(residual[p, c], phi) for c in range(C)] for p in range(P)]
+    bands = [[band_levels(residual[p, c], phi, int(k_max[p]), spectra[p][c]) for c in range(C)] for p in range(P)]
     xs, ys = [], []
     for row in bands:
         for centres, levels in row:
@@ -94,16 +99,57 @@ def profile_noise(residual: np.ndarray, phi: np.ndarray, k_max) -> tuple[np.ndar
         b = float(np.clip(np.sum(x * yv) / max(np.sum(x * x), 1e-300), *SLOPE_RANGE))
     else:
         b = 0.0
-    sigma = np.zeros((P, C))
+    sigma, dof = np.zeros((P, C)), np.ones((P, C))
+    rho = ordinate_correlation(phi)
     for p in range(P):
-        k = np.arange(1, int(k_max[p]) + 1, dtype=np.float64)
+        K = int(k_max[p])
+        k_lo = min(LOWEST_HARMONIC, K + 1)
+        k = np.arange(1, k_lo, dtype=np.float64)
         for c in range(C):
             centres, levels = bands[p][c]
             if centres.size == 0:
                 continue
             a = float(np.mean(np.log(levels) - b * np.log(centres)))
-            sigma[p, c] = math.sqrt(2.0 / M * float(np.sum(np.exp(a + b * np.log(k)))))
-    return sigma, b
+            low = np.exp(a + b * np.log(k))
+            high = spectra[p][c][k_lo : K + 1]
+            sigma[p, c] = math.sqrt(2.0 / M * (float(np.sum(low)) + float(np.sum(high))))
+            sq = np.concatenate([low**2, _band_power2(high, DOF_BAND, rho)])
+            dof[p, c] = 2.0 * (float(np.sum(low)) + float(np.sum(high))) ** 2 / max(float(np.sum(sq)), 1e-300)
+    return sigma, b, dof
+
+
+def _band_power2(s: np.ndarray, width: int, rho: np.ndarray) -> np.ndarray:
+    """Unbiased squares S_k² of the spectrum under the ordinates ``s`` ``(n,)``: each ordinate's band mean m
+    (``width``-harmonic bands, a short last band joining the one before) squared and divided by 1 + 1/n_eff,
+    where n_eff = n²/Σ_{i,j} ρ_{|i−j|} counts the band's independent ordinates (``rho``: correlation of two
+    ordinates j apart, from the window). For white noise E m² = S²(1 + 1/n_eff)."""
+    edges = list(range(0, s.size, width))
+    if len(edges) > 1 and s.size - edges[-1] < width // 2:
+        edges.pop()
+    edges.append(s.size)
+    lo, hi = np.asarray(edges[:-1]), np.asarray(edges[1:])
+    n = hi - lo
+    means = np.add.reduceat(s, lo) / n
+    lags = np.arange(int(n.max()), dtype=np.int64)
+    r = rho[np.minimum(lags, rho.size - 1)]
+    # Σ_{i,j<n} ρ_|i−j| = n ρ_0 + 2 Σ_{j=1}^{n−1} (n − j) ρ_j
+    pair = np.array([m * r[0] + 2.0 * float(np.sum((m - lags[1:m]) * r[1:m])) for m in n.tolist()])
+    return np.repeat(means**2 / (1.0 + pair / (n * n)), n)
+
+
+def ordinate_correlation(phi: np.ndarray) -> np.ndarray:
+    """Correlation ρ_j of two far-side periodogram ordinates j harmonics apart under white noise,
+    |Σw² e^{−ijφ}|² / (Σw²)² (``(M//2 + 1,)``)."""
+    w2 = far_side_window(phi) ** 2
+    return np.abs(np.fft.rfft(w2)) ** 2 / np.sum(w2) ** 2
+
+
+def spectrum_dof(s: np.ndarray) -> float:
+    """Effective degrees of freedom ν = 2(Σs_k)²/Σs_k² of a periodic noise series with power ``s_k`` per
+    harmonic k = 1 … (each harmonic an independent scaled χ²_2; Satterthwaite)."""
+    s = np.asarray(s, dtype=np.float64)
+    q = float(np.sum(s**2))
+    return float(2.0 * np.sum(s) ** 2 / q) if q > 0.0 else 1.0
 
 
 def noise_dof(slope: float, k_max: int) -> float:
@@ -112,9 +158,8 @@ def noise_dof(slope: float, k_max: int) -> float:
     Harmonics k = 1 … ``k_max`` are independent, each a scaled χ²_2 (Satterthwaite): white noise gives
     ν = 2·k_max (the samples of a band-limited series), red noise (slope −1.5) about 11.
     """
-    k = np.arange(1, int(k_max) + 1, dtype=np.float64)
-    s = k**slope
-    return float(2.0 * np.sum(s) ** 2 / np.sum(s**2))
+    return spectrum_dof(np.arange(1, int(k_max) + 1, dtype=np.float64) ** slope)
 
 
-__all__ = ["profile_noise", "noise_dof", "band_levels", "far_side_window", "LOWEST_HARMONIC"]
+__all__ = ["profile_noise", "noise_dof", "spectrum_dof", "periodogram", "band_levels", "far_side_window",
+           "LOWEST_HARMONIC", "SLOPE_RANGE", "DOF_BAND"]
