@@ -1,53 +1,25 @@
 """Identify the tyre once, from everything measured on it: one joint weighted least squares (docs/physics.md §11).
 
-A case folder (docs/formats.md §6) holds measurements whose condition is known. Each kind
-becomes a *residual block* on the one engine (:mod:`ringfit.fit.engine`); the blocks share the
-ring parameters and each run keeps its own nuisances:
+A case folder (docs/formats.md §6) is read by the one case-folder reader (:func:`read_identify_folder`,
+:mod:`ringfit.io.case`). Each kind of measurement is a residual block on the one engine (:mod:`ringfit.fit.engine`)
+sharing the ring, each run keeping its own nuisances: free modes and free damping
+(:mod:`ringfit.fit.free_block`), standing loaded modes (the patch from the static contact solve at the stated
+load), rolling profiles (:mod:`ringfit.fit.profile_block`: harmonic rows, gain, angle offset and the sensor's own
+nuisances). Across states (two or more pressures, a known torque) the ring's pressure law and the tread's
+longitudinal stiffness are identified too. §11 gives the method: the blocks, each block's noise model and its
+Student-t widening, the model's own discretisation checked at the optimum (:func:`grid_check`), the discrepancy
+ratio per block (:func:`discrepancy_ratio`), what each block tells (Fisher shares), the active set on bounds and
+friction held, carried or read. Stated conditions are checked on reading and each loaded table's load after the
+fit (:func:`load_check`). :func:`identify` returns an :class:`Identification` and never raises on
+non-convergence (check ``converged``).
 
-- ``free modes`` — ``free.modes.csv``: eq. 18 (docs/physics.md §2.1), rows ``(f_model − f)/σ``;
-- ``free damping`` — the free table's ``damping_pct``: modal damping ratio ζ, rows ``(ζ − ζ_i)/σ``;
-- ``loaded modes`` — tables with ``state = "loaded"`` at a known ``load_n``, standing: the
-  loaded-mode model of docs/physics.md §6 ``ground_contact`` (tread springs in the patch), the
-  patch half-angle from the static contact solve at that load (§4.3–4.4), so ``k_tread`` and the
-  ring meet the load through the patch; rows tagged ``extr``/``vert`` follow the cosine-type
-  branch, ``0``/``hort`` the sine-type one, untagged rows the branch nearer at the start;
-- ``profiles`` — ``*.profile.csv`` at known ``load_n`` and speed: the steady rolling ring read
-  by the sensor (§4–§6, :func:`ringfit.physics.profile.profile_channels`), per profile a gain
-  (sensor sensitivity) and an angle offset; the residual is taken per revolution harmonic
-  (2 … M/2 − 1, and :data:`~ringfit.fit.profile_block.PROFILE_BAND_MARGIN` below what the coarsest profile resolves; real and
-  imaginary parts) so that coloured noise is whitened by its own spectrum, estimated from the residual
-  (:func:`~ringfit.fit.profile_block.noise_spectrum`: a power law, then the ratio averaged over the ±:data:`~ringfit.fit.profile_block.NOISE_SMOOTHING`
-  neighbouring harmonics, each harmonic's own residual left out, times ν/(ν − 4) for weights estimated
-  from ν parts). Rows, nuisances and noise are the profile block's (:mod:`ringfit.fit.profile_block`), the same
-  the diagnosis's profile baseline composes.
+Example (``ringfit example identify --out ex``: free, loaded at 3 and 5 kN, three profiles; about 30 s CPU)::
 
-Noise scales: each block's σ is estimated from its own residual, ``s_b² = χ²_b / (m_b − tr H_bb)``
-with ``H`` the hat matrix of the weighted fit (the block's share of the fitted degrees of
-freedom), and the fit is repeated with the rescaled rows until the scales settle
-(:data:`~ringfit.fit.free_block.SCALE_PASSES`): one data type cannot swamp another, whatever its row count or
-its stated σ. The scale, its degrees of freedom and its widening are the free-modes block's noise model
-(:func:`~ringfit.fit.free_block.block_scale`, :func:`~ringfit.fit.free_block.t_widening`), the one ``ringfit
-fit`` uses, applied here to the free modes, the free damping and the loaded modes alike. Rolling mode tables
-(speed > 0) are not part of the joint model yet: they are listed with a warning. A block scale from ν residual
-degrees of freedom widens that block's share of the covariance by Student's t_ν
-(:func:`~ringfit.fit.free_block.t_widening`), and the model's own discretisation (contact grid,
-loaded-mode basis) is checked once at the optimum (:func:`grid_check`, refined ×2 and ×4, extrapolated to the
-continuum): the values are moved there and the move beyond the first refinement is carried into the covariance as
-a rank-one term. A form error of the model that the parameters absorb differently in different
-parts of a block shows as held-out rows predicted worse than their noise: each block's σ is multiplied by the
-square root of its discrepancy ratio κ_b ≥ 1 in the covariance and the posterior (:func:`discrepancy_ratio`,
-:func:`block_folds`; docs/physics.md §11).
-
-Stated conditions are checked on reading (:mod:`ringfit.io.conditions`: duplicates counted once, another
-pressure refused, a profile's rotation against its speed) and, after the fit, each loaded table's load
-against its own frequencies (:func:`load_check`). The freed ring parameters stay inside their plausible range
-(:func:`joint_coords`): one the data do not bound is reported at the edge, its interval cut there
-(:func:`log_interval`, :func:`cap_unbounded`), never an overflow or a non-finite number.
-
-The result is a :class:`~ringfit.fit.result.FitResult` of the final pass (covariance in the
-solver coordinates, ln θ for positive parameters) plus, in :class:`Identification`, the Fisher
-information of each block per parameter and the posterior correlation left among the ring
-parameters.
+    from ringfit.fit.identify import identify, read_identify_folder
+    ident = identify(read_identify_folder("ex/case"))
+    ident.converged, ident.ring.ei, ident.ring.k_tread   # True, 1.026 N m² (truth 1.023), 2.0325e7 (2.0328e7)
+    ident.covariance.sd_ln("ei")                         # σ of ln EI, carried into the tyre file
+    list(ident.blocks)                                   # ['free modes', 'free damping', 'loaded modes', 'profiles']
 """
 
 from __future__ import annotations
