@@ -1,54 +1,21 @@
-"""Many independent jobs as tasks on dask.distributed (docs/formats.md §13).
+"""Many independent jobs as tasks on dask.distributed: the machinery behind ``ringfit batch`` and ``ringfit campaign``
+(docs/formats.md §13; how the workers run, §13.5).
 
-The generic machinery behind ``ringfit batch`` and ``ringfit campaign``. It
-takes plain callables and knows nothing of the command line:
+It takes plain callables and knows nothing of the command line. :func:`open_client` gives a client on a
+:func:`local_cluster` of single-threaded worker processes, or on an existing scheduler, with the worker set-up
+(:class:`WorkerSetup`) on every worker; a :class:`Task` is one job (a picklable callable, its small arguments, the
+tasks it needs first, the files it writes); :func:`run_tasks` submits them with a progress bar that relays each
+running task's latest line, and returns one :class:`TaskResult` per task, in order, whatever happened to it;
+:func:`summarize` counts states, CPU, memory and warm compilations.
 
-- :func:`local_cluster` starts a ``distributed.LocalCluster`` of worker
-  *processes* with one thread each; :func:`open_client` gives a client on it or
-  on an existing scheduler (``dask scheduler`` / ``dask worker``) and installs
-  the worker set-up (:class:`WorkerSetup`) on every worker, present and future.
-- :class:`Task` is one job: a picklable callable and its (small) arguments, the
-  tasks it needs first, the files it writes. :func:`run_tasks` submits them,
-  shows a progress bar over tasks on stderr and returns one
-  :class:`TaskResult` per task, in order, whatever happened to it.
-- **Progress inside a task.** A task's stdout and stderr are its log; the
-  latest line it prints (a command's own progress bar: a diagnosis's
-  candidates, a posterior's steps, ``identify``'s passes) is relayed to the
-  client at most every :data:`PROGRESS_EVERY_S` seconds (a Dask worker event
-  under :data:`PROGRESS_TOPIC`), where the bar names every running task, how
-  long it has run and its latest line; progress-bar redraws are left out of
-  the log.
+Example (four tasks on a two-process LocalCluster; run under ``if __name__ == "__main__":``)::
 
-Workers done right:
-
-- **Threads.** One task at a time per worker process (a process-wide lock,
-  whatever ``--nthreads`` a remote worker was started with), one BLAS/OpenMP
-  thread per process (Dask's nanny sets ``OMP/MKL/OPENBLAS_NUM_THREADS=1``
-  before the process starts; :class:`WorkerSetup` also caps them with
-  threadpoolctl, for workers started without a nanny) and XLA's CPU runtime on
-  one thread: the cluster's processes are the parallelism.
-- **Inputs read on the worker.** A task's arguments are paths and options;
-  only its small result comes back through the scheduler.
-- **Warm workers.** A worker process lives across tasks, so JAX's compiled
-  functions stay in memory: the first task of a given shape compiles (or loads
-  from the persistent cache), later ones do not. Every :class:`TaskResult`
-  counts the XLA compilations its task triggered, which makes that visible.
-- **Memory.** Each task reports its peak resident memory above the process's
-  level when it started (Linux: the kernel's high-water mark, reset per task;
-  elsewhere sampled every 5 ms). A LocalCluster bounds each worker with
-  ``memory_limit``; Dask's nanny restarts a worker that exceeds it.
-- **One task per worker thread.** The client submits a task only when a
-  worker thread is free for it (and its predecessors are done), so a worker
-  never holds queued tasks that its death would take down with it.
-- **Lost workers.** A worker that dies mid-task (crash, memory limit) has its
-  task rescheduled by Dask itself; a task whose worker dies twice is reported
-  as ``lost`` (:data:`SCHEDULER_CONFIG`, set on a LocalCluster; give your own
-  scheduler the same, see the README), not retried forever. Dask counts each
-  death of a worker that holds the task, whatever caused it: a task moved
-  onto a worker that another task then crashes has used one of its two
-  lives. An exception *inside* a task is that task's failure: it is
-  deterministic, so it is reported at once, not retried. ``retries`` (Dask's)
-  covers failures outside the task's own code.
+    import math
+    from ringfit.batch import Task, open_client, run_tasks, summarize
+    with open_client(workers=2) as client:
+        results = run_tasks(client, [Task(f"sqrt{i}", math.sqrt, (float(i),)) for i in range(4)])
+    [r.state for r in results]        # ['ok', 'ok', 'ok', 'ok']; r.value holds each result
+    summarize(results)["by_state"]     # {'ok': 4}
 """
 
 from __future__ import annotations
