@@ -1,50 +1,23 @@
-"""Rows of ``rolling`` mode tables in the gap diagnosis: the rolling, loaded tyre's modes (docs/physics.md §3.7, §6).
+"""Rows of ``rolling`` mode tables in the gap diagnosis: the rolling, loaded tyre's modes (docs/physics.md §3.7,
+§6 ``ground_contact + rotation on rolling tables``, §6.4 *which model structure*).
 
-A ``rolling`` table (docs/formats.md §2 sidecar: ``state = rolling``, ``load_n`` > 0,
-``speed_kmh`` or ``rotation_hz`` > 0, ``frame``) was measured on a tyre that spins
-*and* touches the ground. Its rows are predicted by the model of docs/physics.md §3.7
-(:func:`ringfit.physics.rolling_modes.rolling_modes`: the ring rotating at Ω with the
-tread springs of the steady contact patch, Hill's method) and by what the table's
-observer sees of it (:func:`~ringfit.physics.rolling_modes.observed_frequencies`: the
-co-rotating sensor a line ω + kΩ, a fixed observer ω).
+A ``rolling`` table (docs/formats.md §2: ``state = rolling``, ``load_n`` > 0, a speed, a ``frame``) was measured on
+a tyre that spins and touches the ground. Its rows are assigned once per case, outside the refits: under the
+model structure their frequencies choose (:class:`StructureChoice`: the rolling, loaded model of §3.7 or the free
+spinning ring, by a mixture likelihood that does not reward more lines), then each structural row to a branch or
+a sensor line by ``ringfit campbell``'s matching (:func:`assign_rolling_rows`), the match stated per row. Inside
+the predictor only frequencies are recomputed: :class:`RollingJoint` gives the joint model (patch scale and speed
+gain both away from their nulls, one eigen-solve per table) and each effect alone its own rows; the assignment
+(mode index, line) stays fixed, a stated limitation when a fitted value far from 1 reorders modes.
 
-**Which model, chosen by the data.** The sidecar of a rolling table gives a load, but its rows
-may come from a tyre that does not touch the ground. The rows are therefore assigned under the
-model structure their frequencies choose, once per case (:class:`StructureChoice`,
-docs/physics.md §6.4): the rolling, loaded model below or the free spinning ring (eq. 25/26 at the
-same Ω; rows then carry the ring's n and wave, and the composite has no line to follow).
+Example (``ringfit example rolling --out ex``: a free table and three rolling tables at 20/40/60 km/h)::
 
-**Assignment, once, outside the refits.** Under the rolling, loaded model every structural row of the rolling tables
-is matched to a branch (fixed frame) or to a line of a branch (co-rotating frame) by
-:func:`ringfit.gap.campbell.match_tables` — the matching of ``ringfit campbell`` —
-at the computed condition: the ring fitted to ``free.modes.csv``, ``k_trd`` of the
-diagnosis, Ω = V/R_e (R_e = R_out − δ/3), the patch of the steady rolling solution at
-that speed, :data:`ROLLING_HARMONICS` harmonics. Tags ``extr``/``0`` (``vert``/``hort``)
-are matched to the contact-symmetric/antisymmetric branches through the modes'
-symmetry; rows without n, tag or branch are matched by frequency; the match (branch,
-n, direction, line, error, z) is stated per row (``labels["matched"]``,
-``labels["rolling"]``: the JSON ``rows[].match`` and ``rows[].rolling_match``). The
-assignment — mode index at that speed and sensor line k — is static; inside the
-predictor only the frequencies are recomputed, so the refits differentiate them with
-respect to ``patch_scale`` and ``speed_gain``.
-
-**How the two effects combine on these rows** (:class:`RollingJoint`). With both
-``ground_contact`` (patch scale s) and ``rotation`` (speed gain g) away from their
-nulls, a rolling row is ``rolling_modes(ring, g·Ω, arc scaled by s)`` at its assigned
-mode and line — the joint model, one eigen-solve per rolling table (a sequential ``lax.map``:
-batched eigen-solves under forward-mode differentiation are avoided on purpose),
-added to what the chain's other effects did (``+ (joint − eq. 18)``). With one of
-the two alone, the rows get that effect alone: ``rotation`` eq. 25/26 on the row's
-branch (where the table gives none: the wave of eq. 25/26 nearer the measured
-frequency, stated), ``ground_contact`` the standing loaded modes on the row's tag
-(where it gives none: the cos/sin-type loaded mode nearer the measured frequency,
-stated). With neither, the baseline is eq. 18 of the row's n. A row without n takes, for the
-baseline and the single-effect predictions, the n (and wave) of the nearest eq. 25/26 wave — each
-model its own assignment: the joint one keeps the branch it was matched to, whatever its n.
-
-The mode index is fixed at the computed condition; a fitted patch scale or speed gain
-far from 1 may reorder modes, and the row then follows the index, not the shape (a
-stated limitation: the computed variants are the predictions the verdict leans on).
+    from ringfit.gap import diagnose
+    d = diagnose("ex/rolling", null_draws=0)
+    d.verdict["effects"]                                  # ['ground_contact', 'rotation']
+    next(r["rolling_match"] for r in d.content["rows"] if r.get("rolling_match"))
+    # {'structure': 'rolling_loaded', 'model_branch': 2, 'model_n': 1, 'model_direction': 'backward',
+    #  'model_tag': 'hort', 'model_k': 1, 'frame': 'rotating', 'model_hz': 110.67, 'z': 0.0034, 'status': 'matched', …}
 """
 
 from __future__ import annotations
