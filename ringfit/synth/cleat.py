@@ -1,46 +1,21 @@
-"""Synthetic drum tests: a tyre rolling on a drum, with or without a cleat, seen by one co-rotating sensor.
+"""Synthetic drum tests: a tyre rolling on a drum, with or without a cleat, seen by one co-rotating sensor
+(docs/physics.md §9, *the synthetic drum bench*).
 
-:class:`CleatBench` generates continuous recordings (:mod:`ringfit.io.continuous`)
-with a known truth, so that the whole chain recording → profile / angle–time
-field → rolling-tyre modes can be tested:
+:class:`CleatBench` generates continuous recordings (:mod:`ringfit.io.continuous`) with a known truth, so that
+the whole chain recording → profile / angle–time field → rolling-tyre modes can be tested: the steady reading
+of the rolling ring (or an analytic stand-in), a radial impulse at each cleat pass answered by the rolling,
+loaded tyre's modes (``modes="loaded"``, §3.7) or by the free spinning ring's waves (``modes="free"``, a
+stand-in), the cleat's enveloping ridge, and the measurement chain (encoder, hall pulses, noise, IEPE
+high-pass). Its truth: :meth:`CleatBench.cleat_field`, :meth:`CleatBench.generating_modes`,
+:meth:`CleatBench.profile_truth`, :meth:`CleatBench.arrival_times`.
 
-* **steady rolling** — the per-revolution reading of the sensor from the
-  rolling ring model (:func:`ringfit.physics.contact.solve_rolling` and
-  :func:`ringfit.physics.sensor.sensor_signals`, drum road, gravity, axes
-  turning with the belt), or a smooth analytic stand-in (``steady="analytic"``,
-  fast, for tests);
-* **cleat passes** — at each pass of the cleat under the tyre the rotating
-  ring is hit by a radial impulse at the leading edge of the patch. Each
-  circumferential order n responds with its backward and forward travelling
-  waves at the co-rotating frequencies of seed eq. 25
-  (:func:`ringfit.physics.natural.rotating_natural_frequencies`, docs/physics.md
-  §3.2), decaying with the ring's damping ratio; a fixed observer sees them
-  Doppler-shifted by −nΩ (eq. 26, §3.3): the free spinning ring, no patch, an
-  analytic stand-in for tests of the signal chain — not the modes of a tyre
-  loaded on a drum. With ``modes="loaded"`` (``ringfit example cleat``) the waves
-  are the modes of the rolling ring **with** the tread springs of the steady
-  patch at the bench's speed, load and drum (the one model of the rolling,
-  loaded tyre's modes, :func:`ringfit.physics.rolling_modes.loaded_rolling_modes`,
-  docs/physics.md §3.7, the model ``ringfit campbell`` and ``cleat --ssi --tyre``
-  use): each fixed-frame mode spreads over several harmonics (the forward wave
-  of n hybridises with the backward wave of n + 2), and the response to the
-  impulse, at the patch's leading edge, is their modal superposition. The cleat itself travels through
-  the patch with the belt and adds a short, large ridge along
-  φ = φ_L + Ωτ (the enveloping phase);
-* **the measurement chain** — absolute encoder (quantised) or incremental
-  pulses, hall pulses ahead of each arrival by ``hall_delay_s``, white
-  noise, the IEPE high-pass of docs/physics.md §5 layer 5 applied to the time
-  history (first order, bilinear, started in its periodic steady state).
+Example (two seconds at 40 km/h, the fast stand-ins)::
 
-The drum circumference is not a multiple of the tyre's rolling circumference,
-so successive cleat hits land at different sensor angles and, pass by pass,
-fill the angle–time plane (the source's figure 23).
-
-Truth: :meth:`CleatBench.cleat_field` (the field the reconstruction should
-return, m/s², before noise and high-pass), :meth:`CleatBench.generating_modes`
-(frequencies and decay rates), :meth:`CleatBench.profile_truth` (the
-per-revolution profile the sensor reports, high-pass included) and
-:meth:`CleatBench.arrival_times`.
+    from ringfit.synth.cleat import CleatBench
+    bench = CleatBench(steady="analytic", modes="free", speed_kmh=40.0)
+    rec = bench.record(2.0)                     # a ContinuousRecord; bench.write(path, 2.0) writes it
+    bench.arrival_times(2.0)[:3]                # [0.05, 0.395, 0.739] s: one hit per drum revolution
+    bench.generating_modes()["fixed_hz"][:3]    # [107.0, 107.0, 113.2] Hz (n = 1 backward, forward; n = 2 …)
 """
 
 from __future__ import annotations
