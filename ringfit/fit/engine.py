@@ -1,45 +1,28 @@
-"""The one least-squares engine of ringfit: every fit (free tyre, rolling profiles, gap refits, load estimate) runs here.
+"""The one least-squares engine of ringfit: every fit (free tyre, rolling profiles, identify, gap refits, load and
+state estimates) runs here (docs/physics.md §14).
 
-A fit is a *problem definition* — a residual model and how its parameters are
-coordinated — handed to :func:`least_squares`:
+A fit is a *problem definition* handed to :func:`least_squares` (or :func:`least_squares_batch`): a residual model
+(:class:`AbstractResiduals`, ``model(theta, data) -> (weighted residuals, aux)``), one :class:`Coordinate` per
+parameter (ln θ for positive ones, bounds by the sine transform), the free set per call, and an optional Gaussian
+prior on the coordinates (:class:`GaussianPrior`), bundled in a :class:`Problem`. The solve is one jitted region
+(optimistix Levenberg–Marquardt with an SVD linear solve, the model linearised once per step by forward mode);
+the covariance and flags after it are NumPy on small arrays. The result is a
+:class:`~ringfit.fit.result.FitResult`, which never hides a solve that did not converge.
 
-- **Model**: an :class:`AbstractResiduals` (an ``eqx.Module``; its fields are
-  static configuration) called as ``model(theta, data) -> (residuals (m,), aux)``
-  with ``theta`` the full parameter vector in natural (SI) units and ``data`` any
-  pytree of arrays. Residuals are weighted, ``(model − measured)/σ``; rows of
-  weight zero (held-out rows) take no part. ``aux`` is whatever the caller wants
-  back at the optimum (the prediction, say).
-- **Coordinates** (:class:`Coordinate`): each parameter is solved for in a
-  coordinate ``u``: ``u = ln θ`` for positive parameters (``kind="log"``), or
-  ``u = (θ − center)/scale`` (``kind="linear"``). Bounds (natural units) where both
-  ends are finite are kept by the change of variables ``u = mid + half·sin z``
-  (the MINUIT transform); the solver works on ``z``. Unbounded coordinates are
-  solved for directly.
-- **Free set**: any subset of the parameters, given per call; the others stay at
-  ``theta0``. The free indices are traced, so one compiled solve serves every
-  free set of the same size (``pad_to`` pads the size, so one compilation serves
-  several sizes).
-- **Prior**: an optional Gaussian on ``u`` (:class:`GaussianPrior`, possibly
-  correlated); its marginal over the free parameters enters as whitened residual
-  rows ``W (u − mean)``.
+Example (an exponential decay, its rate bounded)::
 
-The solve is one jitted region (:class:`ringfit._cache.jit`, with XLA's compile options of
-:func:`ringfit._cache.compiler_options`): optimistix Levenberg–Marquardt (or,
-on request, undamped Gauss–Newton) with an SVD linear solve, the model linearised once per step by a forward-mode pass
-(primal and k tangents) whose Jacobian the solver then reuses as a dense matrix,
-and the final residuals, Jacobian and ``aux`` at the optimum (a two-stage model — an expensive inner stage
-and a cheap readout, :class:`AbstractResiduals` ``readout`` — passes only the inner stage's slots' tangents
-through the inner stage). Everything after it
-(covariance, standard errors, flags) is NumPy on small arrays:
+    class Decay(AbstractResiduals):
+        def __call__(self, theta, data):
+            t, y, s = data
+            model = theta[0] * jnp.exp(-theta[1] * t) + theta[2]
+            return (model - y) / s, model
 
-- covariance of ``u`` = ``(JᵀJ)⁻¹`` of all rows (data and prior) by SVD; a
-  direction with no information gets ``inf``; ``sigma="estimate"`` scales the
-  data rows by the residual RMS ``s = √(χ²/dof)`` first (σ unknown: profiles),
-  ``sigma="inflate"`` multiplies standard errors by ``max(1, s)``;
-- flags: solver not converged, a parameter at its bound, a relative standard
-  error above :data:`ringfit.fit.result.MAX_RELATIVE_STDERR`.
-
-The result is a :class:`~ringfit.fit.result.FitResult`.
+    t = np.linspace(0.0, 2.0, 25)
+    y = 3.0 * np.exp(-1.3 * t) + 0.2 + 0.01 * np.random.default_rng(1).standard_normal(t.size)
+    coords = (Coordinate("a", LOG), Coordinate("k", LOG, lo=0.01, hi=100.0), Coordinate("c", LINEAR, scale=0.1))
+    fit = least_squares(Problem(Decay(), (t, y, np.full(t.size, 0.01)), coords), np.array([1.0, 1.0, 0.0]),
+                        ("a", "k", "c"))
+    fit.converged, fit.theta, fit.stderr    # True, [3.008, 1.297, 0.195], {'a': 0.0083, 'k': 0.0108, 'c': 0.0089}
 """
 
 from __future__ import annotations
