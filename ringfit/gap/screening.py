@@ -1,38 +1,15 @@
-"""Cheap screen of each candidate at the baseline: residual–sensitivity alignment and score statistic.
+"""Cheap screen of each candidate at the baseline, linearised (:func:`screen`: score and alignment) or, where the
+baseline fit left its prior, nonlinear (:func:`nonlinear_screen`: a refit from the reference baseline); docs/physics.md
+§6.4 *the screen* and *a baseline that moved*. It only decides which candidates are refitted on the data: the
+calibration's nulls refit every candidate of a round whatever it says.
 
-At the baseline fit θ̂ (every effect at its null) each effect parameter j
-gets a one-sided finite-difference sensitivity ``s_j = (f(θ̂ + h e_j) − f(θ̂))/h``
-with h = 5 % of the parameter's range towards its interior (a step rather
-than a derivative: some effects switch on only off the null). Standardised
-by σ and projected off the baseline parameters' own sensitivities (so an
-effect cannot score by mimicking a baseline refit), the columns S⊥ give
+Example (the screen figures of a diagnosed case, as the JSON lists them)::
 
-- ``score`` = rᵀS⊥(S⊥ᵀS⊥)⁻¹S⊥ᵀr — the χ² a linearised one-step fit of the
-  effect would remove (≈ χ²_k under the null);
-- ``alignment`` = √(score/‖r‖²) — cosine between the residual and the
-  effect's signature.
-
-Candidates with ``score < SCREEN_MIN_SCORE`` are not refitted (they are
-listed with the baseline's figures and ``screened_out``); so are those whose
-linearised score is below ``problem.meta.screen_min_fraction`` (default 0)
-of the current χ²: a 10 % held-out RMS shrink needs ≈ 19 % of the χ², so a
-candidate that aligns with only a few per cent of it cannot be accepted.
-The screen is run at the baseline and again on top of each accepted chain.
-
-**A baseline that moved** (docs/physics.md §6.4). The linearised screen is only as good as
-the point it is linearised at. A baseline that has absorbed an effect — its prior-guarded
-parameters outside their prior's 99.9 % ellipsoid, e.g. k_trd pulled down by a factor 3
-and EI by 70 % under tread shear — is such a bad point: the effect's signature, projected
-off the baseline's own directions *there*, may be small although the effect explains the
-data and puts the baseline back. So when the baseline fit left its prior, every candidate
-the linearised screen would drop is screened *nonlinearly* instead
-(:func:`nonlinear_screen`): refitted jointly with the baseline from the reference baseline
-(:func:`reference_start`: the prior means — the free-table ring, ``tyre.toml``'s k_trd —
-nuisances as fitted), its score the drop of the refit's objective (data χ² plus the prior's
-χ²) below the baseline's. The same two thresholds apply. A candidate that passes keeps
-that refit as its fit (the better of it and the refit from the moved baseline). The
-calibration's null refits every candidate of a round whatever the screen said, so the
-nonlinear screen changes which candidates are refitted on the data, never the null.
+    from ringfit.gap import diagnose
+    d = diagnose("case/", null_draws=0)
+    c = d.content["candidates"][0]
+    c["effect"], c["evidence"]["screen_score"], c["evidence"]["alignment"], c["screened_out"]
+    # e.g. ('sensor_tilt', 5.136, 0.035, True) on a noise-only profile case
 """
 
 from __future__ import annotations
