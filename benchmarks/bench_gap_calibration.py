@@ -31,6 +31,14 @@ Issue 30 (every freedom the diagnosis uses, labels included):
   added: a per-revolution gain drifting 1–4 % over the session (runs in speed order, either sign), a per-run
   angle jitter (σ 0.2°), AR(2) noise (poles 0.9 and 0.5) and 1/f noise, heteroscedastic by run and channel.
 
+A kind the diagnosis's noise model does not have:
+
+- ``profile-patch-noise``: noise-only profiles with extra noise whose level varies with angle, largest at the
+  contact patch (the patch's impacts excite each revolution differently, so an averaged profile keeps more
+  noise there): white noise of std A·σ·exp(−½(φ/w)²) per channel, A 2–8 × the case's noise σ, w 10–25°. The
+  far-side noise estimate cannot see it, and the phase-randomised null spreads it round the wheel: an
+  accepted effect is a false accept; ``unexplained`` is the rule's honest answer.
+
 With ``--power`` it also diagnoses effect cases (every injected effect of ``bench_gap.py`` and the rolling
 cases of ``bench_gap_rolling.py``) twice in the same process, interleaved — with the calibration
 (``--alpha``) and without it (``null_draws=0``, the rule alone) — and prints the share of the rule's
@@ -55,7 +63,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common as bc  # noqa: E402
 
 KINDS = ("rolling-random", "loaded-random", "modal-noise", "profile-noise", "rolling-labelled",
-         "rolling-half-labelled", "rolling-tags-only", "rolling-mixed-frames", "rolling-permuted", "profile-nuisance")
+         "rolling-half-labelled", "rolling-tags-only", "rolling-mixed-frames", "rolling-permuted", "profile-nuisance",
+         "profile-patch-noise")
 #: the source study's label order on a rolling table (n, tag)
 LABELS = [(1, "vert"), (1, "hort"), (2, "extr"), (2, "0"), (3, "extr"), (3, "0"), (4, "extr"), (4, "0"),
           (5, "extr"), (5, "0"), (6, "extr"), (6, "0"), (7, "extr")]
@@ -172,6 +181,22 @@ def profile_nuisance(out: Path, seed: int) -> None:
         write_profile(Profile(prof.angle_deg, chans[0], chans[1], condition=prof.condition), path, overwrite=True)
 
 
+def profile_patch_noise(out: Path, seed: int) -> None:
+    """``make_profile_case(effect="none")`` with noise concentrated at the contact patch (module docstring)."""
+    from ringfit.io.profiles import Profile, read_profile, write_profile
+    from ringfit.synth.cases import make_profile_case
+
+    label = make_profile_case(out, effect="none", seed=seed)
+    rng = np.random.default_rng(3 * 10**6 + seed)
+    amp, width = rng.uniform(2.0, 8.0), rng.uniform(10.0, 25.0)
+    sigma = float(label.noise["grid_rms_ms2"])
+    for path in sorted(out.glob("*.profile.csv")):
+        prof = read_profile(path)
+        env = amp * sigma * np.exp(-0.5 * (prof.angle_deg / width) ** 2)
+        chans = [ch + env * rng.standard_normal(len(prof)) for ch in (prof.acc_radial_ms2, prof.acc_tangential_ms2)]
+        write_profile(Profile(prof.angle_deg, chans[0], chans[1], condition=prof.condition), path, overwrite=True)
+
+
 def loaded_random(out: Path, seed: int) -> None:
     _copy_free(out)
     rng = np.random.default_rng(seed)
@@ -273,6 +298,8 @@ def main(argv=None) -> int:
                                                     "rolling-mixed-frames": "mixed"}[kind])
                 elif kind == "rolling-permuted":
                     rolling_permuted(folder, seed)
+                elif kind == "profile-patch-noise":
+                    profile_patch_noise(folder, seed)
                 else:
                     profile_nuisance(folder, seed)
                 try:

@@ -41,6 +41,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from ringfit.units import KMH
+
 #: Effects the generator injects in mode-table cases, with the verdict the diagnosis should give.
 MODAL_INJECTIONS = ("none", "ground_contact", "rotation", "wave_damping", "tread_pitch", "wheel_suspension",
                     "damping_growth")
@@ -170,7 +172,7 @@ def make_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 
     load_cos = np.asarray(natural_frequencies(ring, geometry, jnp.asarray(n_load, float)))
     load_sin = load_cos.copy()
     speed_kmh = float(rng.uniform(40.0, 90.0))
-    omega = speed_kmh / 3.6 / geometry.outer_radius
+    omega = speed_kmh * KMH / geometry.outer_radius
     n_rot = np.arange(2, int(rng.integers(6, 9)) + 1)
     rot_b = np.asarray(natural_frequencies(ring, geometry, jnp.asarray(n_rot, float)))
     rot_f = rot_b.copy()

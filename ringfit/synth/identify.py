@@ -16,6 +16,8 @@ import os
 
 import numpy as np
 
+from ringfit.units import KMH
+
 #: Loads [N] of the standing loaded tables and of the three profiles, and the profiles' speeds [km/h].
 LOADED_LOADS = (3000.0, 5000.0)
 PROFILE_POINTS = ((3000.0, 30.0), (4000.0, 50.0), (5000.0, 70.0))
@@ -177,7 +179,7 @@ def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_
     truth_profiles = []
     for i, (load, speed, share, slip) in enumerate(profiles):
         g, r = at(share)
-        omega = speed / 3.6 / effective_rolling_radius(r, g, load, solver=fine)
+        omega = speed * KMH / effective_rolling_radius(r, g, load, solver=fine)
         state = TyreState(load=load, pressure=share * p_ref, tread_depth=laws.tread_depth_ref, slip=slip, omega=omega)
         _, channels, q = solve_state(geometry, ring, laws, state, model=ProfileModel(), solver=fine)
         n_points = int(rng.choice([720, 1000, 1024]))
