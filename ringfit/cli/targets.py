@@ -8,6 +8,12 @@ from pathlib import Path
 from ringfit.cli._args import force_flag, integer, number, quiet_flag
 
 
+def _axes() -> tuple[str, ...]:
+    from ringfit.io.record_types import AXES  # noqa: PLC0415 (the CLI's import stays light)
+
+    return AXES
+
+
 def _orders(text: str) -> range:
     try:
         parts = [int(x) for x in text.split(":")]
@@ -49,7 +55,7 @@ def _node_map(kind: str):
                     value = float(value)
                     if not math.isfinite(value):
                         raise ValueError
-                elif value not in ("radial", "tangential", "lateral"):
+                elif value not in _axes():
                     raise ValueError
                 out[key] = value
         except ValueError:

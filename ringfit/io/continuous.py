@@ -32,10 +32,9 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.io.files import atomic_write, check_output_path, existing_file
-from ringfit.io.record_types import CONDITION_KEYS, SIGNED_CONDITION_KEYS
+from ringfit.io.record_types import AXES, CONDITION_KEYS, SIGNED_CONDITION_KEYS
 
 KIND = "continuous"
-AXES = ("radial", "tangential", "lateral")
 #: Samples per chunk when walking a recording (8 MB per float64 channel).
 DEFAULT_CHUNK = 1 << 20
 

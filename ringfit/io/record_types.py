@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
@@ -24,6 +25,8 @@ SIGNED_CONDITION_KEYS = ("torque_nm",)
 
 #: Allowed sensor axes (docs/formats.md §4). Sign convention of ``radial``: positive toward the wheel centre.
 AXES = ("radial", "tangential", "lateral")
+#: One sensor axis, as a type (:data:`AXES`).
+Axis = Literal["radial", "tangential", "lateral"]
 #: Highest sample rate accepted [Hz]; a value above is a unit slip or a corrupted file.
 MAX_FS_HZ = 1.0e7
 #: Largest |acceleration| accepted [m/s²] (10⁷ g, beyond any accelerometer).

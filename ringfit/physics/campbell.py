@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -27,7 +28,7 @@ from ringfit.errors import InputError
 # frames of docs/formats.md §2 (``rotating`` = the co-rotating sensor; the CLI calls it ``sensor``) and the
 # standing/travelling threshold (a mode whose dominant order's backward/forward amplitude ratio is below it is
 # standing): the mode files' and the cleat SSI's own, so that a diagram and a measured table classify alike
-from ringfit.io.modes import FRAMES
+from ringfit.io.modes import FRAMES, Frame
 from ringfit.physics.operating import road_from_drum_diameter
 from ringfit.targets.rolling_modes import TRAVELLING_RATIO
 
@@ -138,11 +139,11 @@ class CampbellDiagram:
             out.append(best)
         return np.array(out, dtype=object)
 
-    def frequencies(self, frame: str) -> np.ndarray:
+    def frequencies(self, frame: Frame | Literal["sensor"]) -> np.ndarray:
         """Branch frequencies in ``frame`` (``fixed``, or ``rotating``/``sensor``: the principal line) ``(S, B)`` [Hz]."""
         return self.fixed_hz if frame_name(frame) == "fixed" else self.sensor_line()[0]
 
-    def rows(self, frame: str = "fixed") -> list[dict]:
+    def rows(self, frame: Frame | Literal["sensor"] = "fixed") -> list[dict]:
         """One dict per (branch, speed): the columns of ``*.campbell.csv`` (docs/formats.md)."""
         frame = frame_name(frame)
         f = self.frequencies(frame)

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ringfit.io.record_types import Axis
 from ringfit.report.figures import pyplot
 from ringfit.units import GRAVITY as G
 
@@ -64,7 +65,7 @@ def _polar_curve(field, axis, index, scale, r0):
 SCALE_WINDOW_S = 0.1
 
 
-def field_scale(field, axis: str = "radial", tau_max_s: float | None = None) -> float:
+def field_scale(field, axis: Axis = "radial", tau_max_s: float | None = None) -> float:
     """m/s² per unit radius shared by :func:`plot_polar_snapshots` and :func:`animate_field`.
 
     The 99.5 % peak of |a| over τ ≤ ``tau_max_s`` (default
@@ -94,7 +95,7 @@ def _frame(ax, scale):
     ax.grid(alpha=0.25)
 
 
-def plot_polar_snapshots(field, times_s, path=None, *, axis: str = "radial", scale: float | None = None,
+def plot_polar_snapshots(field, times_s, path=None, *, axis: Axis = "radial", scale: float | None = None,
                          ncols: int = 3, baseline=None):
     """Figure 37: radial acceleration around the tyre at chosen times after the impact.
 
@@ -128,7 +129,7 @@ def plot_polar_snapshots(field, times_s, path=None, *, axis: str = "radial", sca
     return _finish(fig, path)
 
 
-def animate_field(field, path, *, axis: str = "radial", tau_max_s: float | None = None, frames: int = 120,
+def animate_field(field, path, *, axis: Axis = "radial", tau_max_s: float | None = None, frames: int = 120,
                   fps: int = 15, scale: float | None = None) -> Path:
     """Polar animation (GIF) of the acceleration around the tyre after the cleat impact.
 
@@ -177,7 +178,7 @@ def _save_gif(anim, tmp, fps, writer):
             gif.unlink()
 
 
-def plot_field_map(field, path=None, *, axis: str = "radial", tau_max_s: float | None = None):
+def plot_field_map(field, path=None, *, axis: Axis = "radial", tau_max_s: float | None = None):
     """The field as an image: sector angle (x) × time since arrival (y) [m/s²]."""
     plt = pyplot()
     tau_max = float(field.tau_s[-1] if tau_max_s is None else tau_max_s)

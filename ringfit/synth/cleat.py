@@ -28,6 +28,7 @@ import numpy as np
 
 from ringfit.io.continuous import DEFAULT_CHUNK, ContinuousRecord, ContinuousWriter
 from ringfit.io.profiles import band_limited_resample, grid_angles_deg
+from ringfit.io.record_types import Axis
 from ringfit.units import GRAVITY as G
 from ringfit.units import KMH
 #: Deflection of the Table 9 tyre at 4 kN on the 1.2192 m drum (docs/physics.md §7), for R_e.
@@ -305,7 +306,7 @@ class CleatBench:
             "damping_fixed": -rate.real / np.abs(rate),
         }
 
-    def cleat_field(self, phi_deg, tau_s, axis: str = "radial") -> np.ndarray:
+    def cleat_field(self, phi_deg, tau_s, axis: Axis = "radial") -> np.ndarray:
         """Truth of the cleat response in the angle–time plane [m/s²] (before noise and high-pass).
 
         **Arguments:** ``phi_deg`` sensor angle φ [deg] (any real value),
@@ -399,7 +400,7 @@ class CleatBench:
             tan = tan + G * np.sin(phi)
         return rad, tan
 
-    def steady_reading(self, phi_deg, axis: str = "radial", t=None) -> np.ndarray:
+    def steady_reading(self, phi_deg, axis: Axis = "radial", t=None) -> np.ndarray:
         """Steady sensor reading at φ [deg] (at times ``t`` [s] with ``load_steps``) before the high-pass
         (DC included) [m/s²]."""
         phi_deg = np.asarray(phi_deg, dtype=np.float64)
@@ -412,7 +413,7 @@ class CleatBench:
             out[m] = _interp_periodic(phi_deg[m], self._steady_table(load)[_axis_index(axis)])
         return out
 
-    def profile_truth(self, angle_deg, axis: str = "radial") -> np.ndarray:
+    def profile_truth(self, angle_deg, axis: Axis = "radial") -> np.ndarray:
         """The rolling profile the sensor reports at ``angle_deg`` [m/s²] (docs/formats.md §3: high-pass included).
 
         The steady reading is periodic with period 2π/Ω, so the IEPE high-pass

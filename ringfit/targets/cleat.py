@@ -37,6 +37,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.continuous import DEFAULT_CHUNK, ContinuousRecord
 from ringfit.io.files import load_npz
+from ringfit.io.record_types import Axis
 
 
 # --------------------------------------------------------------------------- arrivals
@@ -232,7 +233,7 @@ class AngleTimeField:
     def sectors(self) -> int:
         return self.sector_deg.shape[0]
 
-    def channel(self, axis: str = "radial") -> np.ndarray:
+    def channel(self, axis: Axis = "radial") -> np.ndarray:
         """(S, T) field of one axis [m/s²]."""
         if axis not in self.axes:
             raise InputError(f"field has no '{axis}' axis (have: {', '.join(self.axes)})")
@@ -591,7 +592,7 @@ def coverage_points(record: ContinuousRecord, arrivals: CleatArrivals, passes: i
     return np.concatenate(phis), np.concatenate(taus)
 
 
-def field_error(field: AngleTimeField, truth, axis: str = "radial", *, tau_min_s: float = 0.0,
+def field_error(field: AngleTimeField, truth, axis: Axis = "radial", *, tau_min_s: float = 0.0,
                 min_count: int = 1) -> dict:
     """Compare a field with a truth function ``truth(phi_deg, tau_s)`` at each bin's mean coordinates.
 

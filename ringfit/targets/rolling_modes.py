@@ -46,6 +46,7 @@ from typing import Literal
 import numpy as np
 
 from ringfit.errors import InputError
+from ringfit.io.record_types import Axis
 
 #: Default band of interest [Hz] (the source's 0–400 Hz).
 DEFAULT_F_MAX = 400.0
@@ -78,7 +79,7 @@ class RollingModes:
     skip_s: float
 
 
-def field_channels(field, *, channels: int = 128, axis: str = "radial", skip_s: float | None = None):
+def field_channels(field, *, channels: int = 128, axis: Axis = "radial", skip_s: float | None = None):
     """Sector subset of a field as SSI channels.
 
     **Returns** ``(y, channel_deg, tau_s, filled)``: y (channels, T) [m/s²] over
@@ -136,7 +137,7 @@ def identify_rolling_modes(
     field,
     *,
     channels: int = 128,
-    axis: str = "radial",
+    axis: Axis = "radial",
     skip_s: float | None = None,
     f_max: float = DEFAULT_F_MAX,
     orders=range(4, 81, 2),

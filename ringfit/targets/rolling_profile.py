@@ -25,8 +25,8 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.io.continuous import DEFAULT_CHUNK, ContinuousRecord
-from ringfit.io.record_types import CONDITION_KEYS
 from ringfit.io.profiles import band_limited_resample, grid_angles_deg
+from ringfit.io.record_types import CONDITION_KEYS, Axis
 
 #: Default number of angle points of a profile (0.18° spacing).
 DEFAULT_POINTS = 2048
@@ -266,7 +266,7 @@ def _accumulate(sums, counts, s1, s2, nrev):
     nrev += have.sum(axis=0)
 
 
-def profile_rms_error(profile: RollingProfile, truth, axis: str = "radial") -> float:
+def profile_rms_error(profile: RollingProfile, truth, axis: Axis = "radial") -> float:
     """RMS difference [m/s²] between a profile and a truth function φ [deg] → reading (for tests and benchmarks)."""
     return float(np.sqrt(np.mean((profile.channel(axis) - truth(profile.angle_deg)) ** 2)))
 
@@ -423,7 +423,7 @@ PASSAGE_SMOOTHING = 1.0 / 200.0
 PASSAGE_LEARN = 1 << 20
 
 
-def patch_passages(record: ContinuousRecord, *, axis: str = "radial", chunk: int = DEFAULT_CHUNK,
+def patch_passages(record: ContinuousRecord, *, axis: Axis = "radial", chunk: int = DEFAULT_CHUNK,
                    progress: bool = False) -> np.ndarray:
     """Sample positions of the sensor's passages through the contact patch, from the reading alone.
 

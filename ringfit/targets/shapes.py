@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-AXIS_ORDER = ("radial", "tangential", "lateral")
+from ringfit.io.record_types import AXES as AXIS_ORDER
 
 
 def max_harmonic(angle_rad: np.ndarray) -> int:
