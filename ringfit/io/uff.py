@@ -1,40 +1,17 @@
 """Universal File Format dataset 58 (UFF/UNV): time records and measured FRFs, via ``pyuff`` (docs/formats.md §4).
 
-Commercial modal-test systems exchange measurements as dataset-58 "function
-at nodal DOF" blocks. ringfit reads two function types:
+:func:`read_uff` reads function type 1 (time response) into :class:`~ringfit.io.record_types.Records` and type 4
+(FRF, with its coherence) into :class:`~ringfit.io.record_types.MeasuredFRF`; units, axes, sensor angles and
+completeness are checked, never guessed (§4 gives every rule: unit labels, direction codes, the order in which
+an angle is looked for, a truncated file refused). :func:`write_uff58` writes time records as binary 58 datasets
+that round-trip exactly (the sample rate in full on ID line 3, the angle on ID line 4).
 
-- **1, time response** → :class:`~ringfit.io.record_types.Records`:
-  acceleration datasets (ordinate specific data type 12, or a unit label that
-  is an acceleration) and, optionally, the hammer force (type 13 or a force
-  unit). One record per (response node, reference node); a dataset that
-  repeats a node and direction starts a new record at the same place (a
-  repeated impact), so nothing is dropped. Force datasets pair with the
-  records in file order (the k-th force with the k-th record).
-- **4, frequency response function** → :class:`~ringfit.io.record_types.MeasuredFRF`:
-  accelerance, mobility or receptance (numerator type 12, 11 or 8 over force
-  13, or their unit labels), converted to accelerance [m/s²/N]; coherence
-  datasets (function type 6) of the same DOF pair are kept with them.
+Example (``ringfit example records --out ex``)::
 
-Checked, never guessed silently:
-
-- **units** — the ordinate label is parsed (``m/s^2``, ``m/s²``, ``mm/s^2``,
-  ``g``; ``N``, ``kN``, ``lbf``) and scaled to SI; a pressure (microphone, Pa),
-  a displacement or velocity time history, or an unknown label is refused;
-- **axes** — the response direction ``±1, ±2, ±3`` (the sign flips the
-  reading) maps to an axis by ringfit's convention ``1`` tangential, ``2``
-  lateral, ``3`` radial (the accelerometer's own x, y, z inside the tyre) or
-  by ``axes={code: name}``; direction 0 (a scalar channel) needs ``axes={0: name}``;
-- **angles** — in this order: ``angles={node: deg}``; ringfit's own ID line 4
-  ``sensor_angle_deg=<value>``; node coordinates from a dataset 15 or 2411
-  (the angle around the axle, the axis along which the nodes spread least,
-  measured from the reference node when it has coordinates); else refused;
-- **completeness** — each dataset must hold the number of points its header
-  announces, and the file must end with a dataset delimiter: a truncated file
-  is refused, never read up to the cut.
-
-ringfit writes time records as binary 58 datasets with the sample rate in full
-in ID line 3 (``fs_hz=<value>``; the header keeps 6 digits) and the angle in
-ID line 4, so its own files round-trip exactly.
+    rec = read_records("ex/impact.records.npz")
+    write_uff58(rec, "impact.uff")
+    back = read_uff58("impact.uff")
+    back.fs_hz == rec.fs_hz, np.array_equal(back.acc, rec.acc), back.axes   # True, True, ('radial', 'tangential')
 """
 
 from __future__ import annotations
