@@ -1,34 +1,22 @@
-"""Measured mode tables matched to the branches of the Campbell diagram (docs/physics.md §3.7).
+"""Measured mode tables matched to the branches of the Campbell diagram (docs/physics.md §3.7, *measured rows
+matched to the diagram*).
 
-The diagram itself — the model's modes against speed, tracked into branches — is a model view and
-lives in :mod:`ringfit.physics.campbell` (:func:`~ringfit.physics.campbell.campbell_diagram`,
-:class:`~ringfit.physics.campbell.CampbellDiagram`, :func:`~ringfit.physics.campbell.track_branches`;
-re-exported here). This module brings the measurements to it:
+The diagram itself (the model's modes against speed, tracked into branches) is a model view in
+:mod:`ringfit.physics.campbell`, re-exported here. This module brings the measurements to it:
+:func:`match_tables` matches every row of measured mode tables to a branch (fixed frame) or a line of a branch
+(co-rotating frame) at the table's speed (z against the model's tolerance, label penalties, one-to-one per
+table), names the rows no branch explains and, across speeds, the trends and labels that contradict every branch;
+:func:`label_identified_modes` labels the modes ``ringfit cleat --ssi`` identifies; :func:`compare_with_ring`
+puts the free spinning ring's eq. 25/26 beside a table.
 
-* :func:`match_tables` — every row of measured mode tables (docs/formats.md
-  §2; condition from the sidecar) matched to a branch (fixed frame) or to a
-  line of a branch (co-rotating frame) at the table's speed, with its error
-  and σ; rows no branch explains are named; with several speeds, rows whose
-  **trend** with speed or whose **n label** contradicts every branch are
-  flagged, and a frame mix-up, a line ``ω + kΩ`` of another mode or a
-  different n is tested as the explanation — one sentence per row.
-* :func:`label_identified_modes` — model labels (n, direction) for the
-  modes ``ringfit cleat --ssi`` identifies, with flags for implausible labels.
-* :func:`compare_with_ring` — the free spinning ring's eq. 25/26 beside a
-  table (docs/physics.md §3.2–3.3).
+Example (``ringfit example rolling --out ex``: three rolling tables at 20/40/60 km/h)::
 
-Matching. A row at frequency f with σ_f = ``freq_std_hz`` (0 when empty) is
-compared with each candidate at f̂ through ``z = (f − f̂)/σ``,
-``σ = √(σ_f² + (τ·f̂)²)``, τ the model's relative σ: from the data by default
-(:func:`data_tolerance`: a first pass at τ = :data:`MODEL_TOLERANCE` = 2 %, then
-the robust scale of the matched rows' residuals in excess of their σ_f), or
-given (``model_tolerance=``, ``ringfit campbell --tolerance``). Every line
-ω + kΩ of a branch (weight ≥ :data:`MIN_LINE_WEIGHT` of its strongest) is a
-candidate and carries the branch's n, direction and tag.
-The cost is ``z²`` plus :data:`LABEL_PENALTY` for each label the candidate
-contradicts (n; branch; tag via the contact symmetry) and, for a sensor line,
-``−2 ln(weight/strongest weight of its mode)``; rows of one table are assigned
-one-to-one (Hungarian). A row is *explained* when ``|z| ≤`` :data:`EXPLAINED_Z`.
+    from ringfit.io.modes import read_mode_table
+    from ringfit.io.tyre import read_tyre
+    tyre = read_tyre("ex/rolling/tyre.toml")
+    tables = [read_mode_table(f"ex/rolling/roll{v}.modes.csv") for v in (20, 40, 60)]
+    match = match_tables(tables, tyre.ring, tyre.geometry)
+    match.summary()        # '27 rows: 27 matched' (else: label or trend conflicts, unexplained rows)
 """
 
 from __future__ import annotations
