@@ -195,3 +195,52 @@ def test_the_patch_never_picks_the_wrong_rotation_over_many_operating_points():
             outcomes["right" if right else "wrong"] += 1
     assert outcomes["wrong"] == 0, outcomes
     assert outcomes["right"] >= 20, outcomes  # 27 of 32 settled, 5 refused (factors below 2.7)
+
+
+def test_a_stated_condition_is_contradicted_about_once_in_a_thousand_checks_when_it_is_true():
+    """The stated value is the truth and the estimate a calibrated draw about it (normal for speed and torque,
+    log-normal for load, pressure and depth, 95 % intervals of its σ): over 50,000 checks the share called a
+    contradiction is the two-sided p of STATED_Z, 0.1 %, inside its Clopper–Pearson 99 % interval; a value 6 σ
+    away is always one."""
+    from scipy.stats import beta
+
+    from ringfit.io.conditions import STATED_ESTIMATED, stated_against_estimate
+
+    rng = np.random.default_rng(4)
+    truth = {"load_n": 4000.0, "pressure_bar": 2.2, "tread_depth_mm": 6.0, "speed_kmh": 80.0, "torque_nm": 250.0}
+    sd = {"load_n": 0.02, "pressure_bar": 0.015, "tread_depth_mm": 0.1, "speed_kmh": 0.3, "torque_nm": 20.0}
+    n, flagged = 10_000, 0
+    for _ in range(n):
+        est = {}
+        for key, log in STATED_ESTIMATED.items():
+            e = rng.standard_normal()
+            if log:
+                v = truth[key] * math.exp(sd[key] * e)
+                est[key] = {"value": v, "lo": v * math.exp(-1.96 * sd[key]), "hi": v * math.exp(1.96 * sd[key])}
+            else:
+                v = truth[key] + sd[key] * e
+                est[key] = {"value": v, "lo": v - 1.96 * sd[key], "hi": v + 1.96 * sd[key]}
+        rows = stated_against_estimate(est, truth, source="run.profile.csv")
+        assert len(rows) == len(STATED_ESTIMATED)
+        flagged += sum(not r["consistent"] for r in rows)
+    checks = n * len(STATED_ESTIMATED)
+    lo, hi = beta.ppf(0.005, flagged, checks - flagged + 1), beta.ppf(0.995, flagged + 1, checks - flagged)
+    assert lo <= 0.001 <= hi, (flagged, checks)
+    far = stated_against_estimate({"load_n": {"value": 4000.0, "lo": 4000 * math.exp(-0.0392),
+                                              "hi": 4000 * math.exp(0.0392)}}, {"load_n": 4000 * math.exp(0.12)})
+    assert not far[0]["consistent"] and far[0]["z"] == pytest.approx(6.0, abs=0.01)
+
+
+def test_only_what_the_data_read_is_compared_and_a_contradiction_names_the_file():
+    from ringfit.io.conditions import stated_against_estimate
+
+    est = {"load_n": {"value": 4000.0, "lo": 3920.0, "hi": 4080.0, "status": "estimated"},
+           "pressure_bar": {"value": 2.2, "lo": 2.2, "hi": 2.2, "status": "fixed"},
+           "tread_depth_mm": {"value": 5.0, "lo": 2.0, "hi": 9.0, "status": "not told"},
+           "speed_kmh": {"value": 60.0, "lo": 59.9, "hi": 60.1}}
+    rows = stated_against_estimate(est, {"load_n": 5000.0, "pressure_bar": 3.0, "tread_depth_mm": 1.0,
+                                         "torque_nm": 100.0}, source="/x/run7.profile.csv")
+    assert [r["quantity"] for r in rows] == ["load_n"]  # fixed, not told, and not estimated: not compared
+    assert not rows[0]["consistent"] and rows[0]["z"] > 10
+    assert rows[0]["sentence"].startswith("run7.profile.csv: the stated load_n = 5000 contradicts the data")
+    assert stated_against_estimate(est, {}) == []

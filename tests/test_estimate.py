@@ -320,6 +320,29 @@ def test_cli_writes_the_estimate_json(profile_file, tmp_path, capsys):
     assert "load 30" in capsys.readouterr().out
 
 
+def test_cli_checks_a_stated_load_against_the_data(profile_file, tmp_path, capsys):
+    """A sidecar that states the true load (3000 N) is consistent; one that states 3900 N is contradicted: one
+    WARNING line naming the file, and the JSON's ``stated`` row says so (the estimate itself is unchanged)."""
+    from ringfit.data import path as data_path
+
+    tyre = data_path("table9.tyre.toml")
+    cond = json.loads(profile_file.with_suffix(".json").read_text())
+    docs = {}
+    for load in (3000.0, 3900.0):
+        run = tmp_path / f"stated{int(load)}.profile.csv"
+        run.write_text(profile_file.read_text())
+        run.with_suffix(".json").write_text(json.dumps({**cond, "load_n": load}))
+        out = tmp_path / f"stated{int(load)}.estimate.json"
+        assert run_cli(run, "--tyre", tyre, "--out", out, "--quiet") == 0
+        docs[load] = json.loads(out.read_text())
+        err = capsys.readouterr().err
+        assert ("WARNING: stated3900.profile.csv: the stated load_n = 3900 contradicts the data" in err) == (load > 3000)
+    ok, bad = docs[3000.0]["stated"], docs[3900.0]["stated"]
+    assert [r["quantity"] for r in ok] == ["load_n"] and ok[0]["consistent"] and abs(ok[0]["z"]) < 3.29
+    assert not bad[0]["consistent"] and bad[0]["z"] > 3.29 and bad[0]["stated"] == 3900.0
+    assert docs[3000.0]["load_n"] == docs[3900.0]["load_n"]
+
+
 def test_cli_exit_codes_and_nothing_written(profile_file, tmp_path, monkeypatch):
     import ringfit.fit.estimate.load as estimate
     from ringfit.data import path as data_path

@@ -113,6 +113,7 @@ def run_estimate(args) -> int:
             import warnings
 
             warnings.warn(note, stacklevel=2)
+        condition = dict(profile.condition)
         fixed = parse_fix(args.fix, profile.condition, source=args.input, laws=tyre.laws) if args.state else {}
         est = estimate_load(profile, tyre.geometry, tyre.ring, settings=settings, k_tread_in_file=k_in_file,
                             ring_covariance=tyre.covariance, laws=tyre.laws)
@@ -128,6 +129,7 @@ def run_estimate(args) -> int:
 
         want_revs = args.per_revolution is not None or args.plot is not None
         with read_continuous(args.input, channels=args.channel_map) as rec:
+            condition = dict(rec.condition)
             fixed = parse_fix(args.fix, rec.condition, source=args.input, laws=tyre.laws)
             est, state, revs = estimate_recording_state(rec, tyre.geometry, tyre.ring, tyre.laws, settings=settings,
                                                         fixed=fixed, k_tread_in_file=k_in_file,
@@ -138,6 +140,7 @@ def run_estimate(args) -> int:
 
         want_revs = args.per_revolution is not None or args.plot is not None
         with read_continuous(args.input, channels=args.channel_map) as rec:
+            condition = dict(rec.condition)
             est, revs = estimate_recording(rec, tyre.geometry, tyre.ring, settings=settings,
                                            k_tread_in_file=k_in_file, per_revolution=want_revs,
                                            progress=not args.quiet, ring_covariance=tyre.covariance,
@@ -168,6 +171,14 @@ def run_estimate(args) -> int:
               if revs.converged.any() else f"per revolution: {len(revs)} revolutions, none converged")
         if not revs.converged.any():
             raise CommandFailed("no revolution's fit converged; nothing written")
+    # every condition the input states that the estimate also read, against the data (ringfit.io.conditions)
+    from ringfit.io.conditions import stated_against_estimate
+
+    read = state.quantities if args.state else {"load_n": {"value": est.load_n, "lo": est.lo, "hi": est.hi}}
+    record["stated"] = stated_against_estimate(read, condition, source=args.input)
+    for row in record["stated"]:
+        if not row["consistent"]:
+            print(f"WARNING: {row['sentence']}", file=sys.stderr)
     atomic_write_text(args.out, json.dumps(record, indent=2, allow_nan=False) + "\n")
     print(f"wrote {args.out}")
     if args.per_revolution is not None:

@@ -15,6 +15,8 @@ every command (identify, diagnose and campaign case folders, fit-rolling, estima
   (exit 2: no answer can be right until the sidecar is corrected);
 - :func:`check_table_rotation`: a mode table's sidecar (no data that tell Ω): a contradiction is refused;
 - :func:`pressure_conflict`: a measurement's ``pressure_bar`` against the tyre file's;
+- :func:`stated_against_estimate`: every stated condition an estimate also reads (load, pressure, tread depth,
+  speed, torque) against the estimate's interval: a contradiction beyond :data:`STATED_Z` σ is named;
 - :func:`duplicate_inputs`: the same file given twice (same resolved path — symlinks followed — or the same
   content hash).
 
@@ -191,6 +193,54 @@ def check_stated(item, geometry, *, source, other_pressure: str, used_as: str = 
     return item, notes
 
 
+#: |z| of a stated condition against an estimate's 95 % interval beyond which the two contradict: 3.29, two-sided
+#: p = 0.001 for a calibrated interval (about one false contradiction in a thousand checks).
+STATED_Z = 3.29
+#: Conditions a sidecar may state that an estimate also reads from the data, and whether the estimate's interval is
+#: log-normal (docs/formats.md §7.1).
+STATED_ESTIMATED = {"load_n": True, "pressure_bar": True, "tread_depth_mm": True, "speed_kmh": False,
+                    "torque_nm": False}
+_Z95 = 1.959963984540054
+
+
+def stated_against_estimate(estimates: dict, condition: dict, *, source=None) -> list[dict]:
+    """Every condition the input states that the estimate also read from the data, compared (docs/formats.md §7.2).
+
+    ``estimates``: quantity → ``{value, lo, hi[, status]}`` (its 95 % interval; :data:`STATED_ESTIMATED` says
+    which are log-normal); ``condition``: the input's stated condition. A quantity held at a value (``status``
+    ``fixed``) or not told by the data (``not told``: its interval is its prior's) is not compared. Per compared
+    quantity: ``stated``, ``value``, ``lo``, ``hi``, ``z`` (the stated value's distance from the estimate in the
+    interval's σ, in logarithms for a log-normal one), ``consistent`` (|z| ≤ :data:`STATED_Z`) and, when not, a
+    ``sentence`` naming the input, the stated value and what the data read."""
+    rows = []
+    name = Path(str(source)).name if source else "the input"
+    for key, log in STATED_ESTIMATED.items():
+        q = estimates.get(key)
+        raw = condition.get(key)
+        if q is None or raw is None or q.get("status", "estimated") != "estimated":
+            continue
+        try:
+            stated, value, lo, hi = (float(x) for x in (raw, q["value"], q["lo"], q["hi"]))
+        except (TypeError, ValueError, KeyError):
+            continue
+        if not all(map(math.isfinite, (stated, value, lo, hi))) or not hi > lo:
+            continue
+        if log:
+            if min(stated, value, lo) <= 0.0:
+                continue
+            z = math.log(stated / value) / (math.log(hi / lo) / (2.0 * _Z95))
+        else:
+            z = (stated - value) / ((hi - lo) / (2.0 * _Z95))
+        row = {"quantity": key, "stated": stated, "value": value, "lo": lo, "hi": hi, "z": round(z, 2),
+               "consistent": abs(z) <= STATED_Z}
+        if not row["consistent"]:
+            row["sentence"] = (f"{name}: the stated {key} = {stated:g} contradicts the data, which read {value:.5g} "
+                               f"[{lo:.5g}, {hi:.5g}] (95 %; the stated value {abs(z):.1f} σ away, beyond "
+                               f"{STATED_Z:g}): check the sidecar, or the tyre file")
+        rows.append(row)
+    return rows
+
+
 def _sidecar(source) -> str | None:
     if not source:
         return None
@@ -287,7 +337,8 @@ def _diff(a, b) -> str:
 
 __all__ = ["rotation_speed_conflict", "patch_drop_omega", "check_profile_rotation", "check_table_rotation",
            "pressure_conflict", "duplicate_inputs", "unique_inputs", "content_hash", "ROLLING_RADIUS_M", "RATE_TOL",
-           "ROLLING_RADIUS_SHARE", "PATCH_DROP_SHARE", "PRESSURE_TOL"]
+           "ROLLING_RADIUS_SHARE", "PATCH_DROP_SHARE", "PRESSURE_TOL", "stated_against_estimate", "STATED_Z",
+           "STATED_ESTIMATED"]
 
 
 def case_inputs(folder) -> tuple[list[Path], list[Path]]:
