@@ -304,18 +304,19 @@ def test_model_resolution_floor_bounds_the_grid_error():
 def test_noise_dof_matches_monte_carlo():
     """Satterthwaite ν of coloured noise: white gives 2·k_max; for red noise (power ∝ k^-1.5) ν matches
     2·E[Q]²/Var[Q] of Q = Σx² over Monte Carlo series (independent of the formula)."""
-    from ringfit.gap.profile_noise import noise_dof
+    from ringfit.gap.profile_noise import spectrum_dof
 
-    assert noise_dof(0.0, 255) == pytest.approx(510.0)
+    k = np.arange(1.0, 256.0)
+    assert spectrum_dof(np.ones(255)) == pytest.approx(510.0)
     rng = np.random.default_rng(1)
     spec = rng.normal(size=(4000, 257)) + 1j * rng.normal(size=(4000, 257))
-    k = np.arange(257.0)
-    k[0] = 1.0
-    spec *= k**-0.75
+    kk = np.arange(257.0)
+    kk[0] = 1.0
+    spec *= kk**-0.75
     spec[:, 0] = 0.0
     spec[:, 256] = 0.0
     q = np.sum(np.fft.irfft(spec, 512, axis=-1) ** 2, axis=-1)
-    assert noise_dof(-1.5, 255) == pytest.approx(2 * np.mean(q) ** 2 / np.var(q), rel=0.1)
+    assert spectrum_dof(k**-1.5) == pytest.approx(2 * np.mean(q) ** 2 / np.var(q), rel=0.1)
 
 
 def test_residual_test_levels():

@@ -11,7 +11,7 @@ Example (pure white noise of σ = 1 on four profiles, both channels)::
 
     phi = -np.pi + 2 * np.pi * np.arange(512) / 512
     sigma, slope, dof = profile_noise(np.random.default_rng(0).normal(size=(4, 2, 512)), phi, np.full(4, 255))
-    # sigma ≈ 1 (4, 2); slope ≈ 0; dof ≈ 2·255 per series, a little fewer (a spectrum estimated, not known)
+    # sigma ≈ 1 (4, 2); slope ≈ 0; dof ≈ 2·255 per series (white noise: the samples of a band-limited series)
 """
 
 from __future__ import annotations
@@ -152,14 +152,5 @@ def spectrum_dof(s: np.ndarray) -> float:
     return float(2.0 * np.sum(s) ** 2 / q) if q > 0.0 else 1.0
 
 
-def noise_dof(slope: float, k_max: int) -> float:
-    """Effective degrees of freedom ν = 2(Σs_k)²/Σs_k² of a periodic noise series with power ``s_k ∝ k^slope``.
-
-    Harmonics k = 1 … ``k_max`` are independent, each a scaled χ²_2 (Satterthwaite): white noise gives
-    ν = 2·k_max (the samples of a band-limited series), red noise (slope −1.5) about 11.
-    """
-    return spectrum_dof(np.arange(1, int(k_max) + 1, dtype=np.float64) ** slope)
-
-
-__all__ = ["profile_noise", "noise_dof", "spectrum_dof", "periodogram", "band_levels", "far_side_window",
+__all__ = ["profile_noise", "spectrum_dof", "periodogram", "band_levels", "far_side_window",
            "LOWEST_HARMONIC", "SLOPE_RANGE", "DOF_BAND"]
