@@ -198,13 +198,13 @@ def test_the_patch_never_picks_the_wrong_rotation_over_many_operating_points():
 
 
 def test_a_stated_condition_is_contradicted_about_once_in_a_thousand_checks_when_it_is_true():
-    """The stated value is the truth and the estimate a calibrated draw about it (normal for speed and torque,
-    log-normal for load, pressure and depth, 95 % intervals of its σ): over 50,000 checks the share called a
-    contradiction is the two-sided p of STATED_Z, 0.1 %, inside its Clopper–Pearson 99 % interval; a value 6 σ
-    away is always one."""
+    """The stated value is the truth (the nominal speed: the truth off by its stated σ, 2 %) and the estimate a
+    calibrated draw about it (normal for speed and torque, log-normal for load, pressure and depth, 95 % intervals
+    of its σ): over 50,000 checks the share called a contradiction is the two-sided p of STATED_Z, 0.1 %, inside
+    its Clopper–Pearson 99 % interval; a value 6 σ away is always one."""
     from scipy.stats import beta
 
-    from ringfit.io.conditions import STATED_ESTIMATED, stated_against_estimate
+    from ringfit.io.conditions import STATED_ESTIMATED, STATED_REL_SD, stated_against_estimate
 
     rng = np.random.default_rng(4)
     truth = {"load_n": 4000.0, "pressure_bar": 2.2, "tread_depth_mm": 6.0, "speed_kmh": 80.0, "torque_nm": 250.0}
@@ -220,7 +220,8 @@ def test_a_stated_condition_is_contradicted_about_once_in_a_thousand_checks_when
             else:
                 v = truth[key] + sd[key] * e
                 est[key] = {"value": v, "lo": v - 1.96 * sd[key], "hi": v + 1.96 * sd[key]}
-        rows = stated_against_estimate(est, truth, source="run.profile.csv")
+        stated = {k: v * (1.0 + STATED_REL_SD.get(k, 0.0) * rng.standard_normal()) for k, v in truth.items()}
+        rows = stated_against_estimate(est, stated, source="run.profile.csv")
         assert len(rows) == len(STATED_ESTIMATED)
         flagged += sum(not r["consistent"] for r in rows)
     checks = n * len(STATED_ESTIMATED)

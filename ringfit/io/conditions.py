@@ -200,6 +200,11 @@ STATED_Z = 3.29
 #: log-normal (docs/formats.md §7.1).
 STATED_ESTIMATED = {"load_n": True, "pressure_bar": True, "tread_depth_mm": True, "speed_kmh": False,
                     "torque_nm": False}
+#: Relative σ of a stated value, where the format says it is nominal (docs/formats.md §3: a sidecar's
+#: ``speed_kmh`` may be off by a few per cent, a vehicle's speedometer or a drum's set point; the encoder's
+#: ``rotation_hz`` is what the data use): in quadrature with the estimate's σ. Every other stated value counts
+#: as exact (a rig's load cell, a gauge's pressure, a tread gauge, a torque hub).
+STATED_REL_SD = {"speed_kmh": RATE_TOL}
 _Z95 = 1.959963984540054
 
 
@@ -210,7 +215,8 @@ def stated_against_estimate(estimates: dict, condition: dict, *, source=None) ->
     which are log-normal); ``condition``: the input's stated condition. A quantity held at a value (``status``
     ``fixed``) or not told by the data (``not told``: its interval is its prior's) is not compared. Per compared
     quantity: ``stated``, ``value``, ``lo``, ``hi``, ``z`` (the stated value's distance from the estimate in the
-    interval's σ, in logarithms for a log-normal one), ``consistent`` (|z| ≤ :data:`STATED_Z`) and, when not, a
+    interval's σ, in logarithms for a log-normal one, with a nominal value's own σ :data:`STATED_REL_SD` in
+    quadrature), ``consistent`` (|z| ≤ :data:`STATED_Z`) and, when not, a
     ``sentence`` naming the input, the stated value and what the data read."""
     rows = []
     name = Path(str(source)).name if source else "the input"
@@ -225,12 +231,13 @@ def stated_against_estimate(estimates: dict, condition: dict, *, source=None) ->
             continue
         if not all(map(math.isfinite, (stated, value, lo, hi))) or not hi > lo:
             continue
+        rel = STATED_REL_SD.get(key, 0.0)
         if log:
             if min(stated, value, lo) <= 0.0:
                 continue
-            z = math.log(stated / value) / (math.log(hi / lo) / (2.0 * _Z95))
+            z = math.log(stated / value) / math.hypot(math.log(hi / lo) / (2.0 * _Z95), rel)
         else:
-            z = (stated - value) / ((hi - lo) / (2.0 * _Z95))
+            z = (stated - value) / math.hypot((hi - lo) / (2.0 * _Z95), rel * abs(stated))
         row = {"quantity": key, "stated": stated, "value": value, "lo": lo, "hi": hi, "z": round(z, 2),
                "consistent": abs(z) <= STATED_Z}
         if not row["consistent"]:
@@ -338,7 +345,7 @@ def _diff(a, b) -> str:
 __all__ = ["rotation_speed_conflict", "patch_drop_omega", "check_profile_rotation", "check_table_rotation",
            "pressure_conflict", "duplicate_inputs", "unique_inputs", "content_hash", "ROLLING_RADIUS_M", "RATE_TOL",
            "ROLLING_RADIUS_SHARE", "PATCH_DROP_SHARE", "PRESSURE_TOL", "stated_against_estimate", "STATED_Z",
-           "STATED_ESTIMATED"]
+           "STATED_ESTIMATED", "STATED_REL_SD"]
 
 
 def case_inputs(folder) -> tuple[list[Path], list[Path]]:
