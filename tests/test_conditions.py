@@ -245,3 +245,19 @@ def test_only_what_the_data_read_is_compared_and_a_contradiction_names_the_file(
     assert not rows[0]["consistent"] and rows[0]["z"] > 10
     assert rows[0]["sentence"].startswith("run7.profile.csv: the stated load_n = 5000 contradicts the data")
     assert stated_against_estimate(est, {}) == []
+
+
+def test_a_stated_value_is_judged_by_the_interval_on_its_own_side():
+    """An interval along a ridge or cut at a bound is not symmetric: a depth held at the new tread's 8 mm,
+    [7.0, 8.0] mm, is consistent with a stated 7.5 mm (z = ln(7.5/8)/(ln(8/7)/1.96) ≈ −0.95) and contradicted by a
+    stated 8.5 mm (no room above the bound); a load of 3,205 N in [3,197, 3,235] N takes σ from its upper side."""
+    from ringfit.io.conditions import stated_against_estimate
+
+    depth = {"tread_depth_mm": {"value": 8.0, "lo": 7.0, "hi": 8.0}}
+    z = stated_against_estimate(depth, {"tread_depth_mm": 7.5})[0]["z"]
+    assert z == pytest.approx(math.log(7.5 / 8.0) / (math.log(8.0 / 7.0) / 1.959964), abs=0.01)
+    assert not stated_against_estimate(depth, {"tread_depth_mm": 8.5})[0]["consistent"]
+    load = {"load_n": {"value": 3205.0, "lo": 3197.0, "hi": 3235.0}}
+    up = stated_against_estimate(load, {"load_n": 3230.0})[0]["z"]
+    assert up == pytest.approx(math.log(3230 / 3205) / (math.log(3235 / 3205) / 1.959964), abs=0.01)
+    assert not stated_against_estimate(load, {"load_n": 3190.0})[0]["consistent"]  # 15 N below: σ there is 2 N

@@ -215,8 +215,9 @@ def stated_against_estimate(estimates: dict, condition: dict, *, source=None) ->
     which are log-normal); ``condition``: the input's stated condition. A quantity held at a value (``status``
     ``fixed``) or not told by the data (``not told``: its interval is its prior's) is not compared. Per compared
     quantity: ``stated``, ``value``, ``lo``, ``hi``, ``z`` (the stated value's distance from the estimate in the
-    interval's σ, in logarithms for a log-normal one, with a nominal value's own σ :data:`STATED_REL_SD` in
-    quadrature), ``consistent`` (|z| ≤ :data:`STATED_Z`) and, when not, a
+    σ of the interval's half on its side, (hi − value)/1.96 or (value − lo)/1.96 — an interval along a ridge or
+    cut at a bound is not symmetric —, in logarithms for a log-normal one, with a nominal value's own σ
+    :data:`STATED_REL_SD` in quadrature), ``consistent`` (|z| ≤ :data:`STATED_Z`) and, when not, a
     ``sentence`` naming the input, the stated value and what the data read."""
     rows = []
     name = Path(str(source)).name if source else "the input"
@@ -232,12 +233,14 @@ def stated_against_estimate(estimates: dict, condition: dict, *, source=None) ->
         if not all(map(math.isfinite, (stated, value, lo, hi))) or not hi > lo:
             continue
         rel = STATED_REL_SD.get(key, 0.0)
-        if log:
-            if min(stated, value, lo) <= 0.0:
-                continue
-            z = math.log(stated / value) / math.hypot(math.log(hi / lo) / (2.0 * _Z95), rel)
-        else:
-            z = (stated - value) / math.hypot((hi - lo) / (2.0 * _Z95), rel * abs(stated))
+        if log and min(stated, value, lo) <= 0.0:
+            continue
+        f = math.log if log else (lambda x: x)
+        # the interval's σ on the stated value's side of the estimate: an interval along a ridge, or cut at a
+        # bound (a tread depth held at the new tread's), is not symmetric about its value
+        side = (f(hi) - f(value)) if stated >= value else (f(value) - f(lo))
+        sigma = math.hypot(max(side, 1e-12 * max(abs(f(value)), 1.0)) / _Z95, rel * (1.0 if log else abs(stated)))
+        z = (f(stated) - f(value)) / sigma
         row = {"quantity": key, "stated": stated, "value": value, "lo": lo, "hi": hi, "z": round(z, 2),
                "consistent": abs(z) <= STATED_Z}
         if not row["consistent"]:
