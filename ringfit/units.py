@@ -11,3 +11,6 @@ G_UNIT = 9.80665
 #: The gravitational acceleration of the model [m/s²] (docs/physics.md §5 layer 3: the rotating gravity the
 #: sensor reads) and of the plots' "g" axes; the 0.03 % from G_UNIT is far below any sensor's calibration.
 GRAVITY = 9.81
+
+#: The two-sided 95 % standard-normal quantile: a 95 % interval is the value ± Z95·σ (every interval of ringfit).
+Z95 = 1.959963984540054

@@ -37,6 +37,7 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.io.modes import ModeTable
+from ringfit.units import Z95
 
 #: σ_i / f_i where a mode table has no ``freq_std_hz``, as the *start* of the block's scale estimate (the scale is
 #: then estimated from the residual). 1 % is the RMS relative difference between the source study's two
@@ -47,8 +48,6 @@ DEFAULT_RELATIVE_STD = 0.01
 SCALE_PASSES = 4
 #: Stop re-weighting once every block scale changes by less than this fraction.
 SCALE_TOLERANCE = 0.02
-#: The two-sided 95 % normal quantile.
-Z95 = 1.959963984540054
 #: The smallest σ/f the scale estimate gives a row: no measured frequency is known better than 1 ppm, and a table
 #: of exact model frequencies (residual ~1e-15) must not weight its rows by a σ the solver cannot resolve.
 SIGMA_FLOOR_REL = 1e-6

@@ -41,6 +41,7 @@ from ringfit.gap.ranking import (COMPUTED, JOIN, baseline_movement, chain_start,
 from ringfit.gap.screening import SCREEN_MIN_SCORE, nonlinear_screen, objective, screen
 from ringfit.gap.verdict import (P_NOISE, P_TRY_DAMPING, PREFER_COMPUTED_PTS, RULES, acceptance, null_decides,
                                  residual_test)
+from ringfit.units import Z95
 
 
 @dataclass
@@ -157,11 +158,11 @@ def _candidate_entry(problem: GapProblem, element: str, fit: FitResult, current:
         for p, i in zip(problem.effect_params(effect), range(sl.start, sl.stop)):
             v = fit.theta[i]
             se = float(cond_sd.get(p.name, 0.0)) if computed else fit.stderr[names[i]]
-            plo, phi = v - 1.959964 * se, v + 1.959964 * se
+            plo, phi = v - Z95 * se, v + Z95 * se
             key = p.name if len(parts(element)) == 1 else f"{name}.{p.name}"
             a, b = p.physical_range
             params[key] = {"value": _r(v, 6), "lo": _r(max(plo, p.lo), 6), "hi": _r(min(phi, p.hi), 6),
-                           "null": p.null, "unit": p.unit, "excludes_null": bool(abs(v - p.null) > 1.959964 * se),
+                           "null": p.null, "unit": p.unit, "excludes_null": bool(abs(v - p.null) > Z95 * se),
                            "physical_range": [a, b],
                            **({"implausible": True} if not computed and not (a - 1e-12 <= v <= b + 1e-12) else {}),
                            **({"fixed_by": "the measured condition"} if computed else {}),

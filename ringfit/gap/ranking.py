@@ -37,8 +37,6 @@ from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, Gaus
                                 least_squares, linearize)
 from ringfit.fit.result import FitResult
 from ringfit.gap.problem import GapProblem
-
-Z95 = 1.959964
 #: Solver tolerances (optimistix Cauchy termination on the solver coordinates and the residuals).
 RTOL, ATOL = 1e-8, 1e-8
 #: Baseline parameters move at most a factor e^3 from the baseline fit in a refit.

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.units import KMH
+from ringfit.units import KMH, Z95
 
 #: Rolling radii [m] a road tyre can have: an encoder rate that implies another contradicts the sampling rate.
 ROLLING_RADIUS_M = (0.15, 0.75)
@@ -205,7 +205,6 @@ STATED_ESTIMATED = {"load_n": True, "pressure_bar": True, "tread_depth_mm": True
 #: ``rotation_hz`` is what the data use): in quadrature with the estimate's σ. Every other stated value counts
 #: as exact (a rig's load cell, a gauge's pressure, a tread gauge, a torque hub).
 STATED_REL_SD = {"speed_kmh": RATE_TOL}
-_Z95 = 1.959963984540054
 
 
 def stated_against_estimate(estimates: dict, condition: dict, *, source=None) -> list[dict]:
@@ -239,7 +238,7 @@ def stated_against_estimate(estimates: dict, condition: dict, *, source=None) ->
         # the interval's σ on the stated value's side of the estimate: an interval along a ridge, or cut at a
         # bound (a tread depth held at the new tread's), is not symmetric about its value
         side = (f(hi) - f(value)) if stated >= value else (f(value) - f(lo))
-        sigma = math.hypot(max(side, 1e-12 * max(abs(f(value)), 1.0)) / _Z95, rel * (1.0 if log else abs(stated)))
+        sigma = math.hypot(max(side, 1e-12 * max(abs(f(value)), 1.0)) / Z95, rel * (1.0 if log else abs(stated)))
         z = (f(stated) - f(value)) / sigma
         row = {"quantity": key, "stated": stated, "value": value, "lo": lo, "hi": hi, "z": round(z, 2),
                "consistent": abs(z) <= STATED_Z}
