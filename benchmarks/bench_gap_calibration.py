@@ -183,18 +183,12 @@ def profile_nuisance(out: Path, seed: int) -> None:
 
 def profile_patch_noise(out: Path, seed: int) -> None:
     """``make_profile_case(effect="none")`` with noise concentrated at the contact patch (module docstring)."""
-    from ringfit.io.profiles import Profile, read_profile, write_profile
-    from ringfit.synth.cases import make_profile_case
+    from ringfit.synth.cases import add_patch_noise, make_profile_case
 
     label = make_profile_case(out, effect="none", seed=seed)
     rng = np.random.default_rng(3 * 10**6 + seed)
     amp, width = rng.uniform(2.0, 8.0), rng.uniform(10.0, 25.0)
-    sigma = float(label.noise["grid_rms_ms2"])
-    for path in sorted(out.glob("*.profile.csv")):
-        prof = read_profile(path)
-        env = amp * sigma * np.exp(-0.5 * (prof.angle_deg / width) ** 2)
-        chans = [ch + env * rng.standard_normal(len(prof)) for ch in (prof.acc_radial_ms2, prof.acc_tangential_ms2)]
-        write_profile(Profile(prof.angle_deg, chans[0], chans[1], condition=prof.condition), path, overwrite=True)
+    add_patch_noise(out, float(label.noise["grid_rms_ms2"]), amp, width, rng)
 
 
 def loaded_random(out: Path, seed: int) -> None:

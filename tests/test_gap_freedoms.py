@@ -255,18 +255,11 @@ def test_noise_concentrated_at_the_patch_is_never_an_effect(tmp_path):
     w 15° and 25°), a noise the stationary far-side model does not have (docs/physics.md §6.4 *noise the model
     does not have*): no effect is accepted; `unexplained` or `none`."""
     from ringfit.gap import diagnose
-    from ringfit.io.profiles import Profile, read_profile, write_profile
-    from ringfit.synth.cases import make_profile_case
+    from ringfit.synth.cases import add_patch_noise, make_profile_case
 
     for seed, amp, width in ((7, 4.0, 15.0), (11, 8.0, 25.0)):
         folder = tmp_path / f"c{seed}"
         label = make_profile_case(folder, "none", seed=seed)
-        rng = np.random.default_rng(seed)
-        sigma = float(label.noise["grid_rms_ms2"])
-        for path in sorted(folder.glob("*.profile.csv")):
-            prof = read_profile(path)
-            env = amp * sigma * np.exp(-0.5 * (prof.angle_deg / width) ** 2)
-            ch = [c + env * rng.standard_normal(len(prof)) for c in (prof.acc_radial_ms2, prof.acc_tangential_ms2)]
-            write_profile(Profile(prof.angle_deg, ch[0], ch[1], condition=prof.condition), path, overwrite=True)
+        add_patch_noise(folder, float(label.noise["grid_rms_ms2"]), amp, width, np.random.default_rng(seed))
         effects = diagnose(folder, progress=False).verdict["effects"]
         assert effects in (["none"], ["unexplained"]), (seed, effects)

@@ -605,6 +605,20 @@ class LeverShearTruth(eqx.Module):
         return q_w, q_v
 
 
+def add_patch_noise(folder: str | os.PathLike, sigma: float, amplitude: float, width_deg: float, rng) -> None:
+    """Add white noise concentrated at the contact patch to every ``*.profile.csv`` of a case ``folder``, in place:
+    std ``amplitude·sigma·exp(−½(φ/width_deg)²)`` per channel [m/s²] — what an averaged profile keeps where the
+    patch's impacts excite each revolution differently, a noise the diagnosis's stationary far-side model does not
+    have (docs/physics.md §6.4 *noise the model does not have*)."""
+    from ringfit.io.profiles import Profile, read_profile, write_profile
+
+    for path in sorted(Path(folder).glob("*.profile.csv")):
+        prof = read_profile(path)
+        env = amplitude * sigma * np.exp(-0.5 * (prof.angle_deg / width_deg) ** 2)
+        ch = [c + env * rng.standard_normal(len(prof)) for c in (prof.acc_radial_ms2, prof.acc_tangential_ms2)]
+        write_profile(Profile(prof.angle_deg, ch[0], ch[1], condition=prof.condition), path, overwrite=True)
+
+
 def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 0) -> CaseLabel:
     """Write a blind rolling-profile case (docs/formats.md §6) into ``folder`` (created; must be empty or absent).
 
