@@ -307,7 +307,7 @@ def _profile_rule(rows, center, *, phi, kmax, floor, shape) -> np.ndarray:
     P, C, M = shape
     out = np.empty_like(rows)
     for b in range(rows.shape[0]):
-        sigma, _, _ = profile_noise((rows[b] - center).reshape(P, C, M), phi, kmax)
+        sigma, _, _ = profile_noise((rows[b] - center).reshape(P, C, M), phi, kmax, dof=False)
         out[b] = np.repeat(np.sqrt(sigma**2 + floor**2).reshape(-1), M)
     return out
 

@@ -67,7 +67,8 @@ def band_levels(residual: np.ndarray, phi: np.ndarray, k_max: int, s: np.ndarray
     return np.asarray(centres), np.asarray(levels)
 
 
-def profile_noise(residual: np.ndarray, phi: np.ndarray, k_max) -> tuple[np.ndarray, float, np.ndarray]:
+def profile_noise(residual: np.ndarray, phi: np.ndarray, k_max, *, dof: bool = True
+                  ) -> tuple[np.ndarray, float, np.ndarray | None]:
     """Noise σ [m/s²] and effective degrees of freedom per profile and channel from the baseline residual
     (docs/physics.md §6 *baselines*, ``gong-rolling``, *noise*).
 
@@ -82,7 +83,8 @@ def profile_noise(residual: np.ndarray, phi: np.ndarray, k_max) -> tuple[np.ndar
     **Arguments:** ``residual`` ``(P, 2, M)``; ``phi`` ``(M,)`` [rad]; ``k_max`` ``(P,)`` highest
     revolution harmonic each measurement holds.
 
-    **Returns:** ``(sigma (P, 2), slope b, dof (P, 2))``.
+    **Returns:** ``(sigma (P, 2), slope b, dof (P, 2))``; ``dof=False`` (the parametric null's noise rule, which
+    needs σ only): dof None, its spectrum squares not computed.
     """
     P, C, M = residual.shape
     spectra = [[periodogram(residual[p, c], phi) for c in range(C)] for p in range(P)]
@@ -99,8 +101,9 @@ def profile_noise(residual: np.ndarray, phi: np.ndarray, k_max) -> tuple[np.ndar
         b = float(np.clip(np.sum(x * yv) / max(np.sum(x * x), 1e-300), *SLOPE_RANGE))
     else:
         b = 0.0
-    sigma, dof = np.zeros((P, C)), np.ones((P, C))
-    rho = ordinate_correlation(phi)
+    sigma = np.zeros((P, C))
+    nu = np.ones((P, C)) if dof else None
+    rho = ordinate_correlation(phi) if dof else None
     for p in range(P):
         K = int(k_max[p])
         k_lo = min(LOWEST_HARMONIC, K + 1)
@@ -113,9 +116,10 @@ def profile_noise(residual: np.ndarray, phi: np.ndarray, k_max) -> tuple[np.ndar
             low = np.exp(a + b * np.log(k))
             high = spectra[p][c][k_lo : K + 1]
             sigma[p, c] = math.sqrt(2.0 / M * (float(np.sum(low)) + float(np.sum(high))))
-            sq = np.concatenate([low**2, _band_power2(high, DOF_BAND, rho)])
-            dof[p, c] = 2.0 * (float(np.sum(low)) + float(np.sum(high))) ** 2 / max(float(np.sum(sq)), 1e-300)
-    return sigma, b, dof
+            if dof:
+                nu[p, c] = spectrum_dof(np.concatenate([low, high]),
+                                        np.concatenate([low**2, _band_power2(high, DOF_BAND, rho)]))
+    return sigma, b, nu
 
 
 def _band_power2(s: np.ndarray, width: int, rho: np.ndarray) -> np.ndarray:
@@ -144,11 +148,12 @@ def ordinate_correlation(phi: np.ndarray) -> np.ndarray:
     return np.abs(np.fft.rfft(w2)) ** 2 / np.sum(w2) ** 2
 
 
-def spectrum_dof(s: np.ndarray) -> float:
+def spectrum_dof(s: np.ndarray, s2: np.ndarray | None = None) -> float:
     """Effective degrees of freedom ν = 2(Σs_k)²/Σs_k² of a periodic noise series with power ``s_k`` per
-    harmonic k = 1 … (each harmonic an independent scaled χ²_2; Satterthwaite)."""
+    harmonic k = 1 … (each harmonic an independent scaled χ²_2; Satterthwaite). ``s2``: the squares s_k² where
+    they are estimated apart from ``s`` (:func:`profile_noise`: freed of their estimation noise)."""
     s = np.asarray(s, dtype=np.float64)
-    q = float(np.sum(s**2))
+    q = float(np.sum(s**2 if s2 is None else s2))
     return float(2.0 * np.sum(s) ** 2 / q) if q > 0.0 else 1.0
 
 
