@@ -60,13 +60,28 @@ def case(tmp_path_factory):
     return root, q_p, q_r
 
 
-@pytest.mark.slow
-def test_state_of_a_profile_and_a_recording(case, capsys):
-    root, q_p, q_r = case
-    out = root / "p.estimate.json"
-    assert main(["estimate", str(root / "p.profile.csv"), "--tyre", str(root / "t.tyre.toml"), "--out", str(out),
+@pytest.fixture(scope="module")
+def serial(case):
+    """The serial commands' outputs, once per module (each state estimate is ~40 s of one core): the profile's
+    JSON, and the recording's JSON, per-revolution CSV and plot. The batch test compares its worker's answers
+    with the same JSONs (its plan's options are these commands' less the per-revolution CSV and plot, which add
+    to the JSON and change no quantity)."""
+    root, _, _ = case
+    tyre = str(root / "t.tyre.toml")
+    out = root / "serial"
+    out.mkdir()
+    assert main(["estimate", str(root / "p.profile.csv"), "--tyre", tyre, "--out", str(out / "p.estimate.json"),
                  "--state", "--quiet"]) == 0
-    doc = json.loads(out.read_text())
+    assert main(["estimate", str(root / "r.records.npz"), "--tyre", tyre, "--out", str(out / "r.estimate.json"),
+                 "--state", "--per-revolution", str(out / "r.revs.csv"), "--plot", str(out / "r.png"),
+                 "--quiet"]) == 0
+    return out
+
+
+@pytest.mark.slow
+def test_state_of_a_profile_and_a_recording(case, serial, capsys):
+    root, q_p, q_r = case
+    doc = json.loads((serial / "p.estimate.json").read_text())
     Q = doc["state"]["quantities"]
     for key, value in (("load_n", 4500.0), ("pressure_bar", 2.5), ("slip", 0.01), ("fx_n", q_p["fx"]),
                        ("tread_depth_mm", 6.0), ("speed_kmh", q_p["speed"] * 3.6)):
@@ -82,12 +97,9 @@ def test_state_of_a_profile_and_a_recording(case, capsys):
     assert Q2["pressure_bar"]["status"] == "fixed" and Q2["pressure_bar"]["value"] == pytest.approx(2.5)
 
     # the recording: JSON, per-revolution CSV with each quantity and its interval, plot
-    out = root / "r.estimate.json"
-    revs = root / "r.revs.csv"
-    png = root / "r.png"
-    assert main(["estimate", str(root / "r.records.npz"), "--tyre", str(root / "t.tyre.toml"), "--out", str(out),
-                 "--state", "--per-revolution", str(revs), "--plot", str(png), "--quiet"]) == 0
-    doc = json.loads(out.read_text())
+    revs = serial / "r.revs.csv"
+    png = serial / "r.png"
+    doc = json.loads((serial / "r.estimate.json").read_text())
     Q = doc["state"]["quantities"]
     for key, value in (("load_n", 4200.0), ("pressure_bar", 2.0), ("slip", -0.006), ("fx_n", q_r["fx"]),
                        ("speed_kmh", q_r["speed"] * 3.6)):
@@ -127,7 +139,7 @@ def test_bad_state_options_are_refused_before_anything_is_written(tmp_path, caps
 
 
 @pytest.mark.slow
-def test_batch_runs_the_state_estimate_over_many_recordings(case, tmp_path, monkeypatch, capsys):
+def test_batch_runs_the_state_estimate_over_many_recordings(case, serial, tmp_path, monkeypatch, capsys):
     """issue 33 item 7: ``ringfit batch estimate … -- --state`` on a worker gives each input's state, the same
     as the serial command to a tenth of its σ (a profile and a continuous recording)."""
     import os
@@ -146,10 +158,7 @@ def test_batch_runs_the_state_estimate_over_many_recordings(case, tmp_path, monk
     finally:
         cl.close()
     assert status == 0, capsys.readouterr().out
-    serial = tmp_path / "serial"
-    serial.mkdir()
-    for plan in plan_batch("estimate", inputs, serial, opts):
-        assert main(plan.argv) == 0
+    for plan in plan_batch("estimate", inputs, tmp_path / "plan", opts):  # the serial commands' names (fixture)
         name = Path(plan.outputs[0]).name
         got, want = (json.loads((d / name).read_text())["state"]["quantities"] for d in (Path("batch"), serial))
         for key in ("load_n", "pressure_bar", "fx_n", "tread_depth_mm", "speed_kmh"):

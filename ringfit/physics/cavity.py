@@ -1,34 +1,20 @@
 """The air cavity of the loaded tyre: the contact flat splits the first acoustic mode (docs/physics.md §3.6, §6 ``cavity_mode``).
 
-The cavity is a closed loop of length L_c = 2πR_c (eq. 22) whose cross-section
-A(θ) changes slowly along it, so its pressure obeys Webster's equation
-``(1/A)(A p′)′ + (ω/c)² p = 0`` (′ = d/ds, s = R_c θ). By Rayleigh's quotient
-``ω² = c² ∫A p′² ds / ∫A p² ds``, a small change ``A = A_0 (1 + ε(θ))`` moves the
-first pair (p = cos θ, sin θ; ω_a = c/R_c) by, to first order,
+The cavity is a loop of air whose cross-section the contact flat narrows. Webster's equation on that loop, by
+Rayleigh's quotient to first order, splits the first acoustic pair by the cos 2θ coefficient W_2 of the belt's
+static deflection over the cavity height h_c: ``ω²_vertical = ω_a²(1 − W_2/h_c)``, ``ω²_fore-aft = ω_a²(1 +
+W_2/h_c)``; rolling, the air turns with the tyre and the fixed-frame lines are ``ω_a ± √(Ω² + g²)``. The
+derivation, the load law and the seed tyre's numbers are in docs/physics.md §6 (*the loaded cavity*); the
+finite-volume check of Webster's equation is ``tests/test_cavity.py``. Pure JAX.
 
-    δω²/ω_a² = (1/π) ∫ ε (sin²θ − cos²θ) dθ = −(1/π) ∫ ε cos 2θ dθ     (p = cos θ)
-    δω²/ω_a² = +(1/π) ∫ ε cos 2θ dθ                                    (p = sin θ)
+Example (the seed tyre at its rated load, standing on a flat road)::
 
-and the pair does not mix when ε is even about the patch centre (θ = 0): only
-the cos 2θ part of the area change splits the pair, a uniform change moves
-neither line. The belt's radial displacement w(θ) changes the cross-section by
-``b·w`` over the belt width b of a section ``A_0 ≈ b·h_c`` (h_c = R − R_rim the
-cavity height; with R_c the mid-height radius, ``h_c = 2(R − R_c)``), so
-``ε = w/h_c`` and, with W_2 the cos 2θ coefficient of the static deflection
-(``w = Σ W_n cos nθ + …``),
-
-    ω²_cos = ω_a² (1 − W_2/h_c),    ω²_sin = ω_a² (1 + W_2/h_c).
-
-The loaded tyre is flattened at θ = 0 (W_2 < 0): the cos line — pressure
-antinodes at the patch and the top, its net force on the rim vertical — rises,
-the sin line (net force fore-aft) falls. Split ``≈ f_a |W_2|/h_c``.
-
-Rolling: the air turns with the tyre (Ω), so in the fixed frame the two waves
-``e^{±iθ}`` sit at ω_a ± Ω before the flat couples them; the flat (fixed in space)
-couples them with the half-split g = ω_a W_2/(2h_c), giving the fixed-frame lines
-``ω_a ± √(Ω² + g²)`` (standing fore-aft / vertical at Ω = 0, travelling when Ω ≫ |g|).
-
-Pure JAX.
+    from ringfit.data import path
+    from ringfit.io.tyre import read_tyre
+    from ringfit.physics.cavity import loaded_cavity_frequencies
+    tyre = read_tyre(path("table9.tyre.toml"))
+    fore_aft, vertical, w2_h = loaded_cavity_frequencies(tyre.ring, tyre.geometry, 6570.0)
+    # 214.5 Hz, 222.9 Hz (a split of 8.4 Hz), W_2/h_c = -0.0385
 """
 
 from __future__ import annotations

@@ -1,34 +1,26 @@
-"""Covariance-driven stochastic subspace identification, SSI-cov/ref (seed §2.4).
+"""Covariance-driven stochastic subspace identification, SSI-cov/ref (seed §2.4; docs/physics.md §9).
 
-Axis order everywhere: ``y`` is ``(channels, samples)``.
+Axis order everywhere: ``y`` is ``(channels, samples)``. The chain, each step one function:
+:func:`output_covariances` (all lags at once; blocked FFT correlation for long records) →
+:func:`block_hankel` (or :class:`BlockHankelOperator`, its products without forming it) →
+:func:`truncated_svd` (only the leading ``max(orders)`` triplets) → :func:`poles_from_svd` (every model order
+from slices of that one SVD and one QR). :func:`ssi_cov` runs them for one matrix of channels;
+:func:`ssi_cov_multi_setup` merges several setups (records) that share reference channels. The equations and the
+numerics (the FFT correlation's cost, why the leading block of one matrix gives every order) are in
+docs/physics.md §9 (*SSI-cov*).
 
-The chain, each step one function:
+Example (three channels of a free decay holding 81 Hz at ζ = 2 % and 123 Hz at ζ = 1 %)::
 
-1. :func:`output_covariances` — unbiased output covariances
-   ``Λ_i = 1/(N−i) Σ_k y(k+i) y_ref(k)ᵀ`` (seed eq. 16 uses 1/(N−1); we divide
-   each lag by the number of products it sums). All lags at once: for long
-   records by blocked FFT correlation (overlap-save, exact up to round-off,
-   ≈ 4·l·r·N·(1 + L/B) flops instead of 2·l·r·N·L for L lags and blocks of
-   B ≈ 2L samples), else by one batched matmul.
-2. :func:`block_hankel` — ``H[i, j] = Λ_{i+j+1}``, p block rows, q block
-   columns (seed eq. 8), shape ``(p·l, q·r)``; :class:`BlockHankelOperator`
-   gives the products ``H X`` and ``Hᵀ Z`` without forming H (block
-   correlation by FFT over the lag axis) for large channel counts.
-3. :func:`truncated_svd` — only the leading ``max(orders)`` singular triplets
-   are needed: a randomized SVD with power iterations (default), ARPACK
-   (``svds``) or the full LAPACK SVD (for checks).
-4. :func:`poles_from_svd` — every model order from slices of that ONE SVD:
-   observability ``O = U_n S_n^½`` (eq. 10), A by least squares on the shifted
-   observability (eq. 11) through one QR of the largest ``O↑ = Q R`` (the
-   leading columns of a QR are the QR of the leading columns), so that
-   ``A_n = R_n⁻¹ (QᵀO↓)_n`` is similar to the leading n × n block of ONE
-   matrix ``G = QᵀO↓R⁻¹`` (``R_n A_n R_n⁻¹ = G_n`` because R⁻¹ is upper
-   triangular); C = first block row, poles λ_c = ln(λ)/Δt (eq. 13),
-   f = |λ_c|/2π, ζ = −Re λ_c/|λ_c| (eq. 14), shapes φ = Cψ = (C R⁻¹)_n x with
-   x the eigenvector of G_n (eq. 15).
-
-:func:`ssi_cov` runs 1–4 for one matrix of channels; :func:`ssi_cov_multi_setup`
-merges several setups (records) that share reference channels.
+    import numpy as np
+    from ringfit.targets.ssi import ssi_cov
+    fs = 1024.0
+    t = np.arange(4096) / fs
+    y = np.array([np.exp(-2 * np.pi * 0.02 * 81 * t) * np.sin(2 * np.pi * 81 * t + ph)
+                  + 0.5 * np.exp(-2 * np.pi * 0.01 * 123 * t) * np.sin(2 * np.pi * 123 * t + 2 * ph)
+                  for ph in (0.3, 1.4, 2.5)])
+    poles = ssi_cov(y, fs, orders=range(2, 13, 2), unbiased=False)  # a free decay: 1/N covariances
+    at8 = poles.order == 8
+    poles.freq_hz[at8], poles.damping[at8]   # [81.016, 123.006] Hz, [0.020, 0.010]
 """
 
 from __future__ import annotations

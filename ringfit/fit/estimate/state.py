@@ -639,11 +639,14 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     # the wide band continued from the narrow band's fit (its first passes started from the priors' means stopped on
     # the ridge far from the optimum at a high signal-to-noise ratio, §13.6), and the narrow one where the wide band's
     # form error shows (§13.4 *the harmonic band*)
+    # the narrow band's fit is only the wide one's start unless it is the answer: its ridge in tread depth (a third
+    # of the command's time) is profiled only then, by the same narrow fit made again with it
     narrow = dataclasses.replace(settings, k_max=STATE_K_FALLBACK)
-    low = _estimate_state(profile, geometry, ring, laws, settings=narrow, load=load, **common)
+    low = _estimate_state(profile, geometry, ring, laws, settings=narrow, load=load, ridge=False, **common)
     start = np.asarray(low.fit.theta) if np.all(np.isfinite(low.fit.theta)) else None
     est = _estimate_state(profile, geometry, ring, laws, settings=settings, load=low.load, start=start, **common)
     if est.discrepancy > KAPPA_BAND_LIMIT or not est.converged:
+        low = _estimate_state(profile, geometry, ring, laws, settings=narrow, load=load, **common)
         why = (f"the model's form error showed above harmonic {STATE_K_FALLBACK} (discrepancy ratio κ = "
                f"{est.discrepancy:.3g} > {KAPPA_BAND_LIMIT:g})" if est.converged else "the fit did not converge")
         low.flags.append(f"harmonics 2…{est.k_max}: {why}; fitted on 2…{low.k_max} (κ = {low.discrepancy:.3g}), "
@@ -661,10 +664,11 @@ def state_band(profile, settings: EstimateSettings, response=None) -> int:
 
 
 def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, *, settings, fixed, omega,
-                    omega_source, response, ring_covariance, load, k_tread_in_file, start=None) -> StateEstimate:
+                    omega_source, response, ring_covariance, load, k_tread_in_file, start=None,
+                    ridge: bool = True) -> StateEstimate:
     """:func:`estimate_state` on the harmonics 2…``settings.k_max`` (within the profile's band); ``start``: θ
     (:data:`STATE_PARAMETERS` order) the passes start from (default: the load estimate's load and nuisances, the
-    priors' means for the rest)."""
+    priors' means for the rest); ``ridge``: as for :func:`_state_passes`."""
     fixed = dict(fixed or {})
     for name in fixed:
         if name not in STATE_NAMES:
@@ -750,7 +754,7 @@ def _estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyr
     # fit again — each warm from the last fit and its correction
     sigma0 = 1.0 / channel_weights(np.asarray(first.extra["aux"])[0] - measured, leverage=len(free0) / (4 * K))
     est = _state_passes(arrays, theta1, sigma0, free, prior, load, geometry, ring, laws, omega, settings, fixed,
-                        ring_covariance, k_max, d_new, opts)
+                        ring_covariance, k_max, d_new, opts, ridge=ridge)
     return _speed_source(est, load)
 
 
