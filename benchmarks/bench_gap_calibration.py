@@ -38,6 +38,11 @@ A kind the diagnosis's noise model does not have:
   noise there): white noise of std A·σ·exp(−½(φ/w)²) per channel, A 2–8 × the case's noise σ, w 10–25°. The
   far-side noise estimate cannot see it, and the phase-randomised null spreads it round the wheel: an
   accepted effect is a false accept; ``unexplained`` is the rule's honest answer.
+- ``modal-heavy-tail``: ``make_case(effect="none")`` with every table's frequencies also scattered by Student-t
+  errors of 2 degrees of freedom (scale 0.05–0.2 %: most rows at the stated noise, a few far out — a row taken
+  from the wrong peak, a mode fitted through a neighbour);
+- ``profile-spikes``: noise-only profiles with 1–3 single-sample spikes of 10–30 × the noise σ per channel
+  (an electrical glitch, a stone's hit kept in the average).
 
 With ``--power`` it also diagnoses effect cases (every injected effect of ``bench_gap.py`` and the rolling
 cases of ``bench_gap_rolling.py``) twice in the same process, interleaved — with the calibration
@@ -64,7 +69,7 @@ import _common as bc  # noqa: E402
 
 KINDS = ("rolling-random", "loaded-random", "modal-noise", "profile-noise", "rolling-labelled",
          "rolling-half-labelled", "rolling-tags-only", "rolling-mixed-frames", "rolling-permuted", "profile-nuisance",
-         "profile-patch-noise")
+         "profile-patch-noise", "modal-heavy-tail", "profile-spikes")
 #: the source study's label order on a rolling table (n, tag)
 LABELS = [(1, "vert"), (1, "hort"), (2, "extr"), (2, "0"), (3, "extr"), (3, "0"), (4, "extr"), (4, "0"),
           (5, "extr"), (5, "0"), (6, "extr"), (6, "0"), (7, "extr")]
@@ -191,6 +196,41 @@ def profile_patch_noise(out: Path, seed: int) -> None:
     add_patch_noise(out, float(label.noise["grid_rms_ms2"]), amp, width, rng)
 
 
+def modal_heavy_tail(out: Path, seed: int) -> None:
+    """``make_case(effect="none")`` with Student-t (ν = 2) frequency errors on every table (module docstring)."""
+    from ringfit.synth.cases import make_case
+
+    make_case(out, effect="none", seed=seed)
+    rng = np.random.default_rng(4 * 10**6 + seed)
+    scale = rng.uniform(0.0005, 0.002)
+    for path in sorted(out.glob("*.modes.csv")):
+        lines = path.read_text().splitlines()
+        j = lines[0].split(",").index("freq_hz")
+        rows = [lines[0]]
+        for line in lines[1:]:
+            cells = line.split(",")
+            if cells[j]:
+                cells[j] = f"{float(cells[j]) * (1.0 + scale * rng.standard_t(2)):.5f}"
+            rows.append(",".join(cells))
+        path.write_text("\n".join(rows) + "\n")
+
+
+def profile_spikes(out: Path, seed: int) -> None:
+    """Noise-only profiles with 1–3 single-sample spikes of 10–30 σ per channel (module docstring)."""
+    from ringfit.io.profiles import Profile, read_profile, write_profile
+    from ringfit.synth.cases import make_profile_case
+
+    sigma = float(make_profile_case(out, effect="none", seed=seed).noise["grid_rms_ms2"])
+    rng = np.random.default_rng(5 * 10**6 + seed)
+    for path in sorted(out.glob("*.profile.csv")):
+        prof = read_profile(path)
+        chans = [np.array(prof.acc_radial_ms2, dtype=np.float64), np.array(prof.acc_tangential_ms2, dtype=np.float64)]
+        for ch in chans:
+            at = rng.choice(ch.size, size=int(rng.integers(1, 4)), replace=False)
+            ch[at] += rng.choice([-1.0, 1.0], at.size) * rng.uniform(10.0, 30.0, at.size) * sigma
+        write_profile(Profile(prof.angle_deg, chans[0], chans[1], condition=prof.condition), path, overwrite=True)
+
+
 def loaded_random(out: Path, seed: int) -> None:
     _copy_free(out)
     rng = np.random.default_rng(seed)
@@ -294,6 +334,10 @@ def main(argv=None) -> int:
                     rolling_permuted(folder, seed)
                 elif kind == "profile-patch-noise":
                     profile_patch_noise(folder, seed)
+                elif kind == "modal-heavy-tail":
+                    modal_heavy_tail(folder, seed)
+                elif kind == "profile-spikes":
+                    profile_spikes(folder, seed)
                 else:
                     profile_nuisance(folder, seed)
                 try:
