@@ -198,21 +198,11 @@ def profile_patch_noise(out: Path, seed: int) -> None:
 
 def modal_heavy_tail(out: Path, seed: int) -> None:
     """``make_case(effect="none")`` with Student-t (ν = 2) frequency errors on every table (module docstring)."""
-    from ringfit.synth.cases import make_case
+    from ringfit.synth.cases import add_heavy_tailed_errors, make_case
 
     make_case(out, effect="none", seed=seed)
     rng = np.random.default_rng(4 * 10**6 + seed)
-    scale = rng.uniform(0.0005, 0.002)
-    for path in sorted(out.glob("*.modes.csv")):
-        lines = path.read_text().splitlines()
-        j = lines[0].split(",").index("freq_hz")
-        rows = [lines[0]]
-        for line in lines[1:]:
-            cells = line.split(",")
-            if cells[j]:
-                cells[j] = f"{float(cells[j]) * (1.0 + scale * rng.standard_t(2)):.5f}"
-            rows.append(",".join(cells))
-        path.write_text("\n".join(rows) + "\n")
+    add_heavy_tailed_errors(out, rng.uniform(0.0005, 0.002), rng)
 
 
 def profile_spikes(out: Path, seed: int) -> None:

@@ -216,6 +216,10 @@ GAIN_DRIFT_MAX = 0.04
 ANGLE_JITTER_DEG = 0.2
 
 
+#: Fewest redrawn rows whose residuals make the resampling pool of the mode tables' noise null; fewer: every row's.
+RESAMPLE_MIN_ROWS = 8
+
+
 def _nuisances(problem: GapProblem, pred: np.ndarray, rng, B: int) -> np.ndarray:
     """``(B, m)`` the current prediction as the rig's nuisances move it per draw: a gain ``1 + d·(rank − ½)`` per
     run (rank 0 … 1 in speed order, d uniform in ±:data:`GAIN_DRIFT_MAX`) and a shift of each run by a random angle
@@ -238,13 +242,23 @@ def _nuisances(problem: GapProblem, pred: np.ndarray, rng, B: int) -> np.ndarray
     return gain[:, prof] * pred[None, :] + jitter[:, prof] * deriv[None, :]
 
 
+def _resampled(pool: np.ndarray, m: int, rng, B: int) -> np.ndarray:
+    """``(B, m)`` standardised residuals drawn from ``pool`` with replacement, each with a random sign: the
+    measured rows' own noise distribution (its tails, its scale against the stated σ), not a normal one."""
+    pool = np.asarray(pool, dtype=np.float64)
+    pool = pool[np.isfinite(pool)]
+    return rng.choice(pool, size=(B, m)) * rng.choice([-1.0, 1.0], size=(B, m))
+
+
 def parametric_null(problem: GapProblem, current, fits: dict, chain: tuple, elements, draws: int = DRAWS,
                     seed: int = 0, nuisances: bool = False) -> NullResult:
     """The parametric null of one round (module docstring): data from ``current`` (the fit of ``chain``), the
-    candidates ``elements`` (each fitted in ``fits[chain + parts(element)]``) refitted linearly. ``nuisances``
-    (profiles): the current model moved by the rig's nuisances per draw (:func:`_nuisances`: gain drift over the
-    session, angle jitter per run) before the phase-randomised residual (coloured, heteroscedastic per run and
-    channel as measured) is added — the null the rule where the null decides instead of a bar is judged by."""
+    candidates ``elements`` (each fitted in ``fits[chain + parts(element)]``) refitted linearly. ``nuisances`` —
+    the null the rule where the null decides instead of a bar is judged by: for profiles the current model moved
+    by the rig's nuisances per draw (:func:`_nuisances`: gain drift over the session, angle jitter per run) before
+    the phase-randomised residual (coloured, heteroscedastic per run and channel as measured) is added; for mode
+    tables the redrawn rows' noise resampled from their own standardised residuals about the current model
+    (:func:`_resampled`: heavy tails and a σ stated too small are in the draws, as they are in the data)."""
     rng = np.random.default_rng(seed)
     y = problem.y
     m = problem.m
@@ -259,9 +273,15 @@ def parametric_null(problem: GapProblem, current, fits: dict, chain: tuple, elem
     else:
         ref = problem.meta.reference_mask
         redraw = np.ones(m, dtype=bool) if ref is None else ~np.asarray(ref, dtype=bool)
-        ystar = np.where(redraw[None, :], pred[None, :] + problem.sigma[None, :] * rng.standard_normal((draws, m)),
-                         y[None, :])
-        kind = ("parametric: rows redrawn from the current model with each row's σ, labels kept"
+        if nuisances:
+            z = (y - pred) / problem.sigma
+            eps = _resampled(z[redraw] if np.count_nonzero(redraw) >= RESAMPLE_MIN_ROWS else z, m, rng, draws)
+        else:
+            eps = rng.standard_normal((draws, m))
+        ystar = np.where(redraw[None, :], pred[None, :] + problem.sigma[None, :] * eps, y[None, :])
+        kind = (("parametric (resampled residuals): rows redrawn from the current model with their own "
+                 "standardised residuals resampled (random signs)" if nuisances else
+                 "parametric: rows redrawn from the current model with each row's σ") + ", labels kept"
                 + ("; the reference table held as measured" if ref is not None else ""))
     lin_cur = linearise(problem, current)
     lins = [linearise(problem, fits[chain + parts(el)]) for el in elements]

@@ -406,16 +406,19 @@ def _calibrate(problem, part, chain, current, remaining, entries, alpha, draws, 
         rl = random_line_null(problem, part.fits, chain, elements, draws, seed=100 + round_no)
         if rl is not None:
             nulls.append(rl)
-    # where the null decides instead of a bar (profiles), it must carry the rig's nuisances (gain drift over the
-    # session, angle jitter; docs/physics.md §6.4; the baseline and every refit fit them per run): a third null
+    # where the null decides instead of a bar, it must carry what the parametric draws idealise: for profiles the
+    # rig's nuisances (gain drift over the session, angle jitter; the baseline and every refit fit them per run),
+    # for mode tables the rows' own noise distribution (resampled residuals: heavy tails, a σ stated too small);
+    # docs/physics.md §6.4: a third null
     rig = None
-    if problem.domain == "profiles" and any(null_decides(c) for c in entries):
+    if any(null_decides(c) for c in entries):
         rig = parametric_null(problem, current, part.fits, chain, elements, draws, seed=200 + round_no, nuisances=True)
     timing = {"wall_s": round(time.perf_counter() - t0, 3), "cpu_s": round(time.process_time() - c0, 3)}
 
     def name(n):
         return ("random_line" if n.kind.startswith("random-line") else
-                "parametric_rig_nuisances" if n is rig else "parametric")
+                ("parametric_rig_nuisances" if problem.domain == "profiles" else "parametric_resampled") if n is rig
+                else "parametric")
 
     for c in entries:
         pending = null_decides(c)

@@ -619,6 +619,23 @@ def add_patch_noise(folder: str | os.PathLike, sigma: float, amplitude: float, w
         write_profile(Profile(prof.angle_deg, ch[0], ch[1], condition=prof.condition), path, overwrite=True)
 
 
+def add_heavy_tailed_errors(folder: str | os.PathLike, scale: float, rng, dof: float = 2.0) -> None:
+    """Scatter every frequency of every ``*.modes.csv`` of a case ``folder`` by ``1 + scale·t`` (t Student's with
+    ``dof`` degrees of freedom), in place: most rows move by about the tables' noise, a few far out (a row taken
+    from the wrong peak, a mode fitted through its neighbour) — a noise the diagnosis's normal row model does not
+    have (docs/physics.md §6.4 *noise the model does not have*). The rows' stated ``freq_std_hz`` are kept."""
+    for path in sorted(Path(folder).glob("*.modes.csv")):
+        lines = path.read_text().splitlines()
+        j = lines[0].split(",").index("freq_hz")
+        rows = [lines[0]]
+        for line in lines[1:]:
+            cells = line.split(",")
+            if cells[j]:
+                cells[j] = f"{float(cells[j]) * (1.0 + scale * rng.standard_t(dof)):.5f}"
+            rows.append(",".join(cells))
+        path.write_text("\n".join(rows) + "\n")
+
+
 def make_profile_case(folder: str | os.PathLike, effect: str | None = None, seed: int = 0) -> CaseLabel:
     """Write a blind rolling-profile case (docs/formats.md §6) into ``folder`` (created; must be empty or absent).
 
