@@ -21,6 +21,7 @@ Example (the profile problem of ``ringfit example case --effect sensor_tilt --ou
 
 from __future__ import annotations
 
+import dataclasses
 from functools import partial
 
 import equinox as eqx
@@ -65,6 +66,9 @@ CHANNELS = ("radial", "tangential")
 #: Ω²e(w‴ + w′)/R at the patch edges are a third derivative). The floor bounds these: below it a
 #: residual is discretisation, not physics.
 MODEL_PRECISION = np.array([1.5e-3, 6e-3])
+#: The baseline's rows are corrected for the model grid's own discretisation by the same model on a grid this many
+#: times finer, evaluated once at the baseline fit (a defect correction, docs/physics.md §6 *baselines*).
+FINE_FACTOR = 4
 
 
 class ProfileData(eqx.Module):
@@ -256,14 +260,20 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
     )
     phi = np.radians(phi_deg)
     user = (noise or {}).get("profile_ms2")
+    correction = np.zeros_like(y)
     for it in range(2):  # σ weights the fit, the fit's residual gives σ: two passes
         theta = fit_chain(problem, ()).theta
         problem.base_values = theta[:nb].copy()
         if it == 0 and not has_encoder:  # Ω = V/R_e with the fitted baseline's deflection
             fitted = ring.replace(**{n: float(v) for n, v in zip(base, theta) if not _is_nuisance(n)})
             rdata, problem.data = prepare(fitted)
-            problem.y = y = rdata.measured.reshape(-1)
+            y = rdata.measured.reshape(-1)
             problem.meta.omega, problem.meta.omega_source = rdata.omega, list(rdata.omega_source)
+        if it == 0:  # the grid's own discretisation error at the first fit, taken off the rows (a defect correction)
+            correction = grid_defect(theta[:nb], problem.data, base, solver)
+            problem.y = y = y + correction
+            theta = fit_chain(problem, ()).theta
+            problem.base_values = theta[:nb].copy()
         resid = (y - predict(problem, problem.null_theta())).reshape(P, 2, M)
         if user is not None:
             sigma, slope = np.full((P, 2), float(user)), 0.0
@@ -297,6 +307,27 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
                                       + "; refitted to the profiles with that fit's uncertainty as prior")
     problem.meta.sources["omega"] = sorted(set(rdata.omega_source))
     return problem
+
+
+def grid_defect(theta, data: ProfileData, base: tuple, solver: ContactSolver, factor: int = FINE_FACTOR) -> np.ndarray:
+    """``(P·2·M,)`` the baseline model's rows on the problem's grid minus the same model's on a grid ``factor``
+    times finer, read at the same angles (both band-limited to the data's band, so the finer grid's every
+    ``factor``-th sample is exact): the discretisation error of the M-point model at ``theta`` (baseline
+    parameters named by ``base``): it leaves the model to be judged against the
+    data, not against its own grid (docs/physics.md §6 *baselines*, gong-rolling). Added to the measured rows
+    (y ≈ fine + noise), it gives rows the M-point model would read: y + (coarse − fine)."""
+    M = solver.n_grid
+    fine = dataclasses.replace(solver, n_grid=factor * M)
+    band = np.asarray(data.band)
+    fine_band = np.zeros((band.shape[0], factor * M // 2 + 1))
+    fine_band[:, : band.shape[1]] = band
+    fine_band[:, M // 2:] = 0.0  # the coarse grid's Nyquist and above: not in the data's band
+    theta = jnp.asarray(theta, dtype=jnp.float64)
+    coarse = np.asarray(profile_predict(theta, data, effects=(), sizes=(), solver=solver, base=base))
+    f = profile_predict(theta, eqx.tree_at(lambda d: d.band, data, jnp.asarray(fine_band)), effects=(), sizes=(),
+                        solver=fine, base=base)
+    P = band.shape[0]
+    return coarse - np.asarray(f).reshape(P, 2, factor * M)[..., ::factor].reshape(-1)
 
 
 def _profile_rule(rows, center, *, phi, kmax, floor, shape) -> np.ndarray:
