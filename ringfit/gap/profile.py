@@ -297,6 +297,11 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
             problem.noise_method += f"; spectral slope {slope:.2f}"
         problem.sigma = np.repeat(sigma.reshape(-1), M)
         problem.meta.series_dof = {2 * i + c: float(dof[i, c]) for i in range(P) for c in range(2)}
+    c2 = correction.reshape(P, 2, M)
+    rel = np.sqrt(np.mean(c2**2, axis=-1)) / np.maximum(np.sqrt(np.mean(rdata.measured**2, axis=-1)), 1e-300)
+    problem.noise_method += (f"; rows corrected for the M = {M} grid's own error against M = {FINE_FACTOR * M} at the "
+                             f"baseline fit (largest {np.max(rel[:, 0]):.2g} of the radial RMS, "
+                             f"{np.max(rel[:, 1]):.2g} of the tangential)")
     if user is None:  # the far-side estimate repeated on every parametric-null draw, as it was made on the data
         problem.meta.noise_rule = partial(_profile_rule, phi=phi, kmax=np.asarray(kmax), floor=floor,
                                                     shape=(P, 2, M))
