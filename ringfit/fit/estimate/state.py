@@ -639,8 +639,8 @@ def estimate_state(profile, geometry: TyreGeometry, ring: RingParams, laws: Tyre
     # the wide band continued from the narrow band's fit (its first passes started from the priors' means stopped on
     # the ridge far from the optimum at a high signal-to-noise ratio, §13.6), and the narrow one where the wide band's
     # form error shows (§13.4 *the harmonic band*)
-    # the narrow band's fit is only the wide one's start unless it is the answer: its ridge in tread depth (a third
-    # of the command's time) is profiled only then, by the same narrow fit made again with it
+    # the narrow band's fit is only the wide one's start unless it is the answer: its ridge in tread depth (a
+    # batch of fits along the depth) is profiled only then, by the same narrow fit made again with it
     narrow = dataclasses.replace(settings, k_max=STATE_K_FALLBACK)
     low = _estimate_state(profile, geometry, ring, laws, settings=narrow, load=load, ridge=False, **common)
     start = np.asarray(low.fit.theta) if np.all(np.isfinite(low.fit.theta)) else None
