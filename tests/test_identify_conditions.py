@@ -3,7 +3,8 @@
 - a profile whose rotation_hz (12) contradicts its speed_kmh (30): warned, read at the rotation its own contact
   patch shows, and the ring identified as without the error (it was ρA +99 %, k_w +214 % before);
 - the same profile and table given twice (a copy, a symlink): counted once, the same intervals as given once;
-- a table measured at 5000 N labelled 3000 N: warned with both loads;
+- a table measured at 5000 N labelled 3000 N: warned with both loads; a profile labelled at 1.25 × its load:
+  warned with what its reading says;
 - estimate on a cleat recording: the hits' ringing left out, the load as without cleat.
 
 Each runs the real command on a generated case: slow.
@@ -86,6 +87,22 @@ def test_a_table_labelled_at_another_load_is_told_by_its_frequencies(case, tmp_p
     assert len(said) == 1 and "states load_n = 3000 N" in said[0]
     best = float(said[0].split("best at about ")[1].split(" N")[0])
     assert 4000.0 < best < 6000.0  # measured at 5000 N
+
+
+def test_a_profile_labelled_at_another_load_is_told_by_its_reading(case, tmp_path, capsys):
+    """A profile's sidecar states 1.25 × its load: identify fits every profile at its stated load, so only the
+    profile's own reading with the identified tyre can tell (fit.identify.profile_load_check, the z test of
+    ``ringfit estimate``'s stated conditions). The other profiles are not named; a clean folder gives no warning
+    (``test_the_same_profile_or_table_twice_counts_once``)."""
+    folder = _copy(case, tmp_path)
+    path = folder / "run1.profile.json"
+    true_load = json.loads(path.read_text())["load_n"]
+    _edit(path, load_n=1.25 * true_load)
+    _, err = _identify(folder, capsys)
+    said = [ln for ln in err.splitlines() if ln.startswith("WARNING:") and "stated load_n" in ln]
+    assert len(said) == 1 and "run1.profile.csv" in said[0], said
+    read = float(said[0].split("which read ")[1].split(" ")[0])
+    assert abs(read / true_load - 1.0) < 0.03, (read, true_load)
 
 
 def test_estimate_leaves_the_cleat_hits_out(tmp_path, capsys):
