@@ -91,7 +91,7 @@ def test_a_table_labelled_at_another_load_is_told_by_its_frequencies(case, tmp_p
 
 def test_a_profile_labelled_at_another_load_is_told_by_its_reading(case, tmp_path, capsys):
     """A profile's sidecar states 1.25 × its load: identify fits every profile at its stated load, so only the
-    profile's own reading with the identified tyre can tell (fit.identify.profile_load_check, the z test of
+    profile's own reading with the identified tyre can tell (fit.estimate.load.stated_load_check, the z test of
     ``ringfit estimate``'s stated conditions). The other profiles are not named; a clean folder gives no warning
     (``test_the_same_profile_or_table_twice_counts_once``)."""
     folder = _copy(case, tmp_path)

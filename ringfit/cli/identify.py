@@ -70,6 +70,17 @@ def run_identify(args) -> int:
     for note in inputs.skipped:
         print(f"WARNING: {note}")
     ident = identify(inputs, progress=not args.quiet, sensor=args.sensor == "fitted")
+    if ident.converged and inputs.profiles:  # each free-rolling profile's stated load against its own reading
+        import warnings
+
+        from ringfit.fit.estimate.load import stated_load_check
+
+        said = stated_load_check(inputs.profiles, inputs.tyre.geometry, ident.ring, laws=ident.laws,
+                                 covariance=ident.covariance)
+        for note in said:
+            warnings.warn(note, stacklevel=2)
+        ident.notes = list(ident.notes) + said
+        ident.warned = list(ident.warned) + said
     doc = identification_report(ident)
     _print(ident, doc)
     for note in ident.notes[len(inputs.skipped):]:

@@ -1128,53 +1128,9 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor, consid
                     free_laws=free_laws, friction=friction)
     if plan.active:
         ident.laws = plan.laws.replace(**{n: float(fit.values[n]) for n in LAW_FIELDS})
-    if (consider or friction is not None) and inputs.profiles and ident.converged:
-        said = profile_load_check(inputs.profiles, geometry, ident.ring, laws=ident.laws if plan.active else None,
-                                  covariance=ident.covariance)
-        for note in said:
-            warnings.warn(note, stacklevel=2)
-        ident.notes = list(ident.notes) + said
-        warned = warned + said
     ident.warned = warned
     ident.at_grid = np.asarray(pre.theta, dtype=np.float64)
     return ident
-
-
-def profile_load_check(profiles, geometry: TyreGeometry, ring: RingParams, *, laws: TyreLaws | None = None,
-                       covariance: RingCovariance | None = None) -> list[str]:
-    """What each free-rolling profile's own reading says of its stated ``load_n`` (one sentence per contradiction).
-
-    The identification fits every profile at its stated load. A profile whose sidecar states the wrong load is
-    then absorbed by the profile block's σ scale and the other parameters, without a word. So each profile
-    without a stated torque is read by the load estimate with the identified tyre (:func:`~ringfit.fit.estimate.
-    load.estimate_load`, the identified ``covariance`` carried into its interval; across states ``laws`` reads
-    the profile at its stated pressure), and its stated load is compared with that reading as ``ringfit estimate``
-    compares a stated condition (:func:`ringfit.io.conditions.stated_against_estimate`: beyond 3.29 σ of the
-    interval's half on its side). A profile the estimate could not read converged is not judged (said so)."""
-    from ringfit.fit.estimate.load import estimate_load
-    from ringfit.io.conditions import stated_against_estimate
-
-    notes = []
-    for prof in profiles:
-        cond = dict(prof.condition or {})
-        if cond.get("load_n") is None or float(cond.get("torque_nm") or 0.0) != 0.0:
-            continue
-        name = Path(str(prof.source)).name if prof.source else "a profile"
-        try:
-            est = estimate_load(prof, geometry, ring, laws=laws, ring_covariance=covariance)
-        except InputError as exc:
-            notes.append(f"{name}: its stated load_n was not checked: the load estimate refused it ({exc})")
-            continue
-        if not est.converged:
-            notes.append(f"{name}: its stated load_n was not checked: the load estimate did not converge "
-                         f"({est.status})")
-            continue
-        for row in stated_against_estimate({"load_n": {"value": est.load_n, "lo": est.lo, "hi": est.hi}}, cond,
-                                           source=prof.source):
-            if not row["consistent"]:
-                notes.append(row["sentence"].rsplit(": check", 1)[0] + " with the identified tyre: check its "
-                             "sidecar (identify fits each profile at its stated load)")
-    return notes
 
 
 #: σ of ln μ, the tread tips' friction, when the tyre file states no ``friction_sd`` (docs/physics.md §11

@@ -11,6 +11,8 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import equinox as eqx
 import numpy as np
@@ -25,7 +27,10 @@ from ringfit.fit.estimate.problem import (ANGLE_OFFSET, CORNER, GAIN, K_TREAD, L
                                           EstimateSettings, estimate_problem, nuisance_priors, optimum_ring_shift)
 from ringfit.fit.profile_block import fit_profile_block
 from ringfit.fit.result import FitResult, gauss_newton_step
-from ringfit.params import BAR, RingParams, TyreGeometry
+from ringfit.params import BAR, RingParams, TyreGeometry, TyreLaws
+
+if TYPE_CHECKING:
+    from ringfit.io.tyre import RingCovariance
 from ringfit.physics.operating import KMH
 from ringfit.physics.profile import effective_rolling_radius, flat_or_drum
 
@@ -448,3 +453,39 @@ def _spread_noise(profile) -> np.ndarray | None:
     if not np.all(np.isfinite(spread)):
         return None
     return spread / math.sqrt(float(revs))
+
+
+def stated_load_check(profiles, geometry: TyreGeometry, ring: RingParams, *, laws: TyreLaws | None = None,
+                       covariance: RingCovariance | None = None) -> list[str]:
+    """What each free-rolling profile's own reading says of its stated ``load_n`` (one sentence per contradiction).
+
+    ``ringfit identify`` fits every profile at its stated load (:func:`ringfit.fit.identify.identify`). A profile
+    whose sidecar states the wrong load is then absorbed by the profile block's σ scale and the other parameters,
+    without a word. So the command reads each profile without a stated torque by :func:`estimate_load` with the
+    identified tyre (the identified ``covariance`` carried into its interval; across states ``laws`` reads the
+    profile at its stated pressure), and its stated load is compared with that reading as ``ringfit estimate``
+    compares a stated condition (:func:`ringfit.io.conditions.stated_against_estimate`: beyond 3.29 σ of the
+    interval's half on its side). A profile the estimate could not read converged is not judged (said so)."""
+    from ringfit.io.conditions import stated_against_estimate
+
+    notes = []
+    for prof in profiles:
+        cond = dict(prof.condition or {})
+        if cond.get("load_n") is None or float(cond.get("torque_nm") or 0.0) != 0.0:
+            continue
+        name = Path(str(prof.source)).name if prof.source else "a profile"
+        try:
+            est = estimate_load(prof, geometry, ring, laws=laws, ring_covariance=covariance)
+        except InputError as exc:
+            notes.append(f"{name}: its stated load_n was not checked: the load estimate refused it ({exc})")
+            continue
+        if not est.converged:
+            notes.append(f"{name}: its stated load_n was not checked: the load estimate did not converge "
+                         f"({est.status})")
+            continue
+        for row in stated_against_estimate({"load_n": {"value": est.load_n, "lo": est.lo, "hi": est.hi}}, cond,
+                                           source=prof.source):
+            if not row["consistent"]:
+                notes.append(row["sentence"].rsplit(": check", 1)[0] + " with the identified tyre: check its "
+                             "sidecar (identify fits each profile at its stated load)")
+    return notes
