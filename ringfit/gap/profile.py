@@ -260,7 +260,6 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
     )
     phi = np.radians(phi_deg)
     user = (noise or {}).get("profile_ms2")
-    correction = np.zeros_like(y)
     for it in range(2):  # σ weights the fit, the fit's residual gives σ: two passes
         theta = fit_chain(problem, ()).theta
         problem.base_values = theta[:nb].copy()
@@ -270,7 +269,8 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
             y = rdata.measured.reshape(-1)
             problem.meta.omega, problem.meta.omega_source = rdata.omega, list(rdata.omega_source)
         if it == 0:  # the grid's own discretisation error at the first fit, taken off the rows (a defect correction)
-            correction = grid_defect(theta[:nb], problem.data, base, solver)
+            correction = grid_defect(theta[:nb], problem.data, base, solver,
+                                     coarse=predict(problem, problem.null_theta()))
             problem.y = y = y + correction
             theta = fit_chain(problem, ()).theta
             problem.base_values = theta[:nb].copy()
@@ -314,21 +314,24 @@ def build_profile_problem(case, ring: RingParams, effects: tuple[Effect, ...], n
     return problem
 
 
-def grid_defect(theta, data: ProfileData, base: tuple, solver: ContactSolver, factor: int = FINE_FACTOR) -> np.ndarray:
+def grid_defect(theta, data: ProfileData, base: tuple, solver: ContactSolver, factor: int = FINE_FACTOR,
+                coarse=None) -> np.ndarray:
     """``(P·2·M,)`` the baseline model's rows on the problem's grid minus the same model's on a grid ``factor``
     times finer, read at the same angles (both band-limited to the data's band, so the finer grid's every
     ``factor``-th sample is exact): the discretisation error of the M-point model at ``theta`` (baseline
     parameters named by ``base``): it leaves the model to be judged against the
     data, not against its own grid (docs/physics.md §6 *baselines*, gong-rolling). Added to the measured rows
-    (y ≈ fine + noise), it gives rows the M-point model would read: y + (coarse − fine)."""
+    (y ≈ fine + noise), it gives rows the M-point model would read: y + (coarse − fine). ``coarse``: the M-point
+    rows at ``theta`` where the caller has them (the problem's own compiled prediction; else computed here)."""
     M = solver.n_grid
     fine = dataclasses.replace(solver, n_grid=factor * M)
     band = np.asarray(data.band)
     fine_band = np.zeros((band.shape[0], factor * M // 2 + 1))
-    fine_band[:, : band.shape[1]] = band
-    fine_band[:, M // 2:] = 0.0  # the coarse grid's Nyquist and above: not in the data's band
+    fine_band[:, : band.shape[1]] = band  # the data's band (the coarse grid's Nyquist is already out of it)
     theta = jnp.asarray(theta, dtype=jnp.float64)
-    coarse = np.asarray(profile_predict(theta, data, effects=(), sizes=(), solver=solver, base=base))
+    if coarse is None:
+        coarse = profile_predict(theta, data, effects=(), sizes=(), solver=solver, base=base)
+    coarse = np.asarray(coarse, dtype=np.float64)
     f = profile_predict(theta, eqx.tree_at(lambda d: d.band, data, jnp.asarray(fine_band)), effects=(), sizes=(),
                         solver=fine, base=base)
     P = band.shape[0]
