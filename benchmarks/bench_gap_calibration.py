@@ -41,6 +41,11 @@ A kind the diagnosis's noise model does not have:
 - ``modal-heavy-tail``: ``make_case(effect="none")`` with every table's frequencies also scattered by Student-t
   errors of 2 degrees of freedom (scale 0.05–0.2 %: most rows at the stated noise, a few far out — a row taken
   from the wrong peak, a mode fitted through a neighbour);
+- ``modal-replicate``: ``make_case(effect="none")`` beside a second identification of the free tyre
+  (``replicate.modes.csv``, the free table's state and n): eq. 18 of the true ring with its own errors, 1–4 × the
+  free table's noise and heavy-tailed (Student-t, ν = 3), as SSI and FRF of one tyre disagree. The diagnosis
+  reads the two tables' difference as the identification spread; a table of the reference state may also carry
+  an effect (``sensor_mass``), so this is where that freedom is tried;
 - ``profile-spikes``: noise-only profiles with 1–3 single-sample spikes of 10–30 × the noise σ per channel
   (an electrical glitch, a stone's hit kept in the average).
 
@@ -69,7 +74,7 @@ import _common as bc  # noqa: E402
 
 KINDS = ("rolling-random", "loaded-random", "modal-noise", "profile-noise", "rolling-labelled",
          "rolling-half-labelled", "rolling-tags-only", "rolling-mixed-frames", "rolling-permuted", "profile-nuisance",
-         "profile-patch-noise", "modal-heavy-tail", "profile-spikes")
+         "profile-patch-noise", "modal-heavy-tail", "profile-spikes", "modal-replicate")
 #: the source study's label order on a rolling table (n, tag)
 LABELS = [(1, "vert"), (1, "hort"), (2, "extr"), (2, "0"), (3, "extr"), (3, "0"), (4, "extr"), (4, "0"),
           (5, "extr"), (5, "0"), (6, "extr"), (6, "0"), (7, "extr")]
@@ -205,6 +210,29 @@ def modal_heavy_tail(out: Path, seed: int) -> None:
     add_heavy_tailed_errors(out, rng.uniform(0.0005, 0.002), rng)
 
 
+def modal_replicate(out: Path, seed: int) -> None:
+    """``make_case(effect="none")`` and a second identification of its free table (module docstring)."""
+    import jax.numpy as jnp
+
+    from ringfit.io.modes import read_mode_table
+    from ringfit.io.tyre import read_tyre
+    from ringfit.params import RingParams
+    from ringfit.physics.natural import natural_frequencies
+    from ringfit.synth.cases import make_case
+
+    label = make_case(out, effect="none", seed=seed)
+    free = read_mode_table(out / "free.modes.csv")
+    geometry = read_tyre(out / "tyre.toml").geometry
+    n = free.n[(free.kind == "structural") & (free.n >= 1)].astype(float)
+    truth = np.asarray(natural_frequencies(RingParams(**label.ring), geometry, jnp.asarray(n)))
+    rng = np.random.default_rng(6 * 10**6 + seed)
+    scale = float(label.noise["relative"]) * rng.uniform(1.0, 4.0)
+    f = truth * (1.0 + scale * rng.standard_t(3.0, n.size) / np.sqrt(3.0))
+    rows = ["n,a,tag,kind,freq_hz,freq_std_hz,damping_pct"] + [f"{int(k)},0,,structural,{x:.5f},," for k, x in zip(n, f)]
+    (out / "replicate.modes.csv").write_text("\n".join(rows) + "\n")
+    (out / "replicate.modes.json").write_text((out / "free.modes.json").read_text())
+
+
 def profile_spikes(out: Path, seed: int) -> None:
     """Noise-only profiles with 1–3 single-sample spikes of 10–30 σ per channel (module docstring)."""
     from ringfit.io.profiles import Profile, read_profile, write_profile
@@ -326,6 +354,8 @@ def main(argv=None) -> int:
                     profile_patch_noise(folder, seed)
                 elif kind == "modal-heavy-tail":
                     modal_heavy_tail(folder, seed)
+                elif kind == "modal-replicate":
+                    modal_replicate(folder, seed)
                 elif kind == "profile-spikes":
                     profile_spikes(folder, seed)
                 else:

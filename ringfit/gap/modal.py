@@ -166,24 +166,31 @@ def _reference_fit(free: ModeTable, geometry, ring, user_sigma_hz=None, fixed: b
 
 
 def _identification_spread(tables, ref_index=0) -> tuple[float, str] | None:
-    """Relative σ of one identification from two tables of the reference state: RMS(Δf/f)/√2 over matched n."""
+    """Relative σ of one identification from two tables of the reference state (docs/physics.md §6 *baselines*):
+    the second differences along n of their relative difference Δf/f over matched n
+    (:func:`second_difference_sigma`, the free table's own rule), divided by √2.
+
+    Two identifications of the same modes differ mode by mode; a smooth difference along n is what a test
+    table of the reference state that carries an effect shows (a sensor's mass, a uniform shift), and the
+    second differences do not count it as noise (a MAD or RMS of Δf/f would, and the effect would widen the σ it
+    is judged against)."""
     ref = tables[ref_index]
     for t in tables[1:]:
         if not _is_reference_state(t):
             continue
-        d = []
-        for n in set(ref.n[(ref.kind == "structural") & (ref.n >= 0)].tolist()):
+        d, ns = [], []
+        for n in sorted(set(ref.n[(ref.kind == "structural") & (ref.n >= 0)].tolist())):
             a = ref.freq_hz[(ref.n == n) & (ref.kind == "structural")]
             b = t.freq_hz[(t.n == n) & (t.kind == "structural")]
             if a.size == 1 and b.size == 1:
                 d.append((b[0] - a[0]) / a[0])
+                ns.append(n)
         if len(d) >= 3:
-            d = np.asarray(d)
-            spread = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0)
-            rms = float(np.sqrt(np.mean(d**2))) / math.sqrt(2.0)
-            s = max(spread, min(rms, 2.0 * spread))
+            s2, count = second_difference_sigma(np.asarray(d), np.zeros(len(d)), np.asarray(ns))
+            s = s2 / math.sqrt(2.0)
             name = str(t.source).rsplit("/", 1)[-1]
-            return s, f"identification spread {s:.3g} (relative) between free.modes.csv and {name}"
+            return s, (f"identification spread {s:.3g} (relative) between free.modes.csv and {name} "
+                       f"(second differences of their Δf/f along n, {count} values)")
     return None
 
 
