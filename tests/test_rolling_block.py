@@ -17,7 +17,9 @@ from ringfit.fit.free_block import SCALE_PASSES, hat_diagonal
 from ringfit.fit.identify import JointArrays, JointResiduals, joint_coords
 from ringfit.fit.least_squares import ring_vector
 from ringfit.fit.priors import BOUNDS
-from ringfit.fit.profile_block import noise_from_residual, nuisance_names, nuisance_prior, nuisance_start, profile_rows
+from ringfit.fit.profile_block import (SENSOR_FIELDS, noise_from_residual, nuisance_names, nuisance_prior,
+                                       nuisance_start, profile_rows, sensor_coords, sensor_names, sensor_prior,
+                                       sensor_start)
 from ringfit.fit.rolling import (RollingResiduals, block_rows, fit_rolling, rolling_coords, rolling_data,
                                  sample_rolling_posterior)
 from ringfit.io.profiles import Profile
@@ -77,19 +79,21 @@ def joint_arrays(rows, sigma):
         p_measured=rows["measured"], p_sigma=sigma))
 
 
-def identify_profiles_only(profiles, ring):
+def identify_profiles_only(profiles, ring, sensor=False):
     """identify's profiles block alone, the ring but k_tread held: identify's pass loop (ringfit/fit/identify.py
-    ``_identify``) written out — fit, then σ from the fit's residual, until a converged pass after the first."""
+    ``_identify``) written out — fit, then σ from the fit's residual, until a converged pass after the first;
+    with ``sensor`` each run's sensor nuisances as identify adds them (its default)."""
     rows = profile_rows(profiles, GEOMETRY, ring, SOLVER)
     P = rows["P"]
-    model = JointResiduals(P, SOLVER, ProfileModel(), k_top=rows["k_top"])
-    free = ("k_tread",) + nuisance_names(P)
-    theta = np.concatenate([ring_vector(ring), nuisance_start(P)])
+    model = JointResiduals(P, SOLVER, ProfileModel(), k_top=rows["k_top"], sensor=sensor)
+    free = ("k_tread",) + nuisance_names(P) + (sensor_names(P) if sensor else ())
+    theta = np.concatenate([ring_vector(ring), nuisance_start(P)] + ([sensor_start(P)] if sensor else []))
+    coords = joint_coords(P) + (sensor_coords(P) if sensor else ())
+    prior = nuisance_prior(P).combine(sensor_prior(P)) if sensor else nuisance_prior(P)
     sigma = rows["sigma"]
     for passes in range(1, SCALE_PASSES + 1):
-        problem = Problem(model, joint_arrays(rows, sigma), joint_coords(P), prior=nuisance_prior(P),
-                          plausible=BOUNDS)
-        fit = least_squares(problem, theta, free, max_steps=64, rtol=1e-8, atol=1e-8)
+        problem = Problem(model, joint_arrays(rows, sigma), coords, prior=prior, plausible=BOUNDS)
+        fit = least_squares(problem, theta, free, max_steps=256 if sensor else 64, rtol=1e-8, atol=1e-8)
         if fit.converged:
             theta = fit.theta.copy()
         m = rows["measured"].size
@@ -105,8 +109,10 @@ def case():
     return make_case(3)
 
 
-def test_rows_and_weighted_residuals_are_identifys(case):
-    """Same profiles, same θ, same σ: fit-rolling's rows are identify's profile rows, number for number."""
+@pytest.mark.parametrize("sensor", [False, True])
+def test_rows_and_weighted_residuals_are_identifys(case, sensor):
+    """Same profiles, same θ, same σ: fit-rolling's rows are identify's profile rows, number for number — with each
+    run's sensor nuisances too (tilt, IEPE corner, liner offset, tangential gain away from their priors' centres)."""
     profiles, gains, offsets = case
     rows = profile_rows(profiles, GEOMETRY, RING, SOLVER)
     mine = block_rows(rolling_data(profiles, GEOMETRY, RING, solver=SOLVER))
@@ -116,21 +122,26 @@ def test_rows_and_weighted_residuals_are_identifys(case):
     P = rows["P"]
     theta = np.concatenate([ring_vector(TRUTH), np.ravel(np.column_stack([offsets, gains]))])
     rng = np.random.default_rng(0)
+    if sensor:  # per run: tilt gain, corner [Hz], liner offset [m], tangential gain
+        theta = np.concatenate([theta, np.ravel([[0.3 + 0.1 * i, 0.4 + 0.2 * i, 1e-3 * (i - 1), 1.0 + 0.01 * i]
+                                                 for i in range(P)])])
+        assert len(SENSOR_FIELDS) == 4
     sigma = rows["sigma"] * np.exp(rng.normal(0.0, 0.3, rows["sigma"].shape))  # any σ, the same to both
-    joint = Problem(JointResiduals(P, SOLVER, ProfileModel(), k_top=rows["k_top"]), joint_arrays(rows, sigma),
-                    joint_coords(P))
+    joint = Problem(JointResiduals(P, SOLVER, ProfileModel(), k_top=rows["k_top"], sensor=sensor),
+                    joint_arrays(rows, sigma), joint_coords(P) + (sensor_coords(P) if sensor else ()))
     from ringfit.fit.rolling import _arrays
 
     data = rolling_data(profiles, GEOMETRY, RING, solver=SOLVER)
-    roll = Problem(RollingResiduals(P, ProfileModel(), SOLVER, k_top=mine["k_top"]),
-                   _arrays(data, GEOMETRY, mine["measured"], sigma, SOLVER.n_grid), rolling_coords(P))
+    roll = Problem(RollingResiduals(P, ProfileModel(), SOLVER, k_top=mine["k_top"], sensor=sensor),
+                   _arrays(data, GEOMETRY, mine["measured"], sigma, SOLVER.n_grid), rolling_coords(P, sensor))
     r_joint, _ = residuals(joint, theta)
     r_roll, _ = residuals(roll, theta)
     assert r_roll.shape == r_joint.shape == (rows["measured"].size,)
     np.testing.assert_allclose(r_roll, r_joint, rtol=1e-9, atol=1e-9 * float(np.max(np.abs(r_joint))))
-    # at the truth the weighted rows are the noise: far below the model's own size (a sanity check of θ's order)
+    # at the truth the weighted rows are the noise: far below the model's own size (a sanity check of θ's order;
+    # the sensor case's θ reads through a sensor the data do not have)
     model_only = np.asarray(rows["measured"]) / sigma
-    assert np.sqrt(np.mean(r_roll**2)) < 0.1 * np.sqrt(np.mean(model_only**2))
+    assert (np.sqrt(np.mean(r_roll**2)) < 0.1 * np.sqrt(np.mean(model_only**2))) != sensor
 
 
 @pytest.mark.slow
@@ -139,7 +150,7 @@ def test_same_tread_stiffness_gains_and_offsets_as_identify(case):
     the same k_tread, gains and offsets to the solver's tolerance."""
     profiles, _, _ = case
     start = RING.replace(damping_ratio=0.03)
-    roll = fit_rolling(profiles, GEOMETRY, start)
+    roll = fit_rolling(profiles, GEOMETRY, start, sensor_nuisances=False)
     joint = identify_profiles_only(profiles, start)
     assert roll.converged and joint.converged
     assert roll.extra["passes"] == 2
@@ -148,6 +159,26 @@ def test_same_tread_stiffness_gains_and_offsets_as_identify(case):
         assert roll.values[name] == pytest.approx(joint.values[name], rel=1e-6, abs=1e-8)
         assert roll.stderr[name] == pytest.approx(joint.stderr[name], rel=1e-4)
     assert roll.stderr["k_tread"] == pytest.approx(joint.stderr["k_tread"], rel=1e-4)
+
+
+@pytest.mark.slow
+def test_with_the_sensors_nuisances_the_same_answer_as_identify(case):
+    """fit-rolling with each run's sensor nuisances (``sensor_nuisances``) and identify's profiles block with its
+    default ``sensor``: the same k_tread, gains, offsets and sensor nuisances, and the same intervals."""
+    profiles, _, _ = case
+    start = RING.replace(damping_ratio=0.03)
+    roll = fit_rolling(profiles, GEOMETRY, start, sensor_nuisances=True)
+    joint = identify_profiles_only(profiles, start, sensor=True)
+    assert roll.converged and joint.converged
+    P = len(profiles)
+    assert set(roll.names) == {"k_tread", *nuisance_names(P), *sensor_names(P)}
+    assert roll.values["k_tread"] == pytest.approx(joint.values["k_tread"], rel=1e-6)
+    assert roll.stderr["k_tread"] == pytest.approx(joint.stderr["k_tread"], rel=1e-4)
+    for name in nuisance_names(P) + sensor_names(P):
+        assert roll.values[name] == pytest.approx(joint.values[name], rel=1e-5, abs=1e-7), name
+        assert roll.stderr[name] == pytest.approx(joint.stderr[name], rel=1e-3), name
+    np.testing.assert_allclose(roll.extra["sensor"]["corner_hz"], [joint.values[f"corner_hz_{i + 1}"] for i in range(P)],
+                               rtol=1e-5)
 
 
 def _inside(fit, gains, offsets, z):
@@ -163,7 +194,7 @@ def test_recovers_tread_stiffness_gains_and_offsets_under_coloured_noise(case):
     profiles, gains, offsets = case
     fit = fit_rolling(profiles, GEOMETRY, RING.replace(damping_ratio=0.03))
     assert fit.converged, fit.message
-    assert set(fit.names) == {"k_tread", *nuisance_names(4)}
+    assert set(fit.names) == {"k_tread", *nuisance_names(4), *sensor_names(4)}
     # one case: every one of the 9 within 3 standard errors (P(a miss) ≈ 2.4 % for honest intervals)
     assert _inside(fit, gains, offsets, 3.0).all()
     assert abs(fit.values["k_tread"] / TRUTH.k_tread - 1) < 0.01
@@ -219,3 +250,31 @@ def test_noise_pooled_over_many_series_counts_their_degrees_of_freedom():
     inner = np.r_[10 : H - 10, H + 10 : 2 * H - 10]
     assert abs(np.mean(np.asarray(pooled)[:, inner]) - 1.0) < 0.04
     assert np.mean(np.asarray(single)[:, inner]) > 1.25
+
+
+@pytest.mark.slow
+def test_a_sensor_that_tilts_and_high_passes_is_read_through_its_nuisances():
+    """Profiles read by a sensor with a typical tilt (γ 0.6), IEPE corner (0.8 Hz) and liner offset (2 mm): the
+    plain reading (gain and offset only) puts k_tread far off and calls it converged; fit-rolling's default reading,
+    through each run's sensor nuisances, holds the truth within 3 standard errors and reads the sensor back."""
+    from ringfit.physics.sensor import SensorModel
+
+    sensor = SensorModel(tilt_gain=0.6, corner_hz=0.8, offset=2e-3)
+    rng = np.random.default_rng(5)
+    profiles = []
+    for v in SPEEDS:
+        p = synthetic_profile(TRUTH, GEOMETRY, v, drum_diameter_m=DRUM, sensor=sensor)
+        ch = np.stack([p.acc_radial_ms2, p.acc_tangential_ms2])
+        s = 0.01 * float(np.std(ch[0]))
+        ch = ch + np.stack([coloured_noise(rng, ch.shape[-1], s, "pink") for _ in range(2)])
+        profiles.append(Profile(p.angle_deg, ch[0], ch[1], condition=p.condition))
+    start = RING.replace(damping_ratio=0.03)
+    plain = fit_rolling(profiles, GEOMETRY, start, sensor_nuisances=False)
+    read = fit_rolling(profiles, GEOMETRY, start)
+    assert read.converged, read.message
+    assert abs(plain.values["k_tread"] - TRUTH.k_tread) > 10 * plain.stderr["k_tread"]
+    assert abs(read.values["k_tread"] - TRUTH.k_tread) < 3 * read.stderr["k_tread"]
+    sens = read.extra["sensor"]
+    np.testing.assert_allclose(sens["tilt_gain"], 0.6, atol=0.05)
+    np.testing.assert_allclose(sens["corner_hz"], 0.8, rtol=0.1)
+    np.testing.assert_allclose(sens["liner_offset_m"], 2e-3, atol=2e-4)

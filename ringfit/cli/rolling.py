@@ -74,6 +74,11 @@ def register(sub) -> None:
                    help="comma-separated ring parameters: k_tread, damping_ratio, ei, kw, kv, rho_a (default "
                         "k_tread); each run's angle offset and gain are always fitted")
     p.add_argument("--grid", type=_grid, default=512, help="model grid M, even (default 512)")
+    p.add_argument("--plain-reading", action="store_true",
+                   help="read each run through its gain and angle offset only (the source study's reading), not "
+                        "also through its sensor's nuisances (tilt gain, IEPE corner, liner offset, tangential gain "
+                        "under the profile block's priors, as identify reads profiles; the default); faster, and "
+                        "wrong on a sensor that tilts or high-passes")
     p.add_argument("--plot", type=Path, default=None, help="optional PNG: measured vs model per channel and speed")
     force_flag(p)
     p.set_defaults(run=run_fit_rolling)
@@ -191,7 +196,8 @@ def run_fit_rolling(args) -> int:
         for note in notes:
             warnings.warn(note, stacklevel=2)
         profiles.append(p)
-    result = fit_rolling(profiles, tyre.geometry, tyre.ring, free=free, solver=ContactSolver(n_grid=args.grid))
+    result = fit_rolling(profiles, tyre.geometry, tyre.ring, free=free, solver=ContactSolver(n_grid=args.grid),
+                         sensor_nuisances=not args.plain_reading)
     print(result.summary())
     for src, speed, (om, how) in zip(args.profiles, result.extra["speed_kmh"],
                                      zip(result.extra["omega"], result.extra["omega_source"])):
@@ -204,6 +210,13 @@ def run_fit_rolling(args) -> int:
                                   ex["angle_offset_sd_deg"]):
         print(f"  {src.name}: angle offset {a:+.3f}° ± {asd:.3f}°, gain {g:.4f} ± {gs:.4f} (not written to the "
               f"tyre file)")
+    if "sensor" in ex:  # each run's sensor nuisances (the default; not with --plain-reading)
+        for i, src in enumerate(args.profiles):
+            v, sd = ex["sensor"], ex["sensor_sd"]
+            print(f"  {src.name}: tilt gain {v['tilt_gain'][i]:.3f} ± {sd['tilt_gain'][i]:.3f}, IEPE corner "
+                  f"{v['corner_hz'][i]:.3g} Hz ± {sd['corner_hz'][i]:.2g}, liner offset "
+                  f"{1e3 * v['liner_offset_m'][i]:+.2f} ± {1e3 * sd['liner_offset_m'][i]:.2f} mm, tangential gain "
+                  f"{v['gain_tangential'][i]:.4f} ± {sd['gain_tangential'][i]:.4f}")
     if args.plot is not None:
         from ringfit.report.rolling_plots import profiles_figure
 
