@@ -36,8 +36,14 @@ def test_roll_then_fit_recovers_tread_stiffness(tmp_path, tyre, capsys):
     fitted = tmp_path / "fitted2.toml"
     assert main(["fit-rolling", *map(str, outs), "--tyre", str(tyre), "--out", str(fitted),
                  "--plot", str(tmp_path / "fit.png")]) == 0
-    assert read_tyre(fitted).ring.k_tread == pytest.approx(25e6, rel=1e-6)
-    assert "converged" in capsys.readouterr().out
+    # noise-free profiles of a sensor with no tilt, corner or liner offset, read through each run's sensor
+    # nuisances (the default): their priors (tilt 0.5 ± 0.5, …) hold them a hair off zero (γ ≈ 0.005), k_tread 4e-6 off
+    assert read_tyre(fitted).ring.k_tread == pytest.approx(25e6, rel=2e-5)
+    out = capsys.readouterr().out
+    assert "converged" in out
+    # the nuisances' own flags (a corner the clean data cannot bound) are not the fit's warnings; each run's line is
+    assert not [line for line in out.splitlines() if line.startswith("WARNING: corner_hz_")]
+    assert out.count("IEPE corner") == 4
     # outputs are never overwritten silently
     assert main(["fit-rolling", *map(str, outs), "--tyre", str(tyre), "--out", str(fitted)]) == 2
 
