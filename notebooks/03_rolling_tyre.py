@@ -60,8 +60,9 @@ print("max |profile/Ω² − profile(10 km/h)/Ω²| =", max(np.abs(s - scaled[0]
 # Synthetic measurements: truth k_trd = 25 MN/m², 2 m/s² white noise, four speeds.
 # The ring's stiffness and density are those of the natural-frequency fit (Table 9).
 # The profiles are read as `ringfit identify` reads them (the profile block, docs/physics.md §11):
-# revolution-harmonic rows, each run's gain and angle offset (one sensor's prior), and the noise
-# per profile, channel and harmonic estimated from the fit's own residual.
+# revolution-harmonic rows, each run's gain and angle offset (one sensor's prior), each run's sensor nuisances
+# (tilt, IEPE corner, liner offset, tangential gain, under their priors), and the noise per profile, channel and
+# harmonic estimated from the fit's own residual.
 
 # %%
 truth = ring.replace(k_tread=25e6)
@@ -79,7 +80,7 @@ profiles_figure(result.extra["angle_deg"], result.extra["model"], result.extra["
 # ## Posterior (emcee, vectorised over walkers)
 
 # %%
-post = sample_rolling_posterior(result, steps=150, seed=0)  # k_trd and the 8 nuisances: 18 walkers
+post = sample_rolling_posterior(result, steps=150, seed=0)  # k_trd and the 24 nuisances: 50 walkers
 row = next(r for r in post.summary_table(level=0.6827) if r["name"] == "k_tread")
 lo, med, hi = row["lo"], row["median"], row["hi"]
 print(f"k_trd posterior: {med:.5g} (68 %: {lo:.5g} … {hi:.5g}); least squares {result.values['k_tread']:.5g} "
