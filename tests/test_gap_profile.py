@@ -247,10 +247,26 @@ def test_wave_damping_viscous_form_in_the_reduced_operator():
     omega, c = 40.0, 800.0
     e = lib.get("wave_damping")
     base = reduced_operator(ring_operator(r, g, n, omega, ProfileModel().operator_model()), n)
-    visc = e.profile_model(jnp.asarray([0.0, c]), ProfileModel())
+    visc = e.profile_model(jnp.asarray([0.0, c, 0.0]), ProfileModel())
     d = np.asarray(reduced_operator(ring_operator(r, g, n, omega, visc.operator_model()), n) - base)
     nn = np.asarray(n)
     np.testing.assert_allclose(d, 1j * nn * omega * c * (1 + 1 / nn**2), rtol=1e-9)
+
+
+def test_wave_damping_order_form_grows_as_the_order_squared_at_any_speed():
+    """docs/physics.md §6 wave_damping form 3: i η2 (n/10)² s_n K_n^c — against form 1's i η1 (|n|Ω/ω_ref) s_n K_n^c
+    on the same K (their ratio is η2 (n/10)² ω_ref/(η1 |n| Ω) per harmonic), the same at every Ω, odd in n."""
+    from ringfit.gap.effects.wave_damping import GrowingLoss, OrderLoss
+
+    g, r = table9()
+    n = jnp.concatenate([-jnp.arange(1.0, 20.0), jnp.arange(1.0, 20.0)])
+    e2, e1, ref = 0.05, 0.1, 2 * np.pi * 100.0
+    for om in (15.0, 50.0):
+        t2, t1 = np.asarray(OrderLoss(e2)(r, g, n, om)), np.asarray(GrowingLoss(e1)(r, g, n, om))
+        nn = np.abs(np.asarray(n))[:, None, None]
+        np.testing.assert_allclose(t2, t1 * e2 * (nn / 10) ** 2 * ref / (e1 * nn * om), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(OrderLoss(e2)(r, g, n, 15.0)), np.asarray(OrderLoss(e2)(r, g, n, 50.0)))
+    assert lib.get("wave_damping").profile_parameters[2].name == "eta_order"
 
 
 def test_wave_damping_sign_and_speed_growth():
@@ -264,7 +280,7 @@ def test_wave_damping_sign_and_speed_growth():
     e = lib.get("wave_damping")
     out = {}
     for c in (0.0, 1000.0):
-        model = e.profile_model(jnp.asarray([0.0, c]), ProfileModel()).operator_model()
+        model = e.profile_model(jnp.asarray([0.0, c, 0.0]), ProfileModel()).operator_model()
         for om in (15.0, 50.0):
             sol = solve_rolling_jit(r, g, OperatingPoint(om, 4000.0, FlatRoad()), model=model, solver=SOLVER)
             p = np.asarray(sol.pressure)

@@ -13,18 +13,25 @@ parameter (null 0 = the baseline's constant hysteretic loss η0 = 2ζ):
    material viscosity per unit length — the data cannot separate c_v from c_w:
    for the inextensible ring they enter only as ``c_w + c_v/n²``).
 
-Either form makes the loss grow with the harmonic's frequency nΩ, so the
+3. **A loss growing with the wave's order** at any speed: ``η(n) = η0 + η2·(n/10)²``
+   (``eta_order`` = η2, the extra loss factor at order 10): ``i η2 (n/10)² s_n K_n^c``
+   added to D_n (:class:`OrderLoss`). A material's loss depends on how fast it is strained
+   (forms 1 and 2); a structure's can depend on how short the wave is (the belt's bending
+   strains grow as the curvature, n²), whatever the speed.
+
+Forms 1 and 2 make the loss grow with the harmonic's frequency nΩ, so the
 bulges at |φ| ≈ 15–60° lose their front/rear symmetry more at higher speed;
 the growing hysteretic form grows like n·K_n (strongest at high n, near the
-patch edges), the viscous one like n (the long waves). The refit frees both and
-the JSON reports both; at least one interval must exclude 0 for acceptance.
+patch edges), the viscous one like n (the long waves); form 3 grows like n²·K_n and
+not with speed. The refit frees all three and the JSON reports them; at least one
+interval must exclude 0 for acceptance.
 
 - **Modal data**: only the hysteretic form, whose modal signature is the one
   docs/physics.md §6 names — ``ζ = ζ0 + η1 ω/(2 ω_ref)`` on damping rows, ζ rising
   with n. (Viscous c_w = c_v gives ``ζ = c/(2ρAω)``, falling with n — not a
   wave-damping signature on a free tyre, and collinear with ζ0 over the few
   measured modes.)
-- **Rolling profiles**: both forms (parameters ``eta_slope``, ``viscous_c``).
+- **Rolling profiles**: all three forms (parameters ``eta_slope``, ``viscous_c``, ``eta_order``).
 """
 
 import jax.numpy as jnp
@@ -49,10 +56,24 @@ class GrowingLoss(AbstractOperatorTerm):
         return 1j * (eta * jnp.sign(n))[..., None, None] * elastic_stiffness(ring, geometry, n)
 
 
+class OrderLoss(AbstractOperatorTerm):
+    """Operator term ``i η2 (n/n_ref)² s_n K_n^c`` [N/m²] (complex, ``n.shape + (2, 2)``), n_ref = 10."""
+
+    eta_order: float
+    reference_order: float = 10.0
+
+    def __call__(self, ring, geometry, n, omega):
+        n = jnp.asarray(n, dtype=jnp.float64)
+        eta = self.eta_order * (n / self.reference_order) ** 2
+        return 1j * (eta * jnp.sign(n))[..., None, None] * elastic_stiffness(ring, geometry, n)
+
+
 ETA_SLOPE = Parameter("eta_slope", "-", null=0.0, lo=0.0, hi=0.3, start=0.02,
                       description="growth of the hysteretic loss factor per 100 Hz")
 VISCOUS_C = Parameter("viscous_c", "N s/m^2", null=0.0, lo=0.0, hi=5000.0, start=300.0,
                       description="viscous material damping c = c_w = c_v per unit length")
+ETA_ORDER = Parameter("eta_order", "-", null=0.0, lo=0.0, hi=0.3, start=0.02,
+                      description="extra hysteretic loss factor at order 10, growing as (n/10)^2 at any speed")
 
 
 class WaveDamping(Effect):
@@ -65,7 +86,7 @@ class WaveDamping(Effect):
     baseline_partners = ("damping_ratio",)
     summary = "damping that grows with frequency: waves decay away from the patch, front and rear differ"
     parameters = (ETA_SLOPE,)
-    profile_parameters = (ETA_SLOPE, VISCOUS_C)
+    profile_parameters = (ETA_SLOPE, VISCOUS_C, ETA_ORDER)
 
     def modal_mask(self, rows):
         return np.asarray(rows.is_freq) == 0
@@ -76,7 +97,8 @@ class WaveDamping(Effect):
 
     def profile_model(self, values, model):
         model = model.with_operator_term(GrowingLoss(values[0]))
-        return model.with_operator_term(Viscous(c_w=values[1], c_v=values[1]))
+        model = model.with_operator_term(Viscous(c_w=values[1], c_v=values[1]))
+        return model.with_operator_term(OrderLoss(values[2]))
 
 
 EFFECT = register(WaveDamping())
