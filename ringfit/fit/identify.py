@@ -46,9 +46,9 @@ from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_F
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
 from ringfit.fit.profile_block import (PROFILE_K_MAX, SENSOR_FIELDS, harmonic_rows, noise_from_residual, nuisance_coords,
-                                       nuisance_names, nuisance_prior, nuisance_start, profile_rows, read_through,
-                                       sensor_basis, sensor_coords, sensor_names, sensor_prior, sensor_reading,
-                                       sensor_start)
+                                       nuisance_names, nuisance_prior, nuisance_start, profile_basis, profile_rows,
+                                       read_through, sensor_basis, sensor_coords, sensor_names, sensor_prior,
+                                       sensor_reading, sensor_start)
 from ringfit.fit.result import FitResult, covariance_from_jacobian, grid_moves
 from ringfit.io.case import CaseFolder, read_case_folder, sidecar_number
 from ringfit.io.conditions import pressure_conflict
@@ -429,10 +429,7 @@ class JointResiduals(AbstractResiduals):
                 om, fz, road, band = args
                 if self.sensor:  # the reading's bilinear basis in (e, γ), read in the outer stage
                     pm = self.profile_model
-                    ring_p = pm.ring(ring)
-                    sol, _ = rolling_state(pm, ring_p, g, OperatingPoint(om, fz, road), self.solver)
-                    return spectral_stage(pm, sensor_basis(sol, g, pm.sensor), ring_p, g, jnp.full(4, om),
-                                          jnp.broadcast_to(band, (4,) + band.shape), 0.0)
+                    return profile_basis(pm, pm.ring(ring), g, OperatingPoint(om, fz, road), band, self.solver)
                 return profile_channels(self.profile_model, ring, g, om[None], fz[None],
                                         jax.tree.map(lambda x: x[None], road), band[None], 0.0, self.solver)[0]
 

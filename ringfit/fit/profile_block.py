@@ -204,6 +204,19 @@ def sensor_basis(solution, geometry: TyreGeometry, sensor: SensorModel) -> jax.A
     return jnp.stack(out)
 
 
+def profile_basis(model: ProfileModel, ring: RingParams, geometry: TyreGeometry, operating, band,
+                  solver: ContactSolver) -> jax.Array:
+    """One profile's reading basis ``(4, 2, M)``: the rolling state of ``ring`` (already through ``model.ring``) at
+    ``operating`` (:func:`ringfit.physics.profile.rolling_state`), read by :func:`sensor_basis` and band-limited by
+    the spectral stage to ``band`` ``(M//2+1,)`` — the inner stage of every reader that fits each run's sensor
+    nuisances (fit-rolling, identify); :func:`sensor_reading` combines it."""
+    from ringfit.physics.profile import rolling_state, spectral_stage
+
+    sol, _ = rolling_state(model, ring, geometry, operating, solver)
+    return spectral_stage(model, sensor_basis(sol, geometry, model.sensor), ring, geometry,
+                          jnp.full(4, operating.omega), jnp.broadcast_to(band, (4,) + band.shape), 0.0)
+
+
 def sensor_reading(basis, omega, sensor):
     """The runs' channels ``(P, 2, M)`` from their :func:`sensor_basis` ``(P, 4, 2, M)`` (after the spectral stage)
     at their sensor nuisances ``sensor`` ``(P, 4)`` (:data:`SENSOR_FIELDS` order) and Ω ``(P,)``: the bilinear

@@ -56,15 +56,14 @@ from ringfit.fit.engine import AbstractResiduals, Problem, least_squares, sum_of
 from ringfit.fit.least_squares import RING_COORDS, RING_FIELDS, ring_from_vector, ring_vector
 from ringfit.fit.priors import BOUNDS
 from ringfit.fit.profile_block import (SENSOR_FIELDS, RollingData, block_rows, fit_profile_block, harmonic_rows,
-                                       nuisance_coords, nuisance_names, nuisance_prior, nuisance_start, read_through,
-                                       rolling_data, sensor_basis, sensor_coords, sensor_names, sensor_prior,
+                                       nuisance_coords, nuisance_names, nuisance_prior, nuisance_start, profile_basis,
+                                       read_through, rolling_data, sensor_coords, sensor_names, sensor_prior,
                                        sensor_reading, sensor_start)
 from ringfit.fit.result import FitResult
 from ringfit.io.profiles import grid_angles_deg
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver, as_traced
-from ringfit.physics.profile import (FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels,
-                                     rolling_state, spectral_stage)
+from ringfit.physics.profile import FlatOrDrum, ProfileModel, flat_or_drum, full_band, profile_channels
 from ringfit.physics.operating import OperatingPoint
 from ringfit.physics.rolling import RingModel
 from ringfit.physics.sensor import SensorModel
@@ -129,15 +128,10 @@ class RollingResiduals(AbstractResiduals):
         if not self.sensor:
             return profile_channels(self.model, ring, data.geometry, data.omega, data.load, data.roads, data.band,
                                     0.0, self.solver)
-        pm, g = self.model, data.geometry
-        ring_p = pm.ring(ring)
-
-        def one(om, fz, road, band):  # identify's reading of one profile (ringfit.fit.identify.JointResiduals.inner)
-            sol, _ = rolling_state(pm, ring_p, g, OperatingPoint(om, fz, road), self.solver)
-            return spectral_stage(pm, sensor_basis(sol, g, pm.sensor), ring_p, g, jax.numpy.full(4, om),
-                                  jax.numpy.broadcast_to(band, (4,) + band.shape), 0.0)
-
-        return jax.vmap(one)(data.omega, data.load, data.roads, data.band)
+        ring_p = self.model.ring(ring)
+        return jax.vmap(lambda om, fz, road, band: profile_basis(self.model, ring_p, data.geometry,
+                                                                OperatingPoint(om, fz, road), band, self.solver))(
+            data.omega, data.load, data.roads, data.band)
 
     def outer(self, channels, theta, data: RollingArrays):
         """The cheap stage: each run's reading of ``channels`` and its harmonic rows, divided by their σ."""
