@@ -214,7 +214,7 @@ def modal_replicate(out: Path, seed: int) -> None:
     """``make_case(effect="none")`` and a second identification of its free table (module docstring)."""
     import jax.numpy as jnp
 
-    from ringfit.io.modes import read_mode_table
+    from ringfit.io.modes import ModeTable, read_mode_table, write_mode_table
     from ringfit.io.tyre import read_tyre
     from ringfit.params import RingParams
     from ringfit.physics.natural import natural_frequencies
@@ -228,9 +228,7 @@ def modal_replicate(out: Path, seed: int) -> None:
     rng = np.random.default_rng(6 * 10**6 + seed)
     scale = float(label.noise["relative"]) * rng.uniform(1.0, 4.0)
     f = truth * (1.0 + scale * rng.standard_t(3.0, n.size) / np.sqrt(3.0))
-    rows = ["n,a,tag,kind,freq_hz,freq_std_hz,damping_pct"] + [f"{int(k)},0,,structural,{x:.5f},," for k, x in zip(n, f)]
-    (out / "replicate.modes.csv").write_text("\n".join(rows) + "\n")
-    (out / "replicate.modes.json").write_text((out / "free.modes.json").read_text())
+    write_mode_table(ModeTable(freq_hz=f, n=n.astype(int), condition=dict(free.condition)), out / "replicate.modes.csv")
 
 
 def profile_spikes(out: Path, seed: int) -> None:
