@@ -7,6 +7,7 @@ differences of it, and the Gaussian log density written here.
 import math
 
 import jax.numpy as jnp
+import pytest
 import numpy as np
 
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, evaluate,
@@ -95,3 +96,56 @@ def test_an_unknown_sigma_mode_is_refused_when_the_problem_is_made():
 
     with pytest.raises(ValueError, match="sigma='estimte'"):
         Problem(model=None, data=None, coords=(Coordinate("a", "log"),), sigma="estimte")
+
+
+def test_gauss_newton_decrement_is_the_drop_the_linearised_rows_promise():
+    """The decrement against numpy's least squares: |r|² − min_δ |r + Jδ|², the same with the columns rescaled,
+    and with a column of zeros (a padded free set) added."""
+    from ringfit.fit._steps import gauss_newton_decrement
+
+    rng = np.random.default_rng(7)
+    for m, p in ((40, 3), (300, 12)):
+        J, r = rng.standard_normal((m, p)), rng.standard_normal(m)
+        delta, *_ = np.linalg.lstsq(J, -r, rcond=None)
+        expected = r @ r - np.sum((r + J @ delta) ** 2)
+        assert float(gauss_newton_decrement(jnp.asarray(r), jnp.asarray(J))) == pytest.approx(expected, rel=1e-9)
+        scaled = J * np.logspace(-4, 4, p)[None, :]
+        assert float(gauss_newton_decrement(jnp.asarray(r), jnp.asarray(scaled))) == pytest.approx(expected, rel=1e-6)
+        padded = np.concatenate([J, np.zeros((m, 2))], axis=1)
+        assert float(gauss_newton_decrement(jnp.asarray(r), jnp.asarray(padded))) == pytest.approx(expected, rel=1e-9)
+
+
+class _HighPass(AbstractResiduals):
+    """A gain read through a first-order high-pass at frequencies f: the corner is told only weakly (its data
+    want it at 0, its log-normal prior at 0.3), the case where Gauss–Newton crawls (docs/physics.md §11)."""
+
+    def __call__(self, theta, data):
+        f, y, s = data
+        m = theta[0] / (1.0 - 1j * theta[1] / f)
+        return jnp.concatenate([(m.real - y.real) / s, (m.imag - y.imag) / s]), m
+
+
+def test_the_decrement_stop_ends_a_linear_crawl_at_the_optimum():
+    """With ``dtol`` a weakly told corner's fit ends in fewer steps, at the Cauchy test's optimum to 1e-2 of a
+    standard error, on every one of 8 noise draws; started far away, it does not stop early."""
+    from ringfit.fit.engine import DECREMENT_TOL
+
+    f = np.arange(2, 40) * 2.7
+    coords = (Coordinate("a", LOG), Coordinate("fc", LOG))
+    prior = GaussianPrior.independent({"fc": (math.log(0.3), 2.0)})
+    steps = []
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        y = 1.0 + 0.02 * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size))
+        problem = Problem(_HighPass(), (f, y, np.full(f.size, 0.02)), coords, prior=prior, sigma="fixed")
+        cauchy = least_squares(problem, np.array([1.0, 0.3]), ("a", "fc"), rtol=1e-8, atol=1e-8)
+        for start in ([1.0, 0.3], [3.0, 5.0]):
+            fit = least_squares(problem, np.array(start), ("a", "fc"), rtol=1e-8, atol=1e-8, dtol=DECREMENT_TOL)
+            assert cauchy.converged and fit.converged
+            for j, name in enumerate(("a", "fc")):
+                off = (math.log(fit.values[name]) - math.log(cauchy.values[name])) / math.sqrt(cauchy.covariance_log[j, j])
+                assert abs(off) < 1e-2, (seed, start, name, off)
+        steps.append((cauchy.iterations, least_squares(problem, np.array([1.0, 0.3]), ("a", "fc"), rtol=1e-8,
+                                                       atol=1e-8, dtol=DECREMENT_TOL).iterations))
+    cauchy_steps, dtol_steps = np.array(steps).T
+    assert np.all(dtol_steps <= cauchy_steps) and dtol_steps.sum() < 0.7 * cauchy_steps.sum(), steps

@@ -154,11 +154,7 @@ def test_same_tread_stiffness_gains_and_offsets_as_identify(case):
     joint = identify_profiles_only(profiles, start)
     assert roll.converged and joint.converged
     assert roll.extra["passes"] == 2
-    assert roll.values["k_tread"] == pytest.approx(joint.values["k_tread"], rel=1e-6)
-    for name in nuisance_names(len(profiles)):
-        assert roll.values[name] == pytest.approx(joint.values[name], rel=1e-6, abs=1e-8)
-        assert roll.stderr[name] == pytest.approx(joint.stderr[name], rel=1e-4)
-    assert roll.stderr["k_tread"] == pytest.approx(joint.stderr["k_tread"], rel=1e-4)
+    _same_to_convergence(roll, joint, ("k_tread",) + nuisance_names(len(profiles)))
 
 
 @pytest.mark.slow
@@ -172,13 +168,17 @@ def test_with_the_sensors_nuisances_the_same_answer_as_identify(case):
     assert roll.converged and joint.converged
     P = len(profiles)
     assert set(roll.names) == {"k_tread", *nuisance_names(P), *sensor_names(P)}
-    assert roll.values["k_tread"] == pytest.approx(joint.values["k_tread"], rel=1e-6)
-    assert roll.stderr["k_tread"] == pytest.approx(joint.stderr["k_tread"], rel=1e-4)
-    for name in nuisance_names(P) + sensor_names(P):
-        assert roll.values[name] == pytest.approx(joint.values[name], rel=1e-5, abs=1e-7), name
+    _same_to_convergence(roll, joint, ("k_tread",) + nuisance_names(P) + sensor_names(P))
+    np.testing.assert_allclose(roll.extra["sensor"]["corner_hz"], [roll.values[f"corner_hz_{i + 1}"] for i in range(P)])
+
+
+def _same_to_convergence(roll, joint, names):
+    """Each parameter the same to the fits' convergence (``least_squares(dtol=DECREMENT_TOL)``: each optimum within
+    ~1e-3 standard errors of the exact one, docs/physics.md §11 *convergence*): values within 1e-2 of a standard
+    error, standard errors within 1e-3."""
+    for name in names:
+        assert abs(roll.values[name] - joint.values[name]) <= 1e-2 * joint.stderr[name], name
         assert roll.stderr[name] == pytest.approx(joint.stderr[name], rel=1e-3), name
-    np.testing.assert_allclose(roll.extra["sensor"]["corner_hz"], [joint.values[f"corner_hz_{i + 1}"] for i in range(P)],
-                               rtol=1e-5)
 
 
 def _inside(fit, gains, offsets, z):

@@ -33,17 +33,31 @@ STEP_CAP = 100_000
 def _limited_terminate(done, result, state, args):
     """Stop at the traced step limit ``max_steps`` and, after two accepted steps, after STALL_STEPS rejections.
 
-    ``args`` = ``(max_steps, _, check_at, bounded, near_sin)``: a solve still running after ``check_at`` steps
+    ``args`` = ``(max_steps, _, check_at, bounded, near_sin, dtol)``: a solve still running after ``check_at`` steps
     (> 0) whose accepted point has a bounded slot creeping onto its bound (``|sin z| ≥ near_sin``, z = s/scale:
     the engine's sine transform, ``ringfit.fit.engine.ACTIVE_SET_NEAR``) stops there too, reported as
     ``nonlinear_max_steps_reached`` (the engine's active set finishes it); otherwise it runs on uninterrupted."""
-    max_steps, _, check_at, bounded, near_sin = args
+    max_steps, _, check_at, bounded, near_sin, _ = args
     stalled = (state.num_accepted_steps >= 2) & (state.num_steps_since_acceptance >= STALL_STEPS)
     creeping = jnp.any(bounded & (jnp.abs(jnp.sin(state.accepted / state.scale)) >= near_sin))
     at_check = (check_at > 0) & (state.num_steps == check_at) & creeping
     limit = ((state.num_steps >= jnp.maximum(max_steps, 1)) | at_check) & ~(done | stalled)
     result = optx.RESULTS.where(limit & (max_steps > 0), optx.RESULTS.nonlinear_max_steps_reached, result)
     return done | stalled | limit, result
+
+
+def gauss_newton_decrement(residual: jax.Array, jac: jax.Array) -> jax.Array:
+    """The Gauss–Newton decrement ``|J δ|²`` with ``δ = −J⁺ r``: the drop of the cost Σr² that the linearised rows
+    promise to their own optimum (docs/physics.md §11 *convergence*). Invariant to a scaling of the columns of
+    ``J`` (its columns are normalised first); columns of zeros (a padded free set) and directions ``JᵀJ`` does not
+    resolve (eigenvalues under 1e-12 of its largest) are left out."""
+    norms = jnp.sqrt(jnp.sum(jac**2, axis=0))
+    jac = jac / jnp.where(norms > 0, norms, 1.0)[None, :]
+    g = jac.T @ residual
+    w, v = jnp.linalg.eigh(jac.T @ jac)
+    keep = w > 1e-12 * jnp.max(w)
+    c = v.T @ g
+    return jnp.sum(jnp.where(keep, c**2 / jnp.where(keep, w, 1.0), 0.0))
 
 
 class _DenseState(eqx.Module):
@@ -123,7 +137,9 @@ class _DenseSteps:
             descent_state = self.descent.query(y_eval, f_eval_info, descent_state)
             terminate = cauchy_termination(self.rtol, self.atol, self.norm, y_eval, y_eval - y, f_eval_info.residual,
                                             f_eval_info.residual - state.f_info.residual)
-            return y_eval, f_eval_info, fn_aux, descent_state, terminate
+            dtol = args[5]
+            near = jax.lax.cond(dtol > 0, lambda: gauss_newton_decrement(res, jac_z) < dtol, lambda: jnp.array(False))
+            return y_eval, f_eval_info, fn_aux, descent_state, terminate | near
 
         def rejected(descent_state):
             return y, state.f_info, state.aux, descent_state, jnp.array(False)

@@ -309,12 +309,14 @@ def _linearisation(model, data, theta0, free, prior_w, prior_mean):
     return linearise_any
 
 
-def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, check_at=0, *, model,
-               treedef, method="levenberg_marquardt"):
+def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, rtol, atol, check_at=0, dtol=0.0, *,
+               model, treedef, method="levenberg_marquardt"):
     """One fit (traced): ``data`` arrives as flat leaves (fast dispatch); ``max_steps`` and the tolerances are
     traced, so one compiled solve serves every step limit and tolerance, and with ``max_steps = 0`` every
     evaluation (:func:`linearize`, :func:`evaluate`). ``check_at`` (traced, 0 = never): the step after which a
     solve with a bounded parameter creeping onto its bound stops for the active set (:func:`least_squares`).
+    ``dtol`` (traced, 0 = never): an accepted point whose Gauss–Newton decrement is below it has converged
+    (:func:`ringfit.fit._steps.gauss_newton_decrement`, :func:`least_squares`).
 
     Levenberg–Marquardt works on ``s = d·z``, its scaling ``d`` set inside the first step
     (:class:`ringfit.fit._steps._DenseSteps`); a call with ``max_steps = 0`` works on z itself (``d = 1``).
@@ -323,7 +325,7 @@ def _solve_one(leaves, z0, theta0, free_arrays, prior_w, prior_mean, max_steps, 
     free = _Free(*free_arrays)
     linearise = _linearisation(model, data, theta0, free, prior_w, prior_mean)
     solver = SOLVERS[method](rtol=rtol, atol=atol, linear_solver=lx.SVD())
-    creep = (max_steps, jnp.ones_like(z0), check_at, free.bounded, 1.0 - 2.0 * ACTIVE_SET_NEAR)
+    creep = (max_steps, jnp.ones_like(z0), check_at, free.bounded, 1.0 - 2.0 * ACTIVE_SET_NEAR, dtol)
     sol = optx.least_squares(lambda s, a: linearise(s / a[1]), solver, z0, args=creep, has_aux=True,
                              max_steps=STEP_CAP, throw=False)
     d = sol.state.scale
@@ -462,6 +464,7 @@ def least_squares(
     pad_to: int | None = None,
     method: SolverMethod = "levenberg_marquardt",
     active_set: bool = True,
+    dtol: float = 0.0,
 ) -> FitResult:
     """Weighted least squares of ``problem`` over the ``free`` parameters (see the module docstring).
 
@@ -476,6 +479,11 @@ def least_squares(
       should not be counted).
     - ``pad_to``: pad the free set to this size (one compilation for several free-set sizes).
     - ``method``: ``"levenberg_marquardt"`` (default) or ``"gauss_newton"`` (:data:`SOLVERS`).
+    - ``dtol``: also converged at an accepted point whose Gauss–Newton decrement (the drop of Σr², data and prior
+      rows, that the linearised rows promise to their optimum) is below ``dtol`` (default 0: the Cauchy test
+      alone). A weakly told nuisance whose linearisation mis-states its curvature (a high-pass corner far below
+      the first harmonic) converges only linearly; the decrement says how far in standard errors the optimum still
+      is, where the Cauchy test asks for steps of 1e-8 (docs/physics.md §11 *convergence*).
     - ``active_set``: finish a solve that has a bounded parameter on its bound and has not converged by holding
       it there (:func:`_hold_on_bounds`; docs/physics.md §11 *bounds*), checked inside the compiled solve after
       :data:`ACTIVE_SET_AFTER` steps and again at ``max_steps``; a solve with nothing on a bound at the check
@@ -486,7 +494,7 @@ def least_squares(
     the active set held on a bound. Never raises on non-convergence: check ``converged``.
     """
     require_x64("ringfit.fit.engine.least_squares")
-    kw = dict(max_steps=max_steps, rtol=rtol, atol=atol, n_data=n_data, method=method)
+    kw = dict(max_steps=max_steps, rtol=rtol, atol=atol, n_data=n_data, method=method, dtol=dtol)
     # A solve still running after ACTIVE_SET_AFTER steps with a parameter on its bound is creeping there: the
     # compiled solve stops at that step and the active set finishes it, instead of after the whole budget. A solve
     # with nothing on a bound there runs on, as it would without the check (checked inside the solve's loop: a
@@ -503,6 +511,13 @@ def least_squares(
     if result.status == "max_steps_reached":
         result = _hold_on_bounds(problem, result, tuple(free), pad_to, kw)
     return result
+
+
+#: The Gauss–Newton decrement under which :func:`least_squares` (``dtol``) takes a fit of σ-weighted rows as
+#: converged: its linearisation promises a drop of Σr² (a χ²) under 1e-6, i.e. the optimum is ~1e-3 standard
+#: errors away (docs/physics.md §11 *convergence*). Used where weakly told nuisances converge only linearly
+#: (the profile block's sensor: ``fit-rolling``, ``identify``).
+DECREMENT_TOL = 1e-6
 
 
 #: A solve that reaches its step limit with a bounded parameter within this share of its solver coordinate's
@@ -576,7 +591,7 @@ def _u_bounds(problem: Problem, free) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _least_squares(problem: Problem, theta0, free, *, max_steps, rtol, atol, n_data, pad_to, method,
-                   check_at: int = 0) -> FitResult:
+                   check_at: int = 0, dtol: float = 0.0) -> FitResult:
     """One solve of :func:`least_squares` (no active set; ``check_at``: :func:`_solve_one`)."""
     model, data, coords = problem.model, problem.data, problem.coords
     names = problem.names
@@ -595,7 +610,8 @@ def _least_squares(problem: Problem, theta0, free, *, max_steps, rtol, atol, n_d
         raise InputError(f"max_steps = {max_steps}: expected 1 … {STEP_CAP} (0: evaluate only)")
     args = (leaves, z0, np.append(theta0, 0.0), free_arrays, W, mean)
     tol = (np.float64(rtol), np.float64(atol))
-    out = _solve_program(model)(*args, np.int64(max_steps), *tol, np.int64(check_at), model=model, treedef=treedef,
+    out = _solve_program(model)(*args, np.int64(max_steps), *tol, np.int64(check_at), np.float64(dtol), model=model,
+                                treedef=treedef,
                                 method=method)
     u_free, result, steps, res, jac = jax.device_get(out[:5])  # one transfer; the model's aux stays as it is
     aux = out[5]
@@ -850,7 +866,7 @@ def _linearize_all(problem: Problem, theta, free, pad_to):
     solve = _solve_program(problem.model)
     _, _, _, res, jac, aux = solve(leaves, u, np.append(theta, 0.0), fs.unbounded_arrays(), fs.prior_w,
                                    fs.prior_mean, np.int64(0), np.float64(1e-10), np.float64(1e-10), np.int64(0),
-                                   model=problem.model, treedef=treedef, method="levenberg_marquardt")
+                                   np.float64(0.0), model=problem.model, treedef=treedef, method="levenberg_marquardt")
     jac = np.asarray(jac)
     if solve_free != tuple(free):  # back to the caller's order (a two-stage model's free set was reordered)
         k = len(back)
@@ -1022,5 +1038,5 @@ def evaluate(problem: Problem, theta, free: tuple[str, ...], *, pad_to: int | No
     return result
 
 
-__all__ = ["least_squares", "least_squares_batch", "SOLVERS", "evaluate", "sum_of_squares_batch", "linearize",
+__all__ = ["DECREMENT_TOL", "least_squares", "least_squares_batch", "SOLVERS", "evaluate", "sum_of_squares_batch", "linearize",
            "Linearization", "inner_slots", "residuals", "residuals_batch", "log_probability", "log_density", "DensityKernel", "free_set", "FreeSet", "in_fixed_chunks", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]

@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares, residuals
+from ringfit.fit.engine import DECREMENT_TOL, LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares, residuals
 from ringfit.fit.free_block import (DISCREPANCY_FOLDS, FOLD_LEVERAGE_MAX, SCALE_PASSES,  # noqa: F401 (re-exported)
                                     SCALE_TOLERANCE, Z95, block_scale, discrepancy_ratio, frequency_folds,
                                     hat_diagonal, noise_passes, t_widening)
@@ -1029,7 +1029,8 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor, consid
         state["passes"] += 1
         data = _arrays(geometry, rows, solver)
         problem = Problem(model, data, coords, prior=prior, plausible=BOUNDS, data_label="these measurements")
-        fit = least_squares(problem, state["theta"], free, max_steps=max_steps, rtol=rtol, atol=atol)
+        fit = least_squares(problem, state["theta"], free, max_steps=max_steps, rtol=rtol, atol=atol,
+                            dtol=DECREMENT_TOL)
         if progress:
             print(f"identify: pass {state['passes']}: {fit.status} after {fit.iterations} steps, "
                   f"χ²/m = {fit.extra['chi2_raw'] / fit.residuals.size:.3g}",

@@ -52,7 +52,7 @@ import jax
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import AbstractResiduals, Problem, least_squares, sum_of_squares_batch
+from ringfit.fit.engine import DECREMENT_TOL, AbstractResiduals, Problem, least_squares, sum_of_squares_batch
 from ringfit.fit.least_squares import RING_COORDS, RING_FIELDS, ring_from_vector, ring_vector
 from ringfit.fit.priors import BOUNDS
 from ringfit.fit.profile_block import (SENSOR_FIELDS, RollingData, block_rows, fit_profile_block, harmonic_rows,
@@ -234,8 +234,10 @@ def fit_rolling(
       (``tests/test_rolling_block.py``). On by default: profiles read through a sensor of typical tilt (γ 0.6), IEPE
       corner (0.8 Hz) and liner offset (2 mm) gave the plain reading a k_tread 97 % low, "converged", 730 σ from the
       truth; the sensor's nuisances recover it within its interval (``tests/test_rolling_block.py``). ``False``: the
-      plain reading of ``sensor`` (the §6 baseline, the source study's reading), about 8 steps a pass instead of
-      about 70 where the data do not tell the nuisances well (a corner far below the first harmonic).
+      plain reading of ``sensor`` (the §6 baseline, the source study's reading), a few steps a pass instead of
+      about 40 where the data tell the nuisances weakly (a corner far below the first harmonic: Gauss–Newton
+      converges on it only linearly, and the passes stop at the decrement :data:`~ringfit.fit.engine.DECREMENT_TOL`,
+      docs/physics.md §11 *convergence*).
     - ``max_steps``: per pass (default 64; with ``sensor_nuisances`` identify's 256).
 
     **Returns:** :class:`~ringfit.fit.result.FitResult` of the last pass (values SI; angle offsets in rad).
@@ -276,7 +278,7 @@ def _fit_rolling(profiles, geometry, ring, *, free, model, sensor, solver, rolli
 
     def fit_at(sigma):  # one pass, warm-started from the last converged one
         fit = least_squares(_problem(data, geometry, rows, sigma, model, sensor, solver, nuisances), state["theta"],
-                            free, max_steps=max_steps, rtol=rtol, atol=atol)
+                            free, max_steps=max_steps, rtol=rtol, atol=atol, dtol=DECREMENT_TOL)
         state["evaluations"] += evaluations_used(fit.iterations, len(free_ring))
         if fit.converged:
             state["theta"] = fit.theta.copy()
