@@ -234,10 +234,10 @@ def fit_rolling(
       (``tests/test_rolling_block.py``). On by default: profiles read through a sensor of typical tilt (γ 0.6), IEPE
       corner (0.8 Hz) and liner offset (2 mm) gave the plain reading a k_tread 97 % low, "converged", 730 σ from the
       truth; the sensor's nuisances recover it within its interval (``tests/test_rolling_block.py``). ``False``: the
-      plain reading of ``sensor`` (the §6 baseline, the source study's reading), a few steps a pass instead of
+      plain reading of ``sensor`` (the §6 baseline, the source study's reading), about 8 steps a pass instead of
       about 40 where the data tell the nuisances weakly (a corner far below the first harmonic: Gauss–Newton
-      converges on it only linearly, and the passes stop at the decrement :data:`~ringfit.fit.engine.DECREMENT_TOL`,
-      docs/physics.md §11 *convergence*).
+      converges on it only linearly, and with the nuisances the passes stop at the decrement
+      :data:`~ringfit.fit.engine.DECREMENT_TOL`, docs/physics.md §11 *convergence*).
     - ``max_steps``: per pass (default 64; with ``sensor_nuisances`` identify's 256).
 
     **Returns:** :class:`~ringfit.fit.result.FitResult` of the last pass (values SI; angle offsets in rad).
@@ -278,7 +278,8 @@ def _fit_rolling(profiles, geometry, ring, *, free, model, sensor, solver, rolli
 
     def fit_at(sigma):  # one pass, warm-started from the last converged one
         fit = least_squares(_problem(data, geometry, rows, sigma, model, sensor, solver, nuisances), state["theta"],
-                            free, max_steps=max_steps, rtol=rtol, atol=atol, dtol=DECREMENT_TOL)
+                            free, max_steps=max_steps, rtol=rtol, atol=atol,
+                            dtol=DECREMENT_TOL if nuisances else 0.0)  # as identify's (§11 *convergence*)
         state["evaluations"] += evaluations_used(fit.iterations, len(free_ring))
         if fit.converged:
             state["theta"] = fit.theta.copy()
