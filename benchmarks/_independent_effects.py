@@ -8,7 +8,8 @@ as a dense real operator; hysteretic loss is the real Hilbert-transform matrix o
 complex modulus per harmonic); mode tables are eigenvalues of the FD ring's symmetric (cos-type) and antisymmetric
 (sin-type) subspaces (not eq. 18 nor the loaded ring's Fourier basis); contact is an active-set loop with a load
 balance (not ringfit's spectral contact solve). ringfit is used only for the parameter values of Table 9
-(:func:`ringfit.params.table9`) and to write the folder files (:mod:`ringfit.io`).
+(:func:`ringfit.params.table9`), to write the folder files (:mod:`ringfit.io`) and for the km/h conversion
+(:data:`ringfit.units.KMH`).
 
 Families (``FAMILIES``; each generator's docstring has its physics):
 
@@ -36,6 +37,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from _independent_ring import _stencils
+from ringfit.units import KMH
 
 #: Sound speed [m/s] and cavity length [m] of eq. 22 (docs/physics.md §3.6).
 SOUND_SPEED, CAVITY_LENGTH = 343.0, 1.568
@@ -272,13 +274,18 @@ def _spectral_derivatives(x, n):
     return lambda order: np.fft.irfft((1j * k) ** order * X, n)
 
 
-def fd_reading(sol, omega, *, offset=0.0, tilt_gain=0.0, gravity=0.0, corner_hz=0.0, revolutions_filtered=6):
+def fd_reading(sol, omega, *, offset=0.0, tilt_gain=0.0, gravity=0.0, corner_hz=0.0, settle=40.0):
     """The sensor's two channels from an FD solution, docs/physics.md §4.6 and §5 layers 1–5 written from the
     text: liner point v_s = v + eψ (ψ = (w′ − v)/R), a_r = Ω²(w″ − 2v_s′ − w) − Ω²R_s, a_θ = Ω²(v_s″ + 2w′ − v_s);
     specific force f_r = a_r − g cos φ, f_θ = a_θ + g sin φ; axes turned by γψ on the zeroth-order force;
     s_rad = −f_r + γψ g sin φ, s_tan = f_θ + γψ(−Ω²R_s − g cos φ). The IEPE high-pass (first order, corner f_c) is
-    applied in the time domain: the revolution repeated, filtered with scipy's bilinear ``lfilter`` at 64 samples
-    per grid step…, the last revolution kept (not the harmonic gain H(ikΩ)). Mean removed (docs/physics.md §5).
+    applied in the time domain: the revolution repeated, filtered with scipy's bilinear ``lfilter`` at 16 samples
+    per grid step, the last revolution kept (not the harmonic gain H(ikΩ)). The repeats last ``settle`` time
+    constants 1/(2πf_c) (at least 6 revolutions), so the filter's start-up transient — the centripetal level
+    Ω²R switched on at t = 0 — has decayed to e^−40 of it: the periodic steady state a sensor on a rolling tyre
+    gives. (Until stop 54 six revolutions were filtered: at a 0.8 Hz corner and 60 km/h that left 3 % of Ω²R
+    decaying across the last revolution, a ramp of ~12 m/s² that no sensor in steady state shows.) Mean removed
+    (docs/physics.md §5).
     **Returns:** (2, n) [radial, tangential] [m/s²]."""
     phi, w, v = sol["phi"], sol["w"], sol["v"]
     n = phi.size
@@ -302,7 +309,8 @@ def fd_reading(sol, omega, *, offset=0.0, tilt_gain=0.0, gravity=0.0, corner_hz=
         dt = 2 * np.pi / omega / (n * up)
         b, a = ss.butter(1, corner_hz, btype="highpass", fs=1.0 / dt)
         fine = np.stack([np.interp(np.arange(n * up) / up, np.arange(n + 1), np.append(c, c[0])) for c in out])
-        long = np.tile(fine, (1, revolutions_filtered))
+        tau_revolutions = omega / (2 * np.pi) / (2 * np.pi * corner_hz)  # the time constant in revolutions
+        long = np.tile(fine, (1, max(6, int(np.ceil(settle * tau_revolutions)) + 1)))
         filt = ss.lfilter(b, a, long, axis=-1)[:, -n * up:]
         out = filt[:, ::up]
     return out - out.mean(axis=-1, keepdims=True)
@@ -551,7 +559,7 @@ def _profile_case(folder, seed, family):
     r_e = g_R + g["tau"] - (g_R + g["tau"] - st["H"]) / 3.0
     by_run = []
     for i, speed in enumerate(speeds):
-        omega = speed / 3.6 / r_e
+        omega = speed * KMH / r_e
         sol = fd_static(p, g, load, n=n, omega=omega, eta=2 * zeta0, **kw_solve)
         sol["R"] = g_R
         values = band_limited_resample(fd_reading(sol, omega, **kw_read), n_points)
@@ -625,7 +633,7 @@ def _rolling_case(folder, seed, family):
     # the truth in full (bulky: kept out of the magnitude the benchmark prints)
     truth_lines = {"ring": dict(p), "geometry": dict(g), "r_e_m": float(r_e), "true_hz": {}, "k": {}}
     for speed in ROLLING_SPEEDS:
-        omega = speed / 3.6 / r_e
+        omega = speed * KMH / r_e
         a = fd_static(p, g, ROLLING_LOAD_N, n=1024, omega=omega)["a"] if contact else 0.0
         f, k, acc = collocation_modes(p, g, omega, -a, a, radial_floor=1e-2)
         line, kd, _ = sensor_lines(f, k, acc, omega, n_top)
