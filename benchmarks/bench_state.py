@@ -397,6 +397,7 @@ def fisher_table():
                                             state_fisher)
     from ringfit.physics.state import TyreState
     from ringfit.synth.state import RATED_LOAD, nominal_tyre
+    from ringfit.units import KMH
 
     from ringfit.io.tyre import read_tyre, write_tyre
 
@@ -426,7 +427,7 @@ def fisher_table():
     for v in FISHER_SPEEDS:
         for lf in FISHER_LOADS:
             load = lf * RATED_LOAD
-            omega = v / 3.6 / rout
+            omega = v * KMH / rout
             noise = FISHER_NOISE_SHARE * omega**2 * rout
             state = TyreState(load, float(geometry.pressure), depth, slip, omega)
             f = state_fisher(geometry, ring, laws, state, noise, samples_per_revolution=FISHER_SAMPLES)

@@ -53,6 +53,7 @@ def main() -> int:
     from ringfit.physics.profile import ProfileModel
     from ringfit.physics.sensor import STANDARD_GRAVITY
     from ringfit.physics.state import TyreState, solve_state
+    from ringfit.units import KMH
 
     print(f"load average at start: {bc.loadavg()}")
     geo, ring = table9()
@@ -92,7 +93,7 @@ def main() -> int:
     both = R / ((c1 - c0) + (c3 - c2))
     print(f"together:                 {both:8.0f} rev per CPU s  target >= 500: {'met' if both >= 500 else 'NOT met'}")
     truth = {"load_n": 4200.0, "pressure_bar": 2.0, "slip": -0.006, "fx_n": q["fx"], "tread_depth_mm": 5.0,
-             "speed_kmh": q["speed"] * 3.6}
+             "speed_kmh": q["speed"] / KMH}
     print(f"{'quantity':16s} {'median |error|':>16s} {'coverage 95 %':>14s} {'mean error / σ':>15s}")
     for key, value in truth.items():
         err = np.abs(revs.values[key] - value)

@@ -28,6 +28,7 @@ from ringfit.io.profiles import Profile
 from ringfit.params import table9
 from ringfit.physics.contact import ContactSolver
 from ringfit.physics.profile import ProfileModel, simulate_profile
+from ringfit.units import KMH
 
 GEOMETRY, RING = table9()
 MODEL = ProfileModel().with_sensor(gravity=0.0, corner_hz=0.0, tilt_gain=0.0)
@@ -79,7 +80,7 @@ def radius():
         r_e = float(effective_rolling_radius(RING, GEOMETRY, load, None))
         delta = 3 * (r_out - r_e)
         for label, radius_m in (("same convention", r_e), ("R_out − δ", r_out - delta), ("free radius R_out", r_out)):
-            rot = speed / 3.6 / radius_m / (2 * math.pi)
+            rot = speed * KMH / radius_m / (2 * math.pi)
             prof = simulate_profile(RING, GEOMETRY, speed_kmh=speed, load_n=load, rotation_hz=rot, model=model,
                                     solver=ContactSolver(n_grid=2048), n_points=2048)
             cond = {k: v for k, v in prof.condition.items() if k not in ("load_n", "rotation_hz")}

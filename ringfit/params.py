@@ -78,6 +78,11 @@ class TyreGeometry(eqx.Module):
         return self.radius + self.tread_thickness
 
 
+#: The radial tread spring k_trd [N/m²] where nothing states it: the source thesis's value, fitted there to its
+#: 50 km/h profile (docs/physics.md §1, the parameter table; Table 9's ``k_tread_n_per_m2``).
+DEFAULT_K_TREAD = 19.0e6
+
+
 class RingParams(eqx.Module):
     """Fitted parameters of the flexible ring (docs/physics.md §1).
 
@@ -98,7 +103,7 @@ class RingParams(eqx.Module):
     kw: float
     kv: float
     damping_ratio: float = 0.025
-    k_tread: float = 19.0e6
+    k_tread: float = DEFAULT_K_TREAD
     ea: float = math.inf
     chi: float = 1.0
 

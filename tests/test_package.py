@@ -80,3 +80,14 @@ def test_top_level_namespace_is_trimmed_and_the_rest_stays_importable():
         assert getattr(obj, "__module__", module_name) == module_name, name  # defined where we say
         with pytest.raises(AttributeError, match=re.escape(f"from {module_name} import {name}")):
             getattr(ringfit, name)
+
+
+def test_the_first_names_a_newcomer_meets_are_top_level():
+    """identify (one ring from a case folder), RingParams and TyreGeometry — a newcomer's first names — are in
+    __all__ and are the very objects their modules define (spelt out here, not read from ringfit._EXPORTS)."""
+    fit_identify = importlib.import_module("ringfit.fit.identify")
+    params = importlib.import_module("ringfit.params")
+    assert {"identify", "RingParams", "TyreGeometry"} <= set(ringfit.__all__)
+    assert ringfit.identify is fit_identify.identify
+    assert ringfit.RingParams is params.RingParams
+    assert ringfit.TyreGeometry is params.TyreGeometry

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.optimize import brentq
-from threadpoolctl import threadpool_limits
 
+from ringfit._threads import small_matrix_threads
 from ringfit.synth.state import (RingFD, Sensor, State, TrueTyre, coloured_time_noise, iepe_highpass,
                                  simulate_state_recording, stencils)
 
@@ -24,20 +24,22 @@ OMEGA = 60 / 3.6 / 0.307
 
 @pytest.fixture(autouse=True)
 def _one_thread():
-    with threadpool_limits(limits=1):
+    with small_matrix_threads():
         yield
 
 
 def test_the_simulator_imports_nothing_of_the_model():
     """Independence: the truth's module imports neither ringfit.physics, ringfit.fit nor the other generators
-    (which use the model), nor JAX; ringfit.io only to write files."""
+    (which use the model), nor JAX; ringfit.io only to write files, and the bottom layer's unit constants and
+    thread limiter."""
     import ast
 
     tree = ast.parse((Path(__file__).resolve().parents[1] / "ringfit" / "synth" / "state.py").read_text())
     names = {a.name for node in ast.walk(tree) if isinstance(node, ast.Import) for a in node.names}
     names |= {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
     ours = {n for n in names if n.startswith("ringfit")}
-    assert ours <= {"ringfit.io.tyre", "ringfit.io.continuous", "ringfit.io.modes", "ringfit.params", "ringfit.errors"}, ours
+    assert ours <= {"ringfit.io.tyre", "ringfit.io.continuous", "ringfit.io.modes", "ringfit.params", "ringfit.errors",
+                    "ringfit.units", "ringfit._threads"}, ours
     assert not any(n.startswith(("jax", "equinox")) for n in names)
 
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -58,7 +59,9 @@ FOLD_LEVERAGE_MAX = 0.99
 #: The noise models of a frequency fit: ``"estimated"`` (the block's scale from its residual, this module's),
 #: ``"fixed"`` (the starting σ as it is: a known σ, e.g. the posterior's simulation-based calibration, or the
 #: profile likelihood's refits at a fit's settled σ).
-NOISE_MODELS = ("estimated", "fixed")
+NoiseModel = Literal["estimated", "fixed"]
+#: The names of :data:`NoiseModel`, as :func:`check_noise` validates them.
+NOISE_MODELS: tuple[str, ...] = get_args(NoiseModel)
 
 
 @dataclass(frozen=True)
@@ -195,7 +198,7 @@ def discrepancy_ratio(J: np.ndarray, r: np.ndarray, folds: list[np.ndarray]) -> 
     return max(1.0, D / T) if T > 0 else 1.0
 
 
-def check_noise(noise: str) -> str:
+def check_noise(noise: str) -> NoiseModel:
     """``noise`` if it is one of :data:`NOISE_MODELS`, else an :class:`~ringfit.errors.InputError`."""
     if noise not in NOISE_MODELS:
         raise InputError(f"noise model {noise!r}: expected one of {', '.join(NOISE_MODELS)}")
@@ -226,7 +229,7 @@ def noise_passes(fit_once, renoise) -> tuple:
     return fit, passes
 
 
-def fit_free_block(fit_at, sigma0: np.ndarray, stated: bool, noise: str = "estimated", scale0: float = 1.0,
+def fit_free_block(fit_at, sigma0: np.ndarray, stated: bool, noise: NoiseModel = "estimated", scale0: float = 1.0,
                    freq_hz: np.ndarray | None = None):
     """A fit of one free-modes block with its noise model: refit with the rows' σ rescaled until the scale settles.
 
@@ -293,4 +296,4 @@ def noise_summary(data: dict) -> str:
 __all__ = ["FrequencyData", "frequency_data", "hat_diagonal", "block_scale", "t_widening", "fit_free_block",
            "frequency_folds", "discrepancy_ratio", "row_widening", "noise_summary", "check_noise",
            "DEFAULT_RELATIVE_STD", "SIGMA_FLOOR_REL", "SCALE_PASSES", "SCALE_TOLERANCE", "Z95", "NOISE_MODELS",
-           "DISCREPANCY_FOLDS", "FOLD_LEVERAGE_MAX"]
+           "NoiseModel", "DISCREPANCY_FOLDS", "FOLD_LEVERAGE_MAX"]

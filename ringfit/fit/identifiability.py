@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ringfit.fit.priors import PriorSpec
 from ringfit.fit.result import MAX_RELATIVE_STDERR, FitResult
 
 #: An eigen-direction whose log-standard deviation 1/√λ exceeds this (a factor
@@ -148,7 +149,8 @@ def identifiability(result: FitResult, *, profile: tuple[str, ...] = (), fit_aga
     return out
 
 
-def profile_natural_frequencies(table, geometry, initial, free, prior="none", noise_scale=None, **kwargs):
+def profile_natural_frequencies(table, geometry, initial, free, prior: PriorSpec = "none", noise_scale=None,
+                                **kwargs):
     """A ``fit_again`` callable for :func:`identifiability` on eq. 18 fits.
 
     The refits hold the σ of the rows where the fit with every parameter free settled it (``noise="fixed"`` at

@@ -16,19 +16,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import fields
-from typing import ClassVar, Literal
+from typing import ClassVar
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, evaluate,
                                 least_squares)
-from ringfit.fit.free_block import (DEFAULT_RELATIVE_STD, NOISE_MODELS, FrequencyData, check_noise, fit_free_block,
-                                    frequency_data, row_widening)
-from ringfit.fit.priors import BOUNDS, LogNormalPrior, resolve_priors
+from ringfit.fit.free_block import (DEFAULT_RELATIVE_STD, NOISE_MODELS, FrequencyData, NoiseModel, check_noise,
+                                    fit_free_block, frequency_data, row_widening)
+from ringfit.fit.priors import BOUNDS, LogNormalPrior, PriorSpec, resolve_priors
 from ringfit.fit.result import FitResult, covariance_from_jacobian
 from ringfit.io.modes import ModeTable
 from ringfit.params import RING_PARAMETERS, RingParams, TyreGeometry
@@ -107,10 +106,10 @@ def fit_natural_frequencies(
     initial: RingParams,
     *,
     free=DEFAULT_FREE,
-    prior="none",
+    prior: PriorSpec = "none",
     modes=None,
     default_relative_std: float | None = None,
-    noise: Literal["estimated", "fixed"] = "estimated",
+    noise: NoiseModel = "estimated",
     noise_scale: float = 1.0,
     max_steps: int = 256,
     rtol: float = 1e-10,
@@ -237,5 +236,5 @@ def fitted_ring(result: FitResult) -> RingParams:
 
 
 __all__ = ["fit_natural_frequencies", "frequency_data", "FrequencyData", "DEFAULT_RELATIVE_STD",
-           "DEFAULT_FREE", "fitted_ring", "LogNormalPrior", "NOISE_MODELS"]
+           "DEFAULT_FREE", "fitted_ring", "LogNormalPrior", "NOISE_MODELS", "NoiseModel", "PriorSpec"]
 

@@ -35,11 +35,12 @@ import threading
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
 from ringfit.fit.engine import LOG, free_set, log_density, log_probability
+from ringfit.fit.priors import PriorSpec
 from ringfit.params import RingParams
 
 #: Stop when the chain is longer than this many integrated autocorrelation times.
@@ -538,9 +539,9 @@ def predictive_check(result, u_draws: np.ndarray, blocks: dict | None = None, ro
 
 #: The samplers of :func:`sample`: the compiled stretch move (:mod:`ringfit.fit.ensemble`, the default) and
 #: emcee's (the reference; same algorithm, driven from Python one step at a time).
-SAMPLERS = ("compiled", "emcee")
-#: A sampler name (:data:`SAMPLERS`).
 Sampler = Literal["compiled", "emcee"]
+#: The names of :data:`Sampler`, as :func:`sample` validates them.
+SAMPLERS: tuple[str, ...] = get_args(Sampler)
 #: Independent ensembles the compiled sampler runs side by side by default.
 DEFAULT_CHAINS = 1
 
@@ -675,7 +676,7 @@ def sample_posterior(
     initial: RingParams,
     *,
     free=None,
-    prior="physical",
+    prior: PriorSpec = "physical",
     modes=None,
     default_relative_std: float | None = None,
     walkers: int = 32,
@@ -770,5 +771,5 @@ def natural_frequency_predictive(post: Posterior, n, level: float = 0.95, noise:
     return dict(n=n, lo=q[0], median=q[1], hi=q[2])
 
 
-__all__ = ["Posterior", "sample", "predictive_check", "SAMPLERS", "sample_posterior", "run_ensemble", "load_posterior", "log_probability_function",
+__all__ = ["Posterior", "sample", "predictive_check", "SAMPLERS", "Sampler", "sample_posterior", "run_ensemble", "load_posterior", "log_probability_function",
            "natural_frequency_predictive", "TAU_FACTOR"]

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-
+from typing import Literal, get_args
 
 from ringfit.errors import InputError
 
@@ -69,8 +69,15 @@ EI_BELT_PLATE_PRIOR = LogNormalPrior(
 
 PHYSICAL_PRIORS: dict[str, LogNormalPrior] = {"ei": EI_BELT_PLATE_PRIOR}
 
+#: A named prior of :func:`resolve_priors`: ``"none"`` (no informative prior) or ``"physical"``
+#: (:data:`PHYSICAL_PRIORS`).
+PriorName = Literal["none", "physical"]
+#: A fit's ``prior`` argument: a :data:`PriorName`, a dict name -> :class:`LogNormalPrior` or (median, σ_ln), or
+#: ``None`` (as ``"none"``).
+PriorSpec = PriorName | dict[str, LogNormalPrior | tuple[float, float]] | None
 
-def resolve_priors(prior, free: tuple[str, ...]) -> dict[str, LogNormalPrior]:
+
+def resolve_priors(prior: PriorSpec, free: tuple[str, ...]) -> dict[str, LogNormalPrior]:
     """Turn the user's ``prior`` argument into {name: LogNormalPrior} for free parameters.
 
     ``prior`` may be ``None``/``"none"`` (no informative prior), ``"physical"``
@@ -88,6 +95,6 @@ def resolve_priors(prior, free: tuple[str, ...]) -> dict[str, LogNormalPrior]:
                 raise InputError(f"prior on unknown parameter {k!r}; known: {sorted(BOUNDS)}")
             chosen[k] = v if isinstance(v, LogNormalPrior) else LogNormalPrior(float(v[0]), float(v[1]))
     else:
-        raise InputError(f"prior = {prior!r}; expected 'none', 'physical' or a dict")
+        raise InputError(f"prior = {prior!r}; expected {', '.join(map(repr, get_args(PriorName)))} or a dict")
     return {k: v for k, v in chosen.items() if k in free}
 

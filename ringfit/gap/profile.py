@@ -48,7 +48,14 @@ BASE = ("k_tread",)
 #: Ring parameters of the baseline also refitted to the profiles, with the free-table fit's Laplace
 #: posterior as a correlated log-normal prior (``damping_ratio`` only when the free table has damping).
 RING_BASE = ("ei", "kw", "kv", "damping_ratio")
-#: log-normal prior σ of k_trd around its starting value (weak: the profiles determine it).
+#: log-normal prior σ of k_trd around its starting value (weak: the profiles determine it): the *profile
+#: baseline's* prior (docs/physics.md §6, *Where the ring's values come from*), around the tyre file's k_trd or
+#: :data:`ringfit.params.DEFAULT_K_TREAD`. Wider than the other two k_trd σ on purpose: k_trd is fitted here to
+#: every profile at its stated load (both channels, every speed), so the data pin it and the prior only keeps
+#: the fit away from absurd values. The load estimate's (:data:`ringfit.fit.estimate.load.DEFAULT_K_TREAD_SD`,
+#: 0.3) must be informative, as its one profile cannot tell k_trd from the unknown load; the loaded-table
+#: condition's (:data:`ringfit.gap.modal_conditions.K_TREAD_PRIOR_SD`, 0.5) is not fitted at all but propagated
+#: into the contact patch computed from a table's stated load.
 K_TREAD_PRIOR_SD = 1.0
 #: Prior σ (log) of a ring parameter when the free-table fit gives no usable covariance.
 RING_PRIOR_SD_FALLBACK = 0.3

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ringfit.errors import InputError
-from ringfit.io.conditions import case_inputs, check_stated
+from ringfit.io.conditions import OtherPressure, case_inputs, check_stated
 from ringfit.io.modes import ModeTable, check_test_condition, read_mode_table
 from ringfit.io.tyre import Tyre, read_tyre
 
@@ -77,7 +77,7 @@ def sidecar_number(cond: dict, key: str):
         return math.nan
 
 
-def read_case_folder(folder: str | os.PathLike, *, other_pressure: str = "warn", used_as: str = "",
+def read_case_folder(folder: str | os.PathLike, *, other_pressure: OtherPressure = "warn", used_as: str = "",
                      pressure_law: bool = False) -> CaseFolder:
     """Read and check a case folder (module docstring); :class:`~ringfit.errors.InputError` names the bad file.
 

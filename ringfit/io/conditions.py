@@ -31,6 +31,7 @@ import hashlib
 import math
 import os
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -160,7 +161,12 @@ def pressure_conflict(condition: dict, tyre_pressure_bar: float) -> str | None:
             f"{100 * PRESSURE_TOL:g} %): the ring's stiffness depends on the pressure (docs/physics.md §1)")
 
 
-def check_stated(item, geometry, *, source, other_pressure: str, used_as: str = "",
+#: What :func:`check_stated` does with a measurement at another pressure than the tyre file's: ``"refuse"`` (an
+#: InputError) or ``"warn"``.
+OtherPressure = Literal["refuse", "warn"]
+
+
+def check_stated(item, geometry, *, source, other_pressure: OtherPressure, used_as: str = "",
                  pressure_law: bool = False) -> tuple[object, list[str]]:
     """A measurement's stated condition checked against the tyre file's geometry — its pressure
     (:func:`pressure_conflict`) and its rotation against its speed (a profile, which has its radial reading:
@@ -347,7 +353,7 @@ def _diff(a, b) -> str:
 __all__ = ["rotation_speed_conflict", "patch_drop_omega", "check_profile_rotation", "check_table_rotation",
            "pressure_conflict", "duplicate_inputs", "unique_inputs", "content_hash", "ROLLING_RADIUS_M", "RATE_TOL",
            "ROLLING_RADIUS_SHARE", "PATCH_DROP_SHARE", "PRESSURE_TOL", "stated_against_estimate", "STATED_Z",
-           "STATED_ESTIMATED", "STATED_REL_SD"]
+           "STATED_ESTIMATED", "STATED_REL_SD", "OtherPressure"]
 
 
 def case_inputs(folder) -> tuple[list[Path], list[Path]]:

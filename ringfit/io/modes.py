@@ -14,7 +14,7 @@ import math
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -26,9 +26,9 @@ KINDS = ("structural", "acoustic", "unclassified")
 TAGS = ("", "extr", "0", "vert", "hort")
 BRANCHES = ("", "backward", "forward")
 STATES = ("free", "loaded", "rolling")
-FRAMES = ("rotating", "fixed")
 #: A table's frame, as a type (:data:`FRAMES`).
 Frame = Literal["rotating", "fixed"]
+FRAMES: tuple[str, ...] = get_args(Frame)
 #: How the rim was held (sidecar ``fixture``, docs/formats.md §2): ``bolted`` = rim fixed (the default).
 FIXTURES = ("bolted", "suspension")
 #: The wheel body's sidecar keys (``fixture: suspension``) with their plausible ranges (stiffness, mass: lo excluded) ...

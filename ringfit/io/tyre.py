@@ -22,7 +22,7 @@ import numpy as np
 from ringfit.errors import InputError
 from ringfit.io.checks import MAX_PRESSURE_BAR
 from ringfit.io.files import atomic_write_text, check_output_path
-from ringfit.params import BAR, RING_PARAMETERS, RingParams, TyreGeometry, TyreLaws
+from ringfit.params import BAR, DEFAULT_K_TREAD, RING_PARAMETERS, RingParams, TyreGeometry, TyreLaws
 
 _TYRE_KEYS = {"radius_m": "radius", "width_m": "width", "tread_thickness_m": "tread_thickness",
               "tread_rib_width_m": "tread_rib_width"}
@@ -68,7 +68,7 @@ RANGES: dict[str, tuple[float, float]] = {
 CLOSED_RANGE = ("kw_share", "kv_share", "k_tread_share")
 
 #: Defaults used when [ring] lacks a value that a model needs (Table 9 of the seed).
-RING_DEFAULTS = dict(rho_a=2.715, ei=0.9426, kw=1.294e6, kv=1.161e6, damping_ratio=0.025, k_tread=19.0e6)
+RING_DEFAULTS = dict(rho_a=2.715, ei=0.9426, kw=1.294e6, kv=1.161e6, damping_ratio=0.025, k_tread=DEFAULT_K_TREAD)
 
 
 @dataclass

@@ -10,7 +10,7 @@ Example (``ringfit example records --out ex``)::
 
     rec = read_records("ex/impact.records.npz")
     write_uff58(rec, "impact.uff")
-    back = read_uff58("impact.uff")
+    back = read_uff("impact.uff")
     back.fs_hz == rec.fs_hz, np.array_equal(back.acc, rec.acc), back.axes   # True, True, ('radial', 'tangential')
 """
 
@@ -115,14 +115,6 @@ def write_uff58(records: Records, path: str | os.PathLike, *, overwrite: bool = 
 
 
 # --------------------------------------------------------------------------- reading
-
-
-def read_uff58(path: str | os.PathLike, *, angles: dict | None = None, axes: dict | None = None) -> Records:
-    """Time records from a UFF58 file (see :func:`read_uff`); an FRF file is refused."""
-    out = read_uff(path, angles=angles, axes=axes)
-    if isinstance(out, MeasuredFRF):
-        raise InputError("holds measured FRFs (function type 4), not time records", source=path)
-    return out
 
 
 def read_uff(path: str | os.PathLike, *, angles: dict | None = None, axes: dict | None = None

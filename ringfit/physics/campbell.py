@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -38,12 +38,16 @@ DEFAULT_N_MAX = 15
 SPEED_BUCKET = 8
 
 
-def frame_name(frame: str) -> str:
+#: A frame as the commands and plots take it: a table's :data:`~ringfit.io.modes.Frame` or ``"sensor"`` (the CLI's
+#: name for ``"rotating"``).
+FrameChoice = Literal[Frame, "sensor"]
+
+
+def frame_name(frame: FrameChoice) -> Frame:
     """``sensor``/``rotating`` → ``rotating``; ``fixed`` → ``fixed`` (docs/formats.md §2 names)."""
-    f = {"sensor": "rotating", "rotating": "rotating", "fixed": "fixed"}.get(frame)
-    if f is None:
+    if not isinstance(frame, str) or frame not in get_args(FrameChoice):
         raise InputError(f"frame {frame!r}; expected 'sensor' (= 'rotating') or 'fixed'")
-    return f
+    return "rotating" if frame == "sensor" else frame
 
 
 @dataclass
@@ -139,11 +143,11 @@ class CampbellDiagram:
             out.append(best)
         return np.array(out, dtype=object)
 
-    def frequencies(self, frame: Frame | Literal["sensor"]) -> np.ndarray:
+    def frequencies(self, frame: FrameChoice) -> np.ndarray:
         """Branch frequencies in ``frame`` (``fixed``, or ``rotating``/``sensor``: the principal line) ``(S, B)`` [Hz]."""
         return self.fixed_hz if frame_name(frame) == "fixed" else self.sensor_line()[0]
 
-    def rows(self, frame: Frame | Literal["sensor"] = "fixed") -> list[dict]:
+    def rows(self, frame: FrameChoice = "fixed") -> list[dict]:
         """One dict per (branch, speed): the columns of ``*.campbell.csv`` (docs/formats.md)."""
         frame = frame_name(frame)
         f = self.frequencies(frame)
@@ -368,5 +372,5 @@ def track_branches(freq: np.ndarray, content: np.ndarray) -> np.ndarray:
     return perm
 
 
-__all__ = ["DEFAULT_N_MAX", "TRAVELLING_RATIO", "SPEED_BUCKET", "FRAMES", "frame_name", "CampbellDiagram",
-           "CAMPBELL_COLUMNS", "campbell_diagram", "track_branches", "acceleration_labels"]
+__all__ = ["DEFAULT_N_MAX", "TRAVELLING_RATIO", "SPEED_BUCKET", "FRAMES", "FrameChoice", "frame_name",
+           "CampbellDiagram", "CAMPBELL_COLUMNS", "campbell_diagram", "track_branches", "acceleration_labels"]

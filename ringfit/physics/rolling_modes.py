@@ -29,6 +29,8 @@ Example (Table 9's tyre at its rated 4 kN, rolling at 40 km/h on a flat road)::
 
 from __future__ import annotations
 
+from typing import Literal, get_args
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -41,6 +43,10 @@ from ringfit.physics.rolling import NoDamping, RingModel, elastic_stiffness, har
 #: Harmonics |k| ≤ K of the Hill basis. K = 32 keeps every mode of dominant order n ≤ 15
 #: within 1e-4 of K = 200 (Table 9 tyre, 4 kN, 0–80 km/h; tests/test_rolling_modes.py).
 DEFAULT_HARMONICS = 32
+#: What :func:`sensor_lines` weights a mode's lines by: ``"displacement"`` or ``"acceleration"`` (an accelerometer's).
+SensorQuantity = Literal["displacement", "acceleration"]
+#: The unit of :func:`campbell_modes`'s speeds: ``"kmh"`` (road speed V [km/h]) or ``"rad/s"`` (wheel speed Ω).
+SpeedUnit = Literal["kmh", "rad/s"]
 
 TWO_PI = 2.0 * jnp.pi
 _J = jnp.array([[0.0, -1.0], [1.0, 0.0]], dtype=jnp.complex128)
@@ -354,7 +360,7 @@ def material_acceleration(modes: RollingModes):
     return -mu2 * modes.radial, -mu2 * modes.tangential
 
 
-def sensor_lines(modes: RollingModes, quantity: str = "displacement"):
+def sensor_lines(modes: RollingModes, quantity: SensorQuantity = "displacement"):
     """Lines of each mode as the co-rotating sensor sees them (docs/physics.md §3.7).
 
     **Arguments:** ``quantity`` — ``"displacement"`` (weights |W_k|², |V_k|²)
@@ -372,7 +378,7 @@ def sensor_lines(modes: RollingModes, quantity: str = "displacement"):
     elif quantity == "acceleration":
         W, V = material_acceleration(modes)
     else:
-        raise ValueError(f"quantity={quantity!r}; expected 'displacement' or 'acceleration'")
+        raise ValueError(f"quantity={quantity!r}; expected {' or '.join(map(repr, get_args(SensorQuantity)))}")
     pr = jnp.abs(W) ** 2
     pt = jnp.abs(V) ** 2
     return f, pr / jnp.sum(pr, -1, keepdims=True), pt / jnp.sum(pt, -1, keepdims=True)
@@ -441,7 +447,7 @@ def campbell_modes(
     speeds,
     road: AbstractRoad = FlatRoad(),
     *,
-    speed_unit: str = "kmh",
+    speed_unit: SpeedUnit = "kmh",
     contact: bool = True,
     harmonics: int = DEFAULT_HARMONICS,
     extensible: bool = False,
@@ -479,7 +485,7 @@ def campbell_modes(
     elif speed_unit == "rad/s":
         omegas = speeds
     else:
-        raise ValueError(f"speed_unit={speed_unit!r}; expected 'kmh' or 'rad/s'")
+        raise ValueError(f"speed_unit={speed_unit!r}; expected {' or '.join(map(repr, get_args(SpeedUnit)))}")
 
     def one(om):
         if not contact:
@@ -514,5 +520,5 @@ __all__ = [
     "DEFAULT_HARMONICS", "ContactArc", "contact_arc", "RollingModes", "harmonic_basis", "gyroscopic_matrices",
     "rolling_modes", "rolling_modes_jit", "mode_labels", "material_acceleration", "sensor_lines",
     "observed_frequencies", "loaded_rolling_modes", "CampbellModes", "campbell_modes",
-    "campbell_modes_jit", "campbell_modes_traced",
+    "campbell_modes_jit", "campbell_modes_traced", "SensorQuantity", "SpeedUnit",
 ]

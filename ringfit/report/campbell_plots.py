@@ -14,9 +14,14 @@ drawn in that panel.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from ringfit.report.figures import new_figure, save_figure
+
+if TYPE_CHECKING:  # the physics (JAX) is imported on first use
+    from ringfit.physics.campbell import FrameChoice
 
 _DIRECTION_COLOUR = {"backward": "tab:blue", "forward": "tab:red", "standing": "0.45"}
 _STATUS_STYLE = {
@@ -27,8 +32,8 @@ _STATUS_STYLE = {
 }
 
 
-def plot_campbell(diagram, path=None, *, frame: str = "fixed", match=None, title: str = "", f_max: float | None = None,
-                  overwrite: bool = True):
+def plot_campbell(diagram, path=None, *, frame: FrameChoice = "fixed", match=None, title: str = "",
+                  f_max: float | None = None, overwrite: bool = True):
     """Draw a :class:`~ringfit.physics.campbell.CampbellDiagram` (and the rows of a ``CampbellMatch``).
 
     **Arguments:** ``frame`` — ``fixed`` or ``sensor``/``rotating``; ``match`` —

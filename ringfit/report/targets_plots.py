@@ -10,6 +10,8 @@ imported inside each function (Agg backend).
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 
 from ringfit.report.figures import pyplot
@@ -135,7 +137,13 @@ def plot_ssi_summary(result, *, f_range=(0.0, 400.0)):
     return fig
 
 
-def plot_mode_shapes(result, *, rows=None, scale: float = 0.25, real: str = "principal", cols: int = 3):
+#: How :func:`plot_mode_shapes` makes a complex shape real: ``"principal"``
+#: (:func:`~ringfit.targets.shapes.real_shape_principal`, the most-real rotation) or ``"source"``
+#: (:func:`~ringfit.targets.shapes.real_shape_source`, the source's v_r = sign(Im v)|v|).
+RealShape = Literal["principal", "source"]
+
+
+def plot_mode_shapes(result, *, rows=None, scale: float = 0.25, real: RealShape = "principal", cols: int = 3):
     """Polar plots of the identified shapes around the tyre (radial and tangential).
 
     **Arguments:** ``rows`` table rows to draw (default all); ``scale`` the
@@ -153,7 +161,8 @@ def plot_mode_shapes(result, *, rows=None, scale: float = 0.25, real: str = "pri
     return fig
 
 
-def _shape_panels(result, fig, spec, *, rows=None, scale: float = 0.25, real: str = "principal", cols: int = 4):
+def _shape_panels(result, fig, spec, *, rows=None, scale: float = 0.25, real: RealShape = "principal",
+                  cols: int = 4):
     """Polar mode-shape panels of ``result`` drawn into the gridspec cell ``spec`` of ``fig``."""
     from ringfit.targets.shapes import real_shape_principal, real_shape_source
 

@@ -190,7 +190,7 @@ def make_state_identify_case(folder: str | os.PathLike, seed: int = 0, *, noise_
         ch = ch + np.stack([coloured_noise(rng, n_points, sigma, colour), coloured_noise(rng, n_points, sigma, colour)])
         angle = (grid_angles_deg(n_points) - offset_deg + 180.0) % 360.0 - 180.0
         order = np.argsort(angle)
-        cond = {"speed_kmh": 3.6 * omega * q["r_road"], "load_n": load, "pressure_bar": share * p_ref / BAR,
+        cond = {"speed_kmh": omega * q["r_road"] / KMH, "load_n": load, "pressure_bar": share * p_ref / BAR,
                 "rotation_hz": omega / (2.0 * np.pi), "revolutions": 50, "sample_rate_hz": 25600.0}
         truth_p = dict(load_n=load, speed_kmh=cond["speed_kmh"], pressure_bar=cond["pressure_bar"], slip=slip,
                        gain=gain, angle_offset_deg=offset_deg, noise_ms2=sigma, noise_colour=colour,

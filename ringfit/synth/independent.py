@@ -35,8 +35,11 @@ from __future__ import annotations
 import json
 import math
 import os
+from typing import Literal
 
 import numpy as np
+
+from ringfit.units import KMH
 
 #: Periodic central-difference coefficients {offset: c} and the power of h dividing them, per order and derivative.
 _COEFFS = {
@@ -52,12 +55,14 @@ EA_PENALTY = 1e9
 EIGEN_GRID = 1024
 PATCH_GRID = 4096
 PROFILE_GRID = 2048
+#: A discretisation of the truth (the keys of :data:`RESOLUTIONS`).
+Resolution = Literal["fine", "coarse"]
 #: The truth's discretisations: ``fine`` (the default) is converged far below the noise (4th order; the patch's
 #: edge cells weighted by the share inside it); ``coarse`` is the same physics on a coarse 2nd-order grid with a
 #: staircase patch (the grid points inside it, its half-angle from the active set's count) — a discretisation
 #: still consistent with the equations whose own error, of the order of the data's noise, stands in for a model
 #: form that differs from the data's more than ringfit's grid check can see.
-RESOLUTIONS = {
+RESOLUTIONS: dict[Resolution, dict] = {
     "fine": dict(order=4, eigen=EIGEN_GRID, patch=PATCH_GRID, profile=PROFILE_GRID, staircase=False),
     "coarse": dict(order=2, eigen=360, patch=720, profile=720, staircase=True),
 }
@@ -304,7 +309,8 @@ def resample(values: np.ndarray, angles_rad: np.ndarray, k_max: int) -> np.ndarr
 
 
 def make_independent_case(folder: str | os.PathLike, seed: int = 0, *, profiles: bool = True, loaded: bool = True,
-                          noise_colour: str | None = None, truth_file: bool = True, resolution: str = "fine") -> dict:
+                          noise_colour: str | None = None, truth_file: bool = True,
+                          resolution: Resolution = "fine") -> dict:
     """Write a ``ringfit identify`` case into ``folder`` (created; must be empty or absent) from the independent
     FD truth at ``resolution`` (:data:`RESOLUTIONS`); returns the truth (also ``truth.json`` there when
     ``truth_file``; the identification does not read it). Files and noise as
@@ -348,7 +354,7 @@ def make_independent_case(folder: str | os.PathLike, seed: int = 0, *, profiles:
             n_points = int(rng.choice([720, 1000, 1024]))
             # Ω = V/R_e, R_e = R_out − δ_z/3 with the standing deflection (docs/physics.md §4.3)
             still = fd_rolling(ring, geometry, load, res["profile"], order=order, omega=0.0)
-            omega = speed / 3.6 / (R_out - (R_out - still["H"]) / 3.0)
+            omega = speed * KMH / (R_out - (R_out - still["H"]) / 3.0)
             sol = fd_rolling(ring, geometry, load, res["profile"], order=order, omega=omega)
             rad, tan = fd_channels(sol, omega)
             gain = float(np.exp(rng.normal(0.0, 0.03)))
@@ -381,4 +387,5 @@ def make_independent_case(folder: str | os.PathLike, seed: int = 0, *, profiles:
 
 __all__ = ["stencils", "symbols", "ring_stiffness", "patch_weights", "fd_modes", "fd_free_frequencies",
            "fd_loaded_frequencies", "fd_rolling", "fd_channels", "fd_profile", "standing_half_angle", "resample",
-           "make_independent_case", "RESOLUTIONS", "LOADED_LOADS", "PROFILE_POINTS"]
+           "make_independent_case", "RESOLUTIONS", "Resolution", "LOADED_LOADS",
+           "PROFILE_POINTS"]

@@ -29,8 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ringfit._threads import small_matrix_threads
+from ringfit.units import GRAVITY, KMH
+
 BAR = 1e5
-G = 9.81
 #: Relaxation of the brush–contact fixed point (its plain steps alternate with a ratio of about −0.28).
 RELAX = 0.88
 #: The rated load of the example tyre [N] (Table 9's test load).
@@ -430,8 +432,8 @@ class RingFD:
         # v″ as D1·D1 v, as in the membrane strain: with D2 the discrete inextensible belt would show a
         # spurious strain rate Ω²(D2 − D1·D1)v at the patch edges in the tangential channel
         a_t = om2 * (d1 @ (d1 @ vs) + 2 * (d1 @ w) - vs)
-        f_r, f_t = a_r - G * np.cos(phi), a_t + G * np.sin(phi)
-        f_r0, f_t0 = -om2 * rs - G * np.cos(phi), G * np.sin(phi)
+        f_r, f_t = a_r - GRAVITY * np.cos(phi), a_t + GRAVITY * np.sin(phi)
+        f_r0, f_t0 = -om2 * rs - GRAVITY * np.cos(phi), GRAVITY * np.sin(phi)
         return -f_r + sensor.tilt * psi * f_t0, f_t + sensor.tilt * psi * f_r0
 
 
@@ -513,9 +515,7 @@ def simulate_state_recording(tyre: TrueTyre, states, *, speed_kmh: float, second
     ``revolutions`` hold the truth (``load_n``, ``pressure_bar``, ``speed_kmh``, ``rolling_radius_m``,
     ``free_radius_m``, ``fx_n``, ``slip``, ``torque_nm`` = Fx·H, ``tread_depth_mm``, …). ``drum_diameter_m``:
     on a drum of that diameter instead of a flat road (V is then the drum's surface speed)."""
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1):  # small dense solves: BLAS threads only cost here
+    with small_matrix_threads():  # small dense solves: BLAS threads only cost here
         return _simulate(tyre, states, speed_kmh, seconds, fs, sensor, seed, n, encoder_counts, drum_diameter_m,
                          progress)
 
@@ -529,7 +529,7 @@ def _simulate(tyre, states, speed_kmh, seconds, fs, sensor, seed, n, encoder_cou
     # Ω from V at the state of t = 0: r_road needs a solve at some Ω; the steady shape hardly depends on Ω
     # (only through EA/R² − ρAΩ²), so a first solve at a nominal Ω gives r_road, and the ring is rebuilt at Ω
     rout = tyre.radius + tyre.at(s0.pressure, s0.depth)["tau"]
-    v_ms = speed_kmh / 3.6
+    v_ms = speed_kmh * KMH
     ring = RingFD(tyre, s0.pressure, s0.depth, v_ms / rout, n=n, drum_diameter=drum)
     omega = v_ms / ring.solve(s0.load, s0.fx).r_road
     ring = RingFD(tyre, s0.pressure, s0.depth, omega, n=n, drum_diameter=drum)
@@ -570,7 +570,7 @@ def _simulate(tyre, states, speed_kmh, seconds, fs, sensor, seed, n, encoder_cou
         revs.append(dict(
             revolution=i, complete=int(0 < i < n_rev - 1), t_start_s=float(t[sel[0]]), t_end_s=float(t[sel[-1]]),
             load_n=st.load,
-            pressure_bar=st.pressure / BAR, speed_kmh=3.6 * omega * sol.r_road, rotation_hz=omega / (2 * np.pi),
+            pressure_bar=st.pressure / BAR, speed_kmh=omega * sol.r_road / KMH, rotation_hz=omega / (2 * np.pi),
             rolling_radius_m=sol.r_road, free_radius_m=sol.r_free, fx_n=sol.fx, slip=sol.slip,
             torque_nm=sol.fx * sol.axle_height, axle_height_m=sol.axle_height, tread_depth_mm=1e3 * st.depth,
             contact_length_m=sol.contact_length, fx_radial_n=sol.fx_radial))
@@ -630,7 +630,7 @@ def jittered_tyre(rng, nominal: TrueTyre | None = None) -> TrueTyre:
 
 
 def _sensor(rng, speed_kmh, rout) -> Sensor:
-    scale = (speed_kmh / 3.6) ** 2 / rout  # the centripetal acceleration
+    scale = (speed_kmh * KMH) ** 2 / rout  # the centripetal acceleration
     sig = rng.uniform(0.003, 0.01) * scale
     return Sensor(offset=float(rng.uniform(0.0005, 0.002)), tilt=float(rng.uniform(0.3, 1.0)),
                   gain=(float(1 + rng.normal(0, 0.02)), float(1 + rng.normal(0, 0.02))),

@@ -20,6 +20,7 @@ force is windowed (zero after ``force_window_s``) to keep its noise out.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -306,11 +307,14 @@ def harmonic_indicators(frf: FRFEstimate, n_max: int | None = None) -> np.ndarra
 #: A peak is resolved when the line spacing is at most this share of its frequency (the ±1 % window of the
 #: per-angle peaks holds a line, and a half-power width of ζ = 0.5 % spans a line).
 RESOLVE_SHARE = 0.01
+#: The mode indicators of :func:`frf_modes`: ``"harmonic"`` (each circumferential harmonic's power,
+#: :func:`harmonic_indicators`) or ``"sum"`` (the summed receptance power, :func:`mode_indicator`).
+Indicator = Literal["harmonic", "sum"]
 
 
 def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = (20.0, 400.0), delay_s: float = 0.0,
               threshold: float = 0.1, min_coherence: float = 0.9, prominence_db: float = 3.0,
-              indicator: str = "harmonic", cavity_hz: float | None = None):
+              indicator: Indicator = "harmonic", cavity_hz: float | None = None):
     """Peak picking on H1 (seed §2.2–2.3) → :class:`~ringfit.targets.identify.ModeIdentification`.
 
     ``indicator="sum"`` picks peaks on the summed receptance power (the
@@ -340,7 +344,7 @@ def frf_modes(records: Records | MeasuredFRF, *, f_range: tuple[float, float] = 
     elif indicator == "harmonic":
         curves = harmonic_indicators(frf)
     else:
-        raise ValueError(f"unknown indicator {indicator!r}; expected 'harmonic' or 'sum'")
+        raise ValueError(f"unknown indicator {indicator!r}; expected {' or '.join(map(repr, get_args(Indicator)))}")
     found = []  # (freq, curve index, strength)
     for i, curve in enumerate(curves):
         for fp in pick_peaks(f, curve, f_range, prominence_db):

@@ -266,11 +266,6 @@ def _accumulate(sums, counts, s1, s2, nrev):
     nrev += have.sum(axis=0)
 
 
-def profile_rms_error(profile: RollingProfile, truth, axis: Axis = "radial") -> float:
-    """RMS difference [m/s²] between a profile and a truth function φ [deg] → reading (for tests and benchmarks)."""
-    return float(np.sqrt(np.mean((profile.channel(axis) - truth(profile.angle_deg)) ** 2)))
-
-
 # ----------------------------------------------------------------------------- single revolutions
 
 #: Samples of the neighbouring revolutions on either side kept in a revolution's angle fit and interpolation.
@@ -503,5 +498,5 @@ def patch_passages(record: ContinuousRecord, *, axis: Axis = "radial", chunk: in
     return times
 
 
-__all__ = ["RollingProfile", "rolling_profile", "periodic_interpolator", "profile_rms_error", "DEFAULT_POINTS",
+__all__ = ["RollingProfile", "rolling_profile", "periodic_interpolator", "DEFAULT_POINTS",
            "revolution_grids", "RevolutionGrid", "patch_passages", "interpolation_response", "FRACTION_BINS"]

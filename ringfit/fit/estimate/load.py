@@ -34,7 +34,14 @@ if TYPE_CHECKING:
 from ringfit.physics.operating import KMH
 from ringfit.physics.profile import effective_rolling_radius, flat_or_drum
 
-#: σ of ln k_trd used when the tyre file has no k_tread (a ±60 % range at 95 %).
+#: σ of ln k_trd used when the tyre file has no k_tread (a ±60 % range at 95 %): the *load estimate's* prior
+#: (docs/physics.md §10, *k_trd held by default*). It differs from the other two k_trd σ on purpose: in one
+#: profile the load and k_trd are ~99 % correlated, so the data cannot pin k_trd and this σ alone sets how wide
+#: the load's interval is — it must be informative. The profile baseline's prior
+#: (:data:`ringfit.gap.profile.K_TREAD_PRIOR_SD`, 1.0) can be weak because there every profile's load is stated
+#: and the profiles determine k_trd; the loaded-table condition's σ
+#: (:data:`ringfit.gap.modal_conditions.K_TREAD_PRIOR_SD`, 0.5) is no prior of a fit but the spread propagated
+#: into a contact patch computed from the stated load.
 DEFAULT_K_TREAD_SD = 0.3
 #: An angle offset beyond this [deg] is flagged (the profile's zero is not the patch centre).
 OFFSET_WARN_DEG = 10.0

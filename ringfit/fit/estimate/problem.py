@@ -17,7 +17,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem
+from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, SigmaMode
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
 from ringfit.fit.least_squares import RING_FIELDS
 from ringfit.io.tyre import LINEAR_COVARIANCE
@@ -228,7 +228,7 @@ def nuisance_priors() -> dict:
 
 
 def estimate_problem(arrays: EstimateArrays, settings: EstimateSettings, k_max: int,
-                     prior: GaussianPrior | None = None, sigma: str = "estimate") -> Problem:
+                     prior: GaussianPrior | None = None, sigma: SigmaMode = "estimate") -> Problem:
     """The engine :class:`~ringfit.fit.engine.Problem` of an estimate. ``sigma``: ``"fixed"`` where the weights are
     the profile block's σ (:func:`ringfit.fit.profile_block.fit_profile_block`, the averaged profile), ``"estimate"``
     where they give only the noise's shape and one revolution's residual its scale (the per-revolution fits)."""

@@ -11,6 +11,7 @@ import dataclasses
 import math
 import warnings
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 import jax
 import numpy as np
@@ -31,6 +32,9 @@ from ringfit.targets.cleat import QUIET_SHARE
 #: Revolutions fitted in one call of the engine (one compiled vmap or scan; the last batch is padded).
 #: 16 is the fastest on a CPU (benchmarks/bench_estimate.py); an accelerator wants more.
 REVOLUTION_BATCH = 16
+#: How :func:`estimate_revolutions` runs a batch: ``"batch"`` (vmapped) or ``"chain"`` (one ``lax.scan``, each fit
+#: warm-started from the previous revolution's).
+RevolutionMode = Literal["batch", "chain"]
 #: Per-revolution Gauss–Newton tolerances (Cauchy test on the solver coordinates and the residual rows;
 #: near the optimum the steps shrink fast, so the error left after the last step is far below the
 #: per-revolution standard error of ~0.2–0.3 %) and step cap.
@@ -351,7 +355,7 @@ def _quiet(block, points: int, arrivals_s: np.ndarray, quiet_s: float) -> np.nda
 
 def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ring: RingParams, *,
                          settings: EstimateSettings = EstimateSettings(), batch: int = REVOLUTION_BATCH,
-                         mode: str = "batch", progress: bool = False) -> RevolutionEstimates:
+                         mode: RevolutionMode = "batch", progress: bool = False) -> RevolutionEstimates:
     """Load and patch for every whole revolution (from :func:`recording_revolutions`).
 
     Each revolution's harmonics 2…k_max are fitted for the load, the gain and the angle offset,
@@ -381,8 +385,8 @@ def estimate_revolutions(data: RecordingRevolutions, reference: LoadEstimate, ri
     """
     from tqdm import tqdm
 
-    if mode not in ("chain", "batch"):
-        raise ValueError(f"mode={mode!r}; expected 'chain' or 'batch'")
+    if mode not in get_args(RevolutionMode):
+        raise ValueError(f"mode={mode!r}; expected {' or '.join(map(repr, get_args(RevolutionMode)))}")
     fit = reference.fit
     k_max = data.k_max
     if k_max != reference.k_max:
@@ -534,7 +538,7 @@ def residual_outliers(scale: np.ndarray, fitted: np.ndarray, dof: int, z: float 
 
 def estimate_recording(record, geometry: TyreGeometry, ring: RingParams, *,
                        settings: EstimateSettings = EstimateSettings(), k_tread_in_file: bool = True,
-                       per_revolution: bool = True, batch: int = REVOLUTION_BATCH, mode: str = "batch",
+                       per_revolution: bool = True, batch: int = REVOLUTION_BATCH, mode: RevolutionMode = "batch",
                        progress: bool = False, ring_covariance=None, laws=None):
     """The averaged and the per-revolution estimates of a continuous recording (one pass over it).
 

@@ -32,8 +32,8 @@ import numpy as np
 from scipy.special import ndtri
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, least_squares,
-                                free_set, least_squares_batch, linearize, residuals)
+from ringfit.fit.engine import (LINEAR, LOG, AbstractResiduals, Coordinate, GaussianPrior, Problem, SigmaMode,
+                                free_set, least_squares, least_squares_batch, linearize, residuals)
 from ringfit.fit.estimate.harmonics import harmonic_amplitudes, amplitude_rows
 from ringfit.fit.profile_block import (LINER_OFFSET_PRIOR, PROFILE_K_MAX, fit_profile_block, noise_from_residual,
                                        sensor_coordinate, sensor_prior_entry)
@@ -210,7 +210,7 @@ class StateResiduals(AbstractResiduals):
 
 
 def state_problem(arrays: StateArrays, settings: EstimateSettings, k_max: int, prior: GaussianPrior | None = None,
-                  sigma: str = "estimate") -> Problem:
+                  sigma: SigmaMode = "estimate") -> Problem:
     """The engine :class:`~ringfit.fit.engine.Problem` of a state estimate."""
     model = StateResiduals(settings.profile_model(), settings.solver, 2, int(k_max))
     return Problem(model, as_traced(arrays), STATE_COORDS, prior=prior, sigma=sigma,
