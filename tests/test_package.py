@@ -91,3 +91,23 @@ def test_the_first_names_a_newcomer_meets_are_top_level():
     assert ringfit.identify is fit_identify.identify
     assert ringfit.RingParams is params.RingParams
     assert ringfit.TyreGeometry is params.TyreGeometry
+
+
+def test_an_option_outside_its_literal_is_refused_by_name():
+    """Options typed as Literals are checked at run time too: a misspelt one is refused with its name and the
+    allowed values, not silently taken for a default."""
+    import pytest
+
+    from ringfit.errors import InputError
+    from ringfit.io.conditions import check_stated
+    from ringfit.params import table9
+    from ringfit.report.targets_plots import plot_mode_shapes
+    from ringfit.synth.independent import make_independent_case
+
+    geometry, _ = table9()
+    with pytest.raises(InputError, match="other_pressure = 'warning'"):
+        check_stated(object(), geometry, source="x.csv", other_pressure="warning")
+    with pytest.raises(ValueError, match="real = 'principle'"):
+        plot_mode_shapes(None, real="principle")
+    with pytest.raises(ValueError, match="resolution = 'coarser'"):
+        make_independent_case("/nonexistent-never-written", resolution="coarser")

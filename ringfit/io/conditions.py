@@ -31,7 +31,7 @@ import hashlib
 import math
 import os
 from pathlib import Path
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -180,6 +180,8 @@ def check_stated(item, geometry, *, source, other_pressure: OtherPressure, used_
     refuse or warn only where the model would use the tyre file's pressure for it).
     **Returns** ``(item, warnings)``: the item as it is to be used (a profile's contradicting ``rotation_hz``
     dropped where its patch says so) and the warning lines, for the caller to issue."""
+    if other_pressure not in get_args(OtherPressure):
+        raise InputError(f"other_pressure = {other_pressure!r}; expected one of {get_args(OtherPressure)}")
     notes = []
     tyre_bar = float(geometry.pressure) / 1e5
     note = None if pressure_law else pressure_conflict(item.condition, tyre_bar)

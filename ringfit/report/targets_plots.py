@@ -10,7 +10,7 @@ imported inside each function (Agg backend).
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -151,6 +151,8 @@ def plot_mode_shapes(result, *, rows=None, scale: float = 0.25, real: RealShape 
     (most-real rotation) or ``"source"`` (v_r = sign(Im v)|v|).
     **Returns:** the figure.
     """
+    if real not in get_args(RealShape):
+        raise ValueError(f"real = {real!r}; expected one of {get_args(RealShape)}")
     plt = pyplot()
     t = result.table
     rows = list(range(len(t))) if rows is None else list(rows)

@@ -315,6 +315,8 @@ def make_independent_case(folder: str | os.PathLike, seed: int = 0, *, profiles:
     FD truth at ``resolution`` (:data:`RESOLUTIONS`); returns the truth (also ``truth.json`` there when
     ``truth_file``; the identification does not read it). Files and noise as
     :func:`ringfit.synth.identify.make_identify_case`."""
+    if resolution not in RESOLUTIONS:
+        raise ValueError(f"resolution = {resolution!r}; expected one of {tuple(RESOLUTIONS)}")
     res = RESOLUTIONS[resolution]
     order, stair = res["order"], res["staircase"]
     from ringfit.io.profiles import Profile, write_profile
