@@ -17,7 +17,7 @@ import ringfit
 from ringfit.data import path
 from ringfit.fit.source_procedure import source_study_fit
 
-out = Path(os.environ.get("RINGFIT_NOTEBOOK_OUT", "."))
+OUT = Path(os.environ.get("RINGFIT_NOTEBOOK_OUT", "."))
 
 # %% [markdown]
 # ## 1. Load the tyre and the mode table
@@ -76,12 +76,27 @@ post = ringfit.sample_posterior(table, tyre.geometry, tyre.ring, prior="physical
 for row in post.summary_table():
     print(f"{row['name']:6s} {row['median']:.4g}  [{row['lo']:.4g}, {row['hi']:.4g}]")
 print(post.diagnostics()["verdict"])
-post.save(out / "free_tyre_posterior.h5", overwrite=True)
+post.save(OUT / "free_tyre_posterior.h5", overwrite=True)
 
 # %% [markdown]
 # ## 5. Report
 # A single self-contained HTML file; rebuild it any time from the saved posterior.
 
 # %%
-report = ringfit.write_report(out / "free_tyre_posterior.h5", out / "free_tyre_report.html", overwrite=True)
+report = ringfit.write_report(OUT / "free_tyre_posterior.h5", OUT / "free_tyre_report.html", overwrite=True)
 print("report:", report)
+
+# %% [markdown]
+# The report's first figure, drawn from the saved posterior alone: each measured frequency with its σ,
+# the least-squares model, and the 95 % posterior predictive band (where a new measurement should fall);
+# below, each against the posterior median.
+
+# %%
+from ringfit.fit.posterior import natural_frequency_predictive
+from ringfit.report.free_plots import modes_figure
+
+saved = ringfit.load_posterior(OUT / "free_tyre_posterior.h5")
+n_data, f_data, sigma = (np.asarray(saved.meta["data"][k], dtype=float) for k in ("n", "freq_hz", "sigma_hz"))
+band = natural_frequency_predictive(saved, np.arange(max(0, n_data.min() - 1), n_data.max() + 2))
+modes_figure(n_data, f_data, sigma, lsq_hz=np.asarray(saved.meta["lsq"]["model_hz"]),
+             predictive=band).savefig(OUT / "free_fit.png", dpi=110)

@@ -16,7 +16,7 @@ from ringfit.gap import diagnose
 from ringfit.report.gap_report import verdict_sentence, write_gap_report
 from ringfit.synth.cases import make_case
 
-out = Path(os.environ.get("RINGFIT_NOTEBOOK_OUT", "."))
+OUT = Path(os.environ.get("RINGFIT_NOTEBOOK_OUT", "."))
 folder = Path(tempfile.mkdtemp()) / "case"
 label = make_case(folder, "ground_contact", seed=7)  # the label stays hidden from the diagnosis
 print(sorted(p.name for p in folder.iterdir()))
@@ -45,8 +45,31 @@ print(verdict_sentence(c))
 print("injected:", label.effect, label.magnitude)
 
 # %%
-write_gap_report(diag, out / "gap_report.html", overwrite=True)
-diag.write(out / "case.diagnosis.json", overwrite=True)
+write_gap_report(diag, OUT / "gap_report.html", overwrite=True)
+diag.write(OUT / "case.diagnosis.json", overwrite=True)
+
+# %% [markdown]
+# The verdict row by row, from the saved diagnosis alone (its `rows`, docs/formats.md §5): each measured mode's
+# held-out residual in units of its σ, before (the baseline) and after the accepted effect. Inside the band
+# is noise; the rows far outside it before are the gap, and the effect must bring them in.
+
+# %%
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ringfit.gap import read_diagnosis  # noqa: E402
+
+saved = read_diagnosis(OUT / "case.diagnosis.json")
+rows = saved["rows"]
+x = np.arange(len(rows))
+fig, ax = plt.subplots(figsize=(max(6.0, 0.25 * len(rows)), 4.0), layout="constrained")
+ax.axhspan(-1, 1, color="0.85", label="±1 noise σ")
+ax.plot(x, [r["z_baseline"] for r in rows], "o", mfc="none", label="before: baseline")
+ax.plot(x, [r["z_with_effects"] for r in rows], "s", ms=4, label="after: + " + " + ".join(saved["verdict"]["effects"]))
+ax.set_xticks(x, [r["short"] for r in rows], rotation=90, fontsize=6)
+ax.set_ylabel("held-out residual / σ")
+ax.legend(fontsize=7)
+fig.savefig(OUT / "gap_rows.png", dpi=110)
 
 # %% [markdown]
 # ## The wheel on its suspension (a loaded case)
@@ -124,5 +147,5 @@ print("injected:", plabel.effect, {k: round(v, 1) for k, v in plabel.magnitude.i
       f"ideal shrink {100 * (1 - plabel.noise['grid_rms_ms2'] / b['heldout_rms']):.1f} %")
 
 # %%
-write_gap_report(pdiag, out / "gap_report_profiles.html", overwrite=True)
-pdiag.write(out / "rolling.diagnosis.json", overwrite=True)
+write_gap_report(pdiag, OUT / "gap_report_profiles.html", overwrite=True)
+pdiag.write(OUT / "rolling.diagnosis.json", overwrite=True)

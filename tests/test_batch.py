@@ -114,6 +114,41 @@ def test_bad_batch_arguments_exit_2_before_any_work(tmp_path, capsys):
     assert capsys.readouterr().out.startswith(f"ringfit fit {MODES} --out {out / 'free-ssi.fitted.tyre.toml'}")
 
 
+def test_campaign_reads_every_tyre_folder_with_the_case_reader_before_any_work(tmp_path, capsys):
+    """A tyre folder the case reader refuses stops the campaign before any work: exit 2, one line naming the file
+    (a sidecar that is not JSON is not skipped; a folder without free.modes.csv or free records is refused)."""
+    from ringfit.synth.cases import make_case
+
+    camp, out = tmp_path / "camp", tmp_path / "out"
+    make_case(camp / "tyreA", effect="none", seed=3)
+    make_case(camp / "tyreB", effect="none", seed=4)
+    (camp / "tyreB" / "loaded.modes.json").write_text('{"state": "loaded", "load_n": 4000,')  # cut short
+    capsys.readouterr()
+    assert main(["campaign", str(camp), "--out", str(out), "--workers", "1", "--quiet"]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(err) == 1 and str(camp / "tyreB" / "loaded.modes.json") in err[0], err
+    assert not out.exists()
+    (camp / "tyreB" / "loaded.modes.json").unlink()
+    (camp / "tyreB" / "loaded.modes.csv").unlink()
+    (camp / "tyreB" / "free.modes.csv").unlink()
+    assert main(["campaign", str(camp), "--out", str(out), "--workers", "1", "--quiet"]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(err) == 1 and "free.modes.csv" in err[0] and "tyreB" in err[0], err
+    assert not out.exists()
+
+
+def test_campaign_joint_data_from_the_read_tables(tmp_path):
+    """Joint data (identify instead of fit and sample): a profile, or a standing loaded table, as read."""
+    from ringfit.cli.batch import read_campaign_tyre
+    from ringfit.synth.cases import make_case
+
+    make_case(tmp_path / "t", effect="none", seed=3)
+    assert read_campaign_tyre(tmp_path / "t").joint_data  # its standing loaded table
+    (tmp_path / "t" / "loaded.modes.json").write_text(
+        '{"state": "loaded", "load_n": 4000, "speed_kmh": 40, "pressure_bar": 2.2, "frame": "fixed"}')
+    assert not read_campaign_tyre(tmp_path / "t").joint_data  # a rolling one is not
+
+
 # ============================================================================ one task, in this process
 def _jitted_twice():
     import jax
@@ -235,8 +270,10 @@ def _make_campaign(root: Path):
     rec = impact_records(ring_modes(ring, geometry, seed=1), np.arange(24) * 15.0, duration_s=0.5, seed=3)
     write_records(rec, root / "tyreB" / "free.records.npz")
     make_case(root / "tyreC", effect="none", seed=5)
+    # tyreC: every measurement at 2.2 bar, its tyre file at 2.5: the case reader takes the folder (with a warning),
+    # identify refuses it (one pressure, not the tyre file's): a failed step in a campaign that runs
     toml = root / "tyreC" / "tyre.toml"
-    toml.write_text(toml.read_text().replace("pressure_bar = 2.2", "pressure_bar = 220000.0"))
+    toml.write_text(toml.read_text().replace("pressure_bar = 2.2", "pressure_bar = 2.5"))
     (root / "notes").mkdir()  # not a case folder: ignored
 
 
@@ -251,7 +288,7 @@ def test_campaign_table_and_report_from_the_saved_files(cluster, tmp_path, capsy
     status = main(["campaign", str(tmp_path / "camp"), "--out", str(out), "--scheduler", cluster.scheduler_address,
                    "--walkers", "8", "--min-steps", "150", "--max-steps", "150", "--quiet"])
     printed = capsys.readouterr().out
-    assert status == 1  # tyreC's tyre file is bad
+    assert status == 1  # identify refuses tyreC's pressures
     assert "tyreC/identify" in printed and "pressure_bar" in printed
     import csv
 

@@ -5,7 +5,6 @@ the CLI reference covers every command and option, and every notebook becomes a 
 import argparse
 import importlib.util
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -28,15 +27,22 @@ def _gen_pages():
     return module
 
 
-@needs_site
-def test_site_builds_strict(tmp_path):
+@pytest.fixture(scope="module")
+def built_site(tmp_path_factory):
+    """``mkdocs build --strict`` once for the tests that read the built site: ``(process, site folder)``."""
+    site = tmp_path_factory.mktemp("docs") / "site"
     env = dict(os.environ, DISABLE_MKDOCS_2_WARNING="true", NO_MKDOCS_2_WARNING="1",
                PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
+    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(site)],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
+    return proc, site
+
+
+@needs_site
+def test_site_builds_strict(built_site):
+    proc, site = built_site
     warnings = [line for line in proc.stderr.splitlines() if "WARNING" in line and "MkDocs may break" not in line]
     assert proc.returncode == 0, "mkdocs build --strict failed:\n" + "\n".join(warnings or [proc.stderr[-4000:]])
-    site = tmp_path / "site"
     for page in ("index.html", "getting-started.html", "cli.html", "physics.html", "formats.html",
                  "api/index.html", "api/fit.html", "api/gap.html", "tutorials/01_free_tyre.html"):
         assert (site / page).stat().st_size > 2000, page
@@ -50,6 +56,41 @@ def test_site_builds_strict(tmp_path):
 
     for name in ringfit.__all__:  # every top-level name links to where it is documented
         assert f"ringfit.{name}</code></a>" in index, name
+
+
+@needs_site
+def test_api_pages_show_only_what_a_module_exports(built_site):
+    """A module with ``__all__``: its page shows the names in it (a ``#:`` constant included) and no other name,
+    however documented (an internal constant with its ``#:`` comment stays off the page)."""
+    import griffe
+
+    proc, site = built_site
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    gen = _gen_pages()
+    loaded = griffe.load("ringfit", search_paths=[str(ROOT)], allow_inspection=False)
+    hidden = shown = 0
+    for page, modules in gen.api_sections():
+        html = (site / "api" / f"{page}.html").read_text()
+        for dotted in modules:
+            module = loaded if dotted == "ringfit" else loaded[dotted[len("ringfit."):]]
+            if not module.exports:
+                continue
+            for name, obj in module.members.items():
+                if obj.is_alias or not obj.is_attribute or obj.lineno is None:
+                    continue
+                comment = module.lines[obj.lineno - 2].lstrip().startswith("#:") if obj.lineno > 1 else False
+                if not comment:
+                    continue
+                on_page = f'id="{dotted}.{name}"' in html
+                if name in module.exports:
+                    assert on_page, f"{dotted}.{name} is in __all__ and documented, but not on api/{page}.html"
+                    shown += 1
+                else:
+                    assert not on_page, f"{dotted}.{name} is not in __all__, but on api/{page}.html"
+                    hidden += 1
+    assert hidden >= 20 and shown >= 20, (hidden, shown)  # both kinds exist: the test can fail
+    gap = (site / "api" / "gap.html").read_text()
+    assert 'id="ringfit.gap.modal.OUTLIER_Z"' in gap and 'id="ringfit.gap.modal.CONTACT_BRANCH"' not in gap
 
 
 @needs_site

@@ -10,9 +10,12 @@
 - ``api/``: one page per top-level module or subpackage of ``ringfit`` (found by
   walking the package, so a new module appears without configuration), each module
   rendered by mkdocstrings from its docstrings; ``api/index.md`` lists the top-level
-  names. Every public function and class the reference shows must have a docstring
-  (a public method may inherit its base class's): a missing one is a warning, which
-  ``mkdocs build --strict`` turns into a failure.
+  names. A page shows a module's public surface only (mkdocs.yml ``filters: public``): the
+  names in its ``__all__`` where it has one (a constant documented by ``#:`` included, through
+  ``comment_docstrings.py``), else its names without a leading underscore; an internal
+  constant or helper left out of ``__all__`` is not on the page. Every public function and
+  class the reference shows must have a docstring (a public method may inherit its base
+  class's): a missing one is a warning, which ``mkdocs build --strict`` turns into a failure.
 """
 
 from __future__ import annotations
@@ -20,7 +23,6 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import re
 import sys
 from pathlib import Path
 

@@ -320,7 +320,6 @@ def run_command(argv: list[str], cwd: str | None = None) -> int:
     line and its exit status when that status is not 0.
     """
     import contextlib
-    import io
     import os
 
     from ringfit.batch import TaskFailed
@@ -565,27 +564,59 @@ def campaign_tyres(folder: Path) -> list[Path]:
 FREE_RECORDS = ("free.records.npz", "free.uff", "free.unv")
 
 
-def has_joint_data(folder: Path) -> bool:
-    """Whether a tyre's folder holds states ``ringfit identify`` uses beside the free table: a rolling profile, or a
-    standing table whose sidecar says ``state = "loaded"`` (its ``load_n`` is checked by identify itself)."""
-    import json
+@dataclass(frozen=True)
+class CampaignTyre:
+    """One tyre of a campaign, its case folder read before any work (:func:`read_campaign_tyre`).
 
-    if any(folder.glob("*.profile.csv")):
-        return True
-    for sidecar in folder.glob("*.modes.json"):
-        if sidecar.name == "free.modes.json":
-            continue
-        try:
-            cond = json.loads(sidecar.read_text())
-        except (OSError, ValueError):
-            continue
-        if isinstance(cond, dict) and cond.get("state") == "loaded" and not (cond.get("speed_kmh") or 0):
-            return True
-    return False
+    ``records``: the free-tyre records its targets come from by SSI (``None``: its ``free.modes.csv`` as it is);
+    ``tables``, ``profiles``: its other mode tables and its rolling profiles, as the case reader gives them."""
+
+    folder: Path
+    records: Path | None
+    tables: tuple = ()
+    profiles: tuple = ()
+
+    @property
+    def joint_data(self) -> bool:
+        """Whether it holds states ``ringfit identify`` uses beside the free table: a rolling profile, or a standing
+        table (no speed, no rotation) whose sidecar says ``state = "loaded"`` (its ``load_n`` is checked by
+        identify itself)."""
+        from ringfit.io.case import sidecar_number
+
+        def standing(cond):
+            return not (sidecar_number(cond, "speed_kmh") or sidecar_number(cond, "rotation_hz") or 0.0)
+
+        return bool(self.profiles) or any(t.state == "loaded" and standing(t.condition) for t in self.tables)
 
 
-def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
-    """Tasks of a campaign and, per tyre, its output paths (docs/formats.md §13 layout)."""
+def read_campaign_tyre(folder: Path) -> CampaignTyre:
+    """A campaign's tyre folder read by the one case-folder reader (:func:`ringfit.io.case.read_case_folder`, its
+    rules and one-line errors naming the file: a sidecar that is not JSON included), before any work.
+
+    A folder whose free modes come from records (:data:`FREE_RECORDS`) has no ``free.modes.csv`` until ``ringfit
+    ssi`` writes it, and the reader requires one; its test tables and profiles are read by the readers
+    ``read_case_folder`` uses for them (the whole folder is read by the case reader in the identify and diagnose
+    steps, after SSI)."""
+    records = next((folder / r for r in FREE_RECORDS if (folder / r).exists()), None)
+    if records is None:
+        from ringfit.io.case import read_case_folder
+
+        case = read_case_folder(folder)
+        return CampaignTyre(folder, None, tuple(case.tables), tuple(case.profiles))
+    from ringfit.io.conditions import case_inputs
+    from ringfit.io.modes import read_mode_table
+    from ringfit.io.profiles import read_profile
+    from ringfit.io.tyre import read_tyre
+
+    read_tyre(folder / "tyre.toml")
+    table_paths, profile_paths = case_inputs(folder)
+    return CampaignTyre(folder, records, tuple(map(read_mode_table, table_paths)),
+                        tuple(map(read_profile, profile_paths)))
+
+
+def plan_campaign(tyres: list[CampaignTyre], out_dir: Path, opts) -> tuple[list, dict]:
+    """Tasks of a campaign (its tyres read by :func:`read_campaign_tyre`) and, per tyre, its output paths
+    (docs/formats.md §13 layout)."""
     import os
     import shutil
 
@@ -603,11 +634,11 @@ def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
                     outputs=tuple(map(str, outputs)), kind=kind)
 
     tasks, layout = [], {}
-    for tyre in tyres:
+    for read in tyres:
+        tyre, records = read.folder, read.records
         name = tyre.name
         dest = out_dir / name
         dest.mkdir(parents=True, exist_ok=True)
-        records = next((tyre / r for r in FREE_RECORDS if (tyre / r).exists()), None)
         paths = dict(folder=str(dest), fitted=str(dest / "fitted.tyre.toml"), posterior=str(dest / "posterior.h5"),
                      diagnosis=str(dest / "diagnosis.json"), source=str(tyre), records=None)
         after: tuple[str, ...] = ()
@@ -628,7 +659,7 @@ def plan_campaign(tyres: list[Path], out_dir: Path, opts) -> tuple[list, dict]:
         else:
             case, targets = tyre, tyre / "free.modes.csv"
             paths.update(case=str(case), targets=str(targets))
-        if has_joint_data(tyre):
+        if read.joint_data:
             # loaded tables at a known load or profiles: the tyre is identified once from everything measured
             # (``ringfit identify``, its posterior included); every later step reads that tyre file
             tasks.append(step(name, "identify", ["identify", str(case), "--out", paths["fitted"], "--posterior",
@@ -702,7 +733,8 @@ def run_campaign(args) -> int:
 
     _check_cluster_options(args)
     _check_campaign_options(args)
-    tyres = campaign_tyres(args.campaign)
+    # every tyre's folder read by the case reader before any work: a folder it refuses is refused here (exit 2)
+    tyres = [read_campaign_tyre(t) for t in campaign_tyres(args.campaign)]
     if args.out.exists() and not args.out.is_dir():
         raise InputError("exists and is not a folder", source=args.out)
     if args.out.resolve() == args.campaign.resolve() or args.campaign.resolve() in args.out.resolve().parents:

@@ -50,10 +50,7 @@ def run(args) -> int:
 
     if not str(args.out).endswith(".json"):
         raise InputError("--out must end in .json (e.g. NAME.diagnosis.json)", source=args.out)
-    folder = Path(args.folder)
-    if not folder.is_dir():
-        raise InputError("not a folder; a case is a folder with tyre.toml and free.modes.csv (docs/formats.md §6)",
-                         source=folder)
+    folder = Path(args.folder)  # not a case folder: the case reader's one line (ringfit.io.case.read_case_folder)
     inputs = list(folder.glob("*")) + ([Path(args.tyre)] if args.tyre else [])
     check_output_paths([args.out, args.report], overwrite=args.force, inputs=inputs)
     baseline = None

@@ -711,4 +711,5 @@ __all__ = [
     "track_branches", "TableCondition", "table_conditions", "CampbellMatch", "match_tables", "MATCH_COLUMNS",
     "CAMPBELL_COLUMNS", "match_rows_table", "resolution_flags", "label_identified_modes", "compare_with_ring",
     "frame_name", "Candidate", "diagram_candidates", "diagram_group_key", "row_labels", "label_penalties", "assign_rows",
+    "MIN_LINE_WEIGHT",
 ]

@@ -33,12 +33,12 @@ import numpy as np
 
 from ringfit.errors import InputError
 from ringfit.gap.effects.base import Effect
-from ringfit.gap.modal_conditions import (DEFAULT_K_TREAD, K_TREAD_FITTED_SD, K_TREAD_PRIOR_SD, _cavity_split,
-                                         _is_reference_state, _static_contact, _table_rows, _wheel_note, contact_patch,
-                                         spin_of, table_label)
-from ringfit.gap.modal_lines import LineSets, _ambiguity, _match_missing_n, label_counts
+from ringfit.gap.modal_conditions import (DEFAULT_K_TREAD, K_TREAD_FITTED_SD, K_TREAD_PRIOR_SD, cavity_split,
+                                         is_reference_state, spin_of, static_contact, table_label, table_rows,
+                                         wheel_note)
+from ringfit.gap.modal_lines import LineSets, ambiguity, label_counts, match_missing_n
 from ringfit.gap.modal_rows import (ROW_BUCKET, TEST_SIGMA_FLOOR_REL, DampingPredictor, ModalData, ModalPredictor,
-                                   ModalRows, _rows_module, pad_rows, rolling_tables)
+                                   pad_rows, rolling_tables, rows_module)
 from ringfit.gap.problem import GapProblem, ProblemMeta
 from ringfit.gap.rolling_rows import assign_rolling_rows, joint_for
 from ringfit.io.modes import ModeTable
@@ -176,7 +176,7 @@ def _identification_spread(tables, ref_index=0) -> tuple[float, str] | None:
     is judged against)."""
     ref = tables[ref_index]
     for t in tables[1:]:
-        if not _is_reference_state(t):
+        if not is_reference_state(t):
             continue
         d, ns = [], []
         for n in sorted(set(ref.n[(ref.kind == "structural") & (ref.n >= 0)].tolist())):
@@ -223,10 +223,10 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
     for t in tables:
         load = t.condition.get("load_n")
         if t.state in ("loaded", "rolling") and load:
-            a, sa, sol = _static_contact(ring_ref, geometry, float(load), t.condition.get("drum_diameter_m"), kt_sd)
+            a, sa, sol = static_contact(ring_ref, geometry, float(load), t.condition.get("drum_diameter_m"), kt_sd)
             patches.append((a, sa))
             # the loaded cavity's split W_2/h_c (docs/physics.md §6) from the same static solve
-            splits.append(float(_cavity_split(sol, geometry)) if t.state == "loaded" else None)
+            splits.append(float(cavity_split(sol, geometry)) if t.state == "loaded" else None)
             conditions.append(f"patch half-angle {math.degrees(a):.2f} ± {math.degrees(sa):.2f} deg from "
                               f"load_n = {float(load):g} N (k_trd {ring_ref.k_tread:.3g} N/m^2"
                               f"{'' if has_kt else ', tyre.toml has none: its prior'})")
@@ -235,10 +235,10 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
             conditions.append("")
             splits.append(None)
     for ti, t in enumerate(tables):  # the wheel on its suspension (docs/physics.md §6 wheel_suspension)
-        note = _wheel_note(t)
+        note = wheel_note(t)
         if note:
             conditions[ti] = "; ".join(x for x in (conditions[ti], note) if x)
-    rows, cavity_hz = _table_rows(tables, geometry, patches, spins, splits)
+    rows, cavity_hz = table_rows(tables, geometry, patches, spins, splits)
     for r in rows:  # rows whose n (and type) the table leaves to matching by frequency: the random-line null's rows
         r["matchable"] = (not r["reference"]) and r["n"] < 0
         # the labels as the table gave them (the assignment of a rolling table may override them: the random-line
@@ -248,7 +248,7 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
     if rolling is not None:
         for ti, note in rolling.notes.items():
             conditions[ti] = "; ".join(x for x in (conditions[ti], note) if x)
-    match_notes, matched_lines = _match_missing_n(rows, ring_ref, geometry)
+    match_notes, matched_lines = match_missing_n(rows, ring_ref, geometry)
     row_lines = {j: cand for j, (cand, _) in matched_lines.items() if rows[j]["matchable"] and rows[j]["joint"] == 0}
     for j, note in rolling_notes.items():
         match_notes[j] = "; ".join(x for x in (note, match_notes.get(j)) if x)
@@ -259,7 +259,7 @@ def build_modal_problems(tables: list[ModeTable], tyre, effects: tuple[Effect, .
     if choice is not None:  # the model structure the rolling rows were assigned to (docs/formats.md §5)
         problems[0].meta.rolling_structure = choice.record()
         problems[0].meta.label_counts = label_counts(tables, rows, rolling_records, choice)
-    _ambiguity(problems[0], rows, choice)
+    ambiguity(problems[0], rows, choice)
     meta = problems[0].meta
     meta.table_names, meta.patches = [table_label(t, i) for i, t in enumerate(tables)], patches
     meta.spins, meta.outer_radius_m = spins, float(geometry.outer_radius)
@@ -357,7 +357,7 @@ def _frequency_problem(tables, rows, cavity_hz, geometry, ring_ref, fit, sigma_r
     from ringfit.fit.priors import PHYSICAL_PRIORS
 
     m = len(rows)
-    mrows = _rows_module(rows, 1.0, cavity_hz, [p[0] for p in patches], rolling)
+    mrows = rows_module(rows, 1.0, cavity_hz, [p[0] for p in patches], rolling)
     y = np.array([r["freq"] for r in rows])
     n = np.array([r["n"] for r in rows], dtype=float)
     ref = np.array([r["reference"] for r in rows])
@@ -440,7 +440,7 @@ def _damping_problem(tables, rows, cavity_hz, geometry, ring_ref, effects, noise
     m = len(rows)
     table_ids = sorted({r["table"] for r in rows})
     remap = {t: i for i, t in enumerate(table_ids)}
-    mrows = _rows_module([dict(r, table=remap[r["table"]]) for r in rows], 0.0, cavity_hz, np.zeros(len(table_ids)))
+    mrows = rows_module([dict(r, table=remap[r["table"]]) for r in rows], 0.0, cavity_hz, np.zeros(len(table_ids)))
     y = np.log(np.array([r["damping"] for r in rows]) / 100.0)
     n = np.array([r["n"] for r in rows], dtype=float)
     tab = np.array([remap[r["table"]] for r in rows])
@@ -490,4 +490,5 @@ def _damping_problem(tables, rows, cavity_hz, geometry, ring_ref, effects, noise
     return problem
 
 
-__all__ = ["build_modal_problems", "second_difference_sigma", "HUBER", "OUTLIER_Z", "BASE"]
+__all__ = ["build_modal_problems", "second_difference_sigma", "HUBER", "OUTLIER_Z", "BASE", "FREQ_SIGMA_FLOOR_HZ",
+           "FREQ_SIGMA_FLOOR_REL", "DAMPING_SIGMA_FLOOR"]

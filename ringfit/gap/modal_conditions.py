@@ -2,7 +2,7 @@
 
 The contact patch at a stated load (:func:`contact_patch`: the rolling model's static contact solve with the
 tyre file's k_trd, or Table 9's with :data:`K_TREAD_PRIOR_SD`), the loaded cavity's split lines, the wheel on its
-suspension (:func:`wheel_row`), the spin of a rolling table, and each table's rows (:func:`_table_rows`).
+suspension (:func:`wheel_row`), the spin of a rolling table, and each table's rows (:func:`table_rows`).
 """
 
 from __future__ import annotations
@@ -52,7 +52,8 @@ def spin_of(table: ModeTable, outer_radius: float) -> float:
     return 0.0
 
 
-def _is_reference_state(table: ModeTable) -> bool:
+def is_reference_state(table: ModeTable) -> bool:
+    """Whether ``table`` is the reference state the ring is fitted to: static, free, on a bolted rim."""
     c = table.condition
     # a free tyre on a suspended wheel is another state (its n <= 1 modes move: wheel_suspension)
     return (table.state == "free" and not float(c.get("speed_kmh") or 0) and not float(c.get("rotation_hz") or 0)
@@ -66,11 +67,11 @@ def contact_patch(ring: RingParams, geometry: TyreGeometry, load_n: float, drum_
     The static contact solve of the rolling model (docs/physics.md §4.3–4.4, Ω = 0): the
     half-angle is half the patch between its edges; σ from k_trd·e^{±k_tread_sd}.
     """
-    a, sa, _ = _static_contact(ring, geometry, load_n, drum_diameter_m, k_tread_sd)
+    a, sa, _ = static_contact(ring, geometry, load_n, drum_diameter_m, k_tread_sd)
     return a, sa
 
 
-def _static_contact(ring, geometry, load_n, drum_diameter_m, k_tread_sd):
+def static_contact(ring, geometry, load_n, drum_diameter_m, k_tread_sd):
     """:func:`contact_patch`'s ``(a, σ_a)`` and the nominal static solution (the loaded cavity's split uses it)."""
     from ringfit.physics.contact import ContactSolver, patch_edges, solve_rolling_jit
     from ringfit.physics.operating import OperatingPoint, road_from_drum_diameter
@@ -95,7 +96,7 @@ def _loaded_cavity_lines(f_a, split):
 
 
 @jit
-def _cavity_split(solution, geometry):
+def cavity_split(solution, geometry):
     """W_2/h_c of a static contact solution (docs/physics.md §6 cavity_mode), in one compiled program."""
     from ringfit.physics.cavity import cavity_height, deflection_cos2
 
@@ -113,7 +114,7 @@ def wheel_row(condition: dict, source: str = "<condition>") -> list[float]:
     return [1.0, w["mass"], w["inertia"], *inv, w["c_vertical"], w["c_fore_aft"], w["c_torsion"]]
 
 
-def _table_rows(tables, geometry, patches, spins, cavity_split=None):
+def table_rows(tables, geometry, patches, spins, cavity_split=None):
     """Per structural row: dict of its attributes (before n-matching).
 
     ``cavity_split``: per table W_2/h_c of the loaded cavity (docs/physics.md §6 cavity_mode), or None."""
@@ -158,7 +159,7 @@ def _row_cavity(table: ModeTable, f_a: float, contact: int, n: int, split) -> fl
     return float(vertical if contact == 1 else fore_aft)
 
 
-def _wheel_note(table: ModeTable) -> str:
+def wheel_note(table: ModeTable) -> str:
     """One line on the table's fixture (empty for a bolted rim); a ``WARNING`` where defaults stand in."""
     import warnings
 
@@ -177,4 +178,5 @@ def _wheel_note(table: ModeTable) -> str:
     return note
 
 
-__all__ = ["contact_patch", "wheel_row", "spin_of", "table_label", "DEFAULT_K_TREAD", "K_TREAD_PRIOR_SD", "K_TREAD_FITTED_SD"]
+__all__ = ["contact_patch", "wheel_row", "spin_of", "table_label", "is_reference_state", "static_contact",
+           "cavity_split", "table_rows", "wheel_note", "DEFAULT_K_TREAD", "K_TREAD_PRIOR_SD", "K_TREAD_FITTED_SD"]

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ringfit.gap.modal_conditions import table_label
-from ringfit.gap.modal_rows import (TEST_SIGMA_FLOOR_REL, ModalData, ModalPredictor, _rows_module, pad_rows,
+from ringfit.gap.modal_rows import (TEST_SIGMA_FLOOR_REL, ModalData, ModalPredictor, rows_module, pad_rows,
                                    rolling_tables)
 from ringfit.gap.problem import UNSET, GapProblem
 from ringfit.gap.rolling_rows import joint_for
@@ -81,7 +81,7 @@ def mixture_sigma(f, sigma, hz_assigned, hz_lines):
     return np.sqrt(sigma**2 + half**2), ambiguous, alt
 
 
-def _ambiguity(problem: GapProblem, rows, choice):
+def ambiguity(problem: GapProblem, rows, choice):
     """Rows of rolling tables whose frequency lies within :data:`AMBIGUOUS_Z` σ of a second line of their table
     (of the model structure the case chose, :class:`ringfit.gap.rolling_rows.StructureChoice`): the data cannot
     decide between the two, so the row carries the two-line mixture (equal weights) in moment form —
@@ -105,7 +105,7 @@ def _ambiguity(problem: GapProblem, rows, choice):
                               mixture_sigma_hz=round(float(sig), 4))
 
 
-def _match_missing_n(rows, ring, geometry):
+def match_missing_n(rows, ring, geometry):
     """Assign n to rows without one: nearest mode of the model their condition computes.
 
     **Returns:** ``(notes, lines)``: the match sentence and the model's lines (:func:`missing_n_lines`) of each
@@ -169,7 +169,7 @@ def line_problem(problem: GapProblem):
         problem.meta.line_problem = None
         return None
     every = list(rows) + extra
-    mrows = _rows_module(every, 1.0, L.cavity_hz, L.table_patch, L.rolling)
+    mrows = rows_module(every, 1.0, L.cavity_hz, L.table_patch, L.rolling)
     # a coarser bucket than the problem's: line problems of different cases (a few hundred rows) then share
     # one compiled linearisation per candidate structure instead of compiling per 32-row step
     data = ModalData(rows=pad_rows(mrows, LINE_BUCKET), ring=problem.data.ring, geometry=problem.data.geometry)
@@ -399,4 +399,5 @@ def label_counts(tables, rows, records, choice) -> dict:
     return out
 
 
-__all__ = ["LineSets", "missing_n_lines", "mixture_sigma", "line_problem", "label_counts", "AMBIGUOUS_Z", "LABEL_OVERRIDE", "LINE_BUCKET", "MATCH_N_MAX"]
+__all__ = ["LineSets", "missing_n_lines", "match_missing_n", "ambiguity", "mixture_sigma", "line_problem",
+           "label_counts", "AMBIGUOUS_Z", "LABEL_OVERRIDE", "LINE_BUCKET", "MATCH_N_MAX"]

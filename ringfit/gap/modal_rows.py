@@ -160,7 +160,10 @@ class DampingPredictor(eqx.Module):
         return jnp.log(jnp.clip(zeta, 1e-6))
 
 
-def _rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=None) -> ModalRows:
+def rows_module(rows, is_freq: float, cavity_hz: float, table_patch, rolling=None) -> ModalRows:
+    """The row dicts (:func:`ringfit.gap.modal_conditions.table_rows`) as one :class:`ModalRows`: ``is_freq`` 1 for
+    frequency rows, 0 for damping rows; ``cavity_hz`` where a row states none; ``table_patch`` per table;
+    ``rolling``: the rolling tables' speeds and patch edges (``None``: none)."""
     def col(key, dtype=np.float64):
         return np.asarray([r[key] for r in rows], dtype=dtype)
 
@@ -211,4 +214,5 @@ def rolling_tables(rows) -> tuple[int, ...]:
     return tuple(sorted({r["table"] for r in rows if r["joint"] > 0}))
 
 
-__all__ = ["ModalRows", "ModalData", "ModalPredictor", "DampingPredictor", "pad_rows", "rolling_tables", "ROW_BUCKET", "TEST_SIGMA_FLOOR_REL"]
+__all__ = ["ModalRows", "ModalData", "ModalPredictor", "DampingPredictor", "rows_module", "pad_rows",
+           "rolling_tables", "ROW_BUCKET", "TEST_SIGMA_FLOOR_REL"]
