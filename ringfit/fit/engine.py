@@ -1038,5 +1038,5 @@ def evaluate(problem: Problem, theta, free: tuple[str, ...], *, pad_to: int | No
     return result
 
 
-__all__ = ["DECREMENT_TOL", "least_squares", "least_squares_batch", "SOLVERS", "evaluate", "sum_of_squares_batch", "linearize",
+__all__ = ["ACTIVE_SET_AFTER", "DECREMENT_TOL", "least_squares", "least_squares_batch", "SOLVERS", "evaluate", "sum_of_squares_batch", "linearize",
            "Linearization", "inner_slots", "residuals", "residuals_batch", "log_probability", "log_density", "DensityKernel", "free_set", "FreeSet", "in_fixed_chunks", "Problem", "Coordinate", "GaussianPrior", "AbstractResiduals", "LOG", "LINEAR"]

@@ -293,7 +293,7 @@ def noise_summary(data: dict) -> str:
             f"√κ {math.sqrt(kappa):.3g})")
 
 
-__all__ = ["FrequencyData", "frequency_data", "hat_diagonal", "block_scale", "t_widening", "fit_free_block",
+__all__ = ["noise_passes", "FrequencyData", "frequency_data", "hat_diagonal", "block_scale", "t_widening", "fit_free_block",
            "frequency_folds", "discrepancy_ratio", "row_widening", "noise_summary", "check_noise",
            "DEFAULT_RELATIVE_STD", "SIGMA_FLOOR_REL", "SCALE_PASSES", "SCALE_TOLERANCE", "Z95", "NOISE_MODELS",
            "NoiseModel", "DISCREPANCY_FOLDS", "FOLD_LEVERAGE_MAX"]

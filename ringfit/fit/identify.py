@@ -1680,7 +1680,7 @@ def _json_safe(x):
     return x
 
 
-__all__ = ["identify", "read_identify_folder", "log_interval", "cap_unbounded", "load_check", "IdentifyInputs",
+__all__ = ["IDENTIFY_MAX_STEPS", "friction_ends", "friction_profile", "serial_map", "identify", "read_identify_folder", "log_interval", "cap_unbounded", "load_check", "IdentifyInputs",
            "discrepancy_ratio", "block_folds", "band_folds",
            "Identification", "identification_report",
            "JointResiduals", "harmonic_rows", "standing_half_angle", "BLOCKS"]

@@ -358,5 +358,5 @@ def _profile_rule(rows, center, *, phi, kmax, floor, shape) -> np.ndarray:
     return out
 
 
-__all__ = ["build_profile_problem", "profile_predict", "ProfilePredictor", "ProfileData",
+__all__ = ["K_TREAD_PRIOR_SD", "MODEL_PRECISION", "grid_defect", "build_profile_problem", "profile_predict", "ProfilePredictor", "ProfileData",
            "BASE", "RING_BASE", "GRID"]

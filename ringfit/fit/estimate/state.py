@@ -1572,7 +1572,7 @@ def state_fisher(geometry: TyreGeometry, ring: RingParams, laws: TyreLaws, state
                        free=free, information=F)
 
 
-__all__ = ["STATE_PARAMETERS", "STATE_NAMES", "STATE_COORDS", "PRESSURE", "SLIP", "TREAD", "QUANTITIES", "StateArrays",
+__all__ = ["grid_corrected", "STATE_PARAMETERS", "STATE_NAMES", "STATE_COORDS", "PRESSURE", "SLIP", "TREAD", "QUANTITIES", "StateArrays",
            "StateResiduals", "state_problem", "state_priors", "free_parameters", "state_quantities", "StateEstimate",
            "estimate_state", "profile_rows", "channel_weights", "StateRevolutions", "state_revolutions",
            "StateFisher", "state_fisher", "state_of", "estimate_recording_state", "state_drift", "drifting_state",
