@@ -38,14 +38,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import DECREMENT_TOL, LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares, residuals
+from ringfit.fit.engine import LINEAR, LOG, AbstractResiduals, Coordinate, Problem, least_squares, residuals
 from ringfit.fit.free_block import (DISCREPANCY_FOLDS, FOLD_LEVERAGE_MAX, SCALE_PASSES,  # noqa: F401 (re-exported)
                                     SCALE_TOLERANCE, Z95, block_scale, discrepancy_ratio, frequency_folds,
                                     hat_diagonal, noise_passes, t_widening)
 from ringfit.fit.least_squares import (DEFAULT_RELATIVE_STD, RING_COORDS, RING_FIELDS, frequency_data,
                                       ring_from_vector, ring_vector)
 from ringfit.fit.priors import BOUNDS
-from ringfit.fit.profile_block import (PROFILE_K_MAX, SENSOR_FIELDS, harmonic_rows, noise_from_residual, nuisance_coords,
+from ringfit.fit.profile_block import (PROFILE_K_MAX, SENSOR_FIELDS, decrement_tol, harmonic_rows, noise_from_residual, nuisance_coords,
                                        nuisance_names, nuisance_prior, nuisance_start, profile_basis, profile_rows,
                                        read_through, sensor_basis, sensor_coords, sensor_names, sensor_prior,
                                        sensor_reading, sensor_start)
@@ -1032,7 +1032,7 @@ def _identify(inputs, *, solver, max_steps, rtol, atol, progress, sensor, consid
         # the sensor's weakly told nuisances converge only linearly: stop at the decrement (docs/physics.md §11
         # *convergence*); without them, the Cauchy test alone, as every other fit of these blocks (`ringfit fit`)
         fit = least_squares(problem, state["theta"], free, max_steps=max_steps, rtol=rtol, atol=atol,
-                            dtol=DECREMENT_TOL if sensor and P else 0.0)
+                            dtol=decrement_tol(bool(sensor and P)))
         if progress:
             print(f"identify: pass {state['passes']}: {fit.status} after {fit.iterations} steps, "
                   f"χ²/m = {fit.extra['chi2_raw'] / fit.residuals.size:.3g}",

@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import LINEAR, LOG, Coordinate, GaussianPrior
+from ringfit.fit.engine import DECREMENT_TOL, LINEAR, LOG, Coordinate, GaussianPrior
 from ringfit.io.profiles import resample_profile
 from ringfit.params import RingParams, TyreGeometry
 from ringfit.physics.contact import ContactSolver
@@ -90,6 +90,13 @@ SENSOR_FIELDS = ("tilt_gain", "corner_hz", "liner_offset_m", "gain_tangential")
 #: The liner offset's step in :func:`sensor_reading`'s bilinear basis [m] (the reading is exactly bilinear in
 #: (e, γ): any step gives the same basis up to round-off).
 LINER_BASIS_STEP = 1.0e-3
+
+
+def decrement_tol(sensor: bool) -> float:
+    """The engine's decrement stop (``least_squares(dtol=…)``) for a fit of profiles: :data:`~ringfit.fit.engine.
+    DECREMENT_TOL` when the runs' sensor nuisances are fitted (they converge only linearly), else 0 (the Cauchy test
+    alone, as every other fit) — docs/physics.md §11 *convergence*; one rule for fit-rolling and identify."""
+    return DECREMENT_TOL if sensor else 0.0
 
 
 def nuisance_names(P: int) -> tuple[str, ...]:
@@ -474,6 +481,6 @@ def _profile_passes(fit_at, sigma0, k_min):
     return fit, state["used"], done
 
 
-__all__ = ["RollingData", "fit_profile_block", "rolling_data", "block_rows", "profile_rows", "harmonic_rows", "profile_band", "nuisance_names", "nuisance_coords", "nuisance_start",
+__all__ = ["decrement_tol", "RollingData", "fit_profile_block", "rolling_data", "block_rows", "profile_rows", "harmonic_rows", "profile_band", "nuisance_names", "nuisance_coords", "nuisance_start",
            "read_through", "nuisance_prior", "nuisance_prior_cov", "GAIN_SPREAD", "GAIN_COMMON_SD", "OFFSET_SPREAD", "noise_spectrum", "noise_from_residual", "GAIN_RANGE", "OFFSET_BOUND", "OFFSET_SCALE",
            "PROFILE_K_MIN", "NOISE_SMOOTHING", "PROFILE_BAND_MARGIN"]

@@ -52,10 +52,11 @@ import jax
 import numpy as np
 
 from ringfit.errors import InputError
-from ringfit.fit.engine import DECREMENT_TOL, AbstractResiduals, Problem, least_squares, sum_of_squares_batch
+from ringfit.fit.engine import AbstractResiduals, Problem, least_squares, sum_of_squares_batch
 from ringfit.fit.least_squares import RING_COORDS, RING_FIELDS, ring_from_vector, ring_vector
 from ringfit.fit.priors import BOUNDS
-from ringfit.fit.profile_block import (SENSOR_FIELDS, RollingData, block_rows, fit_profile_block, harmonic_rows,
+from ringfit.fit.profile_block import (SENSOR_FIELDS, RollingData, block_rows, decrement_tol,
+                                       fit_profile_block, harmonic_rows,
                                        nuisance_coords, nuisance_names, nuisance_prior, nuisance_start, profile_basis,
                                        read_through, rolling_data, sensor_coords, sensor_names, sensor_prior,
                                        sensor_reading, sensor_start)
@@ -279,7 +280,7 @@ def _fit_rolling(profiles, geometry, ring, *, free, model, sensor, solver, rolli
     def fit_at(sigma):  # one pass, warm-started from the last converged one
         fit = least_squares(_problem(data, geometry, rows, sigma, model, sensor, solver, nuisances), state["theta"],
                             free, max_steps=max_steps, rtol=rtol, atol=atol,
-                            dtol=DECREMENT_TOL if nuisances else 0.0)  # as identify's (§11 *convergence*)
+                            dtol=decrement_tol(nuisances))
         state["evaluations"] += evaluations_used(fit.iterations, len(free_ring))
         if fit.converged:
             state["theta"] = fit.theta.copy()
